@@ -1,0 +1,90 @@
+//! The one error type of softvk. Every variant carries enough context (which call, buffer, kernel
+//! or input) for its `Display` to be the single line a user sees.
+
+use ash::vk;
+
+/// Everything that can go wrong in softvk.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// The Vulkan loader (libvulkan) could not be opened.
+    #[error("cannot load the Vulkan loader ({0}); install one, e.g. `apt-get install mesa-vulkan-drivers` for the CPU driver lavapipe")]
+    Loader(String),
+
+    /// No physical device satisfies softvk's needs (or none matches `SOFTVK_DEVICE`).
+    #[error("no usable Vulkan device: {0}")]
+    NoDevice(String),
+
+    /// `SOFTVK_VALIDATION=1` asked for the Khronos validation layer and it is not installed.
+    #[error("validation was requested but VK_LAYER_KHRONOS_validation is not installed (apt-get install vulkan-validationlayers)")]
+    ValidationLayerMissing,
+
+    /// A Vulkan call returned an error code.
+    #[error("Vulkan call {call} failed: {result}")]
+    Vulkan {
+        /// The entry point, e.g. `vkCreateBuffer`.
+        call: &'static str,
+        /// The error code it returned.
+        result: vk::Result,
+    },
+
+    /// GPU memory could not be allocated for a named buffer.
+    #[error("cannot allocate {size} bytes for buffer `{name}`: {source}")]
+    Allocation {
+        /// The buffer's debug name.
+        name: String,
+        /// Requested size in bytes.
+        size: u64,
+        /// What gpu-allocator said.
+        source: gpu_allocator::AllocationError,
+    },
+
+    /// A kernel was recorded with arguments that do not fit its reflected interface.
+    #[error("kernel `{kernel}`: {message}")]
+    Kernel {
+        /// The kernel's name (its `.comp` file stem).
+        kernel: &'static str,
+        /// What does not fit.
+        message: String,
+    },
+
+    /// A request exceeds what the device (or softvk) can do, e.g. a buffer over
+    /// `maxStorageBufferRange`.
+    #[error("{0}")]
+    Limit(String),
+
+    /// The validation layer reported messages (only when validation is on).
+    #[error("the Vulkan validation layer reported {count} message(s); first: {first}")]
+    Validation {
+        /// How many messages were collected.
+        count: usize,
+        /// The first one, verbatim.
+        first: String,
+    },
+
+    /// Bad user input: the message names the input and what is wrong with it.
+    #[error("{0}")]
+    Input(String),
+
+    /// A file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+}
+
+/// softvk's result type.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Attaches the Vulkan entry point's name to an `ash` result.
+pub(crate) trait VkContext<T> {
+    fn vk(self, call: &'static str) -> Result<T>;
+}
+
+impl<T> VkContext<T> for std::result::Result<T, vk::Result> {
+    fn vk(self, call: &'static str) -> Result<T> {
+        self.map_err(|result| Error::Vulkan { call, result })
+    }
+}

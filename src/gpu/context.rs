@@ -1,0 +1,689 @@
+//! The Vulkan context: instance, physical device, device, one compute queue and the memory
+//! allocator. Either owned (headless, for the CLI, tests and benches) or adopted from a host engine
+//! with [`Context::from_raw`], in which case softvk destroys only what it created itself.
+
+use std::ffi::{c_void, CStr, CString};
+use std::sync::{Arc, Mutex};
+
+use ash::vk;
+use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
+
+use crate::error::{Error, Result, VkContext};
+
+const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
+
+/// Device extensions softvk needs. `VK_KHR_push_descriptor` lets a dispatch carry its buffer
+/// bindings inside the command buffer, so recording never allocates or frees descriptor sets.
+pub const REQUIRED_DEVICE_EXTENSIONS: &[&CStr] = &[ash::khr::push_descriptor::NAME];
+
+/// How to create an owned context.
+#[derive(Clone, Debug, Default)]
+pub struct ContextOptions {
+    /// Enable `VK_LAYER_KHRONOS_validation` and collect every message it emits.
+    pub validation: bool,
+    /// Pick a device by index (as `softvk info` lists them) or by a substring of its name.
+    pub device: Option<String>,
+}
+
+impl ContextOptions {
+    /// Reads `SOFTVK_VALIDATION` (`1`/`true` turns validation on) and `SOFTVK_DEVICE`.
+    pub fn from_env() -> Self {
+        let validation = std::env::var("SOFTVK_VALIDATION")
+            .map(|v| matches!(v.trim(), "1" | "true" | "yes" | "on"))
+            .unwrap_or(false);
+        let device = std::env::var("SOFTVK_DEVICE")
+            .ok()
+            .filter(|s| !s.trim().is_empty());
+        Self { validation, device }
+    }
+}
+
+/// Handles a host engine gives to [`Context::from_raw`].
+pub struct RawHandles {
+    /// The loader the host's instance came from.
+    pub entry: ash::Entry,
+    /// The host's instance (Vulkan 1.2 or newer).
+    pub instance: ash::Instance,
+    /// The physical device behind `device`.
+    pub physical_device: vk::PhysicalDevice,
+    /// The host's device, created with [`REQUIRED_DEVICE_EXTENSIONS`].
+    pub device: ash::Device,
+    /// A queue with compute support, used only by softvk's convenience submits.
+    pub queue: vk::Queue,
+    /// The family of `queue`.
+    pub queue_family_index: u32,
+    /// Share the host's allocator; `None` makes softvk create its own on the host's device.
+    pub allocator: Option<Arc<Mutex<Allocator>>>,
+    /// Whether the host enabled `VK_EXT_debug_utils` on its instance (then softvk names objects).
+    pub debug_utils: bool,
+}
+
+/// What softvk learned about its device; printed by `softvk info`.
+#[derive(Clone, Debug)]
+pub struct DeviceInfo {
+    /// Device name, e.g. `llvmpipe (LLVM 15.0.6, 256 bits)`.
+    pub name: String,
+    /// Discrete, integrated, virtual or CPU.
+    pub device_type: vk::PhysicalDeviceType,
+    /// Driver name and info string.
+    pub driver: String,
+    /// The device's Vulkan version, as `major.minor.patch`.
+    pub api_version: (u32, u32, u32),
+    /// Default subgroup size.
+    pub subgroup_size: u32,
+    /// The limits softvk reads.
+    pub limits: vk::PhysicalDeviceLimits,
+    /// Nanoseconds per timestamp tick.
+    pub timestamp_period_ns: f32,
+    /// Valid bits of timestamps on the queue softvk uses (0: no timestamps).
+    pub timestamp_valid_bits: u32,
+    /// Device supports `shaderInt64`.
+    pub shader_int64: bool,
+    /// Device supports `VK_EXT_shader_atomic_float` (softvk does not need it).
+    pub atomic_float: bool,
+}
+
+impl DeviceInfo {
+    /// `major.minor.patch` of the device's API version.
+    pub fn api_version_string(&self) -> String {
+        let (a, b, c) = self.api_version;
+        format!("{a}.{b}.{c}")
+    }
+
+    /// Size that every storage buffer is rounded up to, and every bound offset aligned to: the
+    /// larger of `minStorageBufferOffsetAlignment` and `nonCoherentAtomSize` (mapped ranges).
+    pub fn buffer_alignment(&self) -> u64 {
+        self.limits
+            .min_storage_buffer_offset_alignment
+            .max(self.limits.non_coherent_atom_size)
+            .max(4)
+    }
+}
+
+/// Validation messages collected by the debug messenger. Boxed so its address is stable for the
+/// callback's user-data pointer.
+#[derive(Default)]
+pub(crate) struct ValidationLog {
+    messages: Mutex<Vec<String>>,
+}
+
+/// State shared by the context and every object it creates, so a buffer can free itself on drop
+/// and the device outlives all of them.
+pub(crate) struct Shared {
+    pub(crate) instance: ash::Instance,
+    pub(crate) device: ash::Device,
+    pub(crate) allocator: std::mem::ManuallyDrop<Arc<Mutex<Allocator>>>,
+    pub(crate) debug_device: Option<ash::ext::debug_utils::Device>,
+    messenger: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
+    validation_log: Option<Box<ValidationLog>>,
+    /// True when softvk created the instance and device (and so destroys them).
+    owns_device: bool,
+    _entry: ash::Entry,
+}
+
+impl Shared {
+    /// Gives a Vulkan object a debug name (no-op without `VK_EXT_debug_utils`).
+    pub(crate) fn name<H: vk::Handle>(&self, handle: H, name: &str) {
+        let Some(debug) = &self.debug_device else {
+            return;
+        };
+        let Ok(name) = CString::new(name) else {
+            return;
+        };
+        let info = vk::DebugUtilsObjectNameInfoEXT::default()
+            .object_handle(handle)
+            .object_name(&name);
+        // SAFETY: `handle` is a live object of `self.device`; naming has no other effect.
+        // A failure to name is harmless, so the result is ignored.
+        let _ = unsafe { debug.set_debug_utils_object_name(&info) };
+    }
+}
+
+impl Drop for Shared {
+    fn drop(&mut self) {
+        // SAFETY: this runs when the last context, buffer or kernel is gone, so nothing of ours is
+        // still in use on the GPU (every submit path waits). The allocator is dropped before the
+        // device it allocates from; instance and device are destroyed only if we created them.
+        unsafe {
+            std::mem::ManuallyDrop::drop(&mut self.allocator);
+            if self.owns_device {
+                let _ = self.device.device_wait_idle();
+                self.device.destroy_device(None);
+                if let Some((loader, messenger)) = self.messenger.take() {
+                    loader.destroy_debug_utils_messenger(messenger, None);
+                }
+                self.instance.destroy_instance(None);
+            }
+        }
+    }
+}
+
+/// A Vulkan device and compute queue that softvk records and (optionally) submits work on.
+pub struct Context {
+    pub(crate) shared: Arc<Shared>,
+    pub(crate) physical_device: vk::PhysicalDevice,
+    pub(crate) queue: vk::Queue,
+    pub(crate) queue_family_index: u32,
+    pub(crate) push_descriptor: ash::khr::push_descriptor::Device,
+    pub(crate) command_pool: vk::CommandPool,
+    /// Serializes use of `command_pool` and `queue` (both need external synchronization).
+    pub(crate) pool_lock: Mutex<()>,
+    info: DeviceInfo,
+}
+
+unsafe extern "system" fn on_validation_message(
+    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
+    _types: vk::DebugUtilsMessageTypeFlagsEXT,
+    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
+    user: *mut c_void,
+) -> vk::Bool32 {
+    if severity.intersects(
+        vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
+            | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+    ) && !user.is_null()
+        && !data.is_null()
+    {
+        // SAFETY: `user` is the `ValidationLog` boxed in `Shared`, alive as long as the messenger;
+        // `data` and its message pointer are valid for the duration of the callback.
+        let (log, message) = unsafe {
+            let data = &*data;
+            let message = if data.p_message.is_null() {
+                String::from("(no message)")
+            } else {
+                CStr::from_ptr(data.p_message)
+                    .to_string_lossy()
+                    .into_owned()
+            };
+            (&*(user as *const ValidationLog), message)
+        };
+        if let Ok(mut messages) = log.messages.lock() {
+            messages.push(message);
+        }
+    }
+    vk::FALSE
+}
+
+impl Context {
+    /// Creates an owned headless context as [`ContextOptions::from_env`] says.
+    pub fn from_env() -> Result<Self> {
+        Self::new(&ContextOptions::from_env())
+    }
+
+    /// Creates an owned headless context: instance, the best device (discrete > integrated >
+    /// virtual > CPU, or the one `options.device` names), a compute queue and an allocator.
+    pub fn new(options: &ContextOptions) -> Result<Self> {
+        // SAFETY: loading the system's Vulkan loader; ash checks the library exports.
+        let entry = unsafe { ash::Entry::load() }.map_err(|e| Error::Loader(e.to_string()))?;
+
+        // SAFETY: plain enumeration calls on a loaded entry.
+        let layers = unsafe { entry.enumerate_instance_layer_properties() }
+            .vk("vkEnumerateInstanceLayerProperties")?;
+        let extensions = unsafe { entry.enumerate_instance_extension_properties(None) }
+            .vk("vkEnumerateInstanceExtensionProperties")?;
+        let has_layer = layers
+            .iter()
+            .any(|l| l.layer_name_as_c_str() == Ok(VALIDATION_LAYER));
+        let has_debug_utils = extensions
+            .iter()
+            .any(|e| e.extension_name_as_c_str() == Ok(ash::ext::debug_utils::NAME));
+        if options.validation && !has_layer {
+            return Err(Error::ValidationLayerMissing);
+        }
+        if options.validation && !has_debug_utils {
+            return Err(Error::NoDevice(
+                "validation needs VK_EXT_debug_utils, which this loader lacks".into(),
+            ));
+        }
+
+        let app_name = c"softvk";
+        let app = vk::ApplicationInfo::default()
+            .application_name(app_name)
+            .engine_name(app_name)
+            .api_version(vk::API_VERSION_1_2);
+        let layer_ptrs = if options.validation {
+            vec![VALIDATION_LAYER.as_ptr()]
+        } else {
+            vec![]
+        };
+        let ext_ptrs = if has_debug_utils {
+            vec![ash::ext::debug_utils::NAME.as_ptr()]
+        } else {
+            vec![]
+        };
+        let validation_log = options.validation.then(Box::<ValidationLog>::default);
+        let user_data = validation_log.as_deref().map_or(std::ptr::null_mut(), |l| {
+            l as *const ValidationLog as *mut c_void
+        });
+        let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
+            .message_severity(
+                vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
+                    | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+            )
+            .message_type(
+                vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
+                    | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                    | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
+            )
+            .pfn_user_callback(Some(on_validation_message))
+            .user_data(user_data);
+        let mut create = vk::InstanceCreateInfo::default()
+            .application_info(&app)
+            .enabled_layer_names(&layer_ptrs)
+            .enabled_extension_names(&ext_ptrs);
+        if options.validation {
+            // Chained so messages from instance creation itself are caught too.
+            create = create.push_next(&mut messenger_info);
+        }
+        // SAFETY: the create info and everything it points to live until the call returns.
+        let instance = unsafe { entry.create_instance(&create, None) }.vk("vkCreateInstance")?;
+
+        let messenger = if options.validation {
+            let loader = ash::ext::debug_utils::Instance::new(&entry, &instance);
+            // SAFETY: valid instance with debug_utils enabled; `user_data` outlives the messenger
+            // because both are owned by `Shared`, which destroys the messenger first.
+            match unsafe { loader.create_debug_utils_messenger(&messenger_info, None) } {
+                Ok(m) => Some((loader, m)),
+                Err(result) => {
+                    // SAFETY: nothing else was created from this instance yet.
+                    unsafe { instance.destroy_instance(None) };
+                    return Err(Error::Vulkan {
+                        call: "vkCreateDebugUtilsMessengerEXT",
+                        result,
+                    });
+                }
+            }
+        } else {
+            None
+        };
+
+        let picked = pick_device(&instance, options.device.as_deref());
+        let (physical_device, queue_family_index) = match picked {
+            Ok(p) => p,
+            Err(e) => {
+                // SAFETY: destroy what we created, in reverse order.
+                unsafe {
+                    if let Some((loader, m)) = &messenger {
+                        loader.destroy_debug_utils_messenger(*m, None);
+                    }
+                    instance.destroy_instance(None);
+                }
+                return Err(e);
+            }
+        };
+
+        let priorities = [1.0f32];
+        let queue_info = [vk::DeviceQueueCreateInfo::default()
+            .queue_family_index(queue_family_index)
+            .queue_priorities(&priorities)];
+        let ext_ptrs: Vec<_> = REQUIRED_DEVICE_EXTENSIONS
+            .iter()
+            .map(|e| e.as_ptr())
+            .collect();
+        let device_info = vk::DeviceCreateInfo::default()
+            .queue_create_infos(&queue_info)
+            .enabled_extension_names(&ext_ptrs);
+        // SAFETY: the physical device was enumerated from this instance and supports the
+        // extensions (checked in `pick_device`).
+        let device = match unsafe { instance.create_device(physical_device, &device_info, None) } {
+            Ok(d) => d,
+            Err(result) => {
+                // SAFETY: as above.
+                unsafe {
+                    if let Some((loader, m)) = &messenger {
+                        loader.destroy_debug_utils_messenger(*m, None);
+                    }
+                    instance.destroy_instance(None);
+                }
+                return Err(Error::Vulkan {
+                    call: "vkCreateDevice",
+                    result,
+                });
+            }
+        };
+        // SAFETY: family and index 0 were requested above.
+        let queue = unsafe { device.get_device_queue(queue_family_index, 0) };
+
+        let raw = RawHandles {
+            entry,
+            instance,
+            physical_device,
+            device,
+            queue,
+            queue_family_index,
+            allocator: None,
+            debug_utils: has_debug_utils,
+        };
+        // SAFETY: we just created all of these with the required extensions.
+        unsafe { Self::assemble(raw, true, messenger, validation_log) }
+    }
+
+    /// Adopts a host engine's Vulkan objects without taking ownership of them.
+    ///
+    /// softvk creates its own pipelines, buffers, command pool and query pools on the host's
+    /// device and destroys them when the context (and every buffer and kernel made from it) is
+    /// dropped; it never destroys the instance, device or queue, nor a shared allocator.
+    ///
+    /// # Safety
+    /// - `instance`, `physical_device`, `device` and `queue` are valid, belong together, and stay
+    ///   valid until this context and everything created from it are dropped.
+    /// - The instance was created for Vulkan 1.2 or newer, and the device with every extension in
+    ///   [`REQUIRED_DEVICE_EXTENSIONS`] enabled.
+    /// - `queue_family_index` is `queue`'s family and supports compute. softvk submits to `queue`
+    ///   only from [`Context::submit_and_wait`] and friends; the host must not use the queue from
+    ///   another thread during those calls (Vulkan's external synchronization rule).
+    /// - If `allocator` is given, it was created on this same device.
+    /// - Work the host records with softvk's kernels and buffers has completed before the host
+    ///   drops them (softvk never waits on the host's queue).
+    /// - `debug_utils` is true only if the instance has `VK_EXT_debug_utils` enabled.
+    pub unsafe fn from_raw(raw: RawHandles) -> Result<Self> {
+        // SAFETY: forwarded to the caller's contract above.
+        unsafe { Self::assemble(raw, false, None, None) }
+    }
+
+    /// # Safety
+    /// As [`Context::from_raw`].
+    unsafe fn assemble(
+        raw: RawHandles,
+        owns_device: bool,
+        messenger: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
+        validation_log: Option<Box<ValidationLog>>,
+    ) -> Result<Self> {
+        let RawHandles {
+            entry,
+            instance,
+            physical_device,
+            device,
+            queue,
+            queue_family_index,
+            allocator,
+            debug_utils,
+        } = raw;
+        let info = query_info(&instance, physical_device, queue_family_index);
+        if info.api_version < (1, 2, 0) {
+            return Err(Error::NoDevice(format!(
+                "{} supports Vulkan {} only; softvk needs 1.2",
+                info.name,
+                info.api_version_string()
+            )));
+        }
+        let allocator = match allocator {
+            Some(a) => a,
+            None => Arc::new(Mutex::new(
+                Allocator::new(&AllocatorCreateDesc {
+                    instance: instance.clone(),
+                    device: device.clone(),
+                    physical_device,
+                    debug_settings: Default::default(),
+                    buffer_device_address: false,
+                    allocation_sizes: Default::default(),
+                })
+                .map_err(|source| Error::Allocation {
+                    name: "allocator".into(),
+                    size: 0,
+                    source,
+                })?,
+            )),
+        };
+        let debug_device =
+            debug_utils.then(|| ash::ext::debug_utils::Device::new(&instance, &device));
+        let push_descriptor = ash::khr::push_descriptor::Device::new(&instance, &device);
+        let shared = Arc::new(Shared {
+            instance,
+            device,
+            allocator: std::mem::ManuallyDrop::new(allocator),
+            debug_device,
+            messenger,
+            validation_log,
+            owns_device,
+            _entry: entry,
+        });
+        let pool_info = vk::CommandPoolCreateInfo::default()
+            .queue_family_index(queue_family_index)
+            .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
+        // SAFETY: valid device; the pool is destroyed in `Drop for Context`.
+        let command_pool = unsafe { shared.device.create_command_pool(&pool_info, None) }
+            .vk("vkCreateCommandPool")?;
+        shared.name(command_pool, "softvk command pool");
+        Ok(Self {
+            shared,
+            physical_device,
+            queue,
+            queue_family_index,
+            push_descriptor,
+            command_pool,
+            pool_lock: Mutex::new(()),
+            info,
+        })
+    }
+
+    /// The device this context runs on.
+    pub fn info(&self) -> &DeviceInfo {
+        &self.info
+    }
+
+    /// The raw `ash` device, for hosts that mix softvk's recording with their own.
+    pub fn device(&self) -> &ash::Device {
+        &self.shared.device
+    }
+
+    /// The physical device.
+    pub fn physical_device(&self) -> vk::PhysicalDevice {
+        self.physical_device
+    }
+
+    /// The queue and its family index that convenience submits use.
+    pub fn queue(&self) -> (vk::Queue, u32) {
+        (self.queue, self.queue_family_index)
+    }
+
+    /// The allocator, shareable with a host engine.
+    pub fn allocator(&self) -> Arc<Mutex<Allocator>> {
+        Arc::clone(&self.shared.allocator)
+    }
+
+    /// Whether the validation layer is on and being listened to.
+    pub fn validation_enabled(&self) -> bool {
+        self.shared.validation_log.is_some()
+    }
+
+    /// Every validation message collected so far (warnings and errors), oldest first, and clears
+    /// the log.
+    pub fn take_validation_messages(&self) -> Vec<String> {
+        self.shared
+            .validation_log
+            .as_ref()
+            .and_then(|l| l.messages.lock().ok().map(|mut m| std::mem::take(&mut *m)))
+            .unwrap_or_default()
+    }
+
+    /// `Ok` if the validation layer has said nothing since the last check; otherwise an
+    /// [`Error::Validation`] with the first message. Clears the log either way.
+    pub fn check_validation(&self) -> Result<()> {
+        let messages = self.take_validation_messages();
+        match messages.first() {
+            None => Ok(()),
+            Some(first) => Err(Error::Validation {
+                count: messages.len(),
+                first: first.clone(),
+            }),
+        }
+    }
+
+    pub(crate) fn name<H: vk::Handle>(&self, handle: H, name: &str) {
+        self.shared.name(handle, name);
+    }
+}
+
+impl Drop for Context {
+    fn drop(&mut self) {
+        // SAFETY: every submit path waits for its fence, so the pool's command buffers are idle.
+        unsafe {
+            self.shared
+                .device
+                .destroy_command_pool(self.command_pool, None);
+        }
+    }
+}
+
+fn type_rank(t: vk::PhysicalDeviceType) -> u32 {
+    match t {
+        vk::PhysicalDeviceType::DISCRETE_GPU => 0,
+        vk::PhysicalDeviceType::INTEGRATED_GPU => 1,
+        vk::PhysicalDeviceType::VIRTUAL_GPU => 2,
+        vk::PhysicalDeviceType::CPU => 3,
+        _ => 4,
+    }
+}
+
+/// The devices the loader reports, in enumeration order, with whether softvk can use each.
+pub fn list_devices(
+    instance: &ash::Instance,
+) -> Result<Vec<(vk::PhysicalDevice, String, Result<u32, String>)>> {
+    // SAFETY: plain enumeration on a valid instance.
+    let devices =
+        unsafe { instance.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices")?;
+    Ok(devices
+        .into_iter()
+        .map(|pd| {
+            // SAFETY: `pd` was just enumerated from `instance`.
+            let props = unsafe { instance.get_physical_device_properties(pd) };
+            let name = props
+                .device_name_as_c_str()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            (pd, name, usable(instance, pd))
+        })
+        .collect())
+}
+
+/// The compute queue family softvk would use on `pd`, or why it cannot.
+fn usable(instance: &ash::Instance, pd: vk::PhysicalDevice) -> Result<u32, String> {
+    // SAFETY: `pd` belongs to `instance`.
+    let props = unsafe { instance.get_physical_device_properties(pd) };
+    if vk::api_version_major(props.api_version) == 1 && vk::api_version_minor(props.api_version) < 2
+    {
+        return Err("Vulkan 1.2 not supported".into());
+    }
+    // SAFETY: as above.
+    let exts = unsafe { instance.enumerate_device_extension_properties(pd) }
+        .map_err(|e| format!("cannot list extensions: {e}"))?;
+    for needed in REQUIRED_DEVICE_EXTENSIONS {
+        if !exts
+            .iter()
+            .any(|e| e.extension_name_as_c_str() == Ok(*needed))
+        {
+            return Err(format!("missing {}", needed.to_string_lossy()));
+        }
+    }
+    // SAFETY: as above.
+    let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
+    // Prefer a compute family with timestamps; any compute family otherwise.
+    let compute = |f: &vk::QueueFamilyProperties| f.queue_flags.contains(vk::QueueFlags::COMPUTE);
+    families
+        .iter()
+        .position(|f| compute(f) && f.timestamp_valid_bits > 0)
+        .or_else(|| families.iter().position(compute))
+        .map(|i| i as u32)
+        .ok_or_else(|| "no compute queue".into())
+}
+
+fn pick_device(
+    instance: &ash::Instance,
+    wanted: Option<&str>,
+) -> Result<(vk::PhysicalDevice, u32)> {
+    let devices = list_devices(instance)?;
+    if devices.is_empty() {
+        return Err(Error::NoDevice(
+            "the Vulkan loader reports no physical device (install a driver, e.g. mesa-vulkan-drivers)"
+                .into(),
+        ));
+    }
+    if let Some(wanted) = wanted {
+        let by_index = wanted.trim().parse::<usize>().ok();
+        let lower = wanted.to_lowercase();
+        let (pd, name, usable) = devices
+            .iter()
+            .enumerate()
+            .find(|(i, (_, name, _))| {
+                Some(*i) == by_index || (by_index.is_none() && name.to_lowercase().contains(&lower))
+            })
+            .map(|(_, d)| d)
+            .ok_or_else(|| {
+                let names: Vec<_> = devices
+                    .iter()
+                    .enumerate()
+                    .map(|(i, (_, n, _))| format!("{i}: {n}"))
+                    .collect();
+                Error::NoDevice(format!(
+                    "SOFTVK_DEVICE={wanted} matches none of [{}]",
+                    names.join(", ")
+                ))
+            })?;
+        return match usable {
+            Ok(family) => Ok((*pd, *family)),
+            Err(why) => Err(Error::NoDevice(format!("{name}: {why}"))),
+        };
+    }
+    let mut best: Option<(u32, vk::PhysicalDevice, u32)> = None;
+    let mut reasons = Vec::new();
+    for (pd, name, usable) in &devices {
+        match usable {
+            Ok(family) => {
+                // SAFETY: `pd` belongs to `instance`.
+                let props = unsafe { instance.get_physical_device_properties(*pd) };
+                let rank = type_rank(props.device_type);
+                if best.is_none_or(|(r, _, _)| rank < r) {
+                    best = Some((rank, *pd, *family));
+                }
+            }
+            Err(why) => reasons.push(format!("{name}: {why}")),
+        }
+    }
+    best.map(|(_, pd, family)| (pd, family))
+        .ok_or_else(|| Error::NoDevice(reasons.join("; ")))
+}
+
+fn query_info(instance: &ash::Instance, pd: vk::PhysicalDevice, family: u32) -> DeviceInfo {
+    let mut driver = vk::PhysicalDeviceDriverProperties::default();
+    let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
+    let mut props2 = vk::PhysicalDeviceProperties2::default()
+        .push_next(&mut driver)
+        .push_next(&mut subgroup);
+    // SAFETY: `pd` belongs to `instance`, which is Vulkan 1.1+ (properties2 is core).
+    unsafe { instance.get_physical_device_properties2(pd, &mut props2) };
+    let props = props2.properties;
+    // SAFETY: as above.
+    let features = unsafe { instance.get_physical_device_features(pd) };
+    // SAFETY: as above.
+    let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
+    // SAFETY: as above.
+    let exts = unsafe { instance.enumerate_device_extension_properties(pd) }.unwrap_or_default();
+    let cstr = |s: std::result::Result<&CStr, _>| {
+        s.map(|s: &CStr| s.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
+    DeviceInfo {
+        name: cstr(props.device_name_as_c_str()),
+        device_type: props.device_type,
+        driver: format!(
+            "{} ({})",
+            cstr(driver.driver_name_as_c_str()),
+            cstr(driver.driver_info_as_c_str())
+        ),
+        api_version: (
+            vk::api_version_major(props.api_version),
+            vk::api_version_minor(props.api_version),
+            vk::api_version_patch(props.api_version),
+        ),
+        subgroup_size: subgroup.subgroup_size,
+        limits: props.limits,
+        timestamp_period_ns: props.limits.timestamp_period,
+        timestamp_valid_bits: families
+            .get(family as usize)
+            .map_or(0, |f| f.timestamp_valid_bits),
+        shader_int64: features.shader_int64 == vk::TRUE,
+        atomic_float: exts
+            .iter()
+            .any(|e| e.extension_name_as_c_str() == Ok(ash::ext::shader_atomic_float::NAME)),
+    }
+}

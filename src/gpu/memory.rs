@@ -1,0 +1,283 @@
+//! Buffers through gpu-allocator. Every buffer is named, its size rounded up to the device's
+//! alignment ([`super::DeviceInfo::buffer_alignment`]), and it frees itself on drop through the
+//! shared device state, so an early `?` never leaks GPU memory.
+
+use std::sync::Arc;
+
+use ash::vk;
+use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
+use gpu_allocator::MemoryLocation;
+
+use super::context::{Context, Shared};
+use crate::error::{Error, Result, VkContext};
+
+/// Where a buffer lives and what it is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MemoryKind {
+    /// Device-local storage for kernels; filled and read through copies.
+    Device,
+    /// Host-visible, written by the CPU and read by the GPU (staging uploads, small parameters).
+    Upload,
+    /// Host-visible, written by the GPU and read back by the CPU.
+    Readback,
+}
+
+impl MemoryKind {
+    fn location(self) -> MemoryLocation {
+        match self {
+            MemoryKind::Device => MemoryLocation::GpuOnly,
+            MemoryKind::Upload => MemoryLocation::CpuToGpu,
+            MemoryKind::Readback => MemoryLocation::GpuToCpu,
+        }
+    }
+}
+
+/// A GPU buffer. Usable as a storage buffer and as a copy source and destination.
+pub struct Buffer {
+    pub(crate) raw: vk::Buffer,
+    allocation: Option<Allocation>,
+    size: u64,
+    kind: MemoryKind,
+    name: String,
+    shared: Arc<Shared>,
+}
+
+impl Buffer {
+    /// The raw handle, for hosts binding it in their own pipelines.
+    pub fn raw(&self) -> vk::Buffer {
+        self.raw
+    }
+
+    /// Size in bytes (after alignment rounding).
+    pub fn size(&self) -> u64 {
+        self.size
+    }
+
+    /// The debug name given at creation.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Memory kind chosen at creation.
+    pub fn kind(&self) -> MemoryKind {
+        self.kind
+    }
+
+    /// The whole buffer as a binding range.
+    pub fn whole(&self) -> BufferRange<'_> {
+        BufferRange {
+            buffer: self,
+            offset: 0,
+            size: self.size,
+        }
+    }
+
+    /// `size` bytes from `offset`, as a binding range.
+    pub fn range(&self, offset: u64, size: u64) -> BufferRange<'_> {
+        debug_assert!(offset + size <= self.size, "range outside `{}`", self.name);
+        BufferRange {
+            buffer: self,
+            offset,
+            size,
+        }
+    }
+
+    /// The mapped bytes of an `Upload` or `Readback` buffer.
+    pub fn mapped(&self) -> Option<&[u8]> {
+        self.allocation.as_ref().and_then(Allocation::mapped_slice)
+    }
+
+    /// The mapped bytes of an `Upload` or `Readback` buffer, writable.
+    pub fn mapped_mut(&mut self) -> Option<&mut [u8]> {
+        self.allocation
+            .as_mut()
+            .and_then(Allocation::mapped_slice_mut)
+    }
+}
+
+impl Drop for Buffer {
+    fn drop(&mut self) {
+        // SAFETY: the buffer belongs to `shared.device`, which outlives it (we hold the Arc);
+        // callers wait for GPU work using the buffer before dropping it.
+        unsafe { self.shared.device.destroy_buffer(self.raw, None) };
+        if let Some(allocation) = self.allocation.take() {
+            if let Ok(mut allocator) = self.shared.allocator.lock() {
+                let _ = allocator.free(allocation);
+            }
+        }
+    }
+}
+
+/// A byte range of a buffer, as bound to a kernel.
+#[derive(Clone, Copy)]
+pub struct BufferRange<'a> {
+    /// The buffer.
+    pub buffer: &'a Buffer,
+    /// Offset in bytes; a multiple of the device's `minStorageBufferOffsetAlignment`.
+    pub offset: u64,
+    /// Size in bytes; at most `maxStorageBufferRange`.
+    pub size: u64,
+}
+
+impl<'a> BufferRange<'a> {
+    /// `size` bytes starting `offset` bytes into this range.
+    pub fn sub(&self, offset: u64, size: u64) -> BufferRange<'a> {
+        debug_assert!(
+            offset + size <= self.size,
+            "sub-range outside `{}`",
+            self.buffer.name()
+        );
+        BufferRange {
+            buffer: self.buffer,
+            offset: self.offset + offset,
+            size,
+        }
+    }
+}
+
+/// Rounds `value` up to a multiple of `align`.
+pub fn align_up(value: u64, align: u64) -> u64 {
+    value.div_ceil(align) * align
+}
+
+impl Context {
+    /// Creates a buffer of at least `size` bytes (rounded up to the device's alignment; a zero
+    /// size still gets one aligned unit, so empty inputs need no special case downstream).
+    pub fn create_buffer(&self, name: &str, size: u64, kind: MemoryKind) -> Result<Buffer> {
+        let align = self.info().buffer_alignment();
+        let size = align_up(size.max(1), align);
+        let device = &self.shared.device;
+        let info = vk::BufferCreateInfo::default()
+            .size(size)
+            .usage(
+                vk::BufferUsageFlags::STORAGE_BUFFER
+                    | vk::BufferUsageFlags::TRANSFER_SRC
+                    | vk::BufferUsageFlags::TRANSFER_DST,
+            )
+            .sharing_mode(vk::SharingMode::EXCLUSIVE);
+        // SAFETY: valid device and create info.
+        let raw = unsafe { device.create_buffer(&info, None) }.vk("vkCreateBuffer")?;
+        // SAFETY: `raw` was just created on this device.
+        let requirements = unsafe { device.get_buffer_memory_requirements(raw) };
+        let allocation = self
+            .shared
+            .allocator
+            .lock()
+            .map_err(|_| Error::Limit("the allocator's lock is poisoned".into()))
+            .and_then(|mut a| {
+                a.allocate(&AllocationCreateDesc {
+                    name,
+                    requirements,
+                    location: kind.location(),
+                    linear: true,
+                    allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+                })
+                .map_err(|source| Error::Allocation {
+                    name: name.to_string(),
+                    size,
+                    source,
+                })
+            });
+        let allocation = match allocation {
+            Ok(a) => a,
+            Err(e) => {
+                // SAFETY: not bound to anything yet.
+                unsafe { device.destroy_buffer(raw, None) };
+                return Err(e);
+            }
+        };
+        // Wrap first so every later failure frees both buffer and memory.
+        let buffer = Buffer {
+            raw,
+            allocation: Some(allocation),
+            size,
+            kind,
+            name: name.to_string(),
+            shared: Arc::clone(&self.shared),
+        };
+        let allocation = buffer.allocation.as_ref().expect("set above");
+        // SAFETY: memory from the allocator for exactly these requirements; not yet bound.
+        unsafe { device.bind_buffer_memory(raw, allocation.memory(), allocation.offset()) }
+            .vk("vkBindBufferMemory")?;
+        self.name(raw, name);
+        Ok(buffer)
+    }
+
+    /// Creates a device buffer holding `data` (through a staging copy, waited on).
+    pub fn upload_buffer<T: bytemuck::Pod>(&self, name: &str, data: &[T]) -> Result<Buffer> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        let buffer = self.create_buffer(name, bytes.len() as u64, MemoryKind::Device)?;
+        self.write_buffer(&buffer, 0, data)?;
+        Ok(buffer)
+    }
+
+    /// Writes `data` at byte `offset` of `buffer` (mapped directly for `Upload` buffers, through a
+    /// staging copy otherwise). Waits for the copy.
+    pub fn write_buffer<T: bytemuck::Pod>(
+        &self,
+        buffer: &Buffer,
+        offset: u64,
+        data: &[T],
+    ) -> Result<()> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        if bytes.is_empty() {
+            return Ok(());
+        }
+        if offset + bytes.len() as u64 > buffer.size() {
+            return Err(Error::Limit(format!(
+                "write of {} bytes at {offset} overflows buffer `{}` ({} bytes)",
+                bytes.len(),
+                buffer.name(),
+                buffer.size()
+            )));
+        }
+        let mut staging = self.create_buffer(
+            &format!("{} (staging)", buffer.name()),
+            bytes.len() as u64,
+            MemoryKind::Upload,
+        )?;
+        staging
+            .mapped_mut()
+            .ok_or_else(|| Error::Limit("upload memory is not host-mapped".into()))?[..bytes.len()]
+            .copy_from_slice(bytes);
+        self.submit_and_wait(|rec| {
+            rec.copy(&staging, 0, buffer, offset, bytes.len() as u64);
+            Ok(())
+        })
+    }
+
+    /// Reads `count` elements of `T` from byte `offset` of `buffer` (through a readback copy,
+    /// waited on).
+    pub fn read_buffer<T: bytemuck::Pod>(
+        &self,
+        buffer: &Buffer,
+        offset: u64,
+        count: usize,
+    ) -> Result<Vec<T>> {
+        let len = (count * std::mem::size_of::<T>()) as u64;
+        if count == 0 {
+            return Ok(Vec::new());
+        }
+        if offset + len > buffer.size() {
+            return Err(Error::Limit(format!(
+                "read of {len} bytes at {offset} overflows buffer `{}` ({} bytes)",
+                buffer.name(),
+                buffer.size()
+            )));
+        }
+        let readback = self.create_buffer(
+            &format!("{} (readback)", buffer.name()),
+            len,
+            MemoryKind::Readback,
+        )?;
+        self.submit_and_wait(|rec| {
+            rec.copy(buffer, offset, &readback, 0, len);
+            Ok(())
+        })?;
+        let bytes = readback
+            .mapped()
+            .ok_or_else(|| Error::Limit("readback memory is not host-mapped".into()))?;
+        // Copy out element-wise: the mapping is not guaranteed aligned for T.
+        Ok(bytemuck::pod_collect_to_vec(&bytes[..len as usize]))
+    }
+}

@@ -1,0 +1,475 @@
+//! Recording. The library's main path only records into a command buffer the caller owns
+//! ([`Recorder::new`]); [`Context::submit_and_wait`] is the headless convenience that allocates,
+//! submits and waits for one.
+
+use std::sync::Arc;
+
+use ash::vk;
+
+use super::context::{Context, Shared};
+use super::kernel::Kernel;
+use super::memory::{Buffer, BufferRange};
+use crate::error::{Error, Result, VkContext};
+
+/// Records softvk work into a command buffer in the recording state.
+///
+/// Every dispatch and copy is followed by a compute/transfer memory barrier, so the next one sees
+/// its writes. Work the host recorded *before* handing the command buffer over, and work it
+/// records after, must be synchronized by the host (a barrier from/to `COMPUTE_SHADER`).
+pub struct Recorder<'a> {
+    ctx: &'a Context,
+    cmd: vk::CommandBuffer,
+    timer: Option<&'a mut Timer>,
+}
+
+impl<'a> Recorder<'a> {
+    /// Wraps a command buffer the caller allocated from a pool of `ctx`'s compute queue family
+    /// and began.
+    ///
+    /// # Safety
+    /// `cmd` is a valid command buffer of `ctx`'s device, in the recording state, not recorded
+    /// into from another thread while this recorder lives, and submitted to a queue of a family
+    /// with compute support.
+    pub unsafe fn new(ctx: &'a Context, cmd: vk::CommandBuffer) -> Self {
+        Self {
+            ctx,
+            cmd,
+            timer: None,
+        }
+    }
+
+    /// Attaches a timer: its queries are reset here and [`Recorder::pass`] writes timestamps.
+    pub fn with_timer(mut self, timer: &'a mut Timer) -> Self {
+        // SAFETY: the pool belongs to this device; resetting inside a command buffer is allowed
+        // outside render passes.
+        unsafe {
+            self.ctx
+                .device()
+                .cmd_reset_query_pool(self.cmd, timer.pool, 0, timer.capacity)
+        };
+        timer.labels.clear();
+        self.timer = Some(timer);
+        self
+    }
+
+    /// The context recorded for.
+    pub fn context(&self) -> &'a Context {
+        self.ctx
+    }
+
+    /// The raw command buffer.
+    pub fn command_buffer(&self) -> vk::CommandBuffer {
+        self.cmd
+    }
+
+    /// Records `f` as a named pass, bracketed by GPU timestamps when a timer is attached.
+    pub fn pass<R>(&mut self, name: &str, f: impl FnOnce(&mut Self) -> Result<R>) -> Result<R> {
+        let first = self.timestamp(name)?;
+        let result = f(self)?;
+        if let Some(index) = first {
+            self.write_timestamp(index + 1);
+        }
+        Ok(result)
+    }
+
+    fn timestamp(&mut self, name: &str) -> Result<Option<u32>> {
+        let Some(timer) = self.timer.as_deref_mut() else {
+            return Ok(None);
+        };
+        let index = 2 * timer.labels.len() as u32;
+        if index + 2 > timer.capacity {
+            return Err(Error::Limit(format!(
+                "timer holds {} passes; pass `{name}` is one too many",
+                timer.capacity / 2
+            )));
+        }
+        timer.labels.push(name.to_string());
+        self.write_timestamp(index);
+        Ok(Some(index))
+    }
+
+    fn write_timestamp(&mut self, index: u32) {
+        if let Some(timer) = self.timer.as_deref() {
+            // SAFETY: index < capacity (checked when the pass was opened); pool reset above.
+            unsafe {
+                self.ctx.device().cmd_write_timestamp(
+                    self.cmd,
+                    vk::PipelineStageFlags::BOTTOM_OF_PIPE,
+                    timer.pool,
+                    index,
+                )
+            };
+        }
+    }
+
+    /// Records one dispatch of `kernel` over `groups` workgroups, with `bindings` in binding order
+    /// and `push` as its push constants. Group counts above the device's X limit are folded into a
+    /// 2D grid; kernels address their work with `linear_group_id()` and ignore the surplus.
+    pub fn dispatch<P: bytemuck::Pod>(
+        &mut self,
+        kernel: &Kernel,
+        bindings: &[BufferRange<'_>],
+        push: &P,
+        groups: u32,
+    ) -> Result<()> {
+        let spec = kernel.spec;
+        let fail = |message: String| Error::Kernel {
+            kernel: spec.name,
+            message,
+        };
+        if bindings.len() != spec.bindings.len() {
+            return Err(fail(format!(
+                "expects {} buffer bindings, got {}",
+                spec.bindings.len(),
+                bindings.len()
+            )));
+        }
+        let push_bytes = bytemuck::bytes_of(push);
+        if push_bytes.len() != spec.push_constant_size as usize {
+            return Err(fail(format!(
+                "expects {} bytes of push constants, got {}",
+                spec.push_constant_size,
+                push_bytes.len()
+            )));
+        }
+        let limits = &self.ctx.info().limits;
+        for (range, b) in bindings.iter().zip(spec.bindings) {
+            let what = format!(
+                "binding {} `{}` (buffer `{}`)",
+                b.binding,
+                b.name,
+                range.buffer.name()
+            );
+            if range.size == 0 || range.offset + range.size > range.buffer.size() {
+                return Err(fail(format!(
+                    "{what}: range {}+{} outside the buffer's {} bytes",
+                    range.offset,
+                    range.size,
+                    range.buffer.size()
+                )));
+            }
+            if range.offset % limits.min_storage_buffer_offset_alignment != 0 {
+                return Err(fail(format!(
+                    "{what}: offset {} is misaligned",
+                    range.offset
+                )));
+            }
+            if range.size > u64::from(limits.max_storage_buffer_range) {
+                return Err(fail(format!(
+                    "{what}: {} bytes exceed maxStorageBufferRange ({})",
+                    range.size, limits.max_storage_buffer_range
+                )));
+            }
+        }
+        if groups == 0 {
+            return Ok(());
+        }
+        let max_x = limits.max_compute_work_group_count[0];
+        let x = groups.min(max_x);
+        let y = groups.div_ceil(x);
+        if y > limits.max_compute_work_group_count[1] {
+            return Err(fail(format!(
+                "{groups} workgroups exceed the device's grid"
+            )));
+        }
+
+        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = bindings
+            .iter()
+            .map(|r| {
+                [vk::DescriptorBufferInfo {
+                    buffer: r.buffer.raw,
+                    offset: r.offset,
+                    range: r.size,
+                }]
+            })
+            .collect();
+        let writes: Vec<_> = spec
+            .bindings
+            .iter()
+            .zip(&infos)
+            .map(|(b, info)| {
+                vk::WriteDescriptorSet::default()
+                    .dst_binding(b.binding)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .buffer_info(info)
+            })
+            .collect();
+        let device = self.ctx.device();
+        // SAFETY: the command buffer is recording (constructor contract); pipeline, layout and
+        // buffers belong to this device; bindings and push size were checked against the
+        // kernel's reflected interface above.
+        unsafe {
+            device.cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, kernel.pipeline);
+            self.ctx.push_descriptor.cmd_push_descriptor_set(
+                self.cmd,
+                vk::PipelineBindPoint::COMPUTE,
+                kernel.layout,
+                0,
+                &writes,
+            );
+            if !push_bytes.is_empty() {
+                device.cmd_push_constants(
+                    self.cmd,
+                    kernel.layout,
+                    vk::ShaderStageFlags::COMPUTE,
+                    0,
+                    push_bytes,
+                );
+            }
+            device.cmd_dispatch(self.cmd, x, y, 1);
+        }
+        self.barrier();
+        Ok(())
+    }
+
+    /// Copies `size` bytes between buffers.
+    pub fn copy(
+        &mut self,
+        src: &Buffer,
+        src_offset: u64,
+        dst: &Buffer,
+        dst_offset: u64,
+        size: u64,
+    ) {
+        if size == 0 {
+            return;
+        }
+        let region = [vk::BufferCopy {
+            src_offset,
+            dst_offset,
+            size,
+        }];
+        // SAFETY: recording command buffer; both buffers have TRANSFER usage.
+        unsafe {
+            self.ctx
+                .device()
+                .cmd_copy_buffer(self.cmd, src.raw, dst.raw, &region)
+        };
+        self.barrier();
+    }
+
+    /// Fills `range` (offset and size multiples of 4) with the 32-bit word `value`.
+    pub fn fill(&mut self, range: BufferRange<'_>, value: u32) {
+        // SAFETY: recording command buffer; TRANSFER_DST usage; alignment is the caller's.
+        unsafe {
+            self.ctx.device().cmd_fill_buffer(
+                self.cmd,
+                range.buffer.raw,
+                range.offset,
+                range.size,
+                value,
+            )
+        };
+        self.barrier();
+    }
+
+    /// Makes every compute and transfer write so far visible to later compute and transfer work.
+    pub fn barrier(&mut self) {
+        let stages = vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER;
+        let barrier = [vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(
+                vk::AccessFlags::SHADER_READ
+                    | vk::AccessFlags::SHADER_WRITE
+                    | vk::AccessFlags::TRANSFER_READ
+                    | vk::AccessFlags::TRANSFER_WRITE,
+            )];
+        // SAFETY: recording command buffer.
+        unsafe {
+            self.ctx.device().cmd_pipeline_barrier(
+                self.cmd,
+                stages,
+                stages,
+                vk::DependencyFlags::empty(),
+                &barrier,
+                &[],
+                &[],
+            )
+        };
+    }
+
+    fn host_barrier(&mut self) {
+        let barrier = [vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(vk::AccessFlags::HOST_READ)];
+        // SAFETY: recording command buffer.
+        unsafe {
+            self.ctx.device().cmd_pipeline_barrier(
+                self.cmd,
+                vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::HOST,
+                vk::DependencyFlags::empty(),
+                &barrier,
+                &[],
+                &[],
+            )
+        };
+    }
+}
+
+/// GPU timestamps around named passes.
+pub struct Timer {
+    pool: vk::QueryPool,
+    capacity: u32,
+    labels: Vec<String>,
+    shared: Arc<Shared>,
+}
+
+/// GPU time of one pass.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PassTime {
+    /// The name given to [`Recorder::pass`].
+    pub name: String,
+    /// Milliseconds between the pass's two timestamps.
+    pub ms: f64,
+}
+
+impl Timer {
+    /// A timer for up to `passes` passes per recording.
+    pub fn new(ctx: &Context, passes: u32) -> Result<Self> {
+        if ctx.info().timestamp_valid_bits == 0 {
+            return Err(Error::Limit(format!(
+                "{} has no timestamps on its compute queue",
+                ctx.info().name
+            )));
+        }
+        let info = vk::QueryPoolCreateInfo::default()
+            .query_type(vk::QueryType::TIMESTAMP)
+            .query_count(2 * passes.max(1));
+        // SAFETY: valid device.
+        let pool =
+            unsafe { ctx.device().create_query_pool(&info, None) }.vk("vkCreateQueryPool")?;
+        ctx.name(pool, "softvk timer");
+        Ok(Self {
+            pool,
+            capacity: 2 * passes.max(1),
+            labels: Vec::new(),
+            shared: Arc::clone(&ctx.shared),
+        })
+    }
+
+    /// The pass times of the last completed recording, in recording order.
+    pub fn results(&self, ctx: &Context) -> Result<Vec<PassTime>> {
+        if self.labels.is_empty() {
+            return Ok(Vec::new());
+        }
+        let mut raw = vec![0u64; 2 * self.labels.len()];
+        // SAFETY: the queries were written by a command buffer the caller has waited for.
+        unsafe {
+            ctx.device().get_query_pool_results(
+                self.pool,
+                0,
+                &mut raw,
+                vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
+            )
+        }
+        .vk("vkGetQueryPoolResults")?;
+        let bits = ctx.info().timestamp_valid_bits;
+        let mask = if bits >= 64 {
+            u64::MAX
+        } else {
+            (1u64 << bits) - 1
+        };
+        let period = f64::from(ctx.info().timestamp_period_ns);
+        Ok(self
+            .labels
+            .iter()
+            .zip(raw.chunks_exact(2))
+            .map(|(name, t)| PassTime {
+                name: name.clone(),
+                ms: ((t[1].wrapping_sub(t[0])) & mask) as f64 * period * 1e-6,
+            })
+            .collect())
+    }
+}
+
+impl Drop for Timer {
+    fn drop(&mut self) {
+        // SAFETY: created on this device; no pending command buffer uses it (callers wait).
+        unsafe { self.shared.device.destroy_query_pool(self.pool, None) };
+    }
+}
+
+impl Context {
+    /// Records `f` into a fresh command buffer, submits it to the context's queue and waits.
+    pub fn submit_and_wait(&self, f: impl FnOnce(&mut Recorder<'_>) -> Result<()>) -> Result<()> {
+        self.submit_and_wait_timed(None, f)
+    }
+
+    /// As [`Context::submit_and_wait`], with GPU timestamps into `timer`.
+    pub fn submit_and_wait_timed(
+        &self,
+        timer: Option<&mut Timer>,
+        f: impl FnOnce(&mut Recorder<'_>) -> Result<()>,
+    ) -> Result<()> {
+        let cmd = self.begin_one_time()?;
+        let recorded = {
+            // SAFETY: `cmd` was just allocated from our pool and begun.
+            let mut rec = unsafe { Recorder::new(self, cmd) };
+            if let Some(timer) = timer {
+                rec = rec.with_timer(timer);
+            }
+            f(&mut rec).map(|()| rec.host_barrier())
+        };
+        let result = recorded.and_then(|()| self.end_submit_wait(cmd));
+        // SAFETY: the submit (if any) has completed, or nothing was submitted.
+        unsafe {
+            let _guard = self.pool_lock.lock();
+            self.device()
+                .free_command_buffers(self.command_pool, &[cmd]);
+        }
+        result
+    }
+
+    fn begin_one_time(&self) -> Result<vk::CommandBuffer> {
+        let info = vk::CommandBufferAllocateInfo::default()
+            .command_pool(self.command_pool)
+            .level(vk::CommandBufferLevel::PRIMARY)
+            .command_buffer_count(1);
+        let _guard = self.pool_lock.lock();
+        // SAFETY: the pool is ours and externally synchronized by `pool_lock`.
+        let cmd = unsafe { self.device().allocate_command_buffers(&info) }
+            .vk("vkAllocateCommandBuffers")?[0];
+        let begin = vk::CommandBufferBeginInfo::default()
+            .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT);
+        // SAFETY: freshly allocated command buffer.
+        if let Err(result) = unsafe { self.device().begin_command_buffer(cmd, &begin) } {
+            // SAFETY: never submitted.
+            unsafe {
+                self.device()
+                    .free_command_buffers(self.command_pool, &[cmd])
+            };
+            return Err(Error::Vulkan {
+                call: "vkBeginCommandBuffer",
+                result,
+            });
+        }
+        Ok(cmd)
+    }
+
+    fn end_submit_wait(&self, cmd: vk::CommandBuffer) -> Result<()> {
+        let device = self.device();
+        // SAFETY: `cmd` is recording.
+        unsafe { device.end_command_buffer(cmd) }.vk("vkEndCommandBuffer")?;
+        // SAFETY: valid device.
+        let fence = unsafe { device.create_fence(&vk::FenceCreateInfo::default(), None) }
+            .vk("vkCreateFence")?;
+        let cmds = [cmd];
+        let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
+        let result = {
+            // Queue access must be externally synchronized; the pool lock covers it too.
+            let _guard = self.pool_lock.lock();
+            // SAFETY: executable command buffer, valid queue and unsignaled fence.
+            unsafe { device.queue_submit(self.queue, &submit, fence) }
+                .vk("vkQueueSubmit")
+                // SAFETY: the fence was just submitted.
+                .and_then(|()| {
+                    unsafe { device.wait_for_fences(&[fence], true, u64::MAX) }
+                        .vk("vkWaitForFences")
+                })
+        };
+        // SAFETY: the fence is signaled or was never submitted.
+        unsafe { device.destroy_fence(fence, None) };
+        result
+    }
+}

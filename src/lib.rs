@@ -1,0 +1,16 @@
+//! softvk: differentiable rendering as Vulkan compute kernels.
+//!
+//! - [`gpu`]: the Vulkan compute core — a [`gpu::Context`] (owned headless, or adopted from a host
+//!   engine with [`gpu::Context::from_raw`]), buffers, kernels compiled at build time, and a
+//!   [`gpu::Recorder`] that records dispatches into a command buffer the caller owns.
+//! - [`primitives`]: exclusive scan and stable radix sort, the building blocks of binning.
+//!
+//! Every kernel has a CPU twin that tests compare it with.
+
+#![warn(missing_docs)]
+
+pub mod error;
+pub mod gpu;
+pub mod primitives;
+
+pub use error::{Error, Result};

@@ -1,0 +1,244 @@
+//! Stable LSD radix sort of `(u64 key, u32 value)` pairs, [`RADIX_BITS`] bits per pass. Each pass
+//! counts digits per block (digit-major), scans the counts with [`Scan`], and scatters every pair
+//! to `offset[digit][block] + rank`, where the rank among equal digits follows input order: the
+//! sort is stable, so sorting by (tile, depth) keys keeps equal keys in face order.
+//!
+//! Keys travel as `[u32; 2]` (lo, hi) so kernels need no `shaderInt64`.
+
+use bytemuck::{Pod, Zeroable};
+
+use super::scan::{Scan, ScanScratch};
+use crate::error::{Error, Result};
+use crate::gpu::{specs, Buffer, Context, Kernel, MemoryKind, Recorder};
+
+/// Bits sorted per pass (mirrors `RADIX_BITS` in `kernels/include/radix_config.glsl`).
+pub const RADIX_BITS: u32 = 4;
+const RADIX: u64 = 1 << RADIX_BITS;
+/// Elements per workgroup (mirrors `BLOCK` in `kernels/include/radix_config.glsl`).
+pub const SORT_BLOCK: u32 = 1024;
+
+/// Push constants of `radix_count.comp` and `radix_scatter.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct RadixPush {
+    n: u32,
+    shift: u32,
+    n_blocks: u32,
+}
+
+/// The sort's pipelines, made once per context.
+pub struct RadixSort {
+    count: Kernel,
+    scatter: Kernel,
+    scan: Scan,
+}
+
+/// Ping-pong buffers and digit counts for sorts of up to `capacity` pairs.
+pub struct SortScratch {
+    keys_alt: Buffer,
+    values_alt: Buffer,
+    counts: Buffer,
+    scan: ScanScratch,
+    capacity: u64,
+}
+
+impl SortScratch {
+    /// Scratch for sorts of up to `capacity` pairs. Fails if the key array would not fit one
+    /// storage-buffer binding (`maxStorageBufferRange / 8` pairs: 16 Mi on lavapipe).
+    pub fn new(ctx: &Context, capacity: u64) -> Result<Self> {
+        let max = u64::from(ctx.info().limits.max_storage_buffer_range) / 8;
+        if capacity > max {
+            return Err(Error::Limit(format!(
+                "radix sort of {capacity} pairs: this device binds at most {max} keys at once"
+            )));
+        }
+        let counts_len = RADIX * capacity.div_ceil(u64::from(SORT_BLOCK)).max(1);
+        Ok(Self {
+            keys_alt: ctx.create_buffer(
+                "sort keys (ping-pong)",
+                8 * capacity,
+                MemoryKind::Device,
+            )?,
+            values_alt: ctx.create_buffer(
+                "sort values (ping-pong)",
+                4 * capacity,
+                MemoryKind::Device,
+            )?,
+            counts: ctx.create_buffer("sort digit counts", 4 * counts_len, MemoryKind::Device)?,
+            scan: ScanScratch::new(ctx, counts_len)?,
+            capacity,
+        })
+    }
+
+    /// The largest pair count this scratch serves.
+    pub fn capacity(&self) -> u64 {
+        self.capacity
+    }
+}
+
+impl RadixSort {
+    /// Builds the sort pipelines.
+    pub fn new(ctx: &Context) -> Result<Self> {
+        Ok(Self {
+            count: Kernel::new(ctx, &specs::RADIX_COUNT)?,
+            scatter: Kernel::new(ctx, &specs::RADIX_SCATTER)?,
+            scan: Scan::new(ctx)?,
+        })
+    }
+
+    /// Records a stable sort of the first `n` pairs of `keys` (`[u32; 2]` each) and `values`
+    /// (`u32` each), in place, by the low `key_bits` bits of the keys (higher bits are ignored;
+    /// fewer bits mean fewer passes).
+    pub fn record(
+        &self,
+        rec: &mut Recorder<'_>,
+        scratch: &SortScratch,
+        keys: &Buffer,
+        values: &Buffer,
+        n: u64,
+        key_bits: u32,
+    ) -> Result<()> {
+        if n > scratch.capacity {
+            return Err(Error::Limit(format!(
+                "sort of {n} pairs exceeds its scratch capacity {}",
+                scratch.capacity
+            )));
+        }
+        if key_bits > 64 {
+            return Err(Error::Limit(format!(
+                "sort keys have 64 bits, not {key_bits}"
+            )));
+        }
+        if keys.size() < 8 * n || values.size() < 4 * n {
+            return Err(Error::Limit(format!(
+                "sort buffers `{}`/`{}` hold fewer than {n} pairs",
+                keys.name(),
+                values.name()
+            )));
+        }
+        if n == 0 || key_bits == 0 {
+            return Ok(());
+        }
+        let n_blocks = n.div_ceil(u64::from(SORT_BLOCK));
+        let counts = scratch.counts.range(0, 4 * RADIX * n_blocks);
+        let passes = key_bits.div_ceil(RADIX_BITS);
+        let mut src = (keys, values);
+        let mut dst = (&scratch.keys_alt, &scratch.values_alt);
+        for pass in 0..passes {
+            let push = RadixPush {
+                n: n as u32,
+                shift: pass * RADIX_BITS,
+                n_blocks: n_blocks as u32,
+            };
+            rec.dispatch(
+                &self.count,
+                &[src.0.range(0, 8 * n), counts],
+                &push,
+                n_blocks as u32,
+            )?;
+            self.scan
+                .record(rec, &scratch.scan, counts, counts, RADIX * n_blocks)?;
+            rec.dispatch(
+                &self.scatter,
+                &[
+                    src.0.range(0, 8 * n),
+                    src.1.range(0, 4 * n),
+                    dst.0.range(0, 8 * n),
+                    dst.1.range(0, 4 * n),
+                    counts,
+                ],
+                &push,
+                n_blocks as u32,
+            )?;
+            std::mem::swap(&mut src, &mut dst);
+        }
+        if passes % 2 == 1 {
+            // The result sits in the ping-pong buffers; bring it home.
+            rec.copy(src.0, 0, keys, 0, 8 * n);
+            rec.copy(src.1, 0, values, 0, 4 * n);
+        }
+        Ok(())
+    }
+
+    /// Convenience: uploads the pairs, sorts them on the GPU and reads them back.
+    pub fn run(
+        &self,
+        ctx: &Context,
+        keys: &[u64],
+        values: &[u32],
+        key_bits: u32,
+    ) -> Result<(Vec<u64>, Vec<u32>)> {
+        if keys.len() != values.len() {
+            return Err(Error::Input(format!(
+                "sort: {} keys but {} values",
+                keys.len(),
+                values.len()
+            )));
+        }
+        let n = keys.len() as u64;
+        let key_words: Vec<[u32; 2]> = keys.iter().map(|&k| split_key(k)).collect();
+        let key_buf = ctx.upload_buffer("sort keys", &key_words)?;
+        let value_buf = ctx.upload_buffer("sort values", values)?;
+        let scratch = SortScratch::new(ctx, n)?;
+        ctx.submit_and_wait(|rec| self.record(rec, &scratch, &key_buf, &value_buf, n, key_bits))?;
+        let sorted_keys: Vec<[u32; 2]> = ctx.read_buffer(&key_buf, 0, keys.len())?;
+        Ok((
+            sorted_keys.into_iter().map(join_key).collect(),
+            ctx.read_buffer(&value_buf, 0, values.len())?,
+        ))
+    }
+}
+
+/// A `u64` key as the `(lo, hi)` words the kernels read.
+pub fn split_key(key: u64) -> [u32; 2] {
+    [key as u32, (key >> 32) as u32]
+}
+
+/// Inverse of [`split_key`].
+pub fn join_key(words: [u32; 2]) -> u64 {
+    u64::from(words[0]) | (u64::from(words[1]) << 32)
+}
+
+/// CPU twin.
+pub mod cpu {
+    /// Stable sort of `(key, value)` pairs by the low `key_bits` bits of the key; keys keep
+    /// their high bits, as on the GPU.
+    pub fn sort_pairs(keys: &[u64], values: &[u32], key_bits: u32) -> (Vec<u64>, Vec<u32>) {
+        let mask = if key_bits >= 64 {
+            u64::MAX
+        } else {
+            (1u64 << key_bits) - 1
+        };
+        let mut pairs: Vec<(u64, u32)> = keys.iter().copied().zip(values.iter().copied()).collect();
+        pairs.sort_by_key(|&(k, _)| k & mask); // `sort_by_key` is stable
+        pairs.into_iter().unzip()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn push_constant_struct_matches_the_kernels_layout() {
+        let size = std::mem::size_of::<RadixPush>() as u32;
+        assert_eq!(size, specs::RADIX_COUNT.push_constant_size);
+        assert_eq!(size, specs::RADIX_SCATTER.push_constant_size);
+        assert_eq!(specs::RADIX_SCATTER.workgroup_size[0] * 4, SORT_BLOCK);
+        assert_eq!(specs::RADIX_SCATTER.bindings.len(), 5);
+    }
+
+    #[test]
+    fn key_words_round_trip() {
+        for k in [0, 1, u64::MAX, 0x1234_5678_9abc_def0] {
+            assert_eq!(join_key(split_key(k)), k);
+        }
+    }
+
+    #[test]
+    fn cpu_twin_is_stable_and_honours_key_bits() {
+        let (k, v) = cpu::sort_pairs(&[0x13, 0x02, 0x03, 0x12], &[0, 1, 2, 3], 4);
+        assert_eq!(k, vec![0x02, 0x12, 0x13, 0x03]);
+        assert_eq!(v, vec![1, 3, 0, 2]);
+    }
+}
