@@ -9,8 +9,10 @@
 
 // Keys are u64 stored as uvec2 (lo, hi), so no shaderInt64 is needed. `shift` is a multiple of
 // RADIX_BITS, so a digit never straddles the two words.
-uint key_digit(uvec2 key, uint shift) {
+// `digit_mask` is RADIX - 1, or fewer bits on the last pass when the key width is not a multiple
+// of RADIX_BITS.
+uint key_digit(uvec2 key, uint shift, uint digit_mask) {
     uint word = shift < 32u ? key.x : key.y;
-    return (word >> (shift & 31u)) & uint(RADIX - 1);
+    return (word >> (shift & 31u)) & digit_mask;
 }
 #endif

@@ -15,6 +15,7 @@ layout(push_constant) uniform Push {
     uint n;
     uint shift;
     uint n_blocks;
+    uint digit_mask;
 } pc;
 
 shared uint hist[RADIX];
@@ -32,7 +33,7 @@ void main() {
     for (uint k = 0; k < ITEMS; ++k) {
         uint i = block * BLOCK + k * WG_SIZE + lid;
         if (i < pc.n) {
-            atomicAdd(hist[key_digit(keys[i], pc.shift)], 1u);
+            atomicAdd(hist[key_digit(keys[i], pc.shift, pc.digit_mask)], 1u);
         }
     }
     barrier();

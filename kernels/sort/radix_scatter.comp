@@ -22,6 +22,7 @@ layout(push_constant) uniform Push {
     uint n;
     uint shift;
     uint n_blocks;
+    uint digit_mask;
 } pc;
 
 shared uvec4 scan_lo[WG_SIZE]; // packed counters of digits 0..7
@@ -50,7 +51,7 @@ void main() {
         if (i < pc.n) {
             key[k] = keys_in[i];
             val[k] = vals_in[i];
-            uint d = key_digit(key[k], pc.shift);
+            uint d = key_digit(key[k], pc.shift, pc.digit_mask);
             digit[k] = d;
             rank_in_chunk[k] = packed_get(lo, hi, d);
             uint inc = (d & 1u) != 0u ? 0x10000u : 1u;

@@ -24,6 +24,7 @@ struct RadixPush {
     n: u32,
     shift: u32,
     n_blocks: u32,
+    digit_mask: u32,
 }
 
 /// The sort's pipelines, made once per context.
@@ -125,10 +126,13 @@ impl RadixSort {
         let mut src = (keys, values);
         let mut dst = (&scratch.keys_alt, &scratch.values_alt);
         for pass in 0..passes {
+            let shift = pass * RADIX_BITS;
+            let digit_bits = (key_bits - shift).min(RADIX_BITS);
             let push = RadixPush {
                 n: n as u32,
-                shift: pass * RADIX_BITS,
+                shift,
                 n_blocks: n_blocks as u32,
+                digit_mask: (1 << digit_bits) - 1,
             };
             rec.dispatch(
                 &self.count,

@@ -1,0 +1,166 @@
+//! The Vulkan core: validation capture, device info, buffers, kernel interface checks, timers.
+
+mod common;
+
+use ash::vk;
+use softvk::gpu::{specs, Kernel, MemoryKind, Timer};
+use softvk::primitives::{Scan, ScanScratch};
+use softvk::Error;
+
+#[test]
+fn validation_check_fails_on_deliberate_misuse() {
+    let Some(gpu) = common::gpu() else { return };
+    if !common::validation_wanted() {
+        eprintln!("SOFTVK_VALIDATION=0: the validation check cannot be exercised");
+        return;
+    }
+    gpu.check_validation().expect("clean before the misuse");
+    // A buffer with no usage flags violates VUID-VkBufferCreateInfo-usage-requiredbitmask.
+    let info = vk::BufferCreateInfo::default()
+        .size(64)
+        .usage(vk::BufferUsageFlags::empty());
+    // SAFETY: deliberate misuse the driver tolerates; the buffer is destroyed right away.
+    unsafe {
+        let buffer = gpu.device().create_buffer(&info, None).unwrap();
+        gpu.device().destroy_buffer(buffer, None);
+    }
+    match gpu.check_validation() {
+        Err(Error::Validation { count, first }) => {
+            assert!(count >= 1);
+            assert!(first.contains("usage"), "unexpected message: {first}");
+        }
+        other => panic!("the misuse went unnoticed: {other:?}"),
+    }
+    // The check consumed the messages, so the log is clean again.
+    gpu.check_validation().unwrap();
+}
+
+#[test]
+fn device_info_reports_vulkan_1_2_and_sane_limits() {
+    let Some(gpu) = common::gpu() else { return };
+    let info = gpu.info();
+    assert!(info.api_version >= (1, 2, 0), "{:?}", info.api_version);
+    assert!(!info.name.is_empty() && !info.driver.is_empty());
+    assert!(info.subgroup_size >= 1);
+    assert!(info.buffer_alignment().is_power_of_two());
+    assert!(info.limits.max_compute_work_group_invocations >= 256);
+    assert!(info.limits.max_compute_shared_memory_size >= 16384);
+}
+
+#[test]
+fn buffers_round_sizes_and_round_trip_data() {
+    let Some(gpu) = common::gpu() else { return };
+    let align = gpu.info().buffer_alignment();
+    let buffer = gpu
+        .create_buffer("round trip", 13, MemoryKind::Device)
+        .unwrap();
+    assert_eq!(buffer.size() % align, 0);
+    assert!(buffer.size() >= 13);
+    let data: Vec<u32> = (0..1000).map(|i| i * 7 + 1).collect();
+    let buffer = gpu.upload_buffer("round trip data", &data).unwrap();
+    assert_eq!(
+        gpu.read_buffer::<u32>(&buffer, 0, data.len()).unwrap(),
+        data
+    );
+    assert_eq!(
+        gpu.read_buffer::<u32>(&buffer, 40, 3).unwrap(),
+        vec![71, 78, 85]
+    );
+    // Out-of-bounds reads and writes are errors, not corruption.
+    let too_far = gpu.read_buffer::<u32>(&buffer, 0, 5000);
+    assert!(matches!(too_far, Err(Error::Limit(_))), "{too_far:?}");
+    let too_far = gpu.write_buffer(&buffer, buffer.size() - 4, &[1u32, 2]);
+    assert!(matches!(too_far, Err(Error::Limit(_))), "{too_far:?}");
+}
+
+#[test]
+fn every_generated_kernel_builds_a_pipeline() {
+    let Some(gpu) = common::gpu() else { return };
+    assert!(specs::ALL.len() >= 4);
+    for spec in specs::ALL {
+        assert!(
+            !spec.spirv.is_empty() && spec.spirv[0] == 0x0723_0203,
+            "{}",
+            spec.name
+        );
+        assert!(spec.workgroup_size.iter().all(|&s| s >= 1), "{}", spec.name);
+        Kernel::new(&gpu, spec).unwrap_or_else(|e| panic!("{}: {e}", spec.name));
+    }
+}
+
+#[test]
+fn dispatch_rejects_arguments_that_do_not_fit_the_kernel() {
+    let Some(gpu) = common::gpu() else { return };
+    let kernel = Kernel::new(&gpu, &specs::SCAN_REDUCE).unwrap();
+    let buffer = gpu.create_buffer("args", 4096, MemoryKind::Device).unwrap();
+    let result = gpu.submit_and_wait(|rec| rec.dispatch(&kernel, &[buffer.whole()], &[0u32; 2], 1));
+    assert!(
+        matches!(&result, Err(Error::Kernel { kernel: "scan_reduce", message }) if message.contains("2 buffer bindings")),
+        "{result:?}"
+    );
+    let result = gpu.submit_and_wait(|rec| {
+        rec.dispatch(&kernel, &[buffer.whole(), buffer.whole()], &[0u32; 3], 1)
+    });
+    assert!(
+        matches!(&result, Err(Error::Kernel { message, .. }) if message.contains("push constants")),
+        "{result:?}"
+    );
+    let result = gpu.submit_and_wait(|rec| {
+        rec.dispatch(
+            &kernel,
+            &[buffer.range(4, 64), buffer.whole()],
+            &[0u32; 2],
+            1,
+        )
+    });
+    if gpu.info().limits.min_storage_buffer_offset_alignment > 4 {
+        assert!(
+            matches!(&result, Err(Error::Kernel { message, .. }) if message.contains("misaligned")),
+            "{result:?}"
+        );
+    }
+}
+
+#[test]
+fn scan_scratch_capacity_is_enforced() {
+    let Some(gpu) = common::gpu() else { return };
+    let scan = Scan::new(&gpu).unwrap();
+    let scratch = ScanScratch::new(&gpu, 100).unwrap();
+    let buffer = gpu
+        .create_buffer("scan", 4 * 200, MemoryKind::Device)
+        .unwrap();
+    let result =
+        gpu.submit_and_wait(|rec| scan.record(rec, &scratch, buffer.whole(), buffer.whole(), 200));
+    assert!(matches!(result, Err(Error::Limit(_))), "{result:?}");
+}
+
+#[test]
+fn timer_reports_each_named_pass() {
+    let Some(gpu) = common::gpu() else { return };
+    let scan = Scan::new(&gpu).unwrap();
+    let n = 1u64 << 20;
+    let buffer = gpu
+        .upload_buffer("timed scan", &vec![1u32; n as usize])
+        .unwrap();
+    let scratch = ScanScratch::new(&gpu, n).unwrap();
+    let mut timer = Timer::new(&gpu, 4).unwrap();
+    gpu.submit_and_wait_timed(Some(&mut timer), |rec| {
+        rec.pass("first", |rec| {
+            scan.record(rec, &scratch, buffer.whole(), buffer.whole(), n)
+        })?;
+        rec.pass("second", |rec| {
+            scan.record(rec, &scratch, buffer.whole(), buffer.whole(), n)
+        })
+    })
+    .unwrap();
+    let times = timer.results(&gpu).unwrap();
+    let names: Vec<_> = times.iter().map(|t| t.name.as_str()).collect();
+    assert_eq!(names, ["first", "second"]);
+    assert!(
+        times.iter().all(|t| t.ms > 0.0 && t.ms < 60_000.0),
+        "{times:?}"
+    );
+    // Scanning the scan of ones gives 0, 0, 1, 3, 6, ...: (i - 1) i / 2.
+    let out = gpu.read_buffer::<u32>(&buffer, 0, 5).unwrap();
+    assert_eq!(out, vec![0, 0, 1, 3, 6]);
+}
