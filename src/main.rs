@@ -53,6 +53,22 @@ fn info() -> softvk::Result<()> {
             "off (SOFTVK_VALIDATION=1 turns it on)"
         }
     );
+    println!("devices (SOFTVK_DEVICE takes an index or a name substring):");
+    for (i, d) in softvk::gpu::list_devices(ctx.instance())?
+        .iter()
+        .enumerate()
+    {
+        let mark = if d.handle == ctx.physical_device() {
+            "*"
+        } else {
+            " "
+        };
+        let status = match &d.usable {
+            Ok(_) => "usable".to_string(),
+            Err(why) => format!("unusable: {why}"),
+        };
+        println!("  {mark} {i}: {} ({status})", d.name);
+    }
     println!("limits used by softvk:");
     println!(
         "  maxComputeWorkGroupCount        {:?}",

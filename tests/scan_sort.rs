@@ -7,7 +7,9 @@ use softvk::primitives::sort::cpu::sort_pairs;
 use softvk::primitives::{scan, RadixSort, Scan};
 
 /// Sizes the issue names, plus block and multi-level boundaries.
-const SIZES: &[usize] = &[0, 1, 2, 1023, 1024, 1025, 4097, 1_048_575, 1_000_000];
+const SIZES: &[usize] = &[
+    0, 1, 2, 1023, 1024, 1025, 4095, 4096, 4097, 1_048_575, 1_000_000,
+];
 
 fn check_scan(scan: &Scan, gpu: &common::Gpu, data: &[u32]) {
     let (gpu_out, gpu_total) = scan.run(gpu, data).expect("GPU scan");

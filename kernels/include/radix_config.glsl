@@ -2,7 +2,7 @@
 #ifndef SOFTVK_RADIX_CONFIG_GLSL
 #define SOFTVK_RADIX_CONFIG_GLSL
 #define WG_SIZE 256
-#define ITEMS 4
+#define ITEMS 16
 #define BLOCK (WG_SIZE * ITEMS)
 #define RADIX_BITS 4
 #define RADIX (1 << RADIX_BITS)

@@ -2,6 +2,6 @@
 #ifndef SOFTVK_SCAN_CONFIG_GLSL
 #define SOFTVK_SCAN_CONFIG_GLSL
 #define WG_SIZE 256
-#define ITEMS 4
+#define ITEMS 16
 #define BLOCK (WG_SIZE * ITEMS)
 #endif

@@ -4,7 +4,7 @@
 // Stability: invocation t owns the ITEMS consecutive elements [t*ITEMS, t*ITEMS + ITEMS) of its
 // block, so an element's rank among equal digits is (equal digits in earlier invocations, from a
 // workgroup scan) + (equal digits earlier in its own chunk). The 16 per-digit counters of an
-// invocation are packed two per uint (16 bits each; a block holds 1024 < 65536 elements), so the
+// invocation are packed two per uint (16 bits each; a block holds BLOCK = 4096 < 65536 elements), so the
 // scan moves 8 words per invocation instead of 16.
 #include "radix_config.glsl"
 #include "common.glsl"

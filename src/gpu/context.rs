@@ -275,7 +275,19 @@ impl Context {
             create = create.push_next(&mut messenger_info);
         }
         // SAFETY: the create info and everything it points to live until the call returns.
-        let instance = unsafe { entry.create_instance(&create, None) }.vk("vkCreateInstance")?;
+        let instance = unsafe { entry.create_instance(&create, None) }.map_err(|result| {
+            if result == vk::Result::ERROR_INCOMPATIBLE_DRIVER {
+                Error::NoDevice(
+                    "no Vulkan driver is installed (without a GPU: apt-get install mesa-vulkan-drivers)"
+                        .into(),
+                )
+            } else {
+                Error::Vulkan {
+                    call: "vkCreateInstance",
+                    result,
+                }
+            }
+        })?;
 
         let messenger = if options.validation {
             let loader = ash::ext::debug_utils::Instance::new(&entry, &instance);
@@ -466,6 +478,11 @@ impl Context {
         &self.shared.device
     }
 
+    /// The raw `ash` instance.
+    pub fn instance(&self) -> &ash::Instance {
+        &self.shared.instance
+    }
+
     /// The physical device.
     pub fn physical_device(&self) -> vk::PhysicalDevice {
         self.physical_device
@@ -535,23 +552,36 @@ fn type_rank(t: vk::PhysicalDeviceType) -> u32 {
     }
 }
 
-/// The devices the loader reports, in enumeration order, with whether softvk can use each.
-pub fn list_devices(
-    instance: &ash::Instance,
-) -> Result<Vec<(vk::PhysicalDevice, String, Result<u32, String>)>> {
+/// A physical device as the loader reports it, and whether softvk can use it.
+#[derive(Clone, Debug)]
+pub struct PhysicalDeviceEntry {
+    /// The handle.
+    pub handle: vk::PhysicalDevice,
+    /// The device name.
+    pub name: String,
+    /// The compute queue family softvk would use, or why the device is unusable.
+    pub usable: Result<u32, String>,
+}
+
+/// The devices the loader reports, in enumeration order (the indices `SOFTVK_DEVICE` takes).
+pub fn list_devices(instance: &ash::Instance) -> Result<Vec<PhysicalDeviceEntry>> {
     // SAFETY: plain enumeration on a valid instance.
     let devices =
         unsafe { instance.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices")?;
     Ok(devices
         .into_iter()
-        .map(|pd| {
-            // SAFETY: `pd` was just enumerated from `instance`.
-            let props = unsafe { instance.get_physical_device_properties(pd) };
+        .map(|handle| {
+            // SAFETY: `handle` was just enumerated from `instance`.
+            let props = unsafe { instance.get_physical_device_properties(handle) };
             let name = props
                 .device_name_as_c_str()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_default();
-            (pd, name, usable(instance, pd))
+            PhysicalDeviceEntry {
+                handle,
+                name,
+                usable: usable(instance, handle),
+            }
         })
         .collect())
 }
@@ -601,42 +631,43 @@ fn pick_device(
     if let Some(wanted) = wanted {
         let by_index = wanted.trim().parse::<usize>().ok();
         let lower = wanted.to_lowercase();
-        let (pd, name, usable) = devices
+        let entry = devices
             .iter()
             .enumerate()
-            .find(|(i, (_, name, _))| {
-                Some(*i) == by_index || (by_index.is_none() && name.to_lowercase().contains(&lower))
+            .find(|(i, d)| match by_index {
+                Some(index) => *i == index,
+                None => d.name.to_lowercase().contains(&lower),
             })
             .map(|(_, d)| d)
             .ok_or_else(|| {
                 let names: Vec<_> = devices
                     .iter()
                     .enumerate()
-                    .map(|(i, (_, n, _))| format!("{i}: {n}"))
+                    .map(|(i, d)| format!("{i}: {}", d.name))
                     .collect();
                 Error::NoDevice(format!(
                     "SOFTVK_DEVICE={wanted} matches none of [{}]",
                     names.join(", ")
                 ))
             })?;
-        return match usable {
-            Ok(family) => Ok((*pd, *family)),
-            Err(why) => Err(Error::NoDevice(format!("{name}: {why}"))),
+        return match &entry.usable {
+            Ok(family) => Ok((entry.handle, *family)),
+            Err(why) => Err(Error::NoDevice(format!("{}: {why}", entry.name))),
         };
     }
     let mut best: Option<(u32, vk::PhysicalDevice, u32)> = None;
     let mut reasons = Vec::new();
-    for (pd, name, usable) in &devices {
-        match usable {
+    for entry in &devices {
+        match &entry.usable {
             Ok(family) => {
-                // SAFETY: `pd` belongs to `instance`.
-                let props = unsafe { instance.get_physical_device_properties(*pd) };
+                // SAFETY: `entry.handle` belongs to `instance`.
+                let props = unsafe { instance.get_physical_device_properties(entry.handle) };
                 let rank = type_rank(props.device_type);
                 if best.is_none_or(|(r, _, _)| rank < r) {
-                    best = Some((rank, *pd, *family));
+                    best = Some((rank, entry.handle, *family));
                 }
             }
-            Err(why) => reasons.push(format!("{name}: {why}")),
+            Err(why) => reasons.push(format!("{}: {why}", entry.name)),
         }
     }
     best.map(|(_, pd, family)| (pd, family))

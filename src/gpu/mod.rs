@@ -6,8 +6,9 @@ mod memory;
 mod record;
 
 pub use context::{
-    list_devices, Context, ContextOptions, DeviceInfo, RawHandles, REQUIRED_DEVICE_EXTENSIONS,
+    list_devices, Context, ContextOptions, DeviceInfo, PhysicalDeviceEntry, RawHandles,
+    REQUIRED_DEVICE_EXTENSIONS,
 };
 pub use kernel::{specs, BindingSpec, Kernel, KernelSpec};
 pub use memory::{align_up, Buffer, BufferRange, MemoryKind};
-pub use record::{PassTime, Recorder, Timer};
+pub use record::{PassTime, Recorded, Recorder, Timer};

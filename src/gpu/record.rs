@@ -390,10 +390,54 @@ impl Drop for Timer {
     }
 }
 
+/// A command buffer recorded once and submittable many times (benchmarks, fixed pipelines).
+/// Owns the command buffer and a fence; frees both on drop.
+pub struct Recorded<'a> {
+    ctx: &'a Context,
+    cmd: vk::CommandBuffer,
+    fence: vk::Fence,
+}
+
+impl Recorded<'_> {
+    /// Submits the recording to the context's queue and waits for it to finish.
+    pub fn submit_and_wait(&self) -> Result<()> {
+        let device = self.ctx.device();
+        let cmds = [self.cmd];
+        let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
+        // Queue access must be externally synchronized; the pool lock covers it.
+        let _guard = self.ctx.pool_lock.lock();
+        // SAFETY: the fence is unsignaled (reset after every wait), the command buffer is
+        // executable and not pending (we waited for the previous submit).
+        unsafe {
+            device
+                .queue_submit(self.ctx.queue, &submit, self.fence)
+                .vk("vkQueueSubmit")?;
+            let waited = device
+                .wait_for_fences(&[self.fence], true, u64::MAX)
+                .vk("vkWaitForFences");
+            device.reset_fences(&[self.fence]).vk("vkResetFences")?;
+            waited
+        }
+    }
+}
+
+impl Drop for Recorded<'_> {
+    fn drop(&mut self) {
+        let _guard = self.ctx.pool_lock.lock();
+        // SAFETY: every submit waited for its fence, so the command buffer is not pending.
+        unsafe {
+            self.ctx.device().destroy_fence(self.fence, None);
+            self.ctx
+                .device()
+                .free_command_buffers(self.ctx.command_pool, &[self.cmd]);
+        }
+    }
+}
+
 impl Context {
     /// Records `f` into a fresh command buffer, submits it to the context's queue and waits.
     pub fn submit_and_wait(&self, f: impl FnOnce(&mut Recorder<'_>) -> Result<()>) -> Result<()> {
-        self.submit_and_wait_timed(None, f)
+        self.record(None, f)?.submit_and_wait()
     }
 
     /// As [`Context::submit_and_wait`], with GPU timestamps into `timer`.
@@ -402,74 +446,71 @@ impl Context {
         timer: Option<&mut Timer>,
         f: impl FnOnce(&mut Recorder<'_>) -> Result<()>,
     ) -> Result<()> {
-        let cmd = self.begin_one_time()?;
-        let recorded = {
-            // SAFETY: `cmd` was just allocated from our pool and begun.
-            let mut rec = unsafe { Recorder::new(self, cmd) };
-            if let Some(timer) = timer {
-                rec = rec.with_timer(timer);
-            }
-            f(&mut rec).map(|()| rec.host_barrier())
-        };
-        let result = recorded.and_then(|()| self.end_submit_wait(cmd));
-        // SAFETY: the submit (if any) has completed, or nothing was submitted.
-        unsafe {
-            let _guard = self.pool_lock.lock();
-            self.device()
-                .free_command_buffers(self.command_pool, &[cmd]);
-        }
-        result
+        self.record(timer, f)?.submit_and_wait()
     }
 
-    fn begin_one_time(&self) -> Result<vk::CommandBuffer> {
+    /// Records `f` once into a command buffer of the context's pool (with timestamps into
+    /// `timer`, re-reset on every submit), for [`Recorded::submit_and_wait`].
+    ///
+    /// `f` must only record: submitting through this context from inside it would deadlock on
+    /// the pool lock.
+    pub fn record<'a>(
+        &'a self,
+        timer: Option<&mut Timer>,
+        f: impl FnOnce(&mut Recorder<'_>) -> Result<()>,
+    ) -> Result<Recorded<'a>> {
         let info = vk::CommandBufferAllocateInfo::default()
             .command_pool(self.command_pool)
             .level(vk::CommandBufferLevel::PRIMARY)
             .command_buffer_count(1);
-        let _guard = self.pool_lock.lock();
-        // SAFETY: the pool is ours and externally synchronized by `pool_lock`.
-        let cmd = unsafe { self.device().allocate_command_buffers(&info) }
-            .vk("vkAllocateCommandBuffers")?[0];
-        let begin = vk::CommandBufferBeginInfo::default()
-            .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT);
-        // SAFETY: freshly allocated command buffer.
-        if let Err(result) = unsafe { self.device().begin_command_buffer(cmd, &begin) } {
-            // SAFETY: never submitted.
-            unsafe {
-                self.device()
-                    .free_command_buffers(self.command_pool, &[cmd])
-            };
-            return Err(Error::Vulkan {
-                call: "vkBeginCommandBuffer",
-                result,
-            });
-        }
-        Ok(cmd)
-    }
-
-    fn end_submit_wait(&self, cmd: vk::CommandBuffer) -> Result<()> {
-        let device = self.device();
-        // SAFETY: `cmd` is recording.
-        unsafe { device.end_command_buffer(cmd) }.vk("vkEndCommandBuffer")?;
-        // SAFETY: valid device.
-        let fence = unsafe { device.create_fence(&vk::FenceCreateInfo::default(), None) }
-            .vk("vkCreateFence")?;
-        let cmds = [cmd];
-        let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
-        let result = {
-            // Queue access must be externally synchronized; the pool lock covers it too.
+        let cmd = {
             let _guard = self.pool_lock.lock();
-            // SAFETY: executable command buffer, valid queue and unsignaled fence.
-            unsafe { device.queue_submit(self.queue, &submit, fence) }
-                .vk("vkQueueSubmit")
-                // SAFETY: the fence was just submitted.
-                .and_then(|()| {
-                    unsafe { device.wait_for_fences(&[fence], true, u64::MAX) }
-                        .vk("vkWaitForFences")
-                })
+            // SAFETY: the pool is ours and externally synchronized by `pool_lock`.
+            unsafe { self.device().allocate_command_buffers(&info) }
+                .vk("vkAllocateCommandBuffers")?[0]
         };
-        // SAFETY: the fence is signaled or was never submitted.
-        unsafe { device.destroy_fence(fence, None) };
-        result
+        // SAFETY: valid device.
+        let fence = match unsafe {
+            self.device()
+                .create_fence(&vk::FenceCreateInfo::default(), None)
+        } {
+            Ok(fence) => fence,
+            Err(result) => {
+                let _guard = self.pool_lock.lock();
+                // SAFETY: never begun nor submitted.
+                unsafe {
+                    self.device()
+                        .free_command_buffers(self.command_pool, &[cmd])
+                };
+                return Err(Error::Vulkan {
+                    call: "vkCreateFence",
+                    result,
+                });
+            }
+        };
+        // From here on, `Recorded`'s drop frees the command buffer and fence on any error.
+        let recorded = Recorded {
+            ctx: self,
+            cmd,
+            fence,
+        };
+        // Recording into a command buffer needs its pool externally synchronized too.
+        let _guard = self.pool_lock.lock();
+        // SAFETY: freshly allocated command buffer of our pool, which `pool_lock` guards.
+        unsafe {
+            self.device()
+                .begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default())
+                .vk("vkBeginCommandBuffer")?;
+            let mut rec = Recorder::new(self, cmd);
+            if let Some(timer) = timer {
+                rec = rec.with_timer(timer);
+            }
+            f(&mut rec)?;
+            rec.host_barrier();
+            self.device()
+                .end_command_buffer(cmd)
+                .vk("vkEndCommandBuffer")?;
+        }
+        Ok(recorded)
     }
 }

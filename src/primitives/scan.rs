@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 use crate::gpu::{specs, Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder};
 
 /// Elements per workgroup (mirrors `BLOCK` in `kernels/include/scan_config.glsl`).
-pub const SCAN_BLOCK: u32 = 1024;
+pub const SCAN_BLOCK: u32 = 4096;
 
 /// Push constants of `kernels/scan/scan_reduce.comp`.
 #[repr(C)]
@@ -251,7 +251,7 @@ mod tests {
             std::mem::size_of::<BlockPush>() as u32,
             specs::SCAN_BLOCK.push_constant_size
         );
-        assert_eq!(specs::SCAN_BLOCK.workgroup_size[0] * 4, SCAN_BLOCK);
+        assert_eq!(specs::SCAN_BLOCK.workgroup_size[0] * 16, SCAN_BLOCK);
         assert_eq!(specs::SCAN_REDUCE.bindings.len(), 2);
         assert_eq!(specs::SCAN_BLOCK.bindings.len(), 4);
     }

@@ -15,7 +15,7 @@ use crate::gpu::{specs, Buffer, Context, Kernel, MemoryKind, Recorder};
 pub const RADIX_BITS: u32 = 4;
 const RADIX: u64 = 1 << RADIX_BITS;
 /// Elements per workgroup (mirrors `BLOCK` in `kernels/include/radix_config.glsl`).
-pub const SORT_BLOCK: u32 = 1024;
+pub const SORT_BLOCK: u32 = 4096;
 
 /// Push constants of `radix_count.comp` and `radix_scatter.comp`.
 #[repr(C)]
@@ -228,7 +228,7 @@ mod tests {
         let size = std::mem::size_of::<RadixPush>() as u32;
         assert_eq!(size, specs::RADIX_COUNT.push_constant_size);
         assert_eq!(size, specs::RADIX_SCATTER.push_constant_size);
-        assert_eq!(specs::RADIX_SCATTER.workgroup_size[0] * 4, SORT_BLOCK);
+        assert_eq!(specs::RADIX_SCATTER.workgroup_size[0] * 16, SORT_BLOCK);
         assert_eq!(specs::RADIX_SCATTER.bindings.len(), 5);
     }
 
