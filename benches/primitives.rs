@@ -6,7 +6,7 @@
 
 use std::time::{Duration, Instant};
 
-use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use softvk::gpu::{Context, ContextOptions, Recorded, Timer};
 use softvk::primitives::sort::split_key;
 use softvk::primitives::{RadixSort, Scan, ScanScratch, SortScratch};

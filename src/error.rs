@@ -7,7 +7,9 @@ use ash::vk;
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// The Vulkan loader (libvulkan) could not be opened.
-    #[error("cannot load the Vulkan loader ({0}); install one, e.g. `apt-get install mesa-vulkan-drivers` for the CPU driver lavapipe")]
+    #[error(
+        "cannot load the Vulkan loader ({0}); install one, e.g. `apt-get install mesa-vulkan-drivers` for the CPU driver lavapipe"
+    )]
     Loader(String),
 
     /// No physical device satisfies softvk's needs (or none matches `SOFTVK_DEVICE`).
@@ -15,7 +17,9 @@ pub enum Error {
     NoDevice(String),
 
     /// `SOFTVK_VALIDATION=1` asked for the Khronos validation layer and it is not installed.
-    #[error("validation was requested but VK_LAYER_KHRONOS_validation is not installed (apt-get install vulkan-validationlayers)")]
+    #[error(
+        "validation was requested but VK_LAYER_KHRONOS_validation is not installed (apt-get install vulkan-validationlayers)"
+    )]
     ValidationLayerMissing,
 
     /// A Vulkan call returned an error code.
@@ -64,6 +68,14 @@ pub enum Error {
     /// Bad user input: the message names the input and what is wrong with it.
     #[error("{0}")]
     Input(String),
+
+    /// A mesh could not be loaded, or breaks an invariant (names the file, line or element).
+    #[error(transparent)]
+    Mesh(#[from] crate::mesh::MeshError),
+
+    /// Rendering settings or inputs are out of their domain.
+    #[error(transparent)]
+    Render(#[from] crate::raster::reference::RenderError),
 
     /// A file could not be read or written.
     #[error("{path}: {source}")]

@@ -4,13 +4,21 @@
 //!   engine with [`gpu::Context::from_raw`]), buffers, kernels compiled at build time, and a
 //!   [`gpu::Recorder`] that records dispatches into a command buffer the caller owns.
 //! - [`primitives`]: exclusive scan and stable radix sort, the building blocks of binning.
+//! - The soft rasterizer's stages: [`mesh`] (OBJ, per-face textures) → [`camera`] (look-at,
+//!   projection, pixel centres) → [`lighting`] → [`raster`] (for now its f64 CPU twin,
+//!   [`raster::reference`], the oracle the GPU kernels will be tested against).
 //!
 //! Every kernel has a CPU twin that tests compare it with.
 
 #![warn(missing_docs)]
 
+pub mod assets;
+pub mod camera;
 pub mod error;
 pub mod gpu;
+pub mod lighting;
+pub mod mesh;
 pub mod primitives;
+pub mod raster;
 
 pub use error::{Error, Result};

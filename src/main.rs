@@ -120,9 +120,5 @@ fn info() -> softvk::Result<()> {
 }
 
 fn yes(b: bool) -> &'static str {
-    if b {
-        "yes"
-    } else {
-        "no"
-    }
+    if b { "yes" } else { "no" }
 }

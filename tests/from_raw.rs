@@ -4,13 +4,13 @@
 
 mod common;
 
-use std::ffi::{c_void, CStr};
+use std::ffi::{CStr, c_void};
 use std::sync::{Arc, Mutex};
 
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
-use softvk::gpu::{Context, RawHandles, Recorder, REQUIRED_DEVICE_EXTENSIONS};
-use softvk::primitives::{scan, Scan, ScanScratch};
+use softvk::gpu::{Context, REQUIRED_DEVICE_EXTENSIONS, RawHandles, Recorder};
+use softvk::primitives::{Scan, ScanScratch, scan};
 
 static HOST_MESSAGES: Mutex<Vec<String>> = Mutex::new(Vec::new());
 

@@ -3,9 +3,9 @@
 mod common;
 
 use ash::vk;
-use softvk::gpu::{specs, Kernel, MemoryKind, Timer};
-use softvk::primitives::{Scan, ScanScratch};
 use softvk::Error;
+use softvk::gpu::{Kernel, MemoryKind, Timer, specs};
+use softvk::primitives::{Scan, ScanScratch};
 
 #[test]
 fn validation_check_fails_on_deliberate_misuse() {

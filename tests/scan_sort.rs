@@ -4,7 +4,7 @@ mod common;
 
 use rand::RngExt;
 use softvk::primitives::sort::cpu::sort_pairs;
-use softvk::primitives::{scan, RadixSort, Scan};
+use softvk::primitives::{RadixSort, Scan, scan};
 
 /// Sizes the issue names, plus block and multi-level boundaries.
 const SIZES: &[usize] = &[

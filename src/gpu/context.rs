@@ -2,7 +2,7 @@
 //! allocator. Either owned (headless, for the CLI, tests and benches) or adopted from a host engine
 //! with [`Context::from_raw`], in which case softvk destroys only what it created itself.
 
-use std::ffi::{c_void, CStr, CString};
+use std::ffi::{CStr, CString, c_void};
 use std::sync::{Arc, Mutex};
 
 use ash::vk;

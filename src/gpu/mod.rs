@@ -6,9 +6,9 @@ mod memory;
 mod record;
 
 pub use context::{
-    list_devices, Context, ContextOptions, DeviceInfo, PhysicalDeviceEntry, RawHandles,
-    REQUIRED_DEVICE_EXTENSIONS,
+    Context, ContextOptions, DeviceInfo, PhysicalDeviceEntry, REQUIRED_DEVICE_EXTENSIONS,
+    RawHandles, list_devices,
 };
-pub use kernel::{specs, BindingSpec, Kernel, KernelSpec};
-pub use memory::{align_up, Buffer, BufferRange, MemoryKind};
+pub use kernel::{BindingSpec, Kernel, KernelSpec, specs};
+pub use memory::{Buffer, BufferRange, MemoryKind, align_up};
 pub use record::{PassTime, Recorded, Recorder, Timer};

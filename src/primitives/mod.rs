@@ -4,5 +4,5 @@
 pub mod scan;
 pub mod sort;
 
-pub use scan::{Scan, ScanScratch, SCAN_BLOCK};
-pub use sort::{RadixSort, SortScratch, RADIX_BITS, SORT_BLOCK};
+pub use scan::{SCAN_BLOCK, Scan, ScanScratch};
+pub use sort::{RADIX_BITS, RadixSort, SORT_BLOCK, SortScratch};

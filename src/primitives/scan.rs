@@ -7,7 +7,7 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
-use crate::gpu::{specs, Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
 
 /// Elements per workgroup (mirrors `BLOCK` in `kernels/include/scan_config.glsl`).
 pub const SCAN_BLOCK: u32 = 4096;

@@ -9,7 +9,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::scan::{Scan, ScanScratch};
 use crate::error::{Error, Result};
-use crate::gpu::{specs, Buffer, Context, Kernel, MemoryKind, Recorder};
+use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, specs};
 
 /// Bits sorted per pass (mirrors `RADIX_BITS` in `kernels/include/radix_config.glsl`).
 pub const RADIX_BITS: u32 = 4;

@@ -47,7 +47,9 @@ pub fn gpu() -> Option<Gpu> {
     let mut options = ContextOptions::from_env();
     options.validation = validation_wanted();
     let ctx = Context::new(&options).unwrap_or_else(|e| {
-        panic!("cannot create a Vulkan context ({e}); set SOFTVK_NO_GPU=1 to skip GPU tests explicitly")
+        panic!(
+            "cannot create a Vulkan context ({e}); set SOFTVK_NO_GPU=1 to skip GPU tests explicitly"
+        )
     });
     assert_eq!(ctx.validation_enabled(), options.validation);
     Some(Gpu(Some(ctx)))
