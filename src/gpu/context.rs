@@ -308,20 +308,24 @@ impl Context {
             None
         };
 
-        let picked = pick_device(&instance, options.device.as_deref());
-        let (physical_device, queue_family_index) = match picked {
-            Ok(p) => p,
-            Err(e) => {
-                // SAFETY: destroy what we created, in reverse order.
-                unsafe {
-                    if let Some((loader, m)) = &messenger {
-                        loader.destroy_debug_utils_messenger(*m, None);
-                    }
-                    instance.destroy_instance(None);
+        // Undoes the instance-level objects when a later step fails.
+        let destroy_instance = || {
+            // SAFETY: nothing created from the instance outlives this call; reverse order.
+            unsafe {
+                if let Some((loader, m)) = &messenger {
+                    loader.destroy_debug_utils_messenger(*m, None);
                 }
-                return Err(e);
+                instance.destroy_instance(None);
             }
         };
+        let (physical_device, queue_family_index) =
+            match pick_device(&instance, options.device.as_deref()) {
+                Ok(p) => p,
+                Err(e) => {
+                    destroy_instance();
+                    return Err(e);
+                }
+            };
 
         let priorities = [1.0f32];
         let queue_info = [vk::DeviceQueueCreateInfo::default()
@@ -339,13 +343,7 @@ impl Context {
         let device = match unsafe { instance.create_device(physical_device, &device_info, None) } {
             Ok(d) => d,
             Err(result) => {
-                // SAFETY: as above.
-                unsafe {
-                    if let Some((loader, m)) = &messenger {
-                        loader.destroy_debug_utils_messenger(*m, None);
-                    }
-                    instance.destroy_instance(None);
-                }
+                destroy_instance();
                 return Err(Error::Vulkan {
                     call: "vkCreateDevice",
                     result,

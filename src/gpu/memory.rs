@@ -211,8 +211,8 @@ impl Context {
         Ok(buffer)
     }
 
-    /// Writes `data` at byte `offset` of `buffer` (mapped directly for `Upload` buffers, through a
-    /// staging copy otherwise). Waits for the copy.
+    /// Writes `data` at byte `offset` of `buffer` through a staging copy, and waits for it.
+    /// (Host-visible buffers can also be written directly with [`Buffer::mapped_mut`].)
     pub fn write_buffer<T: bytemuck::Pod>(
         &self,
         buffer: &Buffer,
