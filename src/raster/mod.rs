@@ -1,4 +1,9 @@
-//! Soft rasterization (SPEC §2). For now the f64 CPU twin ([`reference`]); the tiled GPU forward
-//! (face setup → binning → fine raster) is built next and tested against it.
+//! Soft rasterization (SPEC §2), stage by stage: the f64 CPU twin
+//! ([`reference`](mod@reference)), and on the GPU the face setup ([`setup`]) and the brute-force
+//! fine pass ([`brute`]), driven by [`gpu`]. The tiled forward (binning → tiled fine pass) comes
+//! next and is tested against the brute one, bit for bit.
 
+pub mod brute;
+pub mod gpu;
 pub mod reference;
+pub mod setup;

@@ -27,6 +27,10 @@ pub const MIN_DET: f64 = 1e-10;
 /// Floor of the clipped barycentric sum before renormalization.
 pub const CLIP_SUM_FLOOR: f64 = 1e-5;
 
+/// Slack, in ulp per unit of R, of the texel rule's tie test (see [`surface_texel_index`]): the
+/// rounding of `(w̃0 + w̃1) R` is a few ulp of R, in f64 here and in f32 on the GPU.
+pub const TEXEL_TIE_ULPS: f64 = 8.0;
+
 /// Absolute padding of the grown bounding boxes, so float rounding in the distance or the
 /// barycentrics can never make a touched pixel fall just outside (screen coordinates are O(1),
 /// rounding O(1e-16)).
@@ -426,12 +430,19 @@ pub fn depth(face: &FaceSetup, w_clip: &[f64; 3]) -> f64 {
 /// `a` and `b` are clamped to R − 1: at a corner (`w̃0 = 1` or `w̃1 = 1`, common for clipped
 /// pixels outside a vertex) SoftRas reads past the face's texels into the next face's; the
 /// clamp picks the corner texel instead and changes nothing anywhere else.
+///
+/// The test `frac ≤ 1` is taken with a slack of [`TEXEL_TIE_ULPS`]` · R` ulp. On the face's edge
+/// `w̃2 = 0` (every pixel of the soft halo beyond edge v0 v1 clips there) the exact `frac` is 1,
+/// a tie that the rule sends to the lower texel; the rounded `w̃0 + w̃1` lands on either side of
+/// 1, and the other branch is the *mirrored* texel `a R + b`. SoftRas's f32 kernel flips between
+/// the two there; the slack makes the rule's own answer come out in f64 and f32 alike. Elsewhere
+/// it only moves texel boundaries by that many ulp.
 pub fn surface_texel_index(w_clip: &[f64; 3], res: u32) -> usize {
     let r = f64::from(res);
     let a = ((w_clip[0] * r) as u32).min(res - 1);
     let b = ((w_clip[1] * r) as u32).min(res - 1);
     let frac = (w_clip[0] + w_clip[1]) * r - f64::from(a) - f64::from(b);
-    if frac <= 1.0 {
+    if frac <= 1.0 + TEXEL_TIE_ULPS * r * f64::EPSILON {
         (b * res + a) as usize
     } else {
         ((res - 1 - b) * res + (res - 1 - a)) as usize
@@ -1071,6 +1082,34 @@ mod tests {
             );
             assert_eq!(surface_texel_index(&[0.0, 0.0, 1.0], res), 0);
         }
+    }
+
+    /// Beyond edge v0 v1 every pixel clips to `w̃2 = 0`, where the rule's `frac` is exactly 1 and
+    /// picks the lower texel; the rounded `w̃0 + w̃1` often lands just above 1, which without the
+    /// tie slack would pick the mirrored texel `a R + b`.
+    #[test]
+    fn surface_texel_rule_keeps_the_lower_texel_on_the_edge_w2_0() {
+        let mut rounded_above = 0;
+        for i in 1..2000 {
+            let c0 = f64::from(i) * 0.000_731_3;
+            let w = clip_barycentric([c0, 1.3 - c0, -0.2]);
+            assert_eq!(w[2], 0.0);
+            rounded_above += usize::from(w[0] + w[1] > 1.0);
+            for res in [2u32, 3, 5, 64] {
+                let r = f64::from(res);
+                let a = ((w[0] * r) as u32).min(res - 1);
+                let b = ((w[1] * r) as u32).min(res - 1);
+                assert_eq!(
+                    surface_texel_index(&w, res),
+                    (b * res + a) as usize,
+                    "{w:?} R={res}"
+                );
+            }
+        }
+        assert!(
+            rounded_above > 0,
+            "the loop should hit the rounding it guards against"
+        );
     }
 
     #[test]

@@ -1,0 +1,224 @@
+// Soft rasterization maths shared by the face setup and every fine kernel (brute force now, tiled
+// later): the f32 twin of `src/raster/reference.rs`, function for function. A tiled kernel that
+// calls these same functions in the same face order gets bit-identical pixels to the brute one.
+//
+// Where f32 needs a different arrangement of the same formula than the f64 twin, it is said here:
+// - barycentrics are evaluated relative to a vertex of the opposite edge (`barycentric`);
+// - the face determinant is taken in its translated form (`face_setup.comp`);
+// - the softmax exponents are taken from depth differences, not from z̄ (`softmax_add`).
+#ifndef SOFTVK_RASTER_GLSL
+#define SOFTVK_RASTER_GLSL
+
+#define DIST_EUCLIDEAN 0u
+#define DIST_BARYCENTRIC 1u
+#define DIST_HARD 2u
+
+#define RGB_SOFTMAX 0u
+#define RGB_HARD 1u
+
+#define ALPHA_PROD 0u
+#define ALPHA_SUM 1u
+#define ALPHA_HARD 2u
+
+#define FACE_FRONT 1u
+#define FACE_FINITE 2u
+#define FACE_DEGENERATE 4u
+
+// `reference::MIN_DET`: SoftRas's determinant clamp.
+const float MIN_DET = 1e-10;
+// `reference::CLIP_SUM_FLOOR`.
+const float CLIP_SUM_FLOOR = 1e-5;
+
+// One face in one view after setup. Twin of `GpuFaceSetup` (src/raster/setup.rs) and of
+// `reference::FaceSetup`. 128 bytes, std430.
+struct FaceSetup {
+    vec4 v[3];    // screen-space vertices (x_s, y_s, z, 0)
+    vec4 inv[3];  // rows of M_j (clamped determinant), (a, b, c, 0): w_k = a x + b y + c
+    vec4 bbox;    // grown screen box (x_min, y_min, x_max, y_max)
+    uint flags;   // FACE_FRONT | FACE_FINITE | FACE_DEGENERATE
+    uint pad0;
+    uint pad1;
+    uint pad2;
+};
+
+// `camera::pixel_center`: x_p = (2c + 1 - W) / S, y_p = (2(H - 1 - r) + 1 - H) / S, S = min(W, H).
+// Every operand is an integer below 2^24, so only the division rounds.
+vec2 pixel_center(uint col, uint row, uint width, uint height) {
+    float w = float(width);
+    float h = float(height);
+    float s = min(w, h);
+    return vec2((2.0 * float(col) + 1.0 - w) / s, (2.0 * (h - 1.0 - float(row)) + 1.0 - h) / s);
+}
+
+// `reference::outside_bbox` (strict, as SoftRas's check_border).
+bool outside_bbox(vec4 bbox, vec2 p) {
+    return p.x < bbox.x || p.y < bbox.y || p.x > bbox.z || p.y > bbox.w;
+}
+
+// `reference::barycentric`, w = M_j (x_p, y_p, 1). Row k of M_j vanishes on the edge opposite
+// vertex k, so `a x + b y + c = a (x - x_r) + b (y - y_r)` for a vertex r of that edge, exactly,
+// for the clamped determinant too. In f32 the translated form keeps its error at a few ulp of
+// |p - v_r| instead of |c| (which grows like 1 / area and cancels), so the w of a small face stay
+// accurate; SoftRas's σ = 1e-5 barycentric coverage is that sensitive.
+vec3 barycentric(FaceSetup f, vec2 p) {
+    return vec3(f.inv[0].x * (p.x - f.v[1].x) + f.inv[0].y * (p.y - f.v[1].y),
+                f.inv[1].x * (p.x - f.v[2].x) + f.inv[1].y * (p.y - f.v[2].y),
+                f.inv[2].x * (p.x - f.v[0].x) + f.inv[2].y * (p.y - f.v[0].y));
+}
+
+bool strictly_inside(vec3 w) {
+    return w.x > 0.0 && w.x < 1.0 && w.y > 0.0 && w.y < 1.0 && w.z > 0.0 && w.z < 1.0;
+}
+
+// `reference::inside_closed`.
+bool inside_closed(vec3 w) {
+    return w.x >= 0.0 && w.x <= 1.0 && w.y >= 0.0 && w.y <= 1.0 && w.z >= 0.0 && w.z <= 1.0;
+}
+
+// `reference::dist2_point_segment`.
+float dist2_point_segment(vec2 p, vec2 a, vec2 b) {
+    float ex = b.x - a.x;
+    float ey = b.y - a.y;
+    float len2 = ex * ex + ey * ey;
+    float t = 0.0;
+    if (len2 > 0.0) {
+        t = clamp(((p.x - a.x) * ex + (p.y - a.y) * ey) / len2, 0.0, 1.0);
+    }
+    float dx = a.x + t * ex - p.x;
+    float dy = a.y + t * ey - p.y;
+    return dx * dx + dy * dy;
+}
+
+// `reference::euclidean_dist2`: the nearest of the three edges, as segments.
+float euclidean_dist2(FaceSetup f, vec2 p) {
+    return min(min(dist2_point_segment(p, f.v[0].xy, f.v[1].xy),
+                   dist2_point_segment(p, f.v[1].xy, f.v[2].xy)),
+               dist2_point_segment(p, f.v[2].xy, f.v[0].xy));
+}
+
+float sigmoid(float x) {
+    return 1.0 / (1.0 + exp(-x));
+}
+
+// `reference::coverage`: false when the face is ignored at this pixel (outside and beyond the
+// cut-off `t`); otherwise `d` is the coverage D.
+bool coverage(FaceSetup f, vec3 w, vec2 p, uint dist, float sigma, float t, out float d) {
+    if (dist == DIST_HARD) {
+        d = 1.0;
+        return inside_closed(w);
+    }
+    if (dist == DIST_BARYCENTRIC) {
+        float m = min(min(w.x, w.y), w.z);
+        float s = m * abs(m);
+        d = sigmoid(s / sigma);
+        return -s < t;
+    }
+    float d2 = euclidean_dist2(f, p);
+    if (strictly_inside(w)) {
+        d = sigmoid(d2 / sigma);
+        return true;
+    }
+    d = sigmoid(-d2 / sigma);
+    return d2 < t;
+}
+
+// `reference::clip_barycentric`.
+vec3 clip_barycentric(vec3 w) {
+    vec3 c = clamp(w, 0.0, 1.0);
+    float s = max(c.x + c.y + c.z, CLIP_SUM_FLOOR);
+    return vec3(c.x / s, c.y / s, c.z / s);
+}
+
+// `reference::depth` and the near/far test together: false when the depth
+// z = 1 / Σ_k (w̃_k / z_k) is outside [near, far] (a non-positive sum, whose z would be negative
+// or infinite, is outside too; so is NaN).
+bool depth_in_range(FaceSetup f, vec3 wc, float near, float far, out float z) {
+    float inv_z = wc.x / f.v[0].z + wc.y / f.v[1].z + wc.z / f.v[2].z;
+    if (!(inv_z > 0.0)) {
+        z = 0.0;
+        return false;
+    }
+    z = 1.0 / inv_z;
+    return z >= near && z <= far;
+}
+
+// `reference::surface_texel_index`: SoftRas's texel within a face's R×R texture, with the same
+// slack of TEXEL_TIE_ULPS R ulp on the tie test (exact on the edge w̃2 = 0; see the twin).
+const float TEXEL_TIE_ULPS = 8.0;
+const float FLT_EPSILON = 1.1920929e-7;
+
+uint surface_texel_index(vec3 wc, uint res) {
+    float r = float(res);
+    uint a = min(uint(wc.x * r), res - 1u);
+    uint b = min(uint(wc.y * r), res - 1u);
+    float frac = (wc.x + wc.y) * r - float(a) - float(b);
+    if (frac <= 1.0 + TEXEL_TIE_ULPS * r * FLT_EPSILON) {
+        return b * res + a;
+    }
+    return (res - 1u - b) * res + (res - 1u - a);
+}
+
+// `reference::AlphaAccum`. Prod: Π(1 - D); sum: Σ D; hard: 1 once any D > 0.5.
+float alpha_init(uint mode) {
+    return mode == ALPHA_PROD ? 1.0 : 0.0;
+}
+
+float alpha_add(float acc, uint mode, float d) {
+    if (mode == ALPHA_PROD) {
+        return acc * (1.0 - d);
+    }
+    if (mode == ALPHA_SUM) {
+        return acc + d;
+    }
+    return d > 0.5 ? 1.0 : acc;
+}
+
+float alpha_resolve(float acc, uint mode, uint face_count) {
+    if (mode == ALPHA_PROD) {
+        return 1.0 - acc;
+    }
+    if (mode == ALPHA_SUM) {
+        return acc / float(face_count);
+    }
+    return acc;
+}
+
+// `reference::SoftmaxAccum`: numerator and denominator scaled by e^{-max/γ}, max the largest
+// z̄ = (far - z) / (far - near) seen, starting with the background's ε.
+//
+// The running maximum is kept as the depth `ref_depth` whose z̄ it is (the background's is
+// far - ε (far - near)), and every exponent (z̄_a - z̄_b) / γ is taken as
+// (z_b - z_a) * inv_gamma_range with inv_gamma_range = 1 / (γ (far - near)). Same maths; but
+// in f32 z̄ ≈ 0.97 carries an absolute rounding of 6e-8, which at γ = 1e-4 is already a 1e-3
+// error in the exponent, while the difference of two depths is as exact as the depths.
+struct Softmax {
+    float ref_depth;
+    float sum;
+    vec3 rgb;
+};
+
+Softmax softmax_init(vec3 background, float background_depth) {
+    Softmax s;
+    s.ref_depth = background_depth;
+    s.sum = 1.0;
+    s.rgb = background;
+    return s;
+}
+
+void softmax_add(inout Softmax s, float z, float d, vec3 color, float inv_gamma_range) {
+    if (z < s.ref_depth) {
+        float rescale = exp((z - s.ref_depth) * inv_gamma_range);
+        s.sum *= rescale;
+        s.rgb *= rescale;
+        s.ref_depth = z;
+    }
+    float weight = d * exp((s.ref_depth - z) * inv_gamma_range);
+    s.sum += weight;
+    s.rgb += weight * color;
+}
+
+vec3 softmax_resolve(Softmax s) {
+    return s.rgb / s.sum;
+}
+
+#endif

@@ -1,0 +1,130 @@
+#version 460
+#extension GL_GOOGLE_include_directive : require
+// Face setup (SoftRas `forward_soft_rasterize_inv`), one invocation per (view, face): screen
+// vertices from world positions, the inverse barycentric matrix with the clamped determinant,
+// facing, and the grown screen box. Twin: `reference::project_faces` + `reference::setup_face`.
+#include "common.glsl"
+#include "raster.glsl"
+
+layout(local_size_x = 64) in;
+
+#define PROJ_PERSPECTIVE 0u
+#define PROJ_ORTHOGRAPHIC 1u
+
+// Twin of `GpuView` (src/raster/setup.rs). 80 bytes.
+struct View {
+    vec4 rows[3];    // look-at rotation rows x, y, z (w unused)
+    vec4 eye;        // eye position (w unused)
+    uint projection; // PROJ_*
+    float param;     // perspective: tan(viewing angle); orthographic: scale
+    uint pad0;
+    uint pad1;
+};
+
+layout(std430, set = 0, binding = 0) readonly buffer Positions { float positions[]; };
+layout(std430, set = 0, binding = 1) readonly buffer Faces { uint faces[]; };
+layout(std430, set = 0, binding = 2) readonly buffer Views { View views[]; };
+layout(std430, set = 0, binding = 3) writeonly buffer Setups { FaceSetup setups[]; };
+
+layout(push_constant) uniform Push {
+    uint face_count;
+    uint view_count;
+    uint dist;           // DIST_*
+    float radius;        // √T, T the squared-distance cut-off
+    float degenerate_k;  // |det| <= degenerate_k * Σ|terms|: numerically degenerate
+    float bary_margin;   // growth factor on the barycentric box's 3√T/s, for det rounding
+    float pad_rel;       // box padding per unit of coordinate magnitude
+    uint pad0;
+} pc;
+
+// `Camera::to_screen` for perspective and orthographic projections: p_c = R (p - eye), then
+// (x / z / tan a, y / z / tan a, z) or (s x, s y, z).
+vec3 to_screen(View view, uint vertex) {
+    vec3 p = vec3(positions[3u * vertex], positions[3u * vertex + 1u], positions[3u * vertex + 2u]);
+    vec3 d = p - view.eye.xyz;
+    vec3 c = vec3(view.rows[0].x * d.x + view.rows[0].y * d.y + view.rows[0].z * d.z,
+                  view.rows[1].x * d.x + view.rows[1].y * d.y + view.rows[1].z * d.z,
+                  view.rows[2].x * d.x + view.rows[2].y * d.y + view.rows[2].z * d.z);
+    if (view.projection == PROJ_PERSPECTIVE) {
+        return vec3(c.x / c.z / view.param, c.y / c.z / view.param, c.z);
+    }
+    return vec3(c.x * view.param, c.y * view.param, c.z);
+}
+
+bool finite3(vec3 v) {
+    return !any(isinf(v)) && !any(isnan(v));
+}
+
+void main() {
+    uint id = linear_group_id() * 64u + gl_LocalInvocationIndex;
+    if (id >= pc.face_count * pc.view_count) {
+        return;
+    }
+    uint view_index = id / pc.face_count;
+    uint face = id - view_index * pc.face_count;
+    View view = views[view_index];
+    vec3 p0 = to_screen(view, faces[3u * face]);
+    vec3 p1 = to_screen(view, faces[3u * face + 1u]);
+    vec3 p2 = to_screen(view, faces[3u * face + 2u]);
+
+    FaceSetup s;
+    s.v[0] = vec4(p0, 0.0);
+    s.v[1] = vec4(p1, 0.0);
+    s.v[2] = vec4(p2, 0.0);
+
+    // The determinant of [[x], [y], [1, 1, 1]] in its translated form
+    // (x1 - x0)(y2 - y0) - (x2 - x0)(y1 - y0): the same number as the twin's expansion, but in
+    // f32 its rounding is relative to the face's size, not to its distance from the origin.
+    // `precise` keeps the compiler from fusing it into an fma, so that its sign is exactly the
+    // SPEC's facing test `(y2 - y0)(x1 - x0) < (y1 - y0)(x2 - x0)`.
+    precise float ta = (p1.x - p0.x) * (p2.y - p0.y);
+    precise float tb = (p2.x - p0.x) * (p1.y - p0.y);
+    precise float det = ta - tb;
+    float clamped = det > 0.0 ? max(det, MIN_DET) : min(det, -MIN_DET);
+    s.inv[0] = vec4(p1.y - p2.y, p2.x - p1.x, p1.x * p2.y - p2.x * p1.y, 0.0) / clamped;
+    s.inv[1] = vec4(p2.y - p0.y, p0.x - p2.x, p2.x * p0.y - p0.x * p2.y, 0.0) / clamped;
+    s.inv[2] = vec4(p0.y - p1.y, p1.x - p0.x, p0.x * p1.y - p1.x * p0.y, 0.0) / clamped;
+
+    bool finite = finite3(p0) && finite3(p1) && finite3(p2);
+    // `reference::is_numerically_degenerate` at f32 rounding, with a wide margin: a face whose
+    // determinant is within degenerate_k Σ|terms| of its rounding has barycentrics that are noise
+    // scaled by the clamp, not bounded by its vertices; it gets the infinite box. Only the box
+    // (binning, culling) depends on this flag, never a pixel's value.
+    bool degenerate = !(abs(det) > pc.degenerate_k * (abs(ta) + abs(tb)));
+    s.flags = (tb > ta ? FACE_FRONT : 0u) | (finite ? FACE_FINITE : 0u)
+            | (degenerate ? FACE_DEGENERATE : 0u);
+
+    // `reference::face_screen_bbox_grown`.
+    float inf = uintBitsToFloat(0x7f800000u);
+    if (degenerate || !finite) {
+        s.bbox = vec4(-inf, -inf, inf, inf);
+    } else {
+        float x0 = min(min(p0.x, p1.x), p2.x);
+        float y0 = min(min(p0.y, p1.y), p2.y);
+        float x1 = max(max(p0.x, p1.x), p2.x);
+        float y1 = max(max(p0.y, p1.y), p2.y);
+        vec4 b;
+        if (pc.dist == DIST_EUCLIDEAN) {
+            b = vec4(x0 - pc.radius, y0 - pc.radius, x1 + pc.radius, y1 + pc.radius);
+        } else if (pc.dist == DIST_HARD) {
+            b = vec4(x0, y0, x1, y1);
+        } else {
+            // The triangle scaled about its centroid by 1 + 3√T/s, s = min(|det| / MIN_DET, 1);
+            // bary_margin covers the f32 determinant's relative error (below 1/degenerate_k's
+            // multiple for any face not flagged degenerate).
+            float sc = min(abs(det) / MIN_DET, 1.0);
+            float k = 1.0 + 3.0 * pc.radius * pc.bary_margin / sc;
+            float cx = (p0.x + p1.x + p2.x) / 3.0;
+            float cy = (p0.y + p1.y + p2.y) / 3.0;
+            b = vec4(cx + k * (x0 - cx), cy + k * (y0 - cy), cx + k * (x1 - cx), cy + k * (y1 - cy));
+        }
+        // f32 rounding in w and d² is relative to the coordinates' magnitude: pad by it.
+        float mag = max(max(max(abs(x0), abs(x1)), max(abs(y0), abs(y1))), 1.0);
+        float pad = pc.pad_rel * mag;
+        s.bbox = vec4(b.x - pad, b.y - pad, b.z + pad, b.w + pad);
+    }
+    s.pad0 = 0u;
+    s.pad1 = 0u;
+    s.pad2 = 0u;
+    setups[id] = s;
+}

@@ -1,0 +1,262 @@
+//! The brute-force fine pass (`kernels/raster/raster_brute.comp`): one invocation per pixel,
+//! every face of its view in index order, exactly as [`reference::shade_pixel`] (and SoftRas) do.
+//! It is the baseline the tiled kernels must equal bit for bit, and the one benchmarks compare
+//! against. Anti-aliasing renders at 2× and averages with `kernels/raster/downsample_2x2.comp`.
+//!
+//! Besides RGBA, every rendered pixel gets a [`PixelAux`]: the forward's running aggregates that
+//! the backward pass needs, so it needs no second forward.
+
+use bytemuck::{Pod, Zeroable};
+
+use crate::error::{Error, Result};
+use crate::gpu::{BufferRange, Context, Kernel, Recorder, specs};
+use crate::raster::reference::{self, Alpha, ColorMode, RasterSettings, Rgb};
+use crate::raster::setup::dist_code;
+
+/// Per-pixel forward state kept for the backward pass. Twin of `PixelAux` in
+/// `raster_brute.comp`; std430, 16 bytes, one per *rendered* pixel (at 2× with anti-aliasing),
+/// view-major then row-major like the image.
+///
+/// With the softmax colour, `I = rgb_scaled / softmax_sum` where every term was scaled by
+/// `e^{-max/γ}` and `max = (far − softmax_ref_depth) / (far − near)`: a face j at depth `z_j` with
+/// coverage `D_j` has weight `D_j e^{(softmax_ref_depth − z_j) / (γ (far − near))} / softmax_sum`
+/// in the pixel, and the background `e^{(softmax_ref_depth − z_b)/(γ (far − near))} / softmax_sum`
+/// with `z_b = far − ε (far − near)`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct PixelAux {
+    /// The depth whose z̄ is the softmax's running maximum (the background's `far − ε (far −
+    /// near)` when no face is nearer).
+    pub softmax_ref_depth: f32,
+    /// The softmax denominator `Σ_j D_j e^{(z̄_j − max)/γ} + e^{(ε − max)/γ}`.
+    pub softmax_sum: f32,
+    /// Alpha's running aggregate: prod `Π(1 − D_j)`, sum `Σ D_j`, hard 0 or 1.
+    pub alpha_acc: f32,
+    /// Hard colour: the index of the face whose colour the pixel shows, or `u32::MAX` for the
+    /// background.
+    pub hard_face: u32,
+}
+
+/// Push constants of `raster_brute.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct RasterPush {
+    width: u32,
+    height: u32,
+    face_count: u32,
+    view_count: u32,
+    sigma: f32,
+    cutoff: f32,
+    near: f32,
+    far: f32,
+    inv_gamma_range: f32,
+    background_depth: f32,
+    dist: u32,
+    rgb: u32,
+    alpha: u32,
+    texture_res: u32,
+    flags: u32,
+    pad0: u32,
+    background: [f32; 4],
+}
+
+const FLAG_DOUBLE_SIDED: u32 = 1;
+const FLAG_VERTEX_COLORS: u32 = 2;
+const FLAG_CULL: u32 = 4;
+
+/// Push constants of `downsample_2x2.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct DownsamplePush {
+    width: u32,
+    height: u32,
+    view_count: u32,
+    pad0: u32,
+}
+
+/// The buffers one brute-force render reads and writes.
+pub struct BruteBindings<'a> {
+    /// `view_count * face_count` [`crate::raster::setup::GpuFaceSetup`]s.
+    pub setups: BufferRange<'a>,
+    /// Lit colours as packed f32 triples: `F R²` texels (surface) or one per vertex (vertex mode).
+    pub colors: BufferRange<'a>,
+    /// The mesh's faces as packed u32 triples (read in vertex colour mode).
+    pub faces: BufferRange<'a>,
+    /// RGBA f32 per rendered pixel, view-major, row 0 at the top.
+    pub image: BufferRange<'a>,
+    /// One [`PixelAux`] per rendered pixel.
+    pub aux: BufferRange<'a>,
+}
+
+/// The brute-force pipelines, made once per context.
+pub struct BruteRaster {
+    raster: Kernel,
+    downsample: Kernel,
+}
+
+impl BruteRaster {
+    /// Builds the pipelines.
+    pub fn new(ctx: &Context) -> Result<Self> {
+        Ok(Self {
+            raster: Kernel::new(ctx, &specs::RASTER_BRUTE)?,
+            downsample: Kernel::new(ctx, &specs::DOWNSAMPLE_2X2)?,
+        })
+    }
+
+    /// Records the fine pass over a `width × height` image per view (the *rendered* size: pass
+    /// 2× the output size with anti-aliasing, then [`BruteRaster::record_downsample`]).
+    ///
+    /// `cull` skips faces whose grown box excludes the pixel, as SoftRas and the reference's
+    /// `render` do; the box is conservative, so it changes no pixel (a test checks this bit for
+    /// bit), and the tiled kernels skip exactly what binning skips.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &BruteBindings<'_>,
+        settings: &RasterSettings,
+        width: u32,
+        height: u32,
+        face_count: u32,
+        view_count: u32,
+        texture_res: u32,
+        cull: bool,
+    ) -> Result<()> {
+        let pixels = u64::from(width) * u64::from(height) * u64::from(view_count);
+        let need = |what: &str, range: &BufferRange<'_>, bytes: u64| {
+            if range.size < bytes {
+                Err(Error::Limit(format!(
+                    "raster_brute: {what} buffer `{}` has {} bytes, needs {bytes}",
+                    range.buffer.name(),
+                    range.size
+                )))
+            } else {
+                Ok(())
+            }
+        };
+        need("image", &b.image, 16 * pixels)?;
+        need("aux", &b.aux, 16 * pixels)?;
+        need(
+            "face setup",
+            &b.setups,
+            128 * u64::from(face_count) * u64::from(view_count),
+        )?;
+        if pixels > u64::from(u32::MAX) || face_count == 0 {
+            return Err(Error::Limit(format!(
+                "raster_brute: {pixels} pixels and {face_count} faces (need 1..2^32 pixels, > 0 faces)"
+            )));
+        }
+        let s = settings;
+        let range = s.far - s.near;
+        let inv_gamma_range = if s.rgb == Rgb::Softmax {
+            (1.0 / (s.gamma * range)).min(f64::from(f32::MAX)) as f32
+        } else {
+            0.0
+        };
+        let hard = s.dist == reference::Dist::Hard;
+        let mut flags = 0;
+        if s.double_sided {
+            flags |= FLAG_DOUBLE_SIDED;
+        }
+        if s.color_mode == ColorMode::Vertex {
+            flags |= FLAG_VERTEX_COLORS;
+        }
+        if cull {
+            flags |= FLAG_CULL;
+        }
+        let push = RasterPush {
+            width,
+            height,
+            face_count,
+            view_count,
+            sigma: if hard { 1.0 } else { s.sigma as f32 },
+            cutoff: if hard {
+                0.0
+            } else {
+                reference::cutoff(s.sigma) as f32
+            },
+            near: s.near as f32,
+            far: s.far as f32,
+            inv_gamma_range,
+            background_depth: (s.far - s.eps * range) as f32,
+            dist: dist_code(s.dist),
+            rgb: match s.rgb {
+                Rgb::Softmax => 0,
+                Rgb::Hard => 1,
+            },
+            alpha: match s.alpha {
+                Alpha::Prod => 0,
+                Alpha::Sum => 1,
+                Alpha::Hard => 2,
+            },
+            texture_res,
+            flags,
+            pad0: 0,
+            background: [
+                s.background[0] as f32,
+                s.background[1] as f32,
+                s.background[2] as f32,
+                0.0,
+            ],
+        };
+        let groups = pixels.div_ceil(u64::from(specs::RASTER_BRUTE.workgroup_size[0]));
+        rec.dispatch(
+            &self.raster,
+            &[b.setups, b.colors, b.faces, b.image, b.aux],
+            &push,
+            groups as u32,
+        )
+    }
+
+    /// Records the 2×2 average of `big` (`2W × 2H` per view) into `small` (`W × H` per view).
+    pub fn record_downsample(
+        &self,
+        rec: &mut Recorder<'_>,
+        big: BufferRange<'_>,
+        small: BufferRange<'_>,
+        width: u32,
+        height: u32,
+        view_count: u32,
+    ) -> Result<()> {
+        let pixels = u64::from(width) * u64::from(height) * u64::from(view_count);
+        if big.size < 64 * pixels || small.size < 16 * pixels {
+            return Err(Error::Limit(format!(
+                "downsample_2x2 of {pixels} pixels: buffers `{}` ({} bytes) and `{}` ({} bytes) \
+                 are too small",
+                big.buffer.name(),
+                big.size,
+                small.buffer.name(),
+                small.size
+            )));
+        }
+        let push = DownsamplePush {
+            width,
+            height,
+            view_count,
+            pad0: 0,
+        };
+        let groups = pixels.div_ceil(u64::from(specs::DOWNSAMPLE_2X2.workgroup_size[0]));
+        rec.dispatch(&self.downsample, &[big, small], &push, groups as u32)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shared_structs_match_the_kernels_layout() {
+        assert_eq!(
+            std::mem::size_of::<RasterPush>() as u32,
+            specs::RASTER_BRUTE.push_constant_size
+        );
+        assert_eq!(std::mem::offset_of!(RasterPush, background), 64);
+        assert_eq!(
+            std::mem::size_of::<DownsamplePush>() as u32,
+            specs::DOWNSAMPLE_2X2.push_constant_size
+        );
+        assert_eq!(std::mem::size_of::<PixelAux>(), 16);
+        assert_eq!(specs::RASTER_BRUTE.bindings.len(), 5);
+        assert_eq!(specs::DOWNSAMPLE_2X2.bindings.len(), 2);
+    }
+}

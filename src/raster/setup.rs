@@ -1,0 +1,249 @@
+//! Face setup on the GPU (`kernels/raster/face_setup.comp`), one invocation per (view, face):
+//! screen-space vertices from world positions, the inverse barycentric matrix with the SPEC's
+//! determinant clamp, the front-facing flag and the grown screen box. The f64 twin is
+//! [`reference::project_faces`] followed by [`reference::setup_face`].
+//!
+//! Lighting is not a GPU stage: like SoftRas, softvk lights colours in world space *before*
+//! projection, on the host in f64 ([`crate::lighting`]), and uploads the lit per-face texels or
+//! per-vertex colours as f32.
+
+use bytemuck::{Pod, Zeroable};
+
+use crate::camera::{Camera, Projection, look_at};
+use crate::error::{Error, Result};
+use crate::gpu::{BufferRange, Context, Kernel, Recorder, specs};
+use crate::raster::reference::{self, Dist};
+
+/// `Projection::Perspective` in [`GpuView::projection`] (`PROJ_PERSPECTIVE` in the kernel).
+pub const PROJ_PERSPECTIVE: u32 = 0;
+/// `Projection::Orthographic` in [`GpuView::projection`].
+pub const PROJ_ORTHOGRAPHIC: u32 = 1;
+
+/// Bit of [`GpuFaceSetup::flags`]: front-facing in screen space (SPEC §1).
+pub const FACE_FRONT: u32 = 1;
+/// Bit of [`GpuFaceSetup::flags`]: every screen coordinate is finite (else the face is skipped).
+pub const FACE_FINITE: u32 = 2;
+/// Bit of [`GpuFaceSetup::flags`]: numerically degenerate at f32 rounding (infinite box).
+pub const FACE_DEGENERATE: u32 = 4;
+
+/// A face whose |det| is at most this multiple of f32 ε times the determinant's terms is treated
+/// as degenerate (infinite box). The f64 twin uses 4 ε_f64; f32 uses a wide margin, since a face
+/// not flagged must have a determinant accurate to a few percent for [`BARY_MARGIN`] to hold.
+pub const DEGENERATE_ULPS: f32 = 256.0;
+
+/// The barycentric box's growth `3√T/s` is multiplied by this: the f32 determinant of a face
+/// not flagged degenerate is within ~5/[`DEGENERATE_ULPS`] (2 %) of the exact one, and the box
+/// scales with it.
+pub const BARY_MARGIN: f32 = 1.0 + 1.0 / 16.0;
+
+/// Boxes are padded by this times the largest vertex coordinate magnitude (at least 1): the f32
+/// rounding of barycentrics and distances near a box's edge is a few ulp of those magnitudes.
+/// The twin's 1e-9 absolute pad is below f32 resolution.
+pub const BBOX_PAD_REL: f32 = 1e-5;
+
+/// One view as the setup kernel reads it. Twin of `View` in `face_setup.comp`; std430, 80 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuView {
+    /// Rows x, y, z of the look-at rotation (w unused).
+    pub rows: [[f32; 4]; 3],
+    /// Eye position (w unused).
+    pub eye: [f32; 4],
+    /// [`PROJ_PERSPECTIVE`] or [`PROJ_ORTHOGRAPHIC`].
+    pub projection: u32,
+    /// Perspective: `tan(viewing angle)`; orthographic: the scale.
+    pub param: f32,
+    /// std430 padding.
+    pub pad: [u32; 2],
+}
+
+impl GpuView {
+    /// The view of `camera`, rounded to f32 from the twin's f64 look-at. The 3×4 matrix
+    /// projection (with distortion) is CPU-only for now: an [`Error::Input`].
+    pub fn new(camera: &Camera) -> Result<GpuView> {
+        let (projection, param) = match camera.projection {
+            Projection::Perspective { viewing_angle_deg } => {
+                (PROJ_PERSPECTIVE, viewing_angle_deg.to_radians().tan())
+            }
+            Projection::Orthographic { scale } => (PROJ_ORTHOGRAPHIC, scale),
+            Projection::Matrix { .. } => {
+                return Err(Error::Input(
+                    "the GPU rasterizer does not support the 3x4 matrix projection yet; \
+                     use a perspective or orthographic camera (or the CPU reference)"
+                        .into(),
+                ));
+            }
+        };
+        if !(param.is_finite() && camera.eye.is_finite()) {
+            return Err(Error::Input(format!(
+                "camera is not finite: eye {}, projection parameter {param}",
+                camera.eye
+            )));
+        }
+        let r = look_at(camera.eye, camera.at, camera.up);
+        if !r.iter().flatten().all(|c| c.is_finite()) {
+            return Err(Error::Input(format!(
+                "camera at {} looking at {} with up {} has no finite orientation",
+                camera.eye, camera.at, camera.up
+            )));
+        }
+        let row = |k: usize| [r[k][0] as f32, r[k][1] as f32, r[k][2] as f32, 0.0];
+        Ok(GpuView {
+            rows: [row(0), row(1), row(2)],
+            eye: [
+                camera.eye.x as f32,
+                camera.eye.y as f32,
+                camera.eye.z as f32,
+                0.0,
+            ],
+            projection,
+            param: param as f32,
+            pad: [0; 2],
+        })
+    }
+}
+
+/// One face in one view after setup. Twin of `FaceSetup` in `kernels/include/raster.glsl` and of
+/// [`reference::FaceSetup`]; std430, 128 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuFaceSetup {
+    /// Screen-space vertices `(x_s, y_s, z, 0)`.
+    pub v: [[f32; 4]; 3],
+    /// Rows `(a, b, c, 0)` of `M_j` (determinant clamped to ±1e-10): `w_k = a x + b y + c`.
+    pub inv: [[f32; 4]; 3],
+    /// Grown screen box `[x_min, y_min, x_max, y_max]`.
+    pub bbox: [f32; 4],
+    /// [`FACE_FRONT`] | [`FACE_FINITE`] | [`FACE_DEGENERATE`].
+    pub flags: u32,
+    /// std430 padding.
+    pub pad: [u32; 3],
+}
+
+/// Push constants of `face_setup.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct SetupPush {
+    face_count: u32,
+    view_count: u32,
+    dist: u32,
+    radius: f32,
+    degenerate_k: f32,
+    bary_margin: f32,
+    pad_rel: f32,
+    pad0: u32,
+}
+
+/// `DIST_*` of `raster.glsl`.
+pub(crate) fn dist_code(dist: Dist) -> u32 {
+    match dist {
+        Dist::Euclidean => 0,
+        Dist::Barycentric => 1,
+        Dist::Hard => 2,
+    }
+}
+
+/// The face setup pipeline, made once per context.
+pub struct FaceSetupKernel {
+    kernel: Kernel,
+}
+
+impl FaceSetupKernel {
+    /// Builds the pipeline.
+    pub fn new(ctx: &Context) -> Result<Self> {
+        Ok(Self {
+            kernel: Kernel::new(ctx, &specs::FACE_SETUP)?,
+        })
+    }
+
+    /// Records the setup of `face_count` faces in `view_count` views into `setups`
+    /// (`view_count * face_count` [`GpuFaceSetup`]s, view-major).
+    ///
+    /// `positions` holds the world positions as packed `f32` triples, `faces` the vertex indices
+    /// as packed `u32` triples, `views` one [`GpuView`] per view. `dist` and `sigma` choose the box
+    /// growth as [`reference::face_screen_bbox_grown`] does.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record(
+        &self,
+        rec: &mut Recorder<'_>,
+        positions: BufferRange<'_>,
+        faces: BufferRange<'_>,
+        views: BufferRange<'_>,
+        setups: BufferRange<'_>,
+        face_count: u32,
+        view_count: u32,
+        dist: Dist,
+        sigma: f64,
+    ) -> Result<()> {
+        let n = u64::from(face_count) * u64::from(view_count);
+        let need = n * std::mem::size_of::<GpuFaceSetup>() as u64;
+        if setups.size < need || n > u64::from(u32::MAX) {
+            return Err(Error::Limit(format!(
+                "face setup of {face_count} faces x {view_count} views needs {need} bytes; \
+                 buffer `{}` has {}",
+                setups.buffer.name(),
+                setups.size
+            )));
+        }
+        let push = SetupPush {
+            face_count,
+            view_count,
+            dist: dist_code(dist),
+            radius: if dist == Dist::Hard {
+                0.0
+            } else {
+                reference::cutoff(sigma).sqrt() as f32
+            },
+            degenerate_k: DEGENERATE_ULPS * f32::EPSILON,
+            bary_margin: BARY_MARGIN,
+            pad_rel: BBOX_PAD_REL,
+            pad0: 0,
+        };
+        let groups = n.div_ceil(u64::from(specs::FACE_SETUP.workgroup_size[0]));
+        rec.dispatch(
+            &self.kernel,
+            &[positions, faces, views, setups],
+            &push,
+            groups as u32,
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shared_structs_match_the_kernels_layout() {
+        assert_eq!(
+            std::mem::size_of::<SetupPush>() as u32,
+            specs::FACE_SETUP.push_constant_size
+        );
+        assert_eq!(std::mem::size_of::<GpuView>(), 80);
+        assert_eq!(std::mem::offset_of!(GpuView, eye), 48);
+        assert_eq!(std::mem::offset_of!(GpuView, projection), 64);
+        assert_eq!(std::mem::size_of::<GpuFaceSetup>(), 128);
+        assert_eq!(std::mem::offset_of!(GpuFaceSetup, inv), 48);
+        assert_eq!(std::mem::offset_of!(GpuFaceSetup, bbox), 96);
+        assert_eq!(std::mem::offset_of!(GpuFaceSetup, flags), 112);
+        assert_eq!(specs::FACE_SETUP.bindings.len(), 4);
+        assert_eq!(specs::FACE_SETUP.workgroup_size, [64, 1, 1]);
+    }
+
+    #[test]
+    fn matrix_projection_is_an_input_error() {
+        let cam = Camera {
+            projection: Projection::Matrix {
+                p: [
+                    [1.0, 0.0, 0.0, 0.0],
+                    [0.0, 1.0, 0.0, 0.0],
+                    [0.0, 0.0, 1.0, 0.0],
+                ],
+                dist_coeffs: [0.0; 5],
+                orig_size: 2.0,
+            },
+            ..Camera::default()
+        };
+        assert!(matches!(GpuView::new(&cam), Err(Error::Input(_))));
+    }
+}

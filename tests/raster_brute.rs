@@ -1,0 +1,847 @@
+//! The GPU brute-force forward (face setup → one invocation per pixel over every face) against
+//! the f64 CPU twin `raster::reference`, on lavapipe with validation on.
+//!
+//! How "equal" is judged: the GPU works in f32, so its screen positions carry a rounding of a
+//! few 1e-7. Where the forward is continuous that moves a pixel by far less than 1e-4; where it
+//! jumps (hard coverage and hard colour at an edge, the coverage cut-off, texel boundaries, a
+//! near/far drop) no tolerance helps. So the twin is also evaluated at pixel centres shifted by
+//! ±[`JITTER`] in x and y. Where it moves by at most [`TOL`] under those shifts, the GPU must be
+//! within [`TOL`] of the twin at the centre; where it moves more (a discontinuity), the GPU must
+//! lie within [`TOL`] of the range the twin spans. Such pixels are counted, and each check bounds
+//! how many there may be, so the rule cannot quietly excuse everything.
+
+mod common;
+
+use glam::DVec3;
+use rand::RngExt;
+use softvk::camera::{Camera, Projection, pixel_center};
+use softvk::lighting::{Directional, Lighting};
+use softvk::mesh::Mesh;
+use softvk::raster::gpu::Renderer;
+use softvk::raster::reference::{
+    self, Alpha, ColorMode, Dist, FaceColors, RasterSettings, Rgb, project_faces, setup_face,
+    shade_pixel,
+};
+use softvk::raster::setup::{FACE_DEGENERATE, FACE_FINITE, FACE_FRONT};
+
+/// Absolute tolerance per channel.
+const TOL: f64 = 1e-4;
+/// Tolerance at γ = 1e-6, where f32 depth rounding alone moves colours by ~1e-4 (see
+/// `tiny_gamma_does_not_overflow_and_matches_the_twin`).
+const TINY_GAMMA_TOL: f64 = 5e-4;
+/// Shift of the pixel centre that models the GPU's f32 rounding of screen positions.
+const JITTER: f64 = 1e-6;
+
+/// The twin at every pixel centre shifted by `(dx, dy)` (anti-aliasing as `reference::render`).
+fn twin(
+    mesh: &Mesh,
+    cam: &Camera,
+    lit: &Lighting,
+    s: &RasterSettings,
+    (dx, dy): (f64, f64),
+) -> Vec<[f64; 4]> {
+    let colors = FaceColors::new(mesh, lit, s.color_mode);
+    let faces: Vec<_> = project_faces(mesh, cam)
+        .into_iter()
+        .map(|v| setup_face(v, s.dist, s.sigma))
+        .collect();
+    let k = if s.antialias { 2 } else { 1 };
+    let (w, h) = (s.width * k, s.height * k);
+    let mut img = Vec::with_capacity((w * h) as usize);
+    for row in 0..h {
+        for col in 0..w {
+            let (x, y) = pixel_center(col, row, w, h);
+            img.push(shade_pixel(&faces, &colors, x + dx, y + dy, s, true));
+        }
+    }
+    if s.antialias {
+        reference::downsample_2x2(&img, s.width, s.height)
+    } else {
+        img
+    }
+}
+
+/// What one comparison found.
+#[derive(Debug, Default)]
+struct Stats {
+    /// Largest |GPU − twin| over pixels where the twin is continuous.
+    max_err: f64,
+    /// Largest distance of a GPU value outside the twin's jitter range.
+    worst: f64,
+    /// Pixels where the twin spans more than TOL under the jitter.
+    steep: usize,
+    /// Pixels the twin covers with alpha > 0.5.
+    covered: usize,
+    pixels: usize,
+}
+
+/// Compares a GPU image with the twin as the module doc says; panics with the first offender.
+fn compare(
+    what: &str,
+    tol: f64,
+    gpu: &[[f32; 4]],
+    mesh: &Mesh,
+    cam: &Camera,
+    lit: &Lighting,
+    s: &RasterSettings,
+) -> Stats {
+    let centre = twin(mesh, cam, lit, s, (0.0, 0.0));
+    let shifted: Vec<Vec<[f64; 4]>> =
+        [(JITTER, 0.0), (-JITTER, 0.0), (0.0, JITTER), (0.0, -JITTER)]
+            .into_iter()
+            .map(|d| twin(mesh, cam, lit, s, d))
+            .collect();
+    assert_eq!(gpu.len(), centre.len(), "{what}: image size");
+    let mut stats = Stats {
+        pixels: gpu.len(),
+        ..Stats::default()
+    };
+    for (i, (g, c)) in gpu.iter().zip(&centre).enumerate() {
+        let mut steep = false;
+        for k in 0..4 {
+            let g = f64::from(g[k]);
+            let (mut lo, mut hi) = (c[k], c[k]);
+            for img in &shifted {
+                lo = lo.min(img[i][k]);
+                hi = hi.max(img[i][k]);
+            }
+            // Continuous here: the plain tolerance. At a discontinuity: the twin's range.
+            let ok = if hi - lo <= tol {
+                (g - c[k]).abs() <= tol
+            } else {
+                g >= lo - tol && g <= hi + tol
+            };
+            assert!(
+                ok,
+                "{what}: pixel {i} (col {}, row {}) channel {k}: GPU {g} vs twin {} (range \
+                 [{lo}, {hi}] under ±{JITTER} shifts)\nsettings {s:?}",
+                i as u32 % s.width,
+                i as u32 / s.width,
+                c[k]
+            );
+            stats.worst = stats.worst.max(lo - g).max(g - hi);
+            if hi - lo <= tol {
+                stats.max_err = stats.max_err.max((g - c[k]).abs());
+            } else {
+                steep = true;
+            }
+        }
+        stats.steep += usize::from(steep);
+        stats.covered += usize::from(c[3] > 0.5);
+    }
+    stats
+}
+
+/// Renders on the GPU, compares, and bounds the share of pixels at discontinuities.
+fn check(
+    r: &Renderer,
+    gpu: &common::Gpu,
+    what: &str,
+    mesh: &Mesh,
+    cam: &Camera,
+    lit: &Lighting,
+    s: &RasterSettings,
+) -> Stats {
+    let img = r
+        .render_brute(gpu, mesh, cam, lit, s)
+        .unwrap_or_else(|e| panic!("{what}: {e}"));
+    let stats = compare(what, TOL, &img, mesh, cam, lit, s);
+    assert!(
+        stats.steep * 10 <= stats.pixels.max(10),
+        "{what}: {} of {} pixels sit at discontinuities; the comparison says too little",
+        stats.steep,
+        stats.pixels
+    );
+    stats
+}
+
+fn random_colors(n: usize, seed: u64) -> Vec<[f32; 3]> {
+    let mut rng = common::rng(seed);
+    (0..n)
+        .map(|_| std::array::from_fn(|_| rng.random_range(0.0..1.0f32)))
+        .collect()
+}
+
+/// Hand-made triangles: two overlapping faces of different colours at different depths, a
+/// third intersecting the first, a face crossing the image border, one wound backwards, one
+/// behind the camera, one beyond the far plane, and a zero-area face (two coincident vertices).
+fn triangles(res: u32) -> Mesh {
+    let positions = vec![
+        // 0: big, z = 0
+        [-0.6, -0.5, 0.0],
+        [-0.1, 0.6, 0.0],
+        [0.5, -0.4, 0.0],
+        // 1: overlapping, nearer (z = -0.3)
+        [-0.2, -0.2, -0.3],
+        [0.1, 0.4, -0.3],
+        [0.6, 0.0, -0.3],
+        // 2: intersecting face 0 (z from -0.2 to 0.2)
+        [-0.5, 0.1, -0.2],
+        [0.0, 0.2, 0.2],
+        [0.1, -0.3, 0.0],
+        // 3: crossing the image border
+        [0.6, 0.5, 0.1],
+        [1.5, 0.9, 0.1],
+        [1.2, -0.2, 0.1],
+        // 4: back-facing (wound the other way)
+        [-0.9, -0.9, 0.05],
+        [-0.5, -0.3, 0.05],
+        [-0.3, -0.8, 0.05],
+        // 5: behind the camera (camera at z = -2.732 looks along +z)
+        [-0.5, 0.5, -3.5],
+        [0.5, 0.5, -3.5],
+        [0.0, -0.5, -3.5],
+        // 6: beyond far (z = 150 > 100)
+        [-20.0, -20.0, 150.0],
+        [-10.0, 30.0, 150.0],
+        [30.0, -10.0, 150.0],
+        // 7: zero area: two coincident vertices
+        [-0.7, 0.7, 0.0],
+        [-0.7, 0.7, 0.0],
+        [-0.2, 0.8, 0.0],
+    ];
+    let faces = vec![
+        [0, 1, 2],
+        [3, 4, 5],
+        [6, 7, 8],
+        [9, 10, 11],
+        [12, 14, 13],
+        [15, 16, 17],
+        [18, 19, 20],
+        [21, 22, 23],
+    ];
+    let mut mesh = Mesh::new(positions, faces, res).unwrap();
+    mesh.textures = random_colors(mesh.textures.len(), 7);
+    mesh.vertex_colors = Some(random_colors(mesh.vertex_count(), 8));
+    mesh
+}
+
+fn icosphere(res: u32) -> Mesh {
+    let mut mesh = Mesh::icosphere(2);
+    mesh.texture_res = res;
+    mesh.textures = random_colors(mesh.face_count() * (res * res) as usize, 11);
+    mesh.vertex_colors = Some(random_colors(mesh.vertex_count(), 12));
+    mesh.positions.iter_mut().for_each(|p| {
+        p.iter_mut().for_each(|c| *c *= 0.8);
+    });
+    mesh
+}
+
+fn lighting() -> Lighting {
+    Lighting {
+        ambient_intensity: 0.4,
+        ambient_color: [1.0, 0.9, 0.8],
+        directionals: vec![Directional {
+            intensity: 0.6,
+            color: [1.0, 1.0, 1.0],
+            direction: [0.3, 0.8, -0.5],
+        }],
+    }
+}
+
+const DISTS: [Dist; 3] = [Dist::Euclidean, Dist::Barycentric, Dist::Hard];
+const ALPHAS: [Alpha; 3] = [Alpha::Prod, Alpha::Sum, Alpha::Hard];
+const RGBS: [Rgb; 2] = [Rgb::Softmax, Rgb::Hard];
+const COLOR_MODES: [ColorMode; 2] = [ColorMode::Surface, ColorMode::Vertex];
+
+/// Every combination of distance, alpha, colour aggregation, colour source and sidedness, with
+/// the other settings varied round-robin: σ default and large, γ small, default and large,
+/// near/far, background, anti-aliasing, image shape.
+fn all_modes(base: RasterSettings, shapes: &[(u32, u32)]) -> Vec<RasterSettings> {
+    let variants: [(f64, f64, f64, f64, [f64; 3], bool); 6] = [
+        (1e-5, 1e-4, 1.0, 100.0, [0.0; 3], false),
+        (1e-2, 1e-4, 1.0, 100.0, [0.2, 0.4, 0.6], false),
+        (1e-4, 1e-2, 2.0, 3.0, [1.0, 1.0, 1.0], true),
+        (1e-3, 1e-5, 0.5, 50.0, [0.1, 0.0, 0.3], false),
+        (3e-3, 0.3, 1.0, 100.0, [0.0; 3], true),
+        (1e-5, 1e-4, 2.75, 100.0, [0.5; 3], false),
+    ];
+    let mut out = Vec::new();
+    let mut i = 0;
+    for dist in DISTS {
+        for alpha in ALPHAS {
+            for rgb in RGBS {
+                for color_mode in COLOR_MODES {
+                    for double_sided in [true, false] {
+                        let (sigma, gamma, near, far, background, antialias) =
+                            variants[i % variants.len()];
+                        let (width, height) = shapes[i % shapes.len()];
+                        out.push(RasterSettings {
+                            width,
+                            height,
+                            sigma,
+                            gamma,
+                            near,
+                            far,
+                            background,
+                            antialias,
+                            dist,
+                            alpha,
+                            rgb,
+                            color_mode,
+                            double_sided,
+                            ..base
+                        });
+                        i += 1;
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Prints the totals of a family of comparisons and checks that they were not vacuous.
+fn report(what: &str, all: &[Stats]) {
+    let max = all.iter().map(|s| s.max_err).fold(0.0, f64::max);
+    let worst = all.iter().map(|s| s.worst).fold(0.0, f64::max);
+    let steep: usize = all.iter().map(|s| s.steep).sum();
+    let covered: usize = all.iter().map(|s| s.covered).sum();
+    let pixels: usize = all.iter().map(|s| s.pixels).sum();
+    eprintln!(
+        "{what}: {} renders, {pixels} pixels ({covered} covered): max |GPU - twin| {max:.2e} where \
+         continuous; {steep} pixels at discontinuities, worst excess over the twin's range \
+         {worst:.2e}",
+        all.len()
+    );
+    assert!(
+        covered * 10 >= pixels,
+        "{what}: the scenes cover too little to prove much"
+    );
+}
+
+#[test]
+fn hand_made_triangles_match_the_twin_in_every_mode() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let lit = lighting();
+    let shapes = [(24, 16), (17, 17), (16, 24), (1, 1), (31, 9)];
+    let mut all = Vec::new();
+    for res in [1, 3] {
+        let mesh = triangles(res);
+        for (i, s) in all_modes(RasterSettings::default(), &shapes)
+            .iter()
+            .enumerate()
+        {
+            let cam = if i % 4 == 3 {
+                Camera {
+                    projection: Projection::Orthographic { scale: 0.9 },
+                    ..Camera::default()
+                }
+            } else {
+                Camera::default()
+            };
+            all.push(check(
+                &r,
+                &gpu,
+                &format!("triangles R={res} #{i}"),
+                &mesh,
+                &cam,
+                &lit,
+                s,
+            ));
+        }
+    }
+    report("triangles", &all);
+}
+
+#[test]
+fn icosphere_matches_the_twin_in_every_mode() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let lit = lighting();
+    let mesh = icosphere(2);
+    let cam = Camera::from_angles(2.732, 20.0, 35.0);
+    let mut all = Vec::new();
+    for (i, s) in all_modes(RasterSettings::default(), &[(17, 17), (24, 16)])
+        .iter()
+        .enumerate()
+    {
+        all.push(check(
+            &r,
+            &gpu,
+            &format!("icosphere #{i}"),
+            &mesh,
+            &cam,
+            &lit,
+            s,
+        ));
+    }
+    report("icosphere", &all);
+}
+
+#[test]
+fn spot_matches_the_twin_at_32x32() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let path = softvk::assets::dir().join("spot_triangulated.obj");
+    let cam = Camera::from_angles(2.732, 30.0, -45.0);
+    let lit = Lighting::default();
+    let mut all = Vec::new();
+    for res in [1, 2] {
+        let mesh = Mesh::load_obj(&path, res).unwrap();
+        for (i, s) in [
+            RasterSettings::default(),
+            RasterSettings {
+                dist: Dist::Barycentric,
+                alpha: Alpha::Sum,
+                double_sided: false,
+                ..RasterSettings::default()
+            },
+            RasterSettings {
+                sigma: 1e-2,
+                gamma: 0.3,
+                antialias: true,
+                ..RasterSettings::default()
+            },
+            RasterSettings {
+                dist: Dist::Hard,
+                rgb: Rgb::Hard,
+                alpha: Alpha::Hard,
+                color_mode: ColorMode::Vertex,
+                ..RasterSettings::default()
+            },
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let s = RasterSettings {
+                width: 32,
+                height: 32,
+                ..s
+            };
+            all.push(check(
+                &r,
+                &gpu,
+                &format!("spot R={res} #{i}"),
+                &mesh,
+                &cam,
+                &lit,
+                &s,
+            ));
+        }
+    }
+    report("spot", &all);
+}
+
+#[test]
+fn two_runs_are_bit_identical() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let mesh = icosphere(3);
+    let cam = Camera::from_angles(2.5, 10.0, 60.0);
+    let s = RasterSettings {
+        width: 24,
+        height: 16,
+        sigma: 1e-3,
+        antialias: true,
+        ..RasterSettings::default()
+    };
+    let a = r
+        .render_brute_views(&gpu, &mesh, &[cam], &lighting(), &s)
+        .unwrap();
+    let b = r
+        .render_brute_views(&gpu, &mesh, &[cam], &lighting(), &s)
+        .unwrap();
+    let bits = |f: &softvk::raster::gpu::Frames| -> Vec<u32> {
+        f.images
+            .iter()
+            .flatten()
+            .map(|c| c.to_bits())
+            .chain(
+                f.aux
+                    .iter()
+                    .flat_map(|a| [a.softmax_ref_depth.to_bits(), a.softmax_sum.to_bits()]),
+            )
+            .collect()
+    };
+    assert_eq!(bits(&a), bits(&b));
+}
+
+/// Slivers, near-degenerate and collinear faces, a point: culling by the f32 grown boxes must
+/// change no bit, in every distance mode and for σ from tiny to huge.
+#[test]
+fn culling_by_the_f32_boxes_changes_no_bit() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let mut rng = common::rng(3);
+    let mut positions = Vec::new();
+    let mut faces = Vec::new();
+    let mut push = |tri: [[f32; 3]; 3], positions: &mut Vec<[f32; 3]>| {
+        let base = positions.len() as u32;
+        positions.extend_from_slice(&tri);
+        faces.push([base, base + 1, base + 2]);
+    };
+    for i in 0..60 {
+        let mut v: [[f32; 3]; 3] = std::array::from_fn(|_| {
+            [
+                rng.random_range(-1.0..1.0f32),
+                rng.random_range(-1.0..1.0f32),
+                rng.random_range(-0.3..0.3f32),
+            ]
+        });
+        match i % 5 {
+            0 => {
+                // Sliver: third vertex within 1e-4 of the first edge's line.
+                let t = rng.random_range(-0.5..1.5f32);
+                v[2] = std::array::from_fn(|k| v[0][k] + t * (v[1][k] - v[0][k]));
+                v[2][1] += rng.random_range(-1e-4..1e-4f32);
+            }
+            1 => {
+                // Near-degenerate: within a few ulp of collinear.
+                let t = rng.random_range(0.2..0.8f32);
+                v[2] = std::array::from_fn(|k| v[0][k] + t * (v[1][k] - v[0][k]));
+                v[2][0] += rng.random_range(-1e-7..1e-7f32);
+            }
+            2 => {
+                // Small.
+                let base = v[0];
+                for p in &mut v[1..] {
+                    for k in 0..2 {
+                        p[k] = base[k] + rng.random_range(-0.02..0.02f32);
+                    }
+                }
+            }
+            _ => {}
+        }
+        push(v, &mut positions);
+    }
+    push([[0.1, 0.1, 0.0]; 3], &mut positions);
+    let mut mesh = Mesh::new(positions, faces, 1).unwrap();
+    mesh.textures = random_colors(mesh.face_count(), 5);
+    let cam = Camera::from_angles(2.732, 5.0, 10.0);
+    for dist in DISTS {
+        for sigma in [1e-5, 1e-3, 3e-2] {
+            let s = RasterSettings {
+                width: 40,
+                height: 36,
+                sigma,
+                gamma: 1e-2,
+                dist,
+                alpha: Alpha::Sum,
+                ..RasterSettings::default()
+            };
+            let run = |cull| {
+                r.render_brute_views_with_cull(&gpu, &mesh, &[cam], &Lighting::default(), &s, cull)
+                    .unwrap()
+            };
+            let (culled, brute) = (run(true), run(false));
+            let bits = |f: &softvk::raster::gpu::Frames| -> Vec<u32> {
+                f.images.iter().flatten().map(|c| c.to_bits()).collect()
+            };
+            assert!(
+                bits(&culled) == bits(&brute),
+                "{dist:?} σ = {sigma}: culling changed the image"
+            );
+        }
+    }
+}
+
+#[test]
+fn face_setup_matches_the_twin() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let mesh = triangles(1);
+    let cams = [
+        Camera::default(),
+        Camera::from_angles(3.0, 25.0, -40.0),
+        Camera {
+            projection: Projection::Orthographic { scale: 0.7 },
+            ..Camera::from_angles(2.0, -10.0, 20.0)
+        },
+    ];
+    for dist in DISTS {
+        let s = RasterSettings {
+            dist,
+            sigma: 1e-3,
+            ..RasterSettings::default()
+        };
+        let setups = r.face_setups(&gpu, &mesh, &cams, &s).unwrap();
+        assert_eq!(setups.len(), cams.len() * mesh.face_count());
+        for (v, cam) in cams.iter().enumerate() {
+            for (j, tri) in project_faces(&mesh, cam).into_iter().enumerate() {
+                let twin = setup_face(tri, dist, s.sigma);
+                let g = &setups[v * mesh.face_count() + j];
+                let what = format!("{dist:?} view {v} face {j}");
+                for k in 0..3 {
+                    for c in 0..3 {
+                        let (a, b) = (f64::from(g.v[k][c]), twin.v[k][c]);
+                        assert!(
+                            (a - b).abs() <= 1e-6 * (1.0 + b.abs()),
+                            "{what}: v {a} vs {b}"
+                        );
+                    }
+                }
+                assert_ne!(g.flags & FACE_FINITE, 0, "{what}");
+                let degenerate = g.flags & FACE_DEGENERATE != 0;
+                if j == 7 {
+                    assert!(degenerate, "{what}: the zero-area face is degenerate");
+                    assert!(g.bbox[0] == f32::NEG_INFINITY && g.bbox[3] == f32::INFINITY);
+                    continue;
+                }
+                assert!(!degenerate, "{what}");
+                assert_eq!(g.flags & FACE_FRONT != 0, twin.front, "{what}: facing");
+                // M_j: relative to the row's scale.
+                for k in 0..3 {
+                    let scale = twin.inv[k].iter().map(|x| x.abs()).fold(0.0, f64::max);
+                    for c in 0..3 {
+                        let (a, b) = (f64::from(g.inv[k][c]), twin.inv[k][c]);
+                        assert!((a - b).abs() <= 1e-4 * scale, "{what}: inv {a} vs {b}");
+                    }
+                }
+                // The f32 box holds the twin's.
+                let b = twin.bbox;
+                let gb = g.bbox.map(f64::from);
+                assert!(
+                    gb[0] <= b[0] && gb[1] <= b[1] && gb[2] >= b[2] && gb[3] >= b[3],
+                    "{what}: box {gb:?} does not hold {b:?}"
+                );
+            }
+        }
+    }
+}
+
+/// The aux buffer holds the forward's running aggregates: checked against the same loop as
+/// `shade_pixel` in f64, at a γ where the softmax is well conditioned.
+#[test]
+fn aux_holds_the_softmax_and_alpha_aggregates() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let mesh = icosphere(1);
+    let cam = Camera::from_angles(2.732, 20.0, 35.0);
+    for (alpha, rgb) in [(Alpha::Prod, Rgb::Softmax), (Alpha::Sum, Rgb::Hard)] {
+        let s = RasterSettings {
+            width: 16,
+            height: 12,
+            sigma: 1e-3,
+            gamma: 0.05,
+            alpha,
+            rgb,
+            ..RasterSettings::default()
+        };
+        let frames = r
+            .render_brute_views(&gpu, &mesh, &[cam], &lighting(), &s)
+            .unwrap();
+        let faces: Vec<_> = project_faces(&mesh, &cam)
+            .into_iter()
+            .map(|v| setup_face(v, s.dist, s.sigma))
+            .collect();
+        let t = reference::cutoff(s.sigma);
+        let range = s.far - s.near;
+        for (i, a) in frames.aux.iter().enumerate() {
+            let (xp, yp) = pixel_center(i as u32 % s.width, i as u32 / s.width, s.width, s.height);
+            let mut acc = if alpha == Alpha::Prod { 1.0 } else { 0.0 };
+            let mut zmin = s.far - s.eps * range;
+            let mut terms = vec![(zmin, 1.0)];
+            let mut hard: Option<(f64, usize)> = None;
+            for (j, f) in faces.iter().enumerate() {
+                let w = reference::barycentric(f, xp, yp);
+                let Some(d) = reference::coverage(f, &w, xp, yp, s.dist, s.sigma, t) else {
+                    continue;
+                };
+                acc = if alpha == Alpha::Prod {
+                    acc * (1.0 - d)
+                } else {
+                    acc + d
+                };
+                let z = reference::depth(f, &reference::clip_barycentric(w));
+                if !(z >= s.near && z <= s.far) {
+                    continue;
+                }
+                zmin = zmin.min(z);
+                terms.push((z, d));
+                if reference::inside_closed(&w) && hard.is_none_or(|(hz, _)| z < hz) {
+                    hard = Some((z, j));
+                }
+            }
+            let sum: f64 = terms
+                .iter()
+                .map(|&(z, d)| d * ((zmin - z) / (s.gamma * range)).exp())
+                .sum();
+            let what = format!("{alpha:?} {rgb:?} pixel {i}: {a:?}");
+            assert!(
+                (f64::from(a.alpha_acc) - acc).abs() < 1e-4,
+                "{what} vs {acc}"
+            );
+            if rgb == Rgb::Softmax {
+                assert!(
+                    (f64::from(a.softmax_ref_depth) - zmin).abs() < 1e-5,
+                    "{what} vs {zmin}"
+                );
+                assert!(
+                    (f64::from(a.softmax_sum) - sum).abs() < 1e-4 * sum,
+                    "{what} vs {sum}"
+                );
+            } else {
+                let expected = hard.map_or(u32::MAX, |(_, j)| j as u32);
+                assert_eq!(a.hard_face, expected, "{what}");
+            }
+        }
+    }
+}
+
+#[test]
+fn several_views_render_as_one_view_each() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let mesh = icosphere(1);
+    let cams = [
+        Camera::from_angles(2.732, 0.0, 0.0),
+        Camera::from_angles(2.732, 40.0, 90.0),
+        Camera::from_angles(3.5, -20.0, 200.0),
+    ];
+    let s = RasterSettings {
+        width: 13,
+        height: 11,
+        antialias: true,
+        ..RasterSettings::default()
+    };
+    let all = r
+        .render_brute_views(&gpu, &mesh, &cams, &lighting(), &s)
+        .unwrap();
+    for (v, cam) in cams.iter().enumerate() {
+        let one = r.render_brute(&gpu, &mesh, cam, &lighting(), &s).unwrap();
+        assert!(all.image(v) == one.as_slice(), "view {v}");
+    }
+}
+
+/// γ = 1e-6 and 1e-9: the running maximum keeps every exponent ≤ 0, so nothing overflows; at
+/// 1e-6 the image still matches the twin. This is where f32 is at its limit: half an ulp of a depth
+/// near 2 is 1.2e-7, already 2.4e-3 of γ (far − near) ≈ 1e-4, so where two faces of different
+/// colours meet at nearly equal depth (the shared edges of the icosphere) the weights carry a few
+/// 1e-3 of relative error and the colour up to ~1e-4 (measured on lavapipe: 1.0e-4). The bound
+/// here is [`TINY_GAMMA_TOL`].
+#[test]
+fn tiny_gamma_does_not_overflow_and_matches_the_twin() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let cam = Camera::from_angles(2.732, 20.0, 35.0);
+    let mut all = Vec::new();
+    for (name, mesh) in [("triangles", triangles(2)), ("icosphere", icosphere(1))] {
+        for gamma in [1e-6, 1e-9] {
+            for dist in DISTS {
+                let s = RasterSettings {
+                    width: 20,
+                    height: 20,
+                    gamma,
+                    sigma: 1e-3,
+                    dist,
+                    ..RasterSettings::default()
+                };
+                let what = format!("{name} γ = {gamma} {dist:?}");
+                let img = r.render_brute(&gpu, &mesh, &cam, &lighting(), &s).unwrap();
+                assert!(
+                    img.iter()
+                        .flatten()
+                        .all(|c| c.is_finite() && (0.0..=1.0).contains(c)),
+                    "{what}"
+                );
+                // At γ = 1e-9 one ulp of depth is ~2 units of exponent: f32 cannot follow the
+                // twin's mixing of faces at equal depth any more, only stay finite and in range.
+                if gamma >= 1e-6 {
+                    all.push(compare(
+                        &what,
+                        TINY_GAMMA_TOL,
+                        &img,
+                        &mesh,
+                        &cam,
+                        &lighting(),
+                        &s,
+                    ));
+                }
+            }
+        }
+    }
+    report("tiny γ", &all);
+}
+
+/// A vertex exactly on the camera plane (camera z = 0 in f32 and f64 alike) has no screen
+/// position: its face is skipped entirely, by the twin and the GPU.
+#[test]
+fn a_vertex_on_the_camera_plane_skips_its_face() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let cam = Camera {
+        eye: DVec3::new(0.0, 0.0, -2.0),
+        ..Camera::default()
+    };
+    let mut mesh = Mesh::new(
+        vec![
+            [-0.5, -0.5, 0.0],
+            [0.0, 0.5, 0.0],
+            [0.5, -0.5, 0.0],
+            [0.3, 0.3, -2.0],
+            [0.6, 0.2, 1.0],
+            [0.2, -0.6, 0.5],
+        ],
+        vec![[0, 1, 2], [3, 4, 5]],
+        1,
+    )
+    .unwrap();
+    mesh.textures = vec![[0.9, 0.2, 0.1], [0.1, 0.8, 0.3]];
+    let setups = r
+        .face_setups(&gpu, &mesh, &[cam], &RasterSettings::default())
+        .unwrap();
+    assert_ne!(setups[0].flags & FACE_FINITE, 0);
+    assert_eq!(setups[1].flags & FACE_FINITE, 0);
+    let s = RasterSettings {
+        width: 12,
+        height: 10,
+        sigma: 1e-3,
+        ..RasterSettings::default()
+    };
+    let stats = check(
+        &r,
+        &gpu,
+        "camera plane",
+        &mesh,
+        &cam,
+        &Lighting::unlit(),
+        &s,
+    );
+    assert!(stats.covered > 0);
+}
+
+#[test]
+fn bad_inputs_are_errors_not_panics() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let mesh = Mesh::icosphere(0);
+    let lit = Lighting::default();
+    let s = RasterSettings {
+        width: 4,
+        height: 4,
+        ..RasterSettings::default()
+    };
+    let matrix = Camera {
+        projection: Projection::Matrix {
+            p: [
+                [1.0, 0.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0, 0.0],
+                [0.0, 0.0, 1.0, 0.0],
+            ],
+            dist_coeffs: [0.0; 5],
+            orig_size: 2.0,
+        },
+        ..Camera::default()
+    };
+    let err = r.render_brute(&gpu, &mesh, &matrix, &lit, &s).unwrap_err();
+    assert!(matches!(err, softvk::Error::Input(_)), "{err}");
+    let bad = RasterSettings { sigma: -1.0, ..s };
+    let err = r
+        .render_brute(&gpu, &mesh, &Camera::default(), &lit, &bad)
+        .unwrap_err();
+    assert!(matches!(err, softvk::Error::Render(_)), "{err}");
+    let mut broken = mesh.clone();
+    broken.faces[2][0] = 1000;
+    let err = r
+        .render_brute(&gpu, &broken, &Camera::default(), &lit, &s)
+        .unwrap_err();
+    assert!(err.to_string().contains("face 2"), "{err}");
+    let nan_eye = Camera {
+        eye: DVec3::new(f64::NAN, 0.0, -2.0),
+        ..Camera::default()
+    };
+    let err = r.render_brute(&gpu, &mesh, &nan_eye, &lit, &s).unwrap_err();
+    assert!(matches!(err, softvk::Error::Input(_)), "{err}");
+}
