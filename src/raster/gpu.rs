@@ -118,15 +118,7 @@ impl Renderer {
         settings: &RasterSettings,
         cull: bool,
     ) -> Result<Frames> {
-        mesh.validate()?;
-        settings.validate()?;
-        if cameras.is_empty() {
-            return Err(Error::Input("no camera to render from".into()));
-        }
-        let views = cameras
-            .iter()
-            .map(GpuView::new)
-            .collect::<Result<Vec<_>>>()?;
+        let views = checked_views(mesh, cameras, settings)?;
         let face_count = u32::try_from(mesh.face_count())
             .map_err(|_| Error::Limit(format!("{} faces exceed 2^32", mesh.face_count())))?;
         let view_count = views.len() as u32;
@@ -252,15 +244,7 @@ impl Renderer {
         cameras: &[Camera],
         settings: &RasterSettings,
     ) -> Result<Vec<GpuFaceSetup>> {
-        mesh.validate()?;
-        settings.validate()?;
-        if cameras.is_empty() {
-            return Err(Error::Input("no camera to set faces up for".into()));
-        }
-        let views = cameras
-            .iter()
-            .map(GpuView::new)
-            .collect::<Result<Vec<_>>>()?;
+        let views = checked_views(mesh, cameras, settings)?;
         let (positions, faces) = Self::upload_geometry(ctx, mesh)?;
         let view_buf = ctx.upload_buffer("views", &views)?;
         let n = mesh.face_count() * views.len();
@@ -295,4 +279,18 @@ pub fn render_brute(
     settings: &RasterSettings,
 ) -> Result<Vec<[f32; 4]>> {
     Renderer::new(ctx)?.render_brute(ctx, mesh, camera, lighting, settings)
+}
+
+/// Validates a render's inputs (mesh, settings, at least one camera) and builds the GPU views.
+fn checked_views(
+    mesh: &Mesh,
+    cameras: &[Camera],
+    settings: &RasterSettings,
+) -> Result<Vec<GpuView>> {
+    mesh.validate()?;
+    settings.validate()?;
+    if cameras.is_empty() {
+        return Err(Error::Input("no camera to render from".into()));
+    }
+    cameras.iter().map(GpuView::new).collect()
 }
