@@ -3,66 +3,15 @@
 //! It is the baseline the tiled kernels must equal bit for bit, and the one benchmarks compare
 //! against. Anti-aliasing renders at 2× and averages with `kernels/raster/downsample_2x2.comp`.
 //!
-//! Besides RGBA, every rendered pixel gets a [`PixelAux`]: the forward's running aggregates that
-//! the backward pass needs, so it needs no second forward.
+//! Besides RGBA, every rendered pixel gets a [`crate::raster::fine::PixelAux`]: the forward's
+//! running aggregates that the backward pass needs, so it needs no second forward.
 
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
 use crate::gpu::{BufferRange, Context, Kernel, Recorder, specs};
-use crate::raster::reference::{self, Alpha, ColorMode, RasterSettings, Rgb};
-use crate::raster::setup::dist_code;
-
-/// Per-pixel forward state kept for the backward pass. Twin of `PixelAux` in
-/// `raster_brute.comp`; std430, 16 bytes, one per *rendered* pixel (at 2× with anti-aliasing),
-/// view-major then row-major like the image.
-///
-/// With the softmax colour, `I = rgb_scaled / softmax_sum` where every term was scaled by
-/// `e^{-max/γ}` and `max = (far − softmax_ref_depth) / (far − near)`: a face j at depth `z_j` with
-/// coverage `D_j` has weight `D_j e^{(softmax_ref_depth − z_j) / (γ (far − near))} / softmax_sum`
-/// in the pixel, and the background `e^{(softmax_ref_depth − z_b)/(γ (far − near))} / softmax_sum`
-/// with `z_b = far − ε (far − near)`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct PixelAux {
-    /// The depth whose z̄ is the softmax's running maximum (the background's `far − ε (far −
-    /// near)` when no face is nearer).
-    pub softmax_ref_depth: f32,
-    /// The softmax denominator `Σ_j D_j e^{(z̄_j − max)/γ} + e^{(ε − max)/γ}`.
-    pub softmax_sum: f32,
-    /// Alpha's running aggregate: prod `Π(1 − D_j)`, sum `Σ D_j`, hard 0 or 1.
-    pub alpha_acc: f32,
-    /// Hard colour: the index of the face whose colour the pixel shows, or `u32::MAX` for the
-    /// background.
-    pub hard_face: u32,
-}
-
-/// Push constants of `raster_brute.comp`.
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct RasterPush {
-    width: u32,
-    height: u32,
-    face_count: u32,
-    view_count: u32,
-    sigma: f32,
-    cutoff: f32,
-    near: f32,
-    far: f32,
-    inv_gamma_range: f32,
-    background_depth: f32,
-    dist: u32,
-    rgb: u32,
-    alpha: u32,
-    texture_res: u32,
-    flags: u32,
-    pad0: u32,
-    background: [f32; 4],
-}
-
-const FLAG_DOUBLE_SIDED: u32 = 1;
-const FLAG_VERTEX_COLORS: u32 = 2;
-const FLAG_CULL: u32 = 4;
+use crate::raster::fine::RasterPush;
+use crate::raster::reference::RasterSettings;
 
 /// Push constants of `downsample_2x2.comp`.
 #[repr(C)]
@@ -146,59 +95,15 @@ impl BruteRaster {
                 "raster_brute: {pixels} pixels and {face_count} faces (need 1..2^32 pixels, > 0 faces)"
             )));
         }
-        let s = settings;
-        let range = s.far - s.near;
-        let inv_gamma_range = if s.rgb == Rgb::Softmax {
-            (1.0 / (s.gamma * range)).min(f64::from(f32::MAX)) as f32
-        } else {
-            0.0
-        };
-        let hard = s.dist == reference::Dist::Hard;
-        let mut flags = 0;
-        if s.double_sided {
-            flags |= FLAG_DOUBLE_SIDED;
-        }
-        if s.color_mode == ColorMode::Vertex {
-            flags |= FLAG_VERTEX_COLORS;
-        }
-        if cull {
-            flags |= FLAG_CULL;
-        }
-        let push = RasterPush {
+        let push = RasterPush::new(
+            settings,
             width,
             height,
             face_count,
             view_count,
-            sigma: if hard { 1.0 } else { s.sigma as f32 },
-            cutoff: if hard {
-                0.0
-            } else {
-                reference::cutoff(s.sigma) as f32
-            },
-            near: s.near as f32,
-            far: s.far as f32,
-            inv_gamma_range,
-            background_depth: (s.far - s.eps * range) as f32,
-            dist: dist_code(s.dist),
-            rgb: match s.rgb {
-                Rgb::Softmax => 0,
-                Rgb::Hard => 1,
-            },
-            alpha: match s.alpha {
-                Alpha::Prod => 0,
-                Alpha::Sum => 1,
-                Alpha::Hard => 2,
-            },
             texture_res,
-            flags,
-            pad0: 0,
-            background: [
-                s.background[0] as f32,
-                s.background[1] as f32,
-                s.background[2] as f32,
-                0.0,
-            ],
-        };
+            cull,
+        );
         let groups = pixels.div_ceil(u64::from(specs::RASTER_BRUTE.workgroup_size[0]));
         rec.dispatch(
             &self.raster,
@@ -247,15 +152,9 @@ mod tests {
     #[test]
     fn shared_structs_match_the_kernels_layout() {
         assert_eq!(
-            std::mem::size_of::<RasterPush>() as u32,
-            specs::RASTER_BRUTE.push_constant_size
-        );
-        assert_eq!(std::mem::offset_of!(RasterPush, background), 64);
-        assert_eq!(
             std::mem::size_of::<DownsamplePush>() as u32,
             specs::DOWNSAMPLE_2X2.push_constant_size
         );
-        assert_eq!(std::mem::size_of::<PixelAux>(), 16);
         assert_eq!(specs::RASTER_BRUTE.bindings.len(), 5);
         assert_eq!(specs::DOWNSAMPLE_2X2.bindings.len(), 2);
     }

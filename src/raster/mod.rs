@@ -1,9 +1,10 @@
 //! Soft rasterization (SPEC §2), stage by stage: the f64 CPU twin
-//! ([`reference`](mod@reference)), and on the GPU the face setup ([`setup`]) and the brute-force
-//! fine pass ([`brute`]), driven by [`gpu`]. The tiled forward (binning → tiled fine pass) comes
-//! next and is tested against the brute one, bit for bit.
+//! ([`reference`](mod@reference)), and on the GPU the face setup ([`setup`]), binning
+//! ([`crate::primitives::binning`]) and the fine passes — tiled ([`fine`]) and the brute-force
+//! baseline ([`brute`]), bit for bit the same — driven by [`gpu`].
 
 pub mod brute;
+pub mod fine;
 pub mod gpu;
 pub mod reference;
 pub mod setup;

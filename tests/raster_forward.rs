@@ -1,5 +1,7 @@
-//! The GPU brute-force forward (face setup → one invocation per pixel over every face) against
-//! the f64 CPU twin `raster::reference`, on lavapipe with validation on.
+//! The GPU forward against the f64 CPU twin `raster::reference`, on lavapipe with validation on.
+//! Every GPU render here goes through [`render_all`]: the brute-force kernel (one invocation per
+//! pixel over every face) and the tiled one (binning → per-tile faces) at tile sizes 8, 16 and
+//! 32 must agree bit for bit, images and aux, before the brute image is compared with the twin.
 //!
 //! How "equal" is judged: the GPU works in f32, so its screen positions carry a rounding of a
 //! few 1e-7. Where the forward is continuous that moves a pixel by far less than 1e-4; where it
@@ -17,7 +19,8 @@ use rand::RngExt;
 use softvk::camera::{Camera, Projection, pixel_center};
 use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
-use softvk::raster::gpu::Renderer;
+use softvk::primitives::binning::{self, TileGrid};
+use softvk::raster::gpu::{Frames, Method, Renderer};
 use softvk::raster::reference::{
     self, Alpha, ColorMode, Dist, FaceColors, RasterSettings, Rgb, project_faces, setup_face,
     shade_pixel,
@@ -31,6 +34,61 @@ const TOL: f64 = 1e-4;
 const TINY_GAMMA_TOL: f64 = 5e-4;
 /// Shift of the pixel centre that models the GPU's f32 rounding of screen positions.
 const JITTER: f64 = 1e-6;
+
+/// Tile sizes every test scene is rendered with.
+const TILES: [u32; 3] = [8, 16, 32];
+
+/// Bit patterns of a frame set, so that -0.0 vs 0.0 and NaN payloads count as differences.
+fn bits(f: &Frames) -> (Vec<u32>, Vec<u32>) {
+    (
+        f.images.iter().flatten().map(|c| c.to_bits()).collect(),
+        f.aux
+            .iter()
+            .flat_map(|a| {
+                [
+                    a.softmax_ref_depth.to_bits(),
+                    a.softmax_sum.to_bits(),
+                    a.alpha_acc.to_bits(),
+                    a.hard_face,
+                ]
+            })
+            .collect(),
+    )
+}
+
+/// Renders with the brute-force kernel and with the tiled one at every size of [`TILES`],
+/// asserts that all agree bit for bit (images and aux), and returns the frames.
+fn render_all(
+    r: &Renderer,
+    gpu: &common::Gpu,
+    what: &str,
+    mesh: &Mesh,
+    cams: &[Camera],
+    lit: &Lighting,
+    s: &RasterSettings,
+) -> Frames {
+    let brute = r
+        .render_views(gpu, mesh, cams, lit, s, Method::Brute)
+        .unwrap_or_else(|e| panic!("{what}: brute: {e}"));
+    let want = bits(&brute);
+    for tile in TILES {
+        let tiled = r
+            .render_views(gpu, mesh, cams, lit, s, Method::Tiled { tile })
+            .unwrap_or_else(|e| panic!("{what}: tiled {tile}: {e}"));
+        let got = bits(&tiled);
+        if got != want {
+            let px = got.0.iter().zip(&want.0).position(|(a, b)| a != b);
+            let ax = got.1.iter().zip(&want.1).position(|(a, b)| a != b);
+            panic!(
+                "{what}: tiled ({tile}) differs from brute force: first image word {px:?} \
+                 (tiled {:?} vs brute {:?}), first aux word {ax:?}\nsettings {s:?}",
+                px.map(|i| f32::from_bits(got.0[i])),
+                px.map(|i| f32::from_bits(want.0[i])),
+            );
+        }
+    }
+    brute
+}
 
 /// The twin at every pixel centre shifted by `(dx, dy)` (anti-aliasing as `reference::render`).
 fn twin(
@@ -142,9 +200,7 @@ fn check(
     lit: &Lighting,
     s: &RasterSettings,
 ) -> Stats {
-    let img = r
-        .render_brute(gpu, mesh, cam, lit, s)
-        .unwrap_or_else(|e| panic!("{what}: {e}"));
+    let img = render_all(r, gpu, what, mesh, std::slice::from_ref(cam), lit, s).images;
     let stats = compare(what, TOL, &img, mesh, cam, lit, s);
     assert!(
         stats.steep * 10 <= stats.pixels.max(10),
@@ -437,25 +493,21 @@ fn two_runs_are_bit_identical() {
         antialias: true,
         ..RasterSettings::default()
     };
-    let a = r
-        .render_brute_views(&gpu, &mesh, &[cam], &lighting(), &s)
-        .unwrap();
-    let b = r
-        .render_brute_views(&gpu, &mesh, &[cam], &lighting(), &s)
-        .unwrap();
-    let bits = |f: &softvk::raster::gpu::Frames| -> Vec<u32> {
-        f.images
-            .iter()
-            .flatten()
-            .map(|c| c.to_bits())
-            .chain(
-                f.aux
-                    .iter()
-                    .flat_map(|a| [a.softmax_ref_depth.to_bits(), a.softmax_sum.to_bits()]),
-            )
-            .collect()
-    };
-    assert_eq!(bits(&a), bits(&b));
+    // Fresh renderers, fresh scenes: nothing carried over but the inputs.
+    for method in [
+        Method::Brute,
+        Method::Tiled { tile: 8 },
+        Method::Tiled { tile: 16 },
+    ] {
+        let a = r
+            .render_views(&gpu, &mesh, &[cam], &lighting(), &s, method)
+            .unwrap();
+        let b = Renderer::new(&gpu)
+            .unwrap()
+            .render_views(&gpu, &mesh, &[cam], &lighting(), &s, method)
+            .unwrap();
+        assert!(bits(&a) == bits(&b), "{method:?}");
+    }
 }
 
 /// Slivers, near-degenerate and collinear faces, a point: culling by the f32 grown boxes must
@@ -619,9 +671,7 @@ fn aux_holds_the_softmax_and_alpha_aggregates() {
             rgb,
             ..RasterSettings::default()
         };
-        let frames = r
-            .render_brute_views(&gpu, &mesh, &[cam], &lighting(), &s)
-            .unwrap();
+        let frames = render_all(&r, &gpu, "aux", &mesh, &[cam], &lighting(), &s);
         let faces: Vec<_> = project_faces(&mesh, &cam)
             .into_iter()
             .map(|v| setup_face(v, s.dist, s.sigma))
@@ -696,12 +746,18 @@ fn several_views_render_as_one_view_each() {
         antialias: true,
         ..RasterSettings::default()
     };
-    let all = r
-        .render_brute_views(&gpu, &mesh, &cams, &lighting(), &s)
-        .unwrap();
+    let all = render_all(&r, &gpu, "3 views", &mesh, &cams, &lighting(), &s);
     for (v, cam) in cams.iter().enumerate() {
-        let one = r.render_brute(&gpu, &mesh, cam, &lighting(), &s).unwrap();
-        assert!(all.image(v) == one.as_slice(), "view {v}");
+        let one = render_all(
+            &r,
+            &gpu,
+            "1 view",
+            &mesh,
+            std::slice::from_ref(cam),
+            &lighting(),
+            &s,
+        );
+        assert!(all.image(v) == one.images.as_slice(), "view {v}");
     }
 }
 
@@ -729,7 +785,7 @@ fn tiny_gamma_does_not_overflow_and_matches_the_twin() {
                     ..RasterSettings::default()
                 };
                 let what = format!("{name} γ = {gamma} {dist:?}");
-                let img = r.render_brute(&gpu, &mesh, &cam, &lighting(), &s).unwrap();
+                let img = render_all(&r, &gpu, &what, &mesh, &[cam], &lighting(), &s).images;
                 assert!(
                     img.iter()
                         .flatten()
@@ -844,4 +900,273 @@ fn bad_inputs_are_errors_not_panics() {
     };
     let err = r.render_brute(&gpu, &mesh, &nan_eye, &lit, &s).unwrap_err();
     assert!(matches!(err, softvk::Error::Input(_)), "{err}");
+}
+
+// ---- Adversarial binning -------------------------------------------------------------------
+// The scenes above already hold faces across the image border, behind the camera, beyond far
+// and of zero area, at 1×1 and non-square sizes, through every mode and three tile sizes. These
+// push the binning itself: its capacities, its batches and its view groups.
+
+/// `n` small random triangles at random depths, all inside a box of `extent` around (cx, cy)
+/// (screen units at the default camera), with random colours.
+fn cluster(n: usize, (cx, cy): (f32, f32), extent: f32, seed: u64) -> Mesh {
+    let mut rng = common::rng(seed);
+    let mut positions = Vec::new();
+    let mut faces = Vec::new();
+    for f in 0..n {
+        let z: f32 = rng.random_range(-0.1..0.1);
+        for _ in 0..3 {
+            positions.push([
+                cx + rng.random_range(-extent..extent),
+                cy + rng.random_range(-extent..extent),
+                z,
+            ]);
+        }
+        faces.push([3 * f as u32, 3 * f as u32 + 1, 3 * f as u32 + 2]);
+    }
+    let mut mesh = Mesh::new(positions, faces, 1).unwrap();
+    mesh.textures = random_colors(mesh.textures.len(), seed + 1);
+    mesh.vertex_colors = Some(random_colors(mesh.vertex_count(), seed + 2));
+    mesh
+}
+
+/// Bins on the GPU, bins the GPU's own f32 boxes with the CPU twin, and asserts the two agree
+/// exactly; then checks that every face whose box contains a pixel centre is in that pixel's
+/// tile (the fine pass's cull test is that box test, so nothing it would visit is missing).
+/// Returns the GPU binning.
+fn check_binning(
+    r: &Renderer,
+    gpu: &common::Gpu,
+    what: &str,
+    mesh: &Mesh,
+    cams: &[Camera],
+    s: &RasterSettings,
+    tile: u32,
+) -> binning::cpu::Binned {
+    let (setups, binned) = r
+        .bin_faces(gpu, mesh, cams, s, tile)
+        .unwrap_or_else(|e| panic!("{what}: {e}"));
+    let k = if s.antialias { 2 } else { 1 };
+    let grid = TileGrid::new(s.width * k, s.height * k, tile).unwrap();
+    let boxes: Vec<Option<[f32; 4]>> = setups
+        .iter()
+        .map(|f| (f.flags & FACE_FINITE != 0).then_some(f.bbox))
+        .collect();
+    let twin = binning::cpu::bin(&boxes, mesh.face_count() as u32, &grid);
+    assert!(
+        binned == twin,
+        "{what}: GPU binning differs from its CPU twin"
+    );
+    let f = mesh.face_count();
+    let per_view = grid.tiles_per_view() as usize;
+    for v in 0..cams.len() {
+        for row in 0..grid.height {
+            for col in 0..grid.width {
+                let (x, y) = pixel_center(col, row, grid.width, grid.height);
+                let (x, y) = (x as f32, y as f32);
+                let (tx, ty) = binning::cpu::pixel_tile(col, row, &grid);
+                let t = v * per_view + (ty * grid.tiles_x + tx) as usize;
+                let listed = binned.tile_items(t);
+                for (j, b) in boxes[v * f..(v + 1) * f].iter().enumerate() {
+                    if let Some(b) = b {
+                        if x >= b[0] && x <= b[2] && y >= b[1] && y <= b[3] {
+                            assert!(
+                                listed.contains(&(j as u32)),
+                                "{what}: face {j} of view {v} covers pixel ({col}, {row}) but is \
+                                 not in its tile {t}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+    binned
+}
+
+/// 150 faces (over three shared-memory batches of 64) all inside one 8×8 tile.
+#[test]
+fn all_faces_in_one_tile() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    // 48×40 at the default camera: pixel (19.5, 19.5), the centre of tile (2, 2), is world
+    // (-0.315, 0); one pixel is ~0.08 world units there, so the cluster spans ~3.5 pixels.
+    let mesh = cluster(150, (-0.315, 0.0), 0.12, 21);
+    let mut all = Vec::new();
+    for (i, s) in all_modes(RasterSettings::default(), &[(48, 40)])
+        .into_iter()
+        .enumerate()
+        .filter(|(i, _)| i % 3 == 0)
+    {
+        let s = RasterSettings {
+            sigma: s.sigma.min(1e-4),
+            antialias: false,
+            ..s
+        };
+        let what = format!("one tile #{i}");
+        let binned = check_binning(&r, &gpu, &what, &mesh, &[Camera::default()], &s, 8);
+        let busy: Vec<usize> = (0..binned.ranges.len())
+            .filter(|&t| binned.ranges[t][1] > binned.ranges[t][0])
+            .collect();
+        assert_eq!(busy, vec![2 * 6 + 2], "{what}: the tiles holding faces");
+        assert_eq!(binned.total as usize, mesh.face_count(), "{what}");
+        all.push(check(
+            &r,
+            &gpu,
+            &what,
+            &mesh,
+            &Camera::default(),
+            &lighting(),
+            &s,
+        ));
+    }
+    // A cluster of a few pixels: `report`'s coverage floor is for whole scenes; ask for some.
+    let covered: usize = all.iter().map(|s| s.covered).sum();
+    assert!(
+        covered >= 4 * all.len(),
+        "the cluster covers {covered} pixels"
+    );
+}
+
+/// σ so large that every face covers every tile of a non-square image.
+#[test]
+fn huge_sigma_puts_every_face_in_every_tile() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let mesh = icosphere(1);
+    let cam = Camera::from_angles(2.732, 15.0, 40.0);
+    let mut all = Vec::new();
+    for dist in [Dist::Euclidean, Dist::Barycentric] {
+        for alpha in [Alpha::Prod, Alpha::Sum] {
+            let s = RasterSettings {
+                width: 40,
+                height: 24,
+                sigma: 5.0,
+                gamma: 0.5,
+                dist,
+                alpha,
+                ..RasterSettings::default()
+            };
+            let what = format!("huge σ {dist:?} {alpha:?}");
+            for tile in TILES {
+                let binned = check_binning(&r, &gpu, &what, &mesh, &[cam], &s, tile);
+                if dist == Dist::Barycentric {
+                    // Its reach scales with each face (SPEC: min w > -√T): not every tile.
+                    continue;
+                }
+                let tiles = 40u32.div_ceil(tile) * 24u32.div_ceil(tile);
+                assert_eq!(
+                    binned.total as usize,
+                    mesh.face_count() * tiles as usize,
+                    "{what}: tile {tile}"
+                );
+            }
+            all.push(check(&r, &gpu, &what, &mesh, &cam, &lighting(), &s));
+        }
+    }
+    report("huge σ", &all);
+}
+
+/// The binning of the hand-made scene (border-crossing, behind the camera, beyond far, zero
+/// area, back-facing) and of spot-like dense meshes equals its CPU twin, at every tile size and
+/// on odd image shapes.
+#[test]
+fn binning_matches_its_cpu_twin() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let cams = [
+        Camera::default(),
+        Camera::from_angles(2.0, 30.0, 150.0),
+        Camera {
+            projection: Projection::Orthographic { scale: 0.9 },
+            ..Camera::default()
+        },
+    ];
+    for (name, mesh) in [("triangles", triangles(1)), ("icosphere", icosphere(1))] {
+        for (w, h) in [(1, 1), (37, 19), (8, 64), (33, 33)] {
+            for dist in DISTS {
+                for tile in TILES {
+                    let s = RasterSettings {
+                        width: w,
+                        height: h,
+                        sigma: 3e-3,
+                        dist,
+                        antialias: w == 37,
+                        ..RasterSettings::default()
+                    };
+                    let what = format!("{name} {w}x{h} {dist:?} tile {tile}");
+                    check_binning(&r, &gpu, &what, &mesh, &cams, &s, tile);
+                }
+            }
+        }
+    }
+}
+
+/// Views binned in groups under an entry budget (split and re-counted on demand) render the
+/// same bits as one group and as brute force; a budget below one view's needs is a clear error.
+#[test]
+fn view_groups_split_under_an_entry_budget() {
+    let Some(gpu) = common::gpu() else { return };
+    let mesh = icosphere(1);
+    let cams: Vec<Camera> = (0..5)
+        .map(|i| Camera::from_angles(2.732, 10.0 * i as f64, 70.0 * i as f64))
+        .collect();
+    let s = RasterSettings {
+        width: 32,
+        height: 24,
+        sigma: 1e-3,
+        ..RasterSettings::default()
+    };
+    let r = Renderer::new(&gpu).unwrap();
+    let want = render_all(&r, &gpu, "budget", &mesh, &cams, &lighting(), &s);
+    let mut scene = r.prepare(&gpu, &mesh, &cams, &lighting(), &s).unwrap();
+    r.run(&gpu, &mut scene, Method::Tiled { tile: 8 }).unwrap();
+    let one_group = scene.binned_entries();
+    let budget = one_group / 3;
+    let small = Renderer::new(&gpu).unwrap().with_entry_budget(budget);
+    let mut scene = small.prepare(&gpu, &mesh, &cams, &lighting(), &s).unwrap();
+    small
+        .run(&gpu, &mut scene, Method::Tiled { tile: 8 })
+        .unwrap();
+    assert_eq!(scene.binned_entries(), one_group, "every entry binned once");
+    let got = small.read_frames(&gpu, &scene).unwrap();
+    assert!(bits(&got) == bits(&want), "split groups differ");
+
+    let tiny = Renderer::new(&gpu).unwrap().with_entry_budget(10);
+    let err = tiny
+        .render_views(
+            &gpu,
+            &mesh,
+            &cams,
+            &lighting(),
+            &s,
+            Method::Tiled { tile: 8 },
+        )
+        .unwrap_err();
+    assert!(matches!(err, softvk::Error::Limit(_)), "{err}");
+    assert!(err.to_string().contains("entries"), "{err}");
+}
+
+#[test]
+fn bad_tile_sizes_are_errors() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let s = RasterSettings {
+        width: 8,
+        height: 8,
+        ..RasterSettings::default()
+    };
+    for tile in [0, 4, 12] {
+        let err = r
+            .render_views(
+                &gpu,
+                &Mesh::icosphere(0),
+                &[Camera::default()],
+                &Lighting::default(),
+                &s,
+                Method::Tiled { tile },
+            )
+            .unwrap_err();
+        assert!(matches!(err, softvk::Error::Input(_)), "{tile}: {err}");
+    }
 }

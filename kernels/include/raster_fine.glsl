@@ -1,0 +1,135 @@
+// The per-pixel fine pass shared by `raster_brute.comp` and `raster_tiled.comp`: bindings 0–4,
+// the push constants, and the step that folds one face into a pixel's running state. Both kernels
+// call `shade_face` for the same faces in the same (index) order, so their pixels are bit for bit
+// the same; they differ only in which faces they visit (all, or their tile's). Twin:
+// `reference::shade_pixel`, step for step.
+#ifndef SOFTVK_RASTER_FINE_GLSL
+#define SOFTVK_RASTER_FINE_GLSL
+
+#include "raster.glsl"
+
+// Twin of `PixelAux` (src/raster/brute.rs): what the backward pass needs of the forward's
+// running aggregates, so that it needs no second forward. 16 bytes per pixel.
+struct PixelAux {
+    float softmax_ref_depth; // depth whose z̄ is the softmax's running max (background: far - ε (far - near))
+    float softmax_sum;       // softmax denominator, scaled by e^{-max/γ} (includes the background's term)
+    float alpha_acc;         // prod: Π(1 - D); sum: Σ D; hard: 0 or 1
+    uint hard_face;          // hard colour: the winning face, or 0xffffffff for the background
+};
+
+layout(std430, set = 0, binding = 0) readonly buffer Setups { FaceSetup setups[]; };
+layout(std430, set = 0, binding = 1) readonly buffer Colors { float colors[]; };
+layout(std430, set = 0, binding = 2) readonly buffer Faces { uint faces[]; };
+layout(std430, set = 0, binding = 3) writeonly buffer Image { vec4 image[]; };
+layout(std430, set = 0, binding = 4) writeonly buffer Aux { PixelAux aux[]; };
+
+#define FLAG_DOUBLE_SIDED 1u
+#define FLAG_VERTEX_COLORS 2u
+#define FLAG_CULL 4u
+
+// Twin of `RasterPush` (src/raster/fine.rs).
+layout(push_constant) uniform Push {
+    uint width;            // rendered size (2× the output with anti-aliasing)
+    uint height;
+    uint face_count;
+    uint view_count;       // views in this dispatch
+    float sigma;
+    float cutoff;          // T = σ ln(1/ε_d − 1)
+    float near;
+    float far;
+    float inv_gamma_range; // 1 / (γ (far − near))
+    float background_depth; // far − ε (far − near): the background's softmax depth
+    uint dist;             // DIST_*
+    uint rgb;              // RGB_*
+    uint alpha;            // ALPHA_*
+    uint texture_res;      // R (surface colours)
+    uint flags;            // FLAG_*
+    uint first_view;       // view of this dispatch's first view in setups, image and aux
+    vec4 background;       // C_b (w unused)
+    uint tile_size;        // tiled only: tile edge in pixels (a multiple of 8)
+    uint tiles_x;          // tiled only: tiles per row, per column
+    uint tiles_y;
+    uint pad0;
+} pc;
+
+// `FaceColors::sample`: C_j at clipped barycentrics w̃.
+vec3 sample_color(uint face, vec3 wc) {
+    if ((pc.flags & FLAG_VERTEX_COLORS) != 0u) {
+        uvec3 f = uvec3(faces[3u * face], faces[3u * face + 1u], faces[3u * face + 2u]);
+        vec3 c0 = vec3(colors[3u * f.x], colors[3u * f.x + 1u], colors[3u * f.x + 2u]);
+        vec3 c1 = vec3(colors[3u * f.y], colors[3u * f.y + 1u], colors[3u * f.y + 2u]);
+        vec3 c2 = vec3(colors[3u * f.z], colors[3u * f.z + 1u], colors[3u * f.z + 2u]);
+        return wc.x * c0 + wc.y * c1 + wc.z * c2;
+    }
+    uint r2 = pc.texture_res * pc.texture_res;
+    uint t = face * r2 + surface_texel_index(wc, pc.texture_res);
+    return vec3(colors[3u * t], colors[3u * t + 1u], colors[3u * t + 2u]);
+}
+
+// One pixel's running state over the faces it has seen.
+struct PixelState {
+    float alpha;
+    Softmax soft;
+    bool hard_found;
+    float hard_depth;
+    vec3 hard_rgb;
+    uint hard_face;
+};
+
+PixelState pixel_init() {
+    PixelState s;
+    s.alpha = alpha_init(pc.alpha);
+    s.soft = softmax_init(pc.background.rgb, pc.background_depth);
+    s.hard_found = false;
+    s.hard_depth = 0.0;
+    s.hard_rgb = pc.background.rgb;
+    s.hard_face = 0xffffffffu;
+    return s;
+}
+
+// Folds face j (set up as `f`) into the state of the pixel centred at `p`.
+void shade_face(inout PixelState s, FaceSetup f, uint j, vec2 p) {
+    bool cull = (pc.flags & FLAG_CULL) != 0u;
+    if ((f.flags & FACE_FINITE) == 0u || (cull && outside_bbox(f.bbox, p))) {
+        return;
+    }
+    vec3 w = barycentric(f, p);
+    float d;
+    if (!coverage(f, w, p, pc.dist, pc.sigma, pc.cutoff, d)) {
+        return;
+    }
+    // Alpha counts every non-ignored face, whatever its depth or facing.
+    s.alpha = alpha_add(s.alpha, pc.alpha, d);
+
+    vec3 wc = clip_barycentric(w);
+    float z;
+    if (!depth_in_range(f, wc, pc.near, pc.far, z)) {
+        return;
+    }
+    bool double_sided = (pc.flags & FLAG_DOUBLE_SIDED) != 0u;
+    if (!(double_sided || (f.flags & FACE_FRONT) != 0u)) {
+        return;
+    }
+    if (pc.rgb == RGB_SOFTMAX) {
+        softmax_add(s.soft, z, d, sample_color(j, wc), pc.inv_gamma_range);
+    } else if (inside_closed(w) && (!s.hard_found || z < s.hard_depth)) {
+        s.hard_found = true;
+        s.hard_depth = z;
+        s.hard_rgb = sample_color(j, wc);
+        s.hard_face = j;
+    }
+}
+
+// Writes the pixel's colour and aux at index `id` of the image.
+void pixel_finish(PixelState s, uint id) {
+    vec3 rgb = pc.rgb == RGB_SOFTMAX ? softmax_resolve(s.soft) : s.hard_rgb;
+    image[id] = vec4(rgb, alpha_resolve(s.alpha, pc.alpha, pc.face_count));
+    PixelAux a;
+    a.softmax_ref_depth = s.soft.ref_depth;
+    a.softmax_sum = s.soft.sum;
+    a.alpha_acc = s.alpha;
+    a.hard_face = s.hard_face;
+    aux[id] = a;
+}
+
+#endif

@@ -1,0 +1,681 @@
+//! Tiled binning (SPEC §4): which items (faces after setup, anchor spheres, ...) each screen tile
+//! must visit, with every capacity computed exactly.
+//!
+//! 1. **Count** (`kernels/binning/bin_count.comp`): per item, the number of tiles its screen box
+//!    touches. An exclusive [`Scan`] of the counts gives every item its slot in the entry list,
+//!    and the scan's total sizes that list exactly: the host reads it back between the two
+//!    submissions of a binning ([`Bins::read_total`]), grows the entry buffers if needed, and
+//!    records the rest. Nothing is ever written past a capacity, and nothing is dropped.
+//! 2. **Scatter** (`bin_scatter.comp`): one entry per (item, tile), item-major (view-major, then
+//!    item index), keyed by tile.
+//! 3. **Sort**: the stable [`RadixSort`] by tile, over exactly as many key bits as there are
+//!    tiles. Stability keeps each tile's entries in item order, the order brute force visits.
+//! 4. **Ranges** (`bin_ranges.comp`): `[start, end)` of every tile's run.
+//!
+//! Each sorted entry carries its item-major slot, and the item of every slot is kept, so a tiled
+//! backward can write one partial result per (item, tile) at its item-major slot and then reduce
+//! each item's contiguous run in a fixed order: deterministic, without float atomics.
+//!
+//! [`cpu::bin`] is the twin: the same tile rectangles in the same f32 arithmetic, and the same
+//! lists.
+//!
+//! The u32 scan is exact only while the largest possible total (items × tiles) stays below 2^32;
+//! [`Binner::record_count`] refuses a dispatch that could wrap, so callers split their views
+//! into groups ([`max_views_per_group`]).
+
+use bytemuck::{Pod, Zeroable};
+
+use super::scan::{Scan, ScanScratch};
+use super::sort::{RadixSort, SortScratch};
+use crate::error::{Error, Result};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+
+/// The tile grid over a `width × height` image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TileGrid {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Tile edge in pixels.
+    pub tile_size: u32,
+    /// Tiles per row.
+    pub tiles_x: u32,
+    /// Tiles per column.
+    pub tiles_y: u32,
+}
+
+impl TileGrid {
+    /// The grid of `tile_size`-pixel tiles covering the image.
+    pub fn new(width: u32, height: u32, tile_size: u32) -> Result<Self> {
+        if width == 0 || height == 0 || tile_size == 0 {
+            return Err(Error::Input(format!(
+                "tile grid of a {width}x{height} image with {tile_size}-pixel tiles"
+            )));
+        }
+        Ok(Self {
+            width,
+            height,
+            tile_size,
+            tiles_x: width.div_ceil(tile_size),
+            tiles_y: height.div_ceil(tile_size),
+        })
+    }
+
+    /// Tiles per view.
+    pub fn tiles_per_view(&self) -> u64 {
+        u64::from(self.tiles_x) * u64::from(self.tiles_y)
+    }
+}
+
+/// Where an item's box and flags sit in the items buffer (all in 32-bit words).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ItemLayout {
+    /// Words from one item to the next.
+    pub stride_words: u32,
+    /// Offset of the box `(x_min, y_min, x_max, y_max)` (f32, pixel-centre coordinates).
+    pub box_offset: u32,
+    /// Offset of the flag word.
+    pub flag_offset: u32,
+    /// Bits of the flag word that must all be set for the item to be binned (0: all items).
+    pub flag_mask: u32,
+}
+
+/// What one binning dispatch covers: `views` views of `items_per_view` items each, starting at
+/// item `first_item` of the items buffer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BinJob {
+    /// The tile grid (the same for every view).
+    pub grid: TileGrid,
+    /// The item layout.
+    pub layout: ItemLayout,
+    /// Items per view.
+    pub items_per_view: u32,
+    /// Views binned together.
+    pub views: u32,
+    /// Index of the first item in the items buffer (view-major).
+    pub first_item: u32,
+}
+
+impl BinJob {
+    /// Items binned.
+    pub fn item_count(&self) -> u64 {
+        u64::from(self.items_per_view) * u64::from(self.views)
+    }
+
+    /// Tiles over all views.
+    pub fn tile_count(&self) -> u64 {
+        self.grid.tiles_per_view() * u64::from(self.views)
+    }
+
+    /// The most entries this job could produce (every item on every tile of its view).
+    pub fn max_entries(&self) -> u64 {
+        u64::from(self.items_per_view) * self.grid.tiles_per_view() * u64::from(self.views)
+    }
+
+    /// Key bits of a tile index.
+    pub fn key_bits(&self) -> u32 {
+        let tiles = self.tile_count();
+        (u64::BITS - (tiles.max(2) - 1).leading_zeros()).max(1)
+    }
+}
+
+/// The most views of `items_per_view` items on `grid` one binning can take without its u32
+/// entry count possibly wrapping (at least 1; a single view that could wrap is an error at
+/// [`Binner::record_count`]).
+pub fn max_views_per_group(items_per_view: u32, grid: &TileGrid) -> u32 {
+    let per_view = (u64::from(items_per_view) * grid.tiles_per_view()).max(1);
+    (u64::from(u32::MAX) / per_view).clamp(1, u64::from(u32::MAX)) as u32
+}
+
+/// Push constants of `bin_count.comp` and `bin_scatter.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct BinPush {
+    item_count: u32,
+    items_per_view: u32,
+    first_item: u32,
+    stride_words: u32,
+    box_offset: u32,
+    flag_offset: u32,
+    flag_mask: u32,
+    width: u32,
+    height: u32,
+    tile_size: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+}
+
+/// Push constants of `bin_ranges.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct RangesPush {
+    n: u32,
+    tiles: u32,
+    pad: [u32; 2],
+}
+
+/// The binning pipelines, made once per context.
+pub struct Binner {
+    count: Kernel,
+    scatter: Kernel,
+    ranges: Kernel,
+    scan: Scan,
+    sort: RadixSort,
+}
+
+/// The buffers of one binning, reusable across binnings (they grow on demand, never shrink).
+pub struct Bins {
+    counts: Buffer,
+    scan_scratch: ScanScratch,
+    item_capacity: u64,
+    keys: Buffer,
+    pairs: Buffer,
+    pair_items: Buffer,
+    sort_scratch: SortScratch,
+    entry_capacity: u64,
+    ranges: Buffer,
+    tile_capacity: u64,
+    entries: Option<u64>,
+}
+
+impl Bins {
+    /// Empty bins; [`Bins::reserve`] sizes them.
+    pub fn new(ctx: &Context) -> Result<Self> {
+        Self::with_capacity(ctx, 1, 1, 1)
+    }
+
+    fn with_capacity(ctx: &Context, items: u64, entries: u64, tiles: u64) -> Result<Self> {
+        let (items, entries, tiles) = (items.max(1), entries.max(1), tiles.max(1));
+        Ok(Self {
+            counts: ctx.create_buffer("bin counts", 4 * items, MemoryKind::Device)?,
+            scan_scratch: ScanScratch::new(ctx, items)?,
+            item_capacity: items,
+            keys: ctx.create_buffer("bin keys", 8 * entries, MemoryKind::Device)?,
+            pairs: ctx.create_buffer("bin entries", 4 * entries, MemoryKind::Device)?,
+            pair_items: ctx.create_buffer("bin entry items", 4 * entries, MemoryKind::Device)?,
+            sort_scratch: SortScratch::new(ctx, entries)?,
+            entry_capacity: entries,
+            ranges: ctx.create_buffer("bin ranges", 8 * tiles, MemoryKind::Device)?,
+            tile_capacity: tiles,
+            entries: None,
+        })
+    }
+
+    /// Grows the item and tile buffers to hold `job` (entry buffers grow in
+    /// [`Bins::reserve_entries`], once the count is known).
+    pub fn reserve(&mut self, ctx: &Context, job: &BinJob) -> Result<()> {
+        if job.item_count() > self.item_capacity {
+            self.counts =
+                ctx.create_buffer("bin counts", 4 * job.item_count(), MemoryKind::Device)?;
+            self.scan_scratch = ScanScratch::new(ctx, job.item_count())?;
+            self.item_capacity = job.item_count();
+        }
+        if job.tile_count() > self.tile_capacity {
+            self.ranges =
+                ctx.create_buffer("bin ranges", 8 * job.tile_count(), MemoryKind::Device)?;
+            self.tile_capacity = job.tile_count();
+        }
+        Ok(())
+    }
+
+    /// Grows the entry buffers to hold `entries` entries. Fails when one storage-buffer binding
+    /// cannot hold them (`maxStorageBufferRange / 8` entries): the caller bins fewer views at
+    /// once.
+    pub fn reserve_entries(&mut self, ctx: &Context, entries: u64) -> Result<()> {
+        let max = max_entries(ctx);
+        if entries > max {
+            return Err(Error::Limit(format!(
+                "binning needs {entries} (face, tile) entries, over the {max} this device binds at \
+                 once; use fewer views, a larger tile or a smaller σ"
+            )));
+        }
+        if entries > self.entry_capacity {
+            // Grow with headroom, so that a scene that breathes a little does not reallocate.
+            let cap = (entries + entries / 4).min(max);
+            self.keys = ctx.create_buffer("bin keys", 8 * cap, MemoryKind::Device)?;
+            self.pairs = ctx.create_buffer("bin entries", 4 * cap, MemoryKind::Device)?;
+            self.pair_items = ctx.create_buffer("bin entry items", 4 * cap, MemoryKind::Device)?;
+            self.sort_scratch = SortScratch::new(ctx, cap)?;
+            self.entry_capacity = cap;
+        }
+        Ok(())
+    }
+
+    /// Reads the entry count of the last recorded count pass (after its submission finished),
+    /// and remembers it for [`Binner::record_sort`].
+    pub fn read_total(&mut self, ctx: &Context) -> Result<u64> {
+        let total = u64::from(ctx.read_buffer::<u32>(self.scan_scratch.total(), 0, 1)?[0]);
+        self.entries = Some(total);
+        Ok(total)
+    }
+
+    /// Sets the entry count without reading it back (a caller that knows it, e.g. re-running the
+    /// same scene).
+    pub fn set_total(&mut self, total: u64) {
+        self.entries = Some(total);
+    }
+
+    /// The entry count of the current binning, once known.
+    pub fn total(&self) -> Option<u64> {
+        self.entries
+    }
+
+    /// The item-major exclusive offsets of the entries (after the count pass).
+    pub fn offsets(&self) -> &Buffer {
+        &self.counts
+    }
+
+    /// Sorted entries: the item-major slot of each (after [`Binner::record_sort`]).
+    pub fn entries(&self) -> &Buffer {
+        &self.pairs
+    }
+
+    /// The item (within its view) of each item-major slot.
+    pub fn entry_items(&self) -> &Buffer {
+        &self.pair_items
+    }
+
+    /// Sorted tile keys `[tile, 0]` of the entries.
+    pub fn keys(&self) -> &Buffer {
+        &self.keys
+    }
+
+    /// `[start, end)` per tile into the sorted entries.
+    pub fn ranges(&self) -> &Buffer {
+        &self.ranges
+    }
+}
+
+/// The most entries one binning can hold on this device.
+pub fn max_entries(ctx: &Context) -> u64 {
+    u64::from(ctx.info().limits.max_storage_buffer_range) / 8
+}
+
+impl Binner {
+    /// Builds the pipelines.
+    pub fn new(ctx: &Context) -> Result<Self> {
+        Ok(Self {
+            count: Kernel::new(ctx, &specs::BIN_COUNT)?,
+            scatter: Kernel::new(ctx, &specs::BIN_SCATTER)?,
+            ranges: Kernel::new(ctx, &specs::BIN_RANGES)?,
+            scan: Scan::new(ctx)?,
+            sort: RadixSort::new(ctx)?,
+        })
+    }
+
+    fn push(job: &BinJob) -> BinPush {
+        BinPush {
+            item_count: job.item_count() as u32,
+            items_per_view: job.items_per_view,
+            first_item: job.first_item,
+            stride_words: job.layout.stride_words,
+            box_offset: job.layout.box_offset,
+            flag_offset: job.layout.flag_offset,
+            flag_mask: job.layout.flag_mask,
+            width: job.grid.width,
+            height: job.grid.height,
+            tile_size: job.grid.tile_size,
+            tiles_x: job.grid.tiles_x,
+            tiles_y: job.grid.tiles_y,
+        }
+    }
+
+    fn check(job: &BinJob, items: &BufferRange<'_>, bins: &Bins) -> Result<()> {
+        if job.max_entries() > u64::from(u32::MAX) {
+            return Err(Error::Limit(format!(
+                "binning {} items over {} tiles per view in {} view(s) could count past 2^32 \
+                 entries; bin fewer views at once or use larger tiles",
+                job.items_per_view,
+                job.grid.tiles_per_view(),
+                job.views
+            )));
+        }
+        let words = u64::from(job.first_item + job.items_per_view * job.views)
+            * u64::from(job.layout.stride_words);
+        if items.size < 4 * words
+            || job.layout.box_offset + 4 > job.layout.stride_words
+            || job.layout.flag_offset >= job.layout.stride_words
+        {
+            return Err(Error::Limit(format!(
+                "binning: items buffer `{}` ({} bytes) does not hold {} items of {} words with \
+                 the box at {} and flags at {}",
+                items.buffer.name(),
+                items.size,
+                job.first_item + job.items_per_view * job.views,
+                job.layout.stride_words,
+                job.layout.box_offset,
+                job.layout.flag_offset
+            )));
+        }
+        if job.item_count() > bins.item_capacity || job.tile_count() > bins.tile_capacity {
+            return Err(Error::Limit(format!(
+                "binning {} items over {} tiles: bins hold {} items and {} tiles (call reserve)",
+                job.item_count(),
+                job.tile_count(),
+                bins.item_capacity,
+                bins.tile_capacity
+            )));
+        }
+        Ok(())
+    }
+
+    /// Records the count pass and its scan: after it runs, [`Bins::offsets`] holds each item's
+    /// first slot and [`Bins::read_total`] the entry count.
+    pub fn record_count(
+        &self,
+        rec: &mut Recorder<'_>,
+        bins: &Bins,
+        items: BufferRange<'_>,
+        job: &BinJob,
+    ) -> Result<()> {
+        Self::check(job, &items, bins)?;
+        let n = job.item_count();
+        if n == 0 {
+            rec.fill(bins.scan_scratch.total().whole(), 0);
+            return Ok(());
+        }
+        let counts = bins.counts.range(0, 4 * n);
+        let groups = n.div_ceil(u64::from(specs::BIN_COUNT.workgroup_size[0]));
+        rec.dispatch(
+            &self.count,
+            &[items, counts],
+            &Self::push(job),
+            groups as u32,
+        )?;
+        self.scan.record(rec, &bins.scan_scratch, counts, counts, n)
+    }
+
+    /// Records scatter, sort and ranges for the entry count that [`Bins::read_total`] (or
+    /// [`Bins::set_total`]) established; the entry buffers must hold it
+    /// ([`Bins::reserve_entries`]).
+    pub fn record_sort(
+        &self,
+        rec: &mut Recorder<'_>,
+        bins: &Bins,
+        items: BufferRange<'_>,
+        job: &BinJob,
+    ) -> Result<()> {
+        Self::check(job, &items, bins)?;
+        let total = bins.entries.ok_or_else(|| {
+            Error::Limit("binning: the entry count is not known yet (read_total)".into())
+        })?;
+        if total > bins.entry_capacity {
+            return Err(Error::Limit(format!(
+                "binning: {total} entries, entry buffers hold {} (call reserve_entries)",
+                bins.entry_capacity
+            )));
+        }
+        let tiles = job.tile_count();
+        rec.fill(bins.ranges.range(0, 8 * tiles), 0);
+        if total == 0 {
+            return Ok(());
+        }
+        let n = job.item_count();
+        let groups = n.div_ceil(u64::from(specs::BIN_SCATTER.workgroup_size[0]));
+        rec.dispatch(
+            &self.scatter,
+            &[
+                items,
+                bins.counts.range(0, 4 * n),
+                bins.keys.range(0, 8 * total),
+                bins.pairs.range(0, 4 * total),
+                bins.pair_items.range(0, 4 * total),
+            ],
+            &Self::push(job),
+            groups as u32,
+        )?;
+        self.sort.record(
+            rec,
+            &bins.sort_scratch,
+            &bins.keys,
+            &bins.pairs,
+            total,
+            job.key_bits(),
+        )?;
+        let push = RangesPush {
+            n: total as u32,
+            tiles: tiles as u32,
+            pad: [0; 2],
+        };
+        let groups = total.div_ceil(u64::from(specs::BIN_RANGES.workgroup_size[0]));
+        rec.dispatch(
+            &self.ranges,
+            &[
+                bins.keys.range(0, 8 * total),
+                bins.ranges.range(0, 8 * tiles),
+            ],
+            &push,
+            groups as u32,
+        )
+    }
+
+    /// Convenience (tests, tools): bins `items` completely, two submissions, and reads the
+    /// result back as the twin's [`cpu::Binned`].
+    pub fn run(
+        &self,
+        ctx: &Context,
+        bins: &mut Bins,
+        items: &Buffer,
+        job: &BinJob,
+    ) -> Result<cpu::Binned> {
+        bins.reserve(ctx, job)?;
+        ctx.submit_and_wait(|rec| self.record_count(rec, bins, items.whole(), job))?;
+        let total = bins.read_total(ctx)?;
+        bins.reserve_entries(ctx, total)?;
+        ctx.submit_and_wait(|rec| self.record_sort(rec, bins, items.whole(), job))?;
+        let n = job.item_count() as usize;
+        let t = total as usize;
+        let slots: Vec<u32> = ctx.read_buffer(&bins.pairs, 0, t)?;
+        let items_of_slot: Vec<u32> = ctx.read_buffer(&bins.pair_items, 0, t)?;
+        let keys: Vec<[u32; 2]> = ctx.read_buffer(&bins.keys, 0, t)?;
+        Ok(cpu::Binned {
+            offsets: ctx.read_buffer(&bins.counts, 0, n)?,
+            total: total as u32,
+            tiles: keys.iter().map(|k| k[0]).collect(),
+            slots,
+            slot_items: items_of_slot,
+            ranges: ctx.read_buffer(&bins.ranges, 0, job.tile_count() as usize)?,
+        })
+    }
+}
+
+/// The CPU twin of binning.
+pub mod cpu {
+    use super::TileGrid;
+
+    /// A binning's result, as the GPU leaves it.
+    #[derive(Clone, Debug, PartialEq, Eq)]
+    pub struct Binned {
+        /// Exclusive offsets of every item's entries (item-major).
+        pub offsets: Vec<u32>,
+        /// Number of entries.
+        pub total: u32,
+        /// Tile of every entry, sorted (stable) by tile.
+        pub tiles: Vec<u32>,
+        /// Item-major slot of every sorted entry.
+        pub slots: Vec<u32>,
+        /// Item (within its view) of every item-major slot.
+        pub slot_items: Vec<u32>,
+        /// `[start, end)` per tile (`[0, 0]` when empty).
+        pub ranges: Vec<[u32; 2]>,
+    }
+
+    impl Binned {
+        /// The items tile `tile` visits, in order.
+        pub fn tile_items(&self, tile: usize) -> Vec<u32> {
+            let [s, e] = self.ranges[tile];
+            (s..e)
+                .map(|i| self.slot_items[self.slots[i as usize] as usize])
+                .collect()
+        }
+    }
+
+    /// `tile_rect` of `binning.glsl`, in the same f32 operations: the tiles `(x0, y0, x1, y1)`
+    /// (inclusive) a box may touch, or `None` when it touches no pixel of the image.
+    pub fn tile_rect(b: [f32; 4], grid: &TileGrid) -> Option<[u32; 4]> {
+        if b.iter().any(|c| c.is_nan()) {
+            return None;
+        }
+        let w = grid.width as f32;
+        let h = grid.height as f32;
+        let s = w.min(h);
+        // Separate multiply and add, as the kernel's `precise` forces.
+        let c0 = ((b[0] * s + (w - 1.0)) * 0.5).floor() - 1.0;
+        let c1 = ((b[2] * s + (w - 1.0)) * 0.5).ceil() + 1.0;
+        let r0 = (((h - 1.0) - b[3] * s) * 0.5).floor() - 1.0;
+        let r1 = (((h - 1.0) - b[1] * s) * 0.5).ceil() + 1.0;
+        let (c0, r0) = (c0.max(0.0), r0.max(0.0));
+        let (c1, r1) = (c1.min(w - 1.0), r1.min(h - 1.0));
+        if !(c0 <= c1 && r0 <= r1) {
+            return None;
+        }
+        let ts = grid.tile_size;
+        Some([
+            c0 as u32 / ts,
+            r0 as u32 / ts,
+            c1 as u32 / ts,
+            r1 as u32 / ts,
+        ])
+    }
+
+    /// Bins `boxes` (`views × items_per_view`, view-major; `None` = not binned) exactly as the
+    /// GPU does: count, exclusive scan, item-major scatter, stable sort by tile, ranges.
+    pub fn bin(boxes: &[Option<[f32; 4]>], items_per_view: u32, grid: &TileGrid) -> Binned {
+        let per_view = grid.tiles_per_view() as u32;
+        let mut offsets = Vec::with_capacity(boxes.len());
+        let mut entries: Vec<(u32, u32, u32)> = Vec::new(); // (tile, slot, item)
+        for (id, b) in boxes.iter().enumerate() {
+            offsets.push(entries.len() as u32);
+            let Some(rect) = b.and_then(|b| tile_rect(b, grid)) else {
+                continue;
+            };
+            let view = id as u32 / items_per_view.max(1);
+            let item = id as u32 - view * items_per_view;
+            for ty in rect[1]..=rect[3] {
+                for tx in rect[0]..=rect[2] {
+                    let slot = entries.len() as u32;
+                    entries.push((view * per_view + ty * grid.tiles_x + tx, slot, item));
+                }
+            }
+        }
+        let slot_items: Vec<u32> = entries.iter().map(|e| e.2).collect();
+        let total = entries.len() as u32;
+        entries.sort_by_key(|e| e.0); // stable
+        let views = boxes.len() as u32 / items_per_view.max(1);
+        let mut ranges = vec![[0u32; 2]; (per_view * views) as usize];
+        for (i, e) in entries.iter().enumerate() {
+            let r = &mut ranges[e.0 as usize];
+            if i == 0 || entries[i - 1].0 != e.0 {
+                r[0] = i as u32;
+            }
+            r[1] = i as u32 + 1;
+        }
+        Binned {
+            offsets,
+            total,
+            tiles: entries.iter().map(|e| e.0).collect(),
+            slots: entries.iter().map(|e| e.1).collect(),
+            slot_items,
+            ranges,
+        }
+    }
+
+    /// The tile `(tx, ty)` holding pixel `(col, row)`.
+    pub fn pixel_tile(col: u32, row: u32, grid: &TileGrid) -> (u32, u32) {
+        (col / grid.tile_size, row / grid.tile_size)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn push_layouts_match_the_kernels() {
+        assert_eq!(
+            std::mem::size_of::<BinPush>() as u32,
+            specs::BIN_COUNT.push_constant_size
+        );
+        assert_eq!(
+            std::mem::size_of::<BinPush>() as u32,
+            specs::BIN_SCATTER.push_constant_size
+        );
+        assert_eq!(
+            std::mem::size_of::<RangesPush>() as u32,
+            specs::BIN_RANGES.push_constant_size
+        );
+    }
+
+    #[test]
+    fn key_bits_cover_every_tile() {
+        let grid = TileGrid::new(100, 30, 16).unwrap();
+        assert_eq!((grid.tiles_x, grid.tiles_y), (7, 2));
+        for views in 1..40 {
+            let job = BinJob {
+                grid,
+                layout: ItemLayout {
+                    stride_words: 4,
+                    box_offset: 0,
+                    flag_offset: 0,
+                    flag_mask: 0,
+                },
+                items_per_view: 3,
+                views,
+                first_item: 0,
+            };
+            let tiles = job.tile_count();
+            assert!(tiles - 1 < 1 << job.key_bits(), "{views}");
+            assert!(job.key_bits() == 1 || tiles > 1 << (job.key_bits() - 1));
+        }
+    }
+
+    #[test]
+    fn tile_rect_contains_every_pixel_the_box_contains() {
+        let grid = TileGrid::new(37, 23, 8).unwrap();
+        let s = 23.0_f32;
+        let boxes = [
+            [-0.3, -0.2, 0.1, 0.4],
+            [-5.0, -5.0, 5.0, 5.0],
+            [0.99, 0.99, 3.0, 3.0],
+            [-0.01, 0.3, -0.01, 0.3],
+            [
+                f32::NEG_INFINITY,
+                f32::NEG_INFINITY,
+                f32::INFINITY,
+                f32::INFINITY,
+            ],
+        ];
+        for b in boxes {
+            let rect = cpu::tile_rect(b, &grid);
+            for row in 0..grid.height {
+                for col in 0..grid.width {
+                    let x = (2.0 * col as f32 + 1.0 - 37.0) / s;
+                    let y = (2.0 * (23.0 - 1.0 - row as f32) + 1.0 - 23.0) / s;
+                    if x >= b[0] && x <= b[2] && y >= b[1] && y <= b[3] {
+                        let r = rect.unwrap_or_else(|| panic!("{b:?} lost ({col}, {row})"));
+                        let (tx, ty) = cpu::pixel_tile(col, row, &grid);
+                        assert!(tx >= r[0] && tx <= r[2] && ty >= r[1] && ty <= r[3]);
+                    }
+                }
+            }
+        }
+        assert_eq!(cpu::tile_rect([5.0, 5.0, 6.0, 6.0], &grid), None);
+        assert_eq!(cpu::tile_rect([f32::NAN, 0.0, 1.0, 1.0], &grid), None);
+        assert_eq!(cpu::tile_rect([1.0, 1.0, -1.0, -1.0], &grid), None);
+    }
+
+    #[test]
+    fn cpu_bin_keeps_item_order_within_tiles() {
+        let grid = TileGrid::new(16, 16, 8).unwrap();
+        let all = Some([-2.0, -2.0, 2.0, 2.0]);
+        let boxes = vec![all, None, all, Some([-1.0, -1.0, -0.5, -0.5]), all, all];
+        let b = cpu::bin(&boxes, 3, &grid);
+        assert_eq!(b.total, 4 + 4 + 1 + 4 + 4);
+        assert_eq!(b.offsets, vec![0, 4, 4, 8, 9, 13]);
+        // View 0's bottom-left tile (tx 0, ty 1) has items 0, 2; view 1's has items 0, 1, 2.
+        assert_eq!(b.tile_items(2), vec![0, 2]);
+        assert_eq!(b.tile_items(4 + 2), vec![0, 1, 2]);
+        assert_eq!(b.tile_items(4), vec![1, 2]);
+    }
+}

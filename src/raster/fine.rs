@@ -1,0 +1,283 @@
+//! What the two fine passes share (`kernels/include/raster_fine.glsl`): the push constants, the
+//! per-pixel [`PixelAux`] kept for the backward pass, and the tiled fine pass itself
+//! (`kernels/raster/raster_tiled.comp`), which visits per 8×8 block only the faces binned to its
+//! tile ([`crate::primitives::binning`]) and is bit for bit the brute-force pass
+//! ([`crate::raster::brute`]).
+
+use bytemuck::{Pod, Zeroable};
+
+use crate::error::{Error, Result};
+use crate::gpu::{BufferRange, Context, Kernel, Recorder, specs};
+use crate::primitives::TileGrid;
+use crate::raster::reference::{self, Alpha, ColorMode, RasterSettings, Rgb};
+use crate::raster::setup::dist_code;
+
+/// Per-pixel forward state kept for the backward pass. Twin of `PixelAux` in
+/// `raster_fine.glsl`; std430, 16 bytes, one per *rendered* pixel (at 2× with anti-aliasing),
+/// view-major then row-major like the image.
+///
+/// With the softmax colour, `I = rgb_scaled / softmax_sum` where every term was scaled by
+/// `e^{-max/γ}` and `max = (far − softmax_ref_depth) / (far − near)`: a face j at depth `z_j` with
+/// coverage `D_j` has weight `D_j e^{(softmax_ref_depth − z_j) / (γ (far − near))} / softmax_sum`
+/// in the pixel, and the background `e^{(softmax_ref_depth − z_b)/(γ (far − near))} / softmax_sum`
+/// with `z_b = far − ε (far − near)`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct PixelAux {
+    /// The depth whose z̄ is the softmax's running maximum (the background's `far − ε (far −
+    /// near)` when no face is nearer).
+    pub softmax_ref_depth: f32,
+    /// The softmax denominator `Σ_j D_j e^{(z̄_j − max)/γ} + e^{(ε − max)/γ}`.
+    pub softmax_sum: f32,
+    /// Alpha's running aggregate: prod `Π(1 − D_j)`, sum `Σ D_j`, hard 0 or 1.
+    pub alpha_acc: f32,
+    /// Hard colour: the index of the face whose colour the pixel shows, or `u32::MAX` for the
+    /// background.
+    pub hard_face: u32,
+}
+
+/// Push constants of both fine kernels. Twin of `Push` in `raster_fine.glsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(crate) struct RasterPush {
+    pub width: u32,
+    pub height: u32,
+    pub face_count: u32,
+    pub view_count: u32,
+    pub sigma: f32,
+    pub cutoff: f32,
+    pub near: f32,
+    pub far: f32,
+    pub inv_gamma_range: f32,
+    pub background_depth: f32,
+    pub dist: u32,
+    pub rgb: u32,
+    pub alpha: u32,
+    pub texture_res: u32,
+    pub flags: u32,
+    pub first_view: u32,
+    pub background: [f32; 4],
+    pub tile_size: u32,
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    pub pad0: u32,
+}
+
+const FLAG_DOUBLE_SIDED: u32 = 1;
+const FLAG_VERTEX_COLORS: u32 = 2;
+const FLAG_CULL: u32 = 4;
+
+impl RasterPush {
+    /// The push constants for `view_count` views of a `width × height` rendered image (first
+    /// view 0, no tiles: set those fields for a group or the tiled kernel).
+    pub fn new(
+        s: &RasterSettings,
+        width: u32,
+        height: u32,
+        face_count: u32,
+        view_count: u32,
+        texture_res: u32,
+        cull: bool,
+    ) -> Self {
+        let range = s.far - s.near;
+        let inv_gamma_range = if s.rgb == Rgb::Softmax {
+            (1.0 / (s.gamma * range)).min(f64::from(f32::MAX)) as f32
+        } else {
+            0.0
+        };
+        let hard = s.dist == reference::Dist::Hard;
+        let mut flags = 0;
+        if s.double_sided {
+            flags |= FLAG_DOUBLE_SIDED;
+        }
+        if s.color_mode == ColorMode::Vertex {
+            flags |= FLAG_VERTEX_COLORS;
+        }
+        if cull {
+            flags |= FLAG_CULL;
+        }
+        RasterPush {
+            width,
+            height,
+            face_count,
+            view_count,
+            sigma: if hard { 1.0 } else { s.sigma as f32 },
+            cutoff: if hard {
+                0.0
+            } else {
+                reference::cutoff(s.sigma) as f32
+            },
+            near: s.near as f32,
+            far: s.far as f32,
+            inv_gamma_range,
+            background_depth: (s.far - s.eps * range) as f32,
+            dist: dist_code(s.dist),
+            rgb: match s.rgb {
+                Rgb::Softmax => 0,
+                Rgb::Hard => 1,
+            },
+            alpha: match s.alpha {
+                Alpha::Prod => 0,
+                Alpha::Sum => 1,
+                Alpha::Hard => 2,
+            },
+            texture_res,
+            flags,
+            first_view: 0,
+            background: [
+                s.background[0] as f32,
+                s.background[1] as f32,
+                s.background[2] as f32,
+                0.0,
+            ],
+            tile_size: 0,
+            tiles_x: 0,
+            tiles_y: 0,
+            pad0: 0,
+        }
+    }
+}
+
+/// Tile sizes the tiled kernel supports: multiples of its 8×8 workgroup block.
+pub fn check_tile_size(tile: u32) -> Result<()> {
+    if tile == 0 || tile % 8 != 0 || tile > 256 {
+        return Err(Error::Input(format!(
+            "tile size {tile}: must be a multiple of 8 between 8 and 256"
+        )));
+    }
+    Ok(())
+}
+
+/// The buffers one tiled fine pass reads and writes.
+pub struct TiledBindings<'a> {
+    /// All views' face setups (`views × face_count`, view-major).
+    pub setups: BufferRange<'a>,
+    /// Lit colours (as [`crate::raster::brute::BruteBindings::colors`]).
+    pub colors: BufferRange<'a>,
+    /// Faces as packed u32 triples.
+    pub faces: BufferRange<'a>,
+    /// RGBA per rendered pixel of all views.
+    pub image: BufferRange<'a>,
+    /// [`PixelAux`] per rendered pixel of all views.
+    pub aux: BufferRange<'a>,
+    /// Sorted bin entries ([`crate::primitives::Bins::entries`]).
+    pub entries: BufferRange<'a>,
+    /// The face of every item-major slot ([`crate::primitives::Bins::entry_items`]).
+    pub entry_items: BufferRange<'a>,
+    /// Per-tile ranges of the group's views ([`crate::primitives::Bins::ranges`]).
+    pub ranges: BufferRange<'a>,
+}
+
+/// The tiled fine pass's pipeline.
+pub struct TiledRaster {
+    kernel: Kernel,
+}
+
+impl TiledRaster {
+    /// Builds the pipeline.
+    pub fn new(ctx: &Context) -> Result<Self> {
+        Ok(Self {
+            kernel: Kernel::new(ctx, &specs::RASTER_TILED)?,
+        })
+    }
+
+    /// Records the tiled fine pass over views `first_view .. first_view + view_count`, binned on
+    /// `grid` (the rendered size) by one binning whose tiles are numbered from the group's first
+    /// view.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &TiledBindings<'_>,
+        settings: &RasterSettings,
+        grid: &TileGrid,
+        face_count: u32,
+        first_view: u32,
+        view_count: u32,
+        texture_res: u32,
+    ) -> Result<()> {
+        check_tile_size(grid.tile_size)?;
+        let last = u64::from(first_view) + u64::from(view_count);
+        let pixels = u64::from(grid.width) * u64::from(grid.height);
+        if b.image.size < 16 * pixels * last
+            || b.aux.size < 16 * pixels * last
+            || b.setups.size < 128 * u64::from(face_count) * last
+            || b.ranges.size < 8 * grid.tiles_per_view() * u64::from(view_count)
+        {
+            return Err(Error::Limit(format!(
+                "raster_tiled: buffers too small for views {first_view}..{last} of \
+                 {}x{} pixels and {face_count} faces",
+                grid.width, grid.height
+            )));
+        }
+        if pixels * last > u64::from(u32::MAX) || face_count == 0 {
+            return Err(Error::Limit(format!(
+                "raster_tiled: {} pixels and {face_count} faces (need 1..2^32 pixels, > 0 faces)",
+                pixels * last
+            )));
+        }
+        let mut push = RasterPush::new(
+            settings,
+            grid.width,
+            grid.height,
+            face_count,
+            view_count,
+            texture_res,
+            true,
+        );
+        push.first_view = first_view;
+        push.tile_size = grid.tile_size;
+        push.tiles_x = grid.tiles_x;
+        push.tiles_y = grid.tiles_y;
+        let blocks = u64::from(grid.width.div_ceil(8))
+            * u64::from(grid.height.div_ceil(8))
+            * u64::from(view_count);
+        let groups = u32::try_from(blocks)
+            .map_err(|_| Error::Limit(format!("raster_tiled: {blocks} workgroups")))?;
+        rec.dispatch(
+            &self.kernel,
+            &[
+                b.setups,
+                b.colors,
+                b.faces,
+                b.image,
+                b.aux,
+                b.entries,
+                b.entry_items,
+                b.ranges,
+            ],
+            &push,
+            groups,
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shared_structs_match_the_kernels_layout() {
+        for spec in [&specs::RASTER_BRUTE, &specs::RASTER_TILED] {
+            assert_eq!(
+                std::mem::size_of::<RasterPush>() as u32,
+                spec.push_constant_size,
+                "{}",
+                spec.name
+            );
+        }
+        assert_eq!(std::mem::offset_of!(RasterPush, background), 64);
+        assert_eq!(std::mem::size_of::<PixelAux>(), 16);
+        assert_eq!(specs::RASTER_TILED.bindings.len(), 8);
+    }
+
+    #[test]
+    fn tile_sizes_are_multiples_of_the_block() {
+        for t in [8, 16, 32, 64, 256] {
+            assert!(check_tile_size(t).is_ok());
+        }
+        for t in [0, 4, 12, 264] {
+            assert!(check_tile_size(t).is_err());
+        }
+    }
+}
