@@ -127,6 +127,37 @@ impl GpuScene {
         self.groups.iter().map(|g| g.2).sum()
     }
 
+    /// The (pixel, face) pairs the last run's fine pass evaluated: every face for every pixel
+    /// with [`Method::Brute`]; with [`Method::Tiled`], per tile its pixels (clipped to the image)
+    /// times its binned faces, read back from the bins. Tiled needs the last run to have binned
+    /// every view in one group.
+    pub fn evaluated_pairs(&self, ctx: &Context, method: Method) -> Result<u64> {
+        let pixels = u64::from(self.width) * u64::from(self.height) * u64::from(self.view_count);
+        let Method::Tiled { tile } = method else {
+            return Ok(pixels * u64::from(self.face_count));
+        };
+        if self.groups.len() != 1 {
+            return Err(Error::Input(
+                "evaluated_pairs needs a previous tiled run in one view group".into(),
+            ));
+        }
+        let grid = self.grid(tile)?;
+        let tiles = (grid.tiles_per_view() * u64::from(self.view_count)) as usize;
+        let ranges: Vec<[u32; 2]> = ctx.read_buffer(self.bins.ranges(), 0, tiles)?;
+        let per_view = grid.tiles_per_view() as usize;
+        Ok(ranges
+            .iter()
+            .enumerate()
+            .map(|(t, r)| {
+                let t = (t % per_view) as u32;
+                let (tx, ty) = (t % grid.tiles_x, t / grid.tiles_x);
+                let w = (grid.width - tx * tile).min(tile);
+                let h = (grid.height - ty * tile).min(tile);
+                u64::from(r[1] - r[0]) * u64::from(w * h)
+            })
+            .sum())
+    }
+
     /// The rendered (pre-downsampling) image size.
     pub fn rendered_size(&self) -> (u32, u32) {
         (self.width, self.height)
