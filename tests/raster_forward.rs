@@ -877,7 +877,7 @@ fn bad_inputs_are_errors_not_panics() {
                 [0.0, 0.0, 1.0, 0.0],
             ],
             dist_coeffs: [0.0; 5],
-            orig_size: 2.0,
+            orig_size: 0.0,
         },
         ..Camera::default()
     };
@@ -1169,4 +1169,151 @@ fn bad_tile_sizes_are_errors() {
             .unwrap_err();
         assert!(matches!(err, softvk::Error::Input(_)), "{tile}: {err}");
     }
+}
+
+/// SoftRas's `projection` camera: P = K [R | t] for the look-at view at (2.732, 20°, 35°), K
+/// mapping to an `orig`-pixel image with the 30° perspective's focal length, and Brown
+/// distortion `dist`. Without distortion it is (up to SoftRas's 1e-5 in the divide) the
+/// perspective camera.
+fn matrix_camera(orig: f64, dist: [f64; 5]) -> Camera {
+    let cam = Camera::from_angles(2.732, 20.0, 35.0);
+    let r = softvk::camera::look_at(cam.eye, DVec3::ZERO, DVec3::Y);
+    let t: Vec<f64> = r
+        .iter()
+        .map(|row| -DVec3::from(*row).dot(cam.eye))
+        .collect();
+    let (c, f) = (orig / 2.0, orig / 2.0 / 30f64.to_radians().tan());
+    let k = [[f, 0.0, c], [0.0, f, c], [0.0, 0.0, 1.0]];
+    let rt = [
+        [r[0][0], r[0][1], r[0][2], t[0]],
+        [r[1][0], r[1][1], r[1][2], t[1]],
+        [r[2][0], r[2][1], r[2][2], t[2]],
+    ];
+    let mut p = [[0.0; 4]; 3];
+    for i in 0..3 {
+        for j in 0..4 {
+            p[i][j] = (0..3).map(|m| k[i][m] * rt[m][j]).sum();
+        }
+    }
+    Camera {
+        projection: Projection::Matrix {
+            p,
+            dist_coeffs: dist,
+            orig_size: orig,
+        },
+        ..cam
+    }
+}
+
+/// The largest deviation (8.8e-5, lavapipe) is the γ = 1e-5 softmax: P's third row adds the
+/// translation in f32, and one ulp of depth there is 5e-4 of exponent at 1 / (γ (far − near)).
+#[test]
+fn matrix_projection_with_distortion_matches_the_twin() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let mesh = icosphere(2);
+    let mut all = Vec::new();
+    // SoftRas distorts *pixel* coordinates (r ~ 40 here), so sensible coefficients are small.
+    for (d, dist) in [[0.0; 5], [2e-5, -1e-9, 1e-4, -1e-4, 1e-13]]
+        .into_iter()
+        .enumerate()
+    {
+        let cam = matrix_camera(64.0, dist);
+        for (i, s) in all_modes(RasterSettings::default(), &[(17, 17), (24, 16)])
+            .into_iter()
+            .enumerate()
+            .filter(|(i, _)| i % 3 == d)
+        {
+            let st = check(
+                &r,
+                &gpu,
+                &format!("matrix {dist:?} #{i}"),
+                &mesh,
+                &cam,
+                &lighting(),
+                &s,
+            );
+            all.push(st);
+        }
+    }
+    report("matrix projection", &all);
+}
+
+/// Two meshes of equal topology (different positions and colours) and four views in one batch
+/// render, bit for bit, what each mesh renders alone.
+#[test]
+fn a_batch_of_meshes_renders_as_each_mesh_alone() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let a = icosphere(2);
+    let mut b = a.clone();
+    let mut rng = common::rng(5);
+    for p in &mut b.positions {
+        let k = 1.0 + rng.random_range(-0.2f32..0.2);
+        p.iter_mut().for_each(|c| *c *= k);
+    }
+    b.textures = random_colors(b.textures.len(), 31);
+    b.vertex_colors = Some(random_colors(b.vertex_count(), 32));
+    let cams = [
+        Camera::from_angles(2.732, 0.0, 0.0),
+        Camera::from_angles(2.5, 30.0, 100.0),
+        Camera::from_angles(3.0, -10.0, 250.0),
+    ];
+    let views = [(0, cams[0]), (1, cams[0]), (1, cams[1]), (0, cams[2])];
+    let meshes = [a, b];
+    for color_mode in COLOR_MODES {
+        let s = RasterSettings {
+            width: 20,
+            height: 14,
+            sigma: 1e-3,
+            color_mode,
+            antialias: true,
+            ..RasterSettings::default()
+        };
+        for method in [
+            Method::Brute,
+            Method::Tiled { tile: 8 },
+            Method::Tiled { tile: 32 },
+        ] {
+            let mut scene = r
+                .prepare_batch(&gpu, &meshes, &views, &lighting(), &s)
+                .unwrap();
+            r.run(&gpu, &mut scene, method).unwrap();
+            let batch = r.read_frames(&gpu, &scene).unwrap();
+            for (v, (m, cam)) in views.iter().enumerate() {
+                let alone = render_all(&r, &gpu, "alone", &meshes[*m], &[*cam], &lighting(), &s);
+                let bits = |img: &[[f32; 4]]| -> Vec<u32> {
+                    img.iter().flatten().map(|c| c.to_bits()).collect()
+                };
+                assert!(
+                    bits(batch.image(v)) == bits(&alone.images),
+                    "{color_mode:?} {method:?}: view {v} (mesh {m}) differs from the mesh alone"
+                );
+            }
+        }
+    }
+    let mut other = meshes[0].clone();
+    other.faces.swap(0, 1);
+    let err = r
+        .prepare_batch(
+            &gpu,
+            &[meshes[0].clone(), other],
+            &views,
+            &lighting(),
+            &RasterSettings::default(),
+        )
+        .err()
+        .unwrap();
+    assert!(matches!(err, softvk::Error::Input(_)), "{err}");
+    let err = r
+        .prepare_batch(
+            &gpu,
+            &meshes,
+            &[(2, cams[0])],
+            &lighting(),
+            &RasterSettings::default(),
+        )
+        .err()
+        .unwrap();
+    assert!(matches!(err, softvk::Error::Input(_)), "{err}");
 }

@@ -36,9 +36,9 @@ struct FaceSetup {
     vec4 inv[3];  // rows of M_j (clamped determinant), (a, b, c, 0): w_k = a x + b y + c
     vec4 bbox;    // grown screen box (x_min, y_min, x_max, y_max)
     uint flags;   // FACE_FRONT | FACE_FINITE | FACE_DEGENERATE
+    uint mesh;    // the batch's mesh the face belongs to (its view's)
     uint pad0;
     uint pad1;
-    uint pad2;
 };
 
 // `camera::pixel_center`: x_p = (2c + 1 - W) / S, y_p = (2(H - 1 - r) + 1 - H) / S, S = min(W, H).

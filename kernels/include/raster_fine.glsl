@@ -49,20 +49,22 @@ layout(push_constant) uniform Push {
     uint tile_size;        // tiled only: tile edge in pixels (a multiple of 8)
     uint tiles_x;          // tiled only: tiles per row, per column
     uint tiles_y;
-    uint pad0;
+    uint vertex_count;     // vertices per mesh of the batch (vertex colours)
 } pc;
 
-// `FaceColors::sample`: C_j at clipped barycentrics w̃.
-vec3 sample_color(uint face, vec3 wc) {
+// `FaceColors::sample`: C_j at clipped barycentrics w̃, from the colours of mesh `mesh` of the
+// batch (`vertex_count` colours per mesh in vertex mode, `face_count` R² texels in surface mode).
+vec3 sample_color(uint mesh, uint face, vec3 wc) {
     if ((pc.flags & FLAG_VERTEX_COLORS) != 0u) {
-        uvec3 f = uvec3(faces[3u * face], faces[3u * face + 1u], faces[3u * face + 2u]);
+        uvec3 f = uvec3(faces[3u * face], faces[3u * face + 1u], faces[3u * face + 2u])
+                + mesh * pc.vertex_count;
         vec3 c0 = vec3(colors[3u * f.x], colors[3u * f.x + 1u], colors[3u * f.x + 2u]);
         vec3 c1 = vec3(colors[3u * f.y], colors[3u * f.y + 1u], colors[3u * f.y + 2u]);
         vec3 c2 = vec3(colors[3u * f.z], colors[3u * f.z + 1u], colors[3u * f.z + 2u]);
         return wc.x * c0 + wc.y * c1 + wc.z * c2;
     }
     uint r2 = pc.texture_res * pc.texture_res;
-    uint t = face * r2 + surface_texel_index(wc, pc.texture_res);
+    uint t = (mesh * pc.face_count + face) * r2 + surface_texel_index(wc, pc.texture_res);
     return vec3(colors[3u * t], colors[3u * t + 1u], colors[3u * t + 2u]);
 }
 
@@ -111,11 +113,11 @@ void shade_face(inout PixelState s, FaceSetup f, uint j, vec2 p) {
         return;
     }
     if (pc.rgb == RGB_SOFTMAX) {
-        softmax_add(s.soft, z, d, sample_color(j, wc), pc.inv_gamma_range);
+        softmax_add(s.soft, z, d, sample_color(f.mesh, j, wc), pc.inv_gamma_range);
     } else if (inside_closed(w) && (!s.hard_found || z < s.hard_depth)) {
         s.hard_found = true;
         s.hard_depth = z;
-        s.hard_rgb = sample_color(j, wc);
+        s.hard_rgb = sample_color(f.mesh, j, wc);
         s.hard_face = j;
     }
 }

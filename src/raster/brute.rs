@@ -27,7 +27,8 @@ struct DownsamplePush {
 pub struct BruteBindings<'a> {
     /// `view_count * face_count` [`crate::raster::setup::GpuFaceSetup`]s.
     pub setups: BufferRange<'a>,
-    /// Lit colours as packed f32 triples: `F R²` texels (surface) or one per vertex (vertex mode).
+    /// Lit colours as packed f32 triples, mesh after mesh of the batch: `F R²` texels (surface)
+    /// or one per vertex (vertex mode) per mesh.
     pub colors: BufferRange<'a>,
     /// The mesh's faces as packed u32 triples (read in vertex colour mode).
     pub faces: BufferRange<'a>,
@@ -68,6 +69,7 @@ impl BruteRaster {
         height: u32,
         face_count: u32,
         view_count: u32,
+        vertex_count: u32,
         texture_res: u32,
         cull: bool,
     ) -> Result<()> {
@@ -101,6 +103,7 @@ impl BruteRaster {
             height,
             face_count,
             view_count,
+            vertex_count,
             texture_res,
             cull,
         );

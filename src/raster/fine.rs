@@ -60,7 +60,7 @@ pub(crate) struct RasterPush {
     pub tile_size: u32,
     pub tiles_x: u32,
     pub tiles_y: u32,
-    pub pad0: u32,
+    pub vertex_count: u32,
 }
 
 const FLAG_DOUBLE_SIDED: u32 = 1;
@@ -70,12 +70,14 @@ const FLAG_CULL: u32 = 4;
 impl RasterPush {
     /// The push constants for `view_count` views of a `width × height` rendered image (first
     /// view 0, no tiles: set those fields for a group or the tiled kernel).
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         s: &RasterSettings,
         width: u32,
         height: u32,
         face_count: u32,
         view_count: u32,
+        vertex_count: u32,
         texture_res: u32,
         cull: bool,
     ) -> Self {
@@ -133,7 +135,7 @@ impl RasterPush {
             tile_size: 0,
             tiles_x: 0,
             tiles_y: 0,
-            pad0: 0,
+            vertex_count,
         }
     }
 }
@@ -194,6 +196,7 @@ impl TiledRaster {
         face_count: u32,
         first_view: u32,
         view_count: u32,
+        vertex_count: u32,
         texture_res: u32,
     ) -> Result<()> {
         check_tile_size(grid.tile_size)?;
@@ -222,6 +225,7 @@ impl TiledRaster {
             grid.height,
             face_count,
             view_count,
+            vertex_count,
             texture_res,
             true,
         );

@@ -7,6 +7,9 @@
 //!    for every pixel;
 //! 4. the 2×2 average with anti-aliasing, and read back.
 //!
+//! A scene is one mesh seen from many views, or a batch of meshes of equal topology, each seen
+//! from its views ([`Renderer::prepare_batch`]); either renders in one submission per group.
+//!
 //! Binning sizes its entry list exactly: the count pass's total is read back before the rest is
 //! recorded (two submissions per group of views). Views are binned in groups small enough that
 //! the count cannot wrap and the entries fit one storage-buffer binding; a group whose entries do
@@ -93,6 +96,7 @@ pub struct Renderer {
 pub struct GpuScene {
     settings: RasterSettings,
     face_count: u32,
+    vertex_count: u32,
     view_count: u32,
     texture_res: u32,
     /// Rendered size (2× the output with anti-aliasing).
@@ -219,7 +223,7 @@ impl Renderer {
     }
 
     /// Validates the inputs (as the CPU twin does), checks them against the device's limits, and
-    /// uploads the scene.
+    /// uploads the scene: `mesh` seen from every camera.
     pub fn prepare(
         &self,
         ctx: &Context,
@@ -228,11 +232,55 @@ impl Renderer {
         lighting: &Lighting,
         settings: &RasterSettings,
     ) -> Result<GpuScene> {
-        let views = checked_views(mesh, cameras, settings)?;
+        let views: Vec<(usize, Camera)> = cameras.iter().map(|c| (0, *c)).collect();
+        self.prepare_batch(ctx, std::slice::from_ref(mesh), &views, lighting, settings)
+    }
+
+    /// A batch of meshes of equal topology (the same faces, vertex count and texture
+    /// resolution; positions and colours may differ), each seen from any number of views:
+    /// `views` pairs a mesh index with a camera. Everything renders in one submission per view
+    /// group; the frames come back in `views` order.
+    pub fn prepare_batch(
+        &self,
+        ctx: &Context,
+        meshes: &[Mesh],
+        views: &[(usize, Camera)],
+        lighting: &Lighting,
+        settings: &RasterSettings,
+    ) -> Result<GpuScene> {
+        let Some(mesh) = meshes.first() else {
+            return Err(Error::Input("no mesh to render".into()));
+        };
+        let cameras: Vec<Camera> = views.iter().map(|v| v.1).collect();
+        let mut gpu_views = checked_views(mesh, &cameras, settings)?;
+        for (i, m) in meshes.iter().enumerate().skip(1) {
+            m.validate()?;
+            if m.faces != mesh.faces
+                || m.vertex_count() != mesh.vertex_count()
+                || m.texture_res != mesh.texture_res
+            {
+                return Err(Error::Input(format!(
+                    "mesh {i} of the batch does not share mesh 0's topology (faces, vertex \
+                     count and texture resolution must be equal)"
+                )));
+            }
+        }
+        for (gv, (m, _)) in gpu_views.iter_mut().zip(views) {
+            if *m >= meshes.len() {
+                return Err(Error::Input(format!(
+                    "a view shows mesh {m} of a batch of {}",
+                    meshes.len()
+                )));
+            }
+            gv.mesh = *m as u32;
+        }
         let face_count = u32::try_from(mesh.face_count())
             .map_err(|_| Error::Limit(format!("{} faces exceed 2^32", mesh.face_count())))?;
+        let vertex_count = u32::try_from(mesh.vertex_count())
+            .map_err(|_| Error::Limit(format!("{} vertices exceed 2^32", mesh.vertex_count())))?;
         let view_count = u32::try_from(views.len())
             .map_err(|_| Error::Limit(format!("{} views exceed 2^32", views.len())))?;
+        let batch = meshes.len() as u64;
         let scale = if settings.antialias { 2 } else { 1 };
         let (w, h) = (settings.width * scale, settings.height * scale);
         let rendered = u64::from(w) * u64::from(h) * u64::from(view_count);
@@ -250,8 +298,8 @@ impl Renderer {
                 "face setup",
                 pairs * std::mem::size_of::<GpuFaceSetup>() as u64,
             ),
-            ("colour", 12 * texels),
-            ("position", 12 * mesh.vertex_count() as u64),
+            ("colour", 12 * texels * batch),
+            ("position", 12 * mesh.vertex_count() as u64 * batch),
         ] {
             if bytes > max_range {
                 return Err(Error::Limit(format!(
@@ -260,27 +308,34 @@ impl Renderer {
                 )));
             }
         }
-        if rendered > u64::from(u32::MAX) {
+        if rendered > u64::from(u32::MAX) || u64::from(vertex_count) * batch > u64::from(u32::MAX) {
             return Err(Error::Limit(format!(
-                "{rendered} rendered pixels exceed 2^32"
+                "{rendered} rendered pixels or {} batched vertices exceed 2^32",
+                u64::from(vertex_count) * batch
             )));
         }
 
-        let (positions, faces) = upload_geometry(ctx, mesh)?;
+        let positions: Vec<f32> = meshes
+            .iter()
+            .flat_map(|m| m.positions.iter().flatten().copied())
+            .collect();
+        let faces: Vec<u32> = mesh.faces.iter().flatten().copied().collect();
+        let colors: Vec<f32> = meshes
+            .iter()
+            .flat_map(|m| lit_colors(m, lighting, settings.color_mode))
+            .collect();
         Ok(GpuScene {
             settings: *settings,
             face_count,
+            vertex_count,
             view_count,
             texture_res: mesh.texture_res,
             width: w,
             height: h,
-            positions,
-            faces,
-            colors: ctx.upload_buffer(
-                "lit colours",
-                &lit_colors(mesh, lighting, settings.color_mode),
-            )?,
-            views: ctx.upload_buffer("views", &views)?,
+            positions: ctx.upload_buffer("mesh positions", &positions)?,
+            faces: ctx.upload_buffer("mesh faces", &faces)?,
+            colors: ctx.upload_buffer("lit colours", &colors)?,
+            views: ctx.upload_buffer("views", &gpu_views)?,
             setups: ctx.create_buffer(
                 "face setups",
                 pairs * std::mem::size_of::<GpuFaceSetup>() as u64,
@@ -306,6 +361,7 @@ impl Renderer {
                 scene.faces.whole(),
                 scene.views.whole(),
                 scene.setups.whole(),
+                scene.vertex_count,
                 scene.face_count,
                 scene.view_count,
                 scene.settings.dist,
@@ -330,6 +386,7 @@ impl Renderer {
                 scene.height,
                 scene.face_count,
                 scene.view_count,
+                scene.vertex_count,
                 scene.texture_res,
                 cull,
             )
@@ -368,6 +425,7 @@ impl Renderer {
                 scene.face_count,
                 first_view,
                 views,
+                scene.vertex_count,
                 scene.texture_res,
             )
         })
@@ -604,6 +662,7 @@ impl Renderer {
                 faces.whole(),
                 view_buf.whole(),
                 setups.whole(),
+                mesh.vertex_count() as u32,
                 mesh.face_count() as u32,
                 views.len() as u32,
                 settings.dist,

@@ -18,6 +18,8 @@ use crate::raster::reference::{self, Dist};
 pub const PROJ_PERSPECTIVE: u32 = 0;
 /// `Projection::Orthographic` in [`GpuView::projection`].
 pub const PROJ_ORTHOGRAPHIC: u32 = 1;
+/// `Projection::Matrix` in [`GpuView::projection`] (3×4 matrix with Brown distortion).
+pub const PROJ_MATRIX: u32 = 2;
 
 /// Bit of [`GpuFaceSetup::flags`]: front-facing in screen space (SPEC §1).
 pub const FACE_FRONT: u32 = 1;
@@ -41,43 +43,68 @@ pub const BARY_MARGIN: f32 = 1.0 + 1.0 / 16.0;
 /// The twin's 1e-9 absolute pad is below f32 resolution.
 pub const BBOX_PAD_REL: f32 = 1e-5;
 
-/// One view as the setup kernel reads it. Twin of `View` in `face_setup.comp`; std430, 80 bytes.
+/// One view as the setup kernel reads it. Twin of `View` in `face_setup.comp`; std430, 96 bytes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuView {
-    /// Rows x, y, z of the look-at rotation (w unused).
+    /// Perspective and orthographic: rows x, y, z of the look-at rotation (w unused).
+    /// Matrix: the three rows of the 3×4 projection matrix P.
     pub rows: [[f32; 4]; 3],
-    /// Eye position (w unused).
+    /// Eye position (w unused; unused for the matrix projection).
     pub eye: [f32; 4],
-    /// [`PROJ_PERSPECTIVE`] or [`PROJ_ORTHOGRAPHIC`].
+    /// Matrix: Brown distortion `k1, k2, p1, p2` (`k3` is [`GpuView::k3`]).
+    pub dist: [f32; 4],
+    /// [`PROJ_PERSPECTIVE`], [`PROJ_ORTHOGRAPHIC`] or [`PROJ_MATRIX`].
     pub projection: u32,
-    /// Perspective: `tan(viewing angle)`; orthographic: the scale.
+    /// Perspective: `tan(viewing angle)`; orthographic: the scale; matrix: `orig_size`.
     pub param: f32,
-    /// std430 padding.
-    pub pad: [u32; 2],
+    /// Matrix: the distortion's `k3`.
+    pub k3: f32,
+    /// Which mesh of a batch this view shows (index into the batch's positions and colours).
+    pub mesh: u32,
 }
 
 impl GpuView {
-    /// The view of `camera`, rounded to f32 from the twin's f64 look-at. The 3×4 matrix
-    /// projection (with distortion) is CPU-only for now: an [`Error::Input`].
+    /// The view of `camera` showing mesh 0, rounded to f32 from the twin's f64 look-at (or
+    /// matrix).
     pub fn new(camera: &Camera) -> Result<GpuView> {
-        let (projection, param) = match camera.projection {
+        let mut view = GpuView::default();
+        let finite = |v: &[f64]| v.iter().all(|c| c.is_finite());
+        let f4 = |r: [f64; 4]| r.map(|c| c as f32);
+        match camera.projection {
             Projection::Perspective { viewing_angle_deg } => {
-                (PROJ_PERSPECTIVE, viewing_angle_deg.to_radians().tan())
+                view.projection = PROJ_PERSPECTIVE;
+                view.param = viewing_angle_deg.to_radians().tan() as f32;
             }
-            Projection::Orthographic { scale } => (PROJ_ORTHOGRAPHIC, scale),
-            Projection::Matrix { .. } => {
-                return Err(Error::Input(
-                    "the GPU rasterizer does not support the 3x4 matrix projection yet; \
-                     use a perspective or orthographic camera (or the CPU reference)"
-                        .into(),
-                ));
+            Projection::Orthographic { scale } => {
+                view.projection = PROJ_ORTHOGRAPHIC;
+                view.param = scale as f32;
             }
-        };
-        if !(param.is_finite() && camera.eye.is_finite()) {
+            Projection::Matrix {
+                p,
+                dist_coeffs,
+                orig_size,
+            } => {
+                if !(finite(p.as_flattened()) && finite(&dist_coeffs) && orig_size.is_finite())
+                    || orig_size <= 0.0
+                {
+                    return Err(Error::Input(format!(
+                        "matrix projection is not finite or orig_size {orig_size} is not positive"
+                    )));
+                }
+                view.projection = PROJ_MATRIX;
+                view.rows = p.map(f4);
+                let [k1, k2, p1, p2, k3] = dist_coeffs;
+                view.dist = f4([k1, k2, p1, p2]);
+                view.k3 = k3 as f32;
+                view.param = orig_size as f32;
+                return Ok(view);
+            }
+        }
+        if !(view.param.is_finite() && camera.eye.is_finite()) {
             return Err(Error::Input(format!(
-                "camera is not finite: eye {}, projection parameter {param}",
-                camera.eye
+                "camera is not finite: eye {}, projection parameter {}",
+                camera.eye, view.param
             )));
         }
         let r = look_at(camera.eye, camera.at, camera.up);
@@ -88,18 +115,14 @@ impl GpuView {
             )));
         }
         let row = |k: usize| [r[k][0] as f32, r[k][1] as f32, r[k][2] as f32, 0.0];
-        Ok(GpuView {
-            rows: [row(0), row(1), row(2)],
-            eye: [
-                camera.eye.x as f32,
-                camera.eye.y as f32,
-                camera.eye.z as f32,
-                0.0,
-            ],
-            projection,
-            param: param as f32,
-            pad: [0; 2],
-        })
+        view.rows = [row(0), row(1), row(2)];
+        view.eye = [
+            camera.eye.x as f32,
+            camera.eye.y as f32,
+            camera.eye.z as f32,
+            0.0,
+        ];
+        Ok(view)
     }
 }
 
@@ -116,8 +139,10 @@ pub struct GpuFaceSetup {
     pub bbox: [f32; 4],
     /// [`FACE_FRONT`] | [`FACE_FINITE`] | [`FACE_DEGENERATE`].
     pub flags: u32,
+    /// The mesh of the batch this face belongs to (its view's [`GpuView::mesh`]).
+    pub mesh: u32,
     /// std430 padding.
-    pub pad: [u32; 3],
+    pub pad: [u32; 2],
 }
 
 /// Push constants of `face_setup.comp`.
@@ -131,7 +156,7 @@ struct SetupPush {
     degenerate_k: f32,
     bary_margin: f32,
     pad_rel: f32,
-    pad0: u32,
+    vertex_count: u32,
 }
 
 /// `DIST_*` of `raster.glsl`.
@@ -159,8 +184,9 @@ impl FaceSetupKernel {
     /// Records the setup of `face_count` faces in `view_count` views into `setups`
     /// (`view_count * face_count` [`GpuFaceSetup`]s, view-major).
     ///
-    /// `positions` holds the world positions as packed `f32` triples, `faces` the vertex indices
-    /// as packed `u32` triples, `views` one [`GpuView`] per view. `dist` and `sigma` choose the box
+    /// `positions` holds the world positions as packed `f32` triples (`vertex_count` per mesh of
+    /// the batch, mesh after mesh), `faces` the vertex indices as packed `u32` triples, `views`
+    /// one [`GpuView`] per view. `dist` and `sigma` choose the box
     /// growth as [`reference::face_screen_bbox_grown`] does.
     #[allow(clippy::too_many_arguments)]
     pub fn record(
@@ -170,6 +196,7 @@ impl FaceSetupKernel {
         faces: BufferRange<'_>,
         views: BufferRange<'_>,
         setups: BufferRange<'_>,
+        vertex_count: u32,
         face_count: u32,
         view_count: u32,
         dist: Dist,
@@ -197,7 +224,7 @@ impl FaceSetupKernel {
             degenerate_k: DEGENERATE_ULPS * f32::EPSILON,
             bary_margin: BARY_MARGIN,
             pad_rel: BBOX_PAD_REL,
-            pad0: 0,
+            vertex_count,
         };
         let groups = n.div_ceil(u64::from(specs::FACE_SETUP.workgroup_size[0]));
         rec.dispatch(
@@ -219,9 +246,10 @@ mod tests {
             std::mem::size_of::<SetupPush>() as u32,
             specs::FACE_SETUP.push_constant_size
         );
-        assert_eq!(std::mem::size_of::<GpuView>(), 80);
+        assert_eq!(std::mem::size_of::<GpuView>(), 96);
         assert_eq!(std::mem::offset_of!(GpuView, eye), 48);
-        assert_eq!(std::mem::offset_of!(GpuView, projection), 64);
+        assert_eq!(std::mem::offset_of!(GpuView, projection), 80);
+        assert_eq!(std::mem::offset_of!(GpuView, mesh), 92);
         assert_eq!(std::mem::size_of::<GpuFaceSetup>(), 128);
         assert_eq!(std::mem::offset_of!(GpuFaceSetup, inv), 48);
         assert_eq!(std::mem::offset_of!(GpuFaceSetup, bbox), 96);
@@ -231,12 +259,12 @@ mod tests {
     }
 
     #[test]
-    fn matrix_projection_is_an_input_error() {
+    fn non_finite_matrix_projection_is_an_input_error() {
         let cam = Camera {
             projection: Projection::Matrix {
                 p: [
                     [1.0, 0.0, 0.0, 0.0],
-                    [0.0, 1.0, 0.0, 0.0],
+                    [0.0, f64::NAN, 0.0, 0.0],
                     [0.0, 0.0, 1.0, 0.0],
                 ],
                 dist_coeffs: [0.0; 5],
