@@ -110,9 +110,24 @@ pub struct GpuScene {
     image: Buffer,
     aux: Buffer,
     small: Option<Buffer>,
-    bins: Bins,
-    /// The view groups of the last tiled render, with their entry counts.
-    groups: Vec<(u32, u32, u64)>,
+    /// Bins per view group: group `i` of the last tiled run used `bins[i]`. They are kept (the
+    /// backward pass reuses them: no second binning) and grow, never shrink.
+    bins: Vec<Bins>,
+    /// The view groups of the last tiled render.
+    groups: Vec<ViewGroup>,
+    /// The tile size of the last tiled render.
+    tile: Option<u32>,
+}
+
+/// Views binned together: `first .. first + views`, with their (face, tile) entry count.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ViewGroup {
+    /// First view of the group.
+    pub first: u32,
+    /// Views in the group.
+    pub views: u32,
+    /// (face, tile) entries binned.
+    pub entries: u64,
 }
 
 impl GpuScene {
@@ -128,7 +143,7 @@ impl GpuScene {
 
     /// The (face, tile) entries of the last tiled render, over all view groups.
     pub fn binned_entries(&self) -> u64 {
-        self.groups.iter().map(|g| g.2).sum()
+        self.groups.iter().map(|g| g.entries).sum()
     }
 
     /// The (pixel, face) pairs the last run's fine pass evaluated: every face for every pixel
@@ -140,14 +155,15 @@ impl GpuScene {
         let Method::Tiled { tile } = method else {
             return Ok(pixels * u64::from(self.face_count));
         };
-        if self.groups.len() != 1 {
+        if self.tile != Some(tile) || self.groups.len() != 1 {
             return Err(Error::Input(
-                "evaluated_pairs needs a previous tiled run in one view group".into(),
+                "evaluated_pairs needs a previous tiled run with this tile size in one view group"
+                    .into(),
             ));
         }
         let grid = self.grid(tile)?;
         let tiles = (grid.tiles_per_view() * u64::from(self.view_count)) as usize;
-        let ranges: Vec<[u32; 2]> = ctx.read_buffer(self.bins.ranges(), 0, tiles)?;
+        let ranges: Vec<[u32; 2]> = ctx.read_buffer(self.bins[0].ranges(), 0, tiles)?;
         let per_view = grid.tiles_per_view() as usize;
         Ok(ranges
             .iter()
@@ -160,6 +176,11 @@ impl GpuScene {
                 u64::from(r[1] - r[0]) * u64::from(w * h)
             })
             .sum())
+    }
+
+    /// The view groups of the last tiled run.
+    pub fn groups(&self) -> &[ViewGroup] {
+        &self.groups
     }
 
     /// The rendered (pre-downsampling) image size.
@@ -348,8 +369,9 @@ impl Renderer {
             } else {
                 None
             },
-            bins: Bins::new(ctx)?,
+            bins: Vec::new(),
             groups: Vec::new(),
+            tile: None,
         })
     }
 
@@ -398,6 +420,7 @@ impl Renderer {
         &self,
         rec: &mut Recorder<'_>,
         scene: &GpuScene,
+        bins: &Bins,
         grid: TileGrid,
         first_view: u32,
         views: u32,
@@ -405,7 +428,7 @@ impl Renderer {
         let job = scene.job(grid, first_view, views);
         rec.pass("bin sort", |rec| {
             self.binner
-                .record_sort(rec, &scene.bins, scene.setups.whole(), &job)
+                .record_sort(rec, bins, scene.setups.whole(), &job)
         })?;
         rec.pass("raster tiled", |rec| {
             self.tiled.record(
@@ -416,9 +439,9 @@ impl Renderer {
                     faces: scene.faces.whole(),
                     image: scene.image.whole(),
                     aux: scene.aux.whole(),
-                    entries: scene.bins.entries().whole(),
-                    entry_items: scene.bins.entry_items().whole(),
-                    ranges: scene.bins.ranges().whole(),
+                    entries: bins.entries().whole(),
+                    entry_items: bins.entry_items().whole(),
+                    ranges: bins.ranges().whole(),
                 },
                 &scene.settings,
                 &grid,
@@ -435,6 +458,7 @@ impl Renderer {
         &self,
         rec: &mut Recorder<'_>,
         scene: &GpuScene,
+        bins: &Bins,
         grid: TileGrid,
         first_view: u32,
         views: u32,
@@ -442,7 +466,7 @@ impl Renderer {
         let job = scene.job(grid, first_view, views);
         rec.pass("bin count", |rec| {
             self.binner
-                .record_count(rec, &scene.bins, scene.setups.whole(), &job)
+                .record_count(rec, bins, scene.setups.whole(), &job)
         })
     }
 
@@ -497,19 +521,26 @@ impl Renderer {
             .rev()
             .collect();
         scene.groups.clear();
+        scene.tile = Some(tile);
         let mut setup_done = false;
         while let Some((first, views)) = todo.pop() {
             let job = scene.job(grid, first, views);
-            scene.bins.reserve(ctx, &job)?;
+            let index = scene.groups.len();
+            if scene.bins.len() <= index {
+                scene.bins.push(Bins::new(ctx)?);
+            }
+            let mut bins = std::mem::replace(&mut scene.bins[index], Bins::new(ctx)?);
+            bins.reserve(ctx, &job)?;
             ctx.submit_and_wait(|rec| {
                 if !setup_done {
                     self.record_setup(rec, scene)?;
                 }
-                self.record_count(rec, scene, grid, first, views)
+                self.record_count(rec, scene, &bins, grid, first, views)
             })?;
             setup_done = true;
-            let total = scene.bins.read_total(ctx)?;
+            let total = bins.read_total(ctx)?;
             if total > max_entries {
+                scene.bins[index] = bins;
                 if views == 1 {
                     return Err(Error::Limit(format!(
                         "one view needs {total} (face, tile) entries, over the {max_entries} \
@@ -522,16 +553,22 @@ impl Renderer {
                 todo.push((first, half));
                 continue;
             }
-            scene.bins.reserve_entries(ctx, total)?;
+            bins.reserve_entries(ctx, total)?;
             let last = todo.is_empty();
-            ctx.submit_and_wait(|rec| {
-                self.record_group(rec, scene, grid, first, views)?;
+            let done = ctx.submit_and_wait(|rec| {
+                self.record_group(rec, scene, &bins, grid, first, views)?;
                 if last {
                     self.record_downsample(rec, scene)?;
                 }
                 Ok(())
-            })?;
-            scene.groups.push((first, views, total));
+            });
+            scene.bins[index] = bins;
+            done?;
+            scene.groups.push(ViewGroup {
+                first,
+                views,
+                entries: total,
+            });
         }
         Ok(())
     }
@@ -551,15 +588,19 @@ impl Renderer {
             Method::Brute => self.record_brute(rec, scene, true)?,
             Method::Tiled { tile } => {
                 let grid = scene.grid(tile)?;
-                if scene.groups.len() != 1 || scene.groups[0].1 != scene.view_count {
+                if scene.tile != Some(tile)
+                    || scene.groups.len() != 1
+                    || scene.groups[0].views != scene.view_count
+                {
                     return Err(Error::Input(
-                        "record_forward needs a previous tiled run that binned every view in \
-                         one group"
+                        "record_forward needs a previous tiled run with the same tile size that \
+                         binned every view in one group"
                             .into(),
                     ));
                 }
-                self.record_count(rec, scene, grid, 0, scene.view_count)?;
-                self.record_group(rec, scene, grid, 0, scene.view_count)?;
+                let bins = &scene.bins[0];
+                self.record_count(rec, scene, bins, grid, 0, scene.view_count)?;
+                self.record_group(rec, scene, bins, grid, 0, scene.view_count)?;
             }
         }
         self.record_downsample(rec, scene)
@@ -682,14 +723,15 @@ impl Renderer {
         settings: &RasterSettings,
         tile: u32,
     ) -> Result<(Vec<GpuFaceSetup>, binning::cpu::Binned)> {
-        let mut scene = self.prepare(ctx, mesh, cameras, &Lighting::unlit(), settings)?;
+        let scene = self.prepare(ctx, mesh, cameras, &Lighting::unlit(), settings)?;
         let grid = scene.grid(tile)?;
         let job = scene.job(grid, 0, scene.view_count);
         if job.max_entries() > u64::from(u32::MAX) {
             return Err(Error::Limit("bin_faces: bin fewer views".into()));
         }
         ctx.submit_and_wait(|rec| self.record_setup(rec, &scene))?;
-        let binned = self.binner.run(ctx, &mut scene.bins, &scene.setups, &job)?;
+        let mut bins = Bins::new(ctx)?;
+        let binned = self.binner.run(ctx, &mut bins, &scene.setups, &job)?;
         let setups = ctx.read_buffer(&scene.setups, 0, (job.item_count()) as usize)?;
         Ok((setups, binned))
     }
