@@ -1,7 +1,12 @@
-//! The `softvk` command line.
+//! The `softvk` command line (SPEC §6). Subcommands live in [`cli`]; every error, usage errors
+//! included, is one line `softvk: error: ...` on stderr and exit status 1 (a bare `softvk`
+//! prints the help instead).
+
+mod cli;
 
 use std::process::ExitCode;
 
+use clap::error::ErrorKind;
 use clap::{Parser, Subcommand};
 use softvk::gpu::{Context, ContextOptions};
 
@@ -20,20 +25,39 @@ struct Cli {
 enum Command {
     /// Print the Vulkan device softvk would use, its driver, limits and features.
     Info,
+    /// Render one view of a mesh to an RGBA image (.png 8-bit, or .exr float32).
+    Render(Box<cli::render::RenderArgs>),
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
-    let result = match cli.command {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) if !e.use_stderr() => {
+            // --help, --version: clap prints them to stdout and they are not errors.
+            let _ = e.print();
+            return ExitCode::SUCCESS;
+        }
+        Err(e) if e.kind() == ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
+            // Bare `softvk`: the help is the answer, on stderr, and the status says "usage".
+            let _ = e.print();
+            return ExitCode::FAILURE;
+        }
+        Err(e) => return fail(&cli::clap_error_line(&e)),
+    };
+    let result = match &cli.command {
         Command::Info => info(),
+        Command::Render(args) => cli::render::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("softvk: error: {e}");
-            ExitCode::FAILURE
-        }
+        Err(e) => fail(&e.to_string()),
     }
+}
+
+/// Prints the one error line and returns the failure status.
+fn fail(message: &str) -> ExitCode {
+    eprintln!("softvk: error: {}", cli::one_line(message));
+    ExitCode::FAILURE
 }
 
 fn info() -> softvk::Result<()> {
@@ -121,4 +145,53 @@ fn info() -> softvk::Result<()> {
 
 fn yes(b: bool) -> &'static str {
     if b { "yes" } else { "no" }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn usage_errors_become_one_line_without_the_usage_boilerplate() {
+        for (args, needle) in [
+            (&["softvk", "render"][..], "--mesh"),
+            (
+                &[
+                    "softvk", "render", "--mesh", "m.obj", "--out", "o.png", "--dist", "x",
+                ],
+                "euclidean",
+            ),
+            (
+                &[
+                    "softvk", "render", "--mesh", "m.obj", "--out", "o.png", "--sigmaa", "1",
+                ],
+                "--sigma",
+            ),
+            (
+                &[
+                    "softvk", "render", "--mesh", "m.obj", "--out", "o.png", "--size", "0",
+                ],
+                "--size",
+            ),
+            (
+                &[
+                    "softvk", "render", "--mesh", "m.obj", "--out", "o.png", "--eye", "1",
+                ],
+                "three",
+            ),
+            (&["softvk", "frobnicate"], "frobnicate"),
+        ] {
+            let err = Cli::try_parse_from(args).err().expect("a usage error");
+            let line = cli::clap_error_line(&err);
+            assert!(
+                !line.contains('\n') && !line.contains("Usage"),
+                "{args:?}: {line}"
+            );
+            assert!(!line.starts_with("error"), "{args:?}: {line}");
+            assert!(
+                line.contains(needle),
+                "{args:?}: `{needle}` missing from {line}"
+            );
+        }
+    }
 }

@@ -1,8 +1,18 @@
-//! The `softvk` binary as scripts call it.
+//! The `softvk` binary as scripts call it (SPEC §6).
 
 mod common;
 
-use std::process::Command;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use glam::DVec3;
+use softvk::camera::{Camera, Projection, pixel_center};
+use softvk::lighting::{Directional, Lighting};
+use softvk::mesh::Mesh;
+use softvk::raster::reference::{
+    self, Alpha, ColorMode, Dist, FaceColors, RasterSettings, Rgb, project_faces, setup_face,
+    shade_pixel,
+};
 
 fn softvk() -> Command {
     Command::new(env!("CARGO_BIN_EXE_softvk"))
@@ -80,4 +90,660 @@ fn unknown_device_selection_is_an_error_naming_the_choices() {
         stderr.contains("SOFTVK_DEVICE=no-such-gpu-anywhere matches none of"),
         "{stderr}"
     );
+}
+
+// `softvk render`: PNG and EXR outputs, the flags against the f64 twin, and every error class.
+
+/// A fresh folder for one test's outputs, removed when dropped.
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(tag: &str) -> TempDir {
+        let dir = std::env::temp_dir().join(format!("softvk-cli-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        TempDir(dir)
+    }
+
+    fn path(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+
+    fn write(&self, name: &str, text: &str) -> PathBuf {
+        let p = self.path(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    /// Every entry, hidden temporaries included.
+    fn entries(&self) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(&self.0)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn spot() -> PathBuf {
+    softvk::assets::dir().join("spot_triangulated.obj")
+}
+
+/// `softvk render --mesh MESH --out OUT ARGS...`, validated as the tests are.
+fn render(mesh: &Path, out: &Path, args: &[&str]) -> Output {
+    softvk()
+        .arg("render")
+        .arg("--mesh")
+        .arg(mesh)
+        .arg("--out")
+        .arg(out)
+        .args(args)
+        .env(
+            "SOFTVK_VALIDATION",
+            if common::validation_wanted() {
+                "1"
+            } else {
+                "0"
+            },
+        )
+        .output()
+        .unwrap()
+}
+
+fn assert_success(what: &str, out: &Output) {
+    assert!(
+        out.status.success(),
+        "{what}: softvk render failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// RGBA f32 pixels of an EXR, row 0 at the top, after checking it holds exactly the float32
+/// channels R, G, B, A.
+fn read_exr(path: &Path) -> (usize, usize, Vec<[f32; 4]>) {
+    use exr::prelude::*;
+    let meta = exr::meta::MetaData::read_from_file(path, false).unwrap();
+    assert_eq!(meta.headers.len(), 1, "one layer");
+    let mut names: Vec<String> = meta.headers[0]
+        .channels
+        .list
+        .iter()
+        .map(|c| {
+            assert_eq!(c.sample_type, SampleType::F32, "channel {}", c.name);
+            c.name.to_string()
+        })
+        .collect();
+    names.sort();
+    assert_eq!(names, ["A", "B", "G", "R"]);
+    let image = read_first_rgba_layer_from_file(
+        path,
+        |size, _| (size.width(), vec![[0f32; 4]; size.area()]),
+        |(w, px), p, (r, g, b, a): (f32, f32, f32, f32)| px[p.y() * *w + p.x()] = [r, g, b, a],
+    )
+    .unwrap();
+    let size = image.layer_data.size;
+    let (_, pixels) = image.layer_data.channel_data.pixels;
+    (size.width(), size.height(), pixels)
+}
+
+#[test]
+fn render_writes_png_and_exr_of_the_same_rgba() {
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    let dir = TempDir::new("formats");
+    let args = [
+        "--size",
+        "32",
+        "--elevation",
+        "30",
+        "--azimuth",
+        "-45",
+        "--sigma",
+        "1e-4",
+    ];
+    let (png, exr) = (dir.path("spot.png"), dir.path("spot.EXR"));
+    assert_success("png", &render(&spot(), &png, &args));
+    assert_success("exr", &render(&spot(), &exr, &args));
+    assert_eq!(
+        dir.entries(),
+        ["spot.EXR", "spot.png"],
+        "no temporaries left"
+    );
+
+    let (w, h, floats) = read_exr(&exr);
+    assert_eq!((w, h), (32, 32));
+    let covered = floats.iter().filter(|p| p[3] > 0.5).count();
+    assert!(
+        covered > 50 && covered < 32 * 32 - 50,
+        "spot should cover part of the image, covers {covered} pixels"
+    );
+
+    let decoded = image::open(&png).unwrap();
+    assert_eq!(decoded.color(), image::ColorType::Rgba8);
+    let decoded = decoded.to_rgba8();
+    assert_eq!(decoded.dimensions(), (32, 32));
+    // The PNG is the EXR clamped to [0, 1] and rounded to 8 bits, pixel for pixel: same
+    // orientation, same straight alpha.
+    for (i, (p, f)) in decoded.pixels().zip(&floats).enumerate() {
+        let expected = f.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8);
+        assert_eq!(p.0, expected, "pixel {i}: PNG {:?} vs EXR {f:?}", p.0);
+    }
+}
+
+/// Largest |GPU − twin| allowed per channel.
+const TOL: f64 = 1e-4;
+/// Shift of the pixel centres that models the GPU's f32 rounding of screen positions.
+const JITTER: f64 = 1e-6;
+
+/// The f64 twin at every pixel centre shifted by `(dx, dy)`; `(0, 0)` is `reference::render`.
+fn twin(
+    mesh: &Mesh,
+    cam: &Camera,
+    lit: &Lighting,
+    s: &RasterSettings,
+    (dx, dy): (f64, f64),
+) -> Vec<[f64; 4]> {
+    if (dx, dy) == (0.0, 0.0) {
+        return reference::render(mesh, cam, lit, s).unwrap();
+    }
+    let colors = FaceColors::new(mesh, lit, s.color_mode);
+    let faces: Vec<_> = project_faces(mesh, cam)
+        .into_iter()
+        .map(|v| setup_face(v, s.dist, s.sigma))
+        .collect();
+    let k = if s.antialias { 2 } else { 1 };
+    let (w, h) = (s.width * k, s.height * k);
+    let mut img = Vec::with_capacity((w * h) as usize);
+    for row in 0..h {
+        for col in 0..w {
+            let (x, y) = pixel_center(col, row, w, h);
+            img.push(shade_pixel(&faces, &colors, x + dx, y + dy, s, true));
+        }
+    }
+    if s.antialias {
+        reference::downsample_2x2(&img, s.width, s.height)
+    } else {
+        img
+    }
+}
+
+/// The EXR equals the twin within [`TOL`] per channel. Where the twin itself jumps within
+/// ±[`JITTER`] of the pixel centre (a hard edge, the coverage cut-off, a texel border), no
+/// tolerance can hold, so there the EXR must lie within [`TOL`] of the range the twin spans;
+/// such pixels must stay a small minority (as in `tests/raster_brute.rs`).
+fn assert_matches_twin(
+    what: &str,
+    exr: &Path,
+    mesh: &Mesh,
+    cam: &Camera,
+    lit: &Lighting,
+    s: &RasterSettings,
+) {
+    let (w, h, gpu) = read_exr(exr);
+    assert_eq!(
+        (w, h),
+        (s.width as usize, s.height as usize),
+        "{what}: size"
+    );
+    let centre = twin(mesh, cam, lit, s, (0.0, 0.0));
+    let shifted: Vec<_> = [(JITTER, 0.0), (-JITTER, 0.0), (0.0, JITTER), (0.0, -JITTER)]
+        .into_iter()
+        .map(|d| twin(mesh, cam, lit, s, d))
+        .collect();
+    let (mut steep, mut covered, mut max_err) = (0, 0, 0.0f64);
+    for (i, (g, c)) in gpu.iter().zip(&centre).enumerate() {
+        let mut jumps = false;
+        for k in 0..4 {
+            let g = f64::from(g[k]);
+            let (lo, hi) = shifted.iter().fold((c[k], c[k]), |(lo, hi), img| {
+                (lo.min(img[i][k]), hi.max(img[i][k]))
+            });
+            let ok = if hi - lo <= TOL {
+                max_err = max_err.max((g - c[k]).abs());
+                (g - c[k]).abs() <= TOL
+            } else {
+                jumps = true;
+                g >= lo - TOL && g <= hi + TOL
+            };
+            assert!(
+                ok,
+                "{what}: pixel (col {}, row {}) channel {k}: EXR {g} vs twin {} (range [{lo}, \
+                 {hi}])\nsettings {s:?}",
+                i % w,
+                i / w,
+                c[k]
+            );
+        }
+        steep += usize::from(jumps);
+        covered += usize::from(c[3] > 0.0);
+    }
+    eprintln!(
+        "{what}: max |EXR - twin| {max_err:.2e} where continuous; {steep} of {} pixels at \
+         discontinuities; {covered} covered",
+        gpu.len()
+    );
+    assert!(
+        steep * 10 <= gpu.len(),
+        "{what}: {steep} pixels at discontinuities"
+    );
+    assert!(covered > 0, "{what}: the mesh is not in view");
+}
+
+/// An octahedron with a colour per vertex (`v x y z r g b`), faces wound outwards.
+const OCTAHEDRON: &str = "\
+v 0.8 0 0 1 0 0
+v -0.8 0 0 0 1 0
+v 0 0.8 0 0 0 1
+v 0 -0.8 0 1 1 0
+v 0 0 0.8 0 1 1
+v 0 0 -0.8 1 0 1
+f 1 3 5
+f 3 2 5
+f 2 4 5
+f 4 1 5
+f 3 1 6
+f 2 3 6
+f 4 2 6
+f 1 4 6
+";
+
+#[test]
+fn render_flags_map_to_the_settings_of_the_twin() {
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    let dir = TempDir::new("twin");
+
+    // Perspective from an explicit eye, non-square, and most raster flags off their defaults.
+    let out = dir.path("perspective.exr");
+    assert_success(
+        "perspective",
+        &render(
+            &spot(),
+            &out,
+            &[
+                "--width",
+                "40",
+                "--height",
+                "24",
+                "--eye",
+                "1.2,0.9,-2.1",
+                "--viewing-angle",
+                "28",
+                "--sigma",
+                "3e-4",
+                "--gamma",
+                "3e-3",
+                "--dist",
+                "barycentric",
+                "--alpha",
+                "sum",
+                "--near",
+                "0.5",
+                "--far",
+                "8",
+                "--background",
+                "0.2,0.3,0.4",
+                "--single-sided",
+                "--antialias",
+                "--texture-res",
+                "2",
+                "--ambient",
+                "0.3",
+                "--directional",
+                "0.8",
+                "--light-dir",
+                "0.4,0.7,-0.6",
+            ],
+        ),
+    );
+    assert_matches_twin(
+        "perspective",
+        &out,
+        &Mesh::load_obj(&spot(), 2).unwrap(),
+        &Camera {
+            eye: DVec3::new(1.2, 0.9, -2.1),
+            at: DVec3::ZERO,
+            up: DVec3::Y,
+            projection: Projection::Perspective {
+                viewing_angle_deg: 28.0,
+            },
+        },
+        &Lighting {
+            ambient_intensity: 0.3,
+            ambient_color: [1.0; 3],
+            directionals: vec![Directional {
+                intensity: 0.8,
+                color: [1.0; 3],
+                direction: [0.4, 0.7, -0.6],
+            }],
+        },
+        &RasterSettings {
+            width: 40,
+            height: 24,
+            sigma: 3e-4,
+            gamma: 3e-3,
+            dist: Dist::Barycentric,
+            alpha: Alpha::Sum,
+            near: 0.5,
+            far: 8.0,
+            background: [0.2, 0.3, 0.4],
+            double_sided: false,
+            antialias: true,
+            ..RasterSettings::default()
+        },
+    );
+
+    // Orthographic from angles, portrait, hard colour and alpha.
+    let out = dir.path("orthographic.exr");
+    assert_success(
+        "orthographic",
+        &render(
+            &spot(),
+            &out,
+            &[
+                "--width",
+                "20",
+                "--height",
+                "28",
+                "--orthographic",
+                "--scale",
+                "0.9",
+                "--distance",
+                "3",
+                "--elevation",
+                "25",
+                "--azimuth",
+                "120",
+                "--sigma",
+                "1e-4",
+                "--rgb",
+                "hard",
+                "--alpha",
+                "hard",
+                "--background",
+                "1,1,1",
+                "--light-dir",
+                "0,0,-1",
+            ],
+        ),
+    );
+    assert_matches_twin(
+        "orthographic",
+        &out,
+        &Mesh::load_obj(&spot(), 1).unwrap(),
+        &Camera {
+            projection: Projection::Orthographic { scale: 0.9 },
+            ..Camera::from_angles(3.0, 25.0, 120.0)
+        },
+        &Lighting {
+            directionals: vec![Directional {
+                direction: [0.0, 0.0, -1.0],
+                ..Directional::default()
+            }],
+            ..Lighting::default()
+        },
+        &RasterSettings {
+            width: 20,
+            height: 28,
+            sigma: 1e-4,
+            rgb: Rgb::Hard,
+            alpha: Alpha::Hard,
+            background: [1.0; 3],
+            ..RasterSettings::default()
+        },
+    );
+
+    // Vertex colours.
+    let obj = dir.write("octahedron.obj", OCTAHEDRON);
+    let out = dir.path("vertex.exr");
+    assert_success(
+        "vertex colours",
+        &render(
+            &obj,
+            &out,
+            &[
+                "--size",
+                "16",
+                "--vertex-colors",
+                "--elevation",
+                "20",
+                "--azimuth",
+                "30",
+                "--sigma",
+                "1e-3",
+                "--gamma",
+                "1e-2",
+                "--dist",
+                "hard",
+            ],
+        ),
+    );
+    assert_matches_twin(
+        "vertex colours",
+        &out,
+        &Mesh::load_obj(&obj, 1).unwrap(),
+        &Camera::from_angles(2.732, 20.0, 30.0),
+        &Lighting::default(),
+        &RasterSettings {
+            width: 16,
+            height: 16,
+            sigma: 1e-3,
+            gamma: 1e-2,
+            dist: Dist::Hard,
+            color_mode: ColorMode::Vertex,
+            ..RasterSettings::default()
+        },
+    );
+}
+
+/// The run failed with exactly one stderr line, `softvk: error: ...` containing `needle`, and
+/// printed nothing on stdout.
+fn assert_one_error_line(what: &str, out: &Output, needle: &str) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{what}: succeeded");
+    assert_eq!(
+        stderr.lines().count(),
+        1,
+        "{what}: expected one line, got:\n{stderr}"
+    );
+    assert!(stderr.starts_with("softvk: error: "), "{what}: {stderr}");
+    assert!(
+        stderr.contains(needle),
+        "{what}: the error should mention `{needle}`: {stderr}"
+    );
+    assert!(out.stdout.is_empty(), "{what}: printed on stdout");
+}
+
+const TRIANGLE: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+
+#[test]
+fn render_errors_are_one_line_and_write_nothing() {
+    let dir = TempDir::new("errors");
+    let triangle = dir.write("triangle.obj", TRIANGLE);
+    let malformed = dir.write("malformed.obj", "v 0 0 zero\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    let nan = dir.write("nan.obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n");
+    let no_faces = dir.write("no_faces.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n");
+    let missing = dir.path("missing.obj");
+    dir.write("a_file", "");
+    let before = dir.entries();
+
+    let out_png = dir.path("out.png");
+    let cases: Vec<(&str, &Path, PathBuf, Vec<&str>, &str)> = vec![
+        (
+            "missing mesh",
+            &missing,
+            out_png.clone(),
+            vec![],
+            "missing.obj",
+        ),
+        (
+            "malformed OBJ",
+            &malformed,
+            out_png.clone(),
+            vec![],
+            "malformed.obj",
+        ),
+        ("NaN vertex", &nan, out_png.clone(), vec![], "NaN"),
+        ("no faces", &no_faces, out_png.clone(), vec![], "no faces"),
+        (
+            "size 0",
+            &triangle,
+            out_png.clone(),
+            vec!["--size", "0"],
+            "--size",
+        ),
+        (
+            "size 100000",
+            &triangle,
+            out_png.clone(),
+            vec!["--width", "100000", "--height", "8"],
+            "--width",
+        ),
+        (
+            "bad enum",
+            &triangle,
+            out_png.clone(),
+            vec!["--dist", "manhattan"],
+            "possible values",
+        ),
+        (
+            "sigma 0",
+            &triangle,
+            out_png.clone(),
+            vec!["--sigma", "0"],
+            "--sigma",
+        ),
+        (
+            "gamma < 0",
+            &triangle,
+            out_png.clone(),
+            vec!["--gamma", "-1"],
+            "--gamma",
+        ),
+        (
+            "NaN number",
+            &triangle,
+            out_png.clone(),
+            vec!["--far", "nan"],
+            "finite",
+        ),
+        (
+            "near >= far",
+            &triangle,
+            out_png.clone(),
+            vec!["--near", "5", "--far", "5"],
+            "near",
+        ),
+        (
+            "bad triple",
+            &triangle,
+            out_png.clone(),
+            vec!["--background", "1,1"],
+            "three",
+        ),
+        (
+            "eye at the target",
+            &triangle,
+            out_png.clone(),
+            vec!["--eye", "0,0,0"],
+            "eye",
+        ),
+        (
+            "size and width",
+            &triangle,
+            out_png.clone(),
+            vec!["--size", "8", "--width", "8", "--height", "8"],
+            "--size",
+        ),
+        (
+            "no vertex colours",
+            &triangle,
+            out_png.clone(),
+            vec!["--vertex-colors"],
+            "vertex colours",
+        ),
+        (
+            "missing output dir",
+            &triangle,
+            dir.path("nowhere/out.png"),
+            vec![],
+            "nowhere",
+        ),
+        (
+            "output dir is a file",
+            &triangle,
+            dir.path("a_file/out.png"),
+            vec![],
+            "a_file",
+        ),
+        (
+            "unknown extension",
+            &triangle,
+            dir.path("out.jpg"),
+            vec![],
+            ".png or .exr",
+        ),
+        (
+            "no extension",
+            &triangle,
+            dir.path("out"),
+            vec![],
+            ".png or .exr",
+        ),
+    ];
+    for (what, mesh, out, args, needle) in &cases {
+        let result = render(mesh, out, args);
+        assert_one_error_line(what, &result, needle);
+        assert_eq!(dir.entries(), before, "{what}: a file was written");
+    }
+
+    // After the output's temporary file exists: a size the device cannot hold, and no device.
+    if !common::no_gpu() {
+        let result = render(&triangle, &out_png, &["--size", "16384", "--antialias"]);
+        assert_one_error_line("too large for the device", &result, "too large");
+        assert_eq!(dir.entries(), before, "too large: a file was written");
+    }
+    std::fs::write(&out_png, b"old").unwrap();
+    let result = softvk()
+        .args(["render", "--size", "8", "--mesh"])
+        .arg(&triangle)
+        .arg("--out")
+        .arg(&out_png)
+        .env("VK_ICD_FILENAMES", "/nonexistent/softvk-test-icd.json")
+        .env("VK_DRIVER_FILES", "/nonexistent/softvk-test-icd.json")
+        .env_remove("SOFTVK_VALIDATION")
+        .output()
+        .unwrap();
+    assert!(!result.status.success());
+    // The loader may print its own complaints; softvk says one thing.
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    let ours: Vec<_> = stderr.lines().filter(|l| l.starts_with("softvk")).collect();
+    assert_eq!(
+        ours.len(),
+        1,
+        "no device: expected one error line, got:\n{stderr}"
+    );
+    assert!(
+        ours[0].starts_with("softvk: error: ") && ours[0].contains("Vulkan"),
+        "{}",
+        ours[0]
+    );
+    assert_eq!(
+        std::fs::read(&out_png).unwrap(),
+        b"old",
+        "no device: the old image was touched"
+    );
+    std::fs::remove_file(&out_png).unwrap();
+    assert_eq!(dir.entries(), before, "no device: a temporary was left");
 }

@@ -1,0 +1,338 @@
+//! Writing rendered images (SPEC §6): RGBA as 8-bit PNG or float32 EXR, chosen by the file
+//! extension, and written atomically so that a failed run leaves nothing behind.
+//!
+//! Values are written as the renderer produced them: colour and alpha straight (not
+//! premultiplied; SoftRas's colour already blends the background in, its alpha is coverage), row
+//! 0 at the top. OpenEXR tools assume premultiplied colour; softvk's EXR is data, not a plate to
+//! composite.
+
+use std::fs::{File, OpenOptions};
+use std::io::{Cursor, Write};
+use std::path::{Path, PathBuf};
+
+use softvk::{Error, Result};
+
+/// An output image format, from the extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImageFormat {
+    /// 8-bit RGBA PNG: values clamped to [0, 1] and rounded.
+    Png,
+    /// OpenEXR, float32 channels R, G, B, A, lossless (ZIP).
+    Exr,
+}
+
+impl ImageFormat {
+    /// `.png` or `.exr` (any case); anything else is an error naming the file.
+    pub fn from_path(path: &Path) -> Result<ImageFormat> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        match ext.as_deref() {
+            Some("png") => Ok(ImageFormat::Png),
+            Some("exr") => Ok(ImageFormat::Exr),
+            _ => Err(Error::Input(format!(
+                "{}: unknown image format (the extension must be .png or .exr)",
+                path.display()
+            ))),
+        }
+    }
+
+    /// Encodes `width` × `height` RGBA pixels (row-major, row 0 at the top). The error is the
+    /// encoder's message; the caller names the file.
+    pub fn encode(
+        self,
+        pixels: &[[f32; 4]],
+        width: u32,
+        height: u32,
+    ) -> std::result::Result<Vec<u8>, String> {
+        assert_eq!(pixels.len(), width as usize * height as usize);
+        match self {
+            ImageFormat::Png => encode_png(pixels, width, height),
+            ImageFormat::Exr => encode_exr(pixels, width, height),
+        }
+    }
+}
+
+/// One float to one PNG byte: clamp to [0, 1], scale by 255, round half away from zero.
+pub fn to_u8(v: f32) -> u8 {
+    // NaN clamps to NaN and `as` maps it to 0; the renderer never produces one.
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+fn encode_png(
+    pixels: &[[f32; 4]],
+    width: u32,
+    height: u32,
+) -> std::result::Result<Vec<u8>, String> {
+    use image::ImageEncoder;
+    let bytes: Vec<u8> = pixels.iter().flatten().map(|&v| to_u8(v)).collect();
+    let mut out = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut out)
+        .write_image(&bytes, width, height, image::ExtendedColorType::Rgba8)
+        .map_err(|e| format!("cannot encode PNG: {e}"))?;
+    Ok(out)
+}
+
+fn encode_exr(
+    pixels: &[[f32; 4]],
+    width: u32,
+    height: u32,
+) -> std::result::Result<Vec<u8>, String> {
+    use exr::prelude::*;
+    let w = width as usize;
+    let channels = SpecificChannels::rgba(|p: Vec2<usize>| {
+        let [r, g, b, a] = pixels[p.y() * w + p.x()];
+        (r, g, b, a)
+    });
+    // ZIP over scan lines: lossless for f32 (unlike PXR24 or B44) and readable by every
+    // OpenEXR reader (some small ones skip tiled files).
+    let image =
+        Image::from_encoded_channels((w, height as usize), Encoding::SMALL_LOSSLESS, channels);
+    let mut out = Cursor::new(Vec::new());
+    image
+        .write()
+        .to_buffered(&mut out)
+        .map_err(|e| format!("cannot encode EXR: {e}"))?;
+    Ok(out.into_inner())
+}
+
+/// A file written in full or not at all: bytes go to a hidden temporary file beside the target
+/// (same directory, hence same file system, so the final `rename` is atomic and never copies),
+/// which [`AtomicFile::commit`] renames into place. Dropped without a commit (an error, a
+/// panic), it removes the temporary file.
+///
+/// Hand-rolled rather than the `tempfile` crate: `tempfile` creates its files with mode 0600,
+/// which the rename would carry over to the user's image, while `create_new` here gives the
+/// usual permissions (0666 & umask) of any file the user creates; and it is twenty lines.
+#[derive(Debug)]
+pub struct AtomicFile {
+    target: PathBuf,
+    temp: PathBuf,
+    file: Option<File>,
+}
+
+impl AtomicFile {
+    /// Creates the temporary file now, so an unwritable destination is reported before any
+    /// work is done.
+    pub fn create(target: &Path) -> Result<AtomicFile> {
+        let name = target
+            .file_name()
+            .ok_or_else(|| Error::Input(format!("{}: not a file name", target.display())))?;
+        if target.is_dir() {
+            return Err(Error::Input(format!(
+                "{}: is a directory, not an image file",
+                target.display()
+            )));
+        }
+        let dir = match target.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        // Unique among concurrent softvk processes (pid) and calls in one process (counter).
+        static COUNTER: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+        let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let mut temp_name = std::ffi::OsString::from(".");
+        temp_name.push(name);
+        temp_name.push(format!(".softvk-{}-{n}.tmp", std::process::id()));
+        let temp = dir.join(temp_name);
+        let file = OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&temp)
+            .map_err(|e| cannot_write(target, &e))?;
+        Ok(AtomicFile {
+            target: target.to_path_buf(),
+            temp,
+            file: Some(file),
+        })
+    }
+
+    /// Writes `bytes`, flushes them to disk, and renames the file into place.
+    pub fn commit(mut self, bytes: &[u8]) -> Result<()> {
+        let mut file = self.file.take().expect("committed once");
+        let fail = |e: std::io::Error| cannot_write(&self.target, &e);
+        file.write_all(bytes).map_err(fail)?;
+        file.sync_all().map_err(fail)?;
+        drop(file);
+        std::fs::rename(&self.temp, &self.target).map_err(fail)?;
+        // Renamed: nothing left for Drop to remove.
+        self.temp = PathBuf::new();
+        Ok(())
+    }
+}
+
+fn cannot_write(target: &Path, e: &std::io::Error) -> Error {
+    Error::Input(format!("cannot write {}: {e}", target.display()))
+}
+
+impl Drop for AtomicFile {
+    fn drop(&mut self) {
+        drop(self.file.take());
+        if !self.temp.as_os_str().is_empty() {
+            let _ = std::fs::remove_file(&self.temp);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A fresh folder under the system's temporary directory, removed when dropped.
+    struct TempDir(PathBuf);
+
+    impl TempDir {
+        fn new(tag: &str) -> TempDir {
+            let dir =
+                std::env::temp_dir().join(format!("softvk-output-{tag}-{}", std::process::id()));
+            let _ = std::fs::remove_dir_all(&dir);
+            std::fs::create_dir_all(&dir).unwrap();
+            TempDir(dir)
+        }
+
+        fn entries(&self) -> Vec<String> {
+            let mut v: Vec<String> = std::fs::read_dir(&self.0)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            v.sort();
+            v
+        }
+    }
+
+    impl Drop for TempDir {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    /// Awkward floats: subnormals, negatives, > 1, values f16 or 8 bits would round.
+    fn awkward(width: u32, height: u32) -> Vec<[f32; 4]> {
+        let specials = [
+            0.0,
+            -0.0,
+            1.0 / 3.0,
+            f32::MIN_POSITIVE / 8.0,
+            -2.5e-7,
+            1.000_000_1,
+            65504.0 * 4.0,
+            0.123_456_79,
+        ];
+        (0..width * height)
+            .map(|i| std::array::from_fn(|k| specials[(i as usize * 4 + k) % 8] + i as f32 * 1e-3))
+            .collect()
+    }
+
+    #[test]
+    fn extension_decides_the_format() {
+        assert_eq!(
+            ImageFormat::from_path(Path::new("a/b.png")).unwrap(),
+            ImageFormat::Png
+        );
+        assert_eq!(
+            ImageFormat::from_path(Path::new("B.EXR")).unwrap(),
+            ImageFormat::Exr
+        );
+        for bad in ["a.jpg", "a", "a.png.tmp", ".png", "dir/"] {
+            assert!(ImageFormat::from_path(Path::new(bad)).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn exr_reads_back_the_exact_f32s_as_r_g_b_a() {
+        use exr::prelude::*;
+        let (w, h) = (7u32, 5u32);
+        let pixels = awkward(w, h);
+        let bytes = ImageFormat::Exr.encode(&pixels, w, h).unwrap();
+        let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(&bytes), false).unwrap();
+        let header = &meta.headers[0];
+        let mut names: Vec<String> = header
+            .channels
+            .list
+            .iter()
+            .map(|c| {
+                assert_eq!(c.sample_type, SampleType::F32);
+                c.name.to_string()
+            })
+            .collect();
+        names.sort();
+        assert_eq!(names, ["A", "B", "G", "R"]);
+        let image = read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .rgba_channels(
+                |size, _| (size.width(), vec![[0f32; 4]; size.area()]),
+                |(width, v), p, (r, g, b, a): (f32, f32, f32, f32)| {
+                    v[p.y() * *width + p.x()] = [r, g, b, a];
+                },
+            )
+            .first_valid_layer()
+            .all_attributes()
+            .from_buffered(Cursor::new(&bytes))
+            .unwrap();
+        let layer = &image.layer_data;
+        assert_eq!((layer.size.width(), layer.size.height()), (7, 5));
+        let back = &layer.channel_data.pixels.1;
+        for (a, b) in pixels.iter().zip(back) {
+            assert_eq!(a.map(f32::to_bits), b.map(f32::to_bits));
+        }
+    }
+
+    #[test]
+    fn png_is_rgba8_clamped_and_rounded_with_row_0_at_the_top() {
+        assert_eq!(
+            [-1.0, 0.0, 0.5 / 255.0, 0.499 / 255.0, 0.5, 1.0, 7.0].map(to_u8),
+            [0, 0, 1, 0, 128, 255, 255]
+        );
+        let (w, h) = (3u32, 2u32);
+        let mut pixels = vec![[0.0f32; 4]; 6];
+        pixels[0] = [1.0, 0.0, 0.0, 1.0]; // top left
+        pixels[5] = [0.0, 0.0, 1.0, 0.25]; // bottom right
+        let bytes = ImageFormat::Png.encode(&pixels, w, h).unwrap();
+        let img = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png).unwrap();
+        assert_eq!(img.color(), image::ColorType::Rgba8);
+        let img = img.to_rgba8();
+        assert_eq!(img.dimensions(), (3, 2));
+        assert_eq!(img.get_pixel(0, 0).0, [255, 0, 0, 255]);
+        assert_eq!(img.get_pixel(2, 1).0, [0, 0, 255, 64]);
+        assert_eq!(img.get_pixel(1, 0).0, [0, 0, 0, 0]);
+    }
+
+    #[test]
+    fn atomic_file_appears_only_on_commit() {
+        let dir = TempDir::new("atomic");
+        let target = dir.0.join("out.png");
+        std::fs::write(&target, b"old").unwrap();
+
+        let f = AtomicFile::create(&target).unwrap();
+        assert_eq!(
+            dir.entries().len(),
+            2,
+            "the temporary file exists beside the target"
+        );
+        drop(f);
+        assert_eq!(dir.entries(), ["out.png"]);
+        assert_eq!(
+            std::fs::read(&target).unwrap(),
+            b"old",
+            "untouched without a commit"
+        );
+
+        AtomicFile::create(&target).unwrap().commit(b"new").unwrap();
+        assert_eq!(dir.entries(), ["out.png"]);
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+    }
+
+    #[test]
+    fn unwritable_destinations_fail_at_create() {
+        let dir = TempDir::new("unwritable");
+        std::fs::write(dir.0.join("file"), b"").unwrap();
+        std::fs::create_dir(dir.0.join("sub.png")).unwrap();
+        for bad in ["missing/out.png", "file/out.png", "sub.png"] {
+            let err = AtomicFile::create(&dir.0.join(bad)).unwrap_err();
+            assert!(err.to_string().contains(bad), "{err}");
+        }
+        assert_eq!(dir.entries(), ["file", "sub.png"]);
+    }
+}

@@ -1,0 +1,96 @@
+//! `softvk render --mesh M.obj --out IMG.(png|exr) [view] [raster]`: one view of a mesh, written
+//! as RGBA (SPEC §6).
+//!
+//! Order of work: every check that needs no file or device first (flags, output format, camera,
+//! settings), then the mesh, then the output's temporary file (an unwritable destination fails
+//! before the render), then the device and the render. Any error leaves no file behind.
+
+use std::path::PathBuf;
+
+use clap::Args;
+use softvk::camera::Camera;
+use softvk::gpu::{Context, ContextOptions};
+use softvk::lighting::Lighting;
+use softvk::mesh::Mesh;
+use softvk::raster::gpu::{Frames, Renderer};
+use softvk::raster::reference::RasterSettings;
+use softvk::{Error, Result};
+
+use super::args::{RasterArgs, ViewArgs};
+use super::output::{AtomicFile, ImageFormat};
+
+/// The flags of `softvk render`.
+#[derive(Args, Clone, Debug)]
+pub struct RenderArgs {
+    /// The mesh (OBJ; all objects merged, polygons fan-triangulated, MTL map_Kd textures).
+    #[arg(long, value_name = "M.obj")]
+    pub mesh: PathBuf,
+
+    /// The image to write: .png (8-bit RGBA) or .exr (float32 R, G, B, A).
+    #[arg(long, value_name = "IMG")]
+    pub out: PathBuf,
+
+    #[command(flatten)]
+    pub view: ViewArgs,
+
+    #[command(flatten)]
+    pub raster: RasterArgs,
+}
+
+/// Runs `softvk render`.
+pub fn run(args: &RenderArgs) -> Result<()> {
+    let format = ImageFormat::from_path(&args.out)?;
+    let camera = args.view.camera()?;
+    let settings = args.raster.settings(args.view.size())?;
+    let lighting = args.raster.lighting();
+
+    let mesh = Mesh::load_obj(&args.mesh, args.raster.texture_res)?;
+    if args.raster.vertex_colors && mesh.vertex_colors.is_none() {
+        return Err(Error::Input(format!(
+            "--vertex-colors: {} has no vertex colours (every `v` line needs `x y z r g b`)",
+            args.mesh.display()
+        )));
+    }
+
+    let out = AtomicFile::create(&args.out)?;
+    let ctx = Context::new(&ContextOptions::from_env())?;
+    let frames =
+        render_frames(&ctx, &mesh, &camera, &lighting, &settings).map_err(|e| match e {
+            // Say which request is too large, not only which buffer.
+            Error::Limit(m) => Error::Limit(format!(
+                "image {}x{}{} is too large: {m}",
+                settings.width,
+                settings.height,
+                if settings.antialias {
+                    " (rendered at 2x for --antialias)"
+                } else {
+                    ""
+                }
+            )),
+            e => e,
+        })?;
+    ctx.check_validation()?;
+
+    let bytes = format
+        .encode(frames.image(0), frames.width, frames.height)
+        .map_err(|e| Error::Input(format!("{}: {e}", args.out.display())))?;
+    out.commit(&bytes)
+}
+
+/// The one call through which the CLI renders an image: today the brute-force GPU kernel (one
+/// invocation per pixel over every face). The tiled renderer replaces this body, and only it.
+pub fn render_frames(
+    ctx: &Context,
+    mesh: &Mesh,
+    camera: &Camera,
+    lighting: &Lighting,
+    settings: &RasterSettings,
+) -> Result<Frames> {
+    Renderer::new(ctx)?.render_brute_views(
+        ctx,
+        mesh,
+        std::slice::from_ref(camera),
+        lighting,
+        settings,
+    )
+}
