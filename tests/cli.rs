@@ -567,6 +567,46 @@ fn assert_one_error_line(what: &str, out: &Output, needle: &str) {
 
 const TRIANGLE: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
 
+/// The default (tiled) render and `--brute` write the same file, byte for byte, at two tile
+/// sizes; a tile size that is not a multiple of 8 is one error line.
+#[test]
+fn tiled_and_brute_renders_write_the_same_bytes() {
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    let dir = TempDir::new("methods");
+    let args = [
+        "--width",
+        "40",
+        "--height",
+        "24",
+        "--sigma",
+        "3e-4",
+        "--antialias",
+    ];
+    let brute = dir.path("brute.exr");
+    assert_success(
+        "brute",
+        &render(&spot(), &brute, &[&args[..], &["--brute"]].concat()),
+    );
+    for tile in ["8", "32"] {
+        let tiled = dir.path(&format!("tiled{tile}.exr"));
+        assert_success(
+            tile,
+            &render(&spot(), &tiled, &[&args[..], &["--tile", tile]].concat()),
+        );
+        assert!(
+            std::fs::read(&tiled).unwrap() == std::fs::read(&brute).unwrap(),
+            "tile {tile}: the EXR differs from the brute-force one"
+        );
+    }
+    let bad = dir.path("bad.exr");
+    let out = render(&spot(), &bad, &["--size", "8", "--tile", "12"]);
+    assert_one_error_line("tile 12", &out, "tile size 12");
+    assert!(!bad.exists());
+}
+
 #[test]
 fn render_errors_are_one_line_and_write_nothing() {
     let dir = TempDir::new("errors");

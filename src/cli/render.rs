@@ -12,7 +12,7 @@ use softvk::camera::Camera;
 use softvk::gpu::{Context, ContextOptions};
 use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
-use softvk::raster::gpu::{Frames, Renderer};
+use softvk::raster::gpu::{DEFAULT_TILE, Frames, Method, Renderer};
 use softvk::raster::reference::RasterSettings;
 use softvk::{Error, Result};
 
@@ -35,11 +35,32 @@ pub struct RenderArgs {
 
     #[command(flatten)]
     pub raster: RasterArgs,
+
+    /// Tile edge in pixels for the tiled rasterizer (a multiple of 8).
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_TILE)]
+    pub tile: u32,
+
+    /// Use the brute-force kernel (every face for every pixel, as SoftRas) instead of tiles.
+    /// Same pixels, bit for bit; slower.
+    #[arg(long)]
+    pub brute: bool,
+}
+
+impl RenderArgs {
+    /// The fine pass these flags ask for.
+    pub fn method(&self) -> Method {
+        if self.brute {
+            Method::Brute
+        } else {
+            Method::Tiled { tile: self.tile }
+        }
+    }
 }
 
 /// Runs `softvk render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
     let format = ImageFormat::from_path(&args.out)?;
+    softvk::raster::fine::check_tile_size(args.tile)?;
     let camera = args.view.camera()?;
     let settings = args.raster.settings(args.view.size())?;
     let lighting = args.raster.lighting();
@@ -55,19 +76,21 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let out = AtomicFile::create(&args.out)?;
     let ctx = Context::new(&ContextOptions::from_env())?;
     let frames =
-        render_frames(&ctx, &mesh, &camera, &lighting, &settings).map_err(|e| match e {
-            // Say which request is too large, not only which buffer.
-            Error::Limit(m) => Error::Limit(format!(
-                "image {}x{}{} is too large: {m}",
-                settings.width,
-                settings.height,
-                if settings.antialias {
-                    " (rendered at 2x for --antialias)"
-                } else {
-                    ""
-                }
-            )),
-            e => e,
+        render_frames(&ctx, &mesh, &camera, &lighting, &settings, args.method()).map_err(|e| {
+            match e {
+                // Say which request is too large, not only which buffer.
+                Error::Limit(m) => Error::Limit(format!(
+                    "image {}x{}{} is too large: {m}",
+                    settings.width,
+                    settings.height,
+                    if settings.antialias {
+                        " (rendered at 2x for --antialias)"
+                    } else {
+                        ""
+                    }
+                )),
+                e => e,
+            }
         })?;
     ctx.check_validation()?;
 
@@ -77,20 +100,22 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     out.commit(&bytes)
 }
 
-/// The one call through which the CLI renders an image: today the brute-force GPU kernel (one
-/// invocation per pixel over every face). The tiled renderer replaces this body, and only it.
+/// The one call through which the CLI renders an image: the tiled GPU rasterizer by default
+/// (bit for bit the brute-force kernel's pixels), or the brute-force kernel itself.
 pub fn render_frames(
     ctx: &Context,
     mesh: &Mesh,
     camera: &Camera,
     lighting: &Lighting,
     settings: &RasterSettings,
+    method: Method,
 ) -> Result<Frames> {
-    Renderer::new(ctx)?.render_brute_views(
+    Renderer::new(ctx)?.render_views(
         ctx,
         mesh,
         std::slice::from_ref(camera),
         lighting,
         settings,
+        method,
     )
 }
