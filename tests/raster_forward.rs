@@ -49,6 +49,7 @@ fn bits(f: &Frames) -> (Vec<u32>, Vec<u32>) {
                     a.softmax_ref_depth.to_bits(),
                     a.softmax_sum.to_bits(),
                     a.alpha_acc.to_bits(),
+                    a.alpha_zeros,
                     a.hard_face,
                 ]
             })
@@ -709,10 +710,15 @@ fn aux_holds_the_softmax_and_alpha_aggregates() {
                 .map(|&(z, d)| d * ((zmin - z) / (s.gamma * range)).exp())
                 .sum();
             let what = format!("{alpha:?} {rgb:?} pixel {i}: {a:?}");
-            assert!(
-                (f64::from(a.alpha_acc) - acc).abs() < 1e-4,
-                "{what} vs {acc}"
-            );
+            if a.alpha_zeros == 0 {
+                assert!(
+                    (f64::from(a.alpha_acc) - acc).abs() < 1e-4,
+                    "{what} vs {acc}"
+                );
+            } else {
+                // Some 1 − D rounded to 0 in f32: the f64 product holds a factor below 2^-23.
+                assert!(alpha == Alpha::Prod && acc < 1.2e-7, "{what} vs {acc}");
+            }
             if rgb == Rgb::Softmax {
                 assert!(
                     (f64::from(a.softmax_ref_depth) - zmin).abs() < 1e-5,

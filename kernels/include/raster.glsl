@@ -158,29 +158,45 @@ uint surface_texel_index(vec3 wc, uint res) {
     return (res - 1u - b) * res + (res - 1u - a);
 }
 
-// `reference::AlphaAccum`. Prod: Π(1 - D); sum: Σ D; hard: 1 once any D > 0.5.
-float alpha_init(uint mode) {
-    return mode == ALPHA_PROD ? 1.0 : 0.0;
+// `reference::AlphaAccum`. Prod: Π(1 - D) over the factors that are not exactly 0, and the count
+// of those that are (so the backward's ∂A/∂D_j = Π_{k≠j}(1 - D_k) is exact even where D_j
+// rounds to 1; the alpha itself is unchanged: any zero factor makes it 1); sum: Σ D; hard: 1
+// once any D > 0.5.
+struct Alpha {
+    float acc;
+    uint zeros;
+};
+
+Alpha alpha_init(uint mode) {
+    Alpha a;
+    a.acc = mode == ALPHA_PROD ? 1.0 : 0.0;
+    a.zeros = 0u;
+    return a;
 }
 
-float alpha_add(float acc, uint mode, float d) {
+void alpha_add(inout Alpha a, uint mode, float d) {
     if (mode == ALPHA_PROD) {
-        return acc * (1.0 - d);
+        float f = 1.0 - d;
+        if (f == 0.0) {
+            a.zeros += 1u;
+        } else {
+            a.acc *= f;
+        }
+    } else if (mode == ALPHA_SUM) {
+        a.acc += d;
+    } else if (d > 0.5) {
+        a.acc = 1.0;
     }
-    if (mode == ALPHA_SUM) {
-        return acc + d;
-    }
-    return d > 0.5 ? 1.0 : acc;
 }
 
-float alpha_resolve(float acc, uint mode, uint face_count) {
+float alpha_resolve(Alpha a, uint mode, uint face_count) {
     if (mode == ALPHA_PROD) {
-        return 1.0 - acc;
+        return a.zeros > 0u ? 1.0 : 1.0 - a.acc;
     }
     if (mode == ALPHA_SUM) {
-        return acc / float(face_count);
+        return a.acc / float(face_count);
     }
-    return acc;
+    return a.acc;
 }
 
 // `reference::SoftmaxAccum`: numerator and denominator scaled by e^{-max/γ}, max the largest

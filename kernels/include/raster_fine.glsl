@@ -8,13 +8,17 @@
 
 #include "raster.glsl"
 
-// Twin of `PixelAux` (src/raster/brute.rs): what the backward pass needs of the forward's
-// running aggregates, so that it needs no second forward. 16 bytes per pixel.
+// Twin of `PixelAux` (src/raster/fine.rs): what the backward pass needs of the forward's
+// running aggregates, so that it needs no second forward. 32 bytes per pixel.
 struct PixelAux {
     float softmax_ref_depth; // depth whose z̄ is the softmax's running max (background: far - ε (far - near))
     float softmax_sum;       // softmax denominator, scaled by e^{-max/γ} (includes the background's term)
-    float alpha_acc;         // prod: Π(1 - D); sum: Σ D; hard: 0 or 1
+    float alpha_acc;         // prod: Π(1 - D) over non-zero factors; sum: Σ D; hard: 0 or 1
+    uint alpha_zeros;        // prod: how many factors 1 - D were exactly 0
     uint hard_face;          // hard colour: the winning face, or 0xffffffff for the background
+    uint pad0;
+    uint pad1;
+    uint pad2;
 };
 
 layout(std430, set = 0, binding = 0) readonly buffer Setups { FaceSetup setups[]; };
@@ -70,7 +74,7 @@ vec3 sample_color(uint mesh, uint face, vec3 wc) {
 
 // One pixel's running state over the faces it has seen.
 struct PixelState {
-    float alpha;
+    Alpha alpha;
     Softmax soft;
     bool hard_found;
     float hard_depth;
@@ -101,7 +105,7 @@ void shade_face(inout PixelState s, FaceSetup f, uint j, vec2 p) {
         return;
     }
     // Alpha counts every non-ignored face, whatever its depth or facing.
-    s.alpha = alpha_add(s.alpha, pc.alpha, d);
+    alpha_add(s.alpha, pc.alpha, d);
 
     vec3 wc = clip_barycentric(w);
     float z;
@@ -129,8 +133,12 @@ void pixel_finish(PixelState s, uint id) {
     PixelAux a;
     a.softmax_ref_depth = s.soft.ref_depth;
     a.softmax_sum = s.soft.sum;
-    a.alpha_acc = s.alpha;
+    a.alpha_acc = s.alpha.acc;
+    a.alpha_zeros = s.alpha.zeros;
     a.hard_face = s.hard_face;
+    a.pad0 = 0u;
+    a.pad1 = 0u;
+    a.pad2 = 0u;
     aux[id] = a;
 }
 

@@ -86,7 +86,7 @@ impl BruteRaster {
             }
         };
         need("image", &b.image, 16 * pixels)?;
-        need("aux", &b.aux, 16 * pixels)?;
+        need("aux", &b.aux, 32 * pixels)?;
         need(
             "face setup",
             &b.setups,

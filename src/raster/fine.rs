@@ -13,7 +13,7 @@ use crate::raster::reference::{self, Alpha, ColorMode, RasterSettings, Rgb};
 use crate::raster::setup::dist_code;
 
 /// Per-pixel forward state kept for the backward pass. Twin of `PixelAux` in
-/// `raster_fine.glsl`; std430, 16 bytes, one per *rendered* pixel (at 2× with anti-aliasing),
+/// `raster_fine.glsl` (and of `reference`'s); std430, 32 bytes, one per *rendered* pixel (at 2× with anti-aliasing),
 /// view-major then row-major like the image.
 ///
 /// With the softmax colour, `I = rgb_scaled / softmax_sum` where every term was scaled by
@@ -29,11 +29,17 @@ pub struct PixelAux {
     pub softmax_ref_depth: f32,
     /// The softmax denominator `Σ_j D_j e^{(z̄_j − max)/γ} + e^{(ε − max)/γ}`.
     pub softmax_sum: f32,
-    /// Alpha's running aggregate: prod `Π(1 − D_j)`, sum `Σ D_j`, hard 0 or 1.
+    /// Alpha's running aggregate: prod `Π(1 − D_j)` over the factors that are not exactly 0,
+    /// sum `Σ D_j`, hard 0 or 1.
     pub alpha_acc: f32,
+    /// Alpha prod: how many factors `1 − D_j` were exactly 0 (then the alpha is 1, and
+    /// `∂A/∂D_j` is the product of the others: `alpha_acc` for the one zero factor, if alone).
+    pub alpha_zeros: u32,
     /// Hard colour: the index of the face whose colour the pixel shows, or `u32::MAX` for the
     /// background.
     pub hard_face: u32,
+    /// std430 padding.
+    pub pad: [u32; 3],
 }
 
 /// Push constants of both fine kernels. Twin of `Push` in `raster_fine.glsl`.
@@ -203,7 +209,7 @@ impl TiledRaster {
         let last = u64::from(first_view) + u64::from(view_count);
         let pixels = u64::from(grid.width) * u64::from(grid.height);
         if b.image.size < 16 * pixels * last
-            || b.aux.size < 16 * pixels * last
+            || b.aux.size < 32 * pixels * last
             || b.setups.size < 128 * u64::from(face_count) * last
             || b.ranges.size < 8 * grid.tiles_per_view() * u64::from(view_count)
         {
@@ -271,7 +277,7 @@ mod tests {
             );
         }
         assert_eq!(std::mem::offset_of!(RasterPush, background), 64);
-        assert_eq!(std::mem::size_of::<PixelAux>(), 16);
+        assert_eq!(std::mem::size_of::<PixelAux>(), 32);
         assert_eq!(specs::RASTER_TILED.bindings.len(), 8);
     }
 

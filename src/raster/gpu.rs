@@ -363,7 +363,11 @@ impl Renderer {
                 MemoryKind::Device,
             )?,
             image: ctx.create_buffer("image", 16 * rendered, MemoryKind::Device)?,
-            aux: ctx.create_buffer("pixel aux", 16 * rendered, MemoryKind::Device)?,
+            aux: ctx.create_buffer(
+                "pixel aux",
+                std::mem::size_of::<PixelAux>() as u64 * rendered,
+                MemoryKind::Device,
+            )?,
             small: if settings.antialias {
                 Some(ctx.create_buffer("image (anti-aliased)", 16 * outputs, MemoryKind::Device)?)
             } else {
