@@ -5,9 +5,10 @@
 //!   [`gpu::Recorder`] that records dispatches into a command buffer the caller owns.
 //! - [`primitives`]: exclusive scan and stable radix sort, the building blocks of binning.
 //! - The soft rasterizer's stages: [`mesh`] (OBJ, per-face textures) → [`camera`] (look-at,
-//!   projection, pixel centres) → [`lighting`] → [`raster`]: the f64 CPU twin
-//!   ([`raster::reference`], the oracle the GPU kernels are tested against), the GPU face setup
-//!   ([`raster::setup`]) and the brute-force fine pass ([`raster::brute`]), driven by
+//!   projection, pixel centres) → [`lighting`] → [`raster`]: the f64 CPU twins of the forward
+//!   ([`raster::reference`], the oracle the GPU kernels are tested against) and of the backward
+//!   ([`raster::reference_grad`], analytic gradients checked by finite differences), the GPU
+//!   face setup ([`raster::setup`]) and the brute-force fine pass ([`raster::brute`]), driven by
 //!   [`raster::gpu::Renderer`].
 //!
 //! Every kernel has a CPU twin that tests compare it with.

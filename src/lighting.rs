@@ -11,40 +11,61 @@ use glam::DVec3;
 use crate::mesh::Mesh;
 
 /// SoftRas `F.normalize(.., eps=1e-6)`: a zero-area face gets a zero normal, not NaN.
-const NORMAL_EPS: f64 = 1e-6;
+pub const NORMAL_EPS: f64 = 1e-6;
 
-fn position(mesh: &Mesh, i: u32) -> DVec3 {
-    DVec3::from(mesh.positions[i as usize].map(f64::from))
+/// The mesh's positions in f64, the precision every lighting computation runs in.
+pub fn positions_f64(mesh: &Mesh) -> Vec<DVec3> {
+    mesh.positions
+        .iter()
+        .map(|p| DVec3::from(p.map(f64::from)))
+        .collect()
 }
 
 /// Un-normalized face normal `cross(v2 - v1, v0 - v1)` (twice the area, SPEC §1 orientation).
-fn face_normal_raw(mesh: &Mesh, face: [u32; 3]) -> DVec3 {
-    let [a, b, c] = face.map(|i| position(mesh, i));
+pub fn face_normal_raw(positions: &[DVec3], face: [u32; 3]) -> DVec3 {
+    let [a, b, c] = face.map(|i| positions[i as usize]);
     (c - b).cross(a - b)
 }
 
 /// Unit face normals `normalize(cross(v2 - v1, v0 - v1))`, one per face.
 pub fn face_normals(mesh: &Mesh) -> Vec<DVec3> {
-    mesh.faces
+    face_normals_of(&positions_f64(mesh), &mesh.faces)
+}
+
+/// [`face_normals`] of f64 positions.
+pub fn face_normals_of(positions: &[DVec3], faces: &[[u32; 3]]) -> Vec<DVec3> {
+    faces
         .iter()
         .map(|&f| {
-            let n = face_normal_raw(mesh, f);
+            let n = face_normal_raw(positions, f);
             n / n.length().max(NORMAL_EPS)
         })
         .collect()
 }
 
-/// Unit vertex normals: the normalized sum of the un-normalized (area-weighted) normals of the
-/// incident faces. An unused vertex gets a zero normal.
-pub fn vertex_normals(mesh: &Mesh) -> Vec<DVec3> {
-    let mut sum = vec![DVec3::ZERO; mesh.vertex_count()];
-    for &f in &mesh.faces {
-        let n = face_normal_raw(mesh, f);
+/// Un-normalized vertex normals: the sum of the un-normalized (area-weighted) normals of the
+/// incident faces, added in face order.
+pub fn vertex_normal_sums(positions: &[DVec3], faces: &[[u32; 3]]) -> Vec<DVec3> {
+    let mut sum = vec![DVec3::ZERO; positions.len()];
+    for &f in faces {
+        let n = face_normal_raw(positions, f);
         for i in f {
             sum[i as usize] += n;
         }
     }
-    sum.iter()
+    sum
+}
+
+/// Unit vertex normals: the normalized sum of the un-normalized (area-weighted) normals of the
+/// incident faces. An unused vertex gets a zero normal.
+pub fn vertex_normals(mesh: &Mesh) -> Vec<DVec3> {
+    vertex_normals_of(&positions_f64(mesh), &mesh.faces)
+}
+
+/// [`vertex_normals`] of f64 positions.
+pub fn vertex_normals_of(positions: &[DVec3], faces: &[[u32; 3]]) -> Vec<DVec3> {
+    vertex_normal_sums(positions, faces)
+        .iter()
         .map(|n| *n / n.length().max(NORMAL_EPS))
         .collect()
 }
@@ -118,14 +139,29 @@ impl Lighting {
     /// Surface mode: every texel of face f times `L(face normal f)`; `F * R²` colours in the
     /// mesh's texel order.
     pub fn apply_surface(&self, mesh: &Mesh) -> Vec<[f64; 3]> {
-        let r2 = (mesh.texture_res * mesh.texture_res) as usize;
-        let lights: Vec<[f64; 3]> = face_normals(mesh).iter().map(|&n| self.light(n)).collect();
-        mesh.textures
+        let texels: Vec<[f64; 3]> = mesh.textures.iter().map(|t| t.map(f64::from)).collect();
+        self.apply_surface_of(&positions_f64(mesh), &mesh.faces, mesh.texture_res, &texels)
+    }
+
+    /// [`Lighting::apply_surface`] of f64 positions and texels (`F * R²`, face-major).
+    pub fn apply_surface_of(
+        &self,
+        positions: &[DVec3],
+        faces: &[[u32; 3]],
+        texture_res: u32,
+        texels: &[[f64; 3]],
+    ) -> Vec<[f64; 3]> {
+        let r2 = (texture_res * texture_res) as usize;
+        let lights: Vec<[f64; 3]> = face_normals_of(positions, faces)
+            .iter()
+            .map(|&n| self.light(n))
+            .collect();
+        texels
             .iter()
             .enumerate()
             .map(|(i, t)| {
                 let l = lights[i / r2];
-                std::array::from_fn(|k| f64::from(t[k]) * l[k])
+                std::array::from_fn(|k| t[k] * l[k])
             })
             .collect()
     }
@@ -133,13 +169,27 @@ impl Lighting {
     /// Vertex mode: every vertex colour (white when the mesh has none) times
     /// `L(vertex normal)`; one colour per vertex.
     pub fn apply_vertex(&self, mesh: &Mesh) -> Vec<[f64; 3]> {
-        vertex_normals(mesh)
+        let colors: Option<Vec<[f64; 3]>> = mesh
+            .vertex_colors
+            .as_ref()
+            .map(|cs| cs.iter().map(|c| c.map(f64::from)).collect());
+        self.apply_vertex_of(&positions_f64(mesh), &mesh.faces, colors.as_deref())
+    }
+
+    /// [`Lighting::apply_vertex`] of f64 positions and colours (`None`: white).
+    pub fn apply_vertex_of(
+        &self,
+        positions: &[DVec3],
+        faces: &[[u32; 3]],
+        colors: Option<&[[f64; 3]]>,
+    ) -> Vec<[f64; 3]> {
+        vertex_normals_of(positions, faces)
             .iter()
             .enumerate()
             .map(|(v, &n)| {
                 let l = self.light(n);
-                let c = mesh.vertex_colors.as_ref().map_or([1.0; 3], |cs| cs[v]);
-                std::array::from_fn(|k| f64::from(c[k]) * l[k])
+                let c = colors.map_or([1.0; 3], |cs| cs[v]);
+                std::array::from_fn(|k| c[k] * l[k])
             })
             .collect()
     }

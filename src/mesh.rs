@@ -470,7 +470,7 @@ fn white_mesh(positions: Vec<DVec3>, faces: Vec<[u32; 3]>) -> Mesh {
     }
 }
 
-fn check_texture_res(res: u32) -> Result<(), MeshError> {
+pub(crate) fn check_texture_res(res: u32) -> Result<(), MeshError> {
     if res == 0 || res > MAX_TEXTURE_RES {
         return Err(MeshError::TextureRes(res));
     }

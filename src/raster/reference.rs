@@ -15,8 +15,8 @@
 use glam::DVec3;
 
 use crate::camera::{Camera, pixel_center};
-use crate::lighting::Lighting;
-use crate::mesh::{Mesh, MeshError};
+use crate::lighting::{Lighting, positions_f64};
+use crate::mesh::{Location, Mesh, MeshError, check_texture_res};
 
 /// ε_d of the SPEC: the coverage below which a face is ignored (`dist_eps` in SoftRas).
 pub const DIST_EPS: f64 = 1e-4;
@@ -144,6 +144,9 @@ pub enum RenderError {
     /// A setting is out of its domain.
     #[error("invalid raster settings: {0}")]
     Settings(String),
+    /// Other inputs do not fit together (e.g. a gradient image of the wrong size).
+    #[error("invalid input: {0}")]
+    Input(String),
 }
 
 /// Largest image side accepted (×2 with anti-aliasing stays far below any overflow).
@@ -197,6 +200,85 @@ fn sigmoid(x: f64) -> f64 {
     1.0 / (1.0 + (-x).exp())
 }
 
+/// A [`Mesh`] in f64: what the image depends on smoothly, in the precision the twin computes
+/// in. [`render`] converts to it; the backward ([`crate::raster::reference_grad`]) differentiates
+/// with respect to its positions and colours, and its tests perturb them without f32 rounding.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeshF64 {
+    /// World-space vertex positions.
+    pub positions: Vec<DVec3>,
+    /// Triangles as indices into `positions`.
+    pub faces: Vec<[u32; 3]>,
+    /// Texture resolution R.
+    pub texture_res: u32,
+    /// `faces.len() * R²` texels, face-major, as [`Mesh::textures`].
+    pub textures: Vec<[f64; 3]>,
+    /// Per-vertex colours (vertex colour mode); `None` means white.
+    pub vertex_colors: Option<Vec<[f64; 3]>>,
+}
+
+impl MeshF64 {
+    /// The same mesh, widened to f64.
+    pub fn from_mesh(mesh: &Mesh) -> MeshF64 {
+        let widen = |c: &[f32; 3]| c.map(f64::from);
+        MeshF64 {
+            positions: positions_f64(mesh),
+            faces: mesh.faces.clone(),
+            texture_res: mesh.texture_res,
+            textures: mesh.textures.iter().map(widen).collect(),
+            vertex_colors: mesh
+                .vertex_colors
+                .as_ref()
+                .map(|cs| cs.iter().map(widen).collect()),
+        }
+    }
+
+    /// [`Mesh::validate`]'s checks.
+    pub fn validate(&self) -> Result<(), MeshError> {
+        check_texture_res(self.texture_res)?;
+        if let Some(vertex) = self.positions.iter().position(|p| !p.is_finite()) {
+            return Err(MeshError::NonFiniteVertex {
+                vertex,
+                at: Location::default(),
+            });
+        }
+        if self.faces.is_empty() {
+            return Err(MeshError::NoFaces {
+                at: Location::default(),
+            });
+        }
+        let n = self.positions.len();
+        for (face, f) in self.faces.iter().enumerate() {
+            if let Some(&bad) = f.iter().find(|&&i| i as usize >= n) {
+                return Err(MeshError::FaceIndexOutOfRange {
+                    face,
+                    index: i64::from(bad),
+                    vertex_count: n,
+                    at: Location::default(),
+                });
+            }
+        }
+        let r2 = (self.texture_res * self.texture_res) as usize;
+        if self.textures.len() != self.faces.len() * r2 {
+            return Err(MeshError::TextureCount {
+                actual: self.textures.len(),
+                expected: self.faces.len() * r2,
+                faces: self.faces.len(),
+                res: self.texture_res,
+            });
+        }
+        if let Some(colors) = &self.vertex_colors
+            && colors.len() != n
+        {
+            return Err(MeshError::VertexColorCount {
+                actual: colors.len(),
+                expected: n,
+            });
+        }
+        Ok(())
+    }
+}
+
 /// Per-face data computed once before the pixel loop (SoftRas `faces_info`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FaceSetup {
@@ -221,13 +303,13 @@ pub fn is_front_facing(v: &[[f64; 3]; 3]) -> bool {
 }
 
 /// The screen determinant of `[[x0, x1, x2], [y0, y1, y2], [1, 1, 1]]`, unclamped.
-fn screen_det(v: &[[f64; 3]; 3]) -> f64 {
+pub(crate) fn screen_det(v: &[[f64; 3]; 3]) -> f64 {
     v[2][0] * (v[0][1] - v[1][1]) + v[0][0] * (v[1][1] - v[2][1]) + v[1][0] * (v[2][1] - v[0][1])
 }
 
 /// SoftRas's clamp: positive determinants to at least `MIN_DET`, others (zero included) to at
 /// most `-MIN_DET`.
-fn clamp_det(det: f64) -> f64 {
+pub(crate) fn clamp_det(det: f64) -> f64 {
     if det > 0.0 {
         det.max(MIN_DET)
     } else {
@@ -332,12 +414,17 @@ pub fn setup_face(v: [[f64; 3]; 3], dist: Dist, sigma: f64) -> FaceSetup {
 
 /// Screen-space vertices of every face.
 pub fn project_faces(mesh: &Mesh, camera: &Camera) -> Vec<[[f64; 3]; 3]> {
-    let screen: Vec<[f64; 3]> = mesh
-        .positions
-        .iter()
-        .map(|p| camera.to_screen(DVec3::from(p.map(f64::from))))
-        .collect();
-    mesh.faces
+    project_faces_of(&positions_f64(mesh), &mesh.faces, camera)
+}
+
+/// [`project_faces`] of f64 positions.
+pub fn project_faces_of(
+    positions: &[DVec3],
+    faces: &[[u32; 3]],
+    camera: &Camera,
+) -> Vec<[[f64; 3]; 3]> {
+    let screen: Vec<[f64; 3]> = positions.iter().map(|&p| camera.to_screen(p)).collect();
+    faces
         .iter()
         .map(|f| f.map(|i| screen[i as usize]))
         .collect()
@@ -471,14 +558,28 @@ pub enum FaceColors {
 impl FaceColors {
     /// Lights the mesh's colours for the given mode.
     pub fn new(mesh: &Mesh, lighting: &Lighting, mode: ColorMode) -> FaceColors {
+        FaceColors::of(&MeshF64::from_mesh(mesh), lighting, mode)
+    }
+
+    /// [`FaceColors::new`] of an f64 mesh.
+    pub fn of(mesh: &MeshF64, lighting: &Lighting, mode: ColorMode) -> FaceColors {
         match mode {
             ColorMode::Surface => FaceColors::Surface {
                 res: mesh.texture_res,
-                texels: lighting.apply_surface(mesh),
+                texels: lighting.apply_surface_of(
+                    &mesh.positions,
+                    &mesh.faces,
+                    mesh.texture_res,
+                    &mesh.textures,
+                ),
             },
             ColorMode::Vertex => FaceColors::Vertex {
                 faces: mesh.faces.clone(),
-                colors: lighting.apply_vertex(mesh),
+                colors: lighting.apply_vertex_of(
+                    &mesh.positions,
+                    &mesh.faces,
+                    mesh.vertex_colors.as_deref(),
+                ),
             },
         }
     }
@@ -501,24 +602,43 @@ impl FaceColors {
 }
 
 /// Running alpha aggregate over the non-ignored faces.
+///
+/// The product keeps its factors `1 − D` that are exactly 0 (a face whose coverage rounds to
+/// 1, as every pixel well inside a face does at SoftRas's σ) as a count, and multiplies only the
+/// others. The alpha is the same; but the backward's `∂A/∂D_j = Π_{k≠j}(1 − D_k)` then comes
+/// out exactly, from the count and the product, for every j, without re-running the faces
+/// (dividing the full product by `1 − D_j` would give 0/0).
 #[derive(Clone, Copy, Debug)]
 pub struct AlphaAccum {
     mode: Alpha,
-    /// Prod: `Π(1 − D)`; sum: `Σ D`; hard: 1 once any `D > 0.5`.
+    /// Prod: `Π(1 − D)` over the non-zero factors; sum: `Σ D`; hard: 1 once any `D > 0.5`.
     acc: f64,
+    /// Prod: how many factors `1 − D` were exactly 0.
+    zeros: u32,
 }
 
 impl AlphaAccum {
     /// Empty aggregate.
     pub fn new(mode: Alpha) -> AlphaAccum {
         let acc = if mode == Alpha::Prod { 1.0 } else { 0.0 };
-        AlphaAccum { mode, acc }
+        AlphaAccum {
+            mode,
+            acc,
+            zeros: 0,
+        }
     }
 
     /// Adds one face's coverage.
     pub fn add(&mut self, d: f64) {
         match self.mode {
-            Alpha::Prod => self.acc *= 1.0 - d,
+            Alpha::Prod => {
+                let factor = 1.0 - d;
+                if factor == 0.0 {
+                    self.zeros += 1;
+                } else {
+                    self.acc *= factor;
+                }
+            }
             Alpha::Sum => self.acc += d,
             Alpha::Hard => {
                 if d > 0.5 {
@@ -531,6 +651,7 @@ impl AlphaAccum {
     /// The pixel's alpha; `face_count` is the mesh's F for the sum mode.
     pub fn resolve(&self, face_count: usize) -> f64 {
         match self.mode {
+            Alpha::Prod if self.zeros > 0 => 1.0,
             Alpha::Prod => 1.0 - self.acc,
             Alpha::Sum => self.acc / face_count as f64,
             Alpha::Hard => self.acc,
@@ -582,6 +703,16 @@ impl SoftmaxAccum {
     pub fn resolve(&self) -> [f64; 3] {
         self.rgb.map(|c| c / self.sum)
     }
+
+    /// The running maximum of `z̄` (at least the background's ε).
+    pub fn max(&self) -> f64 {
+        self.max
+    }
+
+    /// The denominator, scaled by `e^{−max/γ}`.
+    pub fn sum(&self) -> f64 {
+        self.sum
+    }
 }
 
 /// Running hard colour: the nearest face whose pixel is inside (ties keep the first).
@@ -589,7 +720,11 @@ impl SoftmaxAccum {
 pub struct HardAccum {
     depth: f64,
     rgb: [f64; 3],
+    face: u32,
 }
+
+/// [`HardAccum::face`] and [`PixelAux::hard_face`] of the background.
+pub const NO_FACE: u32 = u32::MAX;
 
 impl HardAccum {
     /// Background only.
@@ -597,14 +732,16 @@ impl HardAccum {
         HardAccum {
             depth: f64::INFINITY,
             rgb: background,
+            face: NO_FACE,
         }
     }
 
-    /// Offers a face at depth `z`; kept if strictly nearer than all before.
-    pub fn add(&mut self, z: f64, color: [f64; 3]) {
+    /// Offers face `face` at depth `z`; kept if strictly nearer than all before.
+    pub fn add(&mut self, z: f64, color: [f64; 3], face: u32) {
         if z < self.depth {
             self.depth = z;
             self.rgb = color;
+            self.face = face;
         }
     }
 
@@ -612,6 +749,33 @@ impl HardAccum {
     pub fn resolve(&self) -> [f64; 3] {
         self.rgb
     }
+
+    /// The winning face, or [`NO_FACE`].
+    pub fn face(&self) -> u32 {
+        self.face
+    }
+}
+
+/// What the backward pass needs of a pixel's forward besides its colour: the running
+/// aggregates' final state, so that the backward visits each face once, independently of the
+/// others, and never re-runs the forward. One per *rendered* pixel (2× with anti-aliasing).
+///
+/// The f64 twin of the GPU's `PixelAux` (`raster_brute.comp`, [`crate::raster::brute::PixelAux`])
+/// extended by `alpha_zeros`; the GPU keeps the softmax maximum as the depth whose `z̄` it is,
+/// `softmax_max = (far − softmax_ref_depth) / (far − near)`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PixelAux {
+    /// Softmax: the running maximum of `z̄` (at least the background's ε).
+    pub softmax_max: f64,
+    /// Softmax: the denominator `S = Σ_j D_j e^{(z̄_j − max)/γ} + e^{(ε − max)/γ}`.
+    pub softmax_sum: f64,
+    /// Alpha prod: `Π(1 − D_j)` over the factors that are not exactly 0; sum: `Σ D_j`; hard: 0
+    /// or 1.
+    pub alpha_acc: f64,
+    /// Alpha prod: the number of factors `1 − D_j` that are exactly 0.
+    pub alpha_zeros: u32,
+    /// Hard colour: the face whose colour the pixel shows, or [`NO_FACE`].
+    pub hard_face: u32,
 }
 
 /// The fine pass for one pixel centre: every face, in order, into the running aggregates.
@@ -627,6 +791,18 @@ pub fn shade_pixel(
     s: &RasterSettings,
     cull: bool,
 ) -> [f64; 4] {
+    shade_pixel_aux(faces, colors, xp, yp, s, cull).0
+}
+
+/// [`shade_pixel`], also returning the aggregates' final state that the backward reads.
+pub fn shade_pixel_aux(
+    faces: &[FaceSetup],
+    colors: &FaceColors,
+    xp: f64,
+    yp: f64,
+    s: &RasterSettings,
+    cull: bool,
+) -> ([f64; 4], PixelAux) {
     let t = cutoff(s.sigma);
     let mut alpha = AlphaAccum::new(s.alpha);
     let mut soft = SoftmaxAccum::new(s.background, s.eps);
@@ -658,7 +834,7 @@ pub fn shade_pixel(
             }
             Rgb::Hard => {
                 if inside_closed(&w) {
-                    hard.add(z, colors.sample(j, &w_clip));
+                    hard.add(z, colors.sample(j, &w_clip), j as u32);
                 }
             }
         }
@@ -667,7 +843,14 @@ pub fn shade_pixel(
         Rgb::Softmax => soft.resolve(),
         Rgb::Hard => hard.resolve(),
     };
-    [rgb[0], rgb[1], rgb[2], alpha.resolve(faces.len())]
+    let aux = PixelAux {
+        softmax_max: soft.max(),
+        softmax_sum: soft.sum(),
+        alpha_acc: alpha.acc,
+        alpha_zeros: alpha.zeros,
+        hard_face: hard.face(),
+    };
+    ([rgb[0], rgb[1], rgb[2], alpha.resolve(faces.len())], aux)
 }
 
 /// Averages 2×2 blocks of a `2W × 2H` image into `W × H` (SoftRas `avg_pool2d(2, 2)`).
@@ -698,11 +881,30 @@ pub fn render(
     lighting: &Lighting,
     settings: &RasterSettings,
 ) -> Result<Vec<[f64; 4]>, RenderError> {
+    render_f64(&MeshF64::from_mesh(mesh), camera, lighting, settings)
+}
+
+/// [`render`] of an f64 mesh: the same pass, with positions and colours that are not rounded
+/// to f32 (finite differences of the backward's tests perturb them by 1e-6).
+pub fn render_f64(
+    mesh: &MeshF64,
+    camera: &Camera,
+    lighting: &Lighting,
+    settings: &RasterSettings,
+) -> Result<Vec<[f64; 4]>, RenderError> {
     render_impl(mesh, camera, lighting, settings, true)
 }
 
+/// The faces of one view after the setup pass.
+pub fn setup_view(mesh: &MeshF64, camera: &Camera, settings: &RasterSettings) -> Vec<FaceSetup> {
+    project_faces_of(&mesh.positions, &mesh.faces, camera)
+        .into_iter()
+        .map(|v| setup_face(v, settings.dist, settings.sigma))
+        .collect()
+}
+
 fn render_impl(
-    mesh: &Mesh,
+    mesh: &MeshF64,
     camera: &Camera,
     lighting: &Lighting,
     settings: &RasterSettings,
@@ -710,11 +912,8 @@ fn render_impl(
 ) -> Result<Vec<[f64; 4]>, RenderError> {
     mesh.validate()?;
     settings.validate()?;
-    let colors = FaceColors::new(mesh, lighting, settings.color_mode);
-    let faces: Vec<FaceSetup> = project_faces(mesh, camera)
-        .into_iter()
-        .map(|v| setup_face(v, settings.dist, settings.sigma))
-        .collect();
+    let colors = FaceColors::of(mesh, lighting, settings.color_mode);
+    let faces = setup_view(mesh, camera, settings);
     let scale = if settings.antialias { 2 } else { 1 };
     let (w, h) = (settings.width * scale, settings.height * scale);
     let mut image = Vec::with_capacity((w * h) as usize);
@@ -1375,6 +1574,7 @@ mod tests {
                 };
                 let cam = Camera::default();
                 let lit = Lighting::default();
+                let mesh = MeshF64::from_mesh(&mesh);
                 let culled = render_impl(&mesh, &cam, &lit, &s, true).unwrap();
                 let brute = render_impl(&mesh, &cam, &lit, &s, false).unwrap();
                 assert_eq!(culled, brute, "{dist:?} {rgb:?}");
