@@ -1,5 +1,7 @@
-// The per-pixel fine pass shared by `raster_brute.comp` and `raster_tiled.comp`: bindings 0–4,
-// the push constants, and the step that folds one face into a pixel's running state. Both kernels
+// The per-pixel fine pass shared by `raster_brute.comp` and `raster_tiled.comp` (and, for its
+// bindings and push constants, by the backward kernels, which define FINE_BACKWARD: they read
+// the image and aux): bindings 0–4, the push constants, and the step that folds one face into a
+// pixel's running state. Both kernels
 // call `shade_face` for the same faces in the same (index) order, so their pixels are bit for bit
 // the same; they differ only in which faces they visit (all, or their tile's). Twin:
 // `reference::shade_pixel`, step for step.
@@ -24,12 +26,18 @@ struct PixelAux {
 layout(std430, set = 0, binding = 0) readonly buffer Setups { FaceSetup setups[]; };
 layout(std430, set = 0, binding = 1) readonly buffer Colors { float colors[]; };
 layout(std430, set = 0, binding = 2) readonly buffer Faces { uint faces[]; };
+#ifdef FINE_BACKWARD
+layout(std430, set = 0, binding = 3) readonly buffer Image { vec4 image[]; };
+layout(std430, set = 0, binding = 4) readonly buffer Aux { PixelAux aux[]; };
+#else
 layout(std430, set = 0, binding = 3) writeonly buffer Image { vec4 image[]; };
 layout(std430, set = 0, binding = 4) writeonly buffer Aux { PixelAux aux[]; };
+#endif
 
 #define FLAG_DOUBLE_SIDED 1u
 #define FLAG_VERTEX_COLORS 2u
 #define FLAG_CULL 4u
+#define FLAG_ANTIALIAS 8u
 
 // Twin of `RasterPush` (src/raster/fine.rs).
 layout(push_constant) uniform Push {
@@ -54,6 +62,10 @@ layout(push_constant) uniform Push {
     uint tiles_x;          // tiled only: tiles per row, per column
     uint tiles_y;
     uint vertex_count;     // vertices per mesh of the batch (vertex colours)
+    uint out_width;        // backward: output size (the upstream gradient's; half with AA)
+    uint out_height;
+    uint entry_total;      // backward, tiled: (face, tile) entries of the view group
+    uint grad_stride;      // backward: floats per face gradient (9 screen + colour slots × 3)
 } pc;
 
 // `FaceColors::sample`: C_j at clipped barycentrics w̃, from the colours of mesh `mesh` of the
@@ -126,6 +138,7 @@ void shade_face(inout PixelState s, FaceSetup f, uint j, vec2 p) {
     }
 }
 
+#ifndef FINE_BACKWARD
 // Writes the pixel's colour and aux at index `id` of the image.
 void pixel_finish(PixelState s, uint id) {
     vec3 rgb = pc.rgb == RGB_SOFTMAX ? softmax_resolve(s.soft) : s.hard_rgb;
@@ -141,5 +154,6 @@ void pixel_finish(PixelState s, uint id) {
     a.pad2 = 0u;
     aux[id] = a;
 }
+#endif
 
 #endif

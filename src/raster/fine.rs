@@ -67,11 +67,16 @@ pub(crate) struct RasterPush {
     pub tiles_x: u32,
     pub tiles_y: u32,
     pub vertex_count: u32,
+    pub out_width: u32,
+    pub out_height: u32,
+    pub entry_total: u32,
+    pub grad_stride: u32,
 }
 
 const FLAG_DOUBLE_SIDED: u32 = 1;
 const FLAG_VERTEX_COLORS: u32 = 2;
 const FLAG_CULL: u32 = 4;
+pub(crate) const FLAG_ANTIALIAS: u32 = 8;
 
 impl RasterPush {
     /// The push constants for `view_count` views of a `width × height` rendered image (first
@@ -142,6 +147,10 @@ impl RasterPush {
             tiles_x: 0,
             tiles_y: 0,
             vertex_count,
+            out_width: 0,
+            out_height: 0,
+            entry_total: 0,
+            grad_stride: 0,
         }
     }
 }

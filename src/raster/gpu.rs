@@ -22,9 +22,11 @@ use crate::gpu::{Buffer, Context, MemoryKind, Recorder};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::primitives::binning::{self, BinJob, Binner, Bins, ItemLayout, TileGrid};
+use crate::raster::backward::{GradBuffers, GradKernels};
 use crate::raster::brute::{BruteBindings, BruteRaster};
 use crate::raster::fine::{PixelAux, TiledBindings, TiledRaster, check_tile_size};
-use crate::raster::reference::{ColorMode, FaceColors, RasterSettings};
+use crate::raster::reference::{ColorMode, FaceColors, MeshF64, RasterSettings};
+use crate::raster::reference_grad::Gradients;
 use crate::raster::setup::{FACE_FINITE, FaceSetupKernel, GpuFaceSetup, GpuView};
 
 /// Tile edge (pixels) of [`Method::default`]. Chosen by `softvk bench` on lavapipe; see
@@ -88,35 +90,40 @@ pub struct Renderer {
     brute: BruteRaster,
     tiled: TiledRaster,
     binner: Binner,
+    grad: GradKernels,
     entry_budget: Option<u64>,
 }
 
 /// A scene on the GPU: mesh, lit colours, views, and every buffer of its forward pass, kept so
 /// the scene can be rendered again without re-uploading (the bins grow, never shrink).
 pub struct GpuScene {
-    settings: RasterSettings,
-    face_count: u32,
-    vertex_count: u32,
-    view_count: u32,
-    texture_res: u32,
+    pub(crate) settings: RasterSettings,
+    pub(crate) face_count: u32,
+    pub(crate) vertex_count: u32,
+    pub(crate) view_count: u32,
+    pub(crate) texture_res: u32,
     /// Rendered size (2× the output with anti-aliasing).
-    width: u32,
-    height: u32,
-    positions: Buffer,
-    faces: Buffer,
-    colors: Buffer,
-    views: Buffer,
-    setups: Buffer,
-    image: Buffer,
-    aux: Buffer,
+    pub(crate) width: u32,
+    pub(crate) height: u32,
+    pub(crate) positions: Buffer,
+    pub(crate) faces: Buffer,
+    pub(crate) colors: Buffer,
+    pub(crate) views: Buffer,
+    pub(crate) setups: Buffer,
+    pub(crate) image: Buffer,
+    pub(crate) aux: Buffer,
     small: Option<Buffer>,
     /// Bins per view group: group `i` of the last tiled run used `bins[i]`. They are kept (the
     /// backward pass reuses them: no second binning) and grow, never shrink.
-    bins: Vec<Bins>,
+    pub(crate) bins: Vec<Bins>,
     /// The view groups of the last tiled render.
-    groups: Vec<ViewGroup>,
+    pub(crate) groups: Vec<ViewGroup>,
     /// The tile size of the last tiled render.
-    tile: Option<u32>,
+    pub(crate) tile: Option<u32>,
+    /// The batch's meshes in f64, the lighting and the views, for the backward's host share.
+    pub(crate) meshes: Vec<MeshF64>,
+    pub(crate) lighting: Lighting,
+    pub(crate) views_host: Vec<(usize, Camera)>,
 }
 
 /// Views binned together: `first .. first + views`, with their (face, tile) entry count.
@@ -189,7 +196,7 @@ impl GpuScene {
     }
 
     /// The tile grid of `tile`-pixel tiles over the rendered image.
-    fn grid(&self, tile: u32) -> Result<TileGrid> {
+    pub(crate) fn grid(&self, tile: u32) -> Result<TileGrid> {
         TileGrid::new(self.width, self.height, tile)
     }
 
@@ -231,6 +238,7 @@ impl Renderer {
             brute: BruteRaster::new(ctx)?,
             tiled: TiledRaster::new(ctx)?,
             binner: Binner::new(ctx)?,
+            grad: GradKernels::new(ctx)?,
             entry_budget: None,
         })
     }
@@ -376,6 +384,9 @@ impl Renderer {
             bins: Vec::new(),
             groups: Vec::new(),
             tile: None,
+            meshes: meshes.iter().map(MeshF64::from_mesh).collect(),
+            lighting: lighting.clone(),
+            views_host: views.to_vec(),
         })
     }
 
@@ -608,6 +619,29 @@ impl Renderer {
             }
         }
         self.record_downsample(rec, scene)
+    }
+
+    /// The backward's pipelines (for callers that record the backward themselves).
+    pub fn grad_kernels(&self) -> &GradKernels {
+        &self.grad
+    }
+
+    /// The backward of the last forward run of `scene`: dL/d(world positions, raw colours, and
+    /// with `cameras` the cameras) given `d_image` = dL/d(output RGBA), view-major. `method`
+    /// picks how faces meet pixels; tiled needs the forward to have run with the same tiles.
+    /// One submission; the host adds lighting's and the cameras' share in f64.
+    pub fn backward(
+        &self,
+        ctx: &Context,
+        scene: &GpuScene,
+        d_image: &[[f32; 4]],
+        method: Method,
+        cameras: bool,
+    ) -> Result<Gradients> {
+        let gb = GradBuffers::new(ctx, scene, method)?;
+        gb.set_d_image(ctx, scene, d_image)?;
+        ctx.submit_and_wait(|rec| self.grad.record(rec, scene, &gb))?;
+        self.grad.finish(ctx, scene, &gb, cameras)
     }
 
     /// Reads back the images and aux of the last run.

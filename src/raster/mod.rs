@@ -4,6 +4,7 @@
 //! ([`fine`]) and the brute-force baseline ([`brute`]), bit for bit the same — driven by
 //! [`gpu`].
 
+pub mod backward;
 pub mod brute;
 pub mod fine;
 pub mod gpu;

@@ -1,0 +1,252 @@
+// The backward of the fine pass, per (pixel, face): the f32 twin of
+// `reference_grad::pixel_face_grad`, step for step. Shared by `grad_tiled.comp` (faces of a
+// tile) and `grad_brute.comp` (every pixel for every face). Each face's contribution at a pixel
+// needs only the pixel's upstream gradient and the forward's aggregates (`PixelAux`), never the
+// other faces: one pass over the faces suffices, and the result does not depend on their order.
+//
+// Includers define FINE_BACKWARD before including this (the image and aux are read).
+#ifndef SOFTVK_RASTER_GRAD_GLSL
+#define SOFTVK_RASTER_GRAD_GLSL
+
+#include "raster_fine.glsl"
+
+// dL/d(output RGBA), output resolution, view-major.
+layout(std430, set = 0, binding = 5) readonly buffer DImage { vec4 d_image[]; };
+
+// `reference_grad::PixelUpstream`.
+struct Upstream {
+    vec2 p;            // pixel centre
+    vec3 d_rgb;        // dL/d(rendered RGB)
+    float d_alpha;     // dL/d(rendered alpha)
+    float d_dot;       // d_rgb · I
+    float inv_sum;     // 1 / S (softmax)
+    float ref_depth;   // the softmax's reference depth
+    float alpha_acc;
+    uint alpha_zeros;
+    uint hard_face;
+};
+
+Upstream zero_upstream() {
+    Upstream u;
+    u.p = vec2(0.0);
+    u.d_rgb = vec3(0.0);
+    u.d_alpha = 0.0;
+    u.d_dot = 0.0;
+    u.inv_sum = 0.0;
+    u.ref_depth = 0.0;
+    u.alpha_acc = 0.0;
+    u.alpha_zeros = 0u;
+    u.hard_face = 0xffffffffu;
+    return u;
+}
+
+bool upstream_is_zero(Upstream u) {
+    return u.d_alpha == 0.0 && u.d_rgb == vec3(0.0);
+}
+
+// The upstream of rendered pixel (col, row) of view `view` (absolute): with anti-aliasing, the
+// output pixel's gradient / 4 (`reference_grad::upsample_grad_2x2`).
+Upstream load_upstream(uint view, uint col, uint row) {
+    uint id = view * pc.width * pc.height + row * pc.width + col;
+    vec4 g;
+    if ((pc.flags & FLAG_ANTIALIAS) != 0u) {
+        g = d_image[view * pc.out_width * pc.out_height + (row / 2u) * pc.out_width + col / 2u]
+          / 4.0;
+    } else {
+        g = d_image[id];
+    }
+    vec4 rgba = image[id];
+    PixelAux a = aux[id];
+    Upstream u;
+    u.p = pixel_center(col, row, pc.width, pc.height);
+    u.d_rgb = g.rgb;
+    u.d_alpha = g.a;
+    u.d_dot = dot(g.rgb, rgba.rgb);
+    u.inv_sum = 1.0 / a.softmax_sum;
+    u.ref_depth = a.softmax_ref_depth;
+    u.alpha_acc = a.alpha_acc;
+    u.alpha_zeros = a.alpha_zeros;
+    u.hard_face = a.hard_face;
+    return u;
+}
+
+// `PixelUpstream::alpha_grad`: dL/dA · ∂A/∂D_j, exact from the zero count.
+float alpha_grad(Upstream u, float d) {
+    if (pc.alpha == ALPHA_PROD) {
+        float factor = 1.0 - d;
+        float others = 0.0;
+        if (factor == 0.0) {
+            others = u.alpha_zeros == 1u ? u.alpha_acc : 0.0;
+        } else if (u.alpha_zeros == 0u) {
+            others = u.alpha_acc / factor;
+        }
+        return u.d_alpha * others;
+    }
+    if (pc.alpha == ALPHA_SUM) {
+        return u.d_alpha / float(pc.face_count);
+    }
+    return 0.0;
+}
+
+// sigmoid'(x) without the cancellation of D (1 - D).
+float sigmoid_grad(float x) {
+    float e = exp(-abs(x));
+    return e / ((1.0 + e) * (1.0 + e));
+}
+
+// One (pixel, face) contribution: dL/d(screen vertex (x_s, y_s, z)) of each corner, and the
+// colour parameters' share: surface, `color[0]` for texel `texel`; vertex, `color[k]` for
+// corner k. `colored` is false where the face adds no colour at the pixel.
+struct FaceGrad {
+    vec3 screen[3];
+    vec3 color[3];
+    uint texel;
+    bool colored;
+};
+
+// `reference_grad::pixel_face_grad`. False where the face does not touch the pixel.
+bool pixel_face_grad(FaceSetup f, uint j, Upstream u, out FaceGrad g) {
+    g.screen[0] = vec3(0.0);
+    g.screen[1] = vec3(0.0);
+    g.screen[2] = vec3(0.0);
+    g.color[0] = vec3(0.0);
+    g.color[1] = vec3(0.0);
+    g.color[2] = vec3(0.0);
+    g.texel = 0u;
+    g.colored = false;
+    vec2 p = u.p;
+    if ((f.flags & FACE_FINITE) == 0u || outside_bbox(f.bbox, p)) {
+        return false;
+    }
+    vec3 w = barycentric(f, p);
+    float d;
+    if (!coverage(f, w, p, pc.dist, pc.sigma, pc.cutoff, d)) {
+        return false;
+    }
+    vec3 wc = clip_barycentric(w);
+    float z;
+    bool in_range = depth_in_range(f, wc, pc.near, pc.far, z);
+    bool double_sided = (pc.flags & FLAG_DOUBLE_SIDED) != 0u;
+    g.colored = in_range && (double_sided || (f.flags & FACE_FRONT) != 0u);
+
+    float d_cov = alpha_grad(u, d);
+    vec3 d_color = vec3(0.0);
+    float d_z = 0.0;
+    vec3 c = vec3(0.0);
+    if (g.colored) {
+        c = sample_color(f.mesh, j, wc);
+        if (pc.rgb == RGB_SOFTMAX) {
+            float e = exp((u.ref_depth - z) * pc.inv_gamma_range);
+            float weight = d * e;
+            float q = (dot(u.d_rgb, c) - u.d_dot) * u.inv_sum;
+            d_color = u.d_rgb * (weight * u.inv_sum);
+            d_cov += q * e;
+            d_z = -q * weight * pc.inv_gamma_range;
+        } else if (u.hard_face == j) {
+            d_color = u.d_rgb;
+        }
+    }
+
+    // Through w̃: depth and (vertex mode) colour.
+    vec3 d_wc = vec3(0.0);
+    if (d_z != 0.0) {
+        float d_inv = -z * z * d_z;
+        for (uint k = 0u; k < 3u; ++k) {
+            float zk = f.v[k].z;
+            d_wc[k] += d_inv / zk;
+            g.screen[k].z -= d_inv * wc[k] / (zk * zk);
+        }
+    }
+    if (g.colored) {
+        if ((pc.flags & FLAG_VERTEX_COLORS) != 0u) {
+            uvec3 vi = uvec3(faces[3u * j], faces[3u * j + 1u], faces[3u * j + 2u])
+                     + f.mesh * pc.vertex_count;
+            for (uint k = 0u; k < 3u; ++k) {
+                vec3 ck = vec3(colors[3u * vi[k]], colors[3u * vi[k] + 1u], colors[3u * vi[k] + 2u]);
+                d_wc[k] += dot(d_color, ck);
+                g.color[k] = d_color * wc[k];
+            }
+        } else {
+            g.texel = surface_texel_index(wc, pc.texture_res);
+            g.color[0] = d_color;
+        }
+    }
+
+    // Clip: c = clamp(w, 0, 1), w̃ = c / max(Σc, floor).
+    vec3 cl = clamp(w, 0.0, 1.0);
+    float raw_sum = cl.x + cl.y + cl.z;
+    float sum = max(raw_sum, CLIP_SUM_FLOOR);
+    float renorm = raw_sum >= CLIP_SUM_FLOOR ? dot(d_wc, wc) : 0.0;
+    vec3 d_w;
+    for (uint k = 0u; k < 3u; ++k) {
+        d_w[k] = (w[k] > 0.0 && w[k] < 1.0) ? (d_wc[k] - renorm) / sum : 0.0;
+    }
+
+    // Coverage.
+    vec2 d_xy_cov[3] = vec2[3](vec2(0.0), vec2(0.0), vec2(0.0));
+    if (d_cov != 0.0) {
+        if (pc.dist == DIST_BARYCENTRIC) {
+            uint k = 0u;
+            if (w[1] < w[k]) k = 1u;
+            if (w[2] < w[k]) k = 2u;
+            float m = w[k];
+            float x = m * abs(m) / pc.sigma;
+            d_w[k] += d_cov * sigmoid_grad(x) * 2.0 * abs(m) / pc.sigma;
+        } else if (pc.dist == DIST_EUCLIDEAN) {
+            // The nearest edge as `euclidean_dist2` picks it (the first of equals).
+            float best = uintBitsToFloat(0x7f800000u);
+            uint ea = 0u;
+            uint eb = 1u;
+            for (uint i = 0u; i < 3u; ++i) {
+                uint jj = i == 2u ? 0u : i + 1u;
+                float d2 = dist2_point_segment(p, f.v[i].xy, f.v[jj].xy);
+                if (d2 < best) {
+                    best = d2;
+                    ea = i;
+                    eb = jj;
+                }
+            }
+            vec2 a = f.v[ea].xy;
+            vec2 b = f.v[eb].xy;
+            float ex = b.x - a.x;
+            float ey = b.y - a.y;
+            float len2 = ex * ex + ey * ey;
+            float t = 0.0;
+            if (len2 > 0.0) {
+                t = clamp(((p.x - a.x) * ex + (p.y - a.y) * ey) / len2, 0.0, 1.0);
+            }
+            float sgn = strictly_inside(w) ? 1.0 : -1.0;
+            float d_d2 = d_cov * sigmoid_grad(sgn * best / pc.sigma) * sgn / pc.sigma;
+            vec2 r = vec2(a.x + t * ex - p.x, a.y + t * ey - p.y);
+            d_xy_cov[ea] += d_d2 * 2.0 * (1.0 - t) * r;
+            d_xy_cov[eb] += d_d2 * 2.0 * t * r;
+        }
+    }
+
+    // Barycentrics w_k = n_k / det, det the clamped determinant (constant where clamped).
+    vec2 v0 = f.v[0].xy;
+    vec2 v1 = f.v[1].xy;
+    vec2 v2 = f.v[2].xy;
+    precise float ta = (v1.x - v0.x) * (v2.y - v0.y);
+    precise float tb = (v2.x - v0.x) * (v1.y - v0.y);
+    precise float det_raw = ta - tb;
+    float det = det_raw > 0.0 ? max(det_raw, MIN_DET) : min(det_raw, -MIN_DET);
+    float d_det = det != det_raw ? 0.0 : -dot(d_w, w) / det;
+    vec2 d_xy[3] = vec2[3](vec2(0.0), vec2(0.0), vec2(0.0));
+    for (uint k = 0u; k < 3u; ++k) {
+        uint ia = k == 2u ? 0u : k + 1u;
+        uint ib = k == 0u ? 2u : k - 1u;
+        vec2 va = f.v[ia].xy;
+        vec2 vb = f.v[ib].xy;
+        float d_n = d_w[k] / det;
+        d_xy[ia] += d_n * vec2(vb.y - p.y, p.x - vb.x);
+        d_xy[ib] += d_n * vec2(p.y - va.y, va.x - p.x);
+        d_xy[k] += d_det * vec2(va.y - vb.y, vb.x - va.x);
+    }
+    for (uint k = 0u; k < 3u; ++k) {
+        g.screen[k].xy += d_xy[k] + d_xy_cov[k];
+    }
+    return true;
+}
+
+#endif

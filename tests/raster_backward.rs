@@ -1,0 +1,455 @@
+//! The GPU backward (tiled at 8, 16, 32, and brute force) against the f64 twin
+//! `raster::reference_grad` (itself checked against central finite differences), on lavapipe
+//! with validation on; determinism; and gradient descent on one triangle's silhouette.
+//!
+//! Bound (issue #4): every component within 1e-3 of the largest component's magnitude, for
+//! positions, colours and cameras separately; tiled and brute agree to the same bound.
+
+mod common;
+
+use glam::DVec3;
+use rand::RngExt;
+use softvk::camera::{Camera, Projection};
+use softvk::lighting::{Directional, Lighting};
+use softvk::mesh::Mesh;
+use softvk::raster::gpu::{GpuScene, Method, Renderer};
+use softvk::raster::reference::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
+use softvk::raster::reference_grad::{self, Gradients};
+
+const REL: f64 = 1e-3;
+const METHODS: [Method; 4] = [
+    Method::Brute,
+    Method::Tiled { tile: 8 },
+    Method::Tiled { tile: 16 },
+    Method::Tiled { tile: 32 },
+];
+
+fn lighting() -> Lighting {
+    Lighting {
+        ambient_intensity: 0.4,
+        ambient_color: [1.0, 0.9, 0.8],
+        directionals: vec![Directional {
+            intensity: 0.6,
+            color: [1.0, 1.0, 0.9],
+            direction: [0.3, 0.5, -0.8],
+        }],
+    }
+}
+
+fn random_colors(n: usize, seed: u64) -> Vec<[f32; 3]> {
+    let mut rng = common::rng(seed);
+    (0..n)
+        .map(|_| std::array::from_fn(|_| rng.random_range(0.1..0.9)))
+        .collect()
+}
+
+/// A jittered icosphere(1) (80 faces) plus two triangles in front of and behind it, random
+/// texels at resolution `res` and random vertex colours.
+fn scene(res: u32, seed: u64) -> Mesh {
+    let mut rng = common::rng(seed);
+    let ico = Mesh::icosphere(1);
+    let mut positions: Vec<[f32; 3]> = ico
+        .positions
+        .iter()
+        .map(|p| p.map(|c| c * 0.6 + rng.random_range(-0.03..0.03)))
+        .collect();
+    let mut faces = ico.faces.clone();
+    for (z, flip) in [(-0.7f32, false), (0.5, true)] {
+        let base = positions.len() as u32;
+        positions.extend([
+            [-0.8 + rng.random_range(-0.05..0.05), -0.3, z],
+            [0.1, 0.7 + rng.random_range(-0.05..0.05), z],
+            [0.5, -0.6, z + 0.1],
+        ]);
+        faces.push(if flip {
+            [base, base + 2, base + 1]
+        } else {
+            [base, base + 1, base + 2]
+        });
+    }
+    let mut mesh = Mesh::new(positions, faces, res).unwrap();
+    mesh.textures = random_colors(mesh.textures.len(), seed + 1);
+    mesh.vertex_colors = Some(random_colors(mesh.vertex_count(), seed + 2));
+    mesh
+}
+
+fn weights(n: usize, seed: u64) -> Vec<[f32; 4]> {
+    let mut rng = common::rng(seed);
+    (0..n)
+        .map(|_| std::array::from_fn(|_| rng.random_range(-1.0..1.0)))
+        .collect()
+}
+
+/// Largest |a − b| relative to the largest |b| of a component family.
+fn rel_err(a: &[[f64; 3]], b: &[[f64; 3]]) -> (f64, f64) {
+    assert_eq!(a.len(), b.len());
+    let scale = b.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+    let err = a
+        .iter()
+        .flatten()
+        .zip(b.iter().flatten())
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    (err / scale.max(1e-30), scale)
+}
+
+fn camera_rows(g: &Gradients) -> Vec<[f64; 3]> {
+    g.cameras.iter().flat_map(|c| [c.eye, c.at, c.up]).collect()
+}
+
+/// Asserts `got` within [`REL`] of `want`, per family; returns the worst relative error.
+fn assert_close(what: &str, got: &Gradients, want: &Gradients, cameras: bool) -> f64 {
+    let mut worst = 0.0f64;
+    let mut families = vec![
+        ("positions", rel_err(&got.positions, &want.positions)),
+        ("colours", rel_err(&got.colors, &want.colors)),
+    ];
+    if cameras {
+        families.push(("cameras", rel_err(&camera_rows(got), &camera_rows(want))));
+    }
+    for (family, (err, scale)) in families {
+        assert!(scale > 0.0, "{what}: {family} gradient is all zero");
+        assert!(
+            err <= REL,
+            "{what}: {family} differ by {err:.2e} of the largest ({scale:.3e})"
+        );
+        worst = worst.max(err);
+    }
+    worst
+}
+
+fn forward(
+    r: &Renderer,
+    gpu: &common::Gpu,
+    mesh: &Mesh,
+    cams: &[Camera],
+    s: &RasterSettings,
+    method: Method,
+) -> GpuScene {
+    let mut scene = r.prepare(gpu, mesh, cams, &lighting(), s).unwrap();
+    r.run(gpu, &mut scene, method).unwrap();
+    scene
+}
+
+/// GPU (every method) vs the twin, and tiled vs brute, on one configuration.
+fn check(
+    r: &Renderer,
+    gpu: &common::Gpu,
+    what: &str,
+    mesh: &Mesh,
+    cams: &[Camera],
+    s: &RasterSettings,
+) -> f64 {
+    let n = (s.width * s.height) as usize * cams.len();
+    let w = weights(n, 99);
+    let w64: Vec<[f64; 4]> = w.iter().map(|g| g.map(f64::from)).collect();
+    let want = reference_grad::grad(mesh, cams, &lighting(), s, &w64).unwrap();
+    let cameras = cams
+        .iter()
+        .all(|c| !matches!(c.projection, Projection::Matrix { .. }));
+    let mut worst = 0.0f64;
+    let mut brute: Option<Gradients> = None;
+    for method in METHODS {
+        let scene = forward(r, gpu, mesh, cams, s, method);
+        let got = r
+            .backward(gpu, &scene, &w, method, cameras)
+            .unwrap_or_else(|e| panic!("{what} {method:?}: {e}"));
+        worst = worst.max(assert_close(
+            &format!("{what} {method:?} vs twin"),
+            &got,
+            &want,
+            cameras,
+        ));
+        match &brute {
+            None => brute = Some(got),
+            Some(b) => {
+                assert_close(&format!("{what} {method:?} vs brute"), &got, b, cameras);
+            }
+        }
+    }
+    worst
+}
+
+fn settings(w: u32, h: u32) -> RasterSettings {
+    RasterSettings {
+        width: w,
+        height: h,
+        sigma: 2e-2,
+        gamma: 5e-2,
+        near: 0.5,
+        far: 10.0,
+        ..RasterSettings::default()
+    }
+}
+
+#[test]
+fn gpu_gradients_match_the_twin_in_every_differentiable_mode() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let cams = [
+        Camera::from_angles(2.732, 15.0, 20.0),
+        Camera::from_angles(2.5, -10.0, 150.0),
+    ];
+    let ortho = [Camera {
+        projection: Projection::Orthographic { scale: 0.9 },
+        ..Camera::from_angles(2.732, 25.0, -40.0)
+    }];
+    let mut worst = 0.0f64;
+    let mut i = 0;
+    for dist in [Dist::Euclidean, Dist::Barycentric] {
+        for alpha in [Alpha::Prod, Alpha::Sum] {
+            for (color_mode, res) in [
+                (ColorMode::Surface, 1),
+                (ColorMode::Surface, 2),
+                (ColorMode::Vertex, 1),
+            ] {
+                let mesh = scene(res, 10 + i);
+                let s = RasterSettings {
+                    dist,
+                    alpha,
+                    color_mode,
+                    double_sided: i % 2 == 0,
+                    antialias: i % 5 == 1,
+                    ..settings(if i % 3 == 0 { 20 } else { 16 }, 16)
+                };
+                let views: &[Camera] = if i % 4 == 3 { &ortho } else { &cams };
+                let what = format!("#{i} {dist:?} {alpha:?} {color_mode:?} R={res}");
+                worst = worst.max(check(&r, &gpu, &what, &mesh, views, &s));
+                i += 1;
+            }
+        }
+    }
+    eprintln!("worst relative difference to the twin: {worst:.2e}");
+}
+
+/// Hard colour, hard coverage and the matrix projection: the a.e. derivative, same bound.
+#[test]
+fn hard_modes_and_the_matrix_projection_match_the_twin() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let mesh = scene(1, 3);
+    let cams = [Camera::from_angles(2.732, 15.0, 20.0)];
+    let hard_rgb = RasterSettings {
+        rgb: Rgb::Hard,
+        color_mode: ColorMode::Vertex,
+        ..settings(16, 16)
+    };
+    check(&r, &gpu, "hard rgb", &mesh, &cams, &hard_rgb);
+    let hard_dist = RasterSettings {
+        dist: Dist::Hard,
+        alpha: Alpha::Sum,
+        color_mode: ColorMode::Vertex,
+        ..settings(16, 16)
+    };
+    check(&r, &gpu, "hard dist", &mesh, &cams, &hard_dist);
+    let cam = Camera::from_angles(2.732, 20.0, 35.0);
+    let rot = softvk::camera::look_at(cam.eye, DVec3::ZERO, DVec3::Y);
+    let t: Vec<f64> = rot
+        .iter()
+        .map(|row| -DVec3::from(*row).dot(cam.eye))
+        .collect();
+    let f = 8.0 / 30f64.to_radians().tan();
+    let mut p = [[0.0; 4]; 3];
+    for j in 0..3 {
+        p[0][j] = f * rot[0][j] + 8.0 * rot[2][j];
+        p[1][j] = f * rot[1][j] + 8.0 * rot[2][j];
+        p[2][j] = rot[2][j];
+    }
+    p[0][3] = f * t[0] + 8.0 * t[2];
+    p[1][3] = f * t[1] + 8.0 * t[2];
+    p[2][3] = t[2];
+    let matrix = [Camera {
+        projection: Projection::Matrix {
+            p,
+            dist_coeffs: [1e-3, 0.0, 1e-4, -1e-4, 0.0],
+            orig_size: 16.0,
+        },
+        ..cam
+    }];
+    check(&r, &gpu, "matrix", &mesh, &matrix, &settings(16, 16));
+}
+
+#[test]
+fn repeated_backward_runs_are_bit_identical() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let mesh = scene(2, 5);
+    let cams = [Camera::from_angles(2.732, 15.0, 20.0)];
+    let s = settings(24, 16);
+    let w = weights(24 * 16, 7);
+    let bits = |g: &Gradients| -> Vec<u64> {
+        g.positions
+            .iter()
+            .chain(&g.colors)
+            .chain(&camera_rows(g))
+            .flatten()
+            .map(|x| x.to_bits())
+            .collect()
+    };
+    for method in [
+        Method::Brute,
+        Method::Tiled { tile: 8 },
+        Method::Tiled { tile: 16 },
+    ] {
+        let a = r
+            .backward(
+                &gpu,
+                &forward(&r, &gpu, &mesh, &cams, &s, method),
+                &w,
+                method,
+                true,
+            )
+            .unwrap();
+        let r2 = Renderer::new(&gpu).unwrap();
+        let b = r2
+            .backward(
+                &gpu,
+                &forward(&r2, &gpu, &mesh, &cams, &s, method),
+                &w,
+                method,
+                true,
+            )
+            .unwrap();
+        assert!(bits(&a) == bits(&b), "{method:?}");
+    }
+}
+
+/// Gradient descent on the GPU: one triangle's vertices move until its soft silhouette matches a
+/// target triangle's (rendered with the same σ, annealed from 1e-2 to 1e-3), judged by the IoU of
+/// the hard silhouettes (> 0.99).
+#[test]
+fn gradient_descent_on_one_triangle_matches_a_silhouette() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let cams = [Camera::default()];
+    let size = 32;
+    let target_mesh = Mesh::new(
+        vec![[-0.5, -0.4, 0.0], [0.1, 0.55, 0.0], [0.6, -0.3, 0.0]],
+        vec![[0, 1, 2]],
+        1,
+    )
+    .unwrap();
+    let hard = RasterSettings {
+        width: size,
+        height: size,
+        dist: Dist::Hard,
+        alpha: Alpha::Hard,
+        ..RasterSettings::default()
+    };
+    let silhouette = |mesh: &Mesh| -> Vec<bool> {
+        r.render_views(
+            &gpu,
+            mesh,
+            &cams,
+            &Lighting::unlit(),
+            &hard,
+            Method::default(),
+        )
+        .unwrap()
+        .images
+        .iter()
+        .map(|p| p[3] > 0.5)
+        .collect()
+    };
+    let target = silhouette(&target_mesh);
+    let mut mesh = Mesh::new(
+        vec![[-0.3, -0.1, 0.0], [0.0, 0.3, 0.0], [0.2, -0.2, 0.0]],
+        vec![[0, 1, 2]],
+        1,
+    )
+    .unwrap();
+    let iou = |a: &[bool], b: &[bool]| {
+        let inter = a.iter().zip(b).filter(|(x, y)| **x && **y).count();
+        let union = a.iter().zip(b).filter(|(x, y)| **x || **y).count();
+        inter as f64 / union as f64
+    };
+    let start = iou(&silhouette(&mesh), &target);
+    // Adam on the vertices, σ annealed from blurry to sharp.
+    let (mut m, mut v) = ([[0.0f64; 3]; 3], [[0.0f64; 3]; 3]);
+    let (b1, b2) = (0.9, 0.999);
+    let mut step = 0;
+    for (sigma, iters, lr) in [(1e-2, 120, 2e-2), (3e-3, 120, 1e-2), (1e-3, 120, 3e-3)] {
+        let s = RasterSettings {
+            width: size,
+            height: size,
+            sigma,
+            ..RasterSettings::default()
+        };
+        let soft_target = r
+            .render_views(
+                &gpu,
+                &target_mesh,
+                &cams,
+                &Lighting::unlit(),
+                &s,
+                Method::default(),
+            )
+            .unwrap()
+            .images;
+        for _ in 0..iters {
+            step += 1;
+            let mut scene = r
+                .prepare(&gpu, &mesh, &cams, &Lighting::unlit(), &s)
+                .unwrap();
+            r.run(&gpu, &mut scene, Method::default()).unwrap();
+            let img = r.read_frames(&gpu, &scene).unwrap().images;
+            // L = Σ (A − A_target)², the target's silhouette rendered with the same σ.
+            let d: Vec<[f32; 4]> = img
+                .iter()
+                .zip(&soft_target)
+                .map(|(p, t)| [0.0, 0.0, 0.0, 2.0 * (p[3] - t[3])])
+                .collect();
+            let g = r
+                .backward(&gpu, &scene, &d, Method::default(), false)
+                .unwrap();
+            for k in 0..3 {
+                for c in 0..2 {
+                    let gk = g.positions[k][c];
+                    m[k][c] = b1 * m[k][c] + (1.0 - b1) * gk;
+                    v[k][c] = b2 * v[k][c] + (1.0 - b2) * gk * gk;
+                    let mh = m[k][c] / (1.0 - b1.powi(step));
+                    let vh = v[k][c] / (1.0 - b2.powi(step));
+                    mesh.positions[k][c] -= (lr * mh / (vh.sqrt() + 1e-8)) as f32;
+                }
+            }
+        }
+    }
+    let end = iou(&silhouette(&mesh), &target);
+    eprintln!("IoU {start:.3} -> {end:.3} in {step} steps");
+    assert!(end > 0.99, "IoU {start:.3} -> {end:.3}");
+}
+
+#[test]
+fn backward_input_errors() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let mesh = scene(1, 1);
+    let cams = [Camera::default()];
+    let s = settings(8, 8);
+    let scene = forward(&r, &gpu, &mesh, &cams, &s, Method::Tiled { tile: 8 });
+    let err = r
+        .backward(
+            &gpu,
+            &scene,
+            &weights(10, 1),
+            Method::Tiled { tile: 8 },
+            false,
+        )
+        .unwrap_err();
+    assert!(matches!(err, softvk::Error::Input(_)), "{err}");
+    let mut w = weights(64, 1);
+    w[3][1] = f32::NAN;
+    let err = r
+        .backward(&gpu, &scene, &w, Method::Tiled { tile: 8 }, false)
+        .unwrap_err();
+    assert!(err.to_string().contains("not finite"), "{err}");
+    let err = r
+        .backward(
+            &gpu,
+            &scene,
+            &weights(64, 1),
+            Method::Tiled { tile: 16 },
+            false,
+        )
+        .unwrap_err();
+    assert!(matches!(err, softvk::Error::Input(_)), "{err}");
+}
