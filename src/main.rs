@@ -27,6 +27,8 @@ enum Command {
     Info,
     /// Render one view of a mesh to an RGBA image (.png 8-bit, or .exr float32).
     Render(Box<cli::render::RenderArgs>),
+    /// dL/d(vertex positions) of L = Σ W ⊙ image, as CSV (W an RGBA EXR of the image's size).
+    Grad(Box<cli::grad::GradArgs>),
 }
 
 fn main() -> ExitCode {
@@ -47,6 +49,7 @@ fn main() -> ExitCode {
     let result = match &cli.command {
         Command::Info => info(),
         Command::Render(args) => cli::render::run(args),
+        Command::Grad(args) => cli::grad::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -787,3 +787,155 @@ fn render_errors_are_one_line_and_write_nothing() {
     std::fs::remove_file(&out_png).unwrap();
     assert_eq!(dir.entries(), before, "no device: a temporary was left");
 }
+
+/// Writes an RGBA f32 EXR (row 0 at the top).
+fn write_exr(path: &Path, w: usize, h: usize, px: &[[f32; 4]]) {
+    exr::prelude::write_rgba_file(path, w, h, |x, y| {
+        let p = px[y * w + x];
+        (p[0], p[1], p[2], p[3])
+    })
+    .unwrap();
+}
+
+fn grad_cmd(mesh: &Path, weights: &Path, out: &Path, args: &[&str]) -> Output {
+    softvk()
+        .arg("grad")
+        .arg("--mesh")
+        .arg(mesh)
+        .arg("--weights")
+        .arg(weights)
+        .arg("--out")
+        .arg(out)
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// `softvk grad` writes `vertex,dx,dy,dz` for every vertex, equal to the f64 twin's gradient of
+/// Σ W ⊙ image within 1e-3 of the largest component; the camera CSV likewise.
+#[test]
+fn grad_writes_the_twins_vertex_gradient_as_csv() {
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    use rand::RngExt;
+    let dir = TempDir::new("grad");
+    let (w, h) = (24usize, 20usize);
+    let mut rng = common::rng(3);
+    let weights: Vec<[f32; 4]> = (0..w * h)
+        .map(|_| std::array::from_fn(|_| rng.random_range(-1.0..1.0)))
+        .collect();
+    let wpath = dir.path("w.exr");
+    write_exr(&wpath, w, h, &weights);
+    let sphere = softvk::assets::dir().join("sphere_642.obj");
+    let out = dir.path("g.csv");
+    let cam_out = dir.path("c.csv");
+    let args = [
+        "--sigma",
+        "1e-2",
+        "--gamma",
+        "5e-2",
+        "--elevation",
+        "20",
+        "--azimuth",
+        "30",
+        "--camera-out",
+    ];
+    let mut full: Vec<&str> = args.to_vec();
+    full.push(cam_out.to_str().unwrap());
+    let o = grad_cmd(&sphere, &wpath, &out, &full);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(&out).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("vertex,dx,dy,dz"));
+    let got: Vec<[f64; 3]> = lines
+        .enumerate()
+        .map(|(i, l)| {
+            let f: Vec<&str> = l.split(',').collect();
+            assert_eq!(f.len(), 4, "{l}");
+            assert_eq!(f[0].parse::<usize>().unwrap(), i);
+            std::array::from_fn(|k| f[k + 1].parse::<f64>().unwrap())
+        })
+        .collect();
+
+    let mesh = Mesh::load_obj(&sphere, 1).unwrap();
+    assert_eq!(got.len(), mesh.vertex_count());
+    let cam = Camera::from_angles(2.732, 20.0, 30.0);
+    let s = RasterSettings {
+        width: w as u32,
+        height: h as u32,
+        sigma: 1e-2,
+        gamma: 5e-2,
+        ..RasterSettings::default()
+    };
+    let w64: Vec<[f64; 4]> = weights.iter().map(|p| p.map(f64::from)).collect();
+    let want = softvk::raster::reference_grad::grad(&mesh, &[cam], &Lighting::default(), &s, &w64)
+        .unwrap();
+    let scale = want
+        .positions
+        .iter()
+        .flatten()
+        .fold(0.0f64, |m, x| m.max(x.abs()));
+    assert!(scale > 0.0);
+    for (v, (g, t)) in got.iter().zip(&want.positions).enumerate() {
+        for k in 0..3 {
+            assert!(
+                (g[k] - t[k]).abs() <= 1e-3 * scale,
+                "vertex {v}: {g:?} vs twin {t:?} (scale {scale})"
+            );
+        }
+    }
+    let cam_text = std::fs::read_to_string(&cam_out).unwrap();
+    let rows: Vec<(String, f64)> = cam_text
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let (k, v) = l.split_once(',').unwrap();
+            (k.to_string(), v.parse().unwrap())
+        })
+        .collect();
+    let angles = want.cameras[0].angles(2.732, 20.0, 30.0);
+    let expect = [
+        ("eye_x", want.cameras[0].eye[0]),
+        ("eye_y", want.cameras[0].eye[1]),
+        ("eye_z", want.cameras[0].eye[2]),
+        ("distance", angles[0]),
+        ("elevation", angles[1]),
+        ("azimuth", angles[2]),
+    ];
+    let cscale = expect.iter().fold(0.0f64, |m, e| m.max(e.1.abs()));
+    for ((name, value), (k, v)) in expect.iter().zip(&rows) {
+        assert_eq!(name, k);
+        assert!(
+            (value - v).abs() <= 1e-3 * cscale,
+            "{name}: {v} vs twin {value}"
+        );
+    }
+}
+
+#[test]
+fn grad_errors_are_one_line_and_write_nothing() {
+    let dir = TempDir::new("grad-errors");
+    let triangle = dir.write("triangle.obj", TRIANGLE);
+    let w8 = dir.path("w8.exr");
+    write_exr(&w8, 8, 8, &vec![[1.0; 4]; 64]);
+    let nan = dir.path("nan.exr");
+    let mut px = vec![[0.5f32; 4]; 64];
+    px[9][2] = f32::NAN;
+    write_exr(&nan, 8, 8, &px);
+    let not_exr = dir.write("not.exr", "hello");
+    let out = dir.path("g.csv");
+    let cases: Vec<(&str, PathBuf, Vec<&str>, &str)> = vec![
+        ("missing weights", dir.path("none.exr"), vec![], "none.exr"),
+        ("not an EXR", not_exr, vec![], "not.exr"),
+        ("NaN weight", nan, vec![], "not finite"),
+        ("size mismatch", w8.clone(), vec!["--size", "16"], "8x8"),
+        ("bad tile", w8.clone(), vec!["--tile", "12"], "tile size 12"),
+    ];
+    for (what, weights, args, needle) in cases {
+        let o = grad_cmd(&triangle, &weights, &out, &args);
+        assert_one_error_line(what, &o, needle);
+        assert!(!out.exists(), "{what}: wrote {}", out.display());
+    }
+}
