@@ -453,3 +453,52 @@ fn backward_input_errors() {
         .unwrap_err();
     assert!(matches!(err, softvk::Error::Input(_)), "{err}");
 }
+
+/// A batch of two meshes of equal topology, four views: each mesh's gradients (positions,
+/// colours, and every view's camera) equal those of the mesh rendered alone with its views.
+#[test]
+fn a_batch_differentiates_as_each_mesh_alone() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let a = scene(2, 21);
+    let mut b = a.clone();
+    let mut rng = common::rng(22);
+    for p in &mut b.positions {
+        p.iter_mut().for_each(|c| *c *= 1.0 + rng.random_range(-0.1f32..0.1));
+    }
+    b.textures = random_colors(b.textures.len(), 23);
+    let cams = [
+        Camera::from_angles(2.732, 15.0, 20.0),
+        Camera::from_angles(2.5, -10.0, 150.0),
+    ];
+    let views = [(0, cams[0]), (1, cams[0]), (1, cams[1]), (0, cams[1])];
+    let meshes = [a, b];
+    let s = settings(16, 16);
+    let px = 16 * 16;
+    let w = weights(px * views.len(), 24);
+    for method in [Method::Brute, Method::Tiled { tile: 8 }] {
+        let mut scene = r
+            .prepare_batch(&gpu, &meshes, &views, &lighting(), &s)
+            .unwrap();
+        r.run(&gpu, &mut scene, method).unwrap();
+        let batch = r.backward(&gpu, &scene, &w, method, true).unwrap();
+        let nv = meshes[0].vertex_count();
+        let nc = batch.colors.len() / 2;
+        for (m, mesh) in meshes.iter().enumerate() {
+            let mine: Vec<usize> = (0..views.len()).filter(|&v| views[v].0 == m).collect();
+            let my_cams: Vec<Camera> = mine.iter().map(|&v| views[v].1).collect();
+            let my_w: Vec<[f32; 4]> = mine
+                .iter()
+                .flat_map(|&v| w[v * px..(v + 1) * px].iter().copied())
+                .collect();
+            let alone_scene = forward(&r, &gpu, mesh, &my_cams, &s, method);
+            let alone = r.backward(&gpu, &alone_scene, &my_w, method, true).unwrap();
+            let what = format!("{method:?} mesh {m}");
+            assert!(batch.positions[m * nv..(m + 1) * nv] == alone.positions[..], "{what}");
+            assert!(batch.colors[m * nc..(m + 1) * nc] == alone.colors[..], "{what}");
+            for (k, &v) in mine.iter().enumerate() {
+                assert!(batch.cameras[v] == alone.cameras[k], "{what}: view {v}");
+            }
+        }
+    }
+}
