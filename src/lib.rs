@@ -10,6 +10,9 @@
 //!   ([`raster::reference_grad`], analytic gradients checked by finite differences), the GPU
 //!   face setup ([`raster::setup`]) and the brute-force fine pass ([`raster::brute`]), driven by
 //!   [`raster::gpu::Renderer`].
+//! - [`fit`]: the fitting building blocks as kernels — SoftRas's silhouette (neg-IoU) loss and an
+//!   image MSE, its Laplacian and flatten regularizers, its sigmoid/tanh deformation, and Adam —
+//!   recordable into one command buffer per iteration.
 //!
 //! Every kernel has a CPU twin that tests compare it with.
 
@@ -18,6 +21,7 @@
 pub mod assets;
 pub mod camera;
 pub mod error;
+pub mod fit;
 pub mod gpu;
 pub mod lighting;
 pub mod mesh;

@@ -1,0 +1,199 @@
+//! Fitting on the GPU: the losses, regularizers, parameterization and optimizer of SoftRas's
+//! mesh deformation (`demo_deform.py`) as compute kernels, each with an f64 CPU twin whose
+//! gradient is checked by central finite differences, so that a whole fitting iteration can be
+//! recorded into one command buffer with no host round trip:
+//!
+//! ```text
+//! params ─[Deform::record_forward]→ positions ─(render)→ RGBA images
+//!   images ─[SilhouetteLoss / ImageMse]→ loss, d_image ─(render backward)→ d_positions
+//!   positions ─[Regularizers::record_laplacian / record_flatten]→ += λ d_positions
+//!   d_positions ─[Deform::record_backward]→ d_params ─[Adam::record_step]→ params
+//! ```
+//!
+//! The renderer's two links of that chain are not wired yet: its positions and `d_image`
+//! buffers are private to `GpuScene` and `GradBuffers`, and its backward adds the lighting's
+//! share of the position gradient on the host (`GradKernels::finish`).
+//!
+//! - [`silhouette`]: SoftRas's `neg_iou_loss` on the alpha channel ([`SilhouetteLoss`]) and the
+//!   image MSE ([`ImageMse`]), with their dL/d(image) in the renderer's `d_image` layout.
+//! - [`laplacian`] and [`flatten`]: SoftRas's `LaplacianLoss` and `FlattenLoss`, driven on the
+//!   GPU by [`Regularizers`].
+//! - [`deform`]: SoftRas's sigmoid/tanh parameterization of vertex positions ([`Deform`]).
+//! - [`adam`]: Adam with PyTorch's semantics ([`Adam`]).
+//!
+//! **Conventions shared by every kernel here.**
+//! - Buffers hold `f32`. Vertex positions and their gradients are packed triples, `3 * vertex`
+//!   floats (the renderer's positions buffer). Images are RGBA, view-major, row-major (the
+//!   renderer's output and its backward's `d_image`); silhouettes are one float per pixel in the
+//!   same order.
+//! - Gradients are written through a [`GradOut`]: `out = weight · g`, or, accumulating,
+//!   `out += weight · g`. Every output element has exactly one writer, so several terms can be
+//!   accumulated into one buffer, one pass after another, deterministically.
+//! - **Deterministic**: no float atomics; every reduction has a fixed order (sequential sums per
+//!   invocation over a fixed stride, then a fixed shared-memory tree: `fit_reduce.glsl`).
+//!   Repeated runs on one device are bit-identical.
+//! - Loss values land in small device buffers the structs own, read back only when asked
+//!   (`read_*`).
+//! - A range that holds fewer values than the problem needs is [`Error::Input`]; a problem too
+//!   large for one storage-buffer binding is [`Error::Limit`]. Larger ranges are fine (only the
+//!   leading values are used), so whole, alignment-rounded buffers can be passed.
+
+pub mod adam;
+pub mod deform;
+pub mod flatten;
+pub mod laplacian;
+mod reduce;
+mod regularizers;
+pub mod silhouette;
+
+pub use adam::{Adam, AdamOptions};
+pub use deform::Deform;
+pub use regularizers::{RegularizerLosses, Regularizers};
+pub use silhouette::{ImageMse, SilhouetteLoss};
+
+use crate::error::{Error, Result};
+use crate::gpu::{BufferRange, Context};
+
+/// Where a kernel writes a gradient, and how: `out = weight · g`, or with `accumulate`,
+/// `out += weight · g` (each element has one writer, so accumulating is deterministic).
+#[derive(Clone, Copy)]
+pub struct GradOut<'a> {
+    /// The destination; it must hold at least as many floats as the gradient has.
+    pub range: BufferRange<'a>,
+    /// Factor applied to the gradient (a loss term's weight).
+    pub weight: f32,
+    /// Add to the destination instead of overwriting it.
+    pub accumulate: bool,
+}
+
+impl<'a> GradOut<'a> {
+    /// Overwrite `range` with the gradient (weight 1).
+    pub fn write(range: BufferRange<'a>) -> Self {
+        Self {
+            range,
+            weight: 1.0,
+            accumulate: false,
+        }
+    }
+
+    /// Add `weight ·` the gradient to what `range` holds.
+    pub fn accumulate(range: BufferRange<'a>, weight: f32) -> Self {
+        Self {
+            range,
+            weight,
+            accumulate: true,
+        }
+    }
+
+    /// The same destination with another weight.
+    pub fn weighted(self, weight: f32) -> Self {
+        Self { weight, ..self }
+    }
+}
+
+/// Fails with [`Error::Input`] when `range` holds fewer than `floats` `f32`s.
+pub(crate) fn check_floats(what: &str, range: &BufferRange<'_>, floats: u64) -> Result<()> {
+    if range.size < 4 * floats {
+        return Err(Error::Input(format!(
+            "{what} (buffer `{}`): {} bytes hold fewer than the {floats} floats it needs",
+            range.buffer.name(),
+            range.size
+        )));
+    }
+    Ok(())
+}
+
+/// Fails with [`Error::Limit`] when `bytes` do not fit one storage-buffer binding; returns the
+/// byte count (at least 4, so that empty problems still get a bindable buffer).
+pub(crate) fn check_binding(ctx: &Context, what: &str, bytes: u64) -> Result<u64> {
+    let max = u64::from(ctx.info().limits.max_storage_buffer_range);
+    if bytes > max {
+        return Err(Error::Limit(format!(
+            "{what} needs {bytes} bytes in one binding, over this device's \
+             maxStorageBufferRange ({max})"
+        )));
+    }
+    Ok(bytes.max(4))
+}
+
+/// Workgroups of `size` invocations covering `n` items, as the `u32` a dispatch takes.
+pub(crate) fn groups(n: u64, size: u32) -> Result<u32> {
+    u32::try_from(n.div_ceil(u64::from(size)))
+        .map_err(|_| Error::Limit(format!("{n} items need more than 2^32 workgroups")))
+}
+
+/// Test data and the finite-difference check shared by the twins' tests.
+#[cfg(test)]
+pub(crate) mod test_support {
+    use crate::mesh::Mesh;
+
+    /// A tiny deterministic generator (tests must not depend on a crate's stream).
+    pub struct Lcg(pub u64);
+
+    impl Lcg {
+        /// Uniform in [0, 1).
+        pub fn unit(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+
+        /// Uniform in [lo, hi).
+        pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
+            lo + (hi - lo) * self.unit()
+        }
+    }
+
+    /// `Mesh::icosphere(subdivisions)` with every coordinate moved by up to ±`jitter`: packed
+    /// positions (3 per vertex, f64) and faces.
+    pub fn jittered_icosphere(
+        subdivisions: u32,
+        jitter: f64,
+        seed: u64,
+    ) -> (Vec<f64>, Vec<[u32; 3]>) {
+        let mesh = Mesh::icosphere(subdivisions);
+        let mut rng = Lcg(seed);
+        let x = mesh
+            .positions
+            .iter()
+            .flatten()
+            .map(|&v| f64::from(v) + rng.range(-jitter, jitter))
+            .collect();
+        (x, mesh.faces)
+    }
+
+    /// Asserts `analytic` is the gradient of `f` at `x` by central differences (step 1e-6):
+    /// every component within `rel` × the largest analytic component.
+    pub fn assert_grad_matches_fd(
+        x: &[f64],
+        analytic: &[f64],
+        rel: f64,
+        f: impl Fn(&[f64]) -> f64,
+    ) {
+        assert_eq!(x.len(), analytic.len());
+        let h = 1e-6;
+        let scale = analytic.iter().fold(0.0f64, |m, g| m.max(g.abs()));
+        assert!(scale > 0.0, "a zero gradient checks nothing");
+        let mut xs = x.to_vec();
+        let mut worst = (0.0, 0);
+        for i in 0..x.len() {
+            xs[i] = x[i] + h;
+            let up = f(&xs);
+            xs[i] = x[i] - h;
+            let down = f(&xs);
+            xs[i] = x[i];
+            let err = ((up - down) / (2.0 * h) - analytic[i]).abs();
+            if err > worst.0 {
+                worst = (err, i);
+            }
+        }
+        assert!(
+            worst.0 <= rel * scale,
+            "component {}: |fd − analytic| = {:e} > {rel:e} × {scale:e}",
+            worst.1,
+            worst.0
+        );
+    }
+}

@@ -1,0 +1,49 @@
+//! The strided sum that finishes every fit loss (`kernels/fit/fit_sum.comp`): one workgroup per
+//! component, a fixed order, no atomics.
+
+use bytemuck::{Pod, Zeroable};
+
+use crate::error::Result;
+use crate::gpu::{BufferRange, Context, Kernel, Recorder, specs};
+
+/// Push constants of `fit_sum.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(crate) struct SumPush {
+    /// Terms per component.
+    pub n: u32,
+    /// Floats between consecutive terms.
+    pub stride: u32,
+    /// Float offset of component 0's first term.
+    pub offset: u32,
+    /// Output float index of component 0.
+    pub out_index: u32,
+    pub scale: f32,
+    pub bias: f32,
+}
+
+/// `fit_sum.comp`, made once per owner.
+pub(crate) struct Sum {
+    kernel: Kernel,
+}
+
+impl Sum {
+    pub fn new(ctx: &Context) -> Result<Self> {
+        Ok(Self {
+            kernel: Kernel::new(ctx, &specs::FIT_SUM)?,
+        })
+    }
+
+    /// Records `outputs[out_index + k] = bias + scale · Σ_i values[i·stride + offset + k]` for
+    /// each of `components` components.
+    pub fn record(
+        &self,
+        rec: &mut Recorder<'_>,
+        values: BufferRange<'_>,
+        outputs: BufferRange<'_>,
+        push: SumPush,
+        components: u32,
+    ) -> Result<()> {
+        rec.dispatch(&self.kernel, &[values, outputs], &push, components)
+    }
+}
