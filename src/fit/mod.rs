@@ -42,6 +42,7 @@ pub mod adam;
 pub mod deform;
 pub mod flatten;
 pub mod laplacian;
+pub mod mesh_fit;
 mod reduce;
 mod regularizers;
 pub mod silhouette;

@@ -112,17 +112,18 @@ pub fn grad_stride(mode: ColorMode, texture_res: u32) -> u32 {
 
 /// The buffers of one scene's backward, reusable across backward passes of that scene.
 pub struct GradBuffers {
-    d_image: Buffer,
+    pub(crate) d_image: Buffer,
     partials: Option<Buffer>,
     face_grads: Buffer,
     corner_world: Buffer,
     corner_cam: Buffer,
     vertex_offsets: Buffer,
     vertex_slots: Buffer,
-    position_grads: Buffer,
+    pub(crate) position_grads: Buffer,
     color_grads: Buffer,
     method: Method,
     stride: u32,
+    entry_capacity: u64,
 }
 
 fn checked(ctx: &Context, what: &str, bytes: u64) -> Result<u64> {
@@ -164,16 +165,23 @@ impl GradBuffers {
             ColorMode::Vertex => vertices,
         };
         let adjacency = VertexFaces::new(&scene.meshes[0].faces, scene.vertex_count as usize);
+        let entry_capacity = match method {
+            Method::Brute => 0,
+            // Headroom, so that a fit whose entries breathe does not reallocate every step.
+            Method::Tiled { .. } => {
+                let most = scene.groups.iter().map(|g| g.entries).max().unwrap_or(0);
+                let max =
+                    u64::from(ctx.info().limits.max_storage_buffer_range) / (4 * u64::from(stride));
+                (most + most / 4).min(max).max(most)
+            }
+        };
         let partials = match method {
             Method::Brute => None,
-            Method::Tiled { .. } => {
-                let entries = scene.groups.iter().map(|g| g.entries).max().unwrap_or(0);
-                Some(ctx.create_buffer(
-                    "grad partials",
-                    checked(ctx, "partials", entries * u64::from(stride) * 4)?,
-                    MemoryKind::Device,
-                )?)
-            }
+            Method::Tiled { .. } => Some(ctx.create_buffer(
+                "grad partials",
+                checked(ctx, "partials", entry_capacity * u64::from(stride) * 4)?,
+                MemoryKind::Device,
+            )?),
         };
         let device = |name: &str, bytes: u64| -> Result<Buffer> {
             ctx.create_buffer(name, checked(ctx, name, bytes)?, MemoryKind::Device)
@@ -190,7 +198,13 @@ impl GradBuffers {
             color_grads: device("colour grads", color_values * 12)?,
             method,
             stride,
+            entry_capacity,
         })
+    }
+
+    /// The (face, tile) entries the tiled partials can hold (0 for brute force).
+    pub fn entry_capacity(&self) -> u64 {
+        self.entry_capacity
     }
 
     /// Uploads dL/d(image): RGBA per output pixel, view-major, row-major.
@@ -274,6 +288,18 @@ impl GradKernels {
                     .as_ref()
                     .ok_or_else(|| Error::Input("tiled backward without partials".into()))?;
                 let grid = scene.grid(tile)?;
+                if scene.tile != Some(tile) {
+                    return Err(Error::Input(format!(
+                        "the tiled backward (tile {tile}) needs the scene binned with those tiles"
+                    )));
+                }
+                if let Some(g) = scene.groups.iter().find(|g| g.entries > gb.entry_capacity) {
+                    return Err(Error::Limit(format!(
+                        "the backward's partials hold {} entries; the scene now has {} (make \
+                         new GradBuffers)",
+                        gb.entry_capacity, g.entries
+                    )));
+                }
                 for (group, bins) in scene.groups.iter().zip(&scene.bins) {
                     if group.entries == 0 {
                         // No face touches these views: their gradients are zero.

@@ -185,6 +185,12 @@ impl GpuScene {
             .sum())
     }
 
+    /// The output image buffer (RGBA per output pixel, view-major): the 2×2 average with
+    /// anti-aliasing, else the rendered image.
+    pub(crate) fn output(&self) -> &Buffer {
+        self.small.as_ref().unwrap_or(&self.image)
+    }
+
     /// The view groups of the last tiled run.
     pub fn groups(&self) -> &[ViewGroup] {
         &self.groups
@@ -586,6 +592,66 @@ impl Renderer {
             });
         }
         Ok(())
+    }
+
+    /// For loops that re-render one scene (fitting): records the face setup and the binning's
+    /// count for every view as one group on `tile`-pixel tiles. After it ran,
+    /// [`Renderer::finish_count`] reads the entry count, and [`Renderer::record_rest`] records
+    /// the rest of the forward.
+    pub(crate) fn record_setup_and_count(
+        &self,
+        ctx: &Context,
+        rec: &mut Recorder<'_>,
+        scene: &mut GpuScene,
+        tile: u32,
+    ) -> Result<()> {
+        check_tile_size(tile)?;
+        let grid = scene.grid(tile)?;
+        let job = scene.job(grid, 0, scene.view_count);
+        if scene.bins.is_empty() {
+            scene.bins.push(Bins::new(ctx)?);
+        }
+        scene.bins[0].reserve(ctx, &job)?;
+        self.record_setup(rec, scene)?;
+        self.record_count(rec, scene, &scene.bins[0], grid, 0, scene.view_count)
+    }
+
+    /// Reads the count of [`Renderer::record_setup_and_count`]'s submission and sizes the
+    /// entries: the scene is then binned as one group, ready for [`Renderer::record_rest`].
+    pub(crate) fn finish_count(
+        &self,
+        ctx: &Context,
+        scene: &mut GpuScene,
+        tile: u32,
+    ) -> Result<u64> {
+        let max = binning::max_entries(ctx).min(self.entry_budget.unwrap_or(u64::MAX));
+        let total = scene.bins[0].read_total(ctx)?;
+        if total > max {
+            return Err(Error::Limit(format!(
+                "{} views need {total} (face, tile) entries at once, over the {max} one binning \
+                 may hold; use fewer views, larger tiles or a smaller σ",
+                scene.view_count
+            )));
+        }
+        scene.bins[0].reserve_entries(ctx, total)?;
+        scene.tile = Some(tile);
+        scene.groups = vec![ViewGroup {
+            first: 0,
+            views: scene.view_count,
+            entries: total,
+        }];
+        Ok(total)
+    }
+
+    /// Sort, ranges, the tiled fine pass and the downsampling of a scene binned by
+    /// [`Renderer::finish_count`].
+    pub(crate) fn record_rest(&self, rec: &mut Recorder<'_>, scene: &GpuScene) -> Result<()> {
+        let tile = scene
+            .tile
+            .ok_or_else(|| Error::Input("record_rest before a count".into()))?;
+        let grid = scene.grid(tile)?;
+        self.record_group(rec, scene, &scene.bins[0], grid, 0, scene.view_count)?;
+        self.record_downsample(rec, scene)
     }
 
     /// Records the whole tiled forward of `scene` into one command buffer, for resubmission
