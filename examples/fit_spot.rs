@@ -80,7 +80,7 @@ fn main() {
         iterations,
         ..MeshFitOptions::default()
     };
-    let fit = fit_mesh(&ctx, &default_template(), &train, &targets, &opts, |l, ious| {
+    let fit = fit_mesh(&ctx, &default_template(), &train, &targets, &opts, |l, ious, _| {
         let mean = ious.iter().sum::<f32>() / ious.len() as f32;
         eprintln!(
             "it {:5} loss {:.4} (1-IoU {:.4}, lap {:.4}, flat {:.2}) soft IoU {mean:.4}  {:.1} s",

@@ -29,6 +29,11 @@ enum Command {
     Render(Box<cli::render::RenderArgs>),
     /// dL/d(vertex positions) of L = Σ W ⊙ image, as CSV (W an RGBA EXR of the image's size).
     Grad(Box<cli::grad::GradArgs>),
+    /// Deform a template mesh to match silhouettes from known cameras (SoftRas's demo).
+    FitMesh(Box<cli::fit_mesh::FitMeshArgs>),
+    /// The built-in demo: generate a shape, render its silhouettes, fit a sphere to them, and
+    /// write everything to ./softvk-demo/.
+    Demo(Box<cli::fit_mesh::DemoArgs>),
 }
 
 fn main() -> ExitCode {
@@ -50,6 +55,8 @@ fn main() -> ExitCode {
         Command::Info => info(),
         Command::Render(args) => cli::render::run(args),
         Command::Grad(args) => cli::grad::run(args),
+        Command::FitMesh(args) => cli::fit_mesh::run(args),
+        Command::Demo(args) => cli::fit_mesh::demo(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

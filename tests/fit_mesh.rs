@@ -81,7 +81,7 @@ fn a_gpu_iteration_equals_the_iteration_of_the_twins() {
     };
     let t = template();
     let mut gpu_losses = Vec::new();
-    let fit = fit_mesh(&gpu, &t, &cams, &targets, &opts, |l, _| {
+    let fit = fit_mesh(&gpu, &t, &cams, &targets, &opts, |l, _, _| {
         gpu_losses.push(l.total);
         true
     })

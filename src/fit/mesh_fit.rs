@@ -44,6 +44,9 @@ pub struct MeshFitOptions {
     pub tile: u32,
     /// Read the losses back every this many iterations (and after the last).
     pub log_every: u32,
+    /// Also read back the predicted alpha images at every logged iteration (for progress
+    /// pictures).
+    pub snapshots: bool,
 }
 
 impl Default for MeshFitOptions {
@@ -67,6 +70,7 @@ impl Default for MeshFitOptions {
             },
             tile: crate::raster::gpu::DEFAULT_TILE,
             log_every: 20,
+            snapshots: false,
         }
     }
 }
@@ -114,14 +118,15 @@ pub fn default_template() -> Mesh {
 
 /// Fits `template` to `targets` (one f32 mask per pixel, view-major, `W × H` per view, W and H
 /// from the options) seen from `cameras`. `progress` is called after every logged iteration
-/// with the log entry and the per-view IoUs, and may return `false` to stop early.
+/// with the log entry, the per-view (soft) IoUs and, with `snapshots`, the predicted alpha per
+/// pixel (view-major) the iteration rendered; it may return `false` to stop early.
 pub fn fit_mesh(
     ctx: &Context,
     template: &Mesh,
     cameras: &[Camera],
     targets: &[f32],
     opts: &MeshFitOptions,
-    mut progress: impl FnMut(&FitLog, &[f32]) -> bool,
+    mut progress: impl FnMut(&FitLog, &[f32], Option<&[f32]>) -> bool,
 ) -> Result<MeshFitResult> {
     let s = &opts.settings;
     let views = cameras.len();
@@ -220,7 +225,13 @@ pub fn fit_mesh(
                 seconds: start.elapsed().as_secs_f64(),
             };
             let ious = sil.read_ious(ctx)?;
-            let go_on = progress(&entry, &ious);
+            let alphas: Option<Vec<f32>> = if opts.snapshots {
+                let rgba: Vec<[f32; 4]> = ctx.read_buffer(scene.output(), 0, views * px)?;
+                Some(rgba.iter().map(|p| p[3]).collect())
+            } else {
+                None
+            };
+            let go_on = progress(&entry, &ious, alphas.as_deref());
             log.push(entry);
             if !go_on {
                 break;
