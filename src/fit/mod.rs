@@ -20,6 +20,8 @@
 //!   GPU by [`Regularizers`].
 //! - [`deform`]: SoftRas's sigmoid/tanh parameterization of vertex positions ([`Deform`]).
 //! - [`adam`]: Adam with PyTorch's semantics ([`Adam`]).
+//! - [`io`]: the fitting commands' files (CPU): target silhouettes, the cameras CSV, the fitted
+//!   OBJ, all checked on load and written atomically.
 //!
 //! **Conventions shared by every kernel here.**
 //! - Buffers hold `f32`. Vertex positions and their gradients are packed triples, `3 * vertex`
@@ -41,6 +43,7 @@
 pub mod adam;
 pub mod deform;
 pub mod flatten;
+pub mod io;
 pub mod laplacian;
 mod reduce;
 mod regularizers;
