@@ -22,6 +22,8 @@
 //! - [`adam`]: Adam with PyTorch's semantics ([`Adam`]).
 //! - [`io`]: the fitting commands' files (CPU): target silhouettes, the cameras CSV, the fitted
 //!   OBJ, all checked on load and written atomically.
+//! - [`report`]: what a fit shows a person (CPU): a contact sheet of predicted against target
+//!   silhouettes, a loss plot, an animated GIF of the progress, PNG writing.
 //!
 //! **Conventions shared by every kernel here.**
 //! - Buffers hold `f32`. Vertex positions and their gradients are packed triples, `3 * vertex`
@@ -47,6 +49,7 @@ pub mod io;
 pub mod laplacian;
 mod reduce;
 mod regularizers;
+pub mod report;
 pub mod silhouette;
 
 pub use adam::{Adam, AdamOptions};
