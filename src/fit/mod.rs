@@ -20,6 +20,10 @@
 //!   GPU by [`Regularizers`].
 //! - [`deform`]: SoftRas's sigmoid/tanh parameterization of vertex positions ([`Deform`]).
 //! - [`adam`]: Adam with PyTorch's semantics ([`Adam`]).
+//! - [`io`]: the fitting commands' files (CPU): target silhouettes, the cameras CSV, the fitted
+//!   OBJ, all checked on load and written atomically.
+//! - [`report`]: what a fit shows a person (CPU): a contact sheet of predicted against target
+//!   silhouettes, a loss plot, an animated GIF of the progress, PNG writing.
 //!
 //! **Conventions shared by every kernel here.**
 //! - Buffers hold `f32`. Vertex positions and their gradients are packed triples, `3 * vertex`
@@ -41,10 +45,12 @@
 pub mod adam;
 pub mod deform;
 pub mod flatten;
+pub mod io;
 pub mod laplacian;
 pub mod mesh_fit;
 mod reduce;
 mod regularizers;
+pub mod report;
 pub mod silhouette;
 
 pub use adam::{Adam, AdamOptions};
