@@ -939,3 +939,129 @@ fn grad_errors_are_one_line_and_write_nothing() {
         assert!(!out.exists(), "{what}: wrote {}", out.display());
     }
 }
+
+/// A tiny fit end to end: silhouettes and cameras written by the library's own writers, five
+/// iterations; the mesh and every report file appear.
+#[test]
+fn fit_mesh_writes_the_mesh_and_its_report() {
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    use softvk::fit::io::{self, CameraRow};
+    let dir = TempDir::new("fit-mesh");
+    let sil = dir.path("sil");
+    let size = 16u32;
+    let px = (size * size) as usize;
+    // A centred disc in every view.
+    let disc: Vec<f32> = (0..px)
+        .map(|i| {
+            let (x, y) = ((i % 16) as f32 - 7.5, (i / 16) as f32 - 7.5);
+            f32::from(u8::from(x * x + y * y < 30.0))
+        })
+        .collect();
+    let masks: Vec<f32> = (0..3).flat_map(|_| disc.iter().copied()).collect();
+    io::write_silhouettes(&sil, &io::silhouette_names(3), size, size, &masks).unwrap();
+    let rows: Vec<CameraRow> = (0..3)
+        .map(|i| CameraRow {
+            distance: 2.732,
+            elevation: 30.0,
+            azimuth: 120.0 * f64::from(i),
+        })
+        .collect();
+    let cams = dir.path("cameras.csv");
+    io::write_cameras(&cams, &rows).unwrap();
+    let out = dir.path("fitted.obj");
+    let o = softvk()
+        .args(["fit-mesh", "--iters", "5", "--log-every", "2", "--quiet"])
+        .arg("--silhouettes")
+        .arg(&sil)
+        .arg("--cameras")
+        .arg(&cams)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mesh = Mesh::load_obj(&out, 1).unwrap();
+    assert_eq!(mesh.face_count(), Mesh::icosphere(3).face_count());
+    let report = dir.path("fitted-report");
+    for f in ["ious.csv", "contact_sheet.png", "loss.png", "progress.gif"] {
+        assert!(report.join(f).is_file(), "{f} missing");
+    }
+    let ious = std::fs::read_to_string(report.join("ious.csv")).unwrap();
+    assert_eq!(ious.lines().count(), 1 + 3 + 1, "{ious}");
+}
+
+#[test]
+fn fit_mesh_errors_are_one_line_and_write_nothing() {
+    use softvk::fit::io::{self, CameraRow};
+    let dir = TempDir::new("fit-errors");
+    let sil = dir.path("sil");
+    let disc: Vec<f32> = (0..64)
+        .map(|i| f32::from(u8::from(i % 8 > 2 && i / 8 > 2)))
+        .collect();
+    io::write_silhouettes(
+        &sil,
+        &io::silhouette_names(2),
+        8,
+        8,
+        &[disc.clone(), disc].concat(),
+    )
+    .unwrap();
+    let empty = dir.path("empty_sil");
+    io::write_silhouettes(&empty, &io::silhouette_names(1), 8, 8, &[0.0; 64]).unwrap();
+    let row = CameraRow {
+        distance: 2.732,
+        elevation: 30.0,
+        azimuth: 0.0,
+    };
+    let two = dir.path("two.csv");
+    io::write_cameras(&two, &[row, row]).unwrap();
+    let three = dir.path("three.csv");
+    io::write_cameras(&three, &[row, row, row]).unwrap();
+    let nan_template = dir.write("nan.obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n");
+    let out = dir.path("m.obj");
+    let no_dir = dir.path("none");
+    let cases: Vec<(&str, &Path, &Path, Vec<&str>, &str)> = vec![
+        ("missing silhouettes", &no_dir, &two, vec![], "none"),
+        (
+            "camera rows vs images",
+            &sil,
+            &three,
+            vec![],
+            "3 camera rows",
+        ),
+        ("empty silhouette", &empty, &two, vec![], "no pixel inside"),
+        (
+            "NaN template",
+            &sil,
+            &two,
+            vec!["--template", nan_template.to_str().unwrap()],
+            "NaN",
+        ),
+        (
+            "size mismatch",
+            &sil,
+            &two,
+            vec!["--size", "16"],
+            "--size 16",
+        ),
+    ];
+    for (what, s, c, args, needle) in cases {
+        let o = softvk()
+            .arg("fit-mesh")
+            .arg("--silhouettes")
+            .arg(s)
+            .arg("--cameras")
+            .arg(c)
+            .arg("--out")
+            .arg(&out)
+            .args(&args)
+            .output()
+            .unwrap();
+        assert_one_error_line(what, &o, needle);
+        assert!(!out.exists(), "{what}: wrote the mesh");
+        assert!(!dir.path("m-report").exists(), "{what}: wrote a report");
+    }
+}

@@ -14,10 +14,10 @@ use std::path::{Path, PathBuf};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use softvk::camera::{Camera, Projection};
+use softvk::fit::AdamOptions;
 use softvk::fit::io::{self, Silhouettes};
 use softvk::fit::mesh_fit::{FitLog, MeshFitOptions, default_template, fit_mesh};
 use softvk::fit::report::{self, GifWriter, Series};
-use softvk::fit::AdamOptions;
 use softvk::gpu::{Context, ContextOptions};
 use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
@@ -31,7 +31,7 @@ use super::output::AtomicFile;
 /// The fitting flags shared by `fit-mesh` and `demo`.
 #[derive(Args, Clone, Debug)]
 pub struct FitArgs {
-    /// Iterations [default: 2000 as SoftRas's demo for fit-mesh; 300 for the demo].
+    /// Iterations [default: 2000 as SoftRas's demo for fit-mesh; 200 for the demo].
     #[arg(long = "iters", value_name = "N")]
     pub iterations: Option<u32>,
 
@@ -121,7 +121,9 @@ impl FitArgs {
         softvk::raster::fine::check_tile_size(self.tile)?;
         let iterations = self.iterations.unwrap_or(iterations);
         if iterations == 0 || self.log_every == 0 {
-            return Err(Error::Input("--iters and --log-every must be at least 1".into()));
+            return Err(Error::Input(
+                "--iters and --log-every must be at least 1".into(),
+            ));
         }
         let adam = AdamOptions {
             lr: self.lr,
@@ -205,9 +207,16 @@ fn fit_and_report(
     let views = sil.views();
     let columns = (views as f64).sqrt().ceil() as u32;
     let (w, h) = (sil.width, sil.height);
-    let sheet_size = report::contact_sheet(&sil.masks, &sil.masks, views, w, h, columns, None)
-        .dimensions();
-    let mut gif = GifWriter::create(&report_dir.join("progress.gif"), sheet_size.0, sheet_size.1, 120)?;
+    let ones = vec![1.0f32; views];
+    let sheet_size =
+        report::contact_sheet(&sil.masks, &sil.masks, views, w, h, columns, Some(&ones))
+            .dimensions();
+    let mut gif = GifWriter::create(
+        &report_dir.join("progress.gif"),
+        sheet_size.0,
+        sheet_size.1,
+        120,
+    )?;
     let bar = if fit.quiet {
         ProgressBar::hidden()
     } else {
@@ -219,19 +228,26 @@ fn fit_and_report(
         )
     };
     let mut gif_error = None;
-    let result = fit_mesh(&ctx, template, cams, &sil.masks, &opts, |l: &FitLog, ious, alphas| {
-        let mean = ious.iter().sum::<f32>() / ious.len().max(1) as f32;
-        bar.set_position(u64::from(l.iteration));
-        bar.set_message(format!("loss {:.4}  soft IoU {mean:.4}", l.total));
-        if let Some(a) = alphas {
-            let frame = report::contact_sheet(a, &sil.masks, views, w, h, columns, Some(ious));
-            if let Err(e) = gif.push(&frame) {
-                gif_error = Some(e);
-                return false;
+    let result = fit_mesh(
+        &ctx,
+        template,
+        cams,
+        &sil.masks,
+        &opts,
+        |l: &FitLog, ious, alphas| {
+            let mean = ious.iter().sum::<f32>() / ious.len().max(1) as f32;
+            bar.set_position(u64::from(l.iteration));
+            bar.set_message(format!("loss {:.4}  soft IoU {mean:.4}", l.total));
+            if let Some(a) = alphas {
+                let frame = report::contact_sheet(a, &sil.masks, views, w, h, columns, Some(ious));
+                if let Err(e) = gif.push(&frame) {
+                    gif_error = Some(e);
+                    return false;
+                }
             }
-        }
-        true
-    })?;
+            true
+        },
+    )?;
     bar.finish_and_clear();
     if let Some(e) = gif_error {
         return Err(e);
@@ -247,7 +263,14 @@ fn fit_and_report(
         ..RasterSettings::default()
     };
     let pred: Vec<f32> = Renderer::new(&ctx)?
-        .render_views(&ctx, &result.mesh, cams, &Lighting::unlit(), &hard, Method::default())?
+        .render_views(
+            &ctx,
+            &result.mesh,
+            cams,
+            &Lighting::unlit(),
+            &hard,
+            Method::default(),
+        )?
         .images
         .iter()
         .map(|p| p[3])
@@ -256,8 +279,16 @@ fn fit_and_report(
     let ious: Vec<f32> = (0..views)
         .map(|v| {
             let (p, t) = (&pred[v * px..(v + 1) * px], sil.mask(v));
-            let i = p.iter().zip(t).filter(|(a, b)| **a > 0.5 && **b > 0.5).count();
-            let u = p.iter().zip(t).filter(|(a, b)| **a > 0.5 || **b > 0.5).count();
+            let i = p
+                .iter()
+                .zip(t)
+                .filter(|(a, b)| **a > 0.5 && **b > 0.5)
+                .count();
+            let u = p
+                .iter()
+                .zip(t)
+                .filter(|(a, b)| **a > 0.5 || **b > 0.5)
+                .count();
             i as f32 / u.max(1) as f32
         })
         .collect();
@@ -309,7 +340,9 @@ fn fit_and_report(
 }
 
 fn default_report(out: &Path) -> PathBuf {
-    let stem = out.file_stem().map_or("fit".into(), |s| s.to_string_lossy().into_owned());
+    let stem = out
+        .file_stem()
+        .map_or("fit".into(), |s| s.to_string_lossy().into_owned());
     out.with_file_name(format!("{stem}-report"))
 }
 
@@ -333,7 +366,11 @@ pub fn run(args: &FitMeshArgs) -> Result<()> {
     };
     template.validate()?;
     let cams = args.fit.cameras(&rows);
-    let report_dir = args.fit.report.clone().unwrap_or_else(|| default_report(&args.out));
+    let report_dir = args
+        .fit
+        .report
+        .clone()
+        .unwrap_or_else(|| default_report(&args.out));
     fit_and_report(
         &args.fit,
         &template,
@@ -347,8 +384,9 @@ pub fn run(args: &FitMeshArgs) -> Result<()> {
 
 /// `fit-mesh`'s default iterations (SoftRas's demo).
 const FIT_ITERATIONS: u32 = 2000;
-/// The demo's default iterations: a few minutes on lavapipe.
-const DEMO_ITERATIONS: u32 = 300;
+/// The demo's default iterations: a few minutes on lavapipe (8 views at 64²: mean IoU 0.95
+/// after 60).
+const DEMO_ITERATIONS: u32 = 200;
 
 /// The flags of `softvk demo`.
 #[derive(Args, Clone, Debug)]
@@ -358,7 +396,7 @@ pub struct DemoArgs {
     pub out: PathBuf,
 
     /// Views of the generated target (elevation 30°, azimuths evenly spaced).
-    #[arg(long, value_name = "N", default_value_t = 12)]
+    #[arg(long, value_name = "N", default_value_t = 8)]
     pub views: u32,
 
     /// Image size.
@@ -385,7 +423,9 @@ pub fn demo_target() -> Mesh {
 /// cameras (so `fit-mesh` can be re-run on them), and fits the default sphere.
 pub fn demo(args: &DemoArgs) -> Result<()> {
     if args.views == 0 || args.size == 0 || args.size > 4096 {
-        return Err(Error::Input("--views must be ≥ 1 and --size in 1..=4096".into()));
+        return Err(Error::Input(
+            "--views must be ≥ 1 and --size in 1..=4096".into(),
+        ));
     }
     let dir = &args.out;
     let sil_dir = dir.join("silhouettes");
@@ -409,7 +449,14 @@ pub fn demo(args: &DemoArgs) -> Result<()> {
         ..RasterSettings::default()
     };
     let masks: Vec<f32> = Renderer::new(&ctx)?
-        .render_views(&ctx, &target, &cams, &Lighting::unlit(), &hard, Method::default())?
+        .render_views(
+            &ctx,
+            &target,
+            &cams,
+            &Lighting::unlit(),
+            &hard,
+            Method::default(),
+        )?
         .images
         .iter()
         .map(|p| p[3])
@@ -420,7 +467,11 @@ pub fn demo(args: &DemoArgs) -> Result<()> {
     io::write_cameras(&dir.join("cameras.csv"), &rows)?;
     io::write_obj(&dir.join("target.obj"), &target.positions, &target.faces)?;
     let sil = io::load_silhouettes(&sil_dir)?;
-    let report_dir = args.fit.report.clone().unwrap_or_else(|| dir.join("report"));
+    let report_dir = args
+        .fit
+        .report
+        .clone()
+        .unwrap_or_else(|| dir.join("report"));
     fit_and_report(
         &args.fit,
         &default_template(),
