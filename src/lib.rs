@@ -10,11 +10,14 @@
 //!   ([`raster::setup`]) and the brute-force fine pass ([`raster::brute`]), driven by
 //!   [`raster::gpu::Renderer`].
 //!
+//! - [`bench`]: the forward benchmark behind `softvk bench` (scenes, timing, JSON records).
+//!
 //! Every kernel has a CPU twin that tests compare it with.
 
 #![warn(missing_docs)]
 
 pub mod assets;
+pub mod bench;
 pub mod camera;
 pub mod error;
 pub mod gpu;
