@@ -28,7 +28,7 @@ struct Args {
     /// Timed submissions of brute force (default: --repeat).
     #[arg(long)]
     brute_repeat: Option<u32>,
-    /// Tile size (repeatable; default 8, 16, 32, 64).
+    /// Tile size (repeatable; default 8, 16, 32).
     #[arg(long = "tile")]
     tiles: Vec<u32>,
     /// Skip brute force (and the bit-for-bit check against it).

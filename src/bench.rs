@@ -19,7 +19,7 @@ use std::time::Instant;
 
 use crate::camera::{Camera, Projection};
 use crate::error::{Error, Result};
-use crate::gpu::{Context, Timer};
+use crate::gpu::{Context, Recorded, Timer};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::raster::fine::check_tile_size;
@@ -29,8 +29,9 @@ use crate::raster::reference::{Dist, RasterSettings, Rgb};
 /// The scenes of SPEC §6, in the order a plain `softvk bench` runs them.
 pub const SCENES: [&str; 4] = ["spot-256", "sphere-64x120", "dense-1024", "blurry-256"];
 
-/// Tile sizes timed by default.
-pub const DEFAULT_TILES: [u32; 4] = [8, 16, 32, 64];
+/// Tile sizes timed by default (64 is slow on a CPU device and never wins there; see
+/// BENCHMARKS.md).
+pub const DEFAULT_TILES: [u32; 3] = [8, 16, 32];
 
 /// Timed submissions per (scene, method) by default.
 pub const DEFAULT_REPEAT: u32 = 5;
@@ -475,6 +476,106 @@ pub fn loop_limit(ctx: &Context) -> Option<u64> {
     (info.name.contains("llvmpipe") || info.driver.contains("llvmpipe")).then_some(65_535)
 }
 
+/// One method of one scene, set up for timing: its own copy of the scene on the GPU (so every
+/// method's recording stays valid while the others run), its recording and its samples.
+struct Variant<'a> {
+    method: Method,
+    repeats: u32,
+    gpu: GpuScene,
+    timer: Option<Timer>,
+    recorded: Recorded<'a>,
+    pairs: u64,
+    entries: Option<u64>,
+    wall_ms: Vec<f64>,
+    gpu_ms: Vec<f64>,
+    passes: Vec<(String, Vec<f64>)>,
+}
+
+impl<'a> Variant<'a> {
+    /// Uploads the scene, runs `method` once (sizing its bins) and records its whole forward.
+    fn new(
+        ctx: &'a Context,
+        renderer: &Renderer,
+        scene: &Scene,
+        method: Method,
+        repeats: u32,
+    ) -> Result<Self> {
+        let mut gpu = renderer.prepare(
+            ctx,
+            &scene.mesh,
+            &scene.cameras,
+            &scene.lighting,
+            &scene.settings,
+        )?;
+        let entries = match method {
+            Method::Brute => None,
+            Method::Tiled { .. } => {
+                renderer.run(ctx, &mut gpu, method)?;
+                Some(gpu.binned_entries())
+            }
+        };
+        let pairs = gpu.evaluated_pairs(ctx, method)?;
+        // Five passes at most; a device without timestamps still gets wall times.
+        let mut timer = if ctx.info().timestamp_valid_bits > 0 {
+            Some(Timer::new(ctx, 8)?)
+        } else {
+            None
+        };
+        let recorded = ctx.record(timer.as_mut(), |rec| {
+            renderer.record_forward(rec, &gpu, method)
+        })?;
+        Ok(Self {
+            method,
+            repeats,
+            gpu,
+            timer,
+            recorded,
+            pairs,
+            entries,
+            wall_ms: Vec::new(),
+            gpu_ms: Vec::new(),
+            passes: Vec::new(),
+        })
+    }
+
+    fn label(&self) -> String {
+        match self.method {
+            Method::Brute => "brute".into(),
+            Method::Tiled { tile } => format!("tiled {tile}"),
+        }
+    }
+
+    /// One timed submission of the recording.
+    fn sample(&mut self, ctx: &Context) -> Result<()> {
+        let start = Instant::now();
+        self.recorded.submit_and_wait()?;
+        self.wall_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        if let Some(timer) = &self.timer {
+            let times = timer.results(ctx)?;
+            self.gpu_ms.push(times.iter().map(|t| t.ms).sum());
+            if self.passes.is_empty() {
+                self.passes = times.iter().map(|t| (t.name.clone(), Vec::new())).collect();
+            }
+            for ((_, series), t) in self.passes.iter_mut().zip(&times) {
+                series.push(t.ms);
+            }
+        }
+        Ok(())
+    }
+
+    fn timing(&self) -> Timing {
+        Timing {
+            gpu_ms: median(&self.gpu_ms),
+            wall_ms: median(&self.wall_ms).unwrap_or(f64::NAN),
+            passes: self
+                .passes
+                .iter()
+                .filter_map(|(name, series)| Some((name.clone(), median(series)?)))
+                .collect(),
+        }
+    }
+}
+
 /// The medians of one method's timed submissions.
 struct Timing {
     gpu_ms: Option<f64>,
@@ -482,9 +583,13 @@ struct Timing {
     passes: Vec<(String, f64)>,
 }
 
-/// Times one scene: brute force first (`brute`: its timed submissions, if any), whose images are
-/// the reference, then every tile size, each checked bit for bit against the reference (or,
-/// without brute force, against the first tile size) before and after timing.
+/// Times one scene with brute force (`brute`: its timed submissions, if any) and every tile size.
+///
+/// Brute force's first submission gives the reference images; every tiled method's first run is
+/// checked against them bit for bit before it is timed (without brute force, against the first
+/// tile size's). The timed submissions are interleaved, one per method per round, so that load
+/// from other processes falls on every method alike; afterwards each method's images are checked
+/// again.
 fn bench_scene(
     ctx: &Context,
     renderer: &Renderer,
@@ -493,96 +598,102 @@ fn bench_scene(
     brute: Option<u32>,
     progress: &mut impl FnMut(&str),
 ) -> Result<Vec<BenchRecord>> {
-    let mut gpu = renderer.prepare(
-        ctx,
-        &scene.mesh,
-        &scene.cameras,
-        &scene.lighting,
-        &scene.settings,
-    )?;
     let name = scene.name.as_str();
-    let (views, faces) = (gpu.view_count(), gpu.face_count());
-    let record = |method, t: Timing, pairs, repeats, entries, identical| BenchRecord {
-        scene: name.to_string(),
-        method,
-        pass: "forward",
-        gpu_ms: t.gpu_ms,
-        wall_ms: t.wall_ms,
-        pairs,
-        device: ctx.info().name.clone(),
-        driver: ctx.info().driver.clone(),
-        repeats,
-        passes: t.passes,
-        views,
-        faces,
-        width: scene.settings.width,
-        height: scene.settings.height,
-        rows: scene.rows,
-        entries,
-        identical_to_brute: identical,
-    };
-    let mut records = Vec::new();
-
+    let mut variants = Vec::new();
     // The bits every tiled render must reproduce, and what they came from.
     let mut reference: Option<(Bits, String)> = None;
-    let mut brute_ms = None;
     if let Some(repeats) = brute {
-        let pairs = gpu.evaluated_pairs(ctx, Method::Brute)?;
+        let mut v = Variant::new(ctx, renderer, scene, Method::Brute, repeats)?;
         progress(&format!(
-            "{name} brute: {pairs} (pixel, face) pairs, {repeats} timed submission(s)"
+            "{name} brute: {} (pixel, face) pairs; first of {repeats} timed submission(s)",
+            v.pairs
         ));
-        let t = time_forward(ctx, renderer, &gpu, Method::Brute, repeats)?;
-        progress(&format!("{name} brute: {}", summary(&t, repeats)));
+        v.sample(ctx)?;
         reference = Some((
-            bits(&renderer.read_frames(ctx, &gpu)?),
+            bits(&renderer.read_frames(ctx, &v.gpu)?),
             "brute force".into(),
         ));
-        brute_ms = Some(t.wall_ms);
-        records.push(record(Method::Brute, t, pairs, repeats, None, None));
+        variants.push(v);
+    }
+    let check = |v: &Variant<'_>, reference: &mut Option<(Bits, String)>, when: &str| {
+        let got = bits(&renderer.read_frames(ctx, &v.gpu)?);
+        let Some((want, what)) = reference else {
+            *reference = Some((got, v.label()));
+            return Ok("the reference for the other tile sizes (brute force not run)".into());
+        };
+        if let Some(at) = first_difference(&got, want) {
+            return Err(Error::Check(format!(
+                "bench {name}: {} differs from {what} {when}, first at {at}",
+                v.label()
+            )));
+        }
+        Ok(format!("images and aux bit-identical to {what}"))
+    };
+    for &tile in &opts.tiles {
+        let v = Variant::new(ctx, renderer, scene, Method::Tiled { tile }, opts.repeat)?;
+        let outcome = check(&v, &mut reference, "in its first run")?;
+        progress(&format!(
+            "{name} {}: {outcome}; {} pairs, {} (face, tile) entries",
+            v.label(),
+            v.pairs,
+            v.entries.unwrap_or(0)
+        ));
+        variants.push(v);
     }
 
-    for &tile in &opts.tiles {
-        let method = Method::Tiled { tile };
-        renderer.run(ctx, &mut gpu, method)?;
-        let mut check = |gpu: &GpuScene, when: &str| -> Result<String> {
-            let got = bits(&renderer.read_frames(ctx, gpu)?);
-            let Some((want, what)) = &reference else {
-                reference = Some((got, format!("tiled {tile}")));
-                return Ok("the reference for the other tile sizes (brute force not run)".into());
-            };
-            if let Some(at) = first_difference(&got, want) {
-                return Err(Error::Check(format!(
-                    "bench {name}: tiled {tile} differs from {what} {when}, first at {at}"
-                )));
+    let rounds = variants.iter().map(|v| v.repeats).max().unwrap_or(0);
+    progress(&format!(
+        "{name}: timing {} method(s) in {rounds} interleaved round(s)",
+        variants.len()
+    ));
+    for _ in 0..rounds {
+        for v in &mut variants {
+            if (v.wall_ms.len() as u32) < v.repeats {
+                v.sample(ctx)?;
             }
-            Ok(format!("images and aux bit-identical to {what}"))
+        }
+    }
+
+    let brute_ms = brute.and(variants.first().map(|v| v.timing().wall_ms));
+    let mut records = Vec::new();
+    for v in &variants {
+        if v.method != Method::Brute {
+            check(v, &mut reference, "after its timed submissions")?;
+        }
+        let t = v.timing();
+        let speedup = match (v.method, brute_ms) {
+            (Method::Tiled { .. }, Some(b)) => {
+                format!(", {:.2}x brute force's wall time", b / t.wall_ms)
+            }
+            _ => String::new(),
         };
-        let outcome = check(&gpu, "in a fresh run")?;
-        let pairs = gpu.evaluated_pairs(ctx, method)?;
-        let entries = gpu.binned_entries();
         progress(&format!(
-            "{name} tiled {tile}: {outcome}; {pairs} pairs, {entries} (face, tile) entries, {} \
-             timed submission(s)",
-            opts.repeat
+            "{name} {}: {}{speedup}",
+            v.label(),
+            summary(&t, v.repeats)
         ));
-        let t = time_forward(ctx, renderer, &gpu, method, opts.repeat)?;
-        check(&gpu, "after the timed resubmissions")?;
-        let speedup = brute_ms.map_or(String::new(), |b| {
-            format!(", {:.2}x brute force's wall time", b / t.wall_ms)
+        records.push(BenchRecord {
+            scene: name.to_string(),
+            method: v.method,
+            pass: "forward",
+            gpu_ms: t.gpu_ms,
+            wall_ms: t.wall_ms,
+            pairs: v.pairs,
+            device: ctx.info().name.clone(),
+            driver: ctx.info().driver.clone(),
+            repeats: v.repeats,
+            passes: t.passes,
+            views: v.gpu.view_count(),
+            faces: v.gpu.face_count(),
+            width: scene.settings.width,
+            height: scene.settings.height,
+            rows: scene.rows,
+            entries: v.entries,
+            identical_to_brute: match v.method {
+                Method::Tiled { .. } => brute.map(|_| true),
+                Method::Brute => None,
+            },
         });
-        progress(&format!(
-            "{name} tiled {tile}: {}{speedup}",
-            summary(&t, opts.repeat)
-        ));
-        let identical = brute.map(|_| true);
-        records.push(record(
-            method,
-            t,
-            pairs,
-            opts.repeat,
-            Some(entries),
-            identical,
-        ));
     }
     Ok(records)
 }
@@ -601,51 +712,6 @@ fn summary(t: &Timing, repeats: u32) -> String {
         t.wall_ms,
         passes.join(", ")
     )
-}
-
-/// Records the whole forward once and times `repeats` submissions of it.
-fn time_forward(
-    ctx: &Context,
-    renderer: &Renderer,
-    scene: &GpuScene,
-    method: Method,
-    repeats: u32,
-) -> Result<Timing> {
-    // Five passes at most; a device without timestamps still gets wall times.
-    let mut timer = if ctx.info().timestamp_valid_bits > 0 {
-        Some(Timer::new(ctx, 8)?)
-    } else {
-        None
-    };
-    let recorded = ctx.record(timer.as_mut(), |rec| {
-        renderer.record_forward(rec, scene, method)
-    })?;
-    let mut wall = Vec::new();
-    let mut gpu = Vec::new();
-    let mut passes: Vec<(String, Vec<f64>)> = Vec::new();
-    for _ in 0..repeats {
-        let start = Instant::now();
-        recorded.submit_and_wait()?;
-        wall.push(start.elapsed().as_secs_f64() * 1e3);
-        if let Some(timer) = &timer {
-            let times = timer.results(ctx)?;
-            gpu.push(times.iter().map(|t| t.ms).sum());
-            if passes.is_empty() {
-                passes = times.iter().map(|t| (t.name.clone(), Vec::new())).collect();
-            }
-            for ((_, series), t) in passes.iter_mut().zip(&times) {
-                series.push(t.ms);
-            }
-        }
-    }
-    Ok(Timing {
-        gpu_ms: median(&gpu),
-        wall_ms: median(&wall).unwrap_or(f64::NAN),
-        passes: passes
-            .into_iter()
-            .filter_map(|(name, series)| Some((name, median(&series)?)))
-            .collect(),
-    })
 }
 
 /// The median (mean of the middle two for an even count); `None` for no samples.
