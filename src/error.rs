@@ -77,6 +77,11 @@ pub enum Error {
     #[error(transparent)]
     Render(#[from] crate::raster::reference::RenderError),
 
+    /// A self-check failed: two computations that must agree bit for bit did not (the
+    /// benchmark checks every tiled render against brute force before timing it).
+    #[error("{0}")]
+    Check(String),
+
     /// A file could not be read or written.
     #[error("{path}: {source}")]
     Io {

@@ -14,11 +14,14 @@
 //!   image MSE, its Laplacian and flatten regularizers, its sigmoid/tanh deformation, and Adam —
 //!   recordable into one command buffer per iteration.
 //!
+//! - [`bench`]: the forward benchmark behind `softvk bench` (scenes, timing, JSON records).
+//!
 //! Every kernel has a CPU twin that tests compare it with.
 
 #![warn(missing_docs)]
 
 pub mod assets;
+pub mod bench;
 pub mod camera;
 pub mod error;
 pub mod fit;

@@ -1,0 +1,1159 @@
+//! The forward-pass benchmark behind `softvk bench` (SPEC §6): four scenes, each rendered with
+//! the tiled kernel at several tile sizes and with the brute-force baseline, timed as
+//! resubmissions of one recorded command buffer, and written as the JSON records of the spec.
+//!
+//! Per scene: upload once ([`Renderer::prepare`]); brute force first, whose images are the
+//! reference; then per tile size one [`Renderer::run`] (which sizes the bins exactly), a check
+//! that its images and aux equal brute force's bit for bit, the timed resubmissions of
+//! [`Renderer::record_forward`], and the same check again on what the timed submissions left.
+//! A mismatch is an error ([`Error::Check`]): a benchmark of a wrong image is worthless.
+//!
+//! Times are medians over the repeats: `wall_ms` is host time from submit to fence, `gpu_ms` the
+//! sum of the GPU timestamps of the passes (`face setup`, `bin count`, `bin sort`, `raster tiled`
+//! or `raster brute`, `downsample 2x2`), each also reported on its own in `passes`.
+
+use std::collections::HashMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::camera::{Camera, Projection};
+use crate::error::{Error, Result};
+use crate::gpu::{Context, Recorded, Timer};
+use crate::lighting::Lighting;
+use crate::mesh::Mesh;
+use crate::raster::fine::check_tile_size;
+use crate::raster::gpu::{Frames, GpuScene, Method, Renderer};
+use crate::raster::reference::{Dist, RasterSettings, Rgb};
+
+/// The scenes of SPEC §6, in the order a plain `softvk bench` runs them.
+pub const SCENES: [&str; 4] = ["spot-256", "sphere-64x120", "dense-1024", "blurry-256"];
+
+/// Tile sizes timed by default (64 is slow on a CPU device and never wins there; see
+/// BENCHMARKS.md).
+pub const DEFAULT_TILES: [u32; 3] = [8, 16, 32];
+
+/// Timed submissions per (scene, method) by default.
+pub const DEFAULT_REPEAT: u32 = 5;
+
+/// What to run.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct BenchOptions {
+    /// Scenes by name (see [`SCENES`]); empty runs them all.
+    pub scenes: Vec<String>,
+    /// Timed submissions per (scene, method); times are medians over them.
+    pub repeat: u32,
+    /// Timed submissions of brute force (tens of seconds each on a CPU device); `None`: `repeat`.
+    pub brute_repeat: Option<u32>,
+    /// Tile sizes of the tiled method (multiples of 8).
+    pub tiles: Vec<u32>,
+    /// Time brute force too. Without it, tiled images are not checked against it.
+    pub brute: bool,
+    /// Render only the middle `N` rows of every scene ([`Scene::band`]) instead of the full
+    /// frame: quick runs and smoke tests.
+    pub band: Option<u32>,
+    /// Folder of the meshes; `None` is [`crate::assets::dir`] (`SOFTVK_ASSETS`).
+    pub assets: Option<PathBuf>,
+}
+
+impl Default for BenchOptions {
+    fn default() -> Self {
+        Self {
+            scenes: Vec::new(),
+            repeat: DEFAULT_REPEAT,
+            brute_repeat: None,
+            tiles: DEFAULT_TILES.to_vec(),
+            brute: true,
+            band: None,
+            assets: None,
+        }
+    }
+}
+
+impl BenchOptions {
+    /// The scenes to run, in order, after checking every option (no GPU work happens before
+    /// the options are known to be good).
+    pub fn checked_scenes(&self) -> Result<Vec<&'static str>> {
+        if self.repeat == 0 || self.brute_repeat == Some(0) {
+            return Err(Error::Input("bench: --repeat must be at least 1".into()));
+        }
+        for &tile in &self.tiles {
+            check_tile_size(tile)?;
+        }
+        if self.band == Some(0) {
+            return Err(Error::Input("bench: a band needs at least one row".into()));
+        }
+        if self.tiles.is_empty() && !self.brute {
+            return Err(Error::Input("bench: no method to time".into()));
+        }
+        if self.scenes.is_empty() {
+            return Ok(SCENES.to_vec());
+        }
+        self.scenes
+            .iter()
+            .map(|name| {
+                SCENES.iter().copied().find(|s| s == name).ok_or_else(|| {
+                    Error::Input(format!(
+                        "bench: unknown scene `{name}`; the scenes are {}",
+                        SCENES.join(", ")
+                    ))
+                })
+            })
+            .collect()
+    }
+}
+
+/// One timed (scene, method) of the forward pass: the fields of SPEC §6 first, then extras.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BenchRecord {
+    /// Scene name.
+    pub scene: String,
+    /// Brute force, or tiled with its tile size.
+    pub method: Method,
+    /// Always `"forward"` here (the backward is not benchmarked yet).
+    pub pass: &'static str,
+    /// Median GPU time (sum of the passes' timestamps), ms; `None` on a device without
+    /// timestamps.
+    pub gpu_ms: Option<f64>,
+    /// Median host time from submit to fence, ms.
+    pub wall_ms: f64,
+    /// (pixel, face) pairs the fine pass evaluated ([`GpuScene::evaluated_pairs`]).
+    pub pairs: u64,
+    /// Device name, as `softvk info` prints it.
+    pub device: String,
+    /// Driver name and version.
+    pub driver: String,
+    /// Timed submissions the medians are over.
+    pub repeats: u32,
+    /// Median GPU time of every pass, ms, in recording order.
+    pub passes: Vec<(String, f64)>,
+    /// Views rendered per submission.
+    pub views: u32,
+    /// Faces per view.
+    pub faces: u32,
+    /// Output width.
+    pub width: u32,
+    /// Output height.
+    pub height: u32,
+    /// For a band ([`Scene::band`]): the rows `[first, end)` of the full frame it renders.
+    pub rows: Option<[u32; 2]>,
+    /// (face, tile) entries binned (tiled only).
+    pub entries: Option<u64>,
+    /// Whether images and aux were checked equal to brute force's bit for bit (`None`: brute
+    /// force not run on this frame, or this is brute force).
+    pub identical_to_brute: Option<bool>,
+}
+
+/// A benchmark scene: what to render and how.
+pub struct Scene {
+    /// Its name in [`SCENES`]; a band's is `NAME[rows A..B]`.
+    pub name: String,
+    /// One line saying what it is (mesh, size, views, settings).
+    pub description: String,
+    /// The mesh.
+    pub mesh: Mesh,
+    /// One camera per view.
+    pub cameras: Vec<Camera>,
+    /// Lights.
+    pub lighting: Lighting,
+    /// Raster settings.
+    pub settings: RasterSettings,
+    /// For a band: the rows `[first, end)` of the full frame it renders.
+    pub rows: Option<[u32; 2]>,
+}
+
+/// SoftRas's default camera distance, `1/tan 30° + 1`.
+const DISTANCE: f64 = 2.732;
+
+fn load(assets: &Path, file: &str, texture_res: u32) -> Result<Mesh> {
+    Ok(Mesh::load_obj(&assets.join(file), texture_res)?)
+}
+
+impl Scene {
+    /// Builds scene `name` from the meshes in `assets`.
+    ///
+    /// - `spot-256`, `blurry-256`: spot with R = 5 textures (as SoftRas's `demo_render.py`),
+    ///   256², seen from distance 2.732, elevation 30°, azimuth 45° (the demo's σ/γ sweep view).
+    /// - `sphere-64x120`: as SoftRas's `demo_deform.py` renders its template: the 1352-vertex
+    ///   sphere scaled by 0.5, 64², viewing angle 15°, hard colour, σ = 1e-4, 120 views at
+    ///   distance 2.732, elevation 30°, azimuths 0°, 3°, …, 357°.
+    /// - `dense-1024`: the 1352-vertex sphere subdivided three times ([`subdivide`]: 172 800
+    ///   faces), 1024², the spot view.
+    pub fn load(name: &str, assets: &Path) -> Result<Scene> {
+        let spot_view = Camera::from_angles(DISTANCE, 30.0, 45.0);
+        let spot_texture_res = 5;
+        let base = RasterSettings::default();
+        Ok(match name {
+            "spot-256" => Scene {
+                name: "spot-256".into(),
+                description: String::new(),
+                mesh: load(assets, "spot_triangulated.obj", spot_texture_res)?,
+                cameras: vec![spot_view],
+                lighting: Lighting::default(),
+                settings: RasterSettings {
+                    width: 256,
+                    height: 256,
+                    sigma: 1e-5,
+                    gamma: 1e-4,
+                    ..base
+                },
+                rows: None,
+            },
+            "sphere-64x120" => {
+                let mut mesh = load(assets, "sphere_1352.obj", 1)?;
+                for p in &mut mesh.positions {
+                    *p = p.map(|c| c * 0.5);
+                }
+                let projection = Projection::Perspective {
+                    viewing_angle_deg: 15.0,
+                };
+                Scene {
+                    name: "sphere-64x120".into(),
+                    description: String::new(),
+                    mesh,
+                    cameras: (0..120)
+                        .map(|i| Camera {
+                            projection,
+                            ..Camera::from_angles(DISTANCE, 30.0, f64::from(3 * i))
+                        })
+                        .collect(),
+                    lighting: Lighting::default(),
+                    settings: RasterSettings {
+                        width: 64,
+                        height: 64,
+                        sigma: 1e-4,
+                        rgb: Rgb::Hard,
+                        ..base
+                    },
+                    rows: None,
+                }
+            }
+            "dense-1024" => Scene {
+                name: "dense-1024".into(),
+                description: String::new(),
+                mesh: subdivide(&subdivide(&subdivide(&load(
+                    assets,
+                    "sphere_1352.obj",
+                    1,
+                )?)?)?)?,
+                cameras: vec![spot_view],
+                lighting: Lighting::default(),
+                settings: RasterSettings {
+                    width: 1024,
+                    height: 1024,
+                    sigma: 1e-5,
+                    gamma: 1e-4,
+                    ..base
+                },
+                rows: None,
+            },
+            "blurry-256" => Scene {
+                name: "blurry-256".into(),
+                description: String::new(),
+                mesh: load(assets, "spot_triangulated.obj", spot_texture_res)?,
+                cameras: vec![spot_view],
+                lighting: Lighting::default(),
+                settings: RasterSettings {
+                    width: 256,
+                    height: 256,
+                    sigma: 3e-2,
+                    gamma: 3e-1,
+                    ..base
+                },
+                rows: None,
+            },
+            _ => {
+                return Err(Error::Input(format!(
+                    "bench: unknown scene `{name}`; the scenes are {}",
+                    SCENES.join(", ")
+                )));
+            }
+        }
+        .described())
+    }
+
+    /// The middle `rows` rows of this scene's frame as a scene of its own: the same faces over
+    /// the same pixel centres, so every pixel visits the same faces as in the full frame.
+    ///
+    /// For an `N × N` frame the band is `N × rows` with `S = rows`, so pixel centres are the
+    /// full frame's scaled by `k = N / rows`; screen space is scaled to match (perspective
+    /// `tan a' = tan a / k`, orthographic `s' = k s`), and σ by `k²`, since euclidean coverage
+    /// `sigmoid(δ d² / σ)` and its cut-off box are in screen units. Only f32 rounding differs.
+    /// Needs a square frame, `N − rows` even, euclidean distance and no anti-aliasing.
+    pub fn band(&self, rows: u32) -> Result<Scene> {
+        let s = &self.settings;
+        let n = s.height;
+        if s.width != n
+            || rows == 0
+            || rows >= n
+            || (n - rows) % 2 != 0
+            || s.antialias
+            || s.dist != Dist::Euclidean
+        {
+            return Err(Error::Input(format!(
+                "bench: cannot take a {rows}-row band of {} ({}x{}, {:?} distance{}): a band \
+                 needs a square frame, fewer rows than it, an even margin, euclidean distance \
+                 and no anti-aliasing",
+                self.name,
+                s.width,
+                s.height,
+                s.dist,
+                if s.antialias { ", anti-aliased" } else { "" },
+            )));
+        }
+        let k = f64::from(n) / f64::from(rows);
+        let cameras = self
+            .cameras
+            .iter()
+            .map(|c| {
+                let projection = match c.projection {
+                    Projection::Perspective { viewing_angle_deg } => Projection::Perspective {
+                        viewing_angle_deg: (viewing_angle_deg.to_radians().tan() / k)
+                            .atan()
+                            .to_degrees(),
+                    },
+                    Projection::Orthographic { scale } => {
+                        Projection::Orthographic { scale: scale * k }
+                    }
+                    Projection::Matrix { .. } => {
+                        return Err(Error::Input(
+                            "bench: a band needs a perspective or orthographic camera".into(),
+                        ));
+                    }
+                };
+                Ok(Camera { projection, ..*c })
+            })
+            .collect::<Result<_>>()?;
+        let first = (n - rows) / 2;
+        Ok(Scene {
+            name: format!("{}[rows {first}..{}]", self.name, first + rows),
+            description: String::new(),
+            mesh: self.mesh.clone(),
+            cameras,
+            lighting: self.lighting.clone(),
+            settings: RasterSettings {
+                height: rows,
+                sigma: s.sigma * k * k,
+                ..*s
+            },
+            rows: Some([first, first + rows]),
+        }
+        .described())
+    }
+
+    fn described(mut self) -> Self {
+        let s = &self.settings;
+        self.description = format!(
+            "{}: {} faces (R = {}), {} view(s) of {}x{}, sigma {:e}, gamma {:e}, rgb {:?}{}",
+            self.name,
+            self.mesh.face_count(),
+            self.mesh.texture_res,
+            self.cameras.len(),
+            s.width,
+            s.height,
+            s.sigma,
+            s.gamma,
+            s.rgb,
+            match self.rows {
+                Some([a, b]) => format!(
+                    " (rows {a}..{b} of the {0}x{0} frame, screen space scaled to match)",
+                    s.width
+                ),
+                None => String::new(),
+            },
+        );
+        self
+    }
+}
+
+/// Midpoint subdivision: every triangle `(a, b, c)` becomes `(a, ab, ca)`, `(b, bc, ab)`,
+/// `(c, ca, bc)`, `(ab, bc, ca)`, each wound as its parent and lying in its plane.
+///
+/// Faces that share an edge share its midpoint (one new vertex per undirected edge, appended in
+/// order of first use), so a watertight mesh stays watertight. Children copy their parent's
+/// texels (exact for R = 1; for R > 1 each child shows the whole parent texture, the benchmark
+/// only needs R = 1); per-vertex colours are averaged at midpoints.
+pub fn subdivide(mesh: &Mesh) -> Result<Mesh> {
+    mesh.validate()?;
+    let mut positions = mesh.positions.clone();
+    let mut colors = mesh.vertex_colors.clone();
+    let mut midpoints: HashMap<(u32, u32), u32> = HashMap::with_capacity(mesh.faces.len() * 3 / 2);
+    let mut midpoint = |a: u32, b: u32| -> Result<u32> {
+        let key = (a.min(b), a.max(b));
+        if let Some(&m) = midpoints.get(&key) {
+            return Ok(m);
+        }
+        let m = u32::try_from(positions.len())
+            .map_err(|_| Error::Limit("subdivide: more than 2^32 vertices".into()))?;
+        let mid = |p: &[[f32; 3]]| {
+            let (p, q) = (p[a as usize], p[b as usize]);
+            // f32 + f32 is exact in f64, so this is the correctly rounded midpoint.
+            [0, 1, 2].map(|k| ((f64::from(p[k]) + f64::from(q[k])) / 2.0) as f32)
+        };
+        positions.push(mid(&positions));
+        if let Some(c) = colors.as_mut() {
+            c.push(mid(c));
+        }
+        midpoints.insert(key, m);
+        Ok(m)
+    };
+    let mut faces = Vec::with_capacity(4 * mesh.faces.len());
+    for &[a, b, c] in &mesh.faces {
+        let ab = midpoint(a, b)?;
+        let bc = midpoint(b, c)?;
+        let ca = midpoint(c, a)?;
+        faces.extend_from_slice(&[[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+    }
+    let r2 = (mesh.texture_res * mesh.texture_res) as usize;
+    let textures = mesh
+        .textures
+        .chunks_exact(r2)
+        .flat_map(|parent| std::iter::repeat_n(parent, 4).flatten().copied())
+        .collect();
+    let out = Mesh {
+        positions,
+        faces,
+        texture_res: mesh.texture_res,
+        textures,
+        vertex_colors: colors,
+    };
+    out.validate()?;
+    Ok(out)
+}
+
+/// Runs the benchmark: every scene of `opts`, brute force then each tile size, with one line of
+/// `progress` per step (including the outcome of every bit-for-bit check).
+pub fn run(
+    ctx: &Context,
+    opts: &BenchOptions,
+    mut progress: impl FnMut(&str),
+) -> Result<Vec<BenchRecord>> {
+    let names = opts.checked_scenes()?;
+    let assets = opts.assets.clone().unwrap_or_else(crate::assets::dir);
+    let renderer = Renderer::new(ctx)?;
+    let mut records = Vec::new();
+    for name in names {
+        let mut scene = Scene::load(name, &assets)?;
+        if let Some(rows) = opts.band {
+            scene = scene.band(rows)?;
+        }
+        progress(&scene.description);
+        let mut brute = opts.brute.then(|| opts.brute_repeat.unwrap_or(opts.repeat));
+        if let Some(limit) = loop_limit(ctx)
+            && brute.is_some()
+            && scene.mesh.face_count() as u64 > limit
+        {
+            progress(&format!(
+                "{}: brute force skipped: {} ends a shader invocation's loops after {limit} \
+                 iterations in all (Mesa's LP_MAX_TGSI_LOOP_ITERATIONS), so the brute-force \
+                 kernel would silently skip faces {limit}.. of {}; the tiled sizes are checked \
+                 against each other instead",
+                scene.name,
+                ctx.info().name,
+                scene.mesh.face_count()
+            ));
+            brute = None;
+        }
+        records.extend(bench_scene(
+            ctx,
+            &renderer,
+            &scene,
+            opts,
+            brute,
+            &mut progress,
+        )?);
+    }
+    Ok(records)
+}
+
+/// The most loop iterations one shader invocation may run, on a driver known to cap them:
+/// llvmpipe (lavapipe) ends every loop of an invocation once 65 535 iterations have run in total,
+/// over all its loops (Mesa's `LP_MAX_TGSI_LOOP_ITERATIONS`). The brute-force kernel loops once
+/// per face, so there it silently drops every face past the 65 535th; the tiled kernel loops
+/// about once per binned face of its tile.
+pub fn loop_limit(ctx: &Context) -> Option<u64> {
+    let info = ctx.info();
+    (info.name.contains("llvmpipe") || info.driver.contains("llvmpipe")).then_some(65_535)
+}
+
+/// One method of one scene, set up for timing: its own copy of the scene on the GPU (so every
+/// method's recording stays valid while the others run), its recording and its samples.
+struct Variant<'a> {
+    method: Method,
+    repeats: u32,
+    gpu: GpuScene,
+    timer: Option<Timer>,
+    recorded: Recorded<'a>,
+    pairs: u64,
+    entries: Option<u64>,
+    wall_ms: Vec<f64>,
+    gpu_ms: Vec<f64>,
+    passes: Vec<(String, Vec<f64>)>,
+}
+
+impl<'a> Variant<'a> {
+    /// Uploads the scene, runs `method` once (sizing its bins) and records its whole forward.
+    fn new(
+        ctx: &'a Context,
+        renderer: &Renderer,
+        scene: &Scene,
+        method: Method,
+        repeats: u32,
+    ) -> Result<Self> {
+        let mut gpu = renderer.prepare(
+            ctx,
+            &scene.mesh,
+            &scene.cameras,
+            &scene.lighting,
+            &scene.settings,
+        )?;
+        let entries = match method {
+            Method::Brute => None,
+            Method::Tiled { .. } => {
+                renderer.run(ctx, &mut gpu, method)?;
+                Some(gpu.binned_entries())
+            }
+        };
+        let pairs = gpu.evaluated_pairs(ctx, method)?;
+        // Five passes at most; a device without timestamps still gets wall times.
+        let mut timer = if ctx.info().timestamp_valid_bits > 0 {
+            Some(Timer::new(ctx, 8)?)
+        } else {
+            None
+        };
+        let recorded = ctx.record(timer.as_mut(), |rec| {
+            renderer.record_forward(rec, &gpu, method)
+        })?;
+        Ok(Self {
+            method,
+            repeats,
+            gpu,
+            timer,
+            recorded,
+            pairs,
+            entries,
+            wall_ms: Vec::new(),
+            gpu_ms: Vec::new(),
+            passes: Vec::new(),
+        })
+    }
+
+    fn label(&self) -> String {
+        match self.method {
+            Method::Brute => "brute".into(),
+            Method::Tiled { tile } => format!("tiled {tile}"),
+        }
+    }
+
+    /// One timed submission of the recording.
+    fn sample(&mut self, ctx: &Context) -> Result<()> {
+        let start = Instant::now();
+        self.recorded.submit_and_wait()?;
+        self.wall_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        if let Some(timer) = &self.timer {
+            let times = timer.results(ctx)?;
+            self.gpu_ms.push(times.iter().map(|t| t.ms).sum());
+            if self.passes.is_empty() {
+                self.passes = times.iter().map(|t| (t.name.clone(), Vec::new())).collect();
+            }
+            for ((_, series), t) in self.passes.iter_mut().zip(&times) {
+                series.push(t.ms);
+            }
+        }
+        Ok(())
+    }
+
+    fn timing(&self) -> Timing {
+        Timing {
+            gpu_ms: median(&self.gpu_ms),
+            wall_ms: median(&self.wall_ms).unwrap_or(f64::NAN),
+            passes: self
+                .passes
+                .iter()
+                .filter_map(|(name, series)| Some((name.clone(), median(series)?)))
+                .collect(),
+        }
+    }
+}
+
+/// The medians of one method's timed submissions.
+struct Timing {
+    gpu_ms: Option<f64>,
+    wall_ms: f64,
+    passes: Vec<(String, f64)>,
+}
+
+/// Times one scene with brute force (`brute`: its timed submissions, if any) and every tile size.
+///
+/// Brute force's first submission gives the reference images; every tiled method's first run is
+/// checked against them bit for bit before it is timed (without brute force, against the first
+/// tile size's). The timed submissions are interleaved, one per method per round, so that load
+/// from other processes falls on every method alike; afterwards each method's images are checked
+/// again.
+fn bench_scene(
+    ctx: &Context,
+    renderer: &Renderer,
+    scene: &Scene,
+    opts: &BenchOptions,
+    brute: Option<u32>,
+    progress: &mut impl FnMut(&str),
+) -> Result<Vec<BenchRecord>> {
+    let name = scene.name.as_str();
+    let mut variants = Vec::new();
+    // The bits every tiled render must reproduce, and what they came from.
+    let mut reference: Option<(Bits, String)> = None;
+    if let Some(repeats) = brute {
+        let mut v = Variant::new(ctx, renderer, scene, Method::Brute, repeats)?;
+        progress(&format!(
+            "{name} brute: {} (pixel, face) pairs; first of {repeats} timed submission(s)",
+            v.pairs
+        ));
+        v.sample(ctx)?;
+        reference = Some((
+            bits(&renderer.read_frames(ctx, &v.gpu)?),
+            "brute force".into(),
+        ));
+        variants.push(v);
+    }
+    let check = |v: &Variant<'_>, reference: &mut Option<(Bits, String)>, when: &str| {
+        let got = bits(&renderer.read_frames(ctx, &v.gpu)?);
+        let Some((want, what)) = reference else {
+            *reference = Some((got, v.label()));
+            return Ok("the reference for the other tile sizes (brute force not run)".into());
+        };
+        if let Some(at) = first_difference(&got, want) {
+            return Err(Error::Check(format!(
+                "bench {name}: {} differs from {what} {when}, first at {at}",
+                v.label()
+            )));
+        }
+        Ok(format!("images and aux bit-identical to {what}"))
+    };
+    for &tile in &opts.tiles {
+        let v = Variant::new(ctx, renderer, scene, Method::Tiled { tile }, opts.repeat)?;
+        let outcome = check(&v, &mut reference, "in its first run")?;
+        progress(&format!(
+            "{name} {}: {outcome}; {} pairs, {} (face, tile) entries",
+            v.label(),
+            v.pairs,
+            v.entries.unwrap_or(0)
+        ));
+        variants.push(v);
+    }
+
+    let rounds = variants.iter().map(|v| v.repeats).max().unwrap_or(0);
+    progress(&format!(
+        "{name}: timing {} method(s) in {rounds} interleaved round(s)",
+        variants.len()
+    ));
+    for _ in 0..rounds {
+        for v in &mut variants {
+            if (v.wall_ms.len() as u32) < v.repeats {
+                v.sample(ctx)?;
+            }
+        }
+    }
+
+    let brute_ms = brute.and(variants.first().map(|v| v.timing().wall_ms));
+    let mut records = Vec::new();
+    for v in &variants {
+        if v.method != Method::Brute {
+            check(v, &mut reference, "after its timed submissions")?;
+        }
+        let t = v.timing();
+        let speedup = match (v.method, brute_ms) {
+            (Method::Tiled { .. }, Some(b)) => {
+                format!(", {:.2}x brute force's wall time", b / t.wall_ms)
+            }
+            _ => String::new(),
+        };
+        progress(&format!(
+            "{name} {}: {}{speedup}",
+            v.label(),
+            summary(&t, v.repeats)
+        ));
+        records.push(BenchRecord {
+            scene: name.to_string(),
+            method: v.method,
+            pass: "forward",
+            gpu_ms: t.gpu_ms,
+            wall_ms: t.wall_ms,
+            pairs: v.pairs,
+            device: ctx.info().name.clone(),
+            driver: ctx.info().driver.clone(),
+            repeats: v.repeats,
+            passes: t.passes,
+            views: v.gpu.view_count(),
+            faces: v.gpu.face_count(),
+            width: scene.settings.width,
+            height: scene.settings.height,
+            rows: scene.rows,
+            entries: v.entries,
+            identical_to_brute: match v.method {
+                Method::Tiled { .. } => brute.map(|_| true),
+                Method::Brute => None,
+            },
+        });
+    }
+    Ok(records)
+}
+
+fn summary(t: &Timing, repeats: u32) -> String {
+    let gpu = t
+        .gpu_ms
+        .map_or("n/a".to_string(), |ms| format!("{ms:.3} ms"));
+    let passes: Vec<String> = t
+        .passes
+        .iter()
+        .map(|(name, ms)| format!("{name} {ms:.3}"))
+        .collect();
+    format!(
+        "gpu {gpu}, wall {:.3} ms (medians of {repeats}) [{}]",
+        t.wall_ms,
+        passes.join(", ")
+    )
+}
+
+/// The median (mean of the middle two for an even count); `None` for no samples.
+fn median(samples: &[f64]) -> Option<f64> {
+    let mut v = samples.to_vec();
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    match n {
+        0 => None,
+        _ if n % 2 == 1 => Some(v[n / 2]),
+        _ => Some((v[n / 2 - 1] + v[n / 2]) / 2.0),
+    }
+}
+
+/// Image then aux bit patterns of a render, so that -0.0 vs 0.0 and NaN payloads count as
+/// differences.
+struct Bits {
+    words: Vec<u32>,
+    image_words: usize,
+}
+
+fn bits(f: &Frames) -> Bits {
+    let mut words: Vec<u32> = f.images.iter().flatten().map(|c| c.to_bits()).collect();
+    let image_words = words.len();
+    words.extend_from_slice(bytemuck::cast_slice(&f.aux));
+    Bits { words, image_words }
+}
+
+/// Where `got` first differs from `want`, as a message.
+fn first_difference(got: &Bits, want: &Bits) -> Option<String> {
+    if got.image_words != want.image_words || got.words.len() != want.words.len() {
+        return Some(format!(
+            "sizes ({} + {} words vs {} + {})",
+            got.image_words,
+            got.words.len() - got.image_words,
+            want.image_words,
+            want.words.len() - want.image_words
+        ));
+    }
+    let i = (0..got.words.len()).find(|&i| got.words[i] != want.words[i])?;
+    let (what, at) = if i < got.image_words {
+        ("image", i)
+    } else {
+        ("aux", i - got.image_words)
+    };
+    Some(format!(
+        "{what} word {at} ({:#010x} vs {:#010x})",
+        got.words[i], want.words[i]
+    ))
+}
+
+/// The records as a JSON list, one record per line, SPEC §6's fields first: `scene`, `method`
+/// (`"tiled"` | `"brute"`), `tile` (null for brute), `pass`, `gpu_ms`, `wall_ms`, `pairs`,
+/// `device`; then `driver`, `repeats`, `views`, `faces`, `width`, `height`, `rows` (`[first,
+/// end)` of a band, else null), `entries`,
+/// `identical_to_brute` and `passes` (`{name: ms}`, median GPU time per pass).
+pub fn to_json(records: &[BenchRecord]) -> String {
+    let mut out = String::from("[\n");
+    for (i, r) in records.iter().enumerate() {
+        let (method, tile) = match r.method {
+            Method::Brute => ("brute", None),
+            Method::Tiled { tile } => ("tiled", Some(tile)),
+        };
+        let mut o = JsonObject::default();
+        o.string("scene", &r.scene);
+        o.string("method", method);
+        o.raw("tile", tile.map_or("null".into(), |t| t.to_string()));
+        o.string("pass", r.pass);
+        o.number("gpu_ms", r.gpu_ms);
+        o.number("wall_ms", Some(r.wall_ms));
+        o.raw("pairs", r.pairs.to_string());
+        o.string("device", &r.device);
+        o.string("driver", &r.driver);
+        o.raw("repeats", r.repeats.to_string());
+        o.raw("views", r.views.to_string());
+        o.raw("faces", r.faces.to_string());
+        o.raw("width", r.width.to_string());
+        o.raw("height", r.height.to_string());
+        o.raw(
+            "rows",
+            r.rows.map_or("null".into(), |[a, b]| format!("[{a}, {b}]")),
+        );
+        o.raw(
+            "entries",
+            r.entries.map_or("null".into(), |e| e.to_string()),
+        );
+        o.raw(
+            "identical_to_brute",
+            r.identical_to_brute
+                .map_or("null".into(), |b| b.to_string()),
+        );
+        let mut passes = JsonObject::default();
+        for (name, ms) in &r.passes {
+            passes.number(name, Some(*ms));
+        }
+        o.raw("passes", passes.finish());
+        out.push_str("  ");
+        out.push_str(&o.finish());
+        out.push_str(if i + 1 < records.len() { ",\n" } else { "\n" });
+    }
+    out.push_str("]\n");
+    out
+}
+
+/// A JSON object written field by field.
+#[derive(Default)]
+struct JsonObject(Vec<String>);
+
+impl JsonObject {
+    fn raw(&mut self, key: &str, value: String) {
+        self.0.push(format!("{}: {value}", json_string(key)));
+    }
+
+    fn string(&mut self, key: &str, value: &str) {
+        self.raw(key, json_string(value));
+    }
+
+    /// Milliseconds to the nanosecond; a missing or non-finite value is `null`.
+    fn number(&mut self, key: &str, value: Option<f64>) {
+        let text = match value {
+            Some(v) if v.is_finite() => format!("{v:.6}"),
+            _ => "null".into(),
+        };
+        self.raw(key, text);
+    }
+
+    fn finish(self) -> String {
+        format!("{{{}}}", self.0.join(", "))
+    }
+}
+
+fn json_string(s: &str) -> String {
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push('"');
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            '\n' => out.push_str("\\n"),
+            '\r' => out.push_str("\\r"),
+            '\t' => out.push_str("\\t"),
+            c if u32::from(c) < 0x20 => {
+                let _ = write!(out, "\\u{:04x}", u32::from(c));
+            }
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec3;
+    use std::collections::HashSet;
+
+    fn pos(m: &Mesh, i: u32) -> DVec3 {
+        DVec3::from(m.positions[i as usize].map(f64::from))
+    }
+
+    /// Twice the signed area vector of face `f`, along the SPEC normal.
+    fn area_vector(m: &Mesh, f: [u32; 3]) -> DVec3 {
+        let [a, b, c] = f.map(|i| pos(m, i));
+        (c - b).cross(a - b)
+    }
+
+    /// Every directed edge of a closed, consistently wound mesh appears once, and so does its
+    /// reverse.
+    fn is_closed_and_consistent(m: &Mesh) -> bool {
+        let mut directed = HashSet::new();
+        for &[a, b, c] in &m.faces {
+            for e in [(a, b), (b, c), (c, a)] {
+                if !directed.insert(e) {
+                    return false;
+                }
+            }
+        }
+        directed.iter().all(|&(a, b)| directed.contains(&(b, a)))
+    }
+
+    fn edge_count(m: &Mesh) -> usize {
+        let mut edges = HashSet::new();
+        for &[a, b, c] in &m.faces {
+            for (p, q) in [(a, b), (b, c), (c, a)] {
+                edges.insert((p.min(q), p.max(q)));
+            }
+        }
+        edges.len()
+    }
+
+    #[test]
+    fn subdivision_makes_four_faces_each_and_one_vertex_per_edge() {
+        for mesh in [Mesh::cuboid([1.0, 2.0, 0.5]), Mesh::icosphere(1)] {
+            let once = subdivide(&mesh).unwrap();
+            assert_eq!(once.face_count(), 4 * mesh.face_count());
+            assert_eq!(once.vertex_count(), mesh.vertex_count() + edge_count(&mesh));
+            assert_eq!(once.positions[..mesh.vertex_count()], mesh.positions[..]);
+            let twice = subdivide(&once).unwrap();
+            assert_eq!(twice.face_count(), 16 * mesh.face_count());
+        }
+    }
+
+    #[test]
+    fn subdivision_keeps_a_closed_mesh_closed_and_consistently_wound() {
+        let mut mesh = Mesh::icosphere(0);
+        assert!(is_closed_and_consistent(&mesh));
+        for _ in 0..3 {
+            mesh = subdivide(&mesh).unwrap();
+            assert!(is_closed_and_consistent(&mesh));
+            // Euler characteristic of a sphere: shared edges really share their midpoint.
+            let chi =
+                mesh.vertex_count() as i64 - edge_count(&mesh) as i64 + mesh.face_count() as i64;
+            assert_eq!(chi, 2);
+        }
+    }
+
+    #[test]
+    fn subdivided_children_tile_their_parent_with_its_normal() {
+        let mesh = Mesh::cuboid([1.0, 0.25, 3.0]);
+        let sub = subdivide(&mesh).unwrap();
+        for (f, &parent) in mesh.faces.iter().enumerate() {
+            let whole = area_vector(&mesh, parent);
+            let children = &sub.faces[4 * f..4 * f + 4];
+            let sum: DVec3 = children.iter().map(|&c| area_vector(&sub, c)).sum();
+            assert!((sum - whole).length() <= 1e-6 * whole.length(), "face {f}");
+            for &c in children {
+                let child = area_vector(&sub, c);
+                // Same plane, same side: a quarter of the parent's area vector.
+                assert!((4.0 * child - whole).length() <= 1e-6 * whole.length());
+            }
+        }
+    }
+
+    #[test]
+    fn subdivided_icosahedron_is_the_icosphere_before_projection() {
+        // Mesh::icosphere makes the same midpoints in the same order, then puts them on the
+        // unit sphere: same faces, and directions within f32 rounding.
+        let sub = subdivide(&Mesh::icosphere(0)).unwrap();
+        let ico = Mesh::icosphere(1);
+        assert_eq!(sub.faces, ico.faces);
+        for (p, q) in sub.positions.iter().zip(&ico.positions) {
+            let p = DVec3::from(p.map(f64::from)).normalize();
+            let q = DVec3::from(q.map(f64::from));
+            assert!((p - q).length() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn subdivision_copies_texels_and_averages_vertex_colors() {
+        let mut mesh = Mesh::new(
+            vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [1.0, 1.0, 0.0],
+            ],
+            vec![[0, 1, 2], [1, 3, 2]],
+            2,
+        )
+        .unwrap();
+        for (i, t) in mesh.textures.iter_mut().enumerate() {
+            *t = [i as f32, 0.5, 1.0];
+        }
+        mesh.vertex_colors = Some(vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+        ]);
+        let sub = subdivide(&mesh).unwrap();
+        assert_eq!(sub.texture_res, 2);
+        for (f, child) in sub.textures.chunks_exact(4).enumerate() {
+            assert_eq!(child, &mesh.textures[4 * (f / 4)..4 * (f / 4) + 4]);
+        }
+        let colors = sub.vertex_colors.as_ref().unwrap();
+        assert_eq!(colors.len(), sub.vertex_count());
+        // Face 0's middle child is (ab, bc, ca); its bc is the midpoint of the shared edge
+        // (1, 2), which face 1's children use too, and holds the average of its ends.
+        let bc = sub.faces[3][1] as usize;
+        assert_eq!(sub.positions[bc], [0.5, 0.5, 0.0]);
+        assert_eq!(colors[bc], [0.5, 0.5, 0.0]);
+        assert!(sub.faces[4..].iter().flatten().any(|&i| i as usize == bc));
+        assert_eq!(sub.vertex_count(), 4 + 5);
+    }
+
+    #[test]
+    fn subdivision_rejects_an_invalid_mesh() {
+        let mut mesh = Mesh::cuboid([1.0; 3]);
+        mesh.faces[0][1] = 99;
+        assert!(subdivide(&mesh).is_err());
+    }
+
+    fn sample(method: Method, gpu_ms: Option<f64>) -> BenchRecord {
+        BenchRecord {
+            scene: "spot-256".into(),
+            method,
+            pass: "forward",
+            gpu_ms,
+            wall_ms: 12.5,
+            pairs: 1 << 40,
+            device: "llvmpipe \"quoted\" \\ (LLVM)\n".into(),
+            driver: "Mesa".into(),
+            repeats: 5,
+            passes: vec![("face setup".into(), 0.25), ("raster brute".into(), 9.0)],
+            views: 1,
+            faces: 5856,
+            width: 256,
+            height: 256,
+            rows: None,
+            entries: matches!(method, Method::Tiled { .. }).then_some(77),
+            identical_to_brute: matches!(method, Method::Tiled { .. }).then_some(true),
+        }
+    }
+
+    #[test]
+    fn json_has_the_spec_fields_with_their_types() {
+        let records = [
+            sample(Method::Brute, Some(10.125)),
+            sample(Method::Tiled { tile: 16 }, None),
+        ];
+        let text = to_json(&records);
+        let v: serde_json::Value = serde_json::from_str(&text).expect("valid JSON");
+        let list = v.as_array().expect("a list");
+        assert_eq!(list.len(), 2);
+        let keys: Vec<&str> = [
+            "scene", "method", "tile", "pass", "gpu_ms", "wall_ms", "pairs", "device",
+        ]
+        .to_vec();
+        for r in list {
+            for k in &keys {
+                assert!(r.get(k).is_some(), "missing {k} in {r}");
+            }
+            assert_eq!(r["scene"], "spot-256");
+            assert_eq!(r["pass"], "forward");
+            assert_eq!(r["wall_ms"].as_f64(), Some(12.5));
+            assert_eq!(r["pairs"].as_u64(), Some(1 << 40));
+            assert_eq!(r["device"], "llvmpipe \"quoted\" \\ (LLVM)\n");
+            assert_eq!(r["repeats"].as_u64(), Some(5));
+        }
+        assert_eq!(list[0]["method"], "brute");
+        assert!(list[0]["tile"].is_null());
+        assert_eq!(list[0]["gpu_ms"].as_f64(), Some(10.125));
+        assert!(list[0]["entries"].is_null());
+        assert!(list[0]["identical_to_brute"].is_null());
+        assert_eq!(list[0]["passes"]["raster brute"].as_f64(), Some(9.0));
+        assert_eq!(list[1]["method"], "tiled");
+        assert_eq!(list[1]["tile"].as_u64(), Some(16));
+        assert!(list[1]["gpu_ms"].is_null());
+        assert_eq!(list[1]["entries"].as_u64(), Some(77));
+        assert_eq!(list[1]["identical_to_brute"], true);
+        // SPEC's fields come first, in its order.
+        let first = text.lines().nth(1).unwrap();
+        let at = |k: &str| first.find(&format!("\"{k}\":")).unwrap();
+        assert!(keys.windows(2).all(|w| at(w[0]) < at(w[1])));
+    }
+
+    #[test]
+    fn json_of_nothing_is_an_empty_list_and_non_finite_times_are_null() {
+        let v: serde_json::Value = serde_json::from_str(&to_json(&[])).unwrap();
+        assert_eq!(v, serde_json::json!([]));
+        let mut r = sample(Method::Brute, Some(f64::INFINITY));
+        r.wall_ms = f64::NAN;
+        let v: serde_json::Value = serde_json::from_str(&to_json(&[r])).unwrap();
+        assert!(v[0]["gpu_ms"].is_null() && v[0]["wall_ms"].is_null());
+    }
+
+    #[test]
+    fn medians_of_odd_and_even_counts() {
+        assert_eq!(median(&[]), None);
+        assert_eq!(median(&[3.0, 1.0, 2.0]), Some(2.0));
+        assert_eq!(median(&[4.0, 1.0, 3.0, 2.0]), Some(2.5));
+    }
+
+    #[test]
+    fn options_are_checked_before_any_work() {
+        let ok = BenchOptions::default();
+        assert_eq!(ok.checked_scenes().unwrap(), SCENES.to_vec());
+        let pick = BenchOptions {
+            scenes: vec!["blurry-256".into(), "spot-256".into()],
+            ..ok.clone()
+        };
+        assert_eq!(pick.checked_scenes().unwrap(), ["blurry-256", "spot-256"]);
+        for bad in [
+            BenchOptions {
+                scenes: vec!["spot-512".into()],
+                ..ok.clone()
+            },
+            BenchOptions {
+                repeat: 0,
+                ..ok.clone()
+            },
+            BenchOptions {
+                brute_repeat: Some(0),
+                ..ok.clone()
+            },
+            BenchOptions {
+                tiles: vec![12],
+                ..ok.clone()
+            },
+            BenchOptions {
+                tiles: vec![],
+                brute: false,
+                ..ok.clone()
+            },
+        ] {
+            assert!(
+                matches!(bad.checked_scenes(), Err(Error::Input(_))),
+                "{bad:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn every_scene_loads_from_the_assets_with_its_spec_parameters() {
+        let assets = crate::assets::dir();
+        let want = [
+            ("spot-256", 5856, 1, 256, 1e-5, 1e-4),
+            ("sphere-64x120", 2700, 120, 64, 1e-4, 1e-4),
+            ("dense-1024", 2700 * 64, 1, 1024, 1e-5, 1e-4),
+            ("blurry-256", 5856, 1, 256, 3e-2, 3e-1),
+        ];
+        for (name, faces, views, size, sigma, gamma) in want {
+            let s = Scene::load(name, &assets).unwrap();
+            assert_eq!(s.name, name);
+            assert_eq!(s.mesh.face_count(), faces, "{name}");
+            assert_eq!(s.cameras.len(), views, "{name}");
+            assert_eq!(
+                (s.settings.width, s.settings.height),
+                (size, size),
+                "{name}"
+            );
+            assert_eq!(
+                (s.settings.sigma, s.settings.gamma),
+                (sigma, gamma),
+                "{name}"
+            );
+            assert!(s.description.starts_with(name));
+        }
+        // The subdivided sphere is as watertight as the asset.
+        let dense = Scene::load("dense-1024", &assets).unwrap().mesh;
+        assert!(is_closed_and_consistent(&dense));
+        assert!(Scene::load("nope", &assets).is_err());
+    }
+}

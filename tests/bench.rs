@@ -1,0 +1,101 @@
+//! `softvk bench` through its library entry point, on lavapipe with validation on: one cheap
+//! scene end to end (brute force, tiled, the bit-for-bit check, JSON), and the band that quick
+//! runs use.
+
+mod common;
+
+use softvk::bench::{self, BenchOptions, Scene};
+use softvk::raster::gpu::{Method, Renderer};
+
+#[test]
+fn one_cheap_scene_runs_end_to_end_and_checks_tiled_against_brute() {
+    let Some(gpu) = common::gpu() else { return };
+    // Eight rows of spot-256: the same per-pixel work as the full frame, at 1/32 of the cost.
+    let opts = BenchOptions {
+        scenes: vec!["spot-256".into()],
+        repeat: 1,
+        tiles: vec![8, 32],
+        band: Some(8),
+        ..BenchOptions::default()
+    };
+    let mut lines = Vec::new();
+    let records = bench::run(&gpu, &opts, |line| lines.push(line.to_string())).unwrap();
+    let log = lines.join("\n");
+    assert_eq!(records.len(), 3, "{log}");
+    assert_eq!(records[0].method, Method::Brute);
+    assert_eq!(records[0].pairs, 256 * 8 * 5856);
+    for (r, tile) in records[1..].iter().zip([8, 32]) {
+        assert_eq!(r.method, Method::Tiled { tile });
+        assert_eq!(r.identical_to_brute, Some(true));
+        assert!(r.pairs > 0 && r.pairs < records[0].pairs);
+        assert!(r.entries.is_some_and(|e| e > 0));
+    }
+    for r in &records {
+        assert_eq!(r.scene, "spot-256[rows 124..132]");
+        assert_eq!(r.rows, Some([124, 132]));
+        assert_eq!(r.repeats, 1);
+        assert!(r.wall_ms > 0.0 && r.gpu_ms.is_some_and(|ms| ms > 0.0));
+        assert!(r.passes.iter().any(|(name, _)| name == "face setup"));
+    }
+    assert_eq!(
+        log.matches("images and aux bit-identical to brute force")
+            .count(),
+        2,
+        "{log}"
+    );
+    let json: serde_json::Value = serde_json::from_str(&bench::to_json(&records)).unwrap();
+    assert_eq!(json.as_array().map(Vec::len), Some(3));
+    assert_eq!(json[1]["tile"], 8);
+    assert_eq!(json[0]["device"], gpu.info().name.as_str());
+}
+
+#[test]
+fn a_band_renders_the_rows_of_the_full_frame() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let full = Scene::load("spot-256", &softvk::assets::dir()).unwrap();
+    let band = full.band(16).unwrap();
+    assert_eq!(band.rows, Some([120, 136]));
+    let render = |s: &Scene| {
+        r.render_views(
+            &gpu,
+            &s.mesh,
+            &s.cameras,
+            &s.lighting,
+            &s.settings,
+            Method::Tiled { tile: 8 },
+        )
+        .unwrap()
+    };
+    let (a, b) = (render(&full), render(&band));
+    // Screen space is scaled by 16: only f32 rounding differs.
+    let rows = &a.images[120 * 256..136 * 256];
+    let max = rows
+        .iter()
+        .flatten()
+        .zip(b.images.iter().flatten())
+        .map(|(p, q)| (p - q).abs())
+        .fold(0.0f32, f32::max);
+    assert!(max < 1e-3, "band differs from the full frame by {max}");
+    assert!(rows.iter().any(|p| p[3] > 0.5), "the band crosses spot");
+}
+
+#[test]
+fn bad_options_are_errors_with_a_clear_message() {
+    let Some(gpu) = common::gpu() else { return };
+    let opts = BenchOptions {
+        scenes: vec!["spot-4096".into()],
+        ..BenchOptions::default()
+    };
+    let err = bench::run(&gpu, &opts, |_| panic!("no progress expected")).unwrap_err();
+    assert!(
+        err.to_string().contains("unknown scene `spot-4096`"),
+        "{err}"
+    );
+    let opts = BenchOptions {
+        band: Some(7), // 256 - 7 is odd: no centred band
+        scenes: vec!["spot-256".into()],
+        ..BenchOptions::default()
+    };
+    assert!(bench::run(&gpu, &opts, |_| {}).is_err());
+}
