@@ -509,3 +509,57 @@ fn a_batch_differentiates_as_each_mesh_alone() {
         }
     }
 }
+
+/// llvmpipe ends a shader invocation's loops after 65 535 iterations in all: every kernel whose
+/// loops grow with the input refuses, on such a driver, what would exceed it, instead of
+/// silently skipping work. (On drivers without the cap this checks nothing and says so.)
+#[test]
+fn the_drivers_loop_cap_is_an_error_not_a_silent_truncation() {
+    let Some(gpu) = common::gpu() else { return };
+    let Some(limit) = gpu.info().shader_loop_limit() else {
+        eprintln!("{}: no known loop cap; nothing to check", gpu.info().name);
+        return;
+    };
+    let r = Renderer::new(&gpu).unwrap();
+    let cams = [Camera::default()];
+    // Brute-force backward over 256² pixels.
+    let s = settings(256, 256);
+    let mesh = scene(1, 2);
+    let fwd = forward(&r, &gpu, &mesh, &cams, &s, Method::Tiled { tile: 8 });
+    let err = r
+        .backward(&gpu, &fwd, &weights(256 * 256, 3), Method::Brute, false)
+        .unwrap_err();
+    assert!(matches!(err, softvk::Error::Limit(_)), "{err}");
+    // More faces than the cap: brute force refuses; the tiled forward refuses a tile holding
+    // them all, and renders them when they spread.
+    let n = limit as usize + 10;
+    let mut positions = Vec::with_capacity(3 * n);
+    let mut faces = Vec::with_capacity(n);
+    for f in 0..n {
+        let x = (f % 300) as f32 / 300.0 - 0.5;
+        let y = (f / 300) as f32 / 300.0 - 0.5;
+        positions.extend([[x, y, 0.0], [x + 0.002, y, 0.0], [x, y + 0.002, 0.0]]);
+        faces.push([3 * f as u32, 3 * f as u32 + 1, 3 * f as u32 + 2]);
+    }
+    let many = Mesh::new(positions, faces, 1).unwrap();
+    let small = settings(8, 8);
+    for method in [Method::Brute, Method::Tiled { tile: 8 }] {
+        let err = r
+            .render_views(&gpu, &many, &cams, &lighting(), &small, method)
+            .unwrap_err();
+        assert!(matches!(err, softvk::Error::Limit(_)), "{method:?}: {err}");
+    }
+    let spread = RasterSettings {
+        sigma: 1e-6,
+        ..settings(64, 64)
+    };
+    r.render_views(
+        &gpu,
+        &many,
+        &cams,
+        &lighting(),
+        &spread,
+        Method::Tiled { tile: 8 },
+    )
+    .unwrap();
+}

@@ -98,6 +98,15 @@ impl DeviceInfo {
             .max(self.limits.non_coherent_atom_size)
             .max(4)
     }
+
+    /// The most loop iterations one shader invocation may run in all, on a driver known to cap
+    /// them silently: llvmpipe (lavapipe) ends every loop of an invocation once 65 535
+    /// iterations have run over all its loops (Mesa's `LP_MAX_TGSI_LOOP_ITERATIONS`), so a
+    /// longer loop would quietly drop work. Kernels whose loops depend on the input check this
+    /// on the host and refuse with [`crate::Error::Limit`] instead. `None`: no known cap.
+    pub fn shader_loop_limit(&self) -> Option<u64> {
+        (self.name.contains("llvmpipe") || self.driver.contains("llvmpipe")).then_some(65_535)
+    }
 }
 
 /// Validation messages collected by the debug messenger. Boxed so its address is stable for the

@@ -264,6 +264,19 @@ impl GradKernels {
         let items = scene.face_count * scene.view_count;
         match gb.method {
             Method::Brute => {
+                if let Some(limit) = rec.context().info().shader_loop_limit() {
+                    let n = u64::from(scene.width) * u64::from(scene.height + 1) + 2;
+                    if n > limit {
+                        return Err(Error::Limit(format!(
+                            "the brute-force backward loops over all {}x{} rendered pixels in \
+                             one shader invocation, over the {limit} iterations {} allows (it \
+                             would silently skip the rest); use the tiled method",
+                            scene.width,
+                            scene.height,
+                            rec.context().info().name
+                        )));
+                    }
+                }
                 let push = Self::fine_push(scene, stride);
                 rec.pass("grad brute", |rec| {
                     rec.dispatch(
@@ -292,6 +305,21 @@ impl GradKernels {
                     return Err(Error::Input(format!(
                         "the tiled backward (tile {tile}) needs the scene binned with those tiles"
                     )));
+                }
+                if let Some(limit) = rec.context().info().shader_loop_limit() {
+                    for g in &scene.groups {
+                        let n =
+                            super::gpu::tiled_backward_iterations(g.max_tile_entries, tile, stride);
+                        if n > limit {
+                            return Err(Error::Limit(format!(
+                                "a tile holds {} faces: the tiled backward would run {n} loop \
+                                 iterations in one shader invocation, over the {limit} {} \
+                                 allows (it would silently skip the rest); use smaller tiles",
+                                g.max_tile_entries,
+                                rec.context().info().name
+                            )));
+                        }
+                    }
                 }
                 if let Some(g) = scene.groups.iter().find(|g| g.entries > gb.entry_capacity) {
                     return Err(Error::Limit(format!(

@@ -97,6 +97,16 @@ impl BruteRaster {
                 "raster_brute: {pixels} pixels and {face_count} faces (need 1..2^32 pixels, > 0 faces)"
             )));
         }
+        if let Some(limit) = rec.context().info().shader_loop_limit()
+            && u64::from(face_count) + 2 > limit
+        {
+            return Err(Error::Limit(format!(
+                "the brute-force kernel loops over all {face_count} faces in one shader \
+                 invocation, over the {limit} iterations {} allows (it would silently skip the \
+                 rest); use the tiled method",
+                rec.context().info().name
+            )));
+        }
         let push = RasterPush::new(
             settings,
             width,

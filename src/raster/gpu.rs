@@ -135,6 +135,64 @@ pub struct ViewGroup {
     pub views: u32,
     /// (face, tile) entries binned.
     pub entries: u64,
+    /// The most entries one tile holds, or an upper bound of it (the entry count) where that
+    /// already satisfies the driver's loop cap ([`crate::gpu::DeviceInfo::shader_loop_limit`]).
+    pub max_tile_entries: u64,
+}
+
+/// Loop iterations one invocation of `raster_tiled.comp` runs for a tile of `run` faces.
+pub(crate) fn tiled_forward_iterations(run: u64) -> u64 {
+    run + run.div_ceil(64) + 2
+}
+
+/// Loop iterations one invocation of `grad_tiled.comp` runs for a tile of `run` faces.
+pub(crate) fn tiled_backward_iterations(run: u64, tile: u32, stride: u32) -> u64 {
+    let chunks = u64::from(tile * tile / 64);
+    run.div_ceil(64) * (chunks * 65 + u64::from(stride)) + 2
+}
+
+/// The most entries any tile of a group holds, read back from its ranges.
+fn max_tile_run(ctx: &Context, bins: &Bins, tiles: u64) -> Result<u64> {
+    let ranges: Vec<[u32; 2]> = ctx.read_buffer(bins.ranges(), 0, tiles as usize)?;
+    Ok(ranges
+        .iter()
+        .map(|r| u64::from(r[1] - r[0]))
+        .max()
+        .unwrap_or(0))
+}
+
+/// On a driver that caps shader loops, the exact largest tile when the entry count alone does
+/// not show that the tiled passes (forward, and backward at the largest gradient stride) stay
+/// under the cap; the entry count otherwise. An error when the forward would exceed it.
+fn checked_tile_runs(
+    ctx: &Context,
+    bins: &Bins,
+    grid: &TileGrid,
+    views: u32,
+    total: u64,
+) -> Result<u64> {
+    let Some(limit) = ctx.info().shader_loop_limit() else {
+        return Ok(total);
+    };
+    let stride = 9 + 3 * 64 * 64;
+    let fits = |run| {
+        tiled_forward_iterations(run) <= limit
+            && tiled_backward_iterations(run, grid.tile_size, stride) <= limit
+    };
+    let run = if fits(total) {
+        total
+    } else {
+        max_tile_run(ctx, bins, grid.tiles_per_view() * u64::from(views))?
+    };
+    if tiled_forward_iterations(run) > limit {
+        return Err(Error::Limit(format!(
+            "a tile holds {run} faces, but {} runs at most {limit} loop iterations per shader \
+             invocation (and would silently skip the rest); use smaller tiles, a smaller σ or \
+             fewer faces",
+            ctx.info().name
+        )));
+    }
+    Ok(run)
 }
 
 impl GpuScene {
@@ -583,12 +641,14 @@ impl Renderer {
                 }
                 Ok(())
             });
+            let max_tile_entries =
+                done.and_then(|()| checked_tile_runs(ctx, &bins, &grid, views, total));
             scene.bins[index] = bins;
-            done?;
             scene.groups.push(ViewGroup {
                 first,
                 views,
                 entries: total,
+                max_tile_entries: max_tile_entries?,
             });
         }
         Ok(())
@@ -634,11 +694,27 @@ impl Renderer {
             )));
         }
         scene.bins[0].reserve_entries(ctx, total)?;
+        if let Some(limit) = ctx.info().shader_loop_limit() {
+            // The tiles are not sorted yet: the entry count bounds the largest.
+            let stride =
+                crate::raster::backward::grad_stride(scene.settings.color_mode, scene.texture_res);
+            if tiled_forward_iterations(total) > limit
+                || tiled_backward_iterations(total, tile, stride) > limit
+            {
+                return Err(Error::Limit(format!(
+                    "{total} (face, tile) entries could put more than {limit} loop iterations in \
+                     one shader invocation on {} (which would silently skip the rest); use \
+                     smaller tiles, fewer views or a smaller σ",
+                    ctx.info().name
+                )));
+            }
+        }
         scene.tile = Some(tile);
         scene.groups = vec![ViewGroup {
             first: 0,
             views: scene.view_count,
             entries: total,
+            max_tile_entries: total,
         }];
         Ok(total)
     }
