@@ -34,6 +34,9 @@ enum Command {
     /// The built-in demo: generate a shape, render its silhouettes, fit a sphere to them, and
     /// write everything to ./softvk-demo/.
     Demo(Box<cli::fit_mesh::DemoArgs>),
+    /// Benchmark the forward and backward passes: tiled (per tile size) vs brute force, GPU
+    /// timestamps and wall time, as JSON records.
+    Bench(Box<cli::bench::BenchArgs>),
 }
 
 fn main() -> ExitCode {
@@ -57,6 +60,7 @@ fn main() -> ExitCode {
         Command::Grad(args) => cli::grad::run(args),
         Command::FitMesh(args) => cli::fit_mesh::run(args),
         Command::Demo(args) => cli::fit_mesh::demo(args),
+        Command::Bench(args) => cli::bench::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1065,3 +1065,49 @@ fn fit_mesh_errors_are_one_line_and_write_nothing() {
         assert!(!dir.path("m-report").exists(), "{what}: wrote a report");
     }
 }
+
+/// `softvk bench` on a thin band of one scene writes the SPEC's JSON records for the forward,
+/// the backward and forward+backward.
+#[test]
+fn bench_writes_json_records_for_every_pass() {
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    let dir = TempDir::new("bench");
+    let out = dir.path("b.json");
+    let o = softvk()
+        .args([
+            "bench",
+            "--scene",
+            "spot-256",
+            "--band",
+            "8",
+            "--repeat",
+            "1",
+            "--tile",
+            "8",
+            "--no-brute",
+            "--json",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(&out).unwrap();
+    for pass in ["\"forward\"", "\"backward\"", "\"forward+backward\""] {
+        assert!(
+            text.contains(&format!("\"pass\": {pass}")),
+            "{pass} missing:\n{text}"
+        );
+    }
+    for key in [
+        "scene", "method", "tile", "gpu_ms", "wall_ms", "pairs", "device",
+    ] {
+        assert_eq!(
+            text.matches(&format!("\"{key}\":")).count(),
+            3,
+            "{key} in every record:\n{text}"
+        );
+    }
+}

@@ -15,6 +15,7 @@
 //! [`render::render_frames`], the one call that renders.
 
 pub mod args;
+pub mod bench;
 pub mod fit_mesh;
 pub mod grad;
 pub mod output;

@@ -1,0 +1,88 @@
+//! `softvk bench [--json OUT.json] [--scene NAME]... [--repeat N] [--assets DIR]` (SPEC §6): the
+//! forward benchmark ([`softvk::bench::run`]: tiled at each tile size vs brute force, checked bit
+//! for bit) and the backward one ([`softvk::bench::run_backward`]: backward and
+//! forward+backward), as the JSON records of the spec. Progress goes to stderr.
+
+use std::path::PathBuf;
+
+use clap::Args;
+use softvk::Result;
+use softvk::bench::{self, BenchOptions};
+use softvk::gpu::{Context, ContextOptions};
+
+use super::output::AtomicFile;
+
+/// The flags of `softvk bench`.
+#[derive(Args, Clone, Debug)]
+pub struct BenchArgs {
+    /// Write the records here (else to stdout).
+    #[arg(long, value_name = "OUT.json")]
+    pub json: Option<PathBuf>,
+    /// Scene to run (repeatable; default all: spot-256, sphere-64x120, dense-1024, blurry-256).
+    #[arg(long = "scene", value_name = "NAME")]
+    pub scenes: Vec<String>,
+    /// Timed submissions per (scene, method, pass); times are medians.
+    #[arg(long, value_name = "N", default_value_t = bench::DEFAULT_REPEAT)]
+    pub repeat: u32,
+    /// Timed submissions of brute force (default: --repeat; each takes seconds on a CPU device).
+    #[arg(long, value_name = "N")]
+    pub brute_repeat: Option<u32>,
+    /// Tile size (repeatable; default 8, 16, 32).
+    #[arg(long = "tile", value_name = "N")]
+    pub tiles: Vec<u32>,
+    /// Skip brute force (and the bit-for-bit check against it).
+    #[arg(long)]
+    pub no_brute: bool,
+    /// Forward only (no backward or forward+backward records).
+    #[arg(long, conflicts_with = "backward_only")]
+    pub forward_only: bool,
+    /// Backward and forward+backward only (no forward records).
+    #[arg(long)]
+    pub backward_only: bool,
+    /// Render only the middle N rows of every scene (quick runs).
+    #[arg(long, value_name = "ROWS")]
+    pub band: Option<u32>,
+    /// Folder of the meshes (default: SOFTVK_ASSETS, else ../shared/assets).
+    #[arg(long, value_name = "DIR")]
+    pub assets: Option<PathBuf>,
+}
+
+/// Runs `softvk bench`.
+pub fn run(args: &BenchArgs) -> Result<()> {
+    let opts = BenchOptions {
+        scenes: args.scenes.clone(),
+        repeat: args.repeat,
+        brute_repeat: args.brute_repeat,
+        tiles: if args.tiles.is_empty() {
+            bench::DEFAULT_TILES.to_vec()
+        } else {
+            args.tiles.clone()
+        },
+        brute: !args.no_brute,
+        band: args.band,
+        assets: args.assets.clone(),
+    };
+    opts.checked_scenes()?;
+    let out = args.json.as_deref().map(AtomicFile::create).transpose()?;
+    let ctx = Context::new(&ContextOptions::from_env())?;
+    eprintln!("device: {} / {}", ctx.info().name, ctx.info().driver);
+    let mut records = if args.backward_only {
+        Vec::new()
+    } else {
+        bench::run(&ctx, &opts, |line| eprintln!("{line}"))?
+    };
+    if !args.forward_only {
+        records.extend(bench::run_backward(&ctx, &opts, |line| {
+            eprintln!("{line}")
+        })?);
+    }
+    ctx.check_validation()?;
+    let json = bench::to_json(&records);
+    match out {
+        Some(file) => file.commit(json.as_bytes()),
+        None => {
+            print!("{json}");
+            Ok(())
+        }
+    }
+}
