@@ -10,7 +10,7 @@
 //!   ([`raster::setup`]) and the brute-force fine pass ([`raster::brute`]), driven by
 //!   [`raster::gpu::Renderer`].
 //!
-//! - [`bench`]: the forward benchmark behind `softvk bench` (scenes, timing, JSON records).
+//! - [`mod@bench`]: the forward benchmark behind `softvk bench` (scenes, timing, JSON records).
 //!
 //! Every kernel has a CPU twin that tests compare it with.
 
