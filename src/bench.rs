@@ -2,11 +2,14 @@
 //! the tiled kernel at several tile sizes and with the brute-force baseline, timed as
 //! resubmissions of one recorded command buffer, and written as the JSON records of the spec.
 //!
-//! Per scene: upload once ([`Renderer::prepare`]); brute force first, whose images are the
-//! reference; then per tile size one [`Renderer::run`] (which sizes the bins exactly), a check
-//! that its images and aux equal brute force's bit for bit, the timed resubmissions of
-//! [`Renderer::record_forward`], and the same check again on what the timed submissions left.
-//! A mismatch is an error ([`Error::Check`]): a benchmark of a wrong image is worthless.
+//! Per scene, each method gets its own upload ([`Renderer::prepare`]), one [`Renderer::run`]
+//! (tiled: it sizes the bins exactly) and one recording of [`Renderer::record_forward`]. Brute
+//! force's first submission gives the reference images; every tiled method's images and aux
+//! must equal them bit for bit before it is timed, and again after. A mismatch is an error
+//! ([`Error::Check`]): a benchmark of a wrong image is worthless. The timed submissions are
+//! interleaved, one per method per round, so that load from other processes falls on all
+//! methods alike. Where brute force cannot be right ([`loop_limit`]), it is skipped and the tile
+//! sizes are checked against each other.
 //!
 //! Times are medians over the repeats: `wall_ms` is host time from submit to fence, `gpu_ms` the
 //! sum of the GPU timestamps of the passes (`face setup`, `bin count`, `bin sort`, `raster tiled`

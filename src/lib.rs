@@ -14,7 +14,7 @@
 //!   image MSE, its Laplacian and flatten regularizers, its sigmoid/tanh deformation, and Adam —
 //!   recordable into one command buffer per iteration.
 //!
-//! - [`bench`]: the forward benchmark behind `softvk bench` (scenes, timing, JSON records).
+//! - [`mod@bench`]: the forward benchmark behind `softvk bench` (scenes, timing, JSON records).
 //!
 //! Every kernel has a CPU twin that tests compare it with.
 

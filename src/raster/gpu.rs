@@ -31,7 +31,7 @@ use crate::raster::setup::{FACE_FINITE, FaceSetupKernel, GpuFaceSetup, GpuView};
 
 /// Tile edge (pixels) of [`Method::default`]. Chosen by `softvk bench` on lavapipe; see
 /// BENCHMARKS.md.
-pub const DEFAULT_TILE: u32 = 16;
+pub const DEFAULT_TILE: u32 = 8;
 
 /// How the fine pass finds the faces of a pixel.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
