@@ -475,8 +475,7 @@ pub fn run(
 /// per face, so there it silently drops every face past the 65 535th; the tiled kernel loops
 /// about once per binned face of its tile.
 pub fn loop_limit(ctx: &Context) -> Option<u64> {
-    let info = ctx.info();
-    (info.name.contains("llvmpipe") || info.driver.contains("llvmpipe")).then_some(65_535)
+    ctx.info().shader_loop_limit()
 }
 
 /// One method of one scene, set up for timing: its own copy of the scene on the GPU (so every
