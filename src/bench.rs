@@ -488,9 +488,57 @@ struct Variant<'a> {
     recorded: Recorded<'a>,
     pairs: u64,
     entries: Option<u64>,
+    samples: Samples,
+}
+
+/// Timed submissions of one recording: wall and GPU times, and each pass's GPU time.
+#[derive(Default)]
+struct Samples {
     wall_ms: Vec<f64>,
     gpu_ms: Vec<f64>,
     passes: Vec<(String, Vec<f64>)>,
+}
+
+impl Samples {
+    /// Submits `recorded` once, waits, and records its times (GPU ones from `timer`, if any).
+    fn take(
+        &mut self,
+        ctx: &Context,
+        recorded: &Recorded<'_>,
+        timer: Option<&Timer>,
+    ) -> Result<()> {
+        let start = Instant::now();
+        recorded.submit_and_wait()?;
+        self.wall_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        if let Some(timer) = timer {
+            let times = timer.results(ctx)?;
+            self.gpu_ms.push(times.iter().map(|t| t.ms).sum());
+            if self.passes.is_empty() {
+                self.passes = times.iter().map(|t| (t.name.clone(), Vec::new())).collect();
+            }
+            for ((_, series), t) in self.passes.iter_mut().zip(&times) {
+                series.push(t.ms);
+            }
+        }
+        Ok(())
+    }
+
+    fn len(&self) -> usize {
+        self.wall_ms.len()
+    }
+
+    /// The medians.
+    fn timing(&self) -> Timing {
+        Timing {
+            gpu_ms: median(&self.gpu_ms),
+            wall_ms: median(&self.wall_ms).unwrap_or(f64::NAN),
+            passes: self
+                .passes
+                .iter()
+                .filter_map(|(name, series)| Some((name.clone(), median(series)?)))
+                .collect(),
+        }
+    }
 }
 
 impl<'a> Variant<'a> {
@@ -534,9 +582,7 @@ impl<'a> Variant<'a> {
             recorded,
             pairs,
             entries,
-            wall_ms: Vec::new(),
-            gpu_ms: Vec::new(),
-            passes: Vec::new(),
+            samples: Samples::default(),
         })
     }
 
@@ -549,32 +595,11 @@ impl<'a> Variant<'a> {
 
     /// One timed submission of the recording.
     fn sample(&mut self, ctx: &Context) -> Result<()> {
-        let start = Instant::now();
-        self.recorded.submit_and_wait()?;
-        self.wall_ms.push(start.elapsed().as_secs_f64() * 1e3);
-        if let Some(timer) = &self.timer {
-            let times = timer.results(ctx)?;
-            self.gpu_ms.push(times.iter().map(|t| t.ms).sum());
-            if self.passes.is_empty() {
-                self.passes = times.iter().map(|t| (t.name.clone(), Vec::new())).collect();
-            }
-            for ((_, series), t) in self.passes.iter_mut().zip(&times) {
-                series.push(t.ms);
-            }
-        }
-        Ok(())
+        self.samples.take(ctx, &self.recorded, self.timer.as_ref())
     }
 
     fn timing(&self) -> Timing {
-        Timing {
-            gpu_ms: median(&self.gpu_ms),
-            wall_ms: median(&self.wall_ms).unwrap_or(f64::NAN),
-            passes: self
-                .passes
-                .iter()
-                .filter_map(|(name, series)| Some((name.clone(), median(series)?)))
-                .collect(),
-        }
+        self.samples.timing()
     }
 }
 
@@ -650,7 +675,7 @@ fn bench_scene(
     ));
     for _ in 0..rounds {
         for v in &mut variants {
-            if (v.wall_ms.len() as u32) < v.repeats {
+            if (v.samples.len() as u32) < v.repeats {
                 v.sample(ctx)?;
             }
         }
@@ -947,32 +972,12 @@ pub fn run_backward(
                     }
                     renderer.grad_kernels().record(rec, &gpu, &gb)
                 })?;
-                let (mut wall, mut gpu_ms) = (Vec::new(), Vec::new());
-                let mut passes: Vec<(String, Vec<f64>)> = Vec::new();
+                let mut samples = Samples::default();
                 for _ in 0..repeats {
-                    let start = Instant::now();
-                    recorded.submit_and_wait()?;
-                    wall.push(start.elapsed().as_secs_f64() * 1e3);
-                    if let Some(timer) = &timer {
-                        let times = timer.results(ctx)?;
-                        gpu_ms.push(times.iter().map(|t| t.ms).sum());
-                        if passes.is_empty() {
-                            passes = times.iter().map(|t| (t.name.clone(), Vec::new())).collect();
-                        }
-                        for ((_, series), t) in passes.iter_mut().zip(&times) {
-                            series.push(t.ms);
-                        }
-                    }
+                    samples.take(ctx, &recorded, timer.as_ref())?;
                 }
                 drop(recorded);
-                let t = Timing {
-                    gpu_ms: median(&gpu_ms),
-                    wall_ms: median(&wall).unwrap_or(f64::NAN),
-                    passes: passes
-                        .iter()
-                        .filter_map(|(name, series)| Some((name.clone(), median(series)?)))
-                        .collect(),
-                };
+                let t = samples.timing();
                 progress(&format!(
                     "{} {label} {pass}: {}",
                     scene.name,
