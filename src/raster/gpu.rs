@@ -170,7 +170,10 @@ fn checked_tile_runs(
     grid: &TileGrid,
     views: u32,
     total: u64,
+    faces: u32,
 ) -> Result<u64> {
+    // A tile belongs to one view, and a face enters a tile at most once.
+    let total = total.min(u64::from(faces));
     let Some(limit) = ctx.info().shader_loop_limit() else {
         return Ok(total);
     };
@@ -642,7 +645,9 @@ impl Renderer {
                 Ok(())
             });
             let max_tile_entries =
-                done.and_then(|()| checked_tile_runs(ctx, &bins, &grid, views, total));
+                done.and_then(|()| {
+                    checked_tile_runs(ctx, &bins, &grid, views, total, scene.face_count)
+                });
             scene.bins[index] = bins;
             scene.groups.push(ViewGroup {
                 first,
@@ -694,12 +699,14 @@ impl Renderer {
             )));
         }
         scene.bins[0].reserve_entries(ctx, total)?;
+        // The tiles are not sorted yet. A tile belongs to one view and holds each face at most
+        // once, so neither the entry count nor the face count can be exceeded by the largest.
+        let max_run = total.min(u64::from(scene.face_count));
         if let Some(limit) = ctx.info().shader_loop_limit() {
-            // The tiles are not sorted yet: the entry count bounds the largest.
             let stride =
                 crate::raster::backward::grad_stride(scene.settings.color_mode, scene.texture_res);
-            if tiled_forward_iterations(total) > limit
-                || tiled_backward_iterations(total, tile, stride) > limit
+            if tiled_forward_iterations(max_run) > limit
+                || tiled_backward_iterations(max_run, tile, stride) > limit
             {
                 return Err(Error::Limit(format!(
                     "{total} (face, tile) entries could put more than {limit} loop iterations in \
@@ -714,7 +721,7 @@ impl Renderer {
             first: 0,
             views: scene.view_count,
             entries: total,
-            max_tile_entries: total,
+            max_tile_entries: max_run,
         }];
         Ok(total)
     }
