@@ -1,5 +1,5 @@
 //! The brute-force fine pass (`kernels/raster/raster_brute.comp`): one invocation per pixel,
-//! every face of its view in index order, exactly as [`reference::shade_pixel`] (and SoftRas) do.
+//! every face of its view in index order, exactly as [`super::reference::shade_pixel`] (and SoftRas) do.
 //! It is the baseline the tiled kernels must equal bit for bit, and the one benchmarks compare
 //! against. Anti-aliasing renders at 2× and averages with `kernels/raster/downsample_2x2.comp`.
 //!
@@ -34,7 +34,7 @@ pub struct BruteBindings<'a> {
     pub faces: BufferRange<'a>,
     /// RGBA f32 per rendered pixel, view-major, row 0 at the top.
     pub image: BufferRange<'a>,
-    /// One [`PixelAux`] per rendered pixel.
+    /// One [`crate::raster::fine::PixelAux`] per rendered pixel.
     pub aux: BufferRange<'a>,
 }
 

@@ -760,7 +760,7 @@ impl HardAccum {
 /// aggregates' final state, so that the backward visits each face once, independently of the
 /// others, and never re-runs the forward. One per *rendered* pixel (2× with anti-aliasing).
 ///
-/// The f64 twin of the GPU's `PixelAux` (`raster_brute.comp`, [`crate::raster::brute::PixelAux`])
+/// The f64 twin of the GPU's `PixelAux` (`raster_brute.comp`, [`crate::raster::fine::PixelAux`])
 /// extended by `alpha_zeros`; the GPU keeps the softmax maximum as the depth whose `z̄` it is,
 /// `softmax_max = (far − softmax_ref_depth) / (far − near)`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
