@@ -21,6 +21,7 @@
 #![warn(missing_docs)]
 
 pub mod assets;
+pub mod atomic_file;
 pub mod bench;
 pub mod camera;
 pub mod error;

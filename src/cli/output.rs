@@ -6,9 +6,8 @@
 //! 0 at the top. OpenEXR tools assume premultiplied colour; softvk's EXR is data, not a plate to
 //! composite.
 
-use std::fs::{File, OpenOptions};
-use std::io::{Cursor, Write};
-use std::path::{Path, PathBuf};
+use std::io::Cursor;
+use std::path::Path;
 
 use softvk::{Error, Result};
 
@@ -97,87 +96,12 @@ fn encode_exr(
     Ok(out.into_inner())
 }
 
-/// A file written in full or not at all: bytes go to a hidden temporary file beside the target
-/// (same directory, hence same file system, so the final `rename` is atomic and never copies),
-/// which [`AtomicFile::commit`] renames into place. Dropped without a commit (an error, a
-/// panic), it removes the temporary file.
-///
-/// Hand-rolled rather than the `tempfile` crate: `tempfile` creates its files with mode 0600,
-/// which the rename would carry over to the user's image, while `create_new` here gives the
-/// usual permissions (0666 & umask) of any file the user creates; and it is twenty lines.
-#[derive(Debug)]
-pub struct AtomicFile {
-    target: PathBuf,
-    temp: PathBuf,
-    file: Option<File>,
-}
-
-impl AtomicFile {
-    /// Creates the temporary file now, so an unwritable destination is reported before any
-    /// work is done.
-    pub fn create(target: &Path) -> Result<AtomicFile> {
-        let name = target
-            .file_name()
-            .ok_or_else(|| Error::Input(format!("{}: not a file name", target.display())))?;
-        if target.is_dir() {
-            return Err(Error::Input(format!(
-                "{}: is a directory, not an image file",
-                target.display()
-            )));
-        }
-        let dir = match target.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
-        // Unique among concurrent softvk processes (pid) and calls in one process (counter).
-        static COUNTER: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
-        let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let mut temp_name = std::ffi::OsString::from(".");
-        temp_name.push(name);
-        temp_name.push(format!(".softvk-{}-{n}.tmp", std::process::id()));
-        let temp = dir.join(temp_name);
-        let file = OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&temp)
-            .map_err(|e| cannot_write(target, &e))?;
-        Ok(AtomicFile {
-            target: target.to_path_buf(),
-            temp,
-            file: Some(file),
-        })
-    }
-
-    /// Writes `bytes`, flushes them to disk, and renames the file into place.
-    pub fn commit(mut self, bytes: &[u8]) -> Result<()> {
-        let mut file = self.file.take().expect("committed once");
-        let fail = |e: std::io::Error| cannot_write(&self.target, &e);
-        file.write_all(bytes).map_err(fail)?;
-        file.sync_all().map_err(fail)?;
-        drop(file);
-        std::fs::rename(&self.temp, &self.target).map_err(fail)?;
-        // Renamed: nothing left for Drop to remove.
-        self.temp = PathBuf::new();
-        Ok(())
-    }
-}
-
-fn cannot_write(target: &Path, e: &std::io::Error) -> Error {
-    Error::Input(format!("cannot write {}: {e}", target.display()))
-}
-
-impl Drop for AtomicFile {
-    fn drop(&mut self) {
-        drop(self.file.take());
-        if !self.temp.as_os_str().is_empty() {
-            let _ = std::fs::remove_file(&self.temp);
-        }
-    }
-}
+pub use softvk::atomic_file::AtomicFile;
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::path::PathBuf;
 
     /// A fresh folder under the system's temporary directory, removed when dropped.
     struct TempDir(PathBuf);
