@@ -227,7 +227,10 @@ impl Sampler {
     /// Records the samples of `iteration`: [`Sampler::rays`], [`Sampler::anchors`] and
     /// [`Sampler::candidates`].
     pub fn record(&self, rec: &mut Recorder<'_>, gpu: &GpuTargets, iteration: u32) -> Result<()> {
-        if gpu.view_count() != self.views || gpu.width() != self.width {
+        if gpu.view_count() != self.views
+            || gpu.width() != self.width
+            || gpu.height() != self.height
+        {
             return Err(Error::Input(
                 "sampler: recorded with other targets than it was made for".into(),
             ));
