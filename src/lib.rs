@@ -14,6 +14,10 @@
 //!   image MSE, its Laplacian and flatten regularizers, its sigmoid/tanh deformation, and Adam —
 //!   recordable into one command buffer per iteration.
 //!
+//! - [`probe`]: implicit-field sphere probing — sampling (rays, anchors, surface candidates),
+//!   probing anchors binned to screen tiles, the silhouette loss and the geometric regularizer,
+//!   with their gradients with respect to φ.
+//!
 //! - [`mod@bench`]: the forward benchmark behind `softvk bench` (scenes, timing, JSON records).
 //!
 //! Every kernel has a CPU twin that tests compare it with.
@@ -30,6 +34,7 @@ pub mod gpu;
 pub mod lighting;
 pub mod mesh;
 pub mod primitives;
+pub mod probe;
 pub mod raster;
 
 pub use error::{Error, Result};

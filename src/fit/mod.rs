@@ -48,7 +48,7 @@ pub mod flatten;
 pub mod io;
 pub mod laplacian;
 pub mod mesh_fit;
-mod reduce;
+pub(crate) mod reduce;
 mod regularizers;
 pub mod report;
 pub mod silhouette;

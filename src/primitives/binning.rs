@@ -433,21 +433,47 @@ impl Binner {
             total,
             job.key_bits(),
         )?;
+        self.record_ranges(
+            rec,
+            bins.keys.range(0, 8 * total),
+            bins.ranges.range(0, 8 * tiles),
+            total,
+            tiles,
+        )
+    }
+
+    /// Records the ranges pass alone: `[start, end)` of every tile's run in the first `n` keys
+    /// of `keys` (`[tile, 0]` each, sorted by tile) into `ranges` (`tiles` pairs, which must
+    /// already be zero: empty tiles are not written). For other lists sorted by tile, such as
+    /// sphere probing's rays.
+    pub fn record_ranges(
+        &self,
+        rec: &mut Recorder<'_>,
+        keys: BufferRange<'_>,
+        ranges: BufferRange<'_>,
+        n: u64,
+        tiles: u64,
+    ) -> Result<()> {
+        if keys.size < 8 * n || ranges.size < 8 * tiles || n > u64::from(u32::MAX) {
+            return Err(Error::Limit(format!(
+                "tile ranges: `{}` ({} bytes) and `{}` ({} bytes) do not hold {n} keys and \
+                 {tiles} ranges",
+                keys.buffer.name(),
+                keys.size,
+                ranges.buffer.name(),
+                ranges.size
+            )));
+        }
+        if n == 0 {
+            return Ok(());
+        }
         let push = RangesPush {
-            n: total as u32,
+            n: n as u32,
             tiles: tiles as u32,
             pad: [0; 2],
         };
-        let groups = total.div_ceil(u64::from(specs::BIN_RANGES.workgroup_size[0]));
-        rec.dispatch(
-            &self.ranges,
-            &[
-                bins.keys.range(0, 8 * total),
-                bins.ranges.range(0, 8 * tiles),
-            ],
-            &push,
-            groups as u32,
-        )
+        let groups = n.div_ceil(u64::from(specs::BIN_RANGES.workgroup_size[0]));
+        rec.dispatch(&self.ranges, &[keys, ranges], &push, groups as u32)
     }
 
     /// Convenience (tests, tools): bins `items` completely, two submissions, and reads the

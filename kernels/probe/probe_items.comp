@@ -1,0 +1,69 @@
+#version 460
+#extension GL_GOOGLE_include_directive : require
+// Sphere probing: every anchor in every view as a binning item (`ProbeItem` of probe.glsl), one
+// invocation per (view, anchor), view-major. The screen box is the box of the projected corners
+// of the anchor's τ-cube: it holds the projection of the anchor's sphere (a projective map sends
+// the cube to the hull of its corners when they are all in front of the camera), so binning by it
+// loses no ray that can hit the sphere. FLAG_VALID: all corners in front (depth and the
+// projection's denominator positive); an anchor reaching behind the camera is not probed in that
+// view. FLAG_INSIDE: the pixel holding the centre's projection is inside the silhouette (pixels
+// outside the image are outside). Twin: `probe::prober::cpu::items`.
+#include "common.glsl"
+#include "probe.glsl"
+
+layout(local_size_x = 64) in;
+
+layout(std430, set = 0, binding = 0) readonly buffer Views { ProbeView views[]; };
+layout(std430, set = 0, binding = 1) readonly buffer Anchors { vec4 anchors[]; };
+layout(std430, set = 0, binding = 2) readonly buffer Masks { float masks[]; };
+layout(std430, set = 0, binding = 3) writeonly buffer Items { ProbeItem items[]; };
+
+layout(push_constant) uniform Push {
+    uint anchors;
+    uint views;
+    uint width;
+    uint height;
+    float tau;
+    float pad0;
+    float pad1;
+    float pad2;
+} pc;
+
+void main() {
+    uint id = linear_group_id() * 64u + gl_LocalInvocationIndex;
+    if (id >= pc.anchors * pc.views) {
+        return;
+    }
+    uint view = id / pc.anchors;
+    uint anchor = id - view * pc.anchors;
+    ProbeView v = views[view];
+    vec3 p = anchors[anchor].xyz;
+
+    bool valid = true;
+    vec4 box = vec4(1e30, 1e30, -1e30, -1e30);
+    for (uint c = 0u; c < 8u; ++c) {
+        vec3 sign = vec3((c & 1u) != 0u ? 1.0 : -1.0, (c & 2u) != 0u ? 1.0 : -1.0,
+                         (c & 4u) != 0u ? 1.0 : -1.0);
+        precise vec3 corner = p + pc.tau * sign;
+        float den = affine(v.a2, corner);
+        valid = valid && affine(v.depth, corner) > 0.0 && den > 0.0;
+        vec2 s = vec2(affine(v.a0, corner), affine(v.a1, corner)) / den;
+        box = vec4(min(box.xy, s), max(box.zw, s));
+    }
+
+    float w = float(pc.width);
+    float h = float(pc.height);
+    float smin = min(w, h);
+    float den = affine(v.a2, p);
+    float sx = affine(v.a0, p) / den;
+    float sy = affine(v.a1, p) / den;
+    // The pixel whose centre is nearest: c = floor((x S + W) / 2), r = floor((H − y S) / 2).
+    precise float fc = floor((sx * smin + w) * 0.5);
+    precise float fr = floor((h - sy * smin) * 0.5);
+    bool inside = false;
+    if (den > 0.0 && fc >= 0.0 && fc < w && fr >= 0.0 && fr < h) {
+        inside = masks[view * pc.width * pc.height + uint(fr) * pc.width + uint(fc)] >= 0.5;
+    }
+    uint flags = (valid ? FLAG_VALID : 0u) | (inside ? FLAG_INSIDE : 0u);
+    items[id] = ProbeItem(box, flags, sx, sy, affine(v.depth, p));
+}

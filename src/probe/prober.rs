@@ -1,0 +1,982 @@
+//! Sphere probing, forward and backward (SPEC §5), on the generic tile binning.
+//!
+//! **Forward.** Every anchor j is a sphere of radius τ. Per view k, `probe_items.comp` writes
+//! the anchor as a binning item ([`ProbeItem`]): the screen box of its τ-cube's projected
+//! corners (which holds the sphere's projection), the flag [`FLAG_VALID`] (the cube is wholly in
+//! front of the camera; otherwise the anchor is not probed in that view) and [`FLAG_INSIDE`]
+//! (its centre projects into the silhouette). The items are binned to screen tiles by
+//! [`crate::primitives::binning`] (count → scan → read-back of the entry count → scatter →
+//! stable sort → ranges). Then one invocation per ray (`probe_forward.comp`) visits the anchors
+//! of its tile in anchor order and aggregates, with G of [`Aggregate`](super::Aggregate), the φ of those whose
+//! centre lies within τ of the ray's line, skipping under boundary-aware assignment the anchors
+//! whose [`FLAG_INSIDE`] differs from the ray's label. No hit: ψ = 0. The loss is
+//! `L_sil = mean_i (ψ_i − S_i)²` over every ray of every view, summed in a fixed order.
+//! `probe_forward_brute.comp` visits every anchor instead: the baseline the tiled pass equals bit
+//! for bit.
+//!
+//! **Backward.** `dL/dφ_j = (2 / N) Σ_i (ψ_i − S_i) dψ_i/dφ_j`, without float atomics: the rays
+//! are sorted by tile (a stable [`RadixSort`] of their tile keys, then the binning's ranges
+//! pass); one invocation per binned (anchor, tile) entry sums over the tile's rays in ray order
+//! and writes the partial at the entry's item-major slot (`probe_backward.comp`); one invocation
+//! per anchor adds its slots, view by view, in slot order (`probe_reduce.comp`).
+//!
+//! **Recording.** The binning's entry count is read back between two submissions:
+//! [`Prober::record_count`] (submission 1), [`Prober::finish_count`] (host), then
+//! [`Prober::record_forward`] and [`Prober::record_backward`] (submission 2). The anchors, φ and
+//! rays must stay unchanged in between. [`Prober::run`] does all of it and reads the results back.
+
+use bytemuck::{Pod, Zeroable};
+
+use super::ProbeSettings;
+use super::targets::GpuTargets;
+use crate::error::{Error, Result};
+use crate::fit::reduce::{Sum, SumPush};
+use crate::fit::{GradOut, check_binding, check_floats, groups};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::primitives::binning::{self, BinJob, Binner, Bins, ItemLayout, TileGrid};
+use crate::primitives::{RadixSort, SortScratch};
+
+/// [`ProbeItem::flags`]: every corner of the anchor's τ-cube is in front of the camera.
+pub const FLAG_VALID: u32 = 1;
+/// [`ProbeItem::flags`]: the anchor's centre projects into the silhouette.
+pub const FLAG_INSIDE: u32 = 2;
+/// [`RayOut::aux`] of a ray without hits.
+pub const NO_HIT: u32 = u32::MAX;
+
+/// One anchor in one view, as the binning reads it. Twin of `ProbeItem` in
+/// `kernels/include/probe.glsl`; 32 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct ProbeItem {
+    /// Screen box `(x_min, y_min, x_max, y_max)` of the projected τ-cube.
+    pub screen_box: [f32; 4],
+    /// [`FLAG_VALID`] | [`FLAG_INSIDE`].
+    pub flags: u32,
+    /// The centre's screen x.
+    pub sx: f32,
+    /// The centre's screen y.
+    pub sy: f32,
+    /// The centre's depth.
+    pub depth: f32,
+}
+
+/// What the forward leaves per ray. Twin of `RayOut` in `kernels/include/probe.glsl`; 16 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct RayOut {
+    /// ψ.
+    pub psi: f32,
+    /// (ψ − S)².
+    pub err2: f32,
+    /// Max and log-sum-exp: the anchor of the largest φ (the first on a tie); union: how many
+    /// hits have 1 − φ = 0; [`NO_HIT`] without hits.
+    pub aux: u32,
+    /// Union: the product of the nonzero 1 − φ.
+    pub aux_f: f32,
+}
+
+/// Push constants of `probe_items.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ItemsPush {
+    anchors: u32,
+    views: u32,
+    width: u32,
+    height: u32,
+    tau: f32,
+    pad: [f32; 3],
+}
+
+/// Push constants of `probe_forward.comp` and `probe_forward_brute.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ForwardPush {
+    rays: u32,
+    anchors: u32,
+    width: u32,
+    height: u32,
+    tile_size: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+    mode: u32,
+    inv_s: f32,
+    tau2: f32,
+    temperature: f32,
+    inv_t: f32,
+    boundary_aware: u32,
+    pad: [u32; 3],
+}
+
+/// Push constants of `probe_ray_keys.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct KeysPush {
+    rays: u32,
+    width: u32,
+    height: u32,
+    tile_size: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+    pad: [u32; 2],
+}
+
+/// Push constants of `probe_backward.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct BackwardPush {
+    entries: u32,
+    anchors: u32,
+    width: u32,
+    height: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+    mode: u32,
+    boundary_aware: u32,
+    inv_s: f32,
+    tau2: f32,
+    inv_t: f32,
+    pad: f32,
+}
+
+/// Push constants of `probe_reduce.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ReducePush {
+    anchors: u32,
+    views: u32,
+    entries: u32,
+    accumulate: u32,
+    coef: f32,
+    pad: [u32; 3],
+}
+
+/// The f32 constants the kernels and the twin share.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Constants {
+    pub inv_s: f32,
+    pub tau: f32,
+    pub tau2: f32,
+    pub temperature: f32,
+    pub inv_t: f32,
+}
+
+impl Constants {
+    pub fn new(settings: &ProbeSettings, width: u32, height: u32) -> Self {
+        Self {
+            inv_s: (1.0 / f64::from(width.min(height))) as f32,
+            tau: settings.tau as f32,
+            tau2: (settings.tau * settings.tau) as f32,
+            temperature: settings.temperature as f32,
+            inv_t: (1.0 / settings.temperature) as f32,
+        }
+    }
+}
+
+/// What [`Prober::run`] reads back.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProbeRun {
+    /// Per ray.
+    pub outs: Vec<RayOut>,
+    /// L_sil.
+    pub loss: f32,
+    /// dL_sil/dφ per anchor.
+    pub d_phi: Vec<f32>,
+    /// Binned (anchor, tile) entries.
+    pub entries: u64,
+}
+
+/// The probing pipelines and their buffers, for one set of targets and settings.
+pub struct Prober {
+    items_kernel: Kernel,
+    forward_kernel: Kernel,
+    brute_kernel: Kernel,
+    keys_kernel: Kernel,
+    backward_kernel: Kernel,
+    reduce_kernel: Kernel,
+    binner: Binner,
+    bins: Bins,
+    sort: RadixSort,
+    sort_scratch: SortScratch,
+    sum: Sum,
+    job: BinJob,
+    settings: ProbeSettings,
+    constants: Constants,
+    items: Buffer,
+    outs: Buffer,
+    ray_keys: Buffer,
+    ray_order: Buffer,
+    ray_ranges: Buffer,
+    partials: Buffer,
+    partial_capacity: u64,
+    loss: Buffer,
+}
+
+/// Fails with [`Error::Limit`] when a kernel loop of `iterations` would pass the driver's cap.
+fn check_loop(ctx: &Context, what: &str, iterations: u64) -> Result<()> {
+    if let Some(limit) = ctx.info().shader_loop_limit() {
+        if iterations > limit {
+            return Err(Error::Limit(format!(
+                "sphere probing: {what} would run {iterations} loop iterations in one shader \
+                 invocation, but {} runs at most {limit} (and would silently skip the rest)",
+                ctx.info().name
+            )));
+        }
+    }
+    Ok(())
+}
+
+impl Prober {
+    /// Pipelines and buffers for probing `gpu`'s views with `settings`' counts: `anchors`
+    /// anchors and `rays_per_view` rays per view.
+    pub fn new(ctx: &Context, gpu: &GpuTargets, settings: &ProbeSettings) -> Result<Self> {
+        settings.validate()?;
+        let views = gpu.view_count();
+        let anchors = u64::from(settings.anchors);
+        let rays = u64::from(views) * u64::from(settings.rays_per_view);
+        let grid = TileGrid::new(gpu.width(), gpu.height(), settings.tile_size)?;
+        let job = BinJob {
+            grid,
+            layout: ItemLayout {
+                stride_words: 8,
+                box_offset: 0,
+                flag_offset: 4,
+                flag_mask: FLAG_VALID,
+            },
+            items_per_view: settings.anchors,
+            views,
+            first_item: 0,
+        };
+        if job.max_entries() > u64::from(u32::MAX) {
+            return Err(Error::Limit(format!(
+                "sphere probing: {} anchors over {} tiles in {views} views could bin more than \
+                 2^32 entries; use fewer anchors or views, or larger tiles",
+                settings.anchors,
+                grid.tiles_per_view()
+            )));
+        }
+        // A tile belongs to one view: the backward visits at most one view's rays per entry.
+        check_loop(
+            ctx,
+            &format!("{} rays per view (backward)", settings.rays_per_view),
+            u64::from(settings.rays_per_view),
+        )?;
+        let items = anchors * u64::from(views);
+        check_binding(ctx, "sphere probing: anchor items", 32 * items)?;
+        check_binding(ctx, "sphere probing: rays", 16 * rays)?;
+        let mut bins = Bins::new(ctx)?;
+        bins.reserve(ctx, &job)?;
+        let tiles = job.tile_count();
+        Ok(Self {
+            items_kernel: Kernel::new(ctx, &specs::PROBE_ITEMS)?,
+            forward_kernel: Kernel::new(ctx, &specs::PROBE_FORWARD)?,
+            brute_kernel: Kernel::new(ctx, &specs::PROBE_FORWARD_BRUTE)?,
+            keys_kernel: Kernel::new(ctx, &specs::PROBE_RAY_KEYS)?,
+            backward_kernel: Kernel::new(ctx, &specs::PROBE_BACKWARD)?,
+            reduce_kernel: Kernel::new(ctx, &specs::PROBE_REDUCE)?,
+            binner: Binner::new(ctx)?,
+            bins,
+            sort: RadixSort::new(ctx)?,
+            sort_scratch: SortScratch::new(ctx, rays)?,
+            sum: Sum::new(ctx)?,
+            job,
+            settings: *settings,
+            constants: Constants::new(settings, gpu.width(), gpu.height()),
+            items: ctx.create_buffer("probe anchor items", 32 * items, MemoryKind::Device)?,
+            outs: ctx.create_buffer("probe ray outputs", 16 * rays, MemoryKind::Device)?,
+            ray_keys: ctx.create_buffer("probe ray tile keys", 8 * rays, MemoryKind::Device)?,
+            ray_order: ctx.create_buffer("probe rays by tile", 4 * rays, MemoryKind::Device)?,
+            ray_ranges: ctx.create_buffer(
+                "probe ray tile ranges",
+                8 * tiles,
+                MemoryKind::Device,
+            )?,
+            partials: ctx.create_buffer("probe partials", 4, MemoryKind::Device)?,
+            partial_capacity: 1,
+            loss: ctx.create_buffer("probe silhouette loss", 4, MemoryKind::Device)?,
+        })
+    }
+
+    fn rays(&self) -> u64 {
+        u64::from(self.job.views) * u64::from(self.settings.rays_per_view)
+    }
+
+    fn anchors(&self) -> u64 {
+        u64::from(self.settings.anchors)
+    }
+
+    fn check_inputs(
+        &self,
+        gpu: &GpuTargets,
+        anchors: &BufferRange<'_>,
+        phi: Option<&BufferRange<'_>>,
+        rays: Option<&BufferRange<'_>>,
+    ) -> Result<()> {
+        if gpu.view_count() != self.job.views
+            || gpu.width() != self.job.grid.width
+            || gpu.height() != self.job.grid.height
+        {
+            return Err(Error::Input(
+                "sphere probing: recorded with other targets than the prober was made for".into(),
+            ));
+        }
+        check_floats("sphere probing: anchors", anchors, 4 * self.anchors())?;
+        if let Some(phi) = phi {
+            check_floats("sphere probing: φ at the anchors", phi, self.anchors())?;
+        }
+        if let Some(rays) = rays {
+            check_floats("sphere probing: rays", rays, 4 * self.rays())?;
+        }
+        Ok(())
+    }
+
+    /// Records the anchor items of every view ([`Prober::items`]); [`Prober::record_count`]
+    /// includes it.
+    pub fn record_items(
+        &self,
+        rec: &mut Recorder<'_>,
+        gpu: &GpuTargets,
+        anchors: BufferRange<'_>,
+    ) -> Result<()> {
+        self.check_inputs(gpu, &anchors, None, None)?;
+        let push = ItemsPush {
+            anchors: self.settings.anchors,
+            views: self.job.views,
+            width: self.job.grid.width,
+            height: self.job.grid.height,
+            tau: self.constants.tau,
+            pad: [0.0; 3],
+        };
+        rec.dispatch(
+            &self.items_kernel,
+            &[
+                gpu.views().whole(),
+                anchors.sub(0, 16 * self.anchors()),
+                gpu.masks().whole(),
+                self.items.whole(),
+            ],
+            &push,
+            groups(self.job.item_count(), 64)?,
+        )
+    }
+
+    /// Submission 1: records the anchor items and the binning's count pass.
+    pub fn record_count(
+        &self,
+        rec: &mut Recorder<'_>,
+        gpu: &GpuTargets,
+        anchors: BufferRange<'_>,
+    ) -> Result<()> {
+        self.record_items(rec, gpu, anchors)?;
+        self.binner
+            .record_count(rec, &self.bins, self.items.whole(), &self.job)
+    }
+
+    /// After submission 1 finished: reads the entry count, sizes the entry buffers, and checks
+    /// the tiled loops against the driver's cap. Returns the entry count.
+    pub fn finish_count(&mut self, ctx: &Context) -> Result<u64> {
+        let total = self.bins.read_total(ctx)?;
+        let max = binning::max_entries(ctx);
+        if total > max {
+            return Err(Error::Limit(format!(
+                "sphere probing: {total} (anchor, tile) entries, over the {max} one binning may \
+                 hold; use fewer anchors or views, larger tiles or a smaller τ"
+            )));
+        }
+        self.bins.reserve_entries(ctx, total)?;
+        // A tile belongs to one view and holds each anchor at most once.
+        let run = total.min(self.anchors());
+        check_loop(ctx, &format!("a tile of {run} anchors (forward)"), run)?;
+        let views = u64::from(self.job.views);
+        let per_anchor = total.min(views * self.job.grid.tiles_per_view());
+        check_loop(
+            ctx,
+            &format!("an anchor binned to {per_anchor} tiles (gradient sum)"),
+            views + per_anchor,
+        )?;
+        if total > self.partial_capacity {
+            let cap = (total + total / 4).min(max).max(total);
+            self.partials = ctx.create_buffer("probe partials", 4 * cap, MemoryKind::Device)?;
+            self.partial_capacity = cap;
+        }
+        Ok(total)
+    }
+
+    fn forward_push(&self) -> ForwardPush {
+        let c = &self.constants;
+        let g = &self.job.grid;
+        ForwardPush {
+            rays: self.rays() as u32,
+            anchors: self.settings.anchors,
+            width: g.width,
+            height: g.height,
+            tile_size: g.tile_size,
+            tiles_x: g.tiles_x,
+            tiles_y: g.tiles_y,
+            mode: self.settings.aggregate.code(),
+            inv_s: c.inv_s,
+            tau2: c.tau2,
+            temperature: c.temperature,
+            inv_t: c.inv_t,
+            boundary_aware: u32::from(self.settings.boundary_aware),
+            pad: [0; 3],
+        }
+    }
+
+    fn record_loss(&self, rec: &mut Recorder<'_>) -> Result<()> {
+        self.sum.record(
+            rec,
+            self.outs.whole(),
+            self.loss.whole(),
+            SumPush {
+                n: self.rays() as u32,
+                stride: 4,
+                offset: 1,
+                out_index: 0,
+                scale: (1.0 / self.rays() as f64) as f32,
+                bias: 0.0,
+            },
+            1,
+        )
+    }
+
+    /// Submission 2: records the rest of the binning, ψ per ray ([`Prober::outputs`]) and
+    /// L_sil ([`Prober::loss_buffer`]). `phi` holds φ at the anchors (one `f32` each), `rays`
+    /// the rays ([`Ray`](super::sampler::Ray) each, view-major, `rays_per_view` per view).
+    pub fn record_forward(
+        &self,
+        rec: &mut Recorder<'_>,
+        gpu: &GpuTargets,
+        anchors: BufferRange<'_>,
+        phi: BufferRange<'_>,
+        rays: BufferRange<'_>,
+    ) -> Result<()> {
+        self.check_inputs(gpu, &anchors, Some(&phi), Some(&rays))?;
+        self.binner
+            .record_sort(rec, &self.bins, self.items.whole(), &self.job)?;
+        let n = self.rays();
+        rec.dispatch(
+            &self.forward_kernel,
+            &[
+                rays.sub(0, 16 * n),
+                gpu.views().whole(),
+                anchors.sub(0, 16 * self.anchors()),
+                phi.sub(0, 4 * self.anchors()),
+                self.items.whole(),
+                self.bins.ranges().range(0, 8 * self.job.tile_count()),
+                self.bins.entries().whole(),
+                self.bins.entry_items().whole(),
+                self.outs.whole(),
+            ],
+            &self.forward_push(),
+            groups(n, 64)?,
+        )?;
+        self.record_loss(rec)
+    }
+
+    /// The brute-force forward (every anchor for every ray), after [`Prober::record_items`]:
+    /// the same [`Prober::outputs`] and loss as [`Prober::record_forward`], bit for bit.
+    pub fn record_forward_brute(
+        &self,
+        rec: &mut Recorder<'_>,
+        gpu: &GpuTargets,
+        anchors: BufferRange<'_>,
+        phi: BufferRange<'_>,
+        rays: BufferRange<'_>,
+    ) -> Result<()> {
+        self.check_inputs(gpu, &anchors, Some(&phi), Some(&rays))?;
+        check_loop(
+            rec.context(),
+            &format!("{} anchors (brute-force forward)", self.anchors()),
+            self.anchors(),
+        )?;
+        let n = self.rays();
+        rec.dispatch(
+            &self.brute_kernel,
+            &[
+                rays.sub(0, 16 * n),
+                gpu.views().whole(),
+                anchors.sub(0, 16 * self.anchors()),
+                phi.sub(0, 4 * self.anchors()),
+                self.items.whole(),
+                self.outs.whole(),
+            ],
+            &self.forward_push(),
+            groups(n, 64)?,
+        )?;
+        self.record_loss(rec)
+    }
+
+    /// Records dL_sil/dφ at the anchors into `d_phi` (one `f32` per anchor, `weight ·` the
+    /// gradient, overwritten or accumulated), after [`Prober::record_forward`] (or the brute
+    /// forward) in this or an earlier submission, with the same inputs.
+    pub fn record_backward(
+        &self,
+        rec: &mut Recorder<'_>,
+        gpu: &GpuTargets,
+        anchors: BufferRange<'_>,
+        phi: BufferRange<'_>,
+        rays: BufferRange<'_>,
+        d_phi: GradOut<'_>,
+    ) -> Result<()> {
+        self.check_inputs(gpu, &anchors, Some(&phi), Some(&rays))?;
+        check_floats("sphere probing: d_phi", &d_phi.range, self.anchors())?;
+        let total = self.bins.total().ok_or_else(|| {
+            Error::Limit("sphere probing: the entry count is not known yet (finish_count)".into())
+        })?;
+        if total > self.partial_capacity {
+            return Err(Error::Limit(
+                "sphere probing: the partials do not hold the entries (finish_count)".into(),
+            ));
+        }
+        let g = &self.job.grid;
+        let n = self.rays();
+        let rays = rays.sub(0, 16 * n);
+        let tiles = self.job.tile_count();
+        rec.dispatch(
+            &self.keys_kernel,
+            &[rays, self.ray_keys.whole(), self.ray_order.whole()],
+            &KeysPush {
+                rays: n as u32,
+                width: g.width,
+                height: g.height,
+                tile_size: g.tile_size,
+                tiles_x: g.tiles_x,
+                tiles_y: g.tiles_y,
+                pad: [0; 2],
+            },
+            groups(n, 64)?,
+        )?;
+        self.sort.record(
+            rec,
+            &self.sort_scratch,
+            &self.ray_keys,
+            &self.ray_order,
+            n,
+            self.job.key_bits(),
+        )?;
+        let ranges = self.ray_ranges.range(0, 8 * tiles);
+        rec.fill(ranges, 0);
+        self.binner
+            .record_ranges(rec, self.ray_keys.range(0, 8 * n), ranges, n, tiles)?;
+        let anchors = anchors.sub(0, 16 * self.anchors());
+        let phi = phi.sub(0, 4 * self.anchors());
+        if total > 0 {
+            let c = &self.constants;
+            rec.dispatch(
+                &self.backward_kernel,
+                &[
+                    self.bins.keys().whole(),
+                    self.bins.entries().whole(),
+                    self.bins.entry_items().whole(),
+                    self.items.whole(),
+                    anchors,
+                    phi,
+                    rays,
+                    gpu.views().whole(),
+                    self.outs.whole(),
+                    self.ray_order.whole(),
+                    ranges,
+                    self.partials.whole(),
+                ],
+                &BackwardPush {
+                    entries: total as u32,
+                    anchors: self.settings.anchors,
+                    width: g.width,
+                    height: g.height,
+                    tiles_x: g.tiles_x,
+                    tiles_y: g.tiles_y,
+                    mode: self.settings.aggregate.code(),
+                    boundary_aware: u32::from(self.settings.boundary_aware),
+                    inv_s: c.inv_s,
+                    tau2: c.tau2,
+                    inv_t: c.inv_t,
+                    pad: 0.0,
+                },
+                groups(total, 64)?,
+            )?;
+        }
+        rec.dispatch(
+            &self.reduce_kernel,
+            &[
+                self.bins.offsets().whole(),
+                self.partials.whole(),
+                d_phi.range.sub(0, 4 * self.anchors()),
+            ],
+            &ReducePush {
+                anchors: self.settings.anchors,
+                views: self.job.views,
+                entries: total as u32,
+                accumulate: u32::from(d_phi.accumulate),
+                coef: (2.0 * f64::from(d_phi.weight) / n as f64) as f32,
+                pad: [0; 3],
+            },
+            groups(self.anchors(), 64)?,
+        )
+    }
+
+    /// Convenience (tests, tools): the whole forward (tiled, or brute force with `brute`) and
+    /// backward of `anchors`, `phi` and `rays`, in two submissions, read back.
+    pub fn run(
+        &mut self,
+        ctx: &Context,
+        gpu: &GpuTargets,
+        anchors: &Buffer,
+        phi: &Buffer,
+        rays: &Buffer,
+        brute: bool,
+    ) -> Result<ProbeRun> {
+        ctx.submit_and_wait(|rec| self.record_count(rec, gpu, anchors.whole()))?;
+        let entries = self.finish_count(ctx)?;
+        let d_phi = ctx.create_buffer("probe d_phi", 4 * self.anchors(), MemoryKind::Device)?;
+        ctx.submit_and_wait(|rec| {
+            if brute {
+                // The backward still needs the binning sorted.
+                self.binner
+                    .record_sort(rec, &self.bins, self.items.whole(), &self.job)?;
+                self.record_forward_brute(rec, gpu, anchors.whole(), phi.whole(), rays.whole())?;
+            } else {
+                self.record_forward(rec, gpu, anchors.whole(), phi.whole(), rays.whole())?;
+            }
+            self.record_backward(
+                rec,
+                gpu,
+                anchors.whole(),
+                phi.whole(),
+                rays.whole(),
+                GradOut::write(d_phi.whole()),
+            )
+        })?;
+        Ok(ProbeRun {
+            outs: self.read_outputs(ctx)?,
+            loss: self.read_loss(ctx)?,
+            d_phi: ctx.read_buffer(&d_phi, 0, self.anchors() as usize)?,
+            entries,
+        })
+    }
+
+    /// [`RayOut`] per ray of the last forward.
+    pub fn outputs(&self) -> &Buffer {
+        &self.outs
+    }
+
+    /// Reads [`Prober::outputs`] back.
+    pub fn read_outputs(&self, ctx: &Context) -> Result<Vec<RayOut>> {
+        ctx.read_buffer(&self.outs, 0, self.rays() as usize)
+    }
+
+    /// One `f32`: L_sil of the last forward.
+    pub fn loss_buffer(&self) -> &Buffer {
+        &self.loss
+    }
+
+    /// Reads L_sil back.
+    pub fn read_loss(&self, ctx: &Context) -> Result<f32> {
+        Ok(ctx.read_buffer::<f32>(&self.loss, 0, 1)?[0])
+    }
+
+    /// The anchor items ([`ProbeItem`], view-major) of the last [`Prober::record_items`].
+    pub fn items(&self) -> &Buffer {
+        &self.items
+    }
+
+    /// The binning of the anchors.
+    pub fn bins(&self) -> &Bins {
+        &self.bins
+    }
+
+    /// The binning job (grid, layout, counts).
+    pub fn job(&self) -> &BinJob {
+        &self.job
+    }
+
+    /// The settings the prober was made with.
+    pub fn settings(&self) -> &ProbeSettings {
+        &self.settings
+    }
+}
+
+/// CPU twins: the discrete decisions in the kernels' f32 operations, the values in f64.
+pub mod cpu {
+    use super::{Constants, FLAG_INSIDE, FLAG_VALID, ProbeItem};
+    use crate::primitives::binning::TileGrid;
+    use crate::probe::sampler::Ray;
+    use crate::probe::targets::{ProbeView, Targets};
+    use crate::probe::{Aggregate, ProbeSettings};
+
+    type V3 = [f32; 3];
+
+    fn affine(a: &[f32; 4], p: V3) -> f32 {
+        a[0] * p[0] + a[1] * p[1] + a[2] * p[2] + a[3]
+    }
+
+    /// `probe_items.comp`.
+    pub fn items(targets: &Targets, tau: f64, anchors: &[[f32; 4]]) -> Vec<ProbeItem> {
+        let tau = tau as f32;
+        let (w, h) = (targets.width as f32, targets.height as f32);
+        let smin = w.min(h);
+        let mut out = Vec::with_capacity(anchors.len() * targets.views.len());
+        for (k, v) in targets.views.iter().enumerate() {
+            for a in anchors {
+                let p = [a[0], a[1], a[2]];
+                let mut valid = true;
+                let mut b = [1e30f32, 1e30, -1e30, -1e30];
+                for c in 0..8u32 {
+                    let sign = |bit: u32| if c & bit != 0 { 1.0f32 } else { -1.0 };
+                    let corner = [
+                        p[0] + tau * sign(1),
+                        p[1] + tau * sign(2),
+                        p[2] + tau * sign(4),
+                    ];
+                    let den = affine(&v.a2, corner);
+                    valid = valid && affine(&v.depth, corner) > 0.0 && den > 0.0;
+                    let (sx, sy) = (affine(&v.a0, corner) / den, affine(&v.a1, corner) / den);
+                    b = [b[0].min(sx), b[1].min(sy), b[2].max(sx), b[3].max(sy)];
+                }
+                let den = affine(&v.a2, p);
+                let sx = affine(&v.a0, p) / den;
+                let sy = affine(&v.a1, p) / den;
+                let fc = ((sx * smin + w) * 0.5).floor();
+                let fr = ((h - sy * smin) * 0.5).floor();
+                let inside = den > 0.0
+                    && fc >= 0.0
+                    && fc < w
+                    && fr >= 0.0
+                    && fr < h
+                    && targets.inside(k, fc as i64, fr as i64);
+                out.push(ProbeItem {
+                    screen_box: b,
+                    flags: (u32::from(valid) * FLAG_VALID) | (u32::from(inside) * FLAG_INSIDE),
+                    sx,
+                    sy,
+                    depth: affine(&v.depth, p),
+                });
+            }
+        }
+        out
+    }
+
+    /// The line of a ray: `pixel_to_screen` and `view_ray` of `probe.glsl`.
+    pub fn ray_line(view: &ProbeView, ray: &Ray, width: u32, height: u32, inv_s: f32) -> (V3, V3) {
+        let sx = (2.0 * ray.px - width as f32) * inv_s;
+        let sy = (height as f32 - 2.0 * ray.py) * inv_s;
+        let f = |a: &[f32; 4], b: &[f32; 4], c: &[f32; 4]| {
+            [0, 1, 2].map(|i| a[i] + sx * b[i] + sy * c[i])
+        };
+        (
+            f(&view.o0, &view.ox, &view.oy),
+            f(&view.d0, &view.dx, &view.dy),
+        )
+    }
+
+    /// `hit_bound` of `probe.glsl`: τ² |d|².
+    pub fn hit_bound(d: V3, tau2: f32) -> f32 {
+        tau2 * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    }
+
+    /// `ray_hits` of `probe.glsl`: |(p − o) × d|² < τ² |d|².
+    pub fn ray_hits(o: V3, d: V3, bound: f32, p: V3) -> bool {
+        let v = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
+        let cx = v[1] * d[2] - v[2] * d[1];
+        let cy = v[2] * d[0] - v[0] * d[2];
+        let cz = v[0] * d[1] - v[1] * d[0];
+        cx * cx + cy * cy + cz * cz < bound
+    }
+
+    /// `ray_tile` of `probe.glsl`.
+    pub fn ray_tile(ray: &Ray, grid: &TileGrid) -> u32 {
+        let col = (ray.px as u32).min(grid.width - 1);
+        let row = (ray.py as u32).min(grid.height - 1);
+        ray.view * grid.tiles_x * grid.tiles_y
+            + (row / grid.tile_size) * grid.tiles_x
+            + col / grid.tile_size
+    }
+
+    /// The anchors each ray uses, in anchor order: valid in its view, assigned to it (when
+    /// boundary-aware) and within τ of its line.
+    pub fn hits(
+        targets: &Targets,
+        settings: &ProbeSettings,
+        anchors: &[[f32; 4]],
+        rays: &[Ray],
+    ) -> Vec<Vec<u32>> {
+        let c = Constants::new(settings, targets.width, targets.height);
+        let items = items(targets, settings.tau, anchors);
+        let n = anchors.len();
+        rays.iter()
+            .map(|r| {
+                let view = &targets.views[r.view as usize];
+                let (o, d) = ray_line(view, r, targets.width, targets.height, c.inv_s);
+                let bound = hit_bound(d, c.tau2);
+                (0..n)
+                    .filter(|&j| {
+                        let flags = items[r.view as usize * n + j].flags;
+                        let assigned = !settings.boundary_aware
+                            || (r.label >= 0.5) == (flags & FLAG_INSIDE != 0);
+                        flags & FLAG_VALID != 0
+                            && assigned
+                            && ray_hits(o, d, bound, [anchors[j][0], anchors[j][1], anchors[j][2]])
+                    })
+                    .map(|j| j as u32)
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// ψ of a ray with `hits` and dψ/dφ of each hit (zero without hits).
+    pub fn aggregate(settings: &ProbeSettings, hits: &[u32], phi: &[f64]) -> (f64, Vec<f64>) {
+        if hits.is_empty() {
+            return (0.0, Vec::new());
+        }
+        let values: Vec<f64> = hits.iter().map(|&j| phi[j as usize]).collect();
+        match settings.aggregate {
+            Aggregate::Max => {
+                let mut best = 0;
+                for (i, &v) in values.iter().enumerate() {
+                    if v > values[best] {
+                        best = i;
+                    }
+                }
+                let mut g = vec![0.0; values.len()];
+                g[best] = 1.0;
+                (values[best], g)
+            }
+            Aggregate::LogSumExp => {
+                let t = settings.temperature;
+                let m = values.iter().fold(f64::NEG_INFINITY, |m, &v| m.max(v));
+                let s: f64 = values.iter().map(|&v| ((v - m) / t).exp()).sum();
+                let psi = m + t * s.ln();
+                (psi, values.iter().map(|&v| ((v - psi) / t).exp()).collect())
+            }
+            Aggregate::Union => {
+                let prod: f64 = values.iter().map(|&v| 1.0 - v).product();
+                let g = (0..values.len())
+                    .map(|i| {
+                        values
+                            .iter()
+                            .enumerate()
+                            .filter(|&(k, _)| k != i)
+                            .map(|(_, &v)| 1.0 - v)
+                            .product()
+                    })
+                    .collect();
+                (1.0 - prod, g)
+            }
+        }
+    }
+
+    /// The forward's result.
+    #[derive(Clone, Debug, PartialEq)]
+    pub struct Forward {
+        /// The anchors each ray used, in order.
+        pub hits: Vec<Vec<u32>>,
+        /// ψ per ray.
+        pub psi: Vec<f64>,
+        /// L_sil.
+        pub loss: f64,
+    }
+
+    /// L_sil of fixed hits: `mean (ψ − S)²`.
+    pub fn loss(settings: &ProbeSettings, hits: &[Vec<u32>], phi: &[f64], rays: &[Ray]) -> f64 {
+        let sum: f64 = hits
+            .iter()
+            .zip(rays)
+            .map(|(h, r)| {
+                let e = aggregate(settings, h, phi).0 - f64::from(r.label);
+                e * e
+            })
+            .sum();
+        sum / rays.len() as f64
+    }
+
+    /// The forward: hits, ψ, L_sil.
+    pub fn forward(
+        targets: &Targets,
+        settings: &ProbeSettings,
+        anchors: &[[f32; 4]],
+        phi: &[f64],
+        rays: &[Ray],
+    ) -> Forward {
+        let hits = hits(targets, settings, anchors, rays);
+        let psi = hits.iter().map(|h| aggregate(settings, h, phi).0).collect();
+        let loss = loss(settings, &hits, phi, rays);
+        Forward { hits, psi, loss }
+    }
+
+    /// dL_sil/dφ per anchor: `(2 / N) Σ_i (ψ_i − S_i) dψ_i/dφ_j`.
+    pub fn backward(
+        settings: &ProbeSettings,
+        forward: &Forward,
+        phi: &[f64],
+        rays: &[Ray],
+    ) -> Vec<f64> {
+        let mut d = vec![0.0; phi.len()];
+        let n = rays.len() as f64;
+        for ((h, &psi), r) in forward.hits.iter().zip(&forward.psi).zip(rays) {
+            let (_, g) = aggregate(settings, h, phi);
+            let e = 2.0 * (psi - f64::from(r.label)) / n;
+            for (&j, gj) in h.iter().zip(g) {
+                d[j as usize] += e * gj;
+            }
+        }
+        d
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::probe::Aggregate;
+
+    #[test]
+    fn push_and_struct_layouts_match_the_kernels() {
+        let size = |s: &crate::gpu::KernelSpec| s.push_constant_size as usize;
+        assert_eq!(std::mem::size_of::<ItemsPush>(), size(&specs::PROBE_ITEMS));
+        assert_eq!(
+            std::mem::size_of::<ForwardPush>(),
+            size(&specs::PROBE_FORWARD)
+        );
+        assert_eq!(
+            std::mem::size_of::<ForwardPush>(),
+            size(&specs::PROBE_FORWARD_BRUTE)
+        );
+        assert_eq!(
+            std::mem::size_of::<KeysPush>(),
+            size(&specs::PROBE_RAY_KEYS)
+        );
+        assert_eq!(
+            std::mem::size_of::<BackwardPush>(),
+            size(&specs::PROBE_BACKWARD)
+        );
+        assert_eq!(
+            std::mem::size_of::<ReducePush>(),
+            size(&specs::PROBE_REDUCE)
+        );
+        assert_eq!(std::mem::size_of::<ProbeItem>(), 32);
+        assert_eq!(std::mem::offset_of!(ProbeItem, flags), 16);
+        assert_eq!(std::mem::size_of::<RayOut>(), 16);
+        assert_eq!(std::mem::size_of::<super::super::ProbeView>(), 160);
+        assert_eq!(specs::PROBE_FORWARD.bindings.len(), 9);
+        assert_eq!(specs::PROBE_BACKWARD.bindings.len(), 12);
+    }
+
+    #[test]
+    fn aggregates_match_their_definitions() {
+        let phi = [0.2, 0.9, 0.5, 0.7];
+        let hits = [0, 2, 3];
+        let s = |aggregate| ProbeSettings {
+            aggregate,
+            temperature: 0.1,
+            ..ProbeSettings::default()
+        };
+        let (psi, g) = cpu::aggregate(&s(Aggregate::Max), &hits, &phi);
+        assert_eq!((psi, g), (0.7, vec![0.0, 0.0, 1.0]));
+        let (psi, g) = cpu::aggregate(&s(Aggregate::LogSumExp), &hits, &phi);
+        let want = 0.1 * (2f64.exp() + 5f64.exp() + 7f64.exp()).ln();
+        assert!((psi - want).abs() < 1e-12);
+        assert!((g.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        let (psi, g) = cpu::aggregate(&s(Aggregate::Union), &hits, &phi);
+        assert!((psi - (1.0 - 0.8 * 0.5 * 0.3)).abs() < 1e-12);
+        assert!((g[1] - 0.8 * 0.3).abs() < 1e-12);
+        assert_eq!(cpu::aggregate(&s(Aggregate::Union), &[], &phi).0, 0.0);
+    }
+}

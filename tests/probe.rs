@@ -1,0 +1,625 @@
+//! Sphere probing (SPEC §5) on the GPU against its CPU twins: sampling, the tiled forward
+//! against the brute-force loop, the backward against the twin and the twin against finite
+//! differences, boundary-aware assignment, the geometric regularizer, determinism and limits.
+
+mod common;
+
+use softvk::Error;
+use softvk::camera::{Camera, Projection};
+use softvk::fit::GradOut;
+use softvk::gpu::{Buffer, Context, MemoryKind};
+use softvk::probe::prober::{NO_HIT, ProbeRun, RayOut, cpu as probe_cpu};
+use softvk::probe::sampler::{Ray, cpu as sampler_cpu};
+use softvk::probe::targets::sphere_silhouettes;
+use softvk::probe::{
+    Aggregate, GeoRegularizer, GpuTargets, ProbeSettings, Prober, Sampler, Targets, geo,
+};
+
+const RADIUS: f64 = 0.5;
+
+fn cameras() -> Vec<Camera> {
+    vec![
+        Camera::from_angles(2.732, 0.0, 0.0),
+        Camera::from_angles(2.732, 30.0, 100.0),
+        Camera::from_angles(3.0, -40.0, 220.0),
+    ]
+}
+
+/// Small settings: 3 views of 40×32, 192 rays per view, 768 anchors with a large τ so that rays
+/// hit several anchors.
+fn settings(aggregate: Aggregate) -> ProbeSettings {
+    ProbeSettings {
+        rays_per_view: 192,
+        anchors: 768,
+        tau: 0.08,
+        anchor_sigma: 0.05,
+        hull_resolution: 20,
+        tile_size: 8,
+        aggregate,
+        temperature: 0.1,
+        geo_candidates: 40,
+        geo_epsilon: 0.25,
+        seed: 42,
+        ..ProbeSettings::default()
+    }
+}
+
+fn targets() -> Targets {
+    sphere_silhouettes(&cameras(), 40, 32, RADIUS).unwrap()
+}
+
+/// φ of a sphere of radius 0.5, soft: sigmoid(12 (0.5 − |p|)), plus a ripple so that φ values
+/// are distinct (no ties for max).
+fn sphere_phi(points: &[[f32; 4]]) -> Vec<f32> {
+    points
+        .iter()
+        .map(|p| {
+            let (x, y, z) = (f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+            let r = (x * x + y * y + z * z).sqrt();
+            let f = 12.0 * (RADIUS - r) + 0.4 * (9.0 * x).sin() * (7.0 * y + 3.0 * z).cos();
+            (1.0 / (1.0 + (-f).exp())) as f32
+        })
+        .collect()
+}
+
+struct Iteration {
+    rays: Vec<Ray>,
+    anchors: Vec<[f32; 4]>,
+    candidates: Vec<[f32; 4]>,
+}
+
+fn sample(ctx: &Context, sampler: &Sampler, gpu: &GpuTargets, iteration: u32) -> Iteration {
+    ctx.submit_and_wait(|rec| sampler.record(rec, gpu, iteration))
+        .unwrap();
+    let s = sampler.settings();
+    Iteration {
+        rays: ctx
+            .read_buffer(sampler.rays(), 0, sampler.ray_count() as usize)
+            .unwrap(),
+        anchors: ctx
+            .read_buffer(sampler.anchors(), 0, s.anchors as usize)
+            .unwrap(),
+        candidates: ctx
+            .read_buffer(sampler.candidates(), 0, s.geo_candidates as usize)
+            .unwrap(),
+    }
+}
+
+fn bits<T: bytemuck::Pod>(v: &[T]) -> Vec<u32> {
+    bytemuck::cast_slice::<T, u32>(v).to_vec()
+}
+
+#[test]
+fn gpu_sampling_equals_the_twin_and_repeats_for_a_seed() {
+    let Some(ctx) = common::gpu() else { return };
+    let t = targets();
+    let gpu = GpuTargets::new(&ctx, &t).unwrap();
+    let s = settings(Aggregate::Max);
+    let sampler = Sampler::new(&ctx, &t, &gpu, &s).unwrap();
+    assert!(sampler.boundary_points().len() > 100);
+
+    // The GPU scan's CDF is the twin's prefix sum of the same integer weights.
+    let (weights, quantum) = sampler_cpu::contour_weights(&t, s.contour_sigma).unwrap();
+    assert_eq!(quantum, sampler.quantum());
+    let n = weights.len();
+    let gpu_weights: Vec<u32> = ctx.read_buffer(sampler.weights(), 0, n).unwrap();
+    let cdf: Vec<u32> = ctx.read_buffer(sampler.cdf(), 0, n).unwrap();
+    assert_eq!(gpu_weights, weights);
+    assert_eq!(cdf, sampler_cpu::exclusive_prefix(&weights));
+
+    let mut first = None;
+    for iteration in [0, 7] {
+        let got = sample(&ctx, &sampler, &gpu, iteration);
+        let want = sampler_cpu::sample(&t, &s, sampler.boundary_points(), iteration).unwrap();
+        assert_eq!(
+            bits(&got.rays),
+            bits(&want.rays),
+            "rays, iteration {iteration}"
+        );
+        for (what, g, w, uniform) in [
+            (
+                "anchors",
+                &got.anchors,
+                &want.anchors,
+                sampler.anchor_push(iteration).uniform_count,
+            ),
+            (
+                "candidates",
+                &got.candidates,
+                &want.candidates,
+                sampler.candidate_push(iteration).uniform_count,
+            ),
+        ] {
+            assert_eq!(g.len(), w.len());
+            for (i, (a, b)) in g.iter().zip(w).enumerate() {
+                if (i as u32) < uniform {
+                    assert_eq!(bits(a), bits(b), "{what} {i} (uniform): {a:?} vs {b:?}");
+                } else {
+                    let d = (0..4).map(|k| (a[k] - b[k]).abs()).fold(0.0, f32::max);
+                    assert!(d <= 1e-6, "{what} {i}: {a:?} vs {b:?}");
+                }
+            }
+        }
+        match &first {
+            None => first = Some(got),
+            Some(f) => {
+                assert_ne!(bits(&f.rays), bits(&got.rays), "iterations differ");
+                assert_ne!(bits(&f.anchors), bits(&got.anchors), "iterations differ");
+            }
+        }
+    }
+    // Iteration 0 again: the same bits.
+    let again = sample(&ctx, &sampler, &gpu, 0);
+    let f = first.unwrap();
+    assert_eq!(bits(&again.rays), bits(&f.rays));
+    assert_eq!(bits(&again.anchors), bits(&f.anchors));
+    assert_eq!(bits(&again.candidates), bits(&f.candidates));
+
+    // Contour sampling put most non-uniform rays where the label changes nearby, and the
+    // near-hull anchors near the sphere.
+    let near = f
+        .anchors
+        .iter()
+        .skip(sampler.anchor_push(0).uniform_count as usize)
+        .filter(|a| {
+            let r = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+            (r - RADIUS as f32).abs() < 0.3
+        })
+        .count();
+    assert!(near * 10 > 9 * (768 - 192), "{near}");
+}
+
+struct Probe {
+    ctx: common::Gpu,
+    targets: Targets,
+    gpu: GpuTargets,
+    it: Iteration,
+    anchors: Buffer,
+    rays: Buffer,
+    phi_host: Vec<f32>,
+    phi: Buffer,
+}
+
+fn probe_setup() -> Option<Probe> {
+    let ctx = common::gpu()?;
+    let targets = targets();
+    let gpu = GpuTargets::new(&ctx, &targets).unwrap();
+    let sampler = Sampler::new(&ctx, &targets, &gpu, &settings(Aggregate::Max)).unwrap();
+    let it = sample(&ctx, &sampler, &gpu, 3);
+    let anchors = ctx.upload_buffer("test anchors", &it.anchors).unwrap();
+    let rays = ctx.upload_buffer("test rays", &it.rays).unwrap();
+    let phi_host = sphere_phi(&it.anchors);
+    let phi = ctx.upload_buffer("test phi", &phi_host).unwrap();
+    drop(sampler);
+    Some(Probe {
+        ctx,
+        targets,
+        gpu,
+        it,
+        anchors,
+        rays,
+        phi_host,
+        phi,
+    })
+}
+
+fn run(p: &Probe, s: &ProbeSettings, brute: bool) -> ProbeRun {
+    let mut prober = Prober::new(&p.ctx, &p.gpu, s).unwrap();
+    prober
+        .run(&p.ctx, &p.gpu, &p.anchors, &p.phi, &p.rays, brute)
+        .unwrap()
+}
+
+fn max_abs(v: impl Iterator<Item = f64>) -> f64 {
+    v.fold(0.0, |m, x| m.max(x.abs()))
+}
+
+#[test]
+fn probing_forward_and_backward_match_the_twin_for_every_aggregate() {
+    let Some(p) = probe_setup() else { return };
+    let phi64: Vec<f64> = p.phi_host.iter().map(|&x| f64::from(x)).collect();
+    for aggregate in [Aggregate::Max, Aggregate::LogSumExp, Aggregate::Union] {
+        let s = settings(aggregate);
+        let got = run(&p, &s, false);
+        let want = probe_cpu::forward(&p.targets, &s, &p.it.anchors, &phi64, &p.it.rays);
+        assert!(got.entries > 0);
+        let hit_rays = want.hits.iter().filter(|h| !h.is_empty()).count();
+        let multi = want.hits.iter().filter(|h| h.len() > 2).count();
+        let n = p.it.rays.len();
+        assert!(
+            hit_rays * 3 > n && multi * 5 > n,
+            "{hit_rays} {multi} of {n}"
+        );
+        for (i, (o, h)) in got.outs.iter().zip(&want.hits).enumerate() {
+            assert_eq!(o.aux == NO_HIT, h.is_empty(), "{aggregate:?} ray {i}");
+            if aggregate != Aggregate::Union && !h.is_empty() {
+                let (_, g) = probe_cpu::aggregate(
+                    &ProbeSettings {
+                        aggregate: Aggregate::Max,
+                        ..s
+                    },
+                    h,
+                    &phi64,
+                );
+                let arg = h[g.iter().position(|&x| x == 1.0).unwrap()];
+                assert_eq!(o.aux, arg, "{aggregate:?} ray {i}: the maximizing anchor");
+            }
+            let d = (f64::from(o.psi) - want.psi[i]).abs();
+            assert!(
+                d <= 2e-6 * (1.0 + want.psi[i].abs()),
+                "{aggregate:?} ray {i}: {o:?} vs {}",
+                want.psi[i]
+            );
+        }
+        let dl = (f64::from(got.loss) - want.loss).abs();
+        assert!(
+            dl <= 1e-5 * want.loss,
+            "{aggregate:?}: {} vs {}",
+            got.loss,
+            want.loss
+        );
+
+        let d_want = probe_cpu::backward(&s, &want, &phi64, &p.it.rays);
+        let scale = max_abs(d_want.iter().copied());
+        assert!(scale > 0.0);
+        let err = max_abs(
+            got.d_phi
+                .iter()
+                .zip(&d_want)
+                .map(|(&g, &w)| f64::from(g) - w),
+        );
+        assert!(
+            err <= 1e-3 * scale,
+            "{aggregate:?}: d_phi off by {err:e} (scale {scale:e})"
+        );
+        let nonzero = d_want.iter().filter(|&&x| x != 0.0).count();
+        assert!(
+            nonzero > 20,
+            "{aggregate:?}: {nonzero} anchors get a gradient"
+        );
+    }
+}
+
+#[test]
+fn tiled_probing_equals_the_brute_force_loop_for_every_tile_size() {
+    let Some(p) = probe_setup() else { return };
+    for aggregate in [Aggregate::Max, Aggregate::LogSumExp, Aggregate::Union] {
+        let s = settings(aggregate);
+        let brute = run(&p, &s, true);
+        for tile_size in [4, 8, 16, 40] {
+            let tiled = run(&p, &ProbeSettings { tile_size, ..s }, false);
+            assert_eq!(
+                bits::<RayOut>(&tiled.outs),
+                bits::<RayOut>(&brute.outs),
+                "{aggregate:?}, tile {tile_size}"
+            );
+            assert_eq!(tiled.loss.to_bits(), brute.loss.to_bits());
+            // The gradient's partial sums follow the tiles: bit-identical on the same tiles
+            // (the brute-force forward was backed by 8-pixel tiles), within rounding otherwise.
+            if tile_size == s.tile_size {
+                assert_eq!(bits(&tiled.d_phi), bits(&brute.d_phi));
+            } else {
+                let scale = max_abs(brute.d_phi.iter().map(|&x| f64::from(x)));
+                let err = max_abs(
+                    tiled
+                        .d_phi
+                        .iter()
+                        .zip(&brute.d_phi)
+                        .map(|(&a, &b)| f64::from(a - b)),
+                );
+                assert!(
+                    err <= 1e-5 * scale,
+                    "{aggregate:?}, tile {tile_size}: {err:e}"
+                );
+            }
+        }
+    }
+}
+
+/// Central differences of the twin's loss with respect to φ at the anchors (hits fixed).
+#[test]
+fn twin_gradients_match_central_differences_of_the_twin_loss() {
+    let t = targets();
+    for aggregate in [Aggregate::Max, Aggregate::LogSumExp, Aggregate::Union] {
+        let s = ProbeSettings {
+            anchors: 200,
+            rays_per_view: 64,
+            ..settings(aggregate)
+        };
+        let boundary = softvk::probe::hull::boundary_points(&t, &s);
+        let it = sampler_cpu::sample(&t, &s, &boundary, 1).unwrap();
+        let phi: Vec<f64> = sphere_phi(&it.anchors)
+            .iter()
+            .map(|&x| f64::from(x))
+            .collect();
+        let fwd = probe_cpu::forward(&t, &s, &it.anchors, &phi, &it.rays);
+        let grad = probe_cpu::backward(&s, &fwd, &phi, &it.rays);
+        let scale = max_abs(grad.iter().copied());
+        assert!(scale > 0.0);
+        let h = 1e-6;
+        let mut x = phi.clone();
+        for j in 0..phi.len() {
+            x[j] = phi[j] + h;
+            let up = probe_cpu::loss(&s, &fwd.hits, &x, &it.rays);
+            x[j] = phi[j] - h;
+            let down = probe_cpu::loss(&s, &fwd.hits, &x, &it.rays);
+            x[j] = phi[j];
+            let fd = (up - down) / (2.0 * h);
+            assert!(
+                (fd - grad[j]).abs() <= 1e-6 * scale,
+                "{aggregate:?} anchor {j}: fd {fd:e} vs {:e}",
+                grad[j]
+            );
+        }
+    }
+}
+
+#[test]
+fn boundary_aware_assignment_skips_anchors_across_the_silhouette() {
+    let Some(ctx) = common::gpu() else { return };
+    // One view of 32×32; the silhouette is the left half (columns 0..16).
+    let camera = Camera::default();
+    let (w, h) = (32u32, 32u32);
+    let masks: Vec<f32> = (0..w * h)
+        .map(|i| if i % w < 16 { 1.0 } else { 0.0 })
+        .collect();
+    let t = Targets::new(&[camera], w, h, masks).unwrap();
+    let gpu = GpuTargets::new(&ctx, &t).unwrap();
+    // The anchor projects to x_s = 3/32, into column 17 (outside); rays at columns 15.5
+    // (inside, label 1) and 19.5 (outside, label 0) pass 4/32 screen units from it, about 0.2
+    // world units at its depth, within τ = 0.3.
+    let Projection::Perspective { viewing_angle_deg } = camera.projection else {
+        unreachable!()
+    };
+    let x = 3.0 / 32.0 * viewing_angle_deg.to_radians().tan() * 2.732;
+    let anchors = [[x as f32, 0.0, 0.0, 1.0]];
+    let rays = [
+        Ray {
+            px: 15.5,
+            py: 16.0,
+            view: 0,
+            label: 1.0,
+        },
+        Ray {
+            px: 19.5,
+            py: 16.0,
+            view: 0,
+            label: 0.0,
+        },
+    ];
+    let phi = [0.8f32];
+    let a = ctx.upload_buffer("anchor", &anchors).unwrap();
+    let r = ctx.upload_buffer("rays", &rays).unwrap();
+    let f = ctx.upload_buffer("phi", &phi).unwrap();
+    let items = probe_cpu::items(&t, 0.3, &anchors);
+    assert_eq!(
+        items[0].flags,
+        softvk::probe::prober::FLAG_VALID,
+        "outside, valid"
+    );
+    for aware in [true, false] {
+        let s = ProbeSettings {
+            anchors: 1,
+            rays_per_view: 2,
+            tau: 0.3,
+            tile_size: 8,
+            boundary_aware: aware,
+            ..ProbeSettings::default()
+        };
+        let mut prober = Prober::new(&ctx, &gpu, &s).unwrap();
+        let got = prober.run(&ctx, &gpu, &a, &f, &r, false).unwrap();
+        let twin = probe_cpu::forward(&t, &s, &anchors, &[0.8], &rays);
+        let psi: Vec<f32> = got.outs.iter().map(|o| o.psi).collect();
+        // Without the assignment both rays see the anchor; with it, the inside ray does not.
+        let want = if aware { [0.0, 0.8] } else { [0.8, 0.8] };
+        assert_eq!(psi, want.map(|x| x as f32), "boundary-aware {aware}");
+        assert_eq!(twin.psi, want, "twin, boundary-aware {aware}");
+        // dL/dφ = (2 / 2) Σ (ψ − S): the inside ray's error ψ − 1 only counts when it may use
+        // the anchor.
+        let d = probe_cpu::backward(&s, &twin, &[0.8], &rays)[0];
+        assert!(
+            (f64::from(got.d_phi[0]) - d).abs() <= 1e-6,
+            "{} vs {d}",
+            got.d_phi[0]
+        );
+        let expected = if aware {
+            2.0 * 0.8 / 2.0
+        } else {
+            2.0 * (0.8 - 1.0) / 2.0 + 2.0 * 0.8 / 2.0
+        };
+        assert!((d - expected).abs() < 1e-6, "{d} vs {expected}");
+    }
+}
+
+#[test]
+fn geo_regularizer_matches_the_twin() {
+    let Some(ctx) = common::gpu() else { return };
+    let t = targets();
+    let gpu = GpuTargets::new(&ctx, &t).unwrap();
+    let s = settings(Aggregate::Max);
+    let sampler = Sampler::new(&ctx, &t, &gpu, &s).unwrap();
+    let geo = GeoRegularizer::new(&ctx, &s).unwrap();
+    ctx.submit_and_wait(|rec| {
+        sampler.record(rec, &gpu, 5)?;
+        geo.record_points(rec, sampler.candidates().whole())
+    })
+    .unwrap();
+    let cands: Vec<[f32; 4]> = ctx
+        .read_buffer(sampler.candidates(), 0, s.geo_candidates as usize)
+        .unwrap();
+    let points: Vec<[f32; 4]> = ctx
+        .read_buffer(geo.points(), 0, geo.point_count() as usize)
+        .unwrap();
+    let want_points = geo::cpu::points(&cands, s.geo_delta, s.geo_normal_delta);
+    assert_eq!(bits(&points), bits(&want_points));
+
+    let phi = sphere_phi(&points);
+    let phi_buf = ctx.upload_buffer("geo phi", &phi).unwrap();
+    let lambda = 0.3f32;
+    // Accumulate onto a buffer of ones: d = 1 + λ dL/dφ.
+    let d_buf = ctx
+        .upload_buffer("geo d_phi", &vec![1f32; phi.len()])
+        .unwrap();
+    ctx.submit_and_wait(|rec| {
+        geo.record_loss(
+            rec,
+            phi_buf.whole(),
+            Some(GradOut::accumulate(d_buf.whole(), lambda)),
+        )
+    })
+    .unwrap();
+    let loss = geo.read_loss(&ctx).unwrap();
+    let d: Vec<f32> = ctx.read_buffer(&d_buf, 0, phi.len()).unwrap();
+    let phi64: Vec<f64> = phi.iter().map(|&x| f64::from(x)).collect();
+    let (want_loss, want_d) = geo::cpu::loss(&s, &phi64);
+    assert!(want_loss > 0.0, "a loss of 0 checks nothing");
+    assert!(
+        (f64::from(loss) - want_loss).abs() <= 1e-4 * want_loss,
+        "{loss} vs {want_loss}"
+    );
+    let scale = max_abs(want_d.iter().copied()) * f64::from(lambda);
+    assert!(scale > 0.0);
+    let err = max_abs(
+        d.iter()
+            .zip(&want_d)
+            .map(|(&g, &w)| f64::from(g) - 1.0 - f64::from(lambda) * w),
+    );
+    assert!(
+        err <= 1e-3 * scale,
+        "d_phi off by {err:e} (scale {scale:e})"
+    );
+
+    // The loss alone, without a gradient, is the same loss.
+    ctx.submit_and_wait(|rec| geo.record_loss(rec, phi_buf.whole(), None))
+        .unwrap();
+    assert_eq!(geo.read_loss(&ctx).unwrap().to_bits(), loss.to_bits());
+}
+
+/// One whole iteration as the glue records it: two submissions.
+fn whole_iteration(ctx: &Context, t: &Targets, s: &ProbeSettings) -> Vec<Vec<u32>> {
+    let gpu = GpuTargets::new(ctx, t).unwrap();
+    let sampler = Sampler::new(ctx, t, &gpu, s).unwrap();
+    let mut prober = Prober::new(ctx, &gpu, s).unwrap();
+    let geo = GeoRegularizer::new(ctx, s).unwrap();
+    ctx.submit_and_wait(|rec| {
+        sampler.record(rec, &gpu, 11)?;
+        geo.record_points(rec, sampler.candidates().whole())?;
+        prober.record_count(rec, &gpu, sampler.anchors().whole())
+    })
+    .unwrap();
+    prober.finish_count(ctx).unwrap();
+    // The "field": φ of the sphere, evaluated on the host.
+    let anchors: Vec<[f32; 4]> = ctx
+        .read_buffer(sampler.anchors(), 0, s.anchors as usize)
+        .unwrap();
+    let points: Vec<[f32; 4]> = ctx
+        .read_buffer(geo.points(), 0, geo.point_count() as usize)
+        .unwrap();
+    let phi_a = ctx.upload_buffer("phi a", &sphere_phi(&anchors)).unwrap();
+    let phi_g = ctx.upload_buffer("phi g", &sphere_phi(&points)).unwrap();
+    let d_a = ctx
+        .create_buffer("d a", 4 * u64::from(s.anchors), MemoryKind::Device)
+        .unwrap();
+    let d_g = ctx
+        .create_buffer("d g", 4 * geo.point_count(), MemoryKind::Device)
+        .unwrap();
+    ctx.submit_and_wait(|rec| {
+        let (a, r) = (sampler.anchors().whole(), sampler.rays().whole());
+        prober.record_forward(rec, &gpu, a, phi_a.whole(), r)?;
+        prober.record_backward(rec, &gpu, a, phi_a.whole(), r, GradOut::write(d_a.whole()))?;
+        geo.record_loss(
+            rec,
+            phi_g.whole(),
+            Some(GradOut::write(d_g.whole()).weighted(s.geo_lambda as f32)),
+        )
+    })
+    .unwrap();
+    let read = |b: &Buffer, n: usize| -> Vec<u32> { ctx.read_buffer(b, 0, n).unwrap() };
+    vec![
+        read(sampler.rays(), 4 * sampler.ray_count() as usize),
+        read(prober.outputs(), 4 * sampler.ray_count() as usize),
+        read(prober.loss_buffer(), 1),
+        read(&d_a, s.anchors as usize),
+        read(geo.loss_buffer(), 1),
+        read(&d_g, geo.point_count() as usize),
+    ]
+}
+
+#[test]
+fn repeated_iterations_are_bit_identical() {
+    let Some(ctx) = common::gpu() else { return };
+    let t = targets();
+    for aggregate in [Aggregate::Max, Aggregate::Union] {
+        let s = settings(aggregate);
+        let first = whole_iteration(&ctx, &t, &s);
+        let second = whole_iteration(&ctx, &t, &s);
+        assert_eq!(first, second, "{aggregate:?}");
+        assert!(first[3].iter().any(|&x| x != 0), "some anchor gradient");
+        assert!(first[5].iter().any(|&x| x != 0), "some geo gradient");
+    }
+}
+
+#[test]
+fn loop_caps_and_bad_inputs_are_clear_errors() {
+    let Some(ctx) = common::gpu() else { return };
+    let t = targets();
+    let gpu = GpuTargets::new(&ctx, &t).unwrap();
+    if let Some(limit) = ctx.info().shader_loop_limit() {
+        // More rays per view than a backward invocation may loop over.
+        let s = ProbeSettings {
+            rays_per_view: limit as u32 + 1,
+            ..settings(Aggregate::Max)
+        };
+        assert!(matches!(Prober::new(&ctx, &gpu, &s), Err(Error::Limit(_))));
+        // More anchors than the brute-force loop may visit.
+        let s = ProbeSettings {
+            anchors: limit as u32 + 1,
+            ..settings(Aggregate::Max)
+        };
+        let prober = Prober::new(&ctx, &gpu, &s).unwrap();
+        let a = ctx
+            .create_buffer("a", 16 * u64::from(s.anchors), MemoryKind::Device)
+            .unwrap();
+        let f = ctx
+            .create_buffer("f", 4 * u64::from(s.anchors), MemoryKind::Device)
+            .unwrap();
+        let r = ctx
+            .create_buffer("r", 16 * 3 * u64::from(s.rays_per_view), MemoryKind::Device)
+            .unwrap();
+        let e = ctx.submit_and_wait(|rec| {
+            prober.record_items(rec, &gpu, a.whole())?;
+            prober.record_forward_brute(rec, &gpu, a.whole(), f.whole(), r.whole())
+        });
+        assert!(matches!(e, Err(Error::Limit(_))), "{e:?}");
+    }
+    // Buffers too small for the settings' counts.
+    let s = settings(Aggregate::Max);
+    let prober = Prober::new(&ctx, &gpu, &s).unwrap();
+    let small = ctx.create_buffer("small", 64, MemoryKind::Device).unwrap();
+    let e = ctx.submit_and_wait(|rec| prober.record_count(rec, &gpu, small.whole()));
+    assert!(matches!(e, Err(Error::Input(_))), "{e:?}");
+    // Settings out of range, and a camera probing cannot follow.
+    let bad = ProbeSettings {
+        tau: -1.0,
+        ..settings(Aggregate::Max)
+    };
+    assert!(matches!(
+        Prober::new(&ctx, &gpu, &bad),
+        Err(Error::Input(_))
+    ));
+    let mut cams = cameras();
+    cams[1].projection = Projection::Matrix {
+        p: [
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 3.0],
+        ],
+        dist_coeffs: [0.01, 0.0, 0.0, 0.0, 0.0],
+        orig_size: 2.0,
+    };
+    let e = Targets::new(&cams, 40, 32, vec![0.0; 3 * 40 * 32]);
+    assert!(
+        matches!(e, Err(Error::Input(ref m)) if m.contains("view 1")),
+        "{e:?}"
+    );
+}
