@@ -14,6 +14,10 @@
 //!   image MSE, its Laplacian and flatten regularizers, its sigmoid/tanh deformation, and Adam —
 //!   recordable into one command buffer per iteration.
 //!
+//! - [`field`]: implicit fields φ = sigmoid(f) in a bounding cube (dense grid, MLP with positional
+//!   encoding, analytic shapes) with a deterministic GPU backward, marching cubes, occupancy / visual
+//!   hull / IoU tools and a ray-marched preview: the field side of implicit-field sphere probing.
+//!
 //! - [`mod@bench`]: the forward benchmark behind `softvk bench` (scenes, timing, JSON records).
 //!
 //! Every kernel has a CPU twin that tests compare it with.
@@ -24,6 +28,7 @@ pub mod assets;
 pub mod bench;
 pub mod camera;
 pub mod error;
+pub mod field;
 pub mod fit;
 pub mod gpu;
 pub mod lighting;
