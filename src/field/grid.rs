@@ -84,7 +84,11 @@ impl GridGpu {
             values: ctx.create_buffer("grid field sort values", 4 * batch, MemoryKind::Device)?,
             records: ctx.create_buffer("grid field records", 16 * batch, MemoryKind::Device)?,
             partial: ctx.create_buffer("grid field piece sums", 32 * batch, MemoryKind::Device)?,
-            cell_start: ctx.create_buffer("grid field cell starts", 4 * cells, MemoryKind::Device)?,
+            cell_start: ctx.create_buffer(
+                "grid field cell starts",
+                4 * cells,
+                MemoryKind::Device,
+            )?,
             cell_end: ctx.create_buffer("grid field cell ends", 4 * cells, MemoryKind::Device)?,
         })
     }

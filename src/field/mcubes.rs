@@ -7,14 +7,18 @@
 //! **Lattice.** Node `(x, y, z)`, `0 ≤ x, y, z < res`, at `c + h (2 (x, y, z) / (res − 1) − 1)`:
 //! the cube's faces are lattice planes. A node is *inside* when φ > 0.5.
 //!
-//! **Case table.** Not the classic Lorensen–Bourke table: [`table`] derives one from a rule, so
-//! that the mesh is closed wherever the surface stays inside the lattice (the classic table
-//! resolves an ambiguous face — two diagonal corners inside — differently in the two cells that
-//! share it, and leaves holes). On each face of a cell the surface's segments cut off the inside
-//! corners, and an ambiguous face always separates its two inside corners; both cells sharing a
-//! face see the same corners and so make the same segments. The segments of a case chain into
-//! closed loops around the cell, each fanned into triangles. Triangles are wound so that the
-//! SPEC §1 normal `cross(v2 − v1, v0 − v1)` points out of the inside (towards φ < 0.5).
+//! **Case table.** Not the classic Lorensen–Cline/Bourke table: [`table`] derives one from a
+//! rule, so that the mesh is closed and manifold wherever the surface stays inside the lattice,
+//! by construction (the original Lorensen–Cline cases, built by complement symmetry, can resolve
+//! an ambiguous face — two diagonal corners inside — differently in the two cells sharing it and
+//! leave holes, Dürst 1988; a derived table also needs no 4 096 copied numbers). On each face of a
+//! cell the surface's segments cut off the inside corners, and an ambiguous face always separates
+//! its two inside corners; both cells sharing a face see the same corners and so make the same
+//! segments. The segments of a case chain into closed loops around the cell; each loop is
+//! triangulated without a diagonal between two crossings of one face (the neighbour could draw
+//! the same diagonal, and that edge would have four triangles). Triangles are wound so that the
+//! SPEC §1 normal `cross(v2 − v1, v0 − v1)` points out of the inside (towards φ < 0.5). A cell
+//! makes at most 5 triangles, as with the classic table.
 //!
 //! **Vertices.** A crossing on the lattice edge from node a to node a + e_axis has the id
 //! `3 a + axis` and lies at `p_a + t (p_b − p_a)`, `t = (0.5 − φ_a) / (φ_b − φ_a)`, computed the
@@ -78,8 +82,62 @@ pub fn edge_corners(e: u32) -> (u32, u32) {
 fn edge_between(a: u32, b: u32) -> u32 {
     let (lo, hi) = (a.min(b), a.max(b));
     let axis = (hi ^ lo).trailing_zeros();
-    let others: Vec<u32> = (0..3).filter(|&k| k != axis).map(|k| (lo >> k) & 1).collect();
+    let others: Vec<u32> = (0..3)
+        .filter(|&k| k != axis)
+        .map(|k| (lo >> k) & 1)
+        .collect();
     4 * axis + others[0] + 2 * others[1]
+}
+
+/// Whether two local edges lie on a common face of the cell.
+fn share_face(e1: u32, e2: u32) -> bool {
+    let (a1, a2) = (e1 / 4, e2 / 4);
+    let (c1, c2) = (edge_corners(e1).0, edge_corners(e2).0);
+    (0..3).any(|b| b != a1 && b != a2 && (c1 >> b & 1) == (c2 >> b & 1))
+}
+
+/// Triangles of a loop of crossings, without a diagonal between two crossings of one cell face:
+/// the neighbour sharing that face could draw the same diagonal, and the edge would then have
+/// four triangles. Loop edges on a face are the face's segments, which the neighbour shares
+/// with the opposite orientation, as a closed surface needs. Fans first (from the first start
+/// that works), otherwise any such triangulation (found by a search over ears).
+fn triangulate(lp: &[u32]) -> Vec<[u32; 3]> {
+    let m = lp.len();
+    for s in 0..m {
+        if (2..m - 1).all(|k| !share_face(lp[s], lp[(s + k) % m])) {
+            return (1..m - 1)
+                .map(|k| [lp[s], lp[(s + k) % m], lp[(s + k + 1) % m]])
+                .collect();
+        }
+    }
+    fn search(poly: &[u32], out: &mut Vec<[u32; 3]>) -> bool {
+        let m = poly.len();
+        if m == 3 {
+            out.push([poly[0], poly[1], poly[2]]);
+            return true;
+        }
+        // Cut the ear at vertex i: the new edge (i − 1, i + 1) must be allowed.
+        for i in 0..m {
+            let (a, b, c) = (poly[(i + m - 1) % m], poly[i], poly[(i + 1) % m]);
+            if share_face(a, c) {
+                continue;
+            }
+            let rest: Vec<u32> = (0..m).filter(|&k| k != i).map(|k| poly[k]).collect();
+            let mark = out.len();
+            out.push([a, b, c]);
+            if search(&rest, out) {
+                return true;
+            }
+            out.truncate(mark);
+        }
+        false
+    }
+    let mut out = Vec::new();
+    assert!(
+        search(lp, &mut out),
+        "no face-safe triangulation of the loop {lp:?}"
+    );
+    out
 }
 
 /// The case table, derived once (see the module doc).
@@ -145,9 +203,7 @@ fn build_table() -> CaseTable {
             }
             // The loop as traced has its normal towards the inside; reversed, out of it.
             lp.reverse();
-            for k in 1..lp.len() - 1 {
-                tris.push([lp[0], lp[k], lp[k + 1]]);
-            }
+            tris.extend(triangulate(&lp));
         }
         per_case.push(tris);
     }
@@ -231,7 +287,10 @@ pub fn mesh_volume(positions: &[[f32; 3]], faces: &[[u32; 3]]) -> f64 {
 fn weld(corner_ids: &[u32], corner_points: &[[f64; 3]]) -> Result<Isosurface> {
     let mut index: HashMap<u32, u32> = HashMap::new();
     let mut out = Isosurface::default();
-    for (tri_ids, tri_points) in corner_ids.chunks_exact(3).zip(corner_points.chunks_exact(3)) {
+    for (tri_ids, tri_points) in corner_ids
+        .chunks_exact(3)
+        .zip(corner_points.chunks_exact(3))
+    {
         let mut face = [0u32; 3];
         for k in 0..3 {
             face[k] = *index.entry(tri_ids[k]).or_insert_with(|| {
@@ -489,7 +548,8 @@ pub mod cpu {
                             let (a, b) = (corner(lo), corner(hi));
                             let (fa, fb) = (phi[node(a)], phi[node(b)]);
                             let s = (0.5 - fa) / (fb - fa);
-                            let (pa, pb) = (lattice_point(cube, res, a), lattice_point(cube, res, b));
+                            let (pa, pb) =
+                                (lattice_point(cube, res, a), lattice_point(cube, res, b));
                             ids.push(3 * node(a) as u32 + e / 4);
                             points.push(std::array::from_fn(|k| pa[k] + s * (pb[k] - pa[k])));
                         }
@@ -556,6 +616,36 @@ mod tests {
         assert_eq!(t.counts[0x01], 1);
         assert_eq!(t.counts[0x69], 4);
         assert_eq!(t.counts[0x96], 4);
+        assert_eq!(t.stride, 15, "at most 5 triangles per cell");
+    }
+
+    #[test]
+    fn no_triangle_edge_joins_two_crossings_of_a_face_unless_it_is_a_face_segment() {
+        let t = table();
+        for case in 0..256usize {
+            let mut uses: HashMap<(u32, u32), u32> = HashMap::new();
+            for tri in t.triangles(case) {
+                for k in 0..3 {
+                    let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                    *uses.entry((a.min(b), a.max(b))).or_default() += 1;
+                }
+            }
+            for (&(a, b), &n) in &uses {
+                // An edge on a face is a segment: one triangle of this cell (the other is the
+                // neighbour's). An interior diagonal: two triangles of this cell.
+                if share_face(a, b) {
+                    assert_eq!(
+                        n, 1,
+                        "case {case:#04x}: edge {a}–{b} on a face is a diagonal"
+                    );
+                } else {
+                    assert_eq!(
+                        n, 2,
+                        "case {case:#04x}: interior edge {a}–{b} used {n} times"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
@@ -565,7 +655,8 @@ mod tests {
         let tri: Vec<[u32; 3]> = t.triangles(1).collect();
         let mid = |e: u32| {
             let (lo, hi) = edge_corners(e);
-            let p = |c: u32| glam::DVec3::new((c & 1) as f64, (c >> 1 & 1) as f64, (c >> 2 & 1) as f64);
+            let p =
+                |c: u32| glam::DVec3::new((c & 1) as f64, (c >> 1 & 1) as f64, (c >> 2 & 1) as f64);
             (p(lo) + p(hi)) / 2.0
         };
         let [a, b, c] = tri[0].map(mid);

@@ -203,7 +203,8 @@ impl MlpGpu {
         }
         let p = layout.param_count() as u64;
         check_binding_bytes(ctx, &what, 4 * p)?;
-        let act_features = (layout.inputs() + (layout.hidden_layers * layout.width) as usize) as u64;
+        let act_features =
+            (layout.inputs() + (layout.hidden_layers * layout.width) as usize) as u64;
         let delta_features = u64::from(layout.hidden_layers * layout.width) + 1;
         let per_point = 4 * (act_features + delta_features);
         let chunk = u64::from(FIELD_CHUNK);
@@ -220,8 +221,16 @@ impl MlpGpu {
             eval: Kernel::new(ctx, &specs::FIELD_MLP_EVAL)?,
             point: Kernel::new(ctx, &specs::FIELD_MLP_POINT)?,
             wgrad: Kernel::new(ctx, &specs::FIELD_MLP_WGRAD)?,
-            acts: ctx.create_buffer("mlp field activations", 4 * act_features * batch, MemoryKind::Device)?,
-            deltas: ctx.create_buffer("mlp field deltas", 4 * delta_features * batch, MemoryKind::Device)?,
+            acts: ctx.create_buffer(
+                "mlp field activations",
+                4 * act_features * batch,
+                MemoryKind::Device,
+            )?,
+            deltas: ctx.create_buffer(
+                "mlp field deltas",
+                4 * delta_features * batch,
+                MemoryKind::Device,
+            )?,
             partial: ctx.create_buffer(
                 "mlp field chunk partials",
                 4 * (batch / chunk) * p,
@@ -285,7 +294,13 @@ impl MlpGpu {
         let push = self.push(cube, n, chunks);
         rec.dispatch(
             &self.point,
-            &[params, points, d_phi, self.acts.whole(), self.deltas.whole()],
+            &[
+                params,
+                points,
+                d_phi,
+                self.acts.whole(),
+                self.deltas.whole(),
+            ],
             &push,
             n.div_ceil(64),
         )?;

@@ -176,8 +176,9 @@ impl FieldKind {
             }
             FieldKind::Mlp { .. } => self.mlp_layout().map_or(Ok(()), |l| l.validate())?,
             FieldKind::Analytic { shape, sharpness } => {
-                if !(sharpness.is_finite() && sharpness > 0.0)
-                    || !shape.params().iter().all(|v| v.is_finite())
+                if !(sharpness.is_finite()
+                    && sharpness > 0.0
+                    && shape.params().iter().all(|v| v.is_finite()))
                 {
                     return Err(Error::Input(format!(
                         "analytic field {shape:?} with sharpness {sharpness}: need finite \
@@ -222,18 +223,16 @@ impl FieldKind {
             FieldKind::Mlp { .. } => self
                 .mlp_layout()
                 .map_or_else(Vec::new, |l| l.initial_params(seed)),
-            FieldKind::Analytic { shape, .. } => {
-                shape.params().iter().map(|&v| v as f32).collect()
-            }
+            FieldKind::Analytic { shape, .. } => shape.params().iter().map(|&v| v as f32).collect(),
         }
     }
 }
 
 /// The kernels of one kind.
 enum Engine {
-    Grid(grid::GridGpu),
-    Mlp(mlp::MlpGpu),
-    Shape(analytic::ShapeGpu),
+    Grid(Box<grid::GridGpu>),
+    Mlp(Box<mlp::MlpGpu>),
+    Shape(Box<analytic::ShapeGpu>),
 }
 
 /// A field on the GPU: its kernels, its parameters (owned) and its backward scratch.
@@ -255,13 +254,13 @@ impl Field {
         kind.validate()?;
         cube.validate()?;
         let engine = match kind {
-            FieldKind::Grid { res } => Engine::Grid(grid::GridGpu::new(ctx, res)?),
-            FieldKind::Mlp { .. } => Engine::Mlp(mlp::MlpGpu::new(
+            FieldKind::Grid { res } => Engine::Grid(Box::new(grid::GridGpu::new(ctx, res)?)),
+            FieldKind::Mlp { .. } => Engine::Mlp(Box::new(mlp::MlpGpu::new(
                 ctx,
                 kind.mlp_layout().expect("an MLP kind has a layout"),
-            )?),
+            )?)),
             FieldKind::Analytic { shape, sharpness } => {
-                Engine::Shape(analytic::ShapeGpu::new(ctx, &shape, sharpness)?)
+                Engine::Shape(Box::new(analytic::ShapeGpu::new(ctx, &shape, sharpness)?))
             }
         };
         let param_count = kind.param_count();
@@ -385,9 +384,9 @@ impl Field {
             let dphi = d_phi.sub(4 * start, 4 * u64::from(len));
             let acc = b > 0;
             match &self.engine {
-                Engine::Grid(g) => g.record_backward_batch(
-                    rec, &self.cube, params, pts, len, dphi, d_params, acc,
-                )?,
+                Engine::Grid(g) => {
+                    g.record_backward_batch(rec, &self.cube, params, pts, len, dphi, d_params, acc)?
+                }
                 Engine::Mlp(m) => m.record_backward_batch(
                     rec, &self.sum, &self.cube, params, pts, len, dphi, d_params, acc,
                 )?,

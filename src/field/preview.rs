@@ -69,9 +69,9 @@ impl PreviewOptions {
             || !finite(self.ambient)
             || !finite(self.diffuse)
             || !self.color.iter().all(|&c| finite(c))
-            || self.light.is_some_and(|l| {
-                !l.iter().all(|c| c.is_finite()) || DVec3::from(l).length() == 0.0
-            })
+            || self
+                .light
+                .is_some_and(|l| !l.iter().all(|c| c.is_finite()) || DVec3::from(l).length() == 0.0)
         {
             return Err(Error::Input(format!(
                 "preview options {self:?}: need a non-empty image, steps > 0, a normal step > 0, \
@@ -81,6 +81,9 @@ impl PreviewOptions {
         Ok(())
     }
 }
+
+/// A φ evaluator: points (xyz, w ignored) → φ.
+pub type Evaluator<'a> = dyn FnMut(&[[f32; 4]]) -> Result<Vec<f32>> + 'a;
 
 /// One pixel's ray: origin and unit direction (world).
 #[derive(Clone, Copy, Debug)]
@@ -137,10 +140,7 @@ fn cube_span(cube: &Cube, ray: &Ray) -> Option<(f64, f64)> {
 }
 
 /// Evaluates φ at many points, in batches of at most [`EVAL_BATCH`].
-fn eval_all(
-    eval: &mut dyn FnMut(&[[f32; 4]]) -> Result<Vec<f32>>,
-    points: &[DVec3],
-) -> Result<Vec<f32>> {
+fn eval_all(eval: &mut Evaluator<'_>, points: &[DVec3]) -> Result<Vec<f32>> {
     let mut out = Vec::with_capacity(points.len());
     for chunk in points.chunks(EVAL_BATCH as usize) {
         let pts: Vec<[f32; 4]> = chunk
@@ -170,7 +170,7 @@ pub fn render_preview(
 /// The preview of the field that `eval` evaluates (points → φ) in `cube`. Pixels without a hit
 /// are transparent black; hits are opaque.
 pub fn render_preview_with(
-    eval: &mut dyn FnMut(&[[f32; 4]]) -> Result<Vec<f32>>,
+    eval: &mut Evaluator<'_>,
     cube: &Cube,
     camera: &Camera,
     options: &PreviewOptions,
@@ -197,7 +197,9 @@ pub fn render_preview_with(
     while start < rays.len() {
         let mut end = start;
         let mut total = 0;
-        while end < rays.len() && (end == start || total + samples(rays[end].2, rays[end].3) <= EVAL_BATCH as usize) {
+        while end < rays.len()
+            && (end == start || total + samples(rays[end].2, rays[end].3) <= EVAL_BATCH as usize)
+        {
             total += samples(rays[end].2, rays[end].3);
             end += 1;
         }
@@ -213,7 +215,11 @@ pub fn render_preview_with(
             let n = samples(t0, t1);
             if let Some(i) = phi[at..at + n].iter().position(|&f| f > 0.5) {
                 let t_in = (t0 + i as f64 * step).min(t1);
-                let t_out = if i == 0 { t_in } else { t0 + (i - 1) as f64 * step };
+                let t_out = if i == 0 {
+                    t_in
+                } else {
+                    t0 + (i - 1) as f64 * step
+                };
                 hits.push((pixel, ray, t_out, t_in));
             }
             at += n;
@@ -257,7 +263,9 @@ pub fn render_preview_with(
         } else {
             -ray.dir
         };
-        let l = options.light.map_or(-ray.dir, |l| DVec3::from(l).normalize());
+        let l = options
+            .light
+            .map_or(-ray.dir, |l| DVec3::from(l).normalize());
         let shade = options.ambient + options.diffuse * n.dot(l).max(0.0);
         let c = options
             .color
@@ -286,7 +294,10 @@ mod tests {
                 let (xp, yp) = pixel_center(c, r, 8, 6);
                 for t in [0.5, 2.0, 4.0] {
                     let s = cam.to_screen(ray.origin + ray.dir * t);
-                    assert!((s[0] - xp).abs() < 1e-12 && (s[1] - yp).abs() < 1e-12, "{s:?}");
+                    assert!(
+                        (s[0] - xp).abs() < 1e-12 && (s[1] - yp).abs() < 1e-12,
+                        "{s:?}"
+                    );
                 }
             }
         }

@@ -10,7 +10,7 @@
 //! | box    | `cx cy cz hx hy hz` (half extents) | `d = |p − c| − h`: `|max(d, 0)| + min(max_i d_i, 0)` |
 //! | torus  | `cx cy cz R r` (axis y)            | `|(|(p − c).xz| − R, (p − c).y)| − r`              |
 //!
-//! Twin of `kernels/include/field_shape.glsl`, in f64; [`sd_and_grad`] also gives ∂sd/∂θ.
+//! Twin of `kernels/include/field_shape.glsl`, in f64; [`Shape::sd_and_grad`] also gives ∂sd/∂θ.
 
 /// An analytic shape and its initial parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -103,7 +103,9 @@ impl Shape {
         use std::f64::consts::PI;
         match *self {
             Shape::Sphere { radius, .. } => 4.0 / 3.0 * PI * radius.powi(3),
-            Shape::Box { half_extents: h, .. } => 8.0 * h[0] * h[1] * h[2],
+            Shape::Box {
+                half_extents: h, ..
+            } => 8.0 * h[0] * h[1] * h[2],
             Shape::Torus { major, minor, .. } => 2.0 * PI * PI * major * minor * minor,
         }
     }
@@ -111,6 +113,11 @@ impl Shape {
     /// Signed distance at `p` (negative inside).
     pub fn sd(&self, p: [f64; 3]) -> f64 {
         sd_and_grad(self.code(), &self.params(), p).0
+    }
+
+    /// Signed distance at `p` and its derivatives by the parameters (unused entries 0).
+    pub fn sd_and_grad(&self, p: [f64; 3]) -> (f64, [f64; MAX_SHAPE_PARAMS]) {
+        sd_and_grad(self.code(), &self.params(), p)
     }
 }
 
@@ -132,7 +139,11 @@ fn sign(x: f64) -> f64 {
 
 /// Signed distance of shape `code` (0 sphere, 1 box, 2 torus) with parameters `params` at `p`,
 /// and ∂sd/∂params (unused entries 0), loop for loop as `shape_sd` in the kernel.
-pub(crate) fn sd_and_grad(code: u32, params: &[f64], p: [f64; 3]) -> (f64, [f64; MAX_SHAPE_PARAMS]) {
+pub(crate) fn sd_and_grad(
+    code: u32,
+    params: &[f64],
+    p: [f64; 3],
+) -> (f64, [f64; MAX_SHAPE_PARAMS]) {
     let d = [p[0] - params[0], p[1] - params[1], p[2] - params[2]];
     let mut g = [0.0; MAX_SHAPE_PARAMS];
     let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();

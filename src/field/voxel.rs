@@ -180,14 +180,22 @@ pub fn voxelize_mesh(
     // Inclusive index range of voxel centres within [lo, hi] along `axis`.
     let span = |axis: usize, lo: f64, hi: f64| {
         let a = ((lo - origin[axis]) / step - 0.5).ceil().max(0.0);
-        let b = ((hi - origin[axis]) / step - 0.5).floor().min(r as f64 - 1.0);
+        let b = ((hi - origin[axis]) / step - 0.5)
+            .floor()
+            .min(r as f64 - 1.0);
         (a as usize, b as isize)
     };
     for f in faces {
         let v = f.map(|i| positions[i as usize].map(f64::from));
         let yz = v.map(|p| [p[1], p[2]]);
-        let (ymin, ymax) = (yz.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min), yz.iter().map(|p| p[0]).fold(f64::NEG_INFINITY, f64::max));
-        let (zmin, zmax) = (yz.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min), yz.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max));
+        let (ymin, ymax) = (
+            yz.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min),
+            yz.iter().map(|p| p[0]).fold(f64::NEG_INFINITY, f64::max),
+        );
+        let (zmin, zmax) = (
+            yz.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min),
+            yz.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max),
+        );
         let (j0, j1) = span(1, ymin, ymax);
         let (k0, k1) = span(2, zmin, zmax);
         for k in k0 as isize..=k1 {
@@ -205,7 +213,11 @@ pub fn voxelize_mesh(
                 let area = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
                     (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
                 };
-                let w = [area(yz[1], yz[2], p), area(yz[2], yz[0], p), area(yz[0], yz[1], p)];
+                let w = [
+                    area(yz[1], yz[2], p),
+                    area(yz[2], yz[0], p),
+                    area(yz[0], yz[1], p),
+                ];
                 let total = w[0] + w[1] + w[2];
                 let x = if total != 0.0 {
                     (w[0] * v[0][0] + w[1] * v[1][0] + w[2] * v[2][0]) / total
@@ -259,6 +271,10 @@ pub fn screen_to_pixel(x_s: f64, y_s: f64, width: u32, height: u32) -> Option<(u
 /// The visual hull: a voxel is inside iff its centre projects (with the project's [`Camera`],
 /// as the renderer projects) into a pixel whose silhouette value is > 0.5 in every view. A
 /// centre that projects outside an image, or behind a perspective camera, is outside.
+///
+/// The silhouettes are sampled at pixel centres (the nearest pixel), so near a contour the hull
+/// can lose up to half a pixel's footprint: it contains the object up to that margin, not
+/// exactly.
 pub fn visual_hull(
     silhouettes: &Silhouettes,
     cameras: &[Camera],
