@@ -262,6 +262,7 @@ fn grid_backward_matches_the_twin_over_several_batches_and_is_repeatable() {
     // cell spans many chunks. A finer grid with fewer points leaves most cells empty.
     check_backward(&ctx, FieldKind::Grid { res: 4 }, 70_000, 11);
     check_backward(&ctx, FieldKind::Grid { res: 17 }, 3_000, 12);
+    check_backward(&ctx, FieldKind::Grid { res: 2 }, 1_000, 14);
 }
 
 #[test]
@@ -547,7 +548,12 @@ fn marching_cubes_gpu_matches_its_twin_and_gives_closed_meshes_of_the_right_volu
             let sd = shape.sd(p.map(f64::from));
             assert!(sd.abs() < 0.05 * h, "vertex {p:?} is {sd} from the surface");
         }
-        gpu.to_mesh().unwrap();
+        // The OBJ loads back as the same mesh.
+        let path = std::env::temp_dir().join(format!("softvk-field-mc-{}.obj", std::process::id()));
+        gpu.write_obj(&path).unwrap();
+        let loaded = Mesh::load_obj(&path, 1).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        assert_eq!(loaded, gpu.to_mesh().unwrap());
     }
 }
 
@@ -765,6 +771,13 @@ fn the_preview_of_a_sphere_is_its_analytic_disc() {
     assert!(hits > 60);
     // Headlight: the brightest pixel looks at the sphere head-on (0.85 · (0.25 + 0.75) · 255).
     assert!(brightest.0 >= 214 && brightest.1 < 0.2, "{brightest:?}");
+    // And it writes as a PNG of that size.
+    let path =
+        std::env::temp_dir().join(format!("softvk-field-preview-{}.png", std::process::id()));
+    softvk::fit::report::write_png(&path, &image).unwrap();
+    let back = image::open(&path).unwrap();
+    std::fs::remove_file(&path).unwrap();
+    assert_eq!((back.width(), back.height()), (40, 32));
 }
 
 #[test]

@@ -252,6 +252,18 @@ impl Isosurface {
         Ok(Mesh::new(self.positions.clone(), self.faces.clone(), 1)?)
     }
 
+    /// Writes the mesh as OBJ ([`crate::fit::io::write_obj`]: atomic, exact `f32`s).
+    /// [`Error::Input`] when empty.
+    pub fn write_obj(&self, path: &std::path::Path) -> Result<()> {
+        if self.is_empty() {
+            return Err(Error::Input(format!(
+                "marching cubes: no surface to write to {} (φ never crosses 0.5)",
+                path.display()
+            )));
+        }
+        crate::fit::io::write_obj(path, &self.positions, &self.faces)
+    }
+
     /// Signed volume `Σ v0 · (v1 × v2) / 6` (positive for a closed mesh wound outwards).
     pub fn volume(&self) -> f64 {
         mesh_volume(&self.positions, &self.faces)
