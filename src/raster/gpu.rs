@@ -644,9 +644,10 @@ impl Renderer {
                 }
                 Ok(())
             });
-            let max_tile_entries = done.and_then(|()| {
-                checked_tile_runs(ctx, &bins, &grid, views, total, scene.face_count)
-            });
+            let max_tile_entries =
+                done.and_then(|()| {
+                    checked_tile_runs(ctx, &bins, &grid, views, total, scene.face_count)
+                });
             scene.bins[index] = bins;
             scene.groups.push(ViewGroup {
                 first,
