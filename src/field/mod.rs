@@ -355,6 +355,10 @@ impl Field {
 
     /// Records dL/dparams (overwriting `param_count` floats of `d_params`) from dL/dφ of `count`
     /// points (`d_phi`, one `f32` per point). Deterministic: fixed-order sums, no float atomics.
+    ///
+    /// The field's backward scratch is reused by every call: several backward passes recorded
+    /// into one command buffer are fine (each dispatch is followed by a barrier), but two command
+    /// buffers holding backward passes of the same field must not run at the same time.
     pub fn record_backward(
         &self,
         rec: &mut Recorder<'_>,
