@@ -17,6 +17,9 @@
 //! - [`probe`]: implicit-field sphere probing — sampling (rays, anchors, surface candidates),
 //!   probing anchors binned to screen tiles, the silhouette loss and the geometric regularizer,
 //!   with their gradients with respect to φ.
+//! - [`field`]: implicit fields φ = sigmoid(f) in a bounding cube (dense grid, MLP with positional
+//!   encoding, analytic shapes) with a deterministic GPU backward, marching cubes, occupancy / visual
+//!   hull / IoU tools and a ray-marched preview: the field side of implicit-field sphere probing.
 //!
 //! - [`mod@bench`]: the forward benchmark behind `softvk bench` (scenes, timing, JSON records).
 //!
@@ -29,6 +32,7 @@ pub mod atomic_file;
 pub mod bench;
 pub mod camera;
 pub mod error;
+pub mod field;
 pub mod fit;
 pub mod gpu;
 pub mod lighting;

@@ -1,0 +1,221 @@
+//! The dense grid field's kernels: `field_grid_eval`, and the four-step deterministic backward
+//! (`field_grid_keys` → stable radix sort by cell → `field_grid_bounds` → `field_grid_chunks`
+//! → `field_grid_gather`).
+//!
+//! The backward scatters each point's 8 trilinear weights × dL/df to the corners of its cell
+//! without float atomics: the points of a batch are sorted by cell (stably, so a cell's points
+//! stay in point order); one invocation per chunk of [`GRID_CHUNK`] sorted points sums each run
+//! of one cell ("piece") sequentially; then each grid node adds, for the (up to) 8 cells it is a
+//! corner of in a fixed order, those cells' pieces in position order. Every sum has a fixed order,
+//! so repeated runs are bit-identical. One invocation's loops are bounded by the chunk (256
+//! points) and by `8 (batch / GRID_CHUNK + 1)` pieces: far under llvmpipe's cap for any input.
+
+use bytemuck::{Pod, Zeroable};
+
+use super::{Cube, check_binding_bytes};
+use crate::error::Result;
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::primitives::{RadixSort, SortScratch};
+
+/// Sorted points per chunk of `field_grid_chunks` (`GRID_CHUNK` in the kernels).
+pub(crate) const GRID_CHUNK: u32 = 256;
+/// Points per backward batch (the scratch is sized for one).
+pub(crate) const GRID_BATCH: u32 = 1 << 16;
+
+/// Push constants of `field_grid_eval` and `field_grid_keys`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct GridPush {
+    cube: [f32; 4],
+    res: u32,
+    n: u32,
+    pad: [u32; 2],
+}
+
+/// Push constants of `field_grid_bounds` and `field_grid_chunks`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct CountPush {
+    n: u32,
+}
+
+/// Push constants of `field_grid_gather`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct GatherPush {
+    res: u32,
+    accumulate: u32,
+}
+
+pub(crate) struct GridGpu {
+    res: u32,
+    eval: Kernel,
+    keys_kernel: Kernel,
+    bounds: Kernel,
+    chunks: Kernel,
+    gather: Kernel,
+    sort: RadixSort,
+    sort_scratch: SortScratch,
+    keys: Buffer,
+    values: Buffer,
+    records: Buffer,
+    partial: Buffer,
+    cell_start: Buffer,
+    cell_end: Buffer,
+}
+
+impl GridGpu {
+    pub fn new(ctx: &Context, res: u32) -> Result<Self> {
+        let what = format!("grid field of resolution {res}");
+        let nodes = u64::from(res).pow(3);
+        let cells = u64::from(res - 1).pow(3);
+        check_binding_bytes(ctx, &what, 4 * nodes)?;
+        let batch = u64::from(GRID_BATCH);
+        Ok(Self {
+            res,
+            eval: Kernel::new(ctx, &specs::FIELD_GRID_EVAL)?,
+            keys_kernel: Kernel::new(ctx, &specs::FIELD_GRID_KEYS)?,
+            bounds: Kernel::new(ctx, &specs::FIELD_GRID_BOUNDS)?,
+            chunks: Kernel::new(ctx, &specs::FIELD_GRID_CHUNKS)?,
+            gather: Kernel::new(ctx, &specs::FIELD_GRID_GATHER)?,
+            sort: RadixSort::new(ctx)?,
+            sort_scratch: SortScratch::new(ctx, batch)?,
+            keys: ctx.create_buffer("grid field sort keys", 8 * batch, MemoryKind::Device)?,
+            values: ctx.create_buffer("grid field sort values", 4 * batch, MemoryKind::Device)?,
+            records: ctx.create_buffer("grid field records", 16 * batch, MemoryKind::Device)?,
+            partial: ctx.create_buffer("grid field piece sums", 32 * batch, MemoryKind::Device)?,
+            cell_start: ctx.create_buffer(
+                "grid field cell starts",
+                4 * cells,
+                MemoryKind::Device,
+            )?,
+            cell_end: ctx.create_buffer("grid field cell ends", 4 * cells, MemoryKind::Device)?,
+        })
+    }
+
+    fn push(&self, cube: &Cube, n: u32) -> GridPush {
+        GridPush {
+            cube: cube.to_f32(),
+            res: self.res,
+            n,
+            pad: [0; 2],
+        }
+    }
+
+    pub fn record_eval(
+        &self,
+        rec: &mut Recorder<'_>,
+        cube: &Cube,
+        params: BufferRange<'_>,
+        points: BufferRange<'_>,
+        n: u32,
+        phi: BufferRange<'_>,
+    ) -> Result<()> {
+        rec.dispatch(
+            &self.eval,
+            &[params, points, phi],
+            &self.push(cube, n),
+            n.div_ceil(64),
+        )
+    }
+
+    /// One batch of at most [`GRID_BATCH`] points.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_backward_batch(
+        &self,
+        rec: &mut Recorder<'_>,
+        cube: &Cube,
+        params: BufferRange<'_>,
+        points: BufferRange<'_>,
+        n: u32,
+        d_phi: BufferRange<'_>,
+        d_params: BufferRange<'_>,
+        accumulate: bool,
+    ) -> Result<()> {
+        rec.dispatch(
+            &self.keys_kernel,
+            &[
+                params,
+                points,
+                d_phi,
+                self.keys.whole(),
+                self.values.whole(),
+                self.records.whole(),
+            ],
+            &self.push(cube, n),
+            n.div_ceil(64),
+        )?;
+        let cells = (self.res - 1).pow(3);
+        let key_bits = (u32::BITS - (cells - 1).leading_zeros()).max(1);
+        self.sort.record(
+            rec,
+            &self.sort_scratch,
+            &self.keys,
+            &self.values,
+            u64::from(n),
+            key_bits,
+        )?;
+        rec.fill(self.cell_start.whole(), 0);
+        rec.fill(self.cell_end.whole(), 0);
+        rec.dispatch(
+            &self.bounds,
+            &[
+                self.keys.whole(),
+                self.cell_start.whole(),
+                self.cell_end.whole(),
+            ],
+            &CountPush { n },
+            n.div_ceil(64),
+        )?;
+        rec.dispatch(
+            &self.chunks,
+            &[
+                self.keys.whole(),
+                self.values.whole(),
+                self.records.whole(),
+                self.partial.whole(),
+            ],
+            &CountPush { n },
+            n.div_ceil(GRID_CHUNK).div_ceil(64),
+        )?;
+        let nodes = u64::from(self.res).pow(3);
+        rec.dispatch(
+            &self.gather,
+            &[
+                self.cell_start.whole(),
+                self.cell_end.whole(),
+                self.partial.whole(),
+                d_params,
+            ],
+            &GatherPush {
+                res: self.res,
+                accumulate: u32::from(accumulate),
+            },
+            super::groups(nodes, 64)?,
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn push_constant_structs_match_the_kernels_layout() {
+        let size = |s| std::mem::size_of_val(&s) as u32;
+        let grid = GridPush {
+            cube: [0.0; 4],
+            res: 0,
+            n: 0,
+            pad: [0; 2],
+        };
+        assert_eq!(size(grid), specs::FIELD_GRID_EVAL.push_constant_size);
+        assert_eq!(size(grid), specs::FIELD_GRID_KEYS.push_constant_size);
+        assert_eq!(4, specs::FIELD_GRID_BOUNDS.push_constant_size);
+        assert_eq!(4, specs::FIELD_GRID_CHUNKS.push_constant_size);
+        assert_eq!(8, specs::FIELD_GRID_GATHER.push_constant_size);
+        assert_eq!(specs::FIELD_GRID_KEYS.bindings.len(), 6);
+        assert_eq!(specs::FIELD_GRID_GATHER.bindings.len(), 4);
+        assert_eq!(GRID_BATCH % GRID_CHUNK, 0);
+    }
+}
