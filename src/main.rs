@@ -31,6 +31,9 @@ enum Command {
     Grad(Box<cli::grad::GradArgs>),
     /// Deform a template mesh to match silhouettes from known cameras (SoftRas's demo).
     FitMesh(Box<cli::fit_mesh::FitMeshArgs>),
+    /// Fit an implicit field to silhouettes from known cameras by sphere probing, and write its
+    /// surface by marching cubes.
+    FitField(Box<cli::fit_field::FitFieldArgs>),
     /// The built-in demo: generate a shape, render its silhouettes, fit a sphere to them, and
     /// write everything to ./softvk-demo/.
     Demo(Box<cli::fit_mesh::DemoArgs>),
@@ -59,6 +62,7 @@ fn main() -> ExitCode {
         Command::Render(args) => cli::render::run(args),
         Command::Grad(args) => cli::grad::run(args),
         Command::FitMesh(args) => cli::fit_mesh::run(args),
+        Command::FitField(args) => cli::fit_field::run(args),
         Command::Demo(args) => cli::fit_mesh::demo(args),
         Command::Bench(args) => cli::bench::run(args),
     };

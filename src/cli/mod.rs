@@ -16,6 +16,7 @@
 
 pub mod args;
 pub mod bench;
+pub mod fit_field;
 pub mod fit_mesh;
 pub mod grad;
 pub mod output;

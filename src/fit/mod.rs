@@ -44,6 +44,7 @@
 
 pub mod adam;
 pub mod deform;
+pub mod field_fit;
 pub mod flatten;
 pub mod io;
 pub mod laplacian;
