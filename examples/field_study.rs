@@ -6,6 +6,8 @@
 //! cargo run --release --example field_study -- sphere [key=value ...]
 //! cargo run --release --example field_study -- sweep NAME [key=value ...]
 //! cargo run --release --example field_study -- throughput [key=value ...]
+//! cargo run --release --example field_study -- write DIR [va=15]
+//! cargo run --release --example field_study -- iou M.obj [va=15]
 //! ```
 //!
 //! `spot`: spot's hard silhouettes at 24 views (elevation 30°, azimuth every 15°, distance
@@ -15,6 +17,8 @@
 //! `sphere`: the same on an analytic sphere of radius 0.5 (exact silhouettes).
 //! `sweep NAME`: runs `spot` for each value of one parameter (see `sweeps()`), sequentially.
 //! `throughput`: rays probed per second against marching every ray densely through the field.
+//! `write DIR`: spot's silhouettes and cameras as `softvk fit-field` reads them; `iou M.obj`:
+//! the 3D IoU of a fitted mesh (voxelized at 64³ in the same cube) against spot.
 //!
 //! Keys (defaults are `FieldFitOptions::default()` and `fit-field`'s): `iters`, `field`
 //! (grid|mlp), `res`, `layers`, `width`, `freqs`, `lr`, `b1`, `b2`, `init` (initial logit),
@@ -314,14 +318,15 @@ fn run_fit(ctx: &Context, p: &Problem, keys: &Keys, label: &str) -> f64 {
 /// Named sweeps: (key, values).
 fn sweeps() -> Vec<(&'static str, &'static str, Vec<&'static str>)> {
     vec![
-        ("res", "res", vec!["32", "48", "64"]),
-        ("tau", "tau", vec!["0.015", "0.03", "0.06"]),
+        ("res", "res", vec!["16", "24", "32", "48"]),
+        ("tau", "tau", vec!["0.03", "0.045", "0.06", "0.09"]),
         ("anchors", "anchors", vec!["2048", "4096", "8192"]),
         ("rays", "rays", vec!["256", "512", "1024"]),
-        ("lambda", "lambda", vec!["0", "0.01", "0.1", "1"]),
+        ("lambda", "lambda", vec!["0", "0.0001", "0.001", "0.01"]),
         ("lr", "lr", vec!["0.02", "0.05", "0.1", "0.2"]),
-        ("init", "init", vec!["0", "1", "2"]),
+        ("init", "init", vec!["-1", "0", "1"]),
         ("agg", "agg", vec!["max", "lse", "union"]),
+        ("mlp_lr", "lr", vec!["0.002", "0.005", "0.01"]),
     ]
 }
 
@@ -386,6 +391,46 @@ fn main() {
             let keys = parse_keys(&args[1..]);
             throughput(&ctx, &keys);
         }
+        "write" => {
+            // The spot problem as `fit-field` reads it: DIR/silhouettes/*.png, DIR/cameras.csv.
+            let dir = std::path::PathBuf::from(args.get(1).expect("write DIR"));
+            let keys = parse_keys(&args[2..]);
+            let p = problem(&ctx, "spot", &keys);
+            use softvk::fit::io;
+            let rows: Vec<io::CameraRow> = (0..24)
+                .map(|i| io::CameraRow {
+                    distance: 2.732,
+                    elevation: 30.0,
+                    azimuth: 15.0 * f64::from(i),
+                })
+                .collect();
+            let (w, h) = (p.targets.width, p.targets.height);
+            io::write_silhouettes(
+                &dir.join("silhouettes"),
+                &io::silhouette_names(24),
+                w,
+                h,
+                &p.targets.masks,
+            )
+            .unwrap();
+            io::write_cameras(&dir.join("cameras.csv"), &rows).unwrap();
+            println!("wrote {}", dir.display());
+        }
+        "iou" => {
+            // 3D IoU of a fitted OBJ (voxelized in the problem's cube) against spot and the hull.
+            let obj = std::path::PathBuf::from(args.get(1).expect("iou OBJ"));
+            let keys = parse_keys(&args[2..]);
+            let p = problem(&ctx, "spot", &keys);
+            let m = Mesh::load_obj(&obj, 1).unwrap();
+            let v = voxel::voxelize_mesh(&m.positions, &m.faces, &p.cube, p.object.res).unwrap();
+            println!(
+                "{}: 3D IoU {:.4} (hull {:.4}); {} rays with an odd crossing count",
+                obj.display(),
+                voxel::iou(&v.occupancy, &p.object).unwrap(),
+                voxel::iou(&p.hull, &p.object).unwrap(),
+                v.odd_rays
+            );
+        }
         other => panic!("{other}: spot, sphere, sweep or throughput"),
     }
 }
@@ -411,8 +456,10 @@ fn throughput(ctx: &Context, keys: &Keys) {
     let mut opts = options(keys);
     opts.probe = scaled_to_cube(&opts.probe, &p.cube);
     let s = opts.probe;
-    let FieldKind::Grid { res } = opts.field else {
-        panic!("throughput compares on a grid field")
+    // Dense marching steps one grid node spacing (for an MLP: of a `step_res` grid).
+    let res = match opts.field {
+        FieldKind::Grid { res } => get(keys, "step_res", res),
+        _ => get(keys, "step_res", 32u32),
     };
     let field = Field::new(ctx, opts.field, p.cube, 0).unwrap();
     // A field with structure (random logits) so that the max has work to do.
@@ -540,11 +587,12 @@ fn throughput(ctx: &Context, keys: &Keys) {
     ctx.check_validation().unwrap();
     let rays_per_s = |ms: f64| n_rays as f64 / (ms * 1e-3);
     println!(
-        "throughput on spot ({} views × {} rays = {n_rays} rays, 64²), grid {res}³, cube half \
-         {:.4}; probing: {} anchors, τ {:.4}, tile {}, {entries} binned entries; dense: step \
+        "throughput on spot ({} views × {} rays = {n_rays} rays, 64²), {:?} (dense step of a \
+         {res}³ grid), cube half {:.4}; probing: {} anchors, τ {:.4}, tile {}, {entries} binned entries; dense: step \
          {:.4} (one node spacing), {} samples ({:.1} per ray); medians of {reps}",
         p.targets.views.len(),
         s.rays_per_view,
+        opts.field,
         p.cube.half,
         s.anchors,
         s.tau,

@@ -173,43 +173,43 @@ pub struct FitFieldArgs {
 
     // ---- sampling and probing (lengths in cube units) ----
     /// N_r, probing rays per view per iteration.
-    #[arg(long, value_name = "N", default_value_t = ProbeSettings::default().rays_per_view,
+    #[arg(long, value_name = "N", default_value_t = FieldFitOptions::default().probe.rays_per_view,
           help_heading = "Probing")]
     pub rays: u32,
 
     /// Fraction of the rays drawn uniformly over the image (the rest near the contour).
-    #[arg(long, value_name = "F", default_value_t = ProbeSettings::default().ray_uniform_fraction,
+    #[arg(long, value_name = "F", default_value_t = FieldFitOptions::default().probe.ray_uniform_fraction,
           value_parser = fraction, help_heading = "Probing")]
     pub ray_uniform: f64,
 
     /// σ_c, pixels: the Gaussian smoothing the silhouette's Laplacian into the contour density.
-    #[arg(long, value_name = "PX", default_value_t = ProbeSettings::default().contour_sigma,
+    #[arg(long, value_name = "PX", default_value_t = FieldFitOptions::default().probe.contour_sigma,
           value_parser = non_negative, help_heading = "Probing")]
     pub contour_sigma: f64,
 
     /// N_a, anchors per iteration.
-    #[arg(long, value_name = "N", default_value_t = ProbeSettings::default().anchors,
+    #[arg(long, value_name = "N", default_value_t = FieldFitOptions::default().probe.anchors,
           help_heading = "Probing")]
     pub anchors: u32,
 
     /// Fraction of the anchors uniform in the cube (the rest near the visual hull's boundary).
     #[arg(long, value_name = "F",
-          default_value_t = ProbeSettings::default().anchor_uniform_fraction,
+          default_value_t = FieldFitOptions::default().probe.anchor_uniform_fraction,
           value_parser = fraction, help_heading = "Probing")]
     pub anchor_uniform: f64,
 
     /// σ_a, cube units: the spread of the anchors around the visual hull's boundary.
-    #[arg(long, value_name = "S", default_value_t = ProbeSettings::default().anchor_sigma,
+    #[arg(long, value_name = "S", default_value_t = FieldFitOptions::default().probe.anchor_sigma,
           value_parser = non_negative, help_heading = "Probing")]
     pub anchor_sigma: f64,
 
     /// Lattice points per axis of the visual hull the anchors are drawn around.
-    #[arg(long, value_name = "N", default_value_t = ProbeSettings::default().hull_resolution,
+    #[arg(long, value_name = "N", default_value_t = FieldFitOptions::default().probe.hull_resolution,
           help_heading = "Probing")]
     pub hull_res: u32,
 
     /// τ, cube units: the anchor spheres' radius.
-    #[arg(long, value_name = "T", default_value_t = ProbeSettings::default().tau,
+    #[arg(long, value_name = "T", default_value_t = FieldFitOptions::default().probe.tau,
           value_parser = finite, help_heading = "Probing")]
     pub tau: f64,
 
@@ -218,7 +218,7 @@ pub struct FitFieldArgs {
     pub aggregate: AggregateArg,
 
     /// The log-sum-exp temperature (with --aggregate lse).
-    #[arg(long, value_name = "T", default_value_t = ProbeSettings::default().temperature,
+    #[arg(long, value_name = "T", default_value_t = FieldFitOptions::default().probe.temperature,
           value_parser = positive, help_heading = "Probing")]
     pub temperature: f64,
 
@@ -227,44 +227,44 @@ pub struct FitFieldArgs {
     pub no_boundary_aware: bool,
 
     /// Screen tile edge of the anchor binning, pixels.
-    #[arg(long, value_name = "PX", default_value_t = ProbeSettings::default().tile_size,
+    #[arg(long, value_name = "PX", default_value_t = FieldFitOptions::default().probe.tile_size,
           help_heading = "Probing")]
     pub tile: u32,
 
     // ---- the geometric regularizer ----
     /// N, surface candidates of the regularizer per iteration (49 field points each).
-    #[arg(long, value_name = "N", default_value_t = ProbeSettings::default().geo_candidates,
+    #[arg(long, value_name = "N", default_value_t = FieldFitOptions::default().probe.geo_candidates,
           help_heading = "Regularizer")]
     pub geo_candidates: u32,
 
     /// Fraction of the candidates uniform in the cube.
     #[arg(long, value_name = "F",
-          default_value_t = ProbeSettings::default().geo_uniform_fraction,
+          default_value_t = FieldFitOptions::default().probe.geo_uniform_fraction,
           value_parser = fraction, help_heading = "Regularizer")]
     pub geo_uniform: f64,
 
     /// δ, cube units: the offset of a candidate's six neighbours.
-    #[arg(long, value_name = "D", default_value_t = ProbeSettings::default().geo_delta,
+    #[arg(long, value_name = "D", default_value_t = FieldFitOptions::default().probe.geo_delta,
           value_parser = finite, help_heading = "Regularizer")]
     pub geo_delta: f64,
 
     /// δ_n, cube units: the central-difference step of the normals.
-    #[arg(long, value_name = "D", default_value_t = ProbeSettings::default().geo_normal_delta,
+    #[arg(long, value_name = "D", default_value_t = FieldFitOptions::default().probe.geo_normal_delta,
           value_parser = finite, help_heading = "Regularizer")]
     pub geo_normal_delta: f64,
 
     /// ε, half-width of the surface window W(x) = 1[|x − 0.5| < ε].
-    #[arg(long, value_name = "E", default_value_t = ProbeSettings::default().geo_epsilon,
+    #[arg(long, value_name = "E", default_value_t = FieldFitOptions::default().probe.geo_epsilon,
           value_parser = finite, help_heading = "Regularizer")]
     pub geo_epsilon: f64,
 
     /// p, the exponent of the normal-difference norm (≥ 1).
-    #[arg(long, value_name = "P", default_value_t = ProbeSettings::default().geo_p,
+    #[arg(long, value_name = "P", default_value_t = FieldFitOptions::default().probe.geo_p,
           value_parser = finite, help_heading = "Regularizer")]
     pub geo_p: f64,
 
     /// λ, the weight of L_geo (0 turns the regularizer off).
-    #[arg(long, value_name = "W", default_value_t = ProbeSettings::default().geo_lambda,
+    #[arg(long, value_name = "W", default_value_t = FieldFitOptions::default().probe.geo_lambda,
           value_parser = non_negative, help_heading = "Regularizer")]
     pub lambda: f64,
 
