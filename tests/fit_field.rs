@@ -401,6 +401,34 @@ fn dense_marching_matches_its_twin() {
     assert!(rel_error(&d, &want_d) < 1e-6);
 }
 
+#[test]
+fn the_auto_cube_holds_a_sphere_that_the_frames_cut() {
+    use softvk::camera::Projection;
+    use softvk::fit::field_fit::silhouettes_touch_the_border;
+    // A 10° frame is ±0.48 wide at the origin: a sphere of radius 0.6 overflows every view.
+    let cams: Vec<Camera> = (0..12)
+        .map(|i| Camera {
+            projection: Projection::Perspective {
+                viewing_angle_deg: 10.0,
+            },
+            ..Camera::from_angles(2.732, [30.0, -15.0][i % 2], 30.0 * i as f64)
+        })
+        .collect();
+    let cut = sphere_silhouettes(&cams, 32, 32, 0.6).unwrap();
+    assert!(silhouettes_touch_the_border(&cut));
+    let cube = auto_cube(&cut, 0.0).unwrap();
+    for a in 0..3 {
+        let (lo, hi) = (cube.center[a] - cube.half, cube.center[a] + cube.half);
+        assert!(lo <= -0.6 && hi >= 0.6, "axis {a}: [{lo}, {hi}]");
+    }
+    check_cameras_outside(&cut, &cube).unwrap();
+    // A sphere within every frame: the ordinary hull, a cube just around it.
+    let whole = sphere_silhouettes(&cams, 32, 32, 0.3).unwrap();
+    assert!(!silhouettes_touch_the_border(&whole));
+    let cube = auto_cube(&whole, 0.0).unwrap();
+    assert!(cube.half > 0.3 && cube.half < 0.45, "{cube:?}");
+}
+
 // ---- the command line ----
 
 fn softvk() -> Command {

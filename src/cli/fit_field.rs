@@ -4,8 +4,8 @@
 //!
 //! Writes the mesh (OBJ) and a report folder (default: `<out>` without its extension +
 //! `-report/`): `preview.png` (the field's surface shaded by ray marching, from the first
-//! camera's direction), `loss.png` (L_sil, λ L_geo and their sum against the iteration) and
-//! `loss.csv` (the same numbers). Every input is checked before anything is written, and the
+//! camera's direction), `loss.png` (L_sil against the iteration; with λ > 0 also λ L_geo and
+//! the sum) and `loss.csv` (the same numbers). Every input is checked before anything is written, and the
 //! files are computed in memory first, so a failure writes nothing.
 //!
 //! **Lengths are in cube units**: τ, σ_a, δ and δ_n are fractions of the cube's half-edge (the
@@ -489,18 +489,19 @@ pub fn run(args: &FitFieldArgs) -> Result<()> {
             .collect(),
         color,
     };
-    let plot = report::loss_plot(
-        &[
+    // Without the regularizer the total is L_sil: one curve.
+    let curves = if lambda > 0.0 {
+        vec![
             series("total", [0, 0, 0], &|l| f64::from(l.total)),
             series("L_sil", [220, 40, 40], &|l| f64::from(l.silhouette)),
             series("lambda L_geo", [40, 120, 220], &|l| {
                 lambda * f64::from(l.geo)
             }),
-        ],
-        800,
-        500,
-        true,
-    );
+        ]
+    } else {
+        vec![series("L_sil", [220, 40, 40], &|l| f64::from(l.silhouette))]
+    };
+    let plot = report::loss_plot(&curves, 800, 500, true);
     let mut csv = String::from("iteration,l_sil,l_geo,total,seconds\n");
     for l in &result.log {
         csv.push_str(&format!(
