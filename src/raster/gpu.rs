@@ -145,10 +145,31 @@ pub(crate) fn tiled_forward_iterations(run: u64) -> u64 {
     run + run.div_ceil(64) + 2
 }
 
-/// Loop iterations one invocation of `grad_tiled.comp` runs for a tile of `run` faces.
-pub(crate) fn tiled_backward_iterations(run: u64, tile: u32, stride: u32) -> u64 {
-    let chunks = u64::from(tile * tile / 64);
-    run.div_ceil(64) * (chunks * 65 + u64::from(stride)) + 2
+/// Loop iterations one invocation of `grad_tiled.comp` runs for a tile of `run` entries when a
+/// workgroup takes at most `faces` of them: two binary searches over the run (for the chunk's
+/// sub-run), then per batch of 64 faces one iteration and, per 64-pixel chunk of the tile, one
+/// iteration and 64 pixels.
+pub(crate) fn tiled_backward_iterations(run: u64, tile: u32, faces: u64) -> u64 {
+    let chunks = u64::from(tile) * u64::from(tile) / 64;
+    let search = u64::from(u64::BITS - run.leading_zeros());
+    2 * search + faces.min(run).div_ceil(64) * (1 + 65 * chunks) + 2
+}
+
+/// Loop iterations one invocation of `grad_brute.comp` runs for a band of `rows` rows of
+/// `width` pixels.
+pub(crate) fn brute_backward_iterations(rows: u64, width: u32) -> u64 {
+    rows * (u64::from(width) + 1) + 2
+}
+
+/// Loop iterations one invocation of `grad_reduce.comp` runs to add at most `units` partials.
+pub(crate) fn reduce_iterations(units: u64) -> u64 {
+    units + 2
+}
+
+/// Loop iterations one invocation of `grad_reduce_texels.comp` runs over `views` views adding
+/// at most `units` partials in all.
+pub(crate) fn texel_reduce_iterations(views: u64, units: u64) -> u64 {
+    views + units + 2
 }
 
 /// The most entries any tile of a group holds, read back from its ranges.
@@ -162,8 +183,9 @@ fn max_tile_run(ctx: &Context, bins: &Bins, tiles: u64) -> Result<u64> {
 }
 
 /// On a driver that caps shader loops, the exact largest tile when the entry count alone does
-/// not show that the tiled passes (forward, and backward at the largest gradient stride) stay
-/// under the cap; the entry count otherwise. An error when the forward would exceed it.
+/// not show that the tiled forward stays under the cap; the entry count otherwise. An error when
+/// the forward would exceed it. (The tiled backward splits a crowded tile over workgroups, so
+/// any run the forward takes, it takes too.)
 fn checked_tile_runs(
     ctx: &Context,
     bins: &Bins,
@@ -177,12 +199,7 @@ fn checked_tile_runs(
     let Some(limit) = ctx.info().shader_loop_limit() else {
         return Ok(total);
     };
-    let stride = 9 + 3 * 64 * 64;
-    let fits = |run| {
-        tiled_forward_iterations(run) <= limit
-            && tiled_backward_iterations(run, grid.tile_size, stride) <= limit
-    };
-    let run = if fits(total) {
+    let run = if tiled_forward_iterations(total) <= limit {
         total
     } else {
         max_tile_run(ctx, bins, grid.tiles_per_view() * u64::from(views))?
@@ -702,11 +719,7 @@ impl Renderer {
         // once, so neither the entry count nor the face count can be exceeded by the largest.
         let max_run = total.min(u64::from(scene.face_count));
         if let Some(limit) = ctx.info().shader_loop_limit() {
-            let stride =
-                crate::raster::backward::grad_stride(scene.settings.color_mode, scene.texture_res);
-            if tiled_forward_iterations(max_run) > limit
-                || tiled_backward_iterations(max_run, tile, stride) > limit
-            {
+            if tiled_forward_iterations(max_run) > limit {
                 return Err(Error::Limit(format!(
                     "{total} (face, tile) entries could put more than {limit} loop iterations in \
                      one shader invocation on {} (which would silently skip the rest); use \
