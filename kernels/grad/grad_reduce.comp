@@ -16,7 +16,7 @@ layout(push_constant) uniform Push {
     uint item_count;   // items of the view group
     uint first_item;   // the group's first item in face_grads
     uint stride;       // floats per gradient
-    uint entry_total;  // entries of the group
+    uint entry_total;  // entries of the group (a guarded binning: its capacity), a bound
 } pc;
 
 void main() {
@@ -24,8 +24,12 @@ void main() {
     if (id >= pc.item_count) {
         return;
     }
-    uint begin = offsets[id];
-    uint end = id + 1u < pc.item_count ? offsets[id + 1u] : pc.entry_total;
+    // offsets[item_count] is the group's total (the binning writes it), so a guarded binning,
+    // whose count the host never reads, needs no push constant for the last item's end. The
+    // clamp to entry_total (the count, or a guarded binning's capacity) keeps every read inside
+    // the partials.
+    uint begin = min(offsets[id], pc.entry_total);
+    uint end = min(offsets[id + 1u], pc.entry_total);
     uint o = (pc.first_item + id) * pc.stride;
     for (uint c = 0u; c < pc.stride; ++c) {
         float s = 0.0;

@@ -142,6 +142,20 @@ impl GradBuffers {
     /// Buffers for the backward of `scene` by `method`. Tiled needs the scene's last forward run
     /// to have been tiled with the same tile size (the backward reuses its binning).
     pub fn new(ctx: &Context, scene: &GpuScene, method: Method) -> Result<Self> {
+        // Headroom, so that a fit whose entries breathe does not reallocate every step.
+        let most = scene.groups.iter().map(|g| g.entries).max().unwrap_or(0);
+        Self::with_entry_capacity(ctx, scene, method, most + most / 4)
+    }
+
+    /// As [`GradBuffers::new`], with tiled partials for `entries` (face, tile) entries (at least
+    /// the scene's largest group; at most what one binding holds): a guarded fitting loop sizes
+    /// them as its bins.
+    pub(crate) fn with_entry_capacity(
+        ctx: &Context,
+        scene: &GpuScene,
+        method: Method,
+        entries: u64,
+    ) -> Result<Self> {
         if let Method::Tiled { tile } = method {
             if scene.tile != Some(tile) || scene.groups.is_empty() {
                 return Err(Error::Input(format!(
@@ -167,12 +181,11 @@ impl GradBuffers {
         let adjacency = VertexFaces::new(&scene.meshes[0].faces, scene.vertex_count as usize);
         let entry_capacity = match method {
             Method::Brute => 0,
-            // Headroom, so that a fit whose entries breathe does not reallocate every step.
             Method::Tiled { .. } => {
                 let most = scene.groups.iter().map(|g| g.entries).max().unwrap_or(0);
                 let max =
                     u64::from(ctx.info().limits.max_storage_buffer_range) / (4 * u64::from(stride));
-                (most + most / 4).min(max).max(most)
+                entries.min(max).max(most)
             }
         };
         let partials = match method {
