@@ -15,6 +15,12 @@
 //! the count cannot wrap and the entries fit one storage-buffer binding; a group whose entries do
 //! not fit is split and re-counted. [`Renderer`] makes the pipelines once; a [`GpuScene`] keeps a
 //! scene's buffers so it can be rendered again (benchmarks record it once and resubmit).
+//!
+//! Fitting loops, which must not wait for the count, bin *guarded* instead
+//! ([`Renderer::reserve_guarded`], [`Renderer::record_setup_and_count`],
+//! [`Renderer::record_rest_guarded`]): every view in one group, entry buffers reserved with
+//! headroom, the sort over the whole capacity with sentinel keys; the caller gates the stages after
+//! the count on the count fitting (`fit::gate`).
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
