@@ -1081,9 +1081,10 @@ pub fn fit_pass_share(pass: &str) -> &'static str {
 ///
 /// After one untimed iteration, `opts.repeat` iterations run one per submission with GPU
 /// timestamps: record `fit-iteration` (medians; `passes` starts with the `render`, `backward`
-/// and `rest` shares of [`fit_pass_share`], then every pass). Then the wall time per iteration
-/// of the fit loop: [`FIT_BATCH`] iterations one per submission (`fit-loop-k1`) and the next
-/// [`FIT_BATCH`] in one submission (`fit-loop-k10`), each including the gate's status read.
+/// and `rest` shares of [`fit_pass_share`], then every pass). Then the fit loop: [`FIT_BATCH`]
+/// iterations one per submission (`fit-loop-k1`) and the next [`FIT_BATCH`] in one submission
+/// (`fit-loop-k10`): wall and GPU time per iteration (means), and as its one pass the `host
+/// overhead`, wall minus GPU (recording, submission, fence, the gate's status read).
 /// The fit goes on from iteration to iteration (the shape changes a little), as a real fit
 /// does; an iteration stopped by the gate (its entries outgrew the capacity) is re-run and not
 /// counted.
@@ -1235,25 +1236,45 @@ pub fn run_fit(
             opts.repeat,
             fitter.last_entries,
         ));
-        let mut loop_ms = Vec::new();
+        // The loop: wall and GPU time per iteration, and their difference, the host's share
+        // (recording, submission, fence, the gate's status read), which is what batching cuts;
+        // on a shared CPU device the GPU time itself moves with the load.
+        let mut loop_timer = if ctx.info().timestamp_valid_bits > 0 {
+            Some(Timer::new(ctx, 20 * FIT_BATCH)?)
+        } else {
+            None
+        };
         for (pass, k) in [("fit-loop-k1", 1), ("fit-loop-k10", FIT_BATCH)] {
-            let mut total = 0.0;
+            let (mut wall, mut gpu) = (0.0, 0.0);
             for _ in 0..FIT_BATCH / k {
-                total += fit_iterations(&mut fitter, &mut it, k, None, &mut progress, name)?;
+                wall += fit_iterations(
+                    &mut fitter,
+                    &mut it,
+                    k,
+                    loop_timer.as_mut(),
+                    &mut progress,
+                    name,
+                )?;
+                if let Some(timer) = &loop_timer {
+                    gpu += timer.results(ctx)?.iter().map(|t| t.ms).sum::<f64>();
+                }
             }
-            let per_iteration = total / f64::from(FIT_BATCH);
+            let n = f64::from(FIT_BATCH);
+            let gpu_ms = loop_timer.is_some().then_some(gpu / n);
+            let host = gpu_ms.map(|g| wall / n - g);
             progress(&format!(
-                "{name} {pass}: {per_iteration:.1} ms wall per iteration over {FIT_BATCH} \
-                 iterations, {k} per submission"
+                "{name} {pass}: {:.1} ms wall per iteration over {FIT_BATCH} iterations, {k} per \
+                 submission; gpu {}, host overhead {} per iteration",
+                wall / n,
+                gpu_ms.map_or("n/a".into(), |g| format!("{g:.1} ms")),
+                host.map_or("n/a".into(), |h| format!("{h:.2} ms")),
             ));
-            loop_ms.push((pass, per_iteration));
-        }
-        for (pass, ms) in loop_ms {
             records.push(record(
                 pass,
-                None,
-                ms,
-                Vec::new(),
+                gpu_ms,
+                wall / n,
+                host.map(|h| vec![("host overhead".to_string(), h)])
+                    .unwrap_or_default(),
                 FIT_BATCH,
                 fitter.last_entries,
             ));
