@@ -42,8 +42,11 @@ void main() {
         begin = id * pc.parts;
         end = begin + pc.parts;
     } else {
-        begin = offsets[id];
-        end = id + 1u < pc.item_count ? offsets[id + 1u] : pc.unit_total;
+        // offsets[item_count] is the group's total (the binning writes it): a guarded binning,
+        // whose count the host never reads, reserved units up to its capacity (`unit_total`)
+        // but only [0, total) were written. The clamp keeps every read inside the partials.
+        begin = min(offsets[id], pc.unit_total);
+        end = min(offsets[id + 1u], pc.unit_total);
     }
     begin = max(begin, pc.window_begin);
     end = min(end, pc.window_end);

@@ -41,7 +41,6 @@ void main() {
     }
     uint face = id / pc.texels;
     uint texel = id - face * pc.texels;
-    uint item_count = pc.group_views * pc.face_count;
     for (uint v = pc.view_begin; v < pc.view_end; ++v) {
         uint item = v * pc.face_count + face;
         uint begin;
@@ -50,8 +49,9 @@ void main() {
             begin = item * pc.parts;
             end = begin + pc.parts;
         } else {
-            begin = offsets[item];
-            end = item + 1u < item_count ? offsets[item + 1u] : pc.unit_total;
+            // offsets[item_count] is the group's total; see grad_reduce.comp.
+            begin = min(offsets[item], pc.unit_total);
+            end = min(offsets[item + 1u], pc.unit_total);
         }
         begin = max(begin, pc.window_begin);
         end = min(end, pc.window_end);

@@ -321,6 +321,28 @@ impl GradBuffers {
         method: Method,
         split: GradSplit,
     ) -> Result<Self> {
+        Self::build(ctx, scene, method, split, None)
+    }
+
+    /// As [`GradBuffers::new`], with tiled partials for `entries` (face, tile) entries (at least
+    /// the scene's largest group; at most what one binding holds, more take several chunks): a
+    /// guarded fitting loop sizes them as its bins.
+    pub(crate) fn with_entry_capacity(
+        ctx: &Context,
+        scene: &GpuScene,
+        method: Method,
+        entries: u64,
+    ) -> Result<Self> {
+        Self::build(ctx, scene, method, GradSplit::default(), Some(entries))
+    }
+
+    fn build(
+        ctx: &Context,
+        scene: &GpuScene,
+        method: Method,
+        split: GradSplit,
+        entries: Option<u64>,
+    ) -> Result<Self> {
         if let Method::Tiled { tile } = method {
             if scene.tile != Some(tile) || scene.groups.is_empty() {
                 return Err(Error::Input(format!(
@@ -367,7 +389,7 @@ impl GradBuffers {
             Method::Tiled { .. } => {
                 let most = scene.groups.iter().map(|g| g.entries).max().unwrap_or(0);
                 // Headroom, so that a fit whose entries breathe does not reallocate every step.
-                (0, 0, most + most / 4)
+                (0, 0, entries.map_or(most + most / 4, |e| e.max(most)))
             }
         };
         if units > u64::from(u32::MAX) {
