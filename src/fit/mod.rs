@@ -48,6 +48,7 @@ pub mod flatten;
 pub mod io;
 pub mod laplacian;
 pub mod mesh_fit;
+pub mod pose;
 mod reduce;
 mod regularizers;
 pub mod report;
