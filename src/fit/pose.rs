@@ -580,6 +580,9 @@ pub struct PoseFitResult {
 /// Fits the pose of `mesh` seen from `camera` to `target` (RGBA per pixel, row 0 at the top,
 /// the settings' size), from `init`. `progress` is called after every iteration and may
 /// return `false` to stop early. The result's loss is against the target of the sharp σ/γ.
+// The scene (mesh, camera, lighting), the target, the start and the options are each a
+// caller's choice; bundling them would only move the count into a struct.
+#[allow(clippy::too_many_arguments)]
 pub fn fit_pose(
     ctx: &Context,
     mesh: &Mesh,
