@@ -16,6 +16,9 @@
 //!   known target pose (possible only in a synthetic study: the loss landscape of the talk,
 //!   where both images are equally soft).
 //!
+//! `schedule` and `rendered` take the schedule's start from `--sigma-start`/`--gamma-start`, or
+//! from a suffix `@σ/γ` (`schedule@1e-3/1e-3`), so one run can compare several starts.
+//!
 //! Run: `cargo run --release --example pose_study -- --trials 20` (`--help` lists the knobs).
 //! Results: RESULTS.md, "Pose estimation".
 
@@ -38,6 +41,7 @@ struct Args {
     texture_res: u32,
     seed: u64,
     min_angle: f64,
+    max_angle: f64,
     success: f64,
     modes: Vec<String>,
     verbose: bool,
@@ -46,7 +50,8 @@ struct Args {
 }
 
 const HELP: &str = "pose_study [--trials N] [--size N] [--iters N] [--texture-res R] [--seed S]
-  [--min-angle DEG] [--success DEG] [--modes sharp,schedule,rendered] [--sigma-start S]
+  [--min-angle DEG] [--max-angle DEG] [--success DEG] [--modes sharp,schedule[@S/G],rendered[@S/G]]
+  [--sigma-start S]
   [--gamma-start G] [--stages N] [--sigma S] [--gamma G] [--lr LR] [--lr-translation LR]
   [--lr-final F] [--tile N] [--verbose]";
 
@@ -59,6 +64,7 @@ fn parse() -> Args {
         texture_res: 4,
         seed: 5,
         min_angle: 60.0,
+        max_angle: 180.0,
         success: 5.0,
         modes: vec!["schedule".into(), "sharp".into()],
         verbose: false,
@@ -76,12 +82,14 @@ fn parse() -> Args {
             "--texture-res" => a.texture_res = num(value()) as u32,
             "--seed" => a.seed = num(value()) as u64,
             "--min-angle" => a.min_angle = num(value()),
+            "--max-angle" => a.max_angle = num(value()),
             "--success" => a.success = num(value()),
             "--modes" => {
                 a.modes = value().split(',').map(str::to_owned).collect();
                 for m in &a.modes {
+                    let name = m.split('@').next().unwrap_or_default();
                     assert!(
-                        ["sharp", "schedule", "rendered"].contains(&m.as_str()),
+                        ["sharp", "schedule", "rendered"].contains(&name),
                         "unknown mode {m}"
                     );
                 }
@@ -184,7 +192,8 @@ fn main() {
         .map(|_| {
             loop {
                 let w = random_rotation(&mut rng);
-                if rotation_distance(w, target_pose.rotation).to_degrees() > args.min_angle {
+                let angle = rotation_distance(w, target_pose.rotation).to_degrees();
+                if angle > args.min_angle && angle <= args.max_angle {
                     break w;
                 }
             }
@@ -193,8 +202,8 @@ fn main() {
 
     println!(
         "spot, {0}x{0}, texture-res {1}, {2} iterations, lr {3} / {4} (decaying to ×{5}), \
-         sharp σ {6:e} γ {7:e}; schedule σ {8:e} γ {9:e} in {10} stages; {11} trials > {12}° \
-         (seed {13}); device {14}",
+         sharp σ {6:e} γ {7:e}; schedule σ {8:e} γ {9:e} in {10} stages; {11} trials in \
+         ({12}°, {13}°] (seed {14}); device {15}",
         s.width,
         args.texture_res,
         args.iterations,
@@ -208,6 +217,7 @@ fn main() {
         args.schedule.stages,
         args.trials,
         args.min_angle,
+        args.max_angle,
         args.seed,
         ctx.info().name
     );
@@ -216,8 +226,14 @@ fn main() {
     let mut summary = Vec::new();
     let cpu_start = cpu_seconds();
     for mode in &args.modes {
+        let (name, start) = mode.split_once('@').unwrap_or((mode, ""));
+        let mut schedule = args.schedule;
+        if let Some((sg, gm)) = start.split_once('/') {
+            schedule.sigma_start = sg.parse().expect("σ of the mode");
+            schedule.gamma_start = gm.parse().expect("γ of the mode");
+        }
         let opts = PoseFitOptions {
-            schedule: (mode != "sharp").then_some(args.schedule),
+            schedule: (name != "sharp").then_some(schedule),
             ..args.opts.clone()
         };
         let mode_cpu = cpu_seconds();
@@ -231,7 +247,7 @@ fn main() {
             };
             let init_deg = rotation_distance(*init, target_pose.rotation).to_degrees();
             let mut per_stage = |sigma, gamma| render_target(sigma, gamma);
-            let fit_target = if mode == "rendered" {
+            let fit_target = if name == "rendered" {
                 PoseTarget::PerStage(&mut per_stage)
             } else {
                 PoseTarget::Fixed(&target)
