@@ -31,6 +31,9 @@ enum Command {
     Grad(Box<cli::grad::GradArgs>),
     /// Deform a template mesh to match silhouettes from known cameras (SoftRas's demo).
     FitMesh(Box<cli::fit_mesh::FitMeshArgs>),
+    /// Fit the rigid pose (rotation + translation) of a textured mesh to a target RGBA image,
+    /// with a σ/γ schedule from blurry to sharp.
+    FitPose(Box<cli::fit_pose::FitPoseArgs>),
     /// The built-in demo: generate a shape, render its silhouettes, fit a sphere to them, and
     /// write everything to ./softvk-demo/.
     Demo(Box<cli::fit_mesh::DemoArgs>),
@@ -59,6 +62,7 @@ fn main() -> ExitCode {
         Command::Render(args) => cli::render::run(args),
         Command::Grad(args) => cli::grad::run(args),
         Command::FitMesh(args) => cli::fit_mesh::run(args),
+        Command::FitPose(args) => cli::fit_pose::run(args),
         Command::Demo(args) => cli::fit_mesh::demo(args),
         Command::Bench(args) => cli::bench::run(args),
     };

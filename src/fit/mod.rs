@@ -51,6 +51,7 @@ pub mod gate;
 pub mod io;
 pub mod laplacian;
 pub mod mesh_fit;
+pub mod pose;
 pub(crate) mod reduce;
 mod regularizers;
 pub mod report;
