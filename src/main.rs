@@ -34,6 +34,9 @@ enum Command {
     /// Fit the rigid pose (rotation + translation) of a textured mesh to a target RGBA image,
     /// with a σ/γ schedule from blurry to sharp.
     FitPose(Box<cli::fit_pose::FitPoseArgs>),
+    /// Fit an implicit field to silhouettes from known cameras by sphere probing, and write its
+    /// surface by marching cubes.
+    FitField(Box<cli::fit_field::FitFieldArgs>),
     /// The built-in demo: generate a shape, render its silhouettes, fit a sphere to them, and
     /// write everything to ./softvk-demo/.
     Demo(Box<cli::fit_mesh::DemoArgs>),
@@ -63,6 +66,7 @@ fn main() -> ExitCode {
         Command::Grad(args) => cli::grad::run(args),
         Command::FitMesh(args) => cli::fit_mesh::run(args),
         Command::FitPose(args) => cli::fit_pose::run(args),
+        Command::FitField(args) => cli::fit_field::run(args),
         Command::Demo(args) => cli::fit_mesh::demo(args),
         Command::Bench(args) => cli::bench::run(args),
     };

@@ -46,6 +46,7 @@
 
 pub mod adam;
 pub mod deform;
+pub mod field_fit;
 pub mod flatten;
 pub mod gate;
 pub mod io;

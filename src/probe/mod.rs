@@ -19,6 +19,8 @@
 //!   ([`crate::primitives::binning`]) → ψ per ray → `L_sil` → dL_sil/dφ per anchor ([`Prober`]).
 //! - [`geo`]: the geometric regularizer `L_geo` and its dL/dφ ([`GeoRegularizer`]).
 //! - [`rng`]: the counter-based hash the sampler draws from.
+//! - [`dense`]: the dense-marching baseline (every ray sampled at voxel steps), for the
+//!   throughput comparison.
 //!
 //! **One iteration** of a field fit, as the glue (`fit-field`) records it. The binning's entry
 //! count is the one read-back, so an iteration is two submissions:
@@ -51,6 +53,7 @@
 //! ([`crate::gpu::DeviceInfo::shader_loop_limit`]): too many anchors or rays per view is an
 //! [`Error::Limit`], never a silently truncated loop.
 
+pub mod dense;
 pub mod geo;
 pub mod hull;
 pub mod prober;

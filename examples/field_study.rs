@@ -1,0 +1,578 @@
+//! The sphere-probing measurements of `RESULTS.md` ("Sphere probing"), reproducible by one
+//! command each.
+//!
+//! ```text
+//! cargo run --release --example field_study -- spot [key=value ...]
+//! cargo run --release --example field_study -- sphere [key=value ...]
+//! cargo run --release --example field_study -- sweep NAME [key=value ...]
+//! cargo run --release --example field_study -- throughput [key=value ...]
+//! ```
+//!
+//! `spot`: spot's hard silhouettes at 24 views (elevation 30°, azimuth every 15°, distance
+//! 2.732, viewing angle 15°, 64², rendered by the project's rasterizer), the cube around their
+//! visual hull (`auto_cube`, as `fit-field` by default), a field fit, and the 3D IoU at 64³ (same
+//! cube) of the fitted field, of the visual hull of the same 24 views, against spot voxelized.
+//! `sphere`: the same on an analytic sphere of radius 0.5 (exact silhouettes).
+//! `sweep NAME`: runs `spot` for each value of one parameter (see `sweeps()`), sequentially.
+//! `throughput`: rays probed per second against marching every ray densely through the field.
+//!
+//! Keys (defaults are `FieldFitOptions::default()` and `fit-field`'s): `iters`, `field`
+//! (grid|mlp), `res`, `layers`, `width`, `freqs`, `lr`, `b1`, `b2`, `init` (initial logit),
+//! `seed`, `log`, `margin` (auto cube), and the probe settings in cube units: `rays`,
+//! `ray_uniform`, `contour_sigma`, `anchors`, `anchor_uniform`, `anchor_sigma`, `hull_res`,
+//! `tau`, `agg` (max|lse|union), `temp`, `boundary` (0|1), `tile`, `geo_n`, `geo_uniform`,
+//! `geo_delta`, `geo_dn`, `geo_eps`, `geo_p`, `lambda`; `size` (image side), `va` (viewing angle, degrees; 15), `eval_res`
+//! (IoU grid), `mc` (write the marching-cubes OBJ and preview to this folder).
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use softvk::camera::{Camera, Projection};
+use softvk::field::mcubes::MarchingCubes;
+use softvk::field::preview::{PreviewOptions, render_preview};
+use softvk::field::voxel::{self, Occupancy};
+use softvk::field::{Cube, FieldKind};
+use softvk::fit::AdamOptions;
+use softvk::fit::field_fit::{FieldFitOptions, auto_cube, fit_field, scaled_to_cube};
+use softvk::fit::io::Silhouettes;
+use softvk::gpu::{Context, ContextOptions};
+use softvk::lighting::Lighting;
+use softvk::mesh::Mesh;
+use softvk::probe::{Aggregate, ProbeSettings, Targets};
+use softvk::raster::gpu::{Method, Renderer};
+use softvk::raster::reference::{Alpha, Dist, RasterSettings};
+
+type Keys = BTreeMap<String, String>;
+
+fn parse_keys(args: &[String]) -> Keys {
+    args.iter()
+        .map(|a| {
+            let (k, v) = a
+                .split_once('=')
+                .unwrap_or_else(|| panic!("`{a}`: expected key=value"));
+            (k.to_string(), v.to_string())
+        })
+        .collect()
+}
+
+fn get<T: std::str::FromStr>(keys: &Keys, key: &str, default: T) -> T {
+    keys.get(key).map_or(default, |v| {
+        v.parse()
+            .unwrap_or_else(|_| panic!("{key}={v}: not a valid value"))
+    })
+}
+
+/// The fit options of `keys` (lengths in cube units), before the cube is known.
+fn options(keys: &Keys) -> FieldFitOptions {
+    let d = FieldFitOptions::default();
+    let p = d.probe;
+    let field = match get(keys, "field", "grid".to_string()).as_str() {
+        "grid" => FieldKind::Grid {
+            res: get(keys, "res", softvk::fit::field_fit::DEFAULT_GRID_RES),
+        },
+        "mlp" => FieldKind::Mlp {
+            hidden_layers: get(keys, "layers", 4),
+            width: get(keys, "width", 64),
+            frequencies: get(keys, "freqs", 4),
+        },
+        other => panic!("field={other}: grid or mlp"),
+    };
+    let aggregate = match get(keys, "agg", "max".to_string()).as_str() {
+        "max" => Aggregate::Max,
+        "lse" => Aggregate::LogSumExp,
+        "union" => Aggregate::Union,
+        other => panic!("agg={other}: max, lse or union"),
+    };
+    FieldFitOptions {
+        field,
+        probe: ProbeSettings {
+            rays_per_view: get(keys, "rays", p.rays_per_view),
+            ray_uniform_fraction: get(keys, "ray_uniform", p.ray_uniform_fraction),
+            contour_sigma: get(keys, "contour_sigma", p.contour_sigma),
+            anchors: get(keys, "anchors", p.anchors),
+            anchor_uniform_fraction: get(keys, "anchor_uniform", p.anchor_uniform_fraction),
+            anchor_sigma: get(keys, "anchor_sigma", p.anchor_sigma),
+            hull_resolution: get(keys, "hull_res", p.hull_resolution),
+            tau: get(keys, "tau", p.tau),
+            aggregate,
+            temperature: get(keys, "temp", p.temperature),
+            boundary_aware: get(keys, "boundary", u8::from(p.boundary_aware)) != 0,
+            tile_size: get(keys, "tile", p.tile_size),
+            geo_candidates: get(keys, "geo_n", p.geo_candidates),
+            geo_uniform_fraction: get(keys, "geo_uniform", p.geo_uniform_fraction),
+            geo_delta: get(keys, "geo_delta", p.geo_delta),
+            geo_normal_delta: get(keys, "geo_dn", p.geo_normal_delta),
+            geo_epsilon: get(keys, "geo_eps", p.geo_epsilon),
+            geo_p: get(keys, "geo_p", p.geo_p),
+            geo_lambda: get(keys, "lambda", p.geo_lambda),
+            seed: get(keys, "seed", p.seed),
+            ..p
+        },
+        adam: AdamOptions {
+            lr: get(keys, "lr", d.adam.lr),
+            betas: (
+                get(keys, "b1", d.adam.betas.0),
+                get(keys, "b2", d.adam.betas.1),
+            ),
+            eps: 1e-8,
+        },
+        iterations: get(keys, "iters", d.iterations),
+        log_every: get(keys, "log", d.log_every),
+        init_logit: get(keys, "init", d.init_logit),
+    }
+}
+
+fn spot_cameras(viewing_angle_deg: f64) -> Vec<Camera> {
+    (0..24)
+        .map(|i| Camera {
+            projection: Projection::Perspective { viewing_angle_deg },
+            ..Camera::from_angles(2.732, 30.0, 15.0 * f64::from(i))
+        })
+        .collect()
+}
+
+fn render_masks(ctx: &Context, mesh: &Mesh, cams: &[Camera], size: u32) -> Vec<f32> {
+    let hard = RasterSettings {
+        width: size,
+        height: size,
+        dist: Dist::Hard,
+        alpha: Alpha::Hard,
+        ..RasterSettings::default()
+    };
+    Renderer::new(ctx)
+        .unwrap()
+        .render_views(
+            ctx,
+            mesh,
+            cams,
+            &Lighting::unlit(),
+            &hard,
+            Method::default(),
+        )
+        .unwrap()
+        .images
+        .iter()
+        .map(|p| p[3])
+        .collect()
+}
+
+/// The problem: targets and the object's occupancy at `eval_res` in the cube.
+struct Problem {
+    name: &'static str,
+    targets: Targets,
+    cube: Cube,
+    object: Occupancy,
+    hull: Occupancy,
+}
+
+fn silhouettes(t: &Targets) -> Silhouettes {
+    Silhouettes {
+        width: t.width,
+        height: t.height,
+        names: (0..t.views.len()).map(|v| format!("{v:03}.png")).collect(),
+        masks: t.masks.clone(),
+    }
+}
+
+fn problem(ctx: &Context, which: &str, keys: &Keys) -> Problem {
+    let size = get(keys, "size", 64u32);
+    let eval_res = get(keys, "eval_res", 64u32);
+    let margin = get(keys, "margin", softvk::fit::field_fit::DEFAULT_CUBE_MARGIN);
+    let cams = spot_cameras(get(keys, "va", 15.0));
+    let (name, targets, mesh) = match which {
+        "spot" => {
+            let spot =
+                Mesh::load_obj(&softvk::assets::dir().join("spot_triangulated.obj"), 1).unwrap();
+            let masks = render_masks(ctx, &spot, &cams, size);
+            let s = size as usize;
+            let border = masks
+                .chunks(s * s)
+                .map(|m| {
+                    (0..s * s)
+                        .filter(|&i| {
+                            let (r, c) = (i / s, i % s);
+                            (r == 0 || c == 0 || r == s - 1 || c == s - 1) && m[i] > 0.5
+                        })
+                        .count()
+                })
+                .sum::<usize>();
+            println!("spot: {border} inside pixels on the image borders over the 24 views");
+            (
+                "spot",
+                Targets::new(&cams, size, size, masks).unwrap(),
+                Some(spot),
+            )
+        }
+        "sphere" => (
+            "sphere",
+            softvk::probe::targets::sphere_silhouettes(&cams, size, size, 0.5).unwrap(),
+            None,
+        ),
+        other => panic!("{other}: spot or sphere"),
+    };
+    let cube = auto_cube(&targets, margin).unwrap();
+    let object = match &mesh {
+        Some(m) => {
+            let v = voxel::voxelize_mesh(&m.positions, &m.faces, &cube, eval_res).unwrap();
+            assert_eq!(v.odd_rays, 0, "the mesh voxelizes watertight");
+            v.occupancy
+        }
+        None => voxel::occupancy_from_fn(&cube, eval_res, |p| {
+            (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() < 0.5
+        }),
+    };
+    let hull =
+        voxel::visual_hull(&silhouettes(&targets), &targets.cameras, &cube, eval_res).unwrap();
+    Problem {
+        name,
+        targets,
+        cube,
+        object,
+        hull,
+    }
+}
+
+fn load() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_else(|_| "?".into())
+}
+
+/// One fit: prints a result line; returns the fitted IoU.
+fn run_fit(ctx: &Context, p: &Problem, keys: &Keys, label: &str) -> f64 {
+    let mut opts = options(keys);
+    opts.probe = scaled_to_cube(&opts.probe, &p.cube);
+    let verbose = get(keys, "verbose", 1u8) != 0;
+    let load_before = load();
+    let t = Instant::now();
+    let r = fit_field(ctx, &p.targets, &opts, |l| {
+        if verbose {
+            eprintln!(
+                "  it {:4}  L_sil {:.5}  L_geo {:.5}  total {:.5}  {:.1} s",
+                l.iteration, l.silhouette, l.geo, l.total, l.seconds
+            );
+        }
+        true
+    })
+    .unwrap();
+    let wall = t.elapsed().as_secs_f64();
+    let occ = voxel::field_occupancy(ctx, &r.field, &p.cube, p.object.res).unwrap();
+    let iou = voxel::iou(&occ, &p.object).unwrap();
+    let hull_iou = voxel::iou(&p.hull, &p.object).unwrap();
+    let last = r.log.last().copied();
+    println!(
+        "{} {label}: 3D IoU {iou:.4} (hull {hull_iou:.4}, ratio {:.3}) | {} its, fit {:.1} s \
+         (setup {:.1} s, sample {:.1} s, step {:.1} s), {:.0} ms/it | L_sil {:.5} L_geo {:.5} | \
+         load {load_before} → {}",
+        p.name,
+        iou / hull_iou,
+        r.iterations,
+        wall,
+        r.timings.setup_s,
+        r.timings.sample_s,
+        r.timings.step_s,
+        1e3 * r.timings.iterations_s / f64::from(r.iterations.max(1)),
+        last.map_or(f32::NAN, |l| l.silhouette),
+        last.map_or(f32::NAN, |l| l.geo),
+        load()
+    );
+    let passes: Vec<String> = r
+        .timings
+        .step_passes_ms
+        .iter()
+        .map(|p| format!("{} {:.1}", p.name, p.ms))
+        .collect();
+    println!(
+        "  GPU ms per step pass (logged iterations): {}",
+        passes.join(", ")
+    );
+    if let Some(dir) = keys.get("mc") {
+        let dir = std::path::Path::new(dir);
+        std::fs::create_dir_all(dir).unwrap();
+        let mc = MarchingCubes::new(ctx).unwrap();
+        let iso = mc.extract(ctx, &r.field, 64).unwrap();
+        iso.write_obj(&dir.join(format!("{}-{label}.obj", p.name)))
+            .unwrap();
+        let cam = Camera::from_angles(2.732, 30.0, 45.0);
+        let img = render_preview(
+            ctx,
+            &r.field,
+            &Camera {
+                projection: Projection::Perspective {
+                    viewing_angle_deg: 15.0,
+                },
+                ..cam
+            },
+            &PreviewOptions::default(),
+        )
+        .unwrap();
+        softvk::fit::report::write_png(&dir.join(format!("{}-{label}.png", p.name)), &img).unwrap();
+    }
+    iou
+}
+
+/// Named sweeps: (key, values).
+fn sweeps() -> Vec<(&'static str, &'static str, Vec<&'static str>)> {
+    vec![
+        ("res", "res", vec!["32", "48", "64"]),
+        ("tau", "tau", vec!["0.015", "0.03", "0.06"]),
+        ("anchors", "anchors", vec!["2048", "4096", "8192"]),
+        ("rays", "rays", vec!["256", "512", "1024"]),
+        ("lambda", "lambda", vec!["0", "0.01", "0.1", "1"]),
+        ("lr", "lr", vec!["0.02", "0.05", "0.1", "0.2"]),
+        ("init", "init", vec!["0", "1", "2"]),
+        ("agg", "agg", vec!["max", "lse", "union"]),
+    ]
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let Some(mode) = args.first() else {
+        eprintln!("usage: field_study spot|sphere|sweep NAME|throughput [key=value ...]");
+        std::process::exit(2);
+    };
+    let ctx = Context::new(&ContextOptions::from_env()).expect("a Vulkan device");
+    println!(
+        "device {} | date {} | load {}",
+        ctx.info().name,
+        std::process::Command::new("date")
+            .arg("-I")
+            .output()
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+            .unwrap_or_default(),
+        load()
+    );
+    match mode.as_str() {
+        "spot" | "sphere" => {
+            let keys = parse_keys(&args[1..]);
+            let p = problem(&ctx, mode, &keys);
+            println!(
+                "{}: cube centre {:?} half {:.4}; object {} voxels, hull {} voxels at {}³",
+                p.name,
+                p.cube.center.map(|c| (c * 1e4).round() / 1e4),
+                p.cube.half,
+                p.object.count(),
+                p.hull.count(),
+                p.object.res
+            );
+            let label = args[1..].join(" ");
+            run_fit(
+                &ctx,
+                &p,
+                &keys,
+                if label.is_empty() { "defaults" } else { &label },
+            );
+        }
+        "sweep" => {
+            let name = args.get(1).expect("sweep NAME");
+            let keys = parse_keys(&args[2..]);
+            let (_, key, values) = sweeps()
+                .into_iter()
+                .find(|(n, _, _)| n == name)
+                .unwrap_or_else(|| panic!("no sweep {name}"));
+            let which = keys
+                .get("problem")
+                .map_or("spot", String::as_str)
+                .to_string();
+            let p = problem(&ctx, &which, &keys);
+            for v in values {
+                let mut k = keys.clone();
+                k.insert(key.to_string(), v.to_string());
+                k.insert("verbose".into(), "0".into());
+                run_fit(&ctx, &p, &k, &format!("{key}={v}"));
+            }
+        }
+        "throughput" => {
+            let keys = parse_keys(&args[1..]);
+            throughput(&ctx, &keys);
+        }
+        other => panic!("{other}: spot, sphere, sweep or throughput"),
+    }
+}
+
+/// Median of `v`.
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Rays probed per second against dense marching at the grid's node spacing, forward and
+/// forward + backward, GPU timestamps (medians over `reps`).
+fn throughput(ctx: &Context, keys: &Keys) {
+    use softvk::field::Field;
+    use softvk::fit::GradOut;
+    use softvk::gpu::{MemoryKind, Timer};
+    use softvk::probe::dense::DenseMarch;
+    use softvk::probe::sampler::Ray;
+    use softvk::probe::{GpuTargets, Prober, Sampler};
+
+    let reps = get(keys, "reps", 5usize);
+    let p = problem(ctx, "spot", keys);
+    let mut opts = options(keys);
+    opts.probe = scaled_to_cube(&opts.probe, &p.cube);
+    let s = opts.probe;
+    let FieldKind::Grid { res } = opts.field else {
+        panic!("throughput compares on a grid field")
+    };
+    let field = Field::new(ctx, opts.field, p.cube, 0).unwrap();
+    // A field with structure (random logits) so that the max has work to do.
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let params: Vec<f32> = (0..field.param_count())
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            ((state >> 40) as f32 / (1u64 << 24) as f32) * 4.0 - 2.0
+        })
+        .collect();
+    field.set_params(ctx, &params).unwrap();
+    let gpu = GpuTargets::new(ctx, &p.targets).unwrap();
+    let sampler = Sampler::new(ctx, &p.targets, &gpu, &s).unwrap();
+    let mut prober = Prober::new(ctx, &gpu, &s).unwrap();
+    ctx.submit_and_wait(|rec| sampler.record(rec, &gpu, 1))
+        .unwrap();
+    let n_rays = sampler.ray_count() as usize;
+    let rays: Vec<Ray> = ctx.read_buffer(sampler.rays(), 0, n_rays).unwrap();
+    let na = u64::from(s.anchors);
+    let phi_a = ctx
+        .create_buffer("phi anchors", 4 * na, MemoryKind::Device)
+        .unwrap();
+    let d_a = ctx
+        .create_buffer("d anchors", 4 * na, MemoryKind::Device)
+        .unwrap();
+    let d_params = ctx
+        .create_buffer(
+            "d params",
+            4 * field.param_count() as u64,
+            MemoryKind::Device,
+        )
+        .unwrap();
+    let step = 2.0 * p.cube.half / f64::from(res - 1);
+    let dense = DenseMarch::new(ctx, &p.targets, &rays, &p.cube, step).unwrap();
+    let mut timer = Timer::new(ctx, 8).unwrap();
+    let total = |t: &Timer, names: &[&str]| -> f64 {
+        t.results(ctx)
+            .unwrap()
+            .iter()
+            .filter(|x| names.contains(&x.name.as_str()))
+            .map(|x| x.ms)
+            .sum()
+    };
+    let (mut pf, mut pfb, mut df, mut dfb) = (vec![], vec![], vec![], vec![]);
+    let (mut pf_wall, mut df_wall) = (vec![], vec![]);
+    let mut entries = 0;
+    for _ in 0..reps {
+        // Probing: items + binning count, read-back, then sort + φ at anchors + forward, and
+        // the backward (probe backward + field backward at the anchors).
+        let t = Instant::now();
+        ctx.submit_and_wait_timed(Some(&mut timer), |rec| {
+            rec.pass("count", |rec| {
+                prober.record_count(rec, &gpu, sampler.anchors().whole())
+            })
+        })
+        .unwrap();
+        let count_ms = total(&timer, &["count"]);
+        entries = prober.finish_count(ctx).unwrap();
+        ctx.submit_and_wait_timed(Some(&mut timer), |rec| {
+            let a = sampler.anchors().whole();
+            rec.pass("eval", |rec| {
+                field.record_eval(rec, a, s.anchors, phi_a.whole())
+            })?;
+            rec.pass("forward", |rec| {
+                prober.record_forward(rec, &gpu, a, phi_a.whole(), sampler.rays().whole())
+            })?;
+            rec.pass("backward", |rec| {
+                prober.record_backward(
+                    rec,
+                    &gpu,
+                    a,
+                    phi_a.whole(),
+                    sampler.rays().whole(),
+                    GradOut::write(d_a.whole()),
+                )
+            })?;
+            rec.pass("field backward", |rec| {
+                field.record_backward(rec, a, s.anchors, d_a.whole(), d_params.whole())
+            })
+        })
+        .unwrap();
+        pf_wall.push(t.elapsed().as_secs_f64() * 1e3);
+        let f = count_ms + total(&timer, &["eval", "forward"]);
+        pf.push(f);
+        pfb.push(f + total(&timer, &["backward", "field backward"]));
+        // Dense marching: samples, φ at the samples, max; backward: dL/dφ per sample + field
+        // backward over all samples.
+        let t = Instant::now();
+        ctx.submit_and_wait_timed(Some(&mut timer), |rec| {
+            rec.pass("points", |rec| {
+                dense.record_points(rec, &gpu, sampler.rays().whole())
+            })?;
+            rec.pass("eval", |rec| {
+                field.record_eval(
+                    rec,
+                    dense.points().whole(),
+                    dense.sample_count(),
+                    dense.phi().whole(),
+                )
+            })?;
+            rec.pass("max", |rec| {
+                dense.record_max(rec, sampler.rays().whole(), false)
+            })?;
+            rec.pass("max grad", |rec| {
+                dense.record_max(rec, sampler.rays().whole(), true)
+            })?;
+            rec.pass("field backward", |rec| {
+                field.record_backward(
+                    rec,
+                    dense.points().whole(),
+                    dense.sample_count(),
+                    dense.d_phi().whole(),
+                    d_params.whole(),
+                )
+            })
+        })
+        .unwrap();
+        df_wall.push(t.elapsed().as_secs_f64() * 1e3);
+        let f = total(&timer, &["points", "eval", "max"]);
+        df.push(f);
+        dfb.push(f + total(&timer, &["max grad", "field backward"]));
+    }
+    ctx.check_validation().unwrap();
+    let rays_per_s = |ms: f64| n_rays as f64 / (ms * 1e-3);
+    println!(
+        "throughput on spot ({} views × {} rays = {n_rays} rays, 64²), grid {res}³, cube half \
+         {:.4}; probing: {} anchors, τ {:.4}, tile {}, {entries} binned entries; dense: step \
+         {:.4} (one node spacing), {} samples ({:.1} per ray); medians of {reps}",
+        p.targets.views.len(),
+        s.rays_per_view,
+        p.cube.half,
+        s.anchors,
+        s.tau,
+        s.tile_size,
+        step,
+        dense.sample_count(),
+        f64::from(dense.sample_count()) / n_rays as f64
+    );
+    let (a, b, c, d) = (median(pf), median(pfb), median(df), median(dfb));
+    println!(
+        "  forward:            probing {a:8.1} ms GPU = {:10.0} rays/s | dense {c:8.1} ms GPU = \
+         {:10.0} rays/s | probing/dense {:.2}x",
+        rays_per_s(a),
+        rays_per_s(c),
+        c / a
+    );
+    println!(
+        "  forward + backward: probing {b:8.1} ms GPU = {:10.0} rays/s | dense {d:8.1} ms GPU = \
+         {:10.0} rays/s | probing/dense {:.2}x",
+        rays_per_s(b),
+        rays_per_s(d),
+        d / b
+    );
+    println!(
+        "  wall (forward + backward, with submit and wait): probing {:.1} ms, dense {:.1} ms | \
+         load {}",
+        median(pf_wall),
+        median(df_wall),
+        load()
+    );
+}
