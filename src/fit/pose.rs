@@ -428,9 +428,12 @@ impl PoseProblem {
         ctx.submit_and_wait(|rec| {
             rec.copy(staging, 0, &scene.positions, 0, split);
             rec.copy(staging, split, &scene.colors, 0, colors);
-            renderer.record_setup_and_count(ctx, rec, scene, tile)
+            Ok(())
         })?;
-        let entries = renderer.finish_count(ctx, scene, tile)?;
+        // The exact-sized tiled forward (its count is read back: the host round trip of this
+        // loop is the pose chain's anyway).
+        renderer.run(ctx, scene, Method::Tiled { tile })?;
+        let entries = scene.binned_entries();
         if self
             .grads
             .as_ref()
@@ -443,7 +446,6 @@ impl PoseProblem {
         let gb = self.grads.as_ref().expect("made above");
         let kernels = renderer.grad_kernels();
         ctx.submit_and_wait(|rec| {
-            renderer.record_rest(rec, scene)?;
             self.mse.record(
                 rec,
                 scene.output().whole(),
