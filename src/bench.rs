@@ -32,6 +32,12 @@ use crate::raster::reference::{Dist, RasterSettings, Rgb};
 /// The scenes of SPEC §6, in the order a plain `softvk bench` runs them.
 pub const SCENES: [&str; 4] = ["spot-256", "sphere-64x120", "dense-1024", "blurry-256"];
 
+/// The fitting benchmark's scenes ([`run_fit`]); run only when named (`--scene fit-120`).
+pub const FIT_SCENES: [&str; 1] = ["fit-120"];
+
+/// Iterations per submission that [`run_fit`]'s loop timing compares with one.
+pub const FIT_BATCH: u32 = 10;
+
 /// Tile sizes timed by default (64 is slow on a CPU device and never wins there; see
 /// BENCHMARKS.md).
 pub const DEFAULT_TILES: [u32; 3] = [8, 16, 32];
@@ -92,17 +98,29 @@ impl BenchOptions {
         if self.scenes.is_empty() {
             return Ok(SCENES.to_vec());
         }
-        self.scenes
+        let mut render = Vec::new();
+        for name in &self.scenes {
+            if let Some(s) = SCENES.iter().find(|s| *s == name) {
+                render.push(*s);
+            } else if !FIT_SCENES.contains(&name.as_str()) {
+                return Err(Error::Input(format!(
+                    "bench: unknown scene `{name}`; the scenes are {}, {}",
+                    SCENES.join(", "),
+                    FIT_SCENES.join(", ")
+                )));
+            }
+        }
+        Ok(render)
+    }
+
+    /// The fitting scenes named ([`FIT_SCENES`]; none unless named), after checking the options.
+    pub fn checked_fit_scenes(&self) -> Result<Vec<&'static str>> {
+        self.checked_scenes()?;
+        Ok(FIT_SCENES
             .iter()
-            .map(|name| {
-                SCENES.iter().copied().find(|s| s == name).ok_or_else(|| {
-                    Error::Input(format!(
-                        "bench: unknown scene `{name}`; the scenes are {}",
-                        SCENES.join(", ")
-                    ))
-                })
-            })
-            .collect()
+            .copied()
+            .filter(|s| self.scenes.iter().any(|n| n == s))
+            .collect())
     }
 }
 
@@ -1012,6 +1030,259 @@ pub fn run_backward(
     Ok(records)
 }
 
+/// Runs iterations `it .. it + k` of `fitter` in one submission (again from a stopped one, until
+/// all ran) and advances `it`; the wall time of the submission that ran them all, ms.
+fn fit_iterations(
+    fitter: &mut crate::fit::mesh_fit::Fitter<'_>,
+    it: &mut u32,
+    k: u32,
+    mut timer: Option<&mut Timer>,
+    progress: &mut impl FnMut(&str),
+    name: &str,
+) -> Result<f64> {
+    loop {
+        let start = Instant::now();
+        let stopped = fitter.run(*it, *it + k - 1, timer.as_deref_mut())?;
+        let wall = start.elapsed().as_secs_f64() * 1e3;
+        match stopped {
+            None => {
+                *it += k;
+                return Ok(wall);
+            }
+            Some(again) => {
+                progress(&format!(
+                    "{name}: iteration {again} outgrew the entry capacity; now {} (re-run, not \
+                     timed)",
+                    fitter.capacity
+                ));
+                *it = again;
+            }
+        }
+    }
+}
+
+/// Which share of a fitting iteration a timed pass belongs to: `render` (face setup and the
+/// binning's count, sort and fine pass), `backward` (the grad passes) or `rest` (deformation,
+/// gate, loss, regularizers, deformation backward, Adam).
+pub fn fit_pass_share(pass: &str) -> &'static str {
+    match pass {
+        "face setup" | "bin count" | "bin sort" | "raster tiled" | "downsample 2x2" => "render",
+        _ if pass.starts_with("grad ") => "backward",
+        _ => "rest",
+    }
+}
+
+/// The fitting benchmark (`softvk bench --scene fit-120`): SoftRas's deformation demo setting,
+/// the 1352-vertex sphere (`sphere_1352.obj` scaled by 0.5) fitted to the silhouettes of the
+/// demo's generated target ([`crate::fit::mesh_fit::demo_target`]) from 120 views (elevation
+/// 30°, azimuth every 3°, distance 2.732, viewing angle 15°) at 64², σ 1e-4, hard colour,
+/// `1 − IoU + 0.03 Laplacian + 0.0003 flatten`, Adam (0.01, 0.5, 0.99), tile 8
+/// ([`MeshFitOptions::default`](crate::fit::mesh_fit::MeshFitOptions)).
+///
+/// After one untimed iteration, `opts.repeat` iterations run one per submission with GPU
+/// timestamps: record `fit-iteration` (medians; `passes` starts with the `render`, `backward`
+/// and `rest` shares of [`fit_pass_share`], then every pass). Then the fit loop: [`FIT_BATCH`]
+/// iterations one per submission (`fit-loop-k1`) and the next [`FIT_BATCH`] in one submission
+/// (`fit-loop-k10`): wall and GPU time per iteration (means), and as its one pass the `host
+/// overhead`, wall minus GPU (recording, submission, fence, the gate's status read).
+/// The fit goes on from iteration to iteration (the shape changes a little), as a real fit
+/// does; an iteration stopped by the gate (its entries outgrew the capacity) is re-run and not
+/// counted.
+pub fn run_fit(
+    ctx: &Context,
+    opts: &BenchOptions,
+    mut progress: impl FnMut(&str),
+) -> Result<Vec<BenchRecord>> {
+    use crate::fit::mesh_fit::{Fitter, MeshFitOptions, demo_target};
+    let names = opts.checked_fit_scenes()?;
+    let assets = opts.assets.clone().unwrap_or_else(crate::assets::dir);
+    let mut records = Vec::new();
+    for name in names {
+        let mut template = load(&assets, "sphere_1352.obj", 1)?;
+        for p in &mut template.positions {
+            *p = p.map(|c| c * 0.5);
+        }
+        let fit_opts = MeshFitOptions {
+            log_every: 1,
+            ..MeshFitOptions::default()
+        };
+        let s = fit_opts.settings;
+        let cameras: Vec<Camera> = (0..120)
+            .map(|i| Camera {
+                projection: Projection::Perspective {
+                    viewing_angle_deg: 15.0,
+                },
+                ..Camera::from_angles(DISTANCE, 30.0, f64::from(3 * i))
+            })
+            .collect();
+        let hard = RasterSettings {
+            dist: Dist::Hard,
+            alpha: crate::raster::reference::Alpha::Hard,
+            rgb: Rgb::Hard,
+            ..s
+        };
+        let targets: Vec<f32> = Renderer::new(ctx)?
+            .render_views(
+                ctx,
+                &demo_target(),
+                &cameras,
+                &Lighting::unlit(),
+                &hard,
+                Method::default(),
+            )?
+            .images
+            .iter()
+            .map(|p| p[3])
+            .collect();
+        let mut fitter = Fitter::new(ctx, &template, &cameras, &targets, &fit_opts)?;
+        let method = Method::Tiled {
+            tile: fit_opts.tile,
+        };
+        progress(&format!(
+            "{name}: sphere_1352 x0.5 ({} faces) fitted to the demo target's silhouettes, {} \
+             views of {}x{}, sigma {:e}, rgb {:?}, tile {}; entry capacity {}",
+            template.face_count(),
+            cameras.len(),
+            s.width,
+            s.height,
+            s.sigma,
+            s.rgb,
+            fit_opts.tile,
+            fitter.capacity
+        ));
+        let mut it = 1u32;
+        fit_iterations(&mut fitter, &mut it, 1, None, &mut progress, name)?;
+        progress(&format!(
+            "{name}: warm-up done, {} entries; timing {} iterations",
+            fitter.last_entries, opts.repeat
+        ));
+        let mut timer = if ctx.info().timestamp_valid_bits > 0 {
+            Some(Timer::new(ctx, 32)?)
+        } else {
+            None
+        };
+        let mut wall = Vec::new();
+        let mut gpu = Vec::new();
+        let mut passes: Vec<(String, Vec<f64>)> = Vec::new();
+        for _ in 0..opts.repeat {
+            wall.push(fit_iterations(
+                &mut fitter,
+                &mut it,
+                1,
+                timer.as_mut(),
+                &mut progress,
+                name,
+            )?);
+            if let Some(timer) = &timer {
+                let times = timer.results(ctx)?;
+                gpu.push(times.iter().map(|t| t.ms).sum());
+                let mut row: Vec<(String, f64)> = ["render", "backward", "rest"]
+                    .iter()
+                    .map(|share| {
+                        let ms = times
+                            .iter()
+                            .filter(|t| fit_pass_share(&t.name) == *share)
+                            .map(|t| t.ms)
+                            .sum();
+                        (share.to_string(), ms)
+                    })
+                    .collect();
+                row.extend(times.iter().map(|t| (t.name.clone(), t.ms)));
+                if passes.is_empty() {
+                    passes = row.iter().map(|(n, _)| (n.clone(), Vec::new())).collect();
+                }
+                for ((_, series), (_, ms)) in passes.iter_mut().zip(&row) {
+                    series.push(*ms);
+                }
+            }
+        }
+        let timing = Timing {
+            gpu_ms: median(&gpu),
+            wall_ms: median(&wall).unwrap_or(f64::NAN),
+            passes: passes
+                .iter()
+                .filter_map(|(n, series)| Some((n.clone(), median(series)?)))
+                .collect(),
+        };
+        progress(&format!(
+            "{name} fit-iteration: {}",
+            summary(&timing, opts.repeat)
+        ));
+        let pairs = fitter.scene.evaluated_pairs(ctx, method)?;
+        let record = |pass: &'static str, gpu_ms, wall_ms, passes, repeats, entries| BenchRecord {
+            scene: name.to_string(),
+            method,
+            pass,
+            gpu_ms,
+            wall_ms,
+            pairs,
+            device: ctx.info().name.clone(),
+            driver: ctx.info().driver.clone(),
+            repeats,
+            passes,
+            views: cameras.len() as u32,
+            faces: template.face_count() as u32,
+            width: s.width,
+            height: s.height,
+            rows: None,
+            entries: Some(entries),
+            identical_to_brute: None,
+        };
+        records.push(record(
+            "fit-iteration",
+            timing.gpu_ms,
+            timing.wall_ms,
+            timing.passes,
+            opts.repeat,
+            fitter.last_entries,
+        ));
+        // The loop: wall and GPU time per iteration, and their difference, the host's share
+        // (recording, submission, fence, the gate's status read), which is what batching cuts;
+        // on a shared CPU device the GPU time itself moves with the load.
+        let mut loop_timer = if ctx.info().timestamp_valid_bits > 0 {
+            Some(Timer::new(ctx, 20 * FIT_BATCH)?)
+        } else {
+            None
+        };
+        for (pass, k) in [("fit-loop-k1", 1), ("fit-loop-k10", FIT_BATCH)] {
+            let (mut wall, mut gpu) = (0.0, 0.0);
+            for _ in 0..FIT_BATCH / k {
+                wall += fit_iterations(
+                    &mut fitter,
+                    &mut it,
+                    k,
+                    loop_timer.as_mut(),
+                    &mut progress,
+                    name,
+                )?;
+                if let Some(timer) = &loop_timer {
+                    gpu += timer.results(ctx)?.iter().map(|t| t.ms).sum::<f64>();
+                }
+            }
+            let n = f64::from(FIT_BATCH);
+            let gpu_ms = loop_timer.is_some().then_some(gpu / n);
+            let host = gpu_ms.map(|g| wall / n - g);
+            progress(&format!(
+                "{name} {pass}: {:.1} ms wall per iteration over {FIT_BATCH} iterations, {k} per \
+                 submission; gpu {}, host overhead {} per iteration",
+                wall / n,
+                gpu_ms.map_or("n/a".into(), |g| format!("{g:.1} ms")),
+                host.map_or("n/a".into(), |h| format!("{h:.2} ms")),
+            ));
+            records.push(record(
+                pass,
+                gpu_ms,
+                wall / n,
+                host.map(|h| vec![("host overhead".to_string(), h)])
+                    .unwrap_or_default(),
+                FIT_BATCH,
+                fitter.last_entries,
+            ));
+        }
+    }
+    Ok(records)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1244,6 +1515,23 @@ mod tests {
             ..ok.clone()
         };
         assert_eq!(pick.checked_scenes().unwrap(), ["blurry-256", "spot-256"]);
+        assert!(pick.checked_fit_scenes().unwrap().is_empty());
+        assert!(
+            ok.checked_fit_scenes().unwrap().is_empty(),
+            "fit-120 runs only when named"
+        );
+        let fit = BenchOptions {
+            scenes: vec!["fit-120".into()],
+            ..ok.clone()
+        };
+        assert!(fit.checked_scenes().unwrap().is_empty());
+        assert_eq!(fit.checked_fit_scenes().unwrap(), ["fit-120"]);
+        let both = BenchOptions {
+            scenes: vec!["fit-120".into(), "spot-256".into()],
+            ..ok.clone()
+        };
+        assert_eq!(both.checked_scenes().unwrap(), ["spot-256"]);
+        assert_eq!(both.checked_fit_scenes().unwrap(), ["fit-120"]);
         for bad in [
             BenchOptions {
                 scenes: vec!["spot-512".into()],
@@ -1271,6 +1559,25 @@ mod tests {
                 matches!(bad.checked_scenes(), Err(Error::Input(_))),
                 "{bad:?}"
             );
+        }
+    }
+
+    #[test]
+    fn fit_passes_fall_into_render_backward_and_rest() {
+        for (pass, share) in [
+            ("face setup", "render"),
+            ("bin count", "render"),
+            ("bin sort", "render"),
+            ("raster tiled", "render"),
+            ("grad tiled", "backward"),
+            ("grad reduce", "backward"),
+            ("grad gather", "backward"),
+            ("deform", "rest"),
+            ("gate", "rest"),
+            ("silhouette loss", "rest"),
+            ("adam", "rest"),
+        ] {
+            assert_eq!(fit_pass_share(pass), share, "{pass}");
         }
     }
 

@@ -31,6 +31,9 @@ enum Command {
     Grad(Box<cli::grad::GradArgs>),
     /// Deform a template mesh to match silhouettes from known cameras (SoftRas's demo).
     FitMesh(Box<cli::fit_mesh::FitMeshArgs>),
+    /// Fit the rigid pose (rotation + translation) of a textured mesh to a target RGBA image,
+    /// with a σ/γ schedule from blurry to sharp.
+    FitPose(Box<cli::fit_pose::FitPoseArgs>),
     /// Fit an implicit field to silhouettes from known cameras by sphere probing, and write its
     /// surface by marching cubes.
     FitField(Box<cli::fit_field::FitFieldArgs>),
@@ -62,6 +65,7 @@ fn main() -> ExitCode {
         Command::Render(args) => cli::render::run(args),
         Command::Grad(args) => cli::grad::run(args),
         Command::FitMesh(args) => cli::fit_mesh::run(args),
+        Command::FitPose(args) => cli::fit_pose::run(args),
         Command::FitField(args) => cli::fit_field::run(args),
         Command::Demo(args) => cli::fit_mesh::demo(args),
         Command::Bench(args) => cli::bench::run(args),

@@ -166,3 +166,178 @@ fn a_gpu_iteration_equals_the_iteration_of_the_twins() {
         3 * n
     );
 }
+
+/// A small fit problem: the box target seen from two views at 20².
+fn small_problem(gpu: &common::Gpu) -> (Vec<Camera>, Vec<f32>, MeshFitOptions) {
+    let size = 20;
+    let cams: Vec<Camera> = [30.0, 150.0]
+        .iter()
+        .map(|&az| Camera {
+            projection: Projection::Perspective {
+                viewing_angle_deg: 15.0,
+            },
+            ..Camera::from_angles(2.732, 30.0, az)
+        })
+        .collect();
+    let hard = RasterSettings {
+        width: size,
+        height: size,
+        dist: Dist::Hard,
+        alpha: Alpha::Hard,
+        ..RasterSettings::default()
+    };
+    let targets: Vec<f32> = Renderer::new(gpu)
+        .unwrap()
+        .render_views(
+            gpu,
+            &Mesh::cuboid([0.4, 0.2, 0.3]),
+            &cams,
+            &Lighting::unlit(),
+            &hard,
+            Method::default(),
+        )
+        .unwrap()
+        .images
+        .iter()
+        .map(|p| p[3])
+        .collect();
+    let opts = MeshFitOptions {
+        iterations: 12,
+        // A large step, so that the entry count moves within a few iterations.
+        adam: softvk::fit::AdamOptions {
+            lr: 0.05,
+            ..MeshFitOptions::default().adam
+        },
+        settings: RasterSettings {
+            width: size,
+            height: size,
+            sigma: 1e-3,
+            rgb: Rgb::Hard,
+            ..RasterSettings::default()
+        },
+        tile: 8,
+        ..MeshFitOptions::default()
+    };
+    (cams, targets, opts)
+}
+
+fn bits(v: &[f32]) -> Vec<u32> {
+    v.iter().map(|x| x.to_bits()).collect()
+}
+
+/// Runs a fit; returns (parameters, logged (iteration, total loss bits, entries), regrowths).
+fn run_fit(
+    gpu: &common::Gpu,
+    cams: &[Camera],
+    targets: &[f32],
+    opts: &MeshFitOptions,
+) -> (Vec<u32>, Vec<(u32, u32, u64)>, u32) {
+    let mut logged = Vec::new();
+    let fit = fit_mesh(gpu, &template(), cams, targets, opts, |l, _, _| {
+        logged.push((l.iteration, l.total.to_bits(), l.entries));
+        true
+    })
+    .unwrap();
+    (bits(&fit.params), logged, fit.regrowths)
+}
+
+#[test]
+fn k_iterations_per_submission_give_the_bits_of_one_per_submission() {
+    let Some(gpu) = common::gpu() else { return };
+    let (cams, targets, opts) = small_problem(&gpu);
+    let one = MeshFitOptions {
+        log_every: 1,
+        ..opts.clone()
+    };
+    let (params_1, log_1, regrowths_1) = run_fit(&gpu, &cams, &targets, &one);
+    assert_eq!(log_1.len(), 12);
+    assert_eq!(regrowths_1, 0, "the default capacity has headroom");
+    for k in [5, 12] {
+        let batched = MeshFitOptions {
+            log_every: k,
+            ..opts.clone()
+        };
+        let (params_k, log_k, _) = run_fit(&gpu, &cams, &targets, &batched);
+        assert_eq!(params_k, params_1, "k = {k}: parameters differ from k = 1");
+        // Logged after iterations k, 2k, ... and the last: the same values as k = 1's there.
+        let want: Vec<u32> = (1..=12).filter(|i| i % k == 0 || *i == 12).collect();
+        assert_eq!(log_k.iter().map(|l| l.0).collect::<Vec<_>>(), want);
+        for l in &log_k {
+            assert_eq!(*l, log_1[l.0 as usize - 1], "k = {k}, iteration {}", l.0);
+        }
+    }
+}
+
+#[test]
+fn a_fit_that_outgrows_its_entry_capacity_equals_one_that_never_did() {
+    let Some(gpu) = common::gpu() else { return };
+    let (cams, targets, opts) = small_problem(&gpu);
+    let ample = MeshFitOptions {
+        log_every: 1,
+        ..opts.clone()
+    };
+    let (params, log, regrowths) = run_fit(&gpu, &cams, &targets, &ample);
+    assert_eq!(regrowths, 0);
+    let entries: Vec<u64> = log.iter().map(|l| l.2).collect();
+    // (a) A capacity of 8 entries: the first iteration of the first submission stops.
+    // (b) Exactly the first iteration's count: a later iteration that counts more stops in the
+    //     middle of a submission, and the iterations after it in that submission are skipped.
+    let grows_at = entries
+        .iter()
+        .position(|&e| e > entries[0])
+        .expect("the entry count must grow at some iteration for this test to say anything");
+    assert!(grows_at > 0);
+    for (capacity, log_every) in [(8, 12), (8, 5), (entries[0], 12), (entries[0], 5)] {
+        let tight = MeshFitOptions {
+            log_every,
+            entry_capacity: Some(capacity),
+            ..opts.clone()
+        };
+        let (params_t, log_t, regrowths_t) = run_fit(&gpu, &cams, &targets, &tight);
+        let what = format!("capacity {capacity}, {log_every} iterations per submission");
+        assert!(regrowths_t >= 1, "{what}: never outgrew its capacity");
+        assert_eq!(params_t, params, "{what}: parameters differ");
+        for l in &log_t {
+            assert_eq!(*l, log[l.0 as usize - 1], "{what}: iteration {}", l.0);
+        }
+    }
+}
+
+#[test]
+fn the_iteration_gate_matches_its_twin_and_its_stop_is_sticky() {
+    use softvk::fit::gate::{GATE_SLOTS, IterationGate, cpu};
+    let Some(gpu) = common::gpu() else { return };
+    let mut gate = IterationGate::new(&gpu).unwrap();
+    let grids = [[3, 1, 1], [7, 2, 1], [1, 1, 1]];
+    gate.upload(&gpu, &grids).unwrap();
+    let total = gpu.upload_buffer("total", &[0u32]).unwrap();
+    let capacity = 100;
+    let mut status = [0u32; 4];
+    // (reset first?, total, iteration): fits, over, fits but after a stop, reset then fits.
+    for (reset, t, it) in [(true, 100, 1), (false, 101, 2), (false, 5, 3), (true, 5, 4)] {
+        gpu.write_buffer(&total, 0, &[t]).unwrap();
+        gpu.submit_and_wait(|rec| {
+            if reset {
+                gate.record_reset(rec);
+            }
+            gate.record_check(rec, total.whole(), it, capacity)
+        })
+        .unwrap();
+        if reset {
+            status = [0; 4];
+        }
+        let want = cpu::gate(&mut status, t, it, capacity as u32, &grids);
+        let (status_buf, args_buf) = gate.buffers();
+        let got_status: Vec<u32> = gpu.read_buffer(status_buf, 0, 4).unwrap();
+        assert_eq!(got_status, status.to_vec(), "iteration {it}");
+        let got: Vec<[u32; 3]> = gpu.read_buffer(args_buf, 0, GATE_SLOTS as usize).unwrap();
+        assert_eq!(&got[..grids.len()], want.as_slice(), "iteration {it}");
+        assert!(got[grids.len()..].iter().all(|g| *g == [0; 3]));
+        let read = gate.read(&gpu).unwrap();
+        assert_eq!(
+            read.stopped,
+            (status[0] != 0).then_some((status[1], u64::from(status[2])))
+        );
+    }
+    assert_eq!(status, [0, 0, 0, 5], "the last check ran after the reset");
+}

@@ -164,3 +164,46 @@ fn timer_reports_each_named_pass() {
     let out = gpu.read_buffer::<u32>(&buffer, 0, 5).unwrap();
     assert_eq!(out, vec![0, 0, 1, 3, 6]);
 }
+
+#[test]
+fn gated_dispatches_run_with_their_grids_and_not_with_zero_grids() {
+    let Some(gpu) = common::gpu() else { return };
+    let scan = Scan::new(&gpu).unwrap();
+    let n = 10_000u64; // three blocks: reduce, scan of sums, block scans
+    let data: Vec<u32> = (0..n as u32).map(|i| i % 7).collect();
+    let input = gpu.upload_buffer("gated input", &data).unwrap();
+    let scratch = ScanScratch::new(&gpu, n).unwrap();
+    let args = gpu
+        .create_buffer("gated args", 64 * 12, MemoryKind::Device)
+        .unwrap();
+    let mut want = Vec::with_capacity(data.len());
+    let mut sum = 0u32;
+    for &d in &data {
+        want.push(sum);
+        sum += d;
+    }
+    let sentinel = vec![u32::MAX; data.len()];
+    for run in [false, true] {
+        let output = gpu.upload_buffer("gated output", &sentinel).unwrap();
+        let mut grids = Vec::new();
+        let recorded = gpu
+            .record(None, |rec| {
+                grids = rec.gated(args.whole(), |rec| {
+                    scan.record(rec, &scratch, input.whole(), output.whole(), n)
+                })?;
+                Ok(())
+            })
+            .unwrap();
+        assert!(grids.len() >= 3, "{grids:?}");
+        assert!(grids.iter().all(|g| g[0] >= 1 && g[2] == 1));
+        let words: Vec<u32> = if run {
+            grids.iter().flatten().copied().collect()
+        } else {
+            vec![0; 3 * grids.len()]
+        };
+        gpu.write_buffer(&args, 0, &words).unwrap();
+        recorded.submit_and_wait().unwrap();
+        let got: Vec<u32> = gpu.read_buffer(&output, 0, data.len()).unwrap();
+        assert_eq!(got, if run { want.clone() } else { sentinel.clone() });
+    }
+}

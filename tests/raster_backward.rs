@@ -3,7 +3,10 @@
 //! with validation on; determinism; and gradient descent on one triangle's silhouette.
 //!
 //! Bound (issue #4): every component within 1e-3 of the largest component's magnitude, for
-//! positions, colours and cameras separately; tiled and brute agree to the same bound.
+//! positions, colours and cameras separately; tiled and brute agree to the same bound. The split
+//! paths (partials in several chunks, brute-force bands, crowded tiles over several workgroups)
+//! are checked against the twin and, where splitting must not change a single sum, against the
+//! unsplit run bit for bit.
 
 mod common;
 
@@ -12,6 +15,7 @@ use rand::RngExt;
 use softvk::camera::{Camera, Projection};
 use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
+use softvk::raster::backward::{GradBuffers, GradSplit};
 use softvk::raster::gpu::{GpuScene, Method, Renderer};
 use softvk::raster::reference::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
 use softvk::raster::reference_grad::{self, Gradients};
@@ -510,9 +514,10 @@ fn a_batch_differentiates_as_each_mesh_alone() {
     }
 }
 
-/// llvmpipe ends a shader invocation's loops after 65 535 iterations in all: every kernel whose
-/// loops grow with the input refuses, on such a driver, what would exceed it, instead of
-/// silently skipping work. (On drivers without the cap this checks nothing and says so.)
+/// llvmpipe ends a shader invocation's loops after 65 535 iterations in all: every forward kernel
+/// whose loops grow with the input refuses, on such a driver, what would exceed it, instead of
+/// silently skipping work (the backward splits instead: see the tests below). (On drivers
+/// without the cap this checks nothing and says so.)
 #[test]
 fn the_drivers_loop_cap_is_an_error_not_a_silent_truncation() {
     let Some(gpu) = common::gpu() else { return };
@@ -522,14 +527,6 @@ fn the_drivers_loop_cap_is_an_error_not_a_silent_truncation() {
     };
     let r = Renderer::new(&gpu).unwrap();
     let cams = [Camera::default()];
-    // Brute-force backward over 256² pixels.
-    let s = settings(256, 256);
-    let mesh = scene(1, 2);
-    let fwd = forward(&r, &gpu, &mesh, &cams, &s, Method::Tiled { tile: 8 });
-    let err = r
-        .backward(&gpu, &fwd, &weights(256 * 256, 3), Method::Brute, false)
-        .unwrap_err();
-    assert!(matches!(err, softvk::Error::Limit(_)), "{err}");
     // More faces than the cap: brute force refuses; the tiled forward refuses a tile holding
     // them all, and renders them when they spread.
     let n = limit as usize + 10;
@@ -562,4 +559,208 @@ fn the_drivers_loop_cap_is_an_error_not_a_silent_truncation() {
         Method::Tiled { tile: 8 },
     )
     .unwrap();
+}
+
+/// The backward of a scene already rendered, with its work split at most as `split` says;
+/// returns the gradients, the units one chunk of partials holds, and the brute-force bands.
+fn backward_split(
+    r: &Renderer,
+    gpu: &common::Gpu,
+    scene: &GpuScene,
+    w: &[[f32; 4]],
+    method: Method,
+    split: GradSplit,
+) -> (Gradients, u64, u32) {
+    let gb = GradBuffers::with_split(gpu, scene, method, split).unwrap();
+    gb.set_d_image(gpu, scene, w).unwrap();
+    gpu.submit_and_wait(|rec| r.grad_kernels().record(rec, scene, &gb))
+        .unwrap();
+    let g = r.grad_kernels().finish(gpu, scene, &gb, true).unwrap();
+    (g, gb.chunk_units(), gb.bands())
+}
+
+fn bits(g: &Gradients) -> Vec<u64> {
+    g.positions
+        .iter()
+        .chain(&g.colors)
+        .chain(&camera_rows(g))
+        .flatten()
+        .map(|x| x.to_bits())
+        .collect()
+}
+
+/// Texel gradients (R = 4: 51 floats per partial) and vertex colours, with the partials in
+/// chunks of 7 units: many chunks, whose boundaries split faces' runs of units. Every method
+/// matches the twin, is bit for bit the single-chunk result (the running sums add in unit order
+/// whatever the chunking), and repeats bit for bit.
+#[test]
+fn partials_in_many_chunks_match_the_twin_and_one_chunk_bit_for_bit() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let cams = [
+        Camera::from_angles(2.732, 15.0, 20.0),
+        Camera::from_angles(2.5, -10.0, 150.0),
+    ];
+    let chunked = GradSplit {
+        chunk_units: Some(7),
+        ..GradSplit::default()
+    };
+    for (color_mode, res) in [(ColorMode::Surface, 4), (ColorMode::Vertex, 1)] {
+        let mesh = scene(res, 31);
+        let s = RasterSettings {
+            color_mode,
+            ..settings(24, 16)
+        };
+        let w = weights(24 * 16 * cams.len(), 32);
+        let w64: Vec<[f64; 4]> = w.iter().map(|g| g.map(f64::from)).collect();
+        let want = reference_grad::grad(&mesh, &cams, &lighting(), &s, &w64).unwrap();
+        for method in METHODS {
+            let what = format!("{color_mode:?} R={res} {method:?}");
+            let fwd = forward(&r, &gpu, &mesh, &cams, &s, method);
+            let (one, one_chunk, bands) =
+                backward_split(&r, &gpu, &fwd, &w, method, GradSplit::default());
+            let units = match method {
+                Method::Brute => u64::from(bands) * 2 * mesh.face_count() as u64,
+                Method::Tiled { .. } => fwd.binned_entries(),
+            };
+            assert!(
+                one_chunk >= units,
+                "{what}: one chunk holds {one_chunk} < {units}"
+            );
+            let (many, chunk, _) = backward_split(&r, &gpu, &fwd, &w, method, chunked);
+            assert_eq!(chunk, 7, "{what}");
+            assert!(units > 3 * chunk, "{what}: only {units} units");
+            assert_close(&format!("{what} chunked vs twin"), &many, &want, true);
+            assert!(bits(&many) == bits(&one), "{what}: chunking changed a sum");
+            let (again, _, _) = backward_split(&r, &gpu, &fwd, &w, method, chunked);
+            assert!(bits(&again) == bits(&many), "{what}: not deterministic");
+        }
+    }
+}
+
+/// A batch of two textured meshes, views interleaved, in chunks of 5 units: the texel sums of
+/// both meshes, fed from views of either in one chunk, are bit for bit the single-chunk ones.
+#[test]
+fn a_chunked_batch_is_bit_for_bit_the_unchunked_batch() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let a = scene(3, 41);
+    let mut b = a.clone();
+    b.textures = random_colors(b.textures.len(), 42);
+    for p in &mut b.positions {
+        p[0] += 0.05;
+    }
+    let cams = [
+        Camera::from_angles(2.732, 15.0, 20.0),
+        Camera::from_angles(2.5, -10.0, 150.0),
+    ];
+    let views = [(0, cams[0]), (1, cams[0]), (1, cams[1]), (0, cams[1])];
+    let s = settings(16, 16);
+    let w = weights(16 * 16 * views.len(), 43);
+    for method in [Method::Brute, Method::Tiled { tile: 8 }] {
+        let mut fwd = r
+            .prepare_batch(&gpu, &[a.clone(), b.clone()], &views, &lighting(), &s)
+            .unwrap();
+        r.run(&gpu, &mut fwd, method).unwrap();
+        let (one, _, _) = backward_split(&r, &gpu, &fwd, &w, method, GradSplit::default());
+        let split = GradSplit {
+            chunk_units: Some(5),
+            ..GradSplit::default()
+        };
+        let (many, _, _) = backward_split(&r, &gpu, &fwd, &w, method, split);
+        assert!(bits(&many) == bits(&one), "{method:?}");
+        assert!(one.colors.iter().flatten().any(|&c| c != 0.0));
+    }
+}
+
+/// Brute force in bands of 3 rows (6 bands over 16 rows, the last of 1) and the tiled backward
+/// with a crowded tile split into workgroups of 64 faces (one 32-pixel tile holding every face):
+/// both match the twin and repeat bit for bit, and splitting a tile changes no sum.
+#[test]
+fn brute_bands_and_split_tiles_match_the_twin() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let mesh = scene(2, 51);
+    let cams = [Camera::from_angles(2.732, 15.0, 20.0)];
+    let s = settings(16, 16);
+    let w = weights(16 * 16, 52);
+    let w64: Vec<[f64; 4]> = w.iter().map(|g| g.map(f64::from)).collect();
+    let want = reference_grad::grad(&mesh, &cams, &lighting(), &s, &w64).unwrap();
+
+    let fwd = forward(&r, &gpu, &mesh, &cams, &s, Method::Brute);
+    let banded = GradSplit {
+        band_rows: Some(3),
+        ..GradSplit::default()
+    };
+    let (got, _, bands) = backward_split(&r, &gpu, &fwd, &w, Method::Brute, banded);
+    assert_eq!(bands, 6);
+    assert_close("brute in bands of 3 rows", &got, &want, true);
+    let (again, _, _) = backward_split(&r, &gpu, &fwd, &w, Method::Brute, banded);
+    assert!(
+        bits(&again) == bits(&got),
+        "banded brute force is not deterministic"
+    );
+
+    let tile = Method::Tiled { tile: 32 };
+    let fwd = forward(&r, &gpu, &mesh, &cams, &s, tile);
+    let run = fwd.binned_entries();
+    assert!(run > 64, "the one tile holds only {run} faces");
+    let parts = GradSplit {
+        tile_faces: Some(64),
+        ..GradSplit::default()
+    };
+    let (split, _, _) = backward_split(&r, &gpu, &fwd, &w, tile, parts);
+    let (whole, _, _) = backward_split(&r, &gpu, &fwd, &w, tile, GradSplit::default());
+    assert_close("tile split in 64-face parts", &split, &want, true);
+    assert!(
+        bits(&split) == bits(&whole),
+        "splitting the tile changed a sum"
+    );
+}
+
+/// Under llvmpipe's real loop cap, the splits it forces: brute force over 256² pixels takes two
+/// bands (254 rows fit), and a 32-pixel tile holding 4 624 faces takes two workgroups (about
+/// 3 968 fit); both match the twin. (On drivers without the cap these run unsplit.)
+#[test]
+fn the_backward_splits_work_past_the_drivers_loop_cap() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let capped = gpu.info().shader_loop_limit().is_some();
+    let cams = [Camera::default()];
+
+    let s = settings(256, 256);
+    let mesh = scene(1, 2);
+    let w = weights(256 * 256, 3);
+    let w64: Vec<[f64; 4]> = w.iter().map(|g| g.map(f64::from)).collect();
+    let want = reference_grad::grad(&mesh, &cams, &lighting(), &s, &w64).unwrap();
+    let fwd = forward(&r, &gpu, &mesh, &cams, &s, Method::Tiled { tile: 8 });
+    let (got, _, bands) = backward_split(&r, &gpu, &fwd, &w, Method::Brute, GradSplit::default());
+    assert_eq!(bands, if capped { 2 } else { 1 });
+    assert_close("brute 256²", &got, &want, true);
+
+    // 68 × 68 small triangles over a 32×32 image: one tile of 32 holds them all.
+    let n = 68;
+    let mut positions = Vec::with_capacity(3 * n * n);
+    let mut faces = Vec::with_capacity(n * n);
+    for i in 0..n * n {
+        let x = (i % n) as f32 / n as f32 - 0.5;
+        let y = (i / n) as f32 / n as f32 - 0.5;
+        let v = positions.len() as u32;
+        positions.extend([[x, y, 0.0], [x + 0.012, y, 0.0], [x, y + 0.012, 0.0]]);
+        faces.push([v, v + 1, v + 2]);
+    }
+    let mut crowded = Mesh::new(positions, faces, 1).unwrap();
+    crowded.textures = random_colors(crowded.textures.len(), 4);
+    let s = RasterSettings {
+        sigma: 1e-4,
+        ..settings(32, 32)
+    };
+    let w = weights(32 * 32, 5);
+    let w64: Vec<[f64; 4]> = w.iter().map(|g| g.map(f64::from)).collect();
+    let want = reference_grad::grad(&crowded, &cams, &lighting(), &s, &w64).unwrap();
+    let tile = Method::Tiled { tile: 32 };
+    let fwd = forward(&r, &gpu, &crowded, &cams, &s, tile);
+    assert_eq!(fwd.binned_entries(), (n * n) as u64);
+    let (got, _, _) = backward_split(&r, &gpu, &fwd, &w, tile, GradSplit::default());
+    assert_close("4 624 faces in one 32-pixel tile", &got, &want, true);
 }

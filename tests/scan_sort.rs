@@ -147,3 +147,81 @@ fn sort_by_fewer_key_bits_ignores_the_rest_and_keeps_order() {
         check_sort(&sort, &gpu, &keys, bits);
     }
 }
+
+/// The guarded binning (sentinel keys over the whole capacity, count never read on the host)
+/// gives the exact binning's entries, item slots and ranges at every capacity that holds the
+/// count, including exactly the count, and on a grid whose tile count is a power of two (the
+/// sentinel then needs one key bit more); `offsets[items]` holds the total.
+#[test]
+fn guarded_binning_equals_the_twin_at_any_capacity_that_holds_the_count() {
+    use softvk::primitives::binning::{self, BinJob, Binner, Bins, ItemLayout, TileGrid};
+    let Some(gpu) = common::gpu() else { return };
+    let binner = Binner::new(&gpu).unwrap();
+    let mut rng = common::rng(7);
+    for (w, h, views) in [(37, 23, 3), (32, 32, 4)] {
+        let grid = TileGrid::new(w, h, 8).unwrap();
+        let per_view = 60u32;
+        let n = (per_view * views) as usize;
+        // Boxes in pixel-centre coordinates (x, y in about [-1.2, 1.2]), a fifth not binned.
+        let mut words = Vec::with_capacity(5 * n);
+        let mut boxes = Vec::with_capacity(n);
+        for _ in 0..n {
+            let (x, y) = (
+                rng.random_range(-1.2..1.2f32),
+                rng.random_range(-1.2..1.2f32),
+            );
+            let (dx, dy) = (rng.random_range(0.0..0.6f32), rng.random_range(0.0..0.4f32));
+            let b = [x, y, x + dx, y + dy];
+            let binned = rng.random_range(0..5) != 0;
+            words.extend_from_slice(&b);
+            words.push(f32::from_bits(u32::from(binned)));
+            boxes.push(binned.then_some(b));
+        }
+        let items = gpu.upload_buffer("boxes", &words).unwrap();
+        let job = BinJob {
+            grid,
+            layout: ItemLayout {
+                stride_words: 5,
+                box_offset: 0,
+                flag_offset: 4,
+                flag_mask: 1,
+            },
+            items_per_view: per_view,
+            views,
+            first_item: 0,
+        };
+        let twin = binning::cpu::bin(&boxes, per_view, &grid);
+        let total = u64::from(twin.total);
+        let mut bins = Bins::new(&gpu).unwrap();
+        bins.reserve(&gpu, &job).unwrap();
+        for cap in [total, total + 1, 2 * total + 100] {
+            bins.reserve_entry_capacity(&gpu, cap).unwrap();
+            assert_eq!(bins.entry_capacity(), cap);
+            gpu.submit_and_wait(|rec| {
+                binner.record_count(rec, &bins, items.whole(), &job)?;
+                binner.record_sort_guarded(rec, &bins, items.whole(), &job)
+            })
+            .unwrap();
+            let what = format!("{w}x{h}, {views} views, capacity {cap} for {total} entries");
+            let offsets: Vec<u32> = gpu.read_buffer(bins.offsets(), 0, n + 1).unwrap();
+            assert_eq!(offsets[..n], twin.offsets[..], "{what}");
+            assert_eq!(u64::from(offsets[n]), total, "{what}: offsets[items]");
+            let keys: Vec<[u32; 2]> = gpu.read_buffer(bins.keys(), 0, cap as usize).unwrap();
+            let t = total as usize;
+            let tiles: Vec<u32> = keys[..t].iter().map(|k| k[0]).collect();
+            assert_eq!(tiles, twin.tiles, "{what}: sorted tiles");
+            assert!(
+                keys[t..].iter().all(|k| *k == [u32::MAX; 2]),
+                "{what}: sentinels"
+            );
+            let slots: Vec<u32> = gpu.read_buffer(bins.entries(), 0, t).unwrap();
+            assert_eq!(slots, twin.slots, "{what}: slots");
+            let slot_items: Vec<u32> = gpu.read_buffer(bins.entry_items(), 0, t).unwrap();
+            assert_eq!(slot_items, twin.slot_items, "{what}: slot items");
+            let ranges: Vec<[u32; 2]> = gpu
+                .read_buffer(bins.ranges(), 0, job.tile_count() as usize)
+                .unwrap();
+            assert_eq!(ranges, twin.ranges, "{what}: ranges");
+        }
+    }
+}

@@ -34,6 +34,12 @@ void main() {
     uint item = id - view * pc.items_per_view;
     uint tile_base = view * pc.tiles_x * pc.tiles_y;
     uint slot = offsets[id];
+    // Never write past the bound entries: with a guarded binning (`record_sort_guarded`) the
+    // count may exceed the capacity, and the caller then discards the whole binning.
+    uint n = (rect.z - rect.x + 1u) * (rect.w - rect.y + 1u);
+    if (uint(keys.length()) < n || slot > uint(keys.length()) - n) {
+        return;
+    }
     for (uint ty = rect.y; ty <= rect.w; ++ty) {
         for (uint tx = rect.x; tx <= rect.z; ++tx) {
             keys[slot] = uvec2(tile_base + ty * pc.tiles_x + tx, 0u);

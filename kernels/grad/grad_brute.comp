@@ -1,36 +1,42 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
-// Brute-force backward of the fine pass (the baseline): one invocation per (view, face), every
-// rendered pixel of its view in row-major order, summed into the face's gradient. Twin:
-// `reference_grad::backward_view`, whose summation order it has.
+// Brute-force backward of the fine pass (the baseline), one chunk of units at a time: a unit is
+// (view, face, band of `split` rows), `parts` bands per view, numbered item-major
+// (`item · parts + band`). One invocation per unit of [chunk_begin, chunk_end) sums the face
+// over every pixel of its band in row-major order and writes the unit's partial at
+// `unit - chunk_begin`. Bands bound each invocation's loop count (llvmpipe stops loops after
+// 65 535 iterations); `grad_reduce.comp` and `grad_reduce_texels.comp` add each face's bands in
+// order. Twin: `reference_grad::backward_view`, whose summation order it has within a band.
 #define FINE_BACKWARD
 #include "common.glsl"
 #include "raster_grad.glsl"
 
 layout(local_size_x = 64) in;
 
-// Face gradients: `grad_stride` floats per (view, face), view-major (9 screen, then colour).
-layout(std430, set = 0, binding = 6) buffer FaceGrads { float face_grads[]; };
+// This chunk's partials: `grad_stride` floats per unit (9 screen, then colour slots × 3). The
+// texel slots arrive zeroed (the host fills them) and are summed into here.
+layout(std430, set = 0, binding = 6) buffer Partials { float partials[]; };
 
 void main() {
     uint id = linear_group_id() * 64u + gl_LocalInvocationIndex;
-    if (id >= pc.face_count * pc.view_count) {
+    if (id >= pc.chunk_end - pc.chunk_begin) {
         return;
     }
-    uint view = id / pc.face_count;
-    uint face = id - view * pc.face_count;
+    uint unit = pc.chunk_begin + id;
+    uint item = unit / pc.parts;
+    uint band = unit - item * pc.parts;
+    uint view = item / pc.face_count;
+    uint face = item - view * pc.face_count;
     uint gview = pc.first_view + view;
-    uint item = gview * pc.face_count + face;
-    FaceSetup f = setups[item];
+    FaceSetup f = setups[gview * pc.face_count + face];
     bool vertex_colors = (pc.flags & FLAG_VERTEX_COLORS) != 0u;
-    uint o = item * pc.grad_stride;
-    for (uint i = 9u; i < pc.grad_stride; ++i) {
-        face_grads[o + i] = 0.0;
-    }
+    uint o = id * pc.grad_stride;
+    uint row_begin = band * pc.split;
+    uint row_end = min(pc.height, row_begin + pc.split);
     vec3 acc[3] = vec3[3](vec3(0.0), vec3(0.0), vec3(0.0));
     vec3 cacc[3] = vec3[3](vec3(0.0), vec3(0.0), vec3(0.0));
     if ((f.flags & FACE_FINITE) != 0u) {
-        for (uint row = 0u; row < pc.height; ++row) {
+        for (uint row = row_begin; row < row_end; ++row) {
             for (uint col = 0u; col < pc.width; ++col) {
                 Upstream u = load_upstream(gview, col, row);
                 if (upstream_is_zero(u)) {
@@ -50,22 +56,22 @@ void main() {
                         cacc[2] += g.color[2];
                     } else {
                         uint t = o + 9u + 3u * g.texel;
-                        face_grads[t] += g.color[0].x;
-                        face_grads[t + 1u] += g.color[0].y;
-                        face_grads[t + 2u] += g.color[0].z;
+                        partials[t] += g.color[0].x;
+                        partials[t + 1u] += g.color[0].y;
+                        partials[t + 2u] += g.color[0].z;
                     }
                 }
             }
         }
     }
     for (uint c = 0u; c < 3u; ++c) {
-        face_grads[o + 3u * c] = acc[c].x;
-        face_grads[o + 3u * c + 1u] = acc[c].y;
-        face_grads[o + 3u * c + 2u] = acc[c].z;
+        partials[o + 3u * c] = acc[c].x;
+        partials[o + 3u * c + 1u] = acc[c].y;
+        partials[o + 3u * c + 2u] = acc[c].z;
         if (vertex_colors) {
-            face_grads[o + 9u + 3u * c] = cacc[c].x;
-            face_grads[o + 9u + 3u * c + 1u] = cacc[c].y;
-            face_grads[o + 9u + 3u * c + 2u] = cacc[c].z;
+            partials[o + 9u + 3u * c] = cacc[c].x;
+            partials[o + 9u + 3u * c + 1u] = cacc[c].y;
+            partials[o + 9u + 3u * c + 2u] = cacc[c].z;
         }
     }
 }

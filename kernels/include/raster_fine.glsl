@@ -65,7 +65,13 @@ layout(push_constant) uniform Push {
     uint out_width;        // backward: output size (the upstream gradient's; half with AA)
     uint out_height;
     uint entry_total;      // backward, tiled: (face, tile) entries of the view group
-    uint grad_stride;      // backward: floats per face gradient (9 screen + colour slots × 3)
+    uint grad_stride;      // backward: floats per partial (9 screen + colour slots × 3)
+#ifdef FINE_BACKWARD
+    uint chunk_begin;      // backward: the first unit (tiled: entry slot; brute: (item, band))
+    uint chunk_end;        //   of this chunk of partials, and one past its last
+    uint split;            // backward, tiled: faces of a tile per workgroup; brute: rows per band
+    uint parts;            // backward, tiled: workgroups per tile; brute: bands per view
+#endif
 } pc;
 
 // `FaceColors::sample`: C_j at clipped barycentrics w̃, from the colours of mesh `mesh` of the

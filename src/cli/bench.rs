@@ -1,7 +1,8 @@
 //! `softvk bench [--json OUT.json] [--scene NAME]... [--repeat N] [--assets DIR]` (SPEC §6): the
 //! forward benchmark ([`softvk::bench::run`]: tiled at each tile size vs brute force, checked bit
 //! for bit) and the backward one ([`softvk::bench::run_backward`]: backward and
-//! forward+backward), as the JSON records of the spec. Progress goes to stderr.
+//! forward+backward), as the JSON records of the spec; with `--scene fit-120`, the fitting
+//! iteration ([`softvk::bench::run_fit`]). Progress goes to stderr.
 
 use std::path::PathBuf;
 
@@ -19,6 +20,7 @@ pub struct BenchArgs {
     #[arg(long, value_name = "OUT.json")]
     pub json: Option<PathBuf>,
     /// Scene to run (repeatable; default all: spot-256, sphere-64x120, dense-1024, blurry-256).
+    /// `fit-120` times a mesh-fitting iteration at SoftRas's demo setting (only when named).
     #[arg(long = "scene", value_name = "NAME")]
     pub scenes: Vec<String>,
     /// Timed submissions per (scene, method, pass); times are medians.
@@ -62,19 +64,24 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         band: args.band,
         assets: args.assets.clone(),
     };
-    opts.checked_scenes()?;
+    let render_scenes = opts.checked_scenes()?;
+    let fit_scenes = opts.checked_fit_scenes()?;
     let out = args.json.as_deref().map(AtomicFile::create).transpose()?;
     let ctx = Context::new(&ContextOptions::from_env())?;
     eprintln!("device: {} / {}", ctx.info().name, ctx.info().driver);
-    let mut records = if args.backward_only {
-        Vec::new()
-    } else {
-        bench::run(&ctx, &opts, |line| eprintln!("{line}"))?
-    };
-    if !args.forward_only {
-        records.extend(bench::run_backward(&ctx, &opts, |line| {
-            eprintln!("{line}")
-        })?);
+    let mut records = Vec::new();
+    if !render_scenes.is_empty() {
+        if !args.backward_only {
+            records = bench::run(&ctx, &opts, |line| eprintln!("{line}"))?;
+        }
+        if !args.forward_only {
+            records.extend(bench::run_backward(&ctx, &opts, |line| {
+                eprintln!("{line}")
+            })?);
+        }
+    }
+    if !fit_scenes.is_empty() {
+        records.extend(bench::run_fit(&ctx, &opts, |line| eprintln!("{line}"))?);
     }
     ctx.check_validation()?;
     let json = bench::to_json(&records);

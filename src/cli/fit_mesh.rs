@@ -16,7 +16,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use softvk::camera::{Camera, Projection};
 use softvk::fit::AdamOptions;
 use softvk::fit::io::{self, Silhouettes};
-use softvk::fit::mesh_fit::{FitLog, MeshFitOptions, default_template, fit_mesh};
+use softvk::fit::mesh_fit::{FitLog, MeshFitOptions, default_template, demo_target, fit_mesh};
 use softvk::fit::report::{self, GifWriter, Series};
 use softvk::gpu::{Context, ContextOptions};
 use softvk::lighting::Lighting;
@@ -75,7 +75,8 @@ pub struct FitArgs {
     #[arg(long, value_name = "N", default_value_t = DEFAULT_TILE)]
     pub tile: u32,
 
-    /// Read the loss back (and draw a progress frame) every N iterations.
+    /// Read the loss back (and draw a progress frame, and move the progress bar) every N
+    /// iterations; the N iterations in between run on the GPU in one submission.
     #[arg(long, value_name = "N", default_value_t = 20)]
     pub log_every: u32,
 
@@ -150,6 +151,7 @@ impl FitArgs {
             tile: self.tile,
             log_every: self.log_every,
             snapshots: true,
+            entry_capacity: None,
         })
     }
 
@@ -405,18 +407,6 @@ pub struct DemoArgs {
 
     #[command(flatten)]
     pub fit: FitArgs,
-}
-
-/// The demo's target, generated in code: an icosphere pushed out into three lobes and a dent.
-pub fn demo_target() -> Mesh {
-    let mut mesh = Mesh::icosphere(3);
-    for p in &mut mesh.positions {
-        let (x, y, z) = (f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
-        let az = z.atan2(x);
-        let r = 0.42 * (1.0 + 0.28 * (3.0 * az).cos() * (1.0 - y * y) + 0.15 * y);
-        *p = [(x * r) as f32, (y * r * 0.9) as f32, (z * r) as f32];
-    }
-    mesh
 }
 
 /// Runs `softvk demo`: renders the generated target's silhouettes, writes them with their

@@ -18,6 +18,7 @@ pub mod args;
 pub mod bench;
 pub mod fit_field;
 pub mod fit_mesh;
+pub mod fit_pose;
 pub mod grad;
 pub mod output;
 pub mod render;

@@ -2,30 +2,45 @@
 //! vertices, parameterized by [`Deform`] (bounded displacement + centroid), are fitted to target
 //! silhouettes seen from known cameras by Adam on `1 − IoU + λ_lap Laplacian + λ_flat flatten`.
 //!
-//! One iteration is two submissions and one 4-byte read-back:
-//! 1. deform forward → face setup → binning count;
-//! 2. (the host reads the entry count, which sizes the bins exactly) sort → tiled fine pass →
-//!    IoU loss and dL/d(image) → tiled backward on the same bins → Laplacian and flatten
-//!    gradients accumulated → deform backward → Adam step.
+//! **A whole iteration runs on the GPU, and many iterations run per submission**, with no host
+//! round trip: deform forward → face setup → binning count → [the gate] → scatter, sort and
+//! ranges → tiled fine pass → IoU loss and dL/d(image) → tiled backward on the same bins →
+//! Laplacian and flatten gradients accumulated → deform backward → Adam step. The host submits
+//! the iterations up to the next logged one (`log_every` per submission), then reads the gate's
+//! status and, at that logged iteration, the losses and per-view IoUs.
 //!
-//! Losses and per-view IoUs are read back only every `log_every` iterations. The silhouette
-//! loss has no colour gradient, so the lighting's share of the position gradient (added on the
-//! host in [`crate::raster::backward::GradKernels::finish`]) is zero and the GPU's position
-//! gradient is complete.
+//! The binning's entry count, which sizes its buffers and the backward's per-entry partials, is
+//! only known on the GPU. The buffers are reserved with headroom ([`ENTRY_HEADROOM`]) over the
+//! last count the host saw (the first from one counting submission before the loop), the sort
+//! runs over the whole capacity with sentinel keys ([`crate::primitives::binning`]), and
+//! [`super::gate`] stops an iteration whose count does not fit before any stage after the count
+//! runs — and every later iteration of the submission. The host then sees the stop, grows the
+//! buffers to the count it recorded (with the headroom again) and re-runs from the stopped
+//! iteration. A stopped iteration changes nothing (parameters and Adam's moments are untouched),
+//! and the binned result does not depend on the capacity, so the fit is bit for bit the one that
+//! never stopped.
+//!
+//! The silhouette loss has no colour gradient, so the lighting's share of the position gradient
+//! (added on the host in [`crate::raster::backward::GradKernels::finish`]) is zero and the GPU's
+//! position gradient is complete.
 
 use std::time::Instant;
 
 use glam::{DMat3, DVec3};
 
+use super::gate::IterationGate;
 use super::{Adam, AdamOptions, Deform, GradOut, Regularizers, SilhouetteLoss};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
-use crate::gpu::{Context, MemoryKind};
+use crate::gpu::{Buffer, Context, MemoryKind, Recorder, Timer};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
-use crate::raster::backward::GradBuffers;
-use crate::raster::gpu::{Method, Renderer};
+use crate::raster::backward::{GradBuffers, grad_stride};
+use crate::raster::gpu::{GpuScene, Method, Renderer};
 use crate::raster::reference::{Alpha, RasterSettings, Rgb};
+
+/// Entry capacity reserved over a count seen: `count × 3 / 2`.
+pub const ENTRY_HEADROOM: (u64, u64) = (3, 2);
 
 /// Everything settable about a mesh fit; the default is SoftRas's deformation demo.
 #[derive(Clone, Debug, PartialEq)]
@@ -42,11 +57,16 @@ pub struct MeshFitOptions {
     pub settings: RasterSettings,
     /// Tile edge of the tiled passes.
     pub tile: u32,
-    /// Read the losses back every this many iterations (and after the last).
+    /// Read the losses back every this many iterations (and after the last); also the
+    /// iterations per submission.
     pub log_every: u32,
     /// Also read back the predicted alpha images at every logged iteration (for progress
     /// pictures).
     pub snapshots: bool,
+    /// The (face, tile) entries reserved at the start; `None` (the default): the template's
+    /// count, read back once, with [`ENTRY_HEADROOM`]. A test knob: a capacity too small makes
+    /// iterations stop and re-run (with the same result).
+    pub entry_capacity: Option<u64>,
 }
 
 impl Default for MeshFitOptions {
@@ -71,6 +91,7 @@ impl Default for MeshFitOptions {
             tile: crate::raster::gpu::DEFAULT_TILE,
             log_every: 20,
             snapshots: false,
+            entry_capacity: None,
         }
     }
 }
@@ -88,6 +109,8 @@ pub struct FitLog {
     pub flatten: f32,
     /// Weighted total.
     pub total: f32,
+    /// (face, tile) entries the iteration binned.
+    pub entries: u64,
     /// Seconds since the fit started.
     pub seconds: f64,
 }
@@ -101,6 +124,13 @@ pub struct MeshFitResult {
     pub log: Vec<FitLog>,
     /// Wall time of the iterations.
     pub seconds: f64,
+    /// Submissions stopped because the entries outgrew their capacity (each grew it and re-ran
+    /// from the stopped iteration).
+    pub regrowths: u32,
+    /// The entry capacity at the end.
+    pub entry_capacity: u64,
+    /// The fitted parameters: `3 V` displacements, then the centre ([`Deform`]'s layout).
+    pub params: Vec<f32>,
 }
 
 /// The template SoftRas's demo starts from, generated in code: an icosphere (3 subdivisions,
@@ -112,6 +142,18 @@ pub fn default_template() -> Mesh {
     for p in &mut mesh.positions {
         let v = rot * DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2])) * 0.5;
         *p = [v.x as f32, v.y as f32, v.z as f32];
+    }
+    mesh
+}
+
+/// The demo's target, generated in code: an icosphere pushed out into three lobes and a dent.
+pub fn demo_target() -> Mesh {
+    let mut mesh = Mesh::icosphere(3);
+    for p in &mut mesh.positions {
+        let (x, y, z) = (f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+        let az = z.atan2(x);
+        let r = 0.42 * (1.0 + 0.28 * (3.0 * az).cos() * (1.0 - y * y) + 0.15 * y);
+        *p = [(x * r) as f32, (y * r * 0.9) as f32, (z * r) as f32];
     }
     mesh
 }
@@ -128,121 +170,333 @@ pub fn fit_mesh(
     opts: &MeshFitOptions,
     mut progress: impl FnMut(&FitLog, &[f32], Option<&[f32]>) -> bool,
 ) -> Result<MeshFitResult> {
-    let s = &opts.settings;
-    let views = cameras.len();
-    if views == 0 {
-        return Err(Error::Input("no views to fit".into()));
-    }
-    let px = (s.width * s.height) as usize;
-    if targets.len() != views * px {
-        return Err(Error::Input(format!(
-            "{} target pixels, but {views} views of {}x{} need {}",
-            targets.len(),
-            s.width,
-            s.height,
-            views * px
-        )));
-    }
-    if opts.iterations == 0 || opts.log_every == 0 {
-        return Err(Error::Input(
-            "iterations and log_every must be at least 1".into(),
-        ));
-    }
-    template.validate()?;
-    let method = Method::Tiled { tile: opts.tile };
-    let renderer = Renderer::new(ctx)?;
-    let mut scene = renderer.prepare(ctx, template, cameras, &Lighting::unlit(), s)?;
-    let deform = Deform::new(ctx, &template.positions)?;
-    let regs = Regularizers::new(ctx, &template.faces, template.vertex_count())?;
-    let sil = SilhouetteLoss::new(ctx, views as u32, s.width, s.height)?;
-    let adam = Adam::new(ctx, deform.param_count(), opts.adam)?;
-    let params = ctx.create_buffer("fit params", 4 * deform.param_count(), MemoryKind::Device)?;
-    let d_params =
-        ctx.create_buffer("fit d_params", 4 * deform.param_count(), MemoryKind::Device)?;
-    let target_buf = ctx.upload_buffer("fit targets", targets)?;
-    // Zero displacement and centre: the template itself.
-    ctx.submit_and_wait(|rec| {
-        rec.fill(params.whole(), 0);
-        adam.record_reset(rec);
-        Ok(())
-    })?;
-
-    // The first forward sizes the bins; the backward's buffers follow them.
+    let mut fitter = Fitter::new(ctx, template, cameras, targets, opts)?;
     let start = Instant::now();
     let mut log = Vec::new();
-    let mut gb: Option<GradBuffers> = None;
-    let grads = renderer.grad_kernels();
-    for it in 1..=opts.iterations {
-        ctx.submit_and_wait(|rec| {
-            deform.record_forward(rec, params.whole(), scene.positions.whole())?;
-            renderer.record_setup_and_count(ctx, rec, &mut scene, opts.tile)
-        })?;
-        let entries = renderer.finish_count(ctx, &mut scene, opts.tile)?;
-        let stale = gb.as_ref().is_none_or(|g| g.entry_capacity() < entries);
-        if stale {
-            gb = Some(GradBuffers::new(ctx, &scene, method)?);
+    let every = u64::from(opts.log_every);
+    let mut it = 1;
+    while it <= opts.iterations {
+        // Up to the next logged iteration in one submission.
+        let next_log = (u64::from(it - 1) / every + 1) * every;
+        let last = next_log.min(u64::from(opts.iterations)) as u32;
+        if let Some(stopped) = fitter.run(it, last, None)? {
+            it = stopped;
+            continue;
         }
-        let g = gb.as_ref().expect("made above");
-        ctx.submit_and_wait(|rec| {
-            renderer.record_rest(rec, &scene)?;
-            sil.record(
-                rec,
-                scene.output().whole(),
-                target_buf.whole(),
-                Some(GradOut::write(g.d_image.whole())),
-            )?;
-            grads.record(rec, &scene, g)?;
-            regs.record_laplacian(
-                rec,
-                scene.positions.whole(),
-                Some(GradOut::accumulate(
-                    g.position_grads.whole(),
-                    opts.laplacian,
-                )),
-            )?;
-            regs.record_flatten(
-                rec,
-                scene.positions.whole(),
-                Some(GradOut::accumulate(g.position_grads.whole(), opts.flatten)),
-            )?;
-            deform.record_backward(
-                rec,
-                params.whole(),
-                g.position_grads.whole(),
-                d_params.whole(),
-            )?;
-            adam.record_step(rec, params.whole(), d_params.whole(), it)
-        })?;
-        if it % opts.log_every == 0 || it == opts.iterations {
-            let silhouette = sil.read_loss(ctx)?;
-            let r = regs.read_losses(ctx)?;
-            let entry = FitLog {
-                iteration: it,
-                silhouette,
-                laplacian: r.laplacian,
-                flatten: r.flatten,
-                total: silhouette + opts.laplacian * r.laplacian + opts.flatten * r.flatten,
-                seconds: start.elapsed().as_secs_f64(),
-            };
-            let ious = sil.read_ious(ctx)?;
-            let alphas: Option<Vec<f32>> = if opts.snapshots {
-                let rgba: Vec<[f32; 4]> = ctx.read_buffer(scene.output(), 0, views * px)?;
-                Some(rgba.iter().map(|p| p[3]).collect())
-            } else {
-                None
-            };
-            let go_on = progress(&entry, &ious, alphas.as_deref());
-            log.push(entry);
-            if !go_on {
-                break;
-            }
+        let (entry, ious, alphas) = fitter.read_progress(last, start.elapsed().as_secs_f64())?;
+        let go_on = progress(&entry, &ious, alphas.as_deref());
+        log.push(entry);
+        if !go_on {
+            break;
         }
+        it = last + 1;
     }
     let seconds = start.elapsed().as_secs_f64();
-    // The positions the last Adam step produced.
-    ctx.submit_and_wait(|rec| deform.record_forward(rec, params.whole(), scene.positions.whole()))?;
-    let positions: Vec<[f32; 3]> = ctx.read_buffer(&scene.positions, 0, template.vertex_count())?;
-    let mut mesh = template.clone();
-    mesh.positions = positions;
-    Ok(MeshFitResult { mesh, log, seconds })
+    Ok(MeshFitResult {
+        mesh: fitter.mesh(template)?,
+        log,
+        seconds,
+        regrowths: fitter.regrowths,
+        entry_capacity: fitter.capacity,
+        params: fitter.read_params()?,
+    })
+}
+
+/// A fit's GPU state: the scene, the losses, the optimizer, the parameters and the guarded
+/// bins, ready to run iterations ([`Fitter::run`]). Also what the fitting benchmark times.
+pub(crate) struct Fitter<'c> {
+    ctx: &'c Context,
+    opts: MeshFitOptions,
+    renderer: Renderer,
+    pub(crate) scene: GpuScene,
+    deform: Deform,
+    regs: Regularizers,
+    sil: SilhouetteLoss,
+    adam: Adam,
+    params: Buffer,
+    d_params: Buffer,
+    targets: Buffer,
+    grads: GradBuffers,
+    gate: IterationGate,
+    /// Entries the bins and the partials hold.
+    pub(crate) capacity: u64,
+    /// The most they may hold (one binding, the u32 count).
+    max_capacity: u64,
+    /// Submissions stopped by the gate.
+    pub(crate) regrowths: u32,
+    /// The entry count of the last iteration that ran.
+    pub(crate) last_entries: u64,
+}
+
+impl<'c> Fitter<'c> {
+    /// Checks the inputs, uploads everything, zeroes the parameters and Adam's moments, and
+    /// reserves the entries (see [`MeshFitOptions::entry_capacity`]).
+    pub(crate) fn new(
+        ctx: &'c Context,
+        template: &Mesh,
+        cameras: &[Camera],
+        targets: &[f32],
+        opts: &MeshFitOptions,
+    ) -> Result<Self> {
+        let s = &opts.settings;
+        let views = cameras.len();
+        if views == 0 {
+            return Err(Error::Input("no views to fit".into()));
+        }
+        let px = (s.width * s.height) as usize;
+        if targets.len() != views * px {
+            return Err(Error::Input(format!(
+                "{} target pixels, but {views} views of {}x{} need {}",
+                targets.len(),
+                s.width,
+                s.height,
+                views * px
+            )));
+        }
+        if opts.iterations == 0 || opts.log_every == 0 {
+            return Err(Error::Input(
+                "iterations and log_every must be at least 1".into(),
+            ));
+        }
+        if opts.entry_capacity == Some(0) {
+            return Err(Error::Input("the entry capacity must be at least 1".into()));
+        }
+        template.validate()?;
+        let renderer = Renderer::new(ctx)?;
+        let mut scene = renderer.prepare(ctx, template, cameras, &Lighting::unlit(), s)?;
+        let deform = Deform::new(ctx, &template.positions)?;
+        let regs = Regularizers::new(ctx, &template.faces, template.vertex_count())?;
+        let sil = SilhouetteLoss::new(ctx, views as u32, s.width, s.height)?;
+        let adam = Adam::new(ctx, deform.param_count(), opts.adam)?;
+        let params =
+            ctx.create_buffer("fit params", 4 * deform.param_count(), MemoryKind::Device)?;
+        let d_params =
+            ctx.create_buffer("fit d_params", 4 * deform.param_count(), MemoryKind::Device)?;
+        let target_buf = ctx.upload_buffer("fit targets", targets)?;
+        // Zero displacement and centre: the template itself.
+        ctx.submit_and_wait(|rec| {
+            rec.fill(params.whole(), 0);
+            adam.record_reset(rec);
+            Ok(())
+        })?;
+        let stride = grad_stride(s.color_mode, scene.texture_res);
+        let max_capacity = renderer
+            .max_entries(ctx)
+            .min(u64::from(ctx.info().limits.max_storage_buffer_range) / (4 * u64::from(stride)))
+            .min(u64::from(u32::MAX));
+        let capacity = match opts.entry_capacity {
+            Some(c) => c.min(max_capacity),
+            None => {
+                // One counting submission on the template.
+                renderer.reserve_guarded(ctx, &mut scene, opts.tile, 1)?;
+                ctx.submit_and_wait(|rec| {
+                    deform.record_forward(rec, params.whole(), scene.positions.whole())?;
+                    renderer.record_setup_and_count(rec, &scene)
+                })?;
+                let total: Vec<u32> = ctx.read_buffer(scene.bins[0].total_buffer(), 0, 1)?;
+                with_headroom(u64::from(total[0]), max_capacity, views)?
+            }
+        };
+        renderer.reserve_guarded(ctx, &mut scene, opts.tile, capacity)?;
+        let grads = GradBuffers::with_entry_capacity(
+            ctx,
+            &scene,
+            Method::Tiled { tile: opts.tile },
+            capacity,
+        )?;
+        Ok(Self {
+            ctx,
+            opts: opts.clone(),
+            renderer,
+            scene,
+            deform,
+            regs,
+            sil,
+            adam,
+            params,
+            d_params,
+            targets: target_buf,
+            grads,
+            gate: IterationGate::new(ctx)?,
+            capacity,
+            max_capacity,
+            regrowths: 0,
+            last_entries: 0,
+        })
+    }
+
+    /// Records iteration `it`: the forward up to the count, the gate, and the rest gated on it.
+    /// Returns the gated dispatches' grids.
+    fn record_iteration(&self, rec: &mut Recorder<'_>, it: u32) -> Result<Vec<[u32; 3]>> {
+        let o = &self.opts;
+        let scene = &self.scene;
+        let g = &self.grads;
+        rec.pass("deform", |rec| {
+            self.deform
+                .record_forward(rec, self.params.whole(), scene.positions.whole())
+        })?;
+        self.renderer.record_setup_and_count(rec, scene)?;
+        self.gate
+            .record_check(rec, scene.bins[0].total_buffer().whole(), it, self.capacity)?;
+        self.gate.record_gated(rec, |rec| {
+            self.renderer.record_rest_guarded(rec, scene)?;
+            rec.pass("silhouette loss", |rec| {
+                self.sil.record(
+                    rec,
+                    scene.output().whole(),
+                    self.targets.whole(),
+                    Some(GradOut::write(g.d_image.whole())),
+                )
+            })?;
+            self.renderer.grad_kernels().record(rec, scene, g)?;
+            rec.pass("regularizers", |rec| {
+                self.regs.record_laplacian(
+                    rec,
+                    scene.positions.whole(),
+                    Some(GradOut::accumulate(g.position_grads.whole(), o.laplacian)),
+                )?;
+                self.regs.record_flatten(
+                    rec,
+                    scene.positions.whole(),
+                    Some(GradOut::accumulate(g.position_grads.whole(), o.flatten)),
+                )
+            })?;
+            rec.pass("deform backward", |rec| {
+                self.deform.record_backward(
+                    rec,
+                    self.params.whole(),
+                    g.position_grads.whole(),
+                    self.d_params.whole(),
+                )
+            })?;
+            rec.pass("adam", |rec| {
+                self.adam
+                    .record_step(rec, self.params.whole(), self.d_params.whole(), it)
+            })
+        })
+    }
+
+    /// Runs iterations `first ..= last` in one submission (GPU timestamps into `timer`). `None`
+    /// when all ran; `Some(i)` when iteration `i` outgrew the entry capacity: it and the later
+    /// ones changed nothing, the capacity has grown to fit it, and they are to be run again.
+    pub(crate) fn run(
+        &mut self,
+        first: u32,
+        last: u32,
+        timer: Option<&mut Timer>,
+    ) -> Result<Option<u32>> {
+        let mut grids: Option<Vec<[u32; 3]>> = None;
+        let recorded = self.ctx.record(timer, |rec| {
+            self.gate.record_reset(rec);
+            for it in first..=last {
+                let g = self.record_iteration(rec, it)?;
+                match &grids {
+                    None => grids = Some(g),
+                    Some(same) if *same == g => {}
+                    Some(_) => {
+                        return Err(Error::Limit(
+                            "fit: iterations of one submission recorded different dispatches"
+                                .into(),
+                        ));
+                    }
+                }
+            }
+            Ok(())
+        })?;
+        self.gate
+            .upload(self.ctx, grids.as_deref().unwrap_or_default())?;
+        recorded.submit_and_wait()?;
+        drop(recorded);
+        let status = self.gate.read(self.ctx)?;
+        if let Some((stopped, total)) = status.stopped {
+            if stopped < first || stopped > last || total <= self.capacity {
+                return Err(Error::Limit(format!(
+                    "fit: the gate stopped iteration {stopped} of {first}..={last} with {total} \
+                     entries for a capacity of {}",
+                    self.capacity
+                )));
+            }
+            self.grow(total)?;
+            return Ok(Some(stopped));
+        }
+        self.last_entries = status.last_total;
+        Ok(None)
+    }
+
+    /// Grows the bins and the partials to `total` entries with the headroom.
+    fn grow(&mut self, total: u64) -> Result<()> {
+        let capacity = with_headroom(total, self.max_capacity, self.scene.view_count() as usize)?;
+        self.renderer
+            .reserve_guarded(self.ctx, &mut self.scene, self.opts.tile, capacity)?;
+        self.grads = GradBuffers::with_entry_capacity(
+            self.ctx,
+            &self.scene,
+            Method::Tiled {
+                tile: self.opts.tile,
+            },
+            capacity,
+        )?;
+        self.capacity = capacity;
+        self.regrowths += 1;
+        Ok(())
+    }
+
+    /// The losses of iteration `it` (the last one run), the per-view IoUs and, with snapshots,
+    /// the predicted alphas.
+    fn read_progress(&self, it: u32, seconds: f64) -> Result<(FitLog, Vec<f32>, Option<Vec<f32>>)> {
+        let o = &self.opts;
+        let silhouette = self.sil.read_loss(self.ctx)?;
+        let r = self.regs.read_losses(self.ctx)?;
+        let entry = FitLog {
+            iteration: it,
+            silhouette,
+            laplacian: r.laplacian,
+            flatten: r.flatten,
+            total: silhouette + o.laplacian * r.laplacian + o.flatten * r.flatten,
+            entries: self.last_entries,
+            seconds,
+        };
+        let ious = self.sil.read_ious(self.ctx)?;
+        let alphas = if o.snapshots {
+            let n = (o.settings.width * o.settings.height) as usize * ious.len();
+            let rgba: Vec<[f32; 4]> = self.ctx.read_buffer(self.scene.output(), 0, n)?;
+            Some(rgba.iter().map(|p| p[3]).collect())
+        } else {
+            None
+        };
+        Ok((entry, ious, alphas))
+    }
+
+    /// The template with the positions the parameters give now.
+    pub(crate) fn mesh(&self, template: &Mesh) -> Result<Mesh> {
+        self.ctx.submit_and_wait(|rec| {
+            self.deform
+                .record_forward(rec, self.params.whole(), self.scene.positions.whole())
+        })?;
+        let mut mesh = template.clone();
+        mesh.positions = self
+            .ctx
+            .read_buffer(&self.scene.positions, 0, template.vertex_count())?;
+        Ok(mesh)
+    }
+
+    /// The parameters (`3 V` displacements, then the centre).
+    pub(crate) fn read_params(&self) -> Result<Vec<f32>> {
+        self.ctx
+            .read_buffer(&self.params, 0, self.deform.param_count() as usize)
+    }
+}
+
+/// The capacity for `total` entries: with [`ENTRY_HEADROOM`], at most `max`; an error when even
+/// `total` is over it.
+fn with_headroom(total: u64, max: u64, views: usize) -> Result<u64> {
+    if total > max {
+        return Err(Error::Limit(format!(
+            "{views} views need {total} (face, tile) entries at once, over the {max} this device \
+             holds in one binding (with the backward's partials); use fewer views, larger tiles \
+             or a smaller σ"
+        )));
+    }
+    let (num, den) = ENTRY_HEADROOM;
+    Ok((total * num / den).clamp(total.max(1), max))
 }

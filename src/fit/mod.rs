@@ -10,9 +10,9 @@
 //!   d_positions ─[Deform::record_backward]→ d_params ─[Adam::record_step]→ params
 //! ```
 //!
-//! The renderer's two links of that chain are not wired yet: its positions and `d_image`
-//! buffers are private to `GpuScene` and `GradBuffers`, and its backward adds the lighting's
-//! share of the position gradient on the host (`GradKernels::finish`).
+//! [`mesh_fit`] wires the renderer into that chain for silhouettes (unlit: the lighting's share
+//! of the position gradient, which the renderer's backward adds on the host, is zero there), and
+//! runs whole iterations on the GPU with no host round trip ([`gate`]).
 //!
 //! - [`silhouette`]: SoftRas's `neg_iou_loss` on the alpha channel ([`SilhouetteLoss`]) and the
 //!   image MSE ([`ImageMse`]), with their dL/d(image) in the renderer's `d_image` layout.
@@ -20,6 +20,8 @@
 //!   GPU by [`Regularizers`].
 //! - [`deform`]: SoftRas's sigmoid/tanh parameterization of vertex positions ([`Deform`]).
 //! - [`adam`]: Adam with PyTorch's semantics ([`Adam`]).
+//! - [`gate`]: the check that lets whole fitting iterations run on the GPU without the host
+//!   reading the binning's entry count ([`mesh_fit`] uses it).
 //! - [`io`]: the fitting commands' files (CPU): target silhouettes, the cameras CSV, the fitted
 //!   OBJ, all checked on load and written atomically.
 //! - [`report`]: what a fit shows a person (CPU): a contact sheet of predicted against target
@@ -46,9 +48,11 @@ pub mod adam;
 pub mod deform;
 pub mod field_fit;
 pub mod flatten;
+pub mod gate;
 pub mod io;
 pub mod laplacian;
 pub mod mesh_fit;
+pub mod pose;
 pub(crate) mod reduce;
 mod regularizers;
 pub mod report;

@@ -11,4 +11,4 @@ pub use context::{
 };
 pub use kernel::{BindingSpec, Kernel, KernelSpec, specs};
 pub use memory::{Buffer, BufferRange, MemoryKind, align_up};
-pub use record::{PassTime, Recorded, Recorder, Timer};
+pub use record::{INDIRECT_ARGS_BYTES, PassTime, Recorded, Recorder, Timer};

@@ -20,7 +20,19 @@ pub struct Recorder<'a> {
     ctx: &'a Context,
     cmd: vk::CommandBuffer,
     timer: Option<&'a mut Timer>,
+    gate: Option<Gate>,
 }
+
+/// The indirect-argument slots of an open [`Recorder::gated`] region.
+struct Gate {
+    buffer: vk::Buffer,
+    offset: u64,
+    slots: u64,
+    groups: Vec<[u32; 3]>,
+}
+
+/// Bytes of one indirect dispatch's arguments (`VkDispatchIndirectCommand`: x, y, z).
+pub const INDIRECT_ARGS_BYTES: u64 = 12;
 
 impl<'a> Recorder<'a> {
     /// Wraps a command buffer the caller allocated from a pool of `ctx`'s compute queue family
@@ -35,6 +47,7 @@ impl<'a> Recorder<'a> {
             ctx,
             cmd,
             timer: None,
+            gate: None,
         }
     }
 
@@ -102,9 +115,74 @@ impl<'a> Recorder<'a> {
         }
     }
 
+    /// Records `f` with every dispatch in it made indirect: the `i`-th dispatch (with a nonzero
+    /// group count) reads its grid `[x, y, z]` from `args` at byte `12 i`, and the grids it was
+    /// recorded with are returned, in order. Whatever writes `args` before they run decides
+    /// whether each runs: its own grid, or `[0, 0, 0]` for nothing. That is how a fitting
+    /// iteration turns every later stage into a no-op on the GPU when a capacity is exceeded
+    /// (`fit::mesh_fit`), without any kernel knowing. Only dispatches are gated: fills and copies
+    /// recorded in `f` always run. The writer must be followed by [`Recorder::indirect_barrier`].
+    pub fn gated(
+        &mut self,
+        args: BufferRange<'_>,
+        f: impl FnOnce(&mut Self) -> Result<()>,
+    ) -> Result<Vec<[u32; 3]>> {
+        if self.gate.is_some() {
+            return Err(Error::Limit("gated regions do not nest".into()));
+        }
+        if args.offset % 4 != 0 || args.offset + args.size > args.buffer.size() {
+            return Err(Error::Limit(format!(
+                "gate arguments {}+{} do not fit buffer `{}`",
+                args.offset,
+                args.size,
+                args.buffer.name()
+            )));
+        }
+        self.gate = Some(Gate {
+            buffer: args.buffer.raw,
+            offset: args.offset,
+            slots: args.size / INDIRECT_ARGS_BYTES,
+            groups: Vec::new(),
+        });
+        let result = f(self);
+        let gate = self.gate.take().expect("set above");
+        result.map(|()| gate.groups)
+    }
+
+    /// Makes shader and transfer writes visible to later indirect-argument reads, and orders
+    /// earlier indirect-argument reads before later writes (around a kernel that writes the
+    /// arguments of [`Recorder::gated`] dispatches).
+    pub fn indirect_barrier(&mut self) {
+        let stages = vk::PipelineStageFlags::COMPUTE_SHADER
+            | vk::PipelineStageFlags::TRANSFER
+            | vk::PipelineStageFlags::DRAW_INDIRECT;
+        let barrier = [vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(
+                vk::AccessFlags::INDIRECT_COMMAND_READ
+                    | vk::AccessFlags::SHADER_READ
+                    | vk::AccessFlags::SHADER_WRITE
+                    | vk::AccessFlags::TRANSFER_READ
+                    | vk::AccessFlags::TRANSFER_WRITE,
+            )];
+        // SAFETY: recording command buffer.
+        unsafe {
+            self.ctx.device().cmd_pipeline_barrier(
+                self.cmd,
+                stages,
+                stages,
+                vk::DependencyFlags::empty(),
+                &barrier,
+                &[],
+                &[],
+            )
+        };
+    }
+
     /// Records one dispatch of `kernel` over `groups` workgroups, with `bindings` in binding order
     /// and `push` as its push constants. Group counts above the device's X limit are folded into a
-    /// 2D grid; kernels address their work with `linear_group_id()` and ignore the surplus.
+    /// 2D grid; kernels address their work with `linear_group_id()` and ignore the surplus. Inside
+    /// [`Recorder::gated`], the grid is read from the gate's arguments instead.
     pub fn dispatch<P: bytemuck::Pod>(
         &mut self,
         kernel: &Kernel,
@@ -172,6 +250,20 @@ impl<'a> Recorder<'a> {
                 "{groups} workgroups exceed the device's grid"
             )));
         }
+        let indirect = match self.gate.as_mut() {
+            None => None,
+            Some(gate) => {
+                let slot = gate.groups.len() as u64;
+                if slot >= gate.slots {
+                    return Err(fail(format!(
+                        "the gated region holds {} dispatches; this is one more",
+                        gate.slots
+                    )));
+                }
+                gate.groups.push([x, y, 1]);
+                Some((gate.buffer, gate.offset + INDIRECT_ARGS_BYTES * slot))
+            }
+        };
 
         let infos: Vec<[vk::DescriptorBufferInfo; 1]> = bindings
             .iter()
@@ -216,7 +308,12 @@ impl<'a> Recorder<'a> {
                     push_bytes,
                 );
             }
-            device.cmd_dispatch(self.cmd, x, y, 1);
+            match indirect {
+                // The buffer has INDIRECT_BUFFER usage (every buffer has) and the slot lies
+                // inside the range `gated` checked.
+                Some((buffer, offset)) => device.cmd_dispatch_indirect(self.cmd, buffer, offset),
+                None => device.cmd_dispatch(self.cmd, x, y, 1),
+            }
         }
         self.barrier();
         Ok(())

@@ -22,6 +22,22 @@
 //! The u32 scan is exact only while the largest possible total (items × tiles) stays below 2^32;
 //! [`Binner::record_count`] refuses a dispatch that could wrap, so callers split their views
 //! into groups ([`max_views_per_group`]).
+//!
+//! **Guarded binning** (a loop that must not wait for the count: mesh fitting). The entry
+//! buffers are reserved with headroom over a count seen before ([`Bins::reserve_entry_capacity`])
+//! and [`Binner::record_sort_guarded`] records the rest without knowing the count: every slot of
+//! the capacity is first filled with a *sentinel* key (all ones, which [`BinJob::padded_key_bits`]
+//! sorts past every tile), the scatter overwrites the first `total` slots, and the sort and the
+//! ranges run over the whole capacity; the sentinels end up after every tile's run and the
+//! ranges pass skips them, so the result is the exact binning's, whatever the headroom. The
+//! sorting kernels stay generic (no count read from a buffer); the price is sorting the headroom
+//! too. Whether `total` fit is for the caller to check on the GPU (the count's total is in
+//! [`Bins::total_buffer`]) before the sort runs: the scatter itself never writes past the
+//! buffers it is given (an item whose entries would not fit writes none), but a count over the
+//! capacity leaves the binning incomplete.
+//!
+//! The offsets buffer holds one entry more than the items: `offsets[items]` is the total, so a
+//! consumer can find the end of the last item's entries without knowing the count on the host.
 
 use bytemuck::{Pod, Zeroable};
 
@@ -118,6 +134,12 @@ impl BinJob {
         let tiles = self.tile_count();
         (u64::BITS - (tiles.max(2) - 1).leading_zeros()).max(1)
     }
+
+    /// Key bits of a guarded sort ([`Binner::record_sort_guarded`]): enough that the sentinel
+    /// (all ones in these bits) is above every tile index.
+    pub fn padded_key_bits(&self) -> u32 {
+        (u64::BITS - self.tile_count().leading_zeros()).max(1)
+    }
 }
 
 /// The most views of `items_per_view` items on `grid` one binning can take without its u32
@@ -188,7 +210,7 @@ impl Bins {
     fn with_capacity(ctx: &Context, items: u64, entries: u64, tiles: u64) -> Result<Self> {
         let (items, entries, tiles) = (items.max(1), entries.max(1), tiles.max(1));
         Ok(Self {
-            counts: ctx.create_buffer("bin counts", 4 * items, MemoryKind::Device)?,
+            counts: ctx.create_buffer("bin counts", 4 * (items + 1), MemoryKind::Device)?,
             scan_scratch: ScanScratch::new(ctx, items)?,
             item_capacity: items,
             keys: ctx.create_buffer("bin keys", 8 * entries, MemoryKind::Device)?,
@@ -207,7 +229,7 @@ impl Bins {
     pub fn reserve(&mut self, ctx: &Context, job: &BinJob) -> Result<()> {
         if job.item_count() > self.item_capacity {
             self.counts =
-                ctx.create_buffer("bin counts", 4 * job.item_count(), MemoryKind::Device)?;
+                ctx.create_buffer("bin counts", 4 * (job.item_count() + 1), MemoryKind::Device)?;
             self.scan_scratch = ScanScratch::new(ctx, job.item_count())?;
             self.item_capacity = job.item_count();
         }
@@ -232,14 +254,44 @@ impl Bins {
         }
         if entries > self.entry_capacity {
             // Grow with headroom, so that a scene that breathes a little does not reallocate.
-            let cap = (entries + entries / 4).min(max);
-            self.keys = ctx.create_buffer("bin keys", 8 * cap, MemoryKind::Device)?;
-            self.pairs = ctx.create_buffer("bin entries", 4 * cap, MemoryKind::Device)?;
-            self.pair_items = ctx.create_buffer("bin entry items", 4 * cap, MemoryKind::Device)?;
-            self.sort_scratch = SortScratch::new(ctx, cap)?;
-            self.entry_capacity = cap;
+            self.allocate_entries(ctx, (entries + entries / 4).min(max))?;
         }
         Ok(())
+    }
+
+    /// Makes the entry buffers hold exactly `entries` entries, if they hold fewer (no headroom
+    /// added: the caller of a guarded binning chose it). Fails as [`Bins::reserve_entries`].
+    pub fn reserve_entry_capacity(&mut self, ctx: &Context, entries: u64) -> Result<()> {
+        let max = max_entries(ctx);
+        if entries > max {
+            return Err(Error::Limit(format!(
+                "binning needs {entries} (face, tile) entries, over the {max} this device binds at \
+                 once; use fewer views, a larger tile or a smaller σ"
+            )));
+        }
+        if entries > self.entry_capacity {
+            self.allocate_entries(ctx, entries)?;
+        }
+        Ok(())
+    }
+
+    fn allocate_entries(&mut self, ctx: &Context, cap: u64) -> Result<()> {
+        self.keys = ctx.create_buffer("bin keys", 8 * cap, MemoryKind::Device)?;
+        self.pairs = ctx.create_buffer("bin entries", 4 * cap, MemoryKind::Device)?;
+        self.pair_items = ctx.create_buffer("bin entry items", 4 * cap, MemoryKind::Device)?;
+        self.sort_scratch = SortScratch::new(ctx, cap)?;
+        self.entry_capacity = cap;
+        Ok(())
+    }
+
+    /// The entries the entry buffers hold.
+    pub fn entry_capacity(&self) -> u64 {
+        self.entry_capacity
+    }
+
+    /// The one `u32` where the last count pass left its entry total (on the GPU).
+    pub fn total_buffer(&self) -> &Buffer {
+        self.scan_scratch.total()
     }
 
     /// Reads the entry count of the last recorded count pass (after its submission finished),
@@ -261,7 +313,8 @@ impl Bins {
         self.entries
     }
 
-    /// The item-major exclusive offsets of the entries (after the count pass).
+    /// The item-major exclusive offsets of the entries (after the count pass), followed by the
+    /// total: `items + 1` values.
     pub fn offsets(&self) -> &Buffer {
         &self.counts
     }
@@ -373,6 +426,7 @@ impl Binner {
         let n = job.item_count();
         if n == 0 {
             rec.fill(bins.scan_scratch.total().whole(), 0);
+            rec.fill(bins.counts.range(0, 4), 0);
             return Ok(());
         }
         let counts = bins.counts.range(0, 4 * n);
@@ -383,7 +437,11 @@ impl Binner {
             &Self::push(job),
             groups as u32,
         )?;
-        self.scan.record(rec, &bins.scan_scratch, counts, counts, n)
+        self.scan
+            .record(rec, &bins.scan_scratch, counts, counts, n)?;
+        // offsets[n] = the total, for consumers that do not know it on the host.
+        rec.copy(bins.scan_scratch.total(), 0, &bins.counts, 4 * n, 4);
+        Ok(())
     }
 
     /// Records scatter, sort and ranges for the entry count that [`Bins::read_total`] (or
@@ -474,6 +532,66 @@ impl Binner {
         };
         let groups = n.div_ceil(u64::from(specs::BIN_RANGES.workgroup_size[0]));
         rec.dispatch(&self.ranges, &[keys, ranges], &push, groups as u32)
+    }
+
+    /// Records scatter, sort and ranges over the whole entry capacity, for a count the host does
+    /// not know (see the module docs): sentinel keys fill the capacity, the scatter overwrites
+    /// the first `total` slots, and the sort and ranges pass run over all of it. The result is
+    /// the exact binning's when the count's total fits [`Bins::entry_capacity`]; the caller
+    /// must gate these dispatches on that ([`Recorder::gated`]).
+    pub fn record_sort_guarded(
+        &self,
+        rec: &mut Recorder<'_>,
+        bins: &Bins,
+        items: BufferRange<'_>,
+        job: &BinJob,
+    ) -> Result<()> {
+        Self::check(job, &items, bins)?;
+        let cap = bins.entry_capacity;
+        let tiles = job.tile_count();
+        if tiles >= u64::from(u32::MAX) {
+            return Err(Error::Limit(format!(
+                "binning: {tiles} tiles leave no room for the sentinel key"
+            )));
+        }
+        rec.fill(bins.keys.range(0, 8 * cap), u32::MAX);
+        rec.fill(bins.ranges.range(0, 8 * tiles), 0);
+        let n = job.item_count();
+        if n > 0 {
+            let groups = n.div_ceil(u64::from(specs::BIN_SCATTER.workgroup_size[0]));
+            rec.dispatch(
+                &self.scatter,
+                &[
+                    items,
+                    bins.counts.range(0, 4 * n),
+                    bins.keys.range(0, 8 * cap),
+                    bins.pairs.range(0, 4 * cap),
+                    bins.pair_items.range(0, 4 * cap),
+                ],
+                &Self::push(job),
+                groups as u32,
+            )?;
+        }
+        self.sort.record(
+            rec,
+            &bins.sort_scratch,
+            &bins.keys,
+            &bins.pairs,
+            cap,
+            job.padded_key_bits(),
+        )?;
+        let push = RangesPush {
+            n: cap as u32,
+            tiles: tiles as u32,
+            pad: [0; 2],
+        };
+        let groups = cap.div_ceil(u64::from(specs::BIN_RANGES.workgroup_size[0]));
+        rec.dispatch(
+            &self.ranges,
+            &[bins.keys.range(0, 8 * cap), bins.ranges.range(0, 8 * tiles)],
+            &push,
+            groups as u32,
+        )
     }
 
     /// Convenience (tests, tools): bins `items` completely, two submissions, and reads the

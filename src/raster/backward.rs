@@ -6,34 +6,60 @@
 //! 1. **Per (pixel, face)** (`kernels/include/raster_grad.glsl`, the twin's `pixel_face_grad`):
 //!    from the pixel's upstream gradient and the forward's [`PixelAux`](super::fine::PixelAux),
 //!    one face's contribution, independently of the other faces.
-//! 2. **Per face**, either
-//!    - tiled (`grad_tiled.comp`): per (face, tile) entry of the forward's binning (no second
-//!      binning), one invocation sums the face over the tile's pixels and writes the partial at
-//!      the entry's item-major slot; then `grad_reduce.comp` sums each face's contiguous slots in
-//!      order; or
-//!    - brute force (`grad_brute.comp`, the baseline): one invocation per (view, face) over every
-//!      pixel.
+//! 2. **Per unit of work**, a partial gradient (9 screen floats, then the colour slots: 3 vertex
+//!    colours or R² texels, × RGB), either
+//!    - tiled (`grad_tiled.comp`): a unit is a (face, tile) entry of the forward's binning (no
+//!      second binning), summed over the tile's pixels; a tile crowded past the driver's loop
+//!      cap is split over several workgroups; or
+//!    - brute force (`grad_brute.comp`, the baseline): a unit is a (view, face, band of rows),
+//!      summed over the band's pixels; bands keep each invocation under the loop cap.
 //!
-//!    Each value has one writer and a fixed summation order: no float atomics, and repeated
-//!    runs are bit-identical.
-//! 3. **Per (view, face)** (`grad_world.comp`, the twin's `face_screen_to_world_grad`): screen →
+//!    An item's (view, face) units are contiguous (item-major). The partials are written one
+//!    **chunk** of units at a time into one buffer of at most one storage binding (or a smaller
+//!    [`GradSplit::chunk_units`]), so memory stays bounded whatever the texture resolution.
+//! 3. **Per face**, after each chunk: `grad_reduce.comp` adds each item's partials to its screen
+//!    (and vertex-colour) gradient, and `grad_reduce_texels.comp` adds the texel slots to the
+//!    face's dL/d(lit texel) of the view's mesh. Both keep running sums in unit order, so the
+//!    result is bit for bit the same however the units are chunked.
+//! 4. **Per (view, face)** (`grad_world.comp`, the twin's `face_screen_to_world_grad`): screen →
 //!    camera → world, through perspective, orthographic or the matrix projection.
-//! 4. **Per vertex** (`grad_gather.comp`, the twin's `VertexFaces::gather`) and **per texel**
-//!    (`grad_texels.comp`): summed over views and incident corners in a fixed order.
-//! 5. **On the host, in f64**, where the forward lights: the lighting's backward (raw colours,
+//! 5. **Per vertex** (`grad_gather.comp`, the twin's `VertexFaces::gather`): summed over views
+//!    and incident corners in a fixed order.
+//! 6. **On the host, in f64**, where the forward lights: the lighting's backward (raw colours,
 //!    and normals → positions) with the twin's own functions, and the camera gradient (look-at).
+//!
+//! Each value has one writer and a fixed summation order: no float atomics, and repeated runs
+//! are bit-identical. On a driver that caps shader loops
+//! ([`crate::gpu::DeviceInfo::shader_loop_limit`]) every dispatch's loop count is bounded on the
+//! host from the real iteration counts (`raster::gpu::*_iterations`); work is split (bands,
+//! tile parts, reduction windows and view ranges) rather than refused.
 
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 
 use super::fine::{FLAG_ANTIALIAS, RasterPush};
-use super::gpu::{GpuScene, Method};
+use super::gpu::{
+    GpuScene, Method, brute_backward_iterations, reduce_iterations, texel_reduce_iterations,
+    tiled_backward_iterations,
+};
 use super::reference::ColorMode;
 use super::reference_grad::{
     self, Gradients, VertexFaces, camera_grad, lighting_grad_surface, lighting_grad_vertex,
 };
 use crate::error::{Error, Result};
-use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+
+/// Push constants of `grad_tiled.comp` and `grad_brute.comp`: the fine pass's, then the chunk.
+/// Twin of `Push` in `raster_fine.glsl` with `FINE_BACKWARD`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct GradPush {
+    fine: RasterPush,
+    chunk_begin: u32,
+    chunk_end: u32,
+    split: u32,
+    parts: u32,
+}
 
 /// Push constants of `grad_reduce.comp`.
 #[repr(C)]
@@ -42,7 +68,31 @@ struct ReducePush {
     item_count: u32,
     first_item: u32,
     stride: u32,
-    entry_total: u32,
+    width: u32,
+    unit_total: u32,
+    chunk_begin: u32,
+    window_begin: u32,
+    window_end: u32,
+    parts: u32,
+    pad: [u32; 3],
+}
+
+/// Push constants of `grad_reduce_texels.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct TexelReducePush {
+    face_count: u32,
+    texels: u32,
+    stride: u32,
+    unit_total: u32,
+    chunk_begin: u32,
+    window_begin: u32,
+    window_end: u32,
+    parts: u32,
+    first_view: u32,
+    group_views: u32,
+    view_begin: u32,
+    view_end: u32,
 }
 
 /// Push constants of `grad_world.comp`.
@@ -68,26 +118,14 @@ struct GatherPush {
     pad: [u32; 2],
 }
 
-/// Push constants of `grad_texels.comp`.
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct TexelsPush {
-    texels: u32,
-    face_count: u32,
-    mesh_count: u32,
-    view_count: u32,
-    stride: u32,
-    pad: [u32; 3],
-}
-
 /// The backward's pipelines, made once per context.
 pub struct GradKernels {
     tiled: Kernel,
     brute: Kernel,
     reduce: Kernel,
+    reduce_texels: Kernel,
     world: Kernel,
     gather: Kernel,
-    texels: Kernel,
 }
 
 impl GradKernels {
@@ -97,23 +135,48 @@ impl GradKernels {
             tiled: Kernel::new(ctx, &specs::GRAD_TILED)?,
             brute: Kernel::new(ctx, &specs::GRAD_BRUTE)?,
             reduce: Kernel::new(ctx, &specs::GRAD_REDUCE)?,
+            reduce_texels: Kernel::new(ctx, &specs::GRAD_REDUCE_TEXELS)?,
             world: Kernel::new(ctx, &specs::GRAD_WORLD)?,
             gather: Kernel::new(ctx, &specs::GRAD_GATHER)?,
-            texels: Kernel::new(ctx, &specs::GRAD_TEXELS)?,
         })
     }
 }
 
-/// Floats per face gradient: 9 screen coordinates, then the colour slots (R² texels or 3
+/// Floats per partial gradient: 9 screen coordinates, then the colour slots (R² texels or 3
 /// corners) × RGB.
 pub fn grad_stride(mode: ColorMode, texture_res: u32) -> u32 {
     9 + 3 * reference_grad::color_slots(mode, texture_res) as u32
 }
 
+/// Floats per (view, face) gradient after the reduction: 9 screen coordinates, and with vertex
+/// colours the 3 corners' RGB (texel gradients go straight to the per-texel sums).
+pub fn face_grad_width(mode: ColorMode) -> u32 {
+    match mode {
+        ColorMode::Surface => 9,
+        ColorMode::Vertex => 18,
+    }
+}
+
+/// How the backward may split its work. The default (all `None`) splits only where it must: the
+/// partials take at most one storage binding, and on a driver that caps shader loops, bands,
+/// tile parts and reduction windows are as large as the cap allows. Smaller values give the same
+/// gradients (bit for bit for `chunk_units` and `tile_faces`; brute force's bands regroup its
+/// sums) and exist to exercise the split paths on small scenes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GradSplit {
+    /// At most this many units (tiled: (face, tile) entries; brute: (view, face, band)) per
+    /// chunk of partials.
+    pub chunk_units: Option<u64>,
+    /// Brute force: at most this many rows per band.
+    pub band_rows: Option<u32>,
+    /// Tiled: at most this many of a tile's faces per workgroup (rounded up to a multiple of 64).
+    pub tile_faces: Option<u32>,
+}
+
 /// The buffers of one scene's backward, reusable across backward passes of that scene.
 pub struct GradBuffers {
     pub(crate) d_image: Buffer,
-    partials: Option<Buffer>,
+    partials: Buffer,
     face_grads: Buffer,
     corner_world: Buffer,
     corner_cam: Buffer,
@@ -123,7 +186,14 @@ pub struct GradBuffers {
     color_grads: Buffer,
     method: Method,
     stride: u32,
-    entry_capacity: u64,
+    width: u32,
+    split: GradSplit,
+    /// Units one chunk of partials holds, and the most it may hold (the budget).
+    chunk_units: u64,
+    budget_units: u64,
+    /// Brute force: rows per band and bands per view.
+    band_rows: u32,
+    bands: u32,
 }
 
 fn checked(ctx: &Context, what: &str, bytes: u64) -> Result<u64> {
@@ -131,17 +201,148 @@ fn checked(ctx: &Context, what: &str, bytes: u64) -> Result<u64> {
     if bytes > max {
         return Err(Error::Limit(format!(
             "the backward's {what} buffer would need {bytes} bytes, over this device's \
-             maxStorageBufferRange ({max}); use fewer views, larger tiles, a smaller σ or a \
-             smaller texture resolution"
+             maxStorageBufferRange ({max}); use fewer views or faces"
         )));
     }
     Ok(bytes.max(4))
+}
+
+/// Rows per band of the brute-force backward over a `width × height` image: the whole image, or
+/// fewer rows where `cap` or the driver's loop `limit` asks.
+fn band_rows(width: u32, height: u32, limit: Option<u64>, cap: Option<u32>) -> Result<u32> {
+    let mut rows = u64::from(height);
+    if let Some(cap) = cap {
+        rows = rows.min(u64::from(cap.max(1)));
+    }
+    if let Some(limit) = limit {
+        let fit =
+            limit.saturating_sub(brute_backward_iterations(0, width)) / (u64::from(width) + 1);
+        if fit == 0 {
+            return Err(Error::Limit(format!(
+                "one row of {width} pixels is over the {limit} loop iterations the driver runs \
+                 per shader invocation; the brute-force backward cannot split it: use the tiled \
+                 method"
+            )));
+        }
+        rows = rows.min(fit);
+    }
+    debug_assert!(limit.is_none_or(|l| brute_backward_iterations(rows, width) <= l));
+    Ok(rows as u32)
+}
+
+/// Faces of one tile per workgroup of `grad_tiled.comp` (a multiple of 64), for tiles of at most
+/// `run` entries: all of them, or fewer where `cap` or the driver's loop `limit` asks.
+fn tile_faces(run: u64, tile: u32, limit: Option<u64>, cap: Option<u32>) -> Result<u64> {
+    let mut faces = run.max(1).div_ceil(64) * 64;
+    if let Some(cap) = cap {
+        faces = faces.min(u64::from(cap.max(1)).div_ceil(64) * 64);
+    }
+    if let Some(limit) = limit {
+        let fixed = tiled_backward_iterations(run, tile, 0);
+        let per_batch = tiled_backward_iterations(run.max(64), tile, 64)
+            - tiled_backward_iterations(run.max(64), tile, 0);
+        let batches = limit.saturating_sub(fixed) / per_batch;
+        if batches == 0 {
+            return Err(Error::Limit(format!(
+                "one batch of 64 faces over a {tile}x{tile} tile is over the {limit} loop \
+                 iterations the driver runs per shader invocation; the tiled backward needs \
+                 tiles of at most 248 pixels there"
+            )));
+        }
+        faces = faces.min(64 * batches);
+        debug_assert!(tiled_backward_iterations(run, tile, faces) <= limit);
+    }
+    Ok(faces)
+}
+
+/// How one chunk's partials are added up: units per `grad_reduce.comp` dispatch (its window),
+/// and views and units per `grad_reduce_texels.comp` dispatch, for a chunk of `chunk` units
+/// where an item holds at most `per_item` units and the group has `views` views.
+fn reduce_plan(chunk: u64, per_item: u64, views: u64, limit: Option<u64>) -> (u64, u64, u64) {
+    let Some(limit) = limit else {
+        return (chunk, views, chunk);
+    };
+    let budget = limit - 2;
+    let window = if reduce_iterations(per_item) <= limit {
+        chunk
+    } else {
+        budget
+    };
+    let (view_step, texel_window) =
+        if texel_reduce_iterations(views, (views * per_item).min(chunk)) <= limit {
+            (views, chunk)
+        } else {
+            let step = (budget / (1 + per_item)).clamp(1, views);
+            if step * (1 + per_item) <= budget {
+                (step, chunk)
+            } else {
+                (1, budget - 1)
+            }
+        };
+    debug_assert!(reduce_iterations(per_item.min(window)) <= limit);
+    debug_assert!(
+        texel_reduce_iterations(view_step, (view_step * per_item).min(texel_window)) <= limit
+    );
+    (window.max(1), view_step.max(1), texel_window.max(1))
+}
+
+/// Workgroups of `size` invocations for `n` invocations, as the u32 a dispatch takes.
+fn groups(n: u64, size: u64) -> Result<u32> {
+    u32::try_from(n.div_ceil(size)).map_err(|_| {
+        Error::Limit(format!(
+            "the backward would dispatch {n} invocations at once"
+        ))
+    })
+}
+
+/// One view group's units, for the reductions.
+struct UnitGroup<'a> {
+    first_view: u32,
+    views: u32,
+    units: u64,
+    /// Brute force: units per item (bands); 0: tiled, from `offsets`.
+    parts: u32,
+    offsets: BufferRange<'a>,
+    /// The most units one item holds.
+    per_item: u64,
 }
 
 impl GradBuffers {
     /// Buffers for the backward of `scene` by `method`. Tiled needs the scene's last forward run
     /// to have been tiled with the same tile size (the backward reuses its binning).
     pub fn new(ctx: &Context, scene: &GpuScene, method: Method) -> Result<Self> {
+        Self::with_split(ctx, scene, method, GradSplit::default())
+    }
+
+    /// As [`GradBuffers::new`], splitting the work at most as `split` says.
+    pub fn with_split(
+        ctx: &Context,
+        scene: &GpuScene,
+        method: Method,
+        split: GradSplit,
+    ) -> Result<Self> {
+        Self::build(ctx, scene, method, split, None)
+    }
+
+    /// As [`GradBuffers::new`], with tiled partials for `entries` (face, tile) entries (at least
+    /// the scene's largest group; at most what one binding holds, more take several chunks): a
+    /// guarded fitting loop sizes them as its bins.
+    pub(crate) fn with_entry_capacity(
+        ctx: &Context,
+        scene: &GpuScene,
+        method: Method,
+        entries: u64,
+    ) -> Result<Self> {
+        Self::build(ctx, scene, method, GradSplit::default(), Some(entries))
+    }
+
+    fn build(
+        ctx: &Context,
+        scene: &GpuScene,
+        method: Method,
+        split: GradSplit,
+        entries: Option<u64>,
+    ) -> Result<Self> {
         if let Method::Tiled { tile } = method {
             if scene.tile != Some(tile) || scene.groups.is_empty() {
                 return Err(Error::Input(format!(
@@ -151,45 +352,60 @@ impl GradBuffers {
                 )));
             }
         }
-        let stride = grad_stride(scene.settings.color_mode, scene.texture_res);
+        let mode = scene.settings.color_mode;
+        let stride = grad_stride(mode, scene.texture_res);
+        let width = face_grad_width(mode);
         let items = u64::from(scene.face_count) * u64::from(scene.view_count);
         let outputs = u64::from(scene.settings.width)
             * u64::from(scene.settings.height)
             * u64::from(scene.view_count);
         let batch = scene.meshes.len() as u64;
         let vertices = u64::from(scene.vertex_count) * batch;
-        let color_values = match scene.settings.color_mode {
+        let color_values = match mode {
             ColorMode::Surface => {
                 u64::from(scene.face_count) * u64::from(scene.texture_res).pow(2) * batch
             }
             ColorMode::Vertex => vertices,
         };
         let adjacency = VertexFaces::new(&scene.meshes[0].faces, scene.vertex_count as usize);
-        let entry_capacity = match method {
-            Method::Brute => 0,
-            // Headroom, so that a fit whose entries breathe does not reallocate every step.
+        let limit = ctx.info().shader_loop_limit();
+        let max_range = u64::from(ctx.info().limits.max_storage_buffer_range);
+        let mut budget_units = max_range / (4 * u64::from(stride));
+        if let Some(cap) = split.chunk_units {
+            budget_units = budget_units.min(cap);
+        }
+        if budget_units == 0 {
+            return Err(Error::Limit(format!(
+                "one partial gradient of {stride} floats is over this device's \
+                 maxStorageBufferRange ({max_range}); use a smaller texture resolution"
+            )));
+        }
+        let (band_rows, bands, units) = match method {
+            Method::Brute => {
+                let rows = band_rows(scene.width, scene.height, limit, split.band_rows)?;
+                let bands = scene.height.div_ceil(rows);
+                (rows, bands, items * u64::from(bands))
+            }
             Method::Tiled { .. } => {
                 let most = scene.groups.iter().map(|g| g.entries).max().unwrap_or(0);
-                let max =
-                    u64::from(ctx.info().limits.max_storage_buffer_range) / (4 * u64::from(stride));
-                (most + most / 4).min(max).max(most)
+                // Headroom, so that a fit whose entries breathe does not reallocate every step.
+                (0, 0, entries.map_or(most + most / 4, |e| e.max(most)))
             }
         };
-        let partials = match method {
-            Method::Brute => None,
-            Method::Tiled { .. } => Some(ctx.create_buffer(
-                "grad partials",
-                checked(ctx, "partials", entry_capacity * u64::from(stride) * 4)?,
-                MemoryKind::Device,
-            )?),
-        };
+        if units > u64::from(u32::MAX) {
+            return Err(Error::Limit(format!(
+                "the backward would split into {units} units of work, over 2^32; use fewer \
+                 views or the tiled method"
+            )));
+        }
+        let chunk_units = units.clamp(1, budget_units);
         let device = |name: &str, bytes: u64| -> Result<Buffer> {
             ctx.create_buffer(name, checked(ctx, name, bytes)?, MemoryKind::Device)
         };
         Ok(Self {
             d_image: device("d_image", 16 * outputs)?,
-            partials,
-            face_grads: device("face grads", items * u64::from(stride) * 4)?,
+            partials: device("grad partials", chunk_units * u64::from(stride) * 4)?,
+            face_grads: device("face grads", items * u64::from(width) * 4)?,
             corner_world: device("corner world grads", items * 36)?,
             corner_cam: device("corner camera grads", items * 36)?,
             vertex_offsets: ctx.upload_buffer("vertex offsets", &adjacency.offsets)?,
@@ -198,13 +414,35 @@ impl GradBuffers {
             color_grads: device("colour grads", color_values * 12)?,
             method,
             stride,
-            entry_capacity,
+            width,
+            split,
+            chunk_units,
+            budget_units,
+            band_rows,
+            bands,
         })
     }
 
-    /// The (face, tile) entries the tiled partials can hold (0 for brute force).
+    /// The (face, tile) entries one chunk of the tiled partials holds, or `u64::MAX` once the
+    /// partials are as large as they may be (more entries then take more chunks, and new
+    /// buffers would not help); 0 for brute force.
     pub fn entry_capacity(&self) -> u64 {
-        self.entry_capacity
+        match self.method {
+            Method::Brute => 0,
+            Method::Tiled { .. } if self.chunk_units >= self.budget_units => u64::MAX,
+            Method::Tiled { .. } => self.chunk_units,
+        }
+    }
+
+    /// Units of work (tiled: (face, tile) entries; brute: (view, face, band)) one chunk of
+    /// partials holds.
+    pub fn chunk_units(&self) -> u64 {
+        self.chunk_units
+    }
+
+    /// Brute force: bands of rows per view (0 for tiled).
+    pub fn bands(&self) -> u32 {
+        self.bands
     }
 
     /// Uploads dL/d(image): RGBA per output pixel, view-major, row-major.
@@ -257,145 +495,31 @@ impl GradKernels {
     }
 
     /// Records the whole backward of `scene` into `gb` (after its forward and
-    /// [`GradBuffers::set_d_image`]): per-face gradients by `gb`'s method, then world, vertex and
-    /// texel sums. [`GradKernels::finish`] reads them back and adds the host's share.
+    /// [`GradBuffers::set_d_image`]): per-face gradients by `gb`'s method (partials chunk by
+    /// chunk, each chunk reduced into the running per-face and per-texel sums), then the world
+    /// chain and the vertex sums. [`GradKernels::finish`] reads them back and adds the host's
+    /// share.
     pub fn record(&self, rec: &mut Recorder<'_>, scene: &GpuScene, gb: &GradBuffers) -> Result<()> {
-        let stride = gb.stride;
         let items = scene.face_count * scene.view_count;
-        match gb.method {
-            Method::Brute => {
-                if let Some(limit) = rec.context().info().shader_loop_limit() {
-                    let n = u64::from(scene.width) * u64::from(scene.height + 1) + 2;
-                    if n > limit {
-                        return Err(Error::Limit(format!(
-                            "the brute-force backward loops over all {}x{} rendered pixels in \
-                             one shader invocation, over the {limit} iterations {} allows (it \
-                             would silently skip the rest); use the tiled method",
-                            scene.width,
-                            scene.height,
-                            rec.context().info().name
-                        )));
-                    }
-                }
-                let push = Self::fine_push(scene, stride);
-                rec.pass("grad brute", |rec| {
-                    rec.dispatch(
-                        &self.brute,
-                        &[
-                            scene.setups.whole(),
-                            scene.colors.whole(),
-                            scene.faces.whole(),
-                            scene.image.whole(),
-                            scene.aux.whole(),
-                            gb.d_image.whole(),
-                            gb.face_grads.whole(),
-                        ],
-                        &push,
-                        items.div_ceil(64),
-                    )
-                })?;
+        let name = match gb.method {
+            Method::Brute => "grad brute",
+            Method::Tiled { .. } => "grad tiled",
+        };
+        rec.pass(name, |rec| {
+            rec.fill(gb.face_grads.whole(), 0);
+            if scene.settings.color_mode == ColorMode::Surface {
+                rec.fill(gb.color_grads.whole(), 0);
             }
-            Method::Tiled { tile } => {
-                let partials = gb
-                    .partials
-                    .as_ref()
-                    .ok_or_else(|| Error::Input("tiled backward without partials".into()))?;
-                let grid = scene.grid(tile)?;
-                if scene.tile != Some(tile) {
-                    return Err(Error::Input(format!(
-                        "the tiled backward (tile {tile}) needs the scene binned with those tiles"
-                    )));
-                }
-                if let Some(limit) = rec.context().info().shader_loop_limit() {
-                    for g in &scene.groups {
-                        let n =
-                            super::gpu::tiled_backward_iterations(g.max_tile_entries, tile, stride);
-                        if n > limit {
-                            return Err(Error::Limit(format!(
-                                "a tile holds {} faces: the tiled backward would run {n} loop \
-                                 iterations in one shader invocation, over the {limit} {} \
-                                 allows (it would silently skip the rest); use smaller tiles",
-                                g.max_tile_entries,
-                                rec.context().info().name
-                            )));
-                        }
-                    }
-                }
-                if let Some(g) = scene.groups.iter().find(|g| g.entries > gb.entry_capacity) {
-                    return Err(Error::Limit(format!(
-                        "the backward's partials hold {} entries; the scene now has {} (make \
-                         new GradBuffers)",
-                        gb.entry_capacity, g.entries
-                    )));
-                }
-                for (group, bins) in scene.groups.iter().zip(&scene.bins) {
-                    if group.entries == 0 {
-                        // No face touches these views: their gradients are zero.
-                        let first = u64::from(group.first) * u64::from(scene.face_count);
-                        let n = u64::from(group.views) * u64::from(scene.face_count);
-                        rec.fill(
-                            gb.face_grads
-                                .range(4 * first * u64::from(stride), 4 * n * u64::from(stride)),
-                            0,
-                        );
-                        continue;
-                    }
-                    let mut push = Self::fine_push(scene, stride);
-                    push.first_view = group.first;
-                    push.view_count = group.views;
-                    push.tile_size = tile;
-                    push.tiles_x = grid.tiles_x;
-                    push.tiles_y = grid.tiles_y;
-                    push.entry_total = group.entries as u32;
-                    let tiles = grid.tiles_per_view() * u64::from(group.views);
-                    rec.pass("grad tiled", |rec| {
-                        rec.dispatch(
-                            &self.tiled,
-                            &[
-                                scene.setups.whole(),
-                                scene.colors.whole(),
-                                scene.faces.whole(),
-                                scene.image.whole(),
-                                scene.aux.whole(),
-                                gb.d_image.whole(),
-                                partials.whole(),
-                                bins.entries().whole(),
-                                bins.entry_items().whole(),
-                                bins.ranges().whole(),
-                            ],
-                            &push,
-                            u32::try_from(tiles).map_err(|_| {
-                                Error::Limit(format!("grad_tiled: {tiles} workgroups"))
-                            })?,
-                        )
-                    })?;
-                    let group_items = group.views * scene.face_count;
-                    let reduce = ReducePush {
-                        item_count: group_items,
-                        first_item: group.first * scene.face_count,
-                        stride,
-                        entry_total: group.entries as u32,
-                    };
-                    rec.pass("grad reduce", |rec| {
-                        rec.dispatch(
-                            &self.reduce,
-                            &[
-                                bins.offsets().whole(),
-                                partials.whole(),
-                                gb.face_grads.whole(),
-                            ],
-                            &reduce,
-                            group_items.div_ceil(64),
-                        )
-                    })?;
-                }
+            match gb.method {
+                Method::Brute => self.record_brute(rec, scene, gb),
+                Method::Tiled { tile } => self.record_tiled(rec, scene, gb, tile),
             }
-        }
+        })?;
         let world = WorldPush {
             face_count: scene.face_count,
             view_count: scene.view_count,
             vertex_count: scene.vertex_count,
-            stride,
+            stride: gb.width,
         };
         rec.pass("grad world", |rec| {
             rec.dispatch(
@@ -419,7 +543,7 @@ impl GradKernels {
             mesh_count: meshes,
             face_count: scene.face_count,
             view_count: scene.view_count,
-            stride,
+            stride: gb.width,
             vertex_colors: u32::from(vertex_colors),
             pad: [0; 2],
         };
@@ -438,29 +562,236 @@ impl GradKernels {
                 &gather,
                 (scene.vertex_count * meshes).div_ceil(64),
             )
-        })?;
-        if !vertex_colors {
-            let texels = scene.texture_res * scene.texture_res;
-            let push = TexelsPush {
-                texels,
-                face_count: scene.face_count,
-                mesh_count: meshes,
-                view_count: scene.view_count,
-                stride,
+        })
+    }
+
+    /// Brute force: (view, face, band) units, chunk by chunk.
+    fn record_brute(
+        &self,
+        rec: &mut Recorder<'_>,
+        scene: &GpuScene,
+        gb: &GradBuffers,
+    ) -> Result<()> {
+        let limit = rec.context().info().shader_loop_limit();
+        if let Some(limit) = limit {
+            let n = brute_backward_iterations(u64::from(gb.band_rows), scene.width);
+            if n > limit {
+                return Err(Error::Limit(format!(
+                    "bands of {} rows of {} pixels need {n} loop iterations per invocation, over \
+                     the {limit} {} allows (make the GradBuffers on this device)",
+                    gb.band_rows,
+                    scene.width,
+                    rec.context().info().name
+                )));
+            }
+        }
+        let items = u64::from(scene.face_count) * u64::from(scene.view_count);
+        let units = items * u64::from(gb.bands);
+        let group = UnitGroup {
+            first_view: 0,
+            views: scene.view_count,
+            units,
+            parts: gb.bands,
+            // Unused with `parts`; any buffer binds.
+            offsets: gb.vertex_offsets.whole(),
+            per_item: u64::from(gb.bands),
+        };
+        let mut begin = 0;
+        while begin < units {
+            let end = units.min(begin + gb.chunk_units);
+            self.clear_texel_partials(rec, scene, gb, end - begin);
+            let push = GradPush {
+                fine: Self::fine_push(scene, gb.stride),
+                chunk_begin: begin as u32,
+                chunk_end: end as u32,
+                split: gb.band_rows,
+                parts: gb.bands,
+            };
+            rec.dispatch(
+                &self.brute,
+                &[
+                    scene.setups.whole(),
+                    scene.colors.whole(),
+                    scene.faces.whole(),
+                    scene.image.whole(),
+                    scene.aux.whole(),
+                    gb.d_image.whole(),
+                    gb.partials.whole(),
+                ],
+                &push,
+                groups(end - begin, 64)?,
+            )?;
+            self.record_reduce(rec, scene, gb, &group, begin, end, limit)?;
+            begin = end;
+        }
+        Ok(())
+    }
+
+    /// Tiled: per view group, its (face, tile) entries chunk by chunk.
+    fn record_tiled(
+        &self,
+        rec: &mut Recorder<'_>,
+        scene: &GpuScene,
+        gb: &GradBuffers,
+        tile: u32,
+    ) -> Result<()> {
+        let grid = scene.grid(tile)?;
+        if scene.tile != Some(tile) {
+            return Err(Error::Input(format!(
+                "the tiled backward (tile {tile}) needs the scene binned with those tiles"
+            )));
+        }
+        let limit = rec.context().info().shader_loop_limit();
+        for (group, bins) in scene.groups.iter().zip(&scene.bins) {
+            if group.entries == 0 {
+                // No face touches these views: their gradients stay zero.
+                continue;
+            }
+            let run = group.max_tile_entries;
+            let faces = tile_faces(run, tile, limit, gb.split.tile_faces)?;
+            let tiles = grid.tiles_per_view() * u64::from(group.views);
+            let units = UnitGroup {
+                first_view: group.first,
+                views: group.views,
+                units: group.entries,
+                parts: 0,
+                offsets: bins.offsets().whole(),
+                // A face enters each tile of its view at most once.
+                per_item: grid.tiles_per_view().min(group.entries),
+            };
+            let mut begin = 0;
+            while begin < group.entries {
+                let end = group.entries.min(begin + gb.chunk_units);
+                self.clear_texel_partials(rec, scene, gb, end - begin);
+                let mut fine = Self::fine_push(scene, gb.stride);
+                fine.first_view = group.first;
+                fine.view_count = group.views;
+                fine.tile_size = tile;
+                fine.tiles_x = grid.tiles_x;
+                fine.tiles_y = grid.tiles_y;
+                fine.entry_total = group.entries as u32;
+                let parts = run.min(end - begin).div_ceil(faces).max(1);
+                let push = GradPush {
+                    fine,
+                    chunk_begin: begin as u32,
+                    chunk_end: end as u32,
+                    split: faces as u32,
+                    parts: parts as u32,
+                };
+                rec.dispatch(
+                    &self.tiled,
+                    &[
+                        scene.setups.whole(),
+                        scene.colors.whole(),
+                        scene.faces.whole(),
+                        scene.image.whole(),
+                        scene.aux.whole(),
+                        gb.d_image.whole(),
+                        gb.partials.whole(),
+                        bins.entries().whole(),
+                        bins.entry_items().whole(),
+                        bins.ranges().whole(),
+                    ],
+                    &push,
+                    groups(tiles * parts, 1)?,
+                )?;
+                self.record_reduce(rec, scene, gb, &units, begin, end, limit)?;
+                begin = end;
+            }
+        }
+        Ok(())
+    }
+
+    /// Surface colours: zeroes the texel slots the next chunk of `units` units sums into.
+    fn clear_texel_partials(
+        &self,
+        rec: &mut Recorder<'_>,
+        scene: &GpuScene,
+        gb: &GradBuffers,
+        units: u64,
+    ) {
+        if scene.settings.color_mode == ColorMode::Surface {
+            rec.fill(gb.partials.range(0, 4 * units * u64::from(gb.stride)), 0);
+        }
+    }
+
+    /// Adds the partials of units `begin .. end` (the chunk in `gb.partials`) of `group` to the
+    /// running per-face sums and, with surface colours, per-texel sums, in unit order.
+    #[allow(clippy::too_many_arguments)]
+    fn record_reduce(
+        &self,
+        rec: &mut Recorder<'_>,
+        scene: &GpuScene,
+        gb: &GradBuffers,
+        group: &UnitGroup<'_>,
+        begin: u64,
+        end: u64,
+        limit: Option<u64>,
+    ) -> Result<()> {
+        let item_count = group.views * scene.face_count;
+        let (window, view_step, texel_window) =
+            reduce_plan(end - begin, group.per_item, u64::from(group.views), limit);
+        let mut w = begin;
+        while w < end {
+            let w_end = end.min(w + window);
+            let push = ReducePush {
+                item_count,
+                first_item: group.first_view * scene.face_count,
+                stride: gb.stride,
+                width: gb.width,
+                unit_total: group.units as u32,
+                chunk_begin: begin as u32,
+                window_begin: w as u32,
+                window_end: w_end as u32,
+                parts: group.parts,
                 pad: [0; 3],
             };
-            rec.pass("grad texels", |rec| {
+            rec.dispatch(
+                &self.reduce,
+                &[group.offsets, gb.partials.whole(), gb.face_grads.whole()],
+                &push,
+                groups(u64::from(item_count), 64)?,
+            )?;
+            w = w_end;
+        }
+        if scene.settings.color_mode != ColorMode::Surface {
+            return Ok(());
+        }
+        let texels = scene.texture_res * scene.texture_res;
+        let mut w = begin;
+        while w < end {
+            let w_end = end.min(w + texel_window);
+            let mut v = 0;
+            while v < group.views {
+                let v_end = group.views.min(v + view_step as u32);
+                let push = TexelReducePush {
+                    face_count: scene.face_count,
+                    texels,
+                    stride: gb.stride,
+                    unit_total: group.units as u32,
+                    chunk_begin: begin as u32,
+                    window_begin: w as u32,
+                    window_end: w_end as u32,
+                    parts: group.parts,
+                    first_view: group.first_view,
+                    group_views: group.views,
+                    view_begin: v,
+                    view_end: v_end,
+                };
                 rec.dispatch(
-                    &self.texels,
+                    &self.reduce_texels,
                     &[
                         scene.views.whole(),
-                        gb.face_grads.whole(),
+                        group.offsets,
+                        gb.partials.whole(),
                         gb.color_grads.whole(),
                     ],
                     &push,
-                    (scene.face_count * texels * meshes).div_ceil(64),
-                )
-            })?;
+                    groups(u64::from(scene.face_count) * u64::from(texels), 64)?,
+                )?;
+                v = v_end;
+            }
+            w = w_end;
         }
         Ok(())
     }
@@ -559,15 +890,20 @@ mod tests {
     fn push_layouts_match_the_kernels() {
         for spec in [&specs::GRAD_TILED, &specs::GRAD_BRUTE] {
             assert_eq!(
-                std::mem::size_of::<RasterPush>() as u32,
+                std::mem::size_of::<GradPush>() as u32,
                 spec.push_constant_size,
                 "{}",
                 spec.name
             );
         }
+        assert_eq!(std::mem::size_of::<GradPush>(), 128);
         assert_eq!(
             std::mem::size_of::<ReducePush>() as u32,
             specs::GRAD_REDUCE.push_constant_size
+        );
+        assert_eq!(
+            std::mem::size_of::<TexelReducePush>() as u32,
+            specs::GRAD_REDUCE_TEXELS.push_constant_size
         );
         assert_eq!(
             std::mem::size_of::<WorldPush>() as u32,
@@ -577,12 +913,10 @@ mod tests {
             std::mem::size_of::<GatherPush>() as u32,
             specs::GRAD_GATHER.push_constant_size
         );
-        assert_eq!(
-            std::mem::size_of::<TexelsPush>() as u32,
-            specs::GRAD_TEXELS.push_constant_size
-        );
         assert_eq!(specs::GRAD_TILED.bindings.len(), 10);
         assert_eq!(specs::GRAD_BRUTE.bindings.len(), 7);
+        assert_eq!(specs::GRAD_REDUCE.bindings.len(), 3);
+        assert_eq!(specs::GRAD_REDUCE_TEXELS.bindings.len(), 4);
     }
 
     #[test]
@@ -590,5 +924,78 @@ mod tests {
         assert_eq!(grad_stride(ColorMode::Surface, 1), 12);
         assert_eq!(grad_stride(ColorMode::Surface, 3), 9 + 27);
         assert_eq!(grad_stride(ColorMode::Vertex, 5), 18);
+        assert_eq!(face_grad_width(ColorMode::Surface), 9);
+        assert_eq!(face_grad_width(ColorMode::Vertex), 18);
+    }
+
+    const CAP: u64 = 65_535;
+
+    #[test]
+    fn bands_are_the_most_rows_under_the_loop_cap() {
+        // No cap: the whole image.
+        assert_eq!(band_rows(256, 256, None, None).unwrap(), 256);
+        assert_eq!(band_rows(256, 256, None, Some(7)).unwrap(), 7);
+        for (w, h) in [(256, 256), (1024, 1024), (64, 64), (65_532, 3)] {
+            let rows = u64::from(band_rows(w, h, Some(CAP), None).unwrap());
+            assert!(brute_backward_iterations(rows, w) <= CAP, "{w}x{h}");
+            assert!(
+                rows == u64::from(h) || brute_backward_iterations(rows + 1, w) > CAP,
+                "{w}x{h}: {rows} rows is not the most"
+            );
+        }
+        // 256 wide: 254 rows fit, so 256² takes two bands.
+        assert_eq!(band_rows(256, 256, Some(CAP), None).unwrap(), 254);
+        assert!(matches!(
+            band_rows(65_533, 1, Some(CAP), None),
+            Err(Error::Limit(_))
+        ));
+    }
+
+    #[test]
+    fn tile_parts_are_the_most_batches_under_the_loop_cap() {
+        // blurry-256 at tile 32: all 5 856 faces in one tile.
+        let run = 5856;
+        let faces = tile_faces(run, 32, Some(CAP), None).unwrap();
+        assert_eq!(faces % 64, 0);
+        assert!(tiled_backward_iterations(run, 32, faces) <= CAP);
+        assert!(tiled_backward_iterations(run, 32, faces + 64) > CAP);
+        assert_eq!(run.div_ceil(faces), 2);
+        // Small runs: one part; a cap rounds up to whole batches.
+        assert_eq!(tile_faces(100, 8, Some(CAP), None).unwrap(), 128);
+        assert_eq!(tile_faces(100, 8, None, Some(1)).unwrap(), 64);
+        assert_eq!(tile_faces(1000, 16, None, None).unwrap(), 1024);
+        for tile in [8, 16, 32, 64, 128, 248] {
+            let f = tile_faces(1 << 20, tile, Some(CAP), None).unwrap();
+            assert!(tiled_backward_iterations(1 << 20, tile, f) <= CAP, "{tile}");
+        }
+        assert!(matches!(
+            tile_faces(100, 256, Some(CAP), None),
+            Err(Error::Limit(_))
+        ));
+    }
+
+    #[test]
+    fn reduce_plans_stay_under_the_loop_cap() {
+        assert_eq!(reduce_plan(1000, 30, 5, None), (1000, 5, 1000));
+        // Everything fits: one dispatch each.
+        assert_eq!(
+            reduce_plan(400_000, 1024, 1, Some(CAP)),
+            (400_000, 1, 400_000)
+        );
+        for (chunk, per_item, views) in [
+            (400_000, 1024, 120),
+            (400_000, 65_536, 1),
+            (400_000, 100_000, 7),
+            (10, 65_536, 3),
+            (3_000_000, 16_384, 64),
+        ] {
+            let (window, view_step, texel_window) = reduce_plan(chunk, per_item, views, Some(CAP));
+            assert!(reduce_iterations(per_item.min(window)) <= CAP);
+            assert!(
+                texel_reduce_iterations(view_step, (view_step * per_item).min(texel_window)) <= CAP,
+                "{chunk} {per_item} {views}"
+            );
+            assert!(window >= 1 && view_step >= 1 && texel_window >= 1);
+        }
     }
 }

@@ -15,6 +15,12 @@
 //! the count cannot wrap and the entries fit one storage-buffer binding; a group whose entries do
 //! not fit is split and re-counted. [`Renderer`] makes the pipelines once; a [`GpuScene`] keeps a
 //! scene's buffers so it can be rendered again (benchmarks record it once and resubmit).
+//!
+//! Fitting loops, which must not wait for the count, bin *guarded* instead
+//! ([`Renderer::reserve_guarded`], [`Renderer::record_setup_and_count`],
+//! [`Renderer::record_rest_guarded`]): every view in one group, entry buffers reserved with
+//! headroom, the sort over the whole capacity with sentinel keys; the caller gates the stages after
+//! the count on the count fitting (`fit::gate`).
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -133,7 +139,8 @@ pub struct ViewGroup {
     pub first: u32,
     /// Views in the group.
     pub views: u32,
-    /// (face, tile) entries binned.
+    /// (face, tile) entries binned; for a guarded binning ([`Renderer::reserve_guarded`], whose
+    /// count stays on the GPU), the entry capacity, an upper bound.
     pub entries: u64,
     /// The most entries one tile holds, or an upper bound of it (the entry count) where that
     /// already satisfies the driver's loop cap ([`crate::gpu::DeviceInfo::shader_loop_limit`]).
@@ -145,10 +152,31 @@ pub(crate) fn tiled_forward_iterations(run: u64) -> u64 {
     run + run.div_ceil(64) + 2
 }
 
-/// Loop iterations one invocation of `grad_tiled.comp` runs for a tile of `run` faces.
-pub(crate) fn tiled_backward_iterations(run: u64, tile: u32, stride: u32) -> u64 {
-    let chunks = u64::from(tile * tile / 64);
-    run.div_ceil(64) * (chunks * 65 + u64::from(stride)) + 2
+/// Loop iterations one invocation of `grad_tiled.comp` runs for a tile of `run` entries when a
+/// workgroup takes at most `faces` of them: two binary searches over the run (for the chunk's
+/// sub-run), then per batch of 64 faces one iteration and, per 64-pixel chunk of the tile, one
+/// iteration and 64 pixels.
+pub(crate) fn tiled_backward_iterations(run: u64, tile: u32, faces: u64) -> u64 {
+    let chunks = u64::from(tile) * u64::from(tile) / 64;
+    let search = u64::from(u64::BITS - run.leading_zeros());
+    2 * search + faces.min(run).div_ceil(64) * (1 + 65 * chunks) + 2
+}
+
+/// Loop iterations one invocation of `grad_brute.comp` runs for a band of `rows` rows of
+/// `width` pixels.
+pub(crate) fn brute_backward_iterations(rows: u64, width: u32) -> u64 {
+    rows * (u64::from(width) + 1) + 2
+}
+
+/// Loop iterations one invocation of `grad_reduce.comp` runs to add at most `units` partials.
+pub(crate) fn reduce_iterations(units: u64) -> u64 {
+    units + 2
+}
+
+/// Loop iterations one invocation of `grad_reduce_texels.comp` runs over `views` views adding
+/// at most `units` partials in all.
+pub(crate) fn texel_reduce_iterations(views: u64, units: u64) -> u64 {
+    views + units + 2
 }
 
 /// The most entries any tile of a group holds, read back from its ranges.
@@ -162,8 +190,9 @@ fn max_tile_run(ctx: &Context, bins: &Bins, tiles: u64) -> Result<u64> {
 }
 
 /// On a driver that caps shader loops, the exact largest tile when the entry count alone does
-/// not show that the tiled passes (forward, and backward at the largest gradient stride) stay
-/// under the cap; the entry count otherwise. An error when the forward would exceed it.
+/// not show that the tiled forward stays under the cap; the entry count otherwise. An error when
+/// the forward would exceed it. (The tiled backward splits a crowded tile over workgroups, so
+/// any run the forward takes, it takes too.)
 fn checked_tile_runs(
     ctx: &Context,
     bins: &Bins,
@@ -177,12 +206,7 @@ fn checked_tile_runs(
     let Some(limit) = ctx.info().shader_loop_limit() else {
         return Ok(total);
     };
-    let stride = 9 + 3 * 64 * 64;
-    let fits = |run| {
-        tiled_forward_iterations(run) <= limit
-            && tiled_backward_iterations(run, grid.tile_size, stride) <= limit
-    };
-    let run = if fits(total) {
+    let run = if tiled_forward_iterations(total) <= limit {
         total
     } else {
         max_tile_run(ctx, bins, grid.tiles_per_view() * u64::from(views))?
@@ -512,6 +536,19 @@ impl Renderer {
             self.binner
                 .record_sort(rec, bins, scene.setups.whole(), &job)
         })?;
+        self.record_fine(rec, scene, bins, grid, first_view, views)
+    }
+
+    /// The tiled fine pass of one view group over its sorted bins.
+    fn record_fine(
+        &self,
+        rec: &mut Recorder<'_>,
+        scene: &GpuScene,
+        bins: &Bins,
+        grid: TileGrid,
+        first_view: u32,
+        views: u32,
+    ) -> Result<()> {
         rec.pass("raster tiled", |rec| {
             self.tiled.record(
                 rec,
@@ -659,58 +696,79 @@ impl Renderer {
     }
 
     /// For loops that re-render one scene (fitting): records the face setup and the binning's
-    /// count for every view as one group on `tile`-pixel tiles. After it ran,
-    /// [`Renderer::finish_count`] reads the entry count, and [`Renderer::record_rest`] records
-    /// the rest of the forward.
+    /// count for every view as one group, on the tiles of [`Renderer::reserve_guarded`] (the
+    /// total lands in [`Bins::total_buffer`] of `scene.bins[0]`). [`Renderer::record_rest_guarded`]
+    /// records the rest of the forward.
     pub(crate) fn record_setup_and_count(
         &self,
-        ctx: &Context,
         rec: &mut Recorder<'_>,
+        scene: &GpuScene,
+    ) -> Result<()> {
+        let tile = scene
+            .tile
+            .ok_or_else(|| Error::Input("record_setup_and_count before reserve_guarded".into()))?;
+        let grid = scene.grid(tile)?;
+        let bins = scene
+            .bins
+            .first()
+            .ok_or_else(|| Error::Input("record_setup_and_count before reserve_guarded".into()))?;
+        self.record_setup(rec, scene)?;
+        self.record_count(rec, scene, bins, grid, 0, scene.view_count)
+    }
+
+    /// The most (face, tile) entries one binning may hold here: what one storage-buffer binding
+    /// holds, or the budget ([`Renderer::with_entry_budget`]) if smaller.
+    pub(crate) fn max_entries(&self, ctx: &Context) -> u64 {
+        binning::max_entries(ctx).min(self.entry_budget.unwrap_or(u64::MAX))
+    }
+
+    /// For loops that never wait for the count (fitting; see the guarded binning of
+    /// [`crate::primitives::binning`]): sizes `scene`'s bins for every view as one group on
+    /// `tile`-pixel tiles with exactly `capacity` entries, and checks the tiled passes against the
+    /// driver's loop cap for any count up to it (a tile holds each face at most once, so its run
+    /// is at most `min(capacity, faces)`). The scene's group then records `capacity` as its
+    /// entries (an upper bound: the count itself stays on the GPU). Record each iteration with
+    /// [`Renderer::record_setup_and_count`] and, gated on the count fitting,
+    /// [`Renderer::record_rest_guarded`].
+    pub(crate) fn reserve_guarded(
+        &self,
+        ctx: &Context,
         scene: &mut GpuScene,
         tile: u32,
+        capacity: u64,
     ) -> Result<()> {
         check_tile_size(tile)?;
         let grid = scene.grid(tile)?;
         let job = scene.job(grid, 0, scene.view_count);
+        let max = self.max_entries(ctx);
+        if capacity > max {
+            return Err(Error::Limit(format!(
+                "{} views need {capacity} (face, tile) entries at once, over the {max} one \
+                 binning may hold; use fewer views, larger tiles or a smaller σ",
+                scene.view_count
+            )));
+        }
+        if job.max_entries() > u64::from(u32::MAX) {
+            return Err(Error::Limit(format!(
+                "{} views of {} faces over {} tiles each could count past 2^32 entries; use \
+                 fewer views or larger tiles",
+                scene.view_count,
+                scene.face_count,
+                grid.tiles_per_view()
+            )));
+        }
         if scene.bins.is_empty() {
             scene.bins.push(Bins::new(ctx)?);
         }
         scene.bins[0].reserve(ctx, &job)?;
-        self.record_setup(rec, scene)?;
-        self.record_count(rec, scene, &scene.bins[0], grid, 0, scene.view_count)
-    }
-
-    /// Reads the count of [`Renderer::record_setup_and_count`]'s submission and sizes the
-    /// entries: the scene is then binned as one group, ready for [`Renderer::record_rest`].
-    pub(crate) fn finish_count(
-        &self,
-        ctx: &Context,
-        scene: &mut GpuScene,
-        tile: u32,
-    ) -> Result<u64> {
-        let max = binning::max_entries(ctx).min(self.entry_budget.unwrap_or(u64::MAX));
-        let total = scene.bins[0].read_total(ctx)?;
-        if total > max {
-            return Err(Error::Limit(format!(
-                "{} views need {total} (face, tile) entries at once, over the {max} one binning \
-                 may hold; use fewer views, larger tiles or a smaller σ",
-                scene.view_count
-            )));
-        }
-        scene.bins[0].reserve_entries(ctx, total)?;
-        // The tiles are not sorted yet. A tile belongs to one view and holds each face at most
-        // once, so neither the entry count nor the face count can be exceeded by the largest.
-        let max_run = total.min(u64::from(scene.face_count));
+        scene.bins[0].reserve_entry_capacity(ctx, capacity.max(1))?;
+        let max_run = capacity.min(u64::from(scene.face_count));
         if let Some(limit) = ctx.info().shader_loop_limit() {
-            let stride =
-                crate::raster::backward::grad_stride(scene.settings.color_mode, scene.texture_res);
-            if tiled_forward_iterations(max_run) > limit
-                || tiled_backward_iterations(max_run, tile, stride) > limit
-            {
+            if tiled_forward_iterations(max_run) > limit {
                 return Err(Error::Limit(format!(
-                    "{total} (face, tile) entries could put more than {limit} loop iterations in \
-                     one shader invocation on {} (which would silently skip the rest); use \
-                     smaller tiles, fewer views or a smaller σ",
+                    "a tile may hold {max_run} faces, which could put more than {limit} loop \
+                     iterations in one shader invocation on {} (which would silently skip the \
+                     rest); use smaller tiles, fewer faces or a smaller σ",
                     ctx.info().name
                 )));
             }
@@ -719,20 +777,32 @@ impl Renderer {
         scene.groups = vec![ViewGroup {
             first: 0,
             views: scene.view_count,
-            entries: total,
+            entries: capacity.max(1),
             max_tile_entries: max_run,
         }];
-        Ok(total)
+        Ok(())
     }
 
-    /// Sort, ranges, the tiled fine pass and the downsampling of a scene binned by
-    /// [`Renderer::finish_count`].
-    pub(crate) fn record_rest(&self, rec: &mut Recorder<'_>, scene: &GpuScene) -> Result<()> {
+    /// Sort (over the whole entry capacity, with sentinels), ranges, the tiled fine pass and the
+    /// downsampling of a scene sized by [`Renderer::reserve_guarded`], after
+    /// [`Renderer::record_setup_and_count`]. Right only when the count fits the capacity: the
+    /// caller gates these dispatches on it ([`Recorder::gated`]).
+    pub(crate) fn record_rest_guarded(
+        &self,
+        rec: &mut Recorder<'_>,
+        scene: &GpuScene,
+    ) -> Result<()> {
         let tile = scene
             .tile
-            .ok_or_else(|| Error::Input("record_rest before a count".into()))?;
+            .ok_or_else(|| Error::Input("record_rest_guarded before reserve_guarded".into()))?;
         let grid = scene.grid(tile)?;
-        self.record_group(rec, scene, &scene.bins[0], grid, 0, scene.view_count)?;
+        let job = scene.job(grid, 0, scene.view_count);
+        let bins = &scene.bins[0];
+        rec.pass("bin sort", |rec| {
+            self.binner
+                .record_sort_guarded(rec, bins, scene.setups.whole(), &job)
+        })?;
+        self.record_fine(rec, scene, bins, grid, 0, scene.view_count)?;
         self.record_downsample(rec, scene)
     }
 

@@ -1,0 +1,417 @@
+//! `softvk fit-pose --mesh M.obj --target T.png --out pose.json [view] [raster]`: the rigid pose
+//! (rotation and translation) of a textured mesh that makes its render match a target RGBA
+//! image ([`softvk::fit::pose`], issue #5), with a σ/γ schedule from blurry to sharp.
+//!
+//! - The target is a PNG with an alpha channel (what `softvk render` writes): the loss is the
+//!   MSE over R, G, B and A, so the alpha carries the silhouette. Its size is the image size;
+//!   `--size`/`--width --height` must agree with it when given.
+//! - `[raster]`'s `--sigma`/`--gamma` are the schedule's sharp end (default SoftRas's 1e-5,
+//!   1e-4); `--sigma-start`/`--gamma-start` its blurry start; `--no-schedule` renders every
+//!   iteration sharp. Lighting is on (SoftRas's defaults) so that shading constrains the
+//!   rotation too; a mesh without a texture renders white and is fitted by shape and shading.
+//! - `--init-rotation x,y,z` is an axis-angle vector **in degrees**: its direction is the axis,
+//!   its length the angle (`0,90,0` is a quarter turn about +y). Rotations turn about the mesh's
+//!   vertex centroid: `p' = R (p − c) + c + t`.
+//!
+//! Writes `pose.json` (rotation as axis-angle, 3×3 matrix and quaternion, translation, centre,
+//! final loss, iterations, angle to the initial rotation), the final render (`--render`,
+//! default `<out stem>-render.png` beside it) and a heat map of |render − target| (`--error`,
+//! default `<out stem>-error.png`). Every file is written atomically after the fit; any error
+//! is one line and leaves no file.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use clap::Args;
+use glam::DVec3;
+use indicatif::{ProgressBar, ProgressStyle};
+use softvk::fit::pose::{Pose, PoseFitOptions, PoseTarget, Schedule, fit_pose, rotation_distance};
+use softvk::gpu::{Context, ContextOptions};
+use softvk::mesh::Mesh;
+use softvk::{Error, Result};
+
+use super::args::{RasterArgs, ViewArgs, positive, triple};
+use super::output::{AtomicFile, ImageFormat};
+
+/// The defaults of the pose fit (chosen by `examples/pose_study.rs`; RESULTS.md).
+fn defaults() -> PoseFitOptions {
+    PoseFitOptions::default()
+}
+
+/// The flags of `softvk fit-pose`.
+#[derive(Args, Clone, Debug)]
+pub struct FitPoseArgs {
+    /// The mesh (OBJ; its MTL map_Kd texture is sampled with --texture-res).
+    #[arg(long, value_name = "M.obj")]
+    pub mesh: PathBuf,
+
+    /// The target image: a PNG with an alpha channel (as `softvk render` writes).
+    #[arg(long, value_name = "T.png")]
+    pub target: PathBuf,
+
+    /// The pose to write (JSON).
+    #[arg(long, value_name = "pose.json")]
+    pub out: PathBuf,
+
+    /// The final render (PNG) [default: <out stem>-render.png beside --out].
+    #[arg(long, value_name = "R.png")]
+    pub render: Option<PathBuf>,
+
+    /// Heat map of |render − target| (PNG) [default: <out stem>-error.png beside --out].
+    #[arg(long, value_name = "E.png")]
+    pub error: Option<PathBuf>,
+
+    /// Iterations [default: 80].
+    #[arg(long = "iters", value_name = "N")]
+    pub iterations: Option<u32>,
+
+    /// Initial rotation: an axis-angle vector in degrees (direction the axis, length the angle).
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = triple)]
+    pub init_rotation: Option<[f64; 3]>,
+
+    /// Initial translation.
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = triple)]
+    pub init_translation: Option<[f64; 3]>,
+
+    /// Render every iteration at the sharp --sigma/--gamma (no blurry-to-sharp schedule).
+    #[arg(long)]
+    pub no_schedule: bool,
+
+    /// σ of the schedule's first (blurry) stage [default: 1e-2].
+    #[arg(long, value_name = "S", value_parser = positive, conflicts_with = "no_schedule")]
+    pub sigma_start: Option<f64>,
+
+    /// γ of the schedule's first stage [default: 1e-1].
+    #[arg(long, value_name = "G", value_parser = positive, conflicts_with = "no_schedule")]
+    pub gamma_start: Option<f64>,
+
+    /// Stages of the schedule (geometric from the start σ/γ to --sigma/--gamma; the last is
+    /// sharp) [default: 4].
+    #[arg(long, value_name = "N", conflicts_with = "no_schedule",
+          value_parser = clap::value_parser!(u32).range(1..))]
+    pub stages: Option<u32>,
+
+    /// Adam learning rate of the rotation (radians) [default: 0.1].
+    #[arg(long, value_name = "LR", value_parser = positive)]
+    pub lr: Option<f64>,
+
+    /// Adam learning rate of the translation [default: 0.005].
+    #[arg(long, value_name = "LR", value_parser = positive)]
+    pub lr_translation: Option<f64>,
+
+    /// Both learning rates decay geometrically to this factor at the last iteration
+    /// [default: 0.1].
+    #[arg(long, value_name = "F", value_parser = positive)]
+    pub lr_final: Option<f64>,
+
+    /// Tile edge in pixels (a multiple of 8) [default: 8].
+    #[arg(long, value_name = "N")]
+    pub tile: Option<u32>,
+
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+
+    #[command(flatten)]
+    pub view: ViewArgs,
+
+    #[command(flatten)]
+    pub raster: RasterArgs,
+}
+
+/// `<out stem><suffix>` beside `out`.
+fn beside(out: &Path, suffix: &str) -> PathBuf {
+    let stem = out
+        .file_stem()
+        .map_or("pose".into(), |s| s.to_string_lossy().into_owned());
+    out.with_file_name(format!("{stem}{suffix}"))
+}
+
+/// The target: RGBA floats in [0, 1], row 0 at the top, and its size. It must have an alpha
+/// channel: the loss compares coverage too.
+pub fn load_target(path: &Path) -> Result<(u32, u32, Vec<[f32; 4]>)> {
+    let bytes = std::fs::read(path)
+        .map_err(|e| Error::Input(format!("cannot read target {}: {e}", path.display())))?;
+    let img =
+        image::load_from_memory_with_format(&bytes, image::ImageFormat::Png).map_err(|e| {
+            Error::Input(format!(
+                "target {}: not a readable PNG: {e}",
+                path.display()
+            ))
+        })?;
+    if !img.color().has_alpha() {
+        return Err(Error::Input(format!(
+            "target {} has no alpha channel; fit-pose compares RGBA (coverage in alpha), as \
+             `softvk render` writes it",
+            path.display()
+        )));
+    }
+    let rgba = img.to_rgba32f();
+    let (w, h) = rgba.dimensions();
+    let pixels = rgba.pixels().map(|p| p.0).collect();
+    Ok((w, h, pixels))
+}
+
+/// |render − target| as a heat map: the mean absolute difference over R, G, B, A per pixel,
+/// black (0) → red → yellow → white (1), opaque.
+pub fn error_map(render: &[[f32; 4]], target: &[[f32; 4]]) -> Vec<[f32; 4]> {
+    render
+        .iter()
+        .zip(target)
+        .map(|(r, t)| {
+            let e = (0..4).map(|k| (r[k] - t[k]).abs()).sum::<f32>() / 4.0;
+            let x = e.clamp(0.0, 1.0) * 3.0;
+            [
+                x.min(1.0),
+                (x - 1.0).clamp(0.0, 1.0),
+                (x - 2.0).clamp(0.0, 1.0),
+                1.0,
+            ]
+        })
+        .collect()
+}
+
+fn json_vec(v: &[f64]) -> String {
+    let items: Vec<String> = v.iter().map(|x| json_num(*x)).collect();
+    format!("[{}]", items.join(", "))
+}
+
+/// A finite number in JSON (shortest round-trip form); non-finite values are `null`.
+fn json_num(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:?}")
+    } else {
+        "null".into()
+    }
+}
+
+/// Runs `softvk fit-pose`.
+pub fn run(args: &FitPoseArgs) -> Result<()> {
+    let d = defaults();
+    let tile = args.tile.unwrap_or(d.tile);
+    softvk::raster::fine::check_tile_size(tile)?;
+    let (tw, th, target) = load_target(&args.target)?;
+    let explicit = args.view.size.is_some() || args.view.width.is_some();
+    let size = if explicit { args.view.size() } else { (tw, th) };
+    if size != (tw, th) {
+        return Err(Error::Input(format!(
+            "the target {} is {tw}x{th} but the image is {}x{}",
+            args.target.display(),
+            size.0,
+            size.1
+        )));
+    }
+    let camera = args.view.camera()?;
+    let settings = args.raster.settings(size)?;
+    let lighting = args.raster.lighting();
+    let schedule = (!args.no_schedule).then(|| {
+        let s = Schedule::default();
+        Schedule {
+            sigma_start: args.sigma_start.unwrap_or(s.sigma_start),
+            gamma_start: args.gamma_start.unwrap_or(s.gamma_start),
+            stages: args.stages.unwrap_or(s.stages),
+        }
+    });
+    let opts = PoseFitOptions {
+        iterations: args.iterations.unwrap_or(d.iterations),
+        lr_rotation: args.lr.unwrap_or(d.lr_rotation),
+        lr_translation: args.lr_translation.unwrap_or(d.lr_translation),
+        lr_final: args.lr_final.unwrap_or(d.lr_final),
+        schedule,
+        settings,
+        tile,
+        ..d
+    };
+    opts.validate()?;
+    let init = Pose {
+        rotation: DVec3::from(args.init_rotation.unwrap_or([0.0; 3])) * (1f64.to_radians()),
+        translation: DVec3::from(args.init_translation.unwrap_or([0.0; 3])),
+    };
+    let mesh = Mesh::load_obj(&args.mesh, args.raster.texture_res)?;
+    if args.raster.vertex_colors && mesh.vertex_colors.is_none() {
+        return Err(Error::Input(format!(
+            "--vertex-colors: {} has no vertex colours (every `v` line needs `x y z r g b`)",
+            args.mesh.display()
+        )));
+    }
+    let render_path = args
+        .render
+        .clone()
+        .unwrap_or_else(|| beside(&args.out, "-render.png"));
+    let error_path = args
+        .error
+        .clone()
+        .unwrap_or_else(|| beside(&args.out, "-error.png"));
+    for p in [&render_path, &error_path] {
+        if ImageFormat::from_path(p)? != ImageFormat::Png {
+            return Err(Error::Input(format!("{}: must be a .png", p.display())));
+        }
+    }
+    if args.out == render_path || args.out == error_path || render_path == error_path {
+        return Err(Error::Input(
+            "--out, --render and --error must be three different files".into(),
+        ));
+    }
+    let out = AtomicFile::create(&args.out)?;
+    let render_file = AtomicFile::create(&render_path)?;
+    let error_file = AtomicFile::create(&error_path)?;
+
+    let ctx = Context::new(&ContextOptions::from_env())?;
+    let bar = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(u64::from(opts.iterations)).with_style(
+            ProgressStyle::with_template(
+                "{bar:40} {pos}/{len} iterations  {msg}  [{elapsed} < {eta}]",
+            )
+            .expect("a valid template"),
+        )
+    };
+    let mut initial_loss = f64::NAN;
+    let result = fit_pose(
+        &ctx,
+        &mesh,
+        &camera,
+        &lighting,
+        PoseTarget::Fixed(&target),
+        &init,
+        &opts,
+        |l| {
+            if l.iteration == 1 {
+                initial_loss = l.loss;
+            }
+            bar.set_position(u64::from(l.iteration));
+            bar.set_message(format!("loss {:.5}  σ {:.0e}", l.loss, l.sigma));
+            true
+        },
+    )?;
+    bar.finish_and_clear();
+    ctx.check_validation()?;
+
+    let pose = &result.pose;
+    let m = pose.matrix();
+    let q = pose.quaternion();
+    let angle = pose.rotation.length();
+    let mut json = String::from("{\n");
+    let mut field = |name: &str, value: String| {
+        writeln!(json, "  \"{name}\": {value},").expect("write to a String");
+    };
+    field(
+        "convention",
+        "\"p' = R (p - centre) + centre + translation; rotation as axis-angle (radians), \
+         matrix row-major, quaternion w, x, y, z\""
+            .into(),
+    );
+    field("rotation_axis_angle", json_vec(&pose.rotation.to_array()));
+    field("rotation_angle_degrees", json_num(angle.to_degrees()));
+    field(
+        "rotation_axis",
+        json_vec(&if angle > 0.0 {
+            (pose.rotation / angle).to_array()
+        } else {
+            [1.0, 0.0, 0.0]
+        }),
+    );
+    field(
+        "rotation_matrix",
+        format!(
+            "[{}, {}, {}]",
+            json_vec(&m.row(0).to_array()),
+            json_vec(&m.row(1).to_array()),
+            json_vec(&m.row(2).to_array())
+        ),
+    );
+    field("quaternion_wxyz", json_vec(&[q.w, q.x, q.y, q.z]));
+    field("translation", json_vec(&pose.translation.to_array()));
+    field("centre", json_vec(&result.centre.to_array()));
+    field(
+        "angle_to_init_degrees",
+        json_num(rotation_distance(pose.rotation, init.rotation).to_degrees()),
+    );
+    field("initial_loss", json_num(initial_loss));
+    field("loss", json_num(result.loss));
+    field("iterations", result.iterations.to_string());
+    field("sigma", json_num(opts.settings.sigma));
+    field("gamma", json_num(opts.settings.gamma));
+    field(
+        "schedule",
+        match &opts.schedule {
+            Some(s) => format!(
+                "{{\"sigma_start\": {}, \"gamma_start\": {}, \"stages\": {}}}",
+                json_num(s.sigma_start),
+                json_num(s.gamma_start),
+                s.stages
+            ),
+            None => "null".into(),
+        },
+    );
+    writeln!(json, "  \"seconds\": {}\n}}", json_num(result.seconds)).expect("write to a String");
+
+    let (w, h) = size;
+    let png = |pixels: &[[f32; 4]], path: &Path| {
+        ImageFormat::Png
+            .encode(pixels, w, h)
+            .map_err(|e| Error::Input(format!("{}: {e}", path.display())))
+    };
+    let render_png = png(&result.image, &render_path)?;
+    let error_png = png(&error_map(&result.image, &target), &error_path)?;
+    out.commit(json.as_bytes())?;
+    render_file.commit(&render_png)?;
+    error_file.commit(&error_png)?;
+    println!(
+        "{} iterations in {:.1} s ({:.1} ms per iteration); loss {:.3e} → {:.3e}; rotation \
+         {:.2}° about {:?}, translation {:?}; wrote {}, {} and {}",
+        result.iterations,
+        result.seconds,
+        1e3 * result.seconds / f64::from(result.iterations.max(1)),
+        initial_loss,
+        result.loss,
+        angle.to_degrees(),
+        pose.rotation
+            .normalize_or_zero()
+            .to_array()
+            .map(|c| (c * 1e4).round() / 1e4),
+        pose.translation.to_array().map(|c| (c * 1e4).round() / 1e4),
+        args.out.display(),
+        render_path.display(),
+        error_path.display()
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn error_map_runs_black_red_yellow_white() {
+        let t = [[0.0f32; 4]; 4];
+        let r = [
+            [0.0; 4],
+            [1.0 / 3.0; 4],
+            [2.0 / 3.0; 4],
+            [1.0, 1.0, 1.0, 1.0],
+        ];
+        let m = error_map(&r, &t);
+        let close = |a: [f32; 4], b: [f32; 4]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-6);
+        assert!(close(m[0], [0.0, 0.0, 0.0, 1.0]));
+        assert!(close(m[1], [1.0, 0.0, 0.0, 1.0]));
+        assert!(close(m[2], [1.0, 1.0, 0.0, 1.0]));
+        assert!(close(m[3], [1.0, 1.0, 1.0, 1.0]));
+    }
+
+    #[test]
+    fn outputs_default_beside_the_pose() {
+        assert_eq!(
+            beside(Path::new("a/b/pose.json"), "-render.png"),
+            PathBuf::from("a/b/pose-render.png")
+        );
+    }
+
+    #[test]
+    fn json_numbers_are_finite_or_null() {
+        assert_eq!(json_num(0.1), "0.1");
+        assert_eq!(json_num(f64::NAN), "null");
+        assert_eq!(json_vec(&[1.0, -2.5]), "[1.0, -2.5]");
+    }
+}

@@ -1,0 +1,207 @@
+//! The gate of a guarded fitting iteration: lets a whole iteration (and many of them) be
+//! recorded into one command buffer although the binning's entry count, which its buffers must
+//! hold, is only known on the GPU.
+//!
+//! After the count, [`IterationGate::record_check`] records `iteration_gate.comp`: it compares
+//! the count's total with the entry capacity and writes the indirect grids of every later
+//! dispatch of the iteration, recorded inside [`Recorder::gated`] (scatter, sort, ranges, fine
+//! pass, loss, backward, regularizers, deformation backward, Adam): their own grids when the
+//! entries fit, `[0, 0, 0]` when they do not — then none of them runs, so nothing is written out
+//! of bounds and parameters and Adam's moments stay as they were. The stop is sticky: every later
+//! iteration of the submission is skipped too, and the first stop leaves its iteration and total
+//! in a status buffer that the host reads after the submission ([`IterationGate::read`]); it then
+//! grows the buffers to the total and re-runs from that iteration, which gives exactly the
+//! result of a run that never stopped.
+//!
+//! Only dispatches are gated; fills and copies recorded in a gated region always run and must be
+//! harmless when the rest does not (the binning's sentinel fill of its keys is).
+
+use bytemuck::{Pod, Zeroable};
+
+use crate::error::{Error, Result};
+use crate::gpu::{
+    Buffer, BufferRange, Context, INDIRECT_ARGS_BYTES, Kernel, MemoryKind, Recorder, specs,
+};
+
+/// Gated dispatches one iteration may record.
+pub const GATE_SLOTS: u64 = 512;
+
+/// Push constants of `iteration_gate.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct GatePush {
+    iteration: u32,
+    capacity: u32,
+    words: u32,
+    pad: u32,
+}
+
+/// What the gate's status says after a submission.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GateStatus {
+    /// The first iteration that was stopped, with the entry total it counted, if any was.
+    pub stopped: Option<(u32, u64)>,
+    /// The entry total of the last iteration that ran (0 if none did).
+    pub last_total: u64,
+}
+
+/// The gate's kernel and buffers: the status, the recorded grids and the grids the gated
+/// dispatches read.
+pub struct IterationGate {
+    kernel: Kernel,
+    status: Buffer,
+    grids: Buffer,
+    args: Buffer,
+    /// The grids last uploaded to `grids`.
+    uploaded: Vec<[u32; 3]>,
+}
+
+impl IterationGate {
+    /// The gate, for up to [`GATE_SLOTS`] gated dispatches per iteration.
+    pub fn new(ctx: &Context) -> Result<Self> {
+        let bytes = GATE_SLOTS * INDIRECT_ARGS_BYTES;
+        Ok(Self {
+            kernel: Kernel::new(ctx, &specs::ITERATION_GATE)?,
+            status: ctx.create_buffer("gate status", 16, MemoryKind::Device)?,
+            grids: ctx.upload_buffer("gate grids", &vec![0u32; 3 * GATE_SLOTS as usize])?,
+            args: ctx.create_buffer("gate indirect args", bytes, MemoryKind::Device)?,
+            uploaded: Vec::new(),
+        })
+    }
+
+    /// Records clearing the status (at the start of a submission).
+    pub fn record_reset(&self, rec: &mut Recorder<'_>) {
+        rec.fill(self.status.whole(), 0);
+    }
+
+    /// Records the check of iteration `iteration`: run the gated region that follows if `total`
+    /// (the count's one `u32`) is at most `capacity` and no earlier iteration since the last
+    /// reset was stopped.
+    pub fn record_check(
+        &self,
+        rec: &mut Recorder<'_>,
+        total: BufferRange<'_>,
+        iteration: u32,
+        capacity: u64,
+    ) -> Result<()> {
+        let capacity = u32::try_from(capacity)
+            .map_err(|_| Error::Limit(format!("gate: capacity {capacity} over 2^32")))?;
+        let push = GatePush {
+            iteration,
+            capacity,
+            words: 3 * GATE_SLOTS as u32,
+            pad: 0,
+        };
+        // Earlier gated dispatches have read their grids before the kernel rewrites them.
+        rec.indirect_barrier();
+        rec.pass("gate", |rec| {
+            rec.dispatch(
+                &self.kernel,
+                &[
+                    total,
+                    self.status.whole(),
+                    self.grids.whole(),
+                    self.args.whole(),
+                ],
+                &push,
+                1,
+            )
+        })?;
+        rec.indirect_barrier();
+        Ok(())
+    }
+
+    /// Records `f` as the gated region of the check just recorded; returns its grids, which
+    /// must be given to [`IterationGate::upload`] before the submission.
+    pub fn record_gated(
+        &self,
+        rec: &mut Recorder<'_>,
+        f: impl FnOnce(&mut Recorder<'_>) -> Result<()>,
+    ) -> Result<Vec<[u32; 3]>> {
+        rec.gated(self.args.whole(), f)
+    }
+
+    /// Uploads the grids of the gated regions (every region of a submission records the same
+    /// dispatches; one list serves them all). Writes only when they changed.
+    pub fn upload(&mut self, ctx: &Context, grids: &[[u32; 3]]) -> Result<()> {
+        if grids == self.uploaded.as_slice() {
+            return Ok(());
+        }
+        let mut words = vec![0u32; 3 * GATE_SLOTS as usize];
+        for (w, g) in words.chunks_exact_mut(3).zip(grids) {
+            w.copy_from_slice(g);
+        }
+        ctx.write_buffer(&self.grids, 0, &words)?;
+        self.uploaded = grids.to_vec();
+        Ok(())
+    }
+
+    /// Reads the status (after the submission finished).
+    pub fn read(&self, ctx: &Context) -> Result<GateStatus> {
+        let s: Vec<u32> = ctx.read_buffer(&self.status, 0, 4)?;
+        Ok(GateStatus {
+            stopped: (s[0] != 0).then_some((s[1], u64::from(s[2]))),
+            last_total: u64::from(s[3]),
+        })
+    }
+
+    /// The status buffer (`[stopped, iteration, total, last total]`) and the grids the gated
+    /// dispatches read (3 words each), for tests.
+    pub fn buffers(&self) -> (&Buffer, &Buffer) {
+        (&self.status, &self.args)
+    }
+}
+
+/// CPU twin.
+pub mod cpu {
+    /// One check: updates `status` (`[stopped, iteration, total, last total]`) and returns the
+    /// grids the gated dispatches get.
+    pub fn gate(
+        status: &mut [u32; 4],
+        total: u32,
+        iteration: u32,
+        capacity: u32,
+        grids: &[[u32; 3]],
+    ) -> Vec<[u32; 3]> {
+        let stopped = status[0] != 0;
+        let fits = total <= capacity;
+        if !stopped && !fits {
+            *status = [1, iteration, total, status[3]];
+        }
+        if !stopped && fits {
+            status[3] = total;
+        }
+        let run = !stopped && fits;
+        grids
+            .iter()
+            .map(|&g| if run { g } else { [0; 3] })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn push_layout_matches_the_kernel() {
+        assert_eq!(
+            std::mem::size_of::<GatePush>() as u32,
+            specs::ITERATION_GATE.push_constant_size
+        );
+        assert_eq!(specs::ITERATION_GATE.bindings.len(), 4);
+    }
+
+    #[test]
+    fn twin_stops_over_capacity_and_stays_stopped() {
+        let grids = [[3, 1, 1], [7, 2, 1]];
+        let mut s = [0; 4];
+        assert_eq!(cpu::gate(&mut s, 10, 1, 10, &grids), grids.to_vec());
+        assert_eq!(s, [0, 0, 0, 10]);
+        assert_eq!(cpu::gate(&mut s, 11, 2, 10, &grids), vec![[0; 3]; 2]);
+        assert_eq!(s, [1, 2, 11, 10]);
+        // Sticky: a later iteration that would fit is skipped too, and the first stop stays.
+        assert_eq!(cpu::gate(&mut s, 5, 3, 10, &grids), vec![[0; 3]; 2]);
+        assert_eq!(s, [1, 2, 11, 10]);
+    }
+}

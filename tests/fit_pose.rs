@@ -1,0 +1,737 @@
+//! Pose estimation (`fit::pose`, `softvk fit-pose`, issue #5): the pose chain against central
+//! finite differences of the f64 twin's forward, the GPU's pose gradient against the twin's,
+//! a small fit that converges, determinism, and the command line (outputs and errors).
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use glam::DVec3;
+use rand::RngExt;
+use softvk::camera::Camera;
+use softvk::fit::pose::{
+    self, Pose, PoseFitOptions, PoseProblem, PoseTarget, Schedule, fit_pose, rotation_distance,
+};
+use softvk::lighting::{Directional, Lighting};
+use softvk::mesh::Mesh;
+use softvk::raster::gpu::{Method, Renderer};
+use softvk::raster::reference::{self, ColorMode, MeshF64, RasterSettings};
+
+fn lighting() -> Lighting {
+    Lighting {
+        ambient_intensity: 0.4,
+        ambient_color: [1.0; 3],
+        directionals: vec![Directional {
+            intensity: 0.6,
+            color: [1.0; 3],
+            direction: [0.3, 0.8, -0.5],
+        }],
+    }
+}
+
+fn camera() -> Camera {
+    Camera::from_angles(2.732, 20.0, -30.0)
+}
+
+fn random_colors(n: usize, seed: u64) -> Vec<[f32; 3]> {
+    let mut rng = common::rng(seed);
+    (0..n)
+        .map(|_| std::array::from_fn(|_| rng.random_range(0.1..0.95)))
+        .collect()
+}
+
+/// A box of three different extents with one random colour per triangle (R = 1): no rotation
+/// but the identity maps its appearance to itself.
+fn colored_box() -> Mesh {
+    let mut mesh = Mesh::cuboid([0.5, 0.32, 0.22]);
+    mesh.textures = random_colors(mesh.textures.len(), 3);
+    mesh
+}
+
+/// A jittered icosphere(1) with random vertex colours (vertex colour mode).
+fn colored_blob() -> Mesh {
+    let mut rng = common::rng(11);
+    let mut mesh = Mesh::icosphere(1);
+    for p in &mut mesh.positions {
+        *p = [
+            p[0] * 0.6 + rng.random_range(-0.04..0.04),
+            p[1] * 0.45 + rng.random_range(-0.04..0.04),
+            p[2] * 0.5 + rng.random_range(-0.04..0.04),
+        ];
+    }
+    mesh.vertex_colors = Some(random_colors(mesh.vertex_count(), 12));
+    mesh
+}
+
+fn settings(size: u32, mode: ColorMode) -> RasterSettings {
+    RasterSettings {
+        width: size,
+        height: size,
+        sigma: 2e-3,
+        gamma: 2e-2,
+        color_mode: mode,
+        ..RasterSettings::default()
+    }
+}
+
+/// The pose the gradients are taken at, and the one the targets are rendered at.
+fn poses() -> (Pose, Pose) {
+    (
+        Pose {
+            rotation: DVec3::new(0.25, -0.45, 0.3),
+            translation: DVec3::new(0.04, -0.03, 0.05),
+        },
+        Pose {
+            rotation: DVec3::new(0.1, -0.2, 0.05),
+            translation: DVec3::new(0.0, 0.02, -0.03),
+        },
+    )
+}
+
+/// The f64 target: the mesh rendered at the target pose.
+fn twin_target(mesh: &MeshF64, centre: DVec3, s: &RasterSettings, at: &Pose) -> Vec<[f64; 4]> {
+    reference::render_f64(
+        &pose::cpu::posed(mesh, centre, at),
+        &camera(),
+        &lighting(),
+        s,
+    )
+    .unwrap()
+}
+
+fn cases() -> Vec<(&'static str, Mesh, RasterSettings)> {
+    vec![
+        (
+            "textured box",
+            colored_box(),
+            settings(16, ColorMode::Surface),
+        ),
+        (
+            "vertex-coloured blob",
+            colored_blob(),
+            settings(16, ColorMode::Vertex),
+        ),
+    ]
+}
+
+/// Largest |a − b| over the largest |b|.
+fn rel_err(a: &[f64], b: &[f64]) -> (f64, f64) {
+    let scale = b.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let err = a
+        .iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    (err / scale.max(1e-300), scale)
+}
+
+#[test]
+fn pose_gradient_of_the_twin_matches_central_differences_of_its_forward() {
+    let (at, target_pose) = poses();
+    for (what, mesh, s) in cases() {
+        let m = MeshF64::from_mesh(&mesh);
+        let centre = pose::centroid(&m.positions);
+        let target = twin_target(&m, centre, &s, &target_pose);
+        let (loss, analytic) =
+            pose::cpu::loss_and_gradient(&m, centre, &camera(), &lighting(), &s, &target, &at)
+                .unwrap();
+        assert!(loss > 1e-4, "{what}: the pose should not match the target");
+        let h = 1e-6;
+        let fd: Vec<f64> = (0..6)
+            .map(|k| {
+                let mut p = at.to_array();
+                let f = |p: [f64; 6]| {
+                    pose::cpu::loss(
+                        &m,
+                        centre,
+                        &camera(),
+                        &lighting(),
+                        &s,
+                        &target,
+                        &Pose::from_array(p),
+                    )
+                    .unwrap()
+                };
+                p[k] = at.to_array()[k] + h;
+                let up = f(p);
+                p[k] = at.to_array()[k] - h;
+                (up - f(p)) / (2.0 * h)
+            })
+            .collect();
+        // Rotation and translation separately: each must be non-zero and match.
+        for (part, r) in [("rotation", 0..3), ("translation", 3..6)] {
+            let (err, scale) = rel_err(&analytic[r.clone()], &fd[r.clone()]);
+            eprintln!(
+                "{what} {part}: analytic {:?} fd {:?}",
+                &analytic[r.clone()],
+                &fd[r]
+            );
+            assert!(scale > 1e-6, "{what}: {part} gradient is ~0");
+            assert!(
+                err < 1e-5,
+                "{what}: {part} differs by {err:.2e} of {scale:.3e}"
+            );
+        }
+    }
+}
+
+#[test]
+fn gpu_pose_gradient_equals_the_twin_chain() {
+    let Some(gpu) = common::gpu() else { return };
+    let (at, target_pose) = poses();
+    for (what, mesh, s) in cases() {
+        let m = MeshF64::from_mesh(&mesh);
+        let centre = pose::centroid(&m.positions);
+        let target = twin_target(&m, centre, &s, &target_pose);
+        let (loss, want) =
+            pose::cpu::loss_and_gradient(&m, centre, &camera(), &lighting(), &s, &target, &at)
+                .unwrap();
+        let target32: Vec<[f32; 4]> = target.iter().map(|p| p.map(|c| c as f32)).collect();
+        for tile in [8, 16] {
+            let mut problem =
+                PoseProblem::new(&gpu, &mesh, &camera(), &lighting(), &target32, &s, tile).unwrap();
+            assert!(problem.centre().abs_diff_eq(centre, 1e-12));
+            let got = problem.evaluate(&gpu, &at, s.sigma, s.gamma).unwrap();
+            let (err, scale) = rel_err(&got.gradient, &want);
+            eprintln!(
+                "{what} tile {tile}: loss {} vs {loss}, gradient error {err:.2e} of {scale:.3e}",
+                got.loss
+            );
+            assert!((got.loss - loss).abs() <= 1e-4 * loss, "{what}: loss");
+            assert!(
+                err <= 1e-3,
+                "{what} tile {tile}: {:?} vs {want:?}",
+                got.gradient
+            );
+        }
+    }
+}
+
+/// The target of the small fits: the box at `target`, rendered by the GPU at its sharp settings.
+fn gpu_target(gpu: &common::Gpu, mesh: &Mesh, s: &RasterSettings, target: &Pose) -> Vec<[f32; 4]> {
+    let rest = softvk::lighting::positions_f64(mesh);
+    let centre = pose::centroid(&rest);
+    let mut posed = mesh.clone();
+    for (p, q) in posed.positions.iter_mut().zip(target.apply(&rest, centre)) {
+        *p = [q.x as f32, q.y as f32, q.z as f32];
+    }
+    Renderer::new(gpu)
+        .unwrap()
+        .render_views(gpu, &posed, &[camera()], &lighting(), s, Method::default())
+        .unwrap()
+        .images
+}
+
+fn small_fit_options(iterations: u32) -> PoseFitOptions {
+    PoseFitOptions {
+        iterations,
+        lr_rotation: 0.05,
+        lr_translation: 0.003,
+        schedule: Some(Schedule {
+            sigma_start: 1e-3,
+            gamma_start: 1e-2,
+            stages: 3,
+        }),
+        settings: RasterSettings {
+            width: 32,
+            height: 32,
+            ..RasterSettings::default()
+        },
+        ..PoseFitOptions::default()
+    }
+}
+
+/// The blob at a target pose, a start 25° away about an oblique axis, and the fit's options:
+/// 48², 60 iterations.
+fn small_fit() -> (Mesh, Pose, Pose, PoseFitOptions) {
+    let mesh = colored_blob();
+    let target = Pose {
+        rotation: DVec3::new(0.3, 0.5, -0.2),
+        translation: DVec3::new(0.03, -0.02, 0.0),
+    };
+    let off =
+        glam::DQuat::from_axis_angle(DVec3::new(1.0, 1.0, 0.3).normalize(), 25f64.to_radians());
+    let init = Pose {
+        rotation: (glam::DQuat::from_scaled_axis(target.rotation) * off).to_scaled_axis(),
+        translation: DVec3::ZERO,
+    };
+    assert!((rotation_distance(init.rotation, target.rotation).to_degrees() - 25.0).abs() < 1e-9);
+    let mut opts = small_fit_options(60);
+    opts.settings.width = 48;
+    opts.settings.height = 48;
+    opts.settings.color_mode = ColorMode::Vertex;
+    (mesh, target, init, opts)
+}
+
+/// Runs a small fit and returns (rotation error °, translation error, first loss, last loss).
+fn run_small_fit(
+    gpu: &common::Gpu,
+    mesh: &Mesh,
+    target: &Pose,
+    init: &Pose,
+    opts: &PoseFitOptions,
+    fit_target: PoseTarget<'_>,
+) -> (f64, f64, f64, f64) {
+    let result = fit_pose(
+        gpu,
+        mesh,
+        &camera(),
+        &lighting(),
+        fit_target,
+        init,
+        opts,
+        |l| {
+            if std::env::var_os("POSE_DEBUG").is_some() {
+                eprintln!(
+                    "it {} σ {:.0e} γ {:.0e} loss {:.4e} err {:.3}°",
+                    l.iteration,
+                    l.sigma,
+                    l.gamma,
+                    l.loss,
+                    rotation_distance(l.pose.rotation, target.rotation).to_degrees()
+                );
+            }
+            true
+        },
+    )
+    .unwrap();
+    assert_eq!(result.iterations, opts.iterations);
+    let err = rotation_distance(result.pose.rotation, target.rotation).to_degrees();
+    let shift = (result.pose.translation - target.translation).length();
+    let first = result.log[0].loss;
+    eprintln!(
+        "error {err:.3}°, translation {shift:.4}, loss {first:.3e} → {:.3e}",
+        result.loss
+    );
+    (err, shift, first, result.loss)
+}
+
+#[test]
+fn a_sharp_fit_from_25_degrees_off_ends_within_2_degrees() {
+    let Some(gpu) = common::gpu() else { return };
+    let (mesh, target, init, mut opts) = small_fit();
+    opts.schedule = None;
+    let image = gpu_target(&gpu, &mesh, &opts.settings, &target);
+    let (err, shift, first, last) = run_small_fit(
+        &gpu,
+        &mesh,
+        &target,
+        &init,
+        &opts,
+        PoseTarget::Fixed(&image),
+    );
+    assert!(err < 2.0, "ended {err}° from the target");
+    assert!(shift < 0.02, "translation off by {shift}");
+    assert!(last < 0.05 * first, "loss {first} → {last}");
+}
+
+#[test]
+fn a_scheduled_fit_with_targets_rendered_per_stage_ends_within_2_degrees() {
+    let Some(gpu) = common::gpu() else { return };
+    let (mesh, target, init, mut opts) = small_fit();
+    opts.schedule = Some(Schedule {
+        sigma_start: 1e-2,
+        gamma_start: 1e-1,
+        stages: 3,
+    });
+    let mut stages = Vec::new();
+    let mut render = |sigma: f64, gamma: f64| {
+        stages.push((sigma, gamma));
+        let s = RasterSettings {
+            sigma,
+            gamma,
+            ..opts.settings
+        };
+        Ok(gpu_target(&gpu, &mesh, &s, &target))
+    };
+    let (err, shift, _, _) = run_small_fit(
+        &gpu,
+        &mesh,
+        &target,
+        &init,
+        &opts,
+        PoseTarget::PerStage(&mut render),
+    );
+    // One target per stage, the last (sharp) one also for the final evaluation.
+    assert_eq!(stages.len(), 3, "{stages:?}");
+    assert_eq!(stages[2], (opts.settings.sigma, opts.settings.gamma));
+    assert!(err < 2.0, "ended {err}° from the target");
+    assert!(shift < 0.02, "translation off by {shift}");
+}
+
+#[test]
+fn repeated_fits_are_bit_identical() {
+    let Some(gpu) = common::gpu() else { return };
+    let mesh = colored_box();
+    let opts = small_fit_options(6);
+    let image = gpu_target(&gpu, &mesh, &opts.settings, &poses().1);
+    let init = poses().0;
+    let run = || {
+        let r = fit_pose(
+            &gpu,
+            &mesh,
+            &camera(),
+            &lighting(),
+            PoseTarget::Fixed(&image),
+            &init,
+            &opts,
+            |_| true,
+        )
+        .unwrap();
+        let losses: Vec<u64> = r.log.iter().map(|l| l.loss.to_bits()).collect();
+        (r.pose.to_array().map(f64::to_bits), losses, r.image)
+    };
+    let a = run();
+    let b = run();
+    assert_eq!(a.0, b.0);
+    assert_eq!(a.1, b.1);
+    assert!(a.2 == b.2);
+}
+
+#[test]
+fn bad_inputs_to_the_library_are_errors() {
+    let Some(gpu) = common::gpu() else { return };
+    let mesh = colored_box();
+    let opts = small_fit_options(3);
+    let px = 32 * 32;
+    let good = vec![[0.0f32; 4]; px];
+    let init = Pose::default();
+    let fit = |target: &[[f32; 4]], init: &Pose, opts: &PoseFitOptions| {
+        fit_pose(
+            &gpu,
+            &mesh,
+            &camera(),
+            &lighting(),
+            PoseTarget::Fixed(target),
+            init,
+            opts,
+            |_| true,
+        )
+    };
+    assert!(fit(&good[..px - 1], &init, &opts).is_err(), "short target");
+    let mut nan = good.clone();
+    nan[5][1] = f32::NAN;
+    assert!(fit(&nan, &init, &opts).is_err(), "NaN target");
+    let bad_init = Pose {
+        rotation: DVec3::new(f64::NAN, 0.0, 0.0),
+        ..init
+    };
+    assert!(fit(&good, &bad_init, &opts).is_err(), "NaN pose");
+    for bad in [
+        PoseFitOptions {
+            iterations: 0,
+            ..opts.clone()
+        },
+        PoseFitOptions {
+            lr_rotation: -1.0,
+            ..opts.clone()
+        },
+        PoseFitOptions {
+            schedule: Some(Schedule {
+                sigma_start: 0.0,
+                ..Schedule::default()
+            }),
+            ..opts.clone()
+        },
+    ] {
+        assert!(fit(&good, &init, &bad).is_err(), "{bad:?}");
+    }
+}
+
+// The command line.
+
+fn softvk() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_softvk"));
+    c.env(
+        "SOFTVK_VALIDATION",
+        if common::validation_wanted() {
+            "1"
+        } else {
+            "0"
+        },
+    );
+    c
+}
+
+/// A fresh folder for one test's files, removed when dropped.
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(tag: &str) -> TempDir {
+        let dir = std::env::temp_dir().join(format!("softvk-pose-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        TempDir(dir)
+    }
+
+    fn path(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+
+    /// Every entry, hidden temporaries included.
+    fn entries(&self) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(&self.0)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// The blob as an OBJ with its vertex colours (`v x y z r g b`).
+fn blob_obj(dir: &TempDir) -> PathBuf {
+    let mesh = colored_blob();
+    let colors = mesh.vertex_colors.clone().unwrap();
+    let mut text = String::new();
+    for (p, c) in mesh.positions.iter().zip(&colors) {
+        text += &format!("v {} {} {} {} {} {}\n", p[0], p[1], p[2], c[0], c[1], c[2]);
+    }
+    for f in &mesh.faces {
+        text += &format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1);
+    }
+    let path = dir.path("blob.obj");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+const VIEW: [&str; 5] = ["--elevation", "20", "--azimuth", "-30", "--vertex-colors"];
+
+fn fit_cmd(mesh: &Path, target: &Path, out: &Path, args: &[&str]) -> Output {
+    softvk()
+        .arg("fit-pose")
+        .arg("--mesh")
+        .arg(mesh)
+        .arg("--target")
+        .arg(target)
+        .arg("--out")
+        .arg(out)
+        .args(VIEW)
+        .args(["--quiet"])
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn fit_pose_writes_the_pose_json_and_both_images() {
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    let dir = TempDir::new("cli");
+    let mesh = blob_obj(&dir);
+    let target = dir.path("target.png");
+    let o = softvk()
+        .arg("render")
+        .arg("--mesh")
+        .arg(&mesh)
+        .arg("--out")
+        .arg(&target)
+        .args(["--size", "32"])
+        .args(VIEW)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = dir.path("pose.json");
+    let o = fit_cmd(
+        &mesh,
+        &target,
+        &out,
+        &[
+            "--iters",
+            "40",
+            "--init-rotation",
+            "0,12,0",
+            "--no-schedule",
+            "--lr",
+            "0.05",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        dir.entries(),
+        [
+            "blob.obj",
+            "pose-error.png",
+            "pose-render.png",
+            "pose.json",
+            "target.png"
+        ]
+    );
+    let json = read_json(&out);
+    let omega = json_v3(&json, "rotation_axis_angle");
+    let q = json["quaternion_wxyz"].as_array().unwrap();
+    let q = glam::DQuat::from_xyzw(
+        q[1].as_f64().unwrap(),
+        q[2].as_f64().unwrap(),
+        q[3].as_f64().unwrap(),
+        q[0].as_f64().unwrap(),
+    );
+    assert!(rotation_distance(q.to_scaled_axis(), omega) < 1e-9);
+    let rows = json["rotation_matrix"].as_array().unwrap();
+    let r = pose::rotation_matrix(omega);
+    for (i, row) in rows.iter().enumerate() {
+        for (j, x) in row.as_array().unwrap().iter().enumerate() {
+            assert!((x.as_f64().unwrap() - r.row(i)[j]).abs() < 1e-12);
+        }
+    }
+    assert_eq!(json["iterations"].as_u64(), Some(40));
+    assert!(json["schedule"].is_null());
+    let (loss, initial) = (
+        json["loss"].as_f64().unwrap(),
+        json["initial_loss"].as_f64().unwrap(),
+    );
+    assert!(loss < 0.2 * initial, "loss {initial} → {loss}");
+    // The target is the rest pose: from 12° off, the fit comes back.
+    let err = omega.length().to_degrees();
+    eprintln!("fit-pose ended {err:.3}° from the target, loss {initial:.3e} → {loss:.3e}");
+    assert!(err < 3.0, "ended {err}° from the rest pose");
+    let to_init = json["angle_to_init_degrees"].as_f64().unwrap();
+    let want = rotation_distance(omega, DVec3::Y * 12f64.to_radians()).to_degrees();
+    assert!((to_init - want).abs() < 1e-9, "{to_init} vs {want}");
+    assert!(json_v3(&json, "translation").length() < 0.03);
+    for f in ["pose-render.png", "pose-error.png"] {
+        let img = image::open(dir.path(f)).unwrap();
+        assert_eq!((img.width(), img.height()), (32, 32), "{f}");
+    }
+
+    // The schedule's flags reach the fit; --render and --error name the images.
+    let out2 = dir.path("scheduled.json");
+    let (r, e) = (dir.path("r.png"), dir.path("e.png"));
+    let o = fit_cmd(
+        &mesh,
+        &target,
+        &out2,
+        &[
+            "--iters",
+            "4",
+            "--stages",
+            "2",
+            "--sigma-start",
+            "1e-3",
+            "--gamma-start",
+            "2e-3",
+            "--render",
+            r.to_str().unwrap(),
+            "--error",
+            e.to_str().unwrap(),
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let json = read_json(&out2);
+    assert_eq!(json["schedule"]["stages"].as_u64(), Some(2));
+    assert_eq!(json["schedule"]["sigma_start"].as_f64(), Some(1e-3));
+    assert_eq!(json["schedule"]["gamma_start"].as_f64(), Some(2e-3));
+    assert!(r.is_file() && e.is_file());
+    assert!(!dir.path("scheduled-render.png").exists());
+}
+
+fn read_json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+fn json_v3(json: &serde_json::Value, key: &str) -> DVec3 {
+    let a = json[key]
+        .as_array()
+        .unwrap_or_else(|| panic!("{key}: {json}"));
+    DVec3::new(
+        a[0].as_f64().unwrap(),
+        a[1].as_f64().unwrap(),
+        a[2].as_f64().unwrap(),
+    )
+}
+
+#[test]
+fn fit_pose_errors_are_one_line_and_write_nothing() {
+    let dir = TempDir::new("cli-errors");
+    let mesh = blob_obj(&dir);
+    // An RGBA target of 16×16, and one without alpha.
+    let target = dir.path("t.png");
+    image::RgbaImage::from_pixel(16, 16, image::Rgba([10, 20, 30, 255]))
+        .save(&target)
+        .unwrap();
+    let rgb = dir.path("rgb.png");
+    image::RgbImage::from_pixel(16, 16, image::Rgb([10, 20, 30]))
+        .save(&rgb)
+        .unwrap();
+    let nan = dir.path("nan.obj");
+    std::fs::write(
+        &nan,
+        "v 0 0 0 1 1 1\nv nan 0 0 1 1 1\nv 0 1 0 1 1 1\nf 1 2 3\n",
+    )
+    .unwrap();
+    let empty = dir.path("empty.obj");
+    std::fs::write(&empty, "v 0 0 0\nv 1 0 0\nv 0 1 0\n").unwrap();
+    let out = dir.path("p.json");
+    let before = dir.entries();
+    let missing = dir.path("missing.png");
+    let cases: Vec<(&str, &Path, &Path, Vec<&str>, &str)> = vec![
+        ("missing target", &mesh, &missing, vec![], "missing.png"),
+        (
+            "size mismatch",
+            &mesh,
+            &target,
+            vec!["--size", "24"],
+            "16x16",
+        ),
+        ("no alpha", &mesh, &rgb, vec![], "alpha"),
+        ("NaN vertex", &nan, &target, vec![], "nan.obj"),
+        ("no faces", &empty, &target, vec![], "empty.obj"),
+        ("bad tile", &mesh, &target, vec!["--tile", "12"], "12"),
+        (
+            "zero iterations",
+            &mesh,
+            &target,
+            vec!["--iters", "0"],
+            "iteration",
+        ),
+        (
+            "init rotation not a triple",
+            &mesh,
+            &target,
+            vec!["--init-rotation", "1,2"],
+            "three",
+        ),
+        (
+            "NaN init translation",
+            &mesh,
+            &target,
+            vec!["--init-translation", "0,nan,0"],
+            "finite",
+        ),
+        (
+            "schedule flags without a schedule",
+            &mesh,
+            &target,
+            vec!["--no-schedule", "--sigma-start", "1e-2"],
+            "--sigma-start",
+        ),
+        (
+            "render path is not a PNG",
+            &mesh,
+            &target,
+            vec!["--render", "r.exr"],
+            "r.exr",
+        ),
+    ];
+    for (what, m, t, args, needle) in cases {
+        let o = fit_cmd(m, t, &out, &args);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{what}: succeeded");
+        assert_eq!(stderr.lines().count(), 1, "{what}: {stderr}");
+        assert!(stderr.starts_with("softvk: error: "), "{what}: {stderr}");
+        assert!(
+            stderr.contains(needle),
+            "{what}: `{needle}` not in {stderr}"
+        );
+        assert!(o.stdout.is_empty(), "{what}: printed on stdout");
+        assert_eq!(dir.entries(), before, "{what}: wrote something");
+    }
+}
