@@ -2,8 +2,10 @@
 
 mod common;
 
+use common::{TempDir, softvk};
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 use glam::DVec3;
 use softvk::camera::{Camera, Projection, pixel_center};
@@ -13,10 +15,6 @@ use softvk::raster::reference::{
     self, Alpha, ColorMode, Dist, FaceColors, RasterSettings, Rgb, project_faces, setup_face,
     shade_pixel,
 };
-
-fn softvk() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_softvk"))
-}
 
 #[test]
 fn info_names_the_device_and_the_validation_state() {
@@ -93,44 +91,6 @@ fn unknown_device_selection_is_an_error_naming_the_choices() {
 }
 
 // `softvk render`: PNG and EXR outputs, the flags against the f64 twin, and every error class.
-
-/// A fresh folder for one test's outputs, removed when dropped.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(tag: &str) -> TempDir {
-        let dir = std::env::temp_dir().join(format!("softvk-cli-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        TempDir(dir)
-    }
-
-    fn path(&self, name: &str) -> PathBuf {
-        self.0.join(name)
-    }
-
-    fn write(&self, name: &str, text: &str) -> PathBuf {
-        let p = self.path(name);
-        std::fs::write(&p, text).unwrap();
-        p
-    }
-
-    /// Every entry, hidden temporaries included.
-    fn entries(&self) -> Vec<String> {
-        let mut v: Vec<String> = std::fs::read_dir(&self.0)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
-        v.sort();
-        v
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
 
 fn spot() -> PathBuf {
     softvk::assets::dir().join("spot_triangulated.obj")

@@ -4,8 +4,9 @@
 
 mod common;
 
+use common::{TempDir, softvk};
+
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use softvk::Error;
 use softvk::camera::Camera;
@@ -430,32 +431,6 @@ fn the_auto_cube_holds_a_sphere_that_the_frames_cut() {
 }
 
 // ---- the command line ----
-
-fn softvk() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_softvk"))
-}
-
-/// A temporary folder removed on drop.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(tag: &str) -> TempDir {
-        let dir = std::env::temp_dir().join(format!("softvk-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        TempDir(dir)
-    }
-
-    fn path(&self, name: &str) -> PathBuf {
-        self.0.join(name)
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
 
 /// Sphere silhouettes (3 views of 24²) and their cameras file, written by the library.
 fn write_sphere_inputs(dir: &TempDir) -> (PathBuf, PathBuf) {

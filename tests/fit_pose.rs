@@ -4,6 +4,8 @@
 
 mod common;
 
+use common::TempDir;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -441,7 +443,7 @@ fn bad_inputs_to_the_library_are_errors() {
 // The command line.
 
 fn softvk() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_softvk"));
+    let mut c = common::softvk();
     c.env(
         "SOFTVK_VALIDATION",
         if common::validation_wanted() {
@@ -451,38 +453,6 @@ fn softvk() -> Command {
         },
     );
     c
-}
-
-/// A fresh folder for one test's files, removed when dropped.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(tag: &str) -> TempDir {
-        let dir = std::env::temp_dir().join(format!("softvk-pose-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        TempDir(dir)
-    }
-
-    fn path(&self, name: &str) -> PathBuf {
-        self.0.join(name)
-    }
-
-    /// Every entry, hidden temporaries included.
-    fn entries(&self) -> Vec<String> {
-        let mut v: Vec<String> = std::fs::read_dir(&self.0)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
-        v.sort();
-        v
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
 }
 
 /// The blob as an OBJ with its vertex colours (`v x y z r g b`).

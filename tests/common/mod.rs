@@ -64,3 +64,51 @@ pub fn validation_wanted() -> bool {
 pub fn rng(seed: u64) -> rand_pcg::Pcg64 {
     rand::SeedableRng::seed_from_u64(seed)
 }
+
+/// The `softvk` binary of this build, as a command (validation as the binary defaults: pass
+/// `SOFTVK_VALIDATION` to change it).
+pub fn softvk() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_softvk"))
+}
+
+/// A fresh folder for one test's files, removed when dropped. `tag` must be unique among the
+/// tests of one test binary (binaries differ by process id).
+pub struct TempDir(pub std::path::PathBuf);
+
+impl TempDir {
+    /// Creates (or empties) the folder.
+    pub fn new(tag: &str) -> TempDir {
+        let dir = std::env::temp_dir().join(format!("softvk-test-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        TempDir(dir)
+    }
+
+    /// `name` inside the folder.
+    pub fn path(&self, name: &str) -> std::path::PathBuf {
+        self.0.join(name)
+    }
+
+    /// Writes `text` to `name` inside the folder and returns its path.
+    pub fn write(&self, name: &str, text: &str) -> std::path::PathBuf {
+        let p = self.path(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    /// Every entry, hidden temporaries included, sorted.
+    pub fn entries(&self) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(&self.0)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
