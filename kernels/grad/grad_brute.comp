@@ -28,8 +28,8 @@ void main() {
     uint view = item / pc.face_count;
     uint face = item - view * pc.face_count;
     uint gview = pc.first_view + view;
-    FaceSetup f = setups[gview * pc.face_count + face];
-    bool vertex_colors = (pc.flags & FLAG_VERTEX_COLORS) != 0u;
+    Face f = face_of(setups[gview * pc.face_count + face]);
+    bool vertex_colors = VERTEX_COLORS;
     uint o = id * pc.grad_stride;
     uint row_begin = band * pc.split;
     uint row_end = min(pc.height, row_begin + pc.split);

@@ -1,20 +1,36 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_ballot : require
+#extension GL_KHR_shader_subgroup_shuffle : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
 // Tiled backward of the fine pass, one chunk of (face, tile) entries at a time: workgroup
 // (tile, part) takes the tile's entries whose item-major slot lies in [chunk_begin, chunk_end)
 // (a contiguous sub-run: a tile's slots increase along its run, since binning's stable sort
-// keeps the item-major order), and of those the part-th `split` faces. Invocation t takes the
-// t-th face of a batch of 64 and sums its contribution over every pixel of the tile (row-major,
-// 64 pixels at a time through shared memory), then writes the entry's partial at
-// `slot - chunk_begin`. Splitting a crowded tile over several workgroups bounds every
-// invocation's loop count (llvmpipe stops loops after 65 535 iterations) without changing any
-// sum: each entry is still summed by one invocation in pixel order. Each partial has one writer
-// and a fixed summation order: no atomics, bit-identical runs. `grad_reduce.comp` and
-// `grad_reduce_texels.comp` then add each face's partials, in slot order, to its gradients.
-// Twin: `reference_grad::backward_view` (per tile instead of per image).
+// keeps the item-major order), and of those the part-th `split` faces. Each invocation holds one
+// face and sums its contribution over every pixel of the tile in row-major order, then writes
+// the entry's partial at `slot - chunk_begin`. Splitting a crowded tile over several workgroups
+// bounds every invocation's loop count (llvmpipe stops loops after 65 535 iterations) without
+// changing any sum: each entry is still summed by one invocation in pixel order. Each partial
+// has one writer and a fixed summation order: no atomics, bit-identical runs.
+// `grad_reduce.comp` and `grad_reduce_texels.comp` then add each face's partials, in slot order,
+// to its gradients. Twin: `reference_grad::backward_view` (per tile instead of per image).
+//
+// Each subgroup works alone (no shared memory, no barrier; see `raster_tiled.comp`): it takes
+// as many faces as it has lanes (one per lane, whose lane keeps its sums), then walks the tile's
+// pixels as many at a time (a segment), each lane loading one pixel's upstream. A ballot keeps
+// the faces whose box touches the segment's pixels with a non-zero upstream (any other face
+// adds nothing there), and the loop over its bits broadcasts each kept face with shuffles: every
+// lane takes its pixel's contribution, `subgroupAdd` sums them, and the face's own lane adds
+// the sum to its running total. So a face's partial is summed segment by segment in pixel
+// order, each segment by the subgroup's reduction (a fixed order on a given device: runs are
+// bit-identical; against brute force it differs by float reassociation). Texel slots are added
+// one pixel at a time, in pixel order, by the face's lane.
+// 64 invocations: the forward's block, and a multiple of any subgroup size up to 64.
 #define FINE_BACKWARD
 #include "common.glsl"
 #include "raster_grad.glsl"
+#include "subgroup_face.glsl"
 
 layout(local_size_x = 64) in;
 
@@ -24,8 +40,6 @@ layout(std430, set = 0, binding = 6) buffer Partials { float partials[]; };
 layout(std430, set = 0, binding = 7) readonly buffer Pairs { uint pairs[]; };
 layout(std430, set = 0, binding = 8) readonly buffer PairItems { uint pair_items[]; };
 layout(std430, set = 0, binding = 9) readonly buffer Ranges { uvec2 ranges[]; };
-
-shared Upstream s_up[64];
 
 // The first position of the sorted run [lo, hi) whose slot is at least `s` (at most
 // bit_length(hi - lo) iterations).
@@ -62,57 +76,81 @@ void main() {
     }
     uint first = lo + part * pc.split;
     uint last = first + min(pc.split, hi - first);
-    uint lid = gl_LocalInvocationIndex;
-    uint chunks = pc.tile_size * pc.tile_size / 64u;
-    bool vertex_colors = (pc.flags & FLAG_VERTEX_COLORS) != 0u;
+    uint pixels = pc.tile_size * pc.tile_size;
 
-    for (uint start = first; start < last; start += 64u) {
-        uint k = start + lid;
-        bool has = k < last;
+    uint lanes = subgroup_lanes(64u);
+    uint lane = gl_SubgroupInvocationID;
+    float inf = uintBitsToFloat(0x7f800000u);
+    // The workgroup's faces go to its subgroups `lanes` at a time, round robin.
+    for (uint start = first + gl_SubgroupID * lanes; start < last;
+         start += gl_NumSubgroups * lanes) {
+        uint k = start + lane;
+        bool has = k < last && lane < lanes;
         uint slot = 0u;
         uint face = 0u;
-        FaceSetup f;
+        Face f = face_none();
         if (has) {
             slot = pairs[k];
             face = pair_items[slot];
-            f = setups[gview * pc.face_count + face];
+            f = face_of(setups[gview * pc.face_count + face]);
         }
         uint o = (slot - pc.chunk_begin) * pc.grad_stride;
         vec3 acc[3] = vec3[3](vec3(0.0), vec3(0.0), vec3(0.0));
         vec3 cacc[3] = vec3[3](vec3(0.0), vec3(0.0), vec3(0.0));
-        for (uint chunk = 0u; chunk < chunks; ++chunk) {
-            barrier();
-            uint i = chunk * 64u + lid;
+        for (uint base = 0u; base < pixels; base += lanes) {
+            uint i = base + lane;
             uint col = tx * pc.tile_size + i % pc.tile_size;
             uint row = ty * pc.tile_size + i / pc.tile_size;
-            s_up[lid] = (col < pc.width && row < pc.height) ? load_upstream(gview, col, row)
-                                                           : zero_upstream();
-            barrier();
-            if (!has) {
-                continue;
-            }
-            for (uint q = 0u; q < 64u; ++q) {
-                Upstream u = s_up[q];
-                if (upstream_is_zero(u)) {
-                    continue;
-                }
-                FaceGrad g;
-                if (!pixel_face_grad(f, face, u, g)) {
-                    continue;
-                }
-                acc[0] += g.screen[0];
-                acc[1] += g.screen[1];
-                acc[2] += g.screen[2];
-                if (g.colored) {
-                    if (vertex_colors) {
-                        cacc[0] += g.color[0];
-                        cacc[1] += g.color[1];
-                        cacc[2] += g.color[2];
+            bool live = i < pixels && lane < lanes && col < pc.width && row < pc.height;
+            Upstream u = live ? load_upstream(gview, col, row) : zero_upstream();
+            live = live && !upstream_is_zero(u);
+            vec2 lo = subgroupMin(live ? u.p : vec2(inf));
+            vec2 hi = subgroupMax(live ? u.p : vec2(-inf));
+            bool touches = (f.flags & FACE_FINITE) != 0u
+                        && !(hi.x < f.bbox.x || hi.y < f.bbox.y || lo.x > f.bbox.z
+                             || lo.y > f.bbox.w);
+            uvec4 kept = subgroupBallot(touches);
+            for (uint word = 0u; word < ballot_words(); ++word) {
+                uint mask = kept[word];
+                while (mask != 0u) {
+                    uint q = 32u * word + uint(findLSB(mask));
+                    mask &= mask - 1u;
+                    uint fq = subgroupShuffle(face, q);
+                    FaceGrad g;
+                    bool hit = live && pixel_face_grad(face_shuffle(f, q), fq, u, g);
+                    bool mine = lane == q;
+                    for (uint c = 0u; c < 3u; ++c) {
+                        vec3 sum = subgroupAdd(hit ? g.screen[c] : vec3(0.0));
+                        acc[c] += mine ? sum : vec3(0.0);
+                    }
+                    if (ALPHA_ONLY) {
+                        continue;
+                    }
+                    bool colored = hit && g.colored;
+                    if (VERTEX_COLORS) {
+                        for (uint c = 0u; c < 3u; ++c) {
+                            vec3 sum = subgroupAdd(colored ? g.color[c] : vec3(0.0));
+                            cacc[c] += mine ? sum : vec3(0.0);
+                        }
                     } else {
-                        uint t = o + 9u + 3u * g.texel;
-                        partials[t] += g.color[0].x;
-                        partials[t + 1u] += g.color[0].y;
-                        partials[t + 2u] += g.color[0].z;
+                        // Texel slots: one pixel at a time, in pixel order (lanes may share a
+                        // texel), by face q's lane.
+                        uvec4 texels = subgroupBallot(colored);
+                        for (uint tw = 0u; tw < ballot_words(); ++tw) {
+                            uint tmask = texels[tw];
+                            while (tmask != 0u) {
+                                uint l = 32u * tw + uint(findLSB(tmask));
+                                tmask &= tmask - 1u;
+                                uint texel = subgroupShuffle(g.texel, l);
+                                vec3 value = subgroupShuffle(g.color[0], l);
+                                if (mine) {
+                                    uint t = o + 9u + 3u * texel;
+                                    partials[t] += value.x;
+                                    partials[t + 1u] += value.y;
+                                    partials[t + 2u] += value.z;
+                                }
+                            }
+                        }
                     }
                 }
             }
@@ -122,7 +160,7 @@ void main() {
                 partials[o + 3u * c] = acc[c].x;
                 partials[o + 3u * c + 1u] = acc[c].y;
                 partials[o + 3u * c + 2u] = acc[c].z;
-                if (vertex_colors) {
+                if (VERTEX_COLORS) {
                     partials[o + 9u + 3u * c] = cacc[c].x;
                     partials[o + 9u + 3u * c + 1u] = cacc[c].y;
                     partials[o + 9u + 3u * c + 2u] = cacc[c].z;

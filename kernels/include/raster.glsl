@@ -41,6 +41,46 @@ struct FaceSetup {
     uint pad1;
 };
 
+// What the per-pixel steps read of a `FaceSetup`: 21 of its 32 words. The tiled kernels hold one
+// face per lane and broadcast it across the subgroup one word per shuffle, so the fewer the
+// better; brute force reads it straight from the setup (`face_of`), with the same arithmetic.
+struct Face {
+    vec3 v[3];    // screen-space vertices (x_s, y_s, z)
+    vec2 inv[3];  // (a, b) of the rows of M_j
+    vec4 bbox;    // grown screen box
+    uint flags;   // FACE_*
+    uint mesh;    // the batch's mesh
+};
+
+Face face_of(FaceSetup s) {
+    Face f;
+    f.v[0] = s.v[0].xyz;
+    f.v[1] = s.v[1].xyz;
+    f.v[2] = s.v[2].xyz;
+    f.inv[0] = s.inv[0].xy;
+    f.inv[1] = s.inv[1].xy;
+    f.inv[2] = s.inv[2].xy;
+    f.bbox = s.bbox;
+    f.flags = s.flags;
+    f.mesh = s.mesh;
+    return f;
+}
+
+// A face that no pixel sees (no FACE_FINITE): for lanes past the end of a run.
+Face face_none() {
+    Face f;
+    f.v[0] = vec3(0.0);
+    f.v[1] = vec3(0.0);
+    f.v[2] = vec3(0.0);
+    f.inv[0] = vec2(0.0);
+    f.inv[1] = vec2(0.0);
+    f.inv[2] = vec2(0.0);
+    f.bbox = vec4(0.0);
+    f.flags = 0u;
+    f.mesh = 0u;
+    return f;
+}
+
 // `camera::pixel_center`: x_p = (2c + 1 - W) / S, y_p = (2(H - 1 - r) + 1 - H) / S, S = min(W, H).
 // Every operand is an integer below 2^24, so only the division rounds.
 vec2 pixel_center(uint col, uint row, uint width, uint height) {
@@ -60,7 +100,7 @@ bool outside_bbox(vec4 bbox, vec2 p) {
 // for the clamped determinant too. In f32 the translated form keeps its error at a few ulp of
 // |p - v_r| instead of |c| (which grows like 1 / area and cancels), so the w of a small face stay
 // accurate; SoftRas's σ = 1e-5 barycentric coverage is that sensitive.
-vec3 barycentric(FaceSetup f, vec2 p) {
+vec3 barycentric(Face f, vec2 p) {
     return vec3(f.inv[0].x * (p.x - f.v[1].x) + f.inv[0].y * (p.y - f.v[1].y),
                 f.inv[1].x * (p.x - f.v[2].x) + f.inv[1].y * (p.y - f.v[2].y),
                 f.inv[2].x * (p.x - f.v[0].x) + f.inv[2].y * (p.y - f.v[0].y));
@@ -90,7 +130,7 @@ float dist2_point_segment(vec2 p, vec2 a, vec2 b) {
 }
 
 // `reference::euclidean_dist2`: the nearest of the three edges, as segments.
-float euclidean_dist2(FaceSetup f, vec2 p) {
+float euclidean_dist2(Face f, vec2 p) {
     return min(min(dist2_point_segment(p, f.v[0].xy, f.v[1].xy),
                    dist2_point_segment(p, f.v[1].xy, f.v[2].xy)),
                dist2_point_segment(p, f.v[2].xy, f.v[0].xy));
@@ -102,7 +142,7 @@ float sigmoid(float x) {
 
 // `reference::coverage`: false when the face is ignored at this pixel (outside and beyond the
 // cut-off `t`); otherwise `d` is the coverage D.
-bool coverage(FaceSetup f, vec3 w, vec2 p, uint dist, float sigma, float t, out float d) {
+bool coverage(Face f, vec3 w, vec2 p, uint dist, float sigma, float t, out float d) {
     if (dist == DIST_HARD) {
         d = 1.0;
         return inside_closed(w);
@@ -132,7 +172,7 @@ vec3 clip_barycentric(vec3 w) {
 // `reference::depth` and the near/far test together: false when the depth
 // z = 1 / Σ_k (w̃_k / z_k) is outside [near, far] (a non-positive sum, whose z would be negative
 // or infinite, is outside too; so is NaN).
-bool depth_in_range(FaceSetup f, vec3 wc, float near, float far, out float z) {
+bool depth_in_range(Face f, vec3 wc, float near, float far, out float z) {
     float inv_z = wc.x / f.v[0].z + wc.y / f.v[1].z + wc.z / f.v[2].z;
     if (!(inv_z > 0.0)) {
         z = 0.0;

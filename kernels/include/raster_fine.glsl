@@ -38,6 +38,22 @@ layout(std430, set = 0, binding = 4) writeonly buffer Aux { PixelAux aux[]; };
 #define FLAG_VERTEX_COLORS 2u
 #define FLAG_CULL 4u
 #define FLAG_ANTIALIAS 8u
+#define FLAG_ALPHA_ONLY 16u
+
+// The modes, as specialization constants (twin: `FineModes`, src/raster/fine.rs): the host builds
+// one pipeline per combination it renders with. On llvmpipe a branch never skips work (it only
+// narrows the lane mask), so a mode read from push constants would run every mode's code.
+layout(constant_id = 0) const uint MODE_DIST = DIST_EUCLIDEAN;
+layout(constant_id = 1) const uint MODE_RGB = RGB_SOFTMAX;
+layout(constant_id = 2) const uint MODE_ALPHA = ALPHA_PROD;
+layout(constant_id = 3) const uint MODE_FLAGS = 0u; // FLAG_*
+const bool DOUBLE_SIDED = (MODE_FLAGS & FLAG_DOUBLE_SIDED) != 0u;
+const bool VERTEX_COLORS = (MODE_FLAGS & FLAG_VERTEX_COLORS) != 0u;
+const bool CULL = (MODE_FLAGS & FLAG_CULL) != 0u;
+const bool ANTIALIAS = (MODE_FLAGS & FLAG_ANTIALIAS) != 0u;
+// Backward only: the upstream gradient has no RGB part (a silhouette loss), so the colour terms,
+// which would add exact zeros, are left out. The same gradients, bit for bit.
+const bool ALPHA_ONLY = (MODE_FLAGS & FLAG_ALPHA_ONLY) != 0u;
 
 // Twin of `RasterPush` (src/raster/fine.rs).
 layout(push_constant) uniform Push {
@@ -51,11 +67,7 @@ layout(push_constant) uniform Push {
     float far;
     float inv_gamma_range; // 1 / (γ (far − near))
     float background_depth; // far − ε (far − near): the background's softmax depth
-    uint dist;             // DIST_*
-    uint rgb;              // RGB_*
-    uint alpha;            // ALPHA_*
     uint texture_res;      // R (surface colours)
-    uint flags;            // FLAG_*
     uint first_view;       // view of this dispatch's first view in setups, image and aux
     vec4 background;       // C_b (w unused)
     uint tile_size;        // tiled only: tile edge in pixels (a multiple of 8)
@@ -77,7 +89,7 @@ layout(push_constant) uniform Push {
 // `FaceColors::sample`: C_j at clipped barycentrics w̃, from the colours of mesh `mesh` of the
 // batch (`vertex_count` colours per mesh in vertex mode, `face_count` R² texels in surface mode).
 vec3 sample_color(uint mesh, uint face, vec3 wc) {
-    if ((pc.flags & FLAG_VERTEX_COLORS) != 0u) {
+    if (VERTEX_COLORS) {
         uvec3 f = uvec3(faces[3u * face], faces[3u * face + 1u], faces[3u * face + 2u])
                 + mesh * pc.vertex_count;
         vec3 c0 = vec3(colors[3u * f.x], colors[3u * f.x + 1u], colors[3u * f.x + 2u]);
@@ -102,7 +114,7 @@ struct PixelState {
 
 PixelState pixel_init() {
     PixelState s;
-    s.alpha = alpha_init(pc.alpha);
+    s.alpha = alpha_init(MODE_ALPHA);
     s.soft = softmax_init(pc.background.rgb, pc.background_depth);
     s.hard_found = false;
     s.hard_depth = 0.0;
@@ -112,29 +124,27 @@ PixelState pixel_init() {
 }
 
 // Folds face j (set up as `f`) into the state of the pixel centred at `p`.
-void shade_face(inout PixelState s, FaceSetup f, uint j, vec2 p) {
-    bool cull = (pc.flags & FLAG_CULL) != 0u;
-    if ((f.flags & FACE_FINITE) == 0u || (cull && outside_bbox(f.bbox, p))) {
+void shade_face(inout PixelState s, Face f, uint j, vec2 p) {
+    if ((f.flags & FACE_FINITE) == 0u || (CULL && outside_bbox(f.bbox, p))) {
         return;
     }
     vec3 w = barycentric(f, p);
     float d;
-    if (!coverage(f, w, p, pc.dist, pc.sigma, pc.cutoff, d)) {
+    if (!coverage(f, w, p, MODE_DIST, pc.sigma, pc.cutoff, d)) {
         return;
     }
     // Alpha counts every non-ignored face, whatever its depth or facing.
-    alpha_add(s.alpha, pc.alpha, d);
+    alpha_add(s.alpha, MODE_ALPHA, d);
 
     vec3 wc = clip_barycentric(w);
     float z;
     if (!depth_in_range(f, wc, pc.near, pc.far, z)) {
         return;
     }
-    bool double_sided = (pc.flags & FLAG_DOUBLE_SIDED) != 0u;
-    if (!(double_sided || (f.flags & FACE_FRONT) != 0u)) {
+    if (!(DOUBLE_SIDED || (f.flags & FACE_FRONT) != 0u)) {
         return;
     }
-    if (pc.rgb == RGB_SOFTMAX) {
+    if (MODE_RGB == RGB_SOFTMAX) {
         softmax_add(s.soft, z, d, sample_color(f.mesh, j, wc), pc.inv_gamma_range);
     } else if (inside_closed(w) && (!s.hard_found || z < s.hard_depth)) {
         s.hard_found = true;
@@ -147,8 +157,8 @@ void shade_face(inout PixelState s, FaceSetup f, uint j, vec2 p) {
 #ifndef FINE_BACKWARD
 // Writes the pixel's colour and aux at index `id` of the image.
 void pixel_finish(PixelState s, uint id) {
-    vec3 rgb = pc.rgb == RGB_SOFTMAX ? softmax_resolve(s.soft) : s.hard_rgb;
-    image[id] = vec4(rgb, alpha_resolve(s.alpha, pc.alpha, pc.face_count));
+    vec3 rgb = MODE_RGB == RGB_SOFTMAX ? softmax_resolve(s.soft) : s.hard_rgb;
+    image[id] = vec4(rgb, alpha_resolve(s.alpha, MODE_ALPHA, pc.face_count));
     PixelAux a;
     a.softmax_ref_depth = s.soft.ref_depth;
     a.softmax_sum = s.soft.sum;

@@ -49,7 +49,7 @@ bool upstream_is_zero(Upstream u) {
 Upstream load_upstream(uint view, uint col, uint row) {
     uint id = view * pc.width * pc.height + row * pc.width + col;
     vec4 g;
-    if ((pc.flags & FLAG_ANTIALIAS) != 0u) {
+    if (ANTIALIAS) {
         g = d_image[view * pc.out_width * pc.out_height + (row / 2u) * pc.out_width + col / 2u]
           / 4.0;
     } else {
@@ -72,7 +72,7 @@ Upstream load_upstream(uint view, uint col, uint row) {
 
 // `PixelUpstream::alpha_grad`: dL/dA · ∂A/∂D_j, exact from the zero count.
 float alpha_grad(Upstream u, float d) {
-    if (pc.alpha == ALPHA_PROD) {
+    if (MODE_ALPHA == ALPHA_PROD) {
         float factor = 1.0 - d;
         float others = 0.0;
         if (factor == 0.0) {
@@ -82,7 +82,7 @@ float alpha_grad(Upstream u, float d) {
         }
         return u.d_alpha * others;
     }
-    if (pc.alpha == ALPHA_SUM) {
+    if (MODE_ALPHA == ALPHA_SUM) {
         return u.d_alpha / float(pc.face_count);
     }
     return 0.0;
@@ -105,7 +105,7 @@ struct FaceGrad {
 };
 
 // `reference_grad::pixel_face_grad`. False where the face does not touch the pixel.
-bool pixel_face_grad(FaceSetup f, uint j, Upstream u, out FaceGrad g) {
+bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
     g.screen[0] = vec3(0.0);
     g.screen[1] = vec3(0.0);
     g.screen[2] = vec3(0.0);
@@ -120,14 +120,13 @@ bool pixel_face_grad(FaceSetup f, uint j, Upstream u, out FaceGrad g) {
     }
     vec3 w = barycentric(f, p);
     float d;
-    if (!coverage(f, w, p, pc.dist, pc.sigma, pc.cutoff, d)) {
+    if (!coverage(f, w, p, MODE_DIST, pc.sigma, pc.cutoff, d)) {
         return false;
     }
     vec3 wc = clip_barycentric(w);
-    float z;
-    bool in_range = depth_in_range(f, wc, pc.near, pc.far, z);
-    bool double_sided = (pc.flags & FLAG_DOUBLE_SIDED) != 0u;
-    g.colored = in_range && (double_sided || (f.flags & FACE_FRONT) != 0u);
+    float z = 0.0;
+    bool in_range = !ALPHA_ONLY && depth_in_range(f, wc, pc.near, pc.far, z);
+    g.colored = in_range && (DOUBLE_SIDED || (f.flags & FACE_FRONT) != 0u);
 
     float d_cov = alpha_grad(u, d);
     vec3 d_color = vec3(0.0);
@@ -135,7 +134,7 @@ bool pixel_face_grad(FaceSetup f, uint j, Upstream u, out FaceGrad g) {
     vec3 c = vec3(0.0);
     if (g.colored) {
         c = sample_color(f.mesh, j, wc);
-        if (pc.rgb == RGB_SOFTMAX) {
+        if (MODE_RGB == RGB_SOFTMAX) {
             float e = exp((u.ref_depth - z) * pc.inv_gamma_range);
             float weight = d * e;
             float q = (dot(u.d_rgb, c) - u.d_dot) * u.inv_sum;
@@ -158,7 +157,7 @@ bool pixel_face_grad(FaceSetup f, uint j, Upstream u, out FaceGrad g) {
         }
     }
     if (g.colored) {
-        if ((pc.flags & FLAG_VERTEX_COLORS) != 0u) {
+        if (VERTEX_COLORS) {
             uvec3 vi = uvec3(faces[3u * j], faces[3u * j + 1u], faces[3u * j + 2u])
                      + f.mesh * pc.vertex_count;
             for (uint k = 0u; k < 3u; ++k) {
@@ -185,14 +184,14 @@ bool pixel_face_grad(FaceSetup f, uint j, Upstream u, out FaceGrad g) {
     // Coverage.
     vec2 d_xy_cov[3] = vec2[3](vec2(0.0), vec2(0.0), vec2(0.0));
     if (d_cov != 0.0) {
-        if (pc.dist == DIST_BARYCENTRIC) {
+        if (MODE_DIST == DIST_BARYCENTRIC) {
             uint k = 0u;
             if (w[1] < w[k]) k = 1u;
             if (w[2] < w[k]) k = 2u;
             float m = w[k];
             float x = m * abs(m) / pc.sigma;
             d_w[k] += d_cov * sigmoid_grad(x) * 2.0 * abs(m) / pc.sigma;
-        } else if (pc.dist == DIST_EUCLIDEAN) {
+        } else if (MODE_DIST == DIST_EUCLIDEAN) {
             // The nearest edge as `euclidean_dist2` picks it (the first of equals).
             float best = uintBitsToFloat(0x7f800000u);
             uint ea = 0u;

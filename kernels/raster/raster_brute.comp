@@ -23,7 +23,7 @@ void main() {
     PixelState s = pixel_init();
     uint base = view * pc.face_count;
     for (uint j = 0u; j < pc.face_count; ++j) {
-        shade_face(s, setups[base + j], j, p);
+        shade_face(s, face_of(setups[base + j]), j, p);
     }
     pixel_finish(s, view * pixels + in_view);
 }

@@ -1,13 +1,26 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
-// Tiled soft rasterization: one workgroup per 8×8 block of pixels, visiting only the faces binned
-// to the block's tile (`kernels/binning/`), in index order, through shared memory 64 faces at a
-// time. The per-face step is `raster_fine.glsl`'s `shade_face`, as in `raster_brute.comp`, and
-// binning keeps every face that can touch a pixel of the tile (a superset is harmless: the step
-// ignores a face beyond its cut-off exactly as brute force does), so the pixels are bit for bit
-// those of the brute-force kernel. Twin: `reference::shade_pixel`.
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_ballot : require
+#extension GL_KHR_shader_subgroup_shuffle : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
+// Tiled soft rasterization: one workgroup per 8×8 block of pixels (64 invocations, one per
+// pixel: a block is the unit a tile size must be a multiple of), visiting only the faces binned
+// to the block's tile (`kernels/binning/`), in index order. Binning keeps every face that can
+// touch a pixel of the tile (a superset is harmless: the step ignores a face beyond its cut-off
+// exactly as brute force does), so the pixels are bit for bit those of `raster_brute.comp`,
+// which calls the same `shade_face` for every face. Twin: `reference::shade_pixel`.
+//
+// Each subgroup works alone, with no shared memory and no barrier: per batch of as many binned
+// faces as it has lanes, each lane loads one face; a ballot keeps the faces whose box touches
+// the box of the subgroup's pixel centres (a face whose box holds none of them changes none of
+// them, the same argument that lets binning drop it from the tile), and the loop over the
+// ballot's bits, lowest first (index order), broadcasts each kept face with shuffles and folds it
+// into every lane's pixel. The loop ends when the mask is empty, which on llvmpipe is the only
+// construct that skips work (an `if` only narrows the lane mask).
 #include "common.glsl"
 #include "raster_fine.glsl"
+#include "subgroup_face.glsl"
 
 layout(local_size_x = 64) in;
 
@@ -17,10 +30,6 @@ layout(std430, set = 0, binding = 5) readonly buffer Pairs { uint pairs[]; };
 layout(std430, set = 0, binding = 6) readonly buffer PairItems { uint pair_items[]; };
 // [start, end) of every tile's run of sorted entries, view-major within this dispatch.
 layout(std430, set = 0, binding = 7) readonly buffer Ranges { uvec2 ranges[]; };
-
-const uint BATCH = 64u;
-shared FaceSetup s_setup[BATCH];
-shared uint s_face[BATCH];
 
 void main() {
     uint blocks_x = (pc.width + 7u) / 8u;
@@ -46,20 +55,32 @@ void main() {
     uint setup_base = (pc.first_view + view) * pc.face_count;
 
     vec2 p = pixel_center(col, row, pc.width, pc.height);
+    // The box of this subgroup's pixel centres (lanes past the image's edge count as the edge).
+    vec2 edge = pixel_center(min(col, pc.width - 1u), min(row, pc.height - 1u), pc.width,
+                             pc.height);
+    vec2 lo = subgroupMin(edge);
+    vec2 hi = subgroupMax(edge);
+
+    uint lanes = subgroup_lanes(64u);
+    uint lane = gl_SubgroupInvocationID;
     PixelState s = pixel_init();
-    for (uint start = range.x; start < range.y; start += BATCH) {
-        barrier();
-        uint k = start + lid;
-        if (k < range.y) {
-            uint face = pair_items[pairs[k]];
-            s_face[lid] = face;
-            s_setup[lid] = setups[setup_base + face];
+    for (uint start = range.x; start < range.y; start += lanes) {
+        uint k = start + lane;
+        Face f = face_none();
+        uint face = 0u;
+        if (k < range.y && lane < lanes) {
+            face = pair_items[pairs[k]];
+            f = face_of(setups[setup_base + face]);
         }
-        barrier();
-        if (valid) {
-            uint n = min(BATCH, range.y - start);
-            for (uint i = 0u; i < n; ++i) {
-                shade_face(s, s_setup[i], s_face[i], p);
+        bool touches = (f.flags & FACE_FINITE) != 0u
+                    && !(hi.x < f.bbox.x || hi.y < f.bbox.y || lo.x > f.bbox.z || lo.y > f.bbox.w);
+        uvec4 kept = subgroupBallot(touches);
+        for (uint word = 0u; word < ballot_words(); ++word) {
+            uint mask = kept[word];
+            while (mask != 0u) {
+                uint i = 32u * word + uint(findLSB(mask));
+                mask &= mask - 1u;
+                shade_face(s, face_shuffle(f, i), subgroupShuffle(face, i), p);
             }
         }
     }

@@ -298,12 +298,14 @@ impl<'c> Fitter<'c> {
             }
         };
         renderer.reserve_guarded(ctx, &mut scene, opts.tile, capacity)?;
-        let grads = GradBuffers::with_entry_capacity(
+        let mut grads = GradBuffers::with_entry_capacity(
             ctx,
             &scene,
             Method::Tiled { tile: opts.tile },
             capacity,
         )?;
+        // The silhouette loss differentiates alpha only.
+        grads.set_alpha_only(true);
         Ok(Self {
             ctx,
             opts: opts.clone(),
@@ -436,6 +438,7 @@ impl<'c> Fitter<'c> {
             },
             capacity,
         )?;
+        self.grads.set_alpha_only(true);
         self.capacity = capacity;
         self.regrowths += 1;
         Ok(())

@@ -3,6 +3,7 @@
 //! with [`Context::from_raw`], in which case softvk destroys only what it created itself.
 
 use std::ffi::{CStr, CString, c_void};
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 use ash::vk;
@@ -23,10 +24,17 @@ pub struct ContextOptions {
     pub validation: bool,
     /// Pick a device by index (as `softvk info` lists them) or by a substring of its name.
     pub device: Option<String>,
+    /// A file that keeps the compiled pipelines (a `VkPipelineCache`) between runs: read when
+    /// the context is made (a missing, unreadable or foreign file is ignored: the driver checks
+    /// the header) and written back, atomically, when the last object of the context is gone (a
+    /// failure to write is ignored). `None`: an in-memory cache only.
+    pub pipeline_cache: Option<PathBuf>,
 }
 
 impl ContextOptions {
-    /// Reads `SOFTVK_VALIDATION` (`1`/`true` turns validation on) and `SOFTVK_DEVICE`.
+    /// Reads `SOFTVK_VALIDATION` (`1`/`true` turns validation on), `SOFTVK_DEVICE`, and
+    /// `SOFTVK_PIPELINE_CACHE` (a file, or `off`; default `softvk/pipelines.bin` under
+    /// `$XDG_CACHE_HOME`, else `$HOME/.cache`).
     pub fn from_env() -> Self {
         let validation = std::env::var("SOFTVK_VALIDATION")
             .map(|v| matches!(v.trim(), "1" | "true" | "yes" | "on"))
@@ -34,7 +42,24 @@ impl ContextOptions {
         let device = std::env::var("SOFTVK_DEVICE")
             .ok()
             .filter(|s| !s.trim().is_empty());
-        Self { validation, device }
+        let pipeline_cache = match std::env::var_os("SOFTVK_PIPELINE_CACHE") {
+            Some(v) if v == "off" || v == "0" || v.is_empty() => None,
+            Some(v) => Some(PathBuf::from(v)),
+            None => std::env::var_os("XDG_CACHE_HOME")
+                .filter(|v| !v.is_empty())
+                .map(PathBuf::from)
+                .or_else(|| {
+                    std::env::var_os("HOME")
+                        .filter(|v| !v.is_empty())
+                        .map(|h| PathBuf::from(h).join(".cache"))
+                })
+                .map(|dir| dir.join("softvk").join("pipelines.bin")),
+        };
+        Self {
+            validation,
+            device,
+            pipeline_cache,
+        }
     }
 }
 
@@ -127,7 +152,44 @@ pub(crate) struct Shared {
     validation_log: Option<Box<ValidationLog>>,
     /// True when softvk created the instance and device (and so destroys them).
     owns_device: bool,
+    /// Every pipeline softvk builds goes through this cache; saved to `cache_path`, if any, on
+    /// drop.
+    pub(crate) pipeline_cache: vk::PipelineCache,
+    cache_path: Option<PathBuf>,
     _entry: ash::Entry,
+}
+
+/// A pipeline cache primed from `path` when it holds one (the driver ignores a foreign header).
+fn create_pipeline_cache(device: &ash::Device, path: Option<&Path>) -> vk::PipelineCache {
+    let data = path.and_then(|p| std::fs::read(p).ok()).unwrap_or_default();
+    let primed = vk::PipelineCacheCreateInfo::default().initial_data(&data);
+    // SAFETY: valid device; the initial data is only read during the call.
+    let cache = unsafe { device.create_pipeline_cache(&primed, None) };
+    cache
+        .or_else(|_| {
+            // SAFETY: as above, with no initial data.
+            unsafe { device.create_pipeline_cache(&vk::PipelineCacheCreateInfo::default(), None) }
+        })
+        .unwrap_or(vk::PipelineCache::null())
+}
+
+/// Writes the cache's data to `path` through a temporary file and a rename, so a reader never
+/// sees half a file. Best effort: a cache that cannot be saved is only slower next time.
+fn save_pipeline_cache(device: &ash::Device, cache: vk::PipelineCache, path: &Path) {
+    // SAFETY: `cache` is a live cache of `device`.
+    let Ok(data) = (unsafe { device.get_pipeline_cache_data(cache) }) else {
+        return;
+    };
+    if data.is_empty() || std::fs::read(path).is_ok_and(|old| old == data) {
+        return;
+    }
+    if let Some(dir) = path.parent() {
+        let _ = std::fs::create_dir_all(dir);
+    }
+    let tmp = path.with_extension(format!("tmp{}", std::process::id()));
+    if std::fs::write(&tmp, &data).is_ok() && std::fs::rename(&tmp, path).is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
 }
 
 impl Shared {
@@ -154,6 +216,10 @@ impl Drop for Shared {
         // still in use on the GPU (every submit path waits). The allocator is dropped before the
         // device it allocates from; instance and device are destroyed only if we created them.
         unsafe {
+            if let Some(path) = &self.cache_path {
+                save_pipeline_cache(&self.device, self.pipeline_cache, path);
+            }
+            self.device.destroy_pipeline_cache(self.pipeline_cache, None);
             std::mem::ManuallyDrop::drop(&mut self.allocator);
             if self.owns_device {
                 let _ = self.device.device_wait_idle();
@@ -373,7 +439,15 @@ impl Context {
             debug_utils: has_debug_utils,
         };
         // SAFETY: we just created all of these with the required extensions.
-        unsafe { Self::assemble(raw, true, messenger, validation_log) }
+        unsafe {
+            Self::assemble(
+                raw,
+                true,
+                messenger,
+                validation_log,
+                options.pipeline_cache.clone(),
+            )
+        }
     }
 
     /// Adopts a host engine's Vulkan objects without taking ownership of them.
@@ -396,7 +470,7 @@ impl Context {
     /// - `debug_utils` is true only if the instance has `VK_EXT_debug_utils` enabled.
     pub unsafe fn from_raw(raw: RawHandles) -> Result<Self> {
         // SAFETY: forwarded to the caller's contract above.
-        unsafe { Self::assemble(raw, false, None, None) }
+        unsafe { Self::assemble(raw, false, None, None, None) }
     }
 
     /// # Safety
@@ -406,6 +480,7 @@ impl Context {
         owns_device: bool,
         messenger: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
         validation_log: Option<Box<ValidationLog>>,
+        cache_path: Option<PathBuf>,
     ) -> Result<Self> {
         let RawHandles {
             entry,
@@ -446,6 +521,7 @@ impl Context {
         let debug_device =
             debug_utils.then(|| ash::ext::debug_utils::Device::new(&instance, &device));
         let push_descriptor = ash::khr::push_descriptor::Device::new(&instance, &device);
+        let pipeline_cache = create_pipeline_cache(&device, cache_path.as_deref());
         let shared = Arc::new(Shared {
             instance,
             device,
@@ -454,6 +530,8 @@ impl Context {
             messenger,
             validation_log,
             owns_device,
+            pipeline_cache,
+            cache_path,
             _entry: entry,
         });
         let pool_info = vk::CommandPoolCreateInfo::default()

@@ -1,7 +1,13 @@
 //! Compute pipelines built from the kernels `build.rs` compiled. A [`Kernel`] is made once (shader
 //! module, push-descriptor set layout, pipeline layout, pipeline) and recorded many times.
+//!
+//! A kernel whose modes are specialization constants (`layout(constant_id = i)`) gets one
+//! pipeline per combination of values it is recorded with: [`KernelVariants`] builds each on
+//! first use and keeps it. On llvmpipe every branch runs for every lane, so a mode passed as a
+//! push constant costs the work of all modes; specialized, only the used mode's code exists.
 
-use std::sync::Arc;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 
 use ash::vk;
 
@@ -52,8 +58,19 @@ pub struct Kernel {
 }
 
 impl Kernel {
-    /// Builds the pipeline for `spec` on `ctx`'s device.
+    /// Builds the pipeline for `spec` on `ctx`'s device (specialization constants, if any, keep
+    /// their defaults).
     pub fn new(ctx: &Context, spec: &'static KernelSpec) -> Result<Self> {
+        Self::specialized(ctx, spec, &[])
+    }
+
+    /// Builds the pipeline for `spec` with `constants[i]` as the 32-bit value of the kernel's
+    /// specialization constant `constant_id = i`.
+    pub fn specialized(
+        ctx: &Context,
+        spec: &'static KernelSpec,
+        constants: &[u32],
+    ) -> Result<Self> {
         let device = &ctx.shared.device;
         let mut kernel = Kernel {
             spec,
@@ -103,16 +120,32 @@ impl Kernel {
             .vk("vkCreatePipelineLayout")?;
         ctx.name(kernel.layout, spec.name);
 
-        let stage = vk::PipelineShaderStageCreateInfo::default()
+        let entries: Vec<vk::SpecializationMapEntry> = (0..constants.len() as u32)
+            .map(|i| {
+                vk::SpecializationMapEntry::default()
+                    .constant_id(i)
+                    .offset(4 * i)
+                    .size(4)
+            })
+            .collect();
+        let data: &[u8] = bytemuck::cast_slice(constants);
+        let specialization = vk::SpecializationInfo::default()
+            .map_entries(&entries)
+            .data(data);
+        let mut stage = vk::PipelineShaderStageCreateInfo::default()
             .stage(vk::ShaderStageFlags::COMPUTE)
             .module(kernel.module)
             .name(c"main");
+        if !constants.is_empty() {
+            stage = stage.specialization_info(&specialization);
+        }
         let info = [vk::ComputePipelineCreateInfo::default()
             .stage(stage)
             .layout(kernel.layout)];
-        // SAFETY: module and layout are valid and match the shader's interface (reflected).
+        // SAFETY: module and layout are valid and match the shader's interface (reflected); the
+        // specialization data holds `entries.len()` u32s.
         kernel.pipeline =
-            unsafe { device.create_compute_pipelines(vk::PipelineCache::null(), &info, None) }
+            unsafe { device.create_compute_pipelines(ctx.shared.pipeline_cache, &info, None) }
                 .map_err(|(_, result)| crate::Error::Vulkan {
                     call: "vkCreateComputePipelines",
                     result,
@@ -124,6 +157,47 @@ impl Kernel {
     /// The kernel's reflected interface.
     pub fn spec(&self) -> &'static KernelSpec {
         self.spec
+    }
+}
+
+/// One kernel's pipelines per combination of specialization constants, each built the first time
+/// it is asked for ([`KernelVariants::get`]) and kept for the life of this value. Building a
+/// pipeline goes through the context's pipeline cache, which persists on disk where it can
+/// ([`crate::gpu::ContextOptions::pipeline_cache`]).
+pub struct KernelVariants {
+    spec: &'static KernelSpec,
+    built: Mutex<HashMap<Vec<u32>, Arc<Kernel>>>,
+}
+
+impl KernelVariants {
+    /// No pipeline yet: each is built on first use.
+    pub fn new(spec: &'static KernelSpec) -> Self {
+        Self {
+            spec,
+            built: Mutex::new(HashMap::new()),
+        }
+    }
+
+    /// The kernel's interface.
+    pub fn spec(&self) -> &'static KernelSpec {
+        self.spec
+    }
+
+    /// The pipeline specialized with `constants` (see [`Kernel::specialized`]), built now if this
+    /// combination was never asked for.
+    pub fn get(&self, ctx: &Context, constants: &[u32]) -> Result<Arc<Kernel>> {
+        let mut built = self.built.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(kernel) = built.get(constants) {
+            return Ok(Arc::clone(kernel));
+        }
+        let kernel = Arc::new(Kernel::specialized(ctx, self.spec, constants)?);
+        built.insert(constants.to_vec(), Arc::clone(&kernel));
+        Ok(kernel)
+    }
+
+    /// How many pipelines have been built.
+    pub fn built(&self) -> usize {
+        self.built.lock().map_or(0, |b| b.len())
     }
 }
 

@@ -9,6 +9,6 @@ pub use context::{
     Context, ContextOptions, DeviceInfo, PhysicalDeviceEntry, REQUIRED_DEVICE_EXTENSIONS,
     RawHandles, list_devices,
 };
-pub use kernel::{BindingSpec, Kernel, KernelSpec, specs};
+pub use kernel::{BindingSpec, Kernel, KernelSpec, KernelVariants, specs};
 pub use memory::{Buffer, BufferRange, MemoryKind, align_up};
 pub use record::{INDIRECT_ARGS_BYTES, PassTime, Recorded, Recorder, Timer};

@@ -37,17 +37,17 @@
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 
-use super::fine::{FLAG_ANTIALIAS, RasterPush};
+use super::fine::{FineModes, RasterPush};
 use super::gpu::{
-    GpuScene, Method, brute_backward_iterations, reduce_iterations, texel_reduce_iterations,
-    tiled_backward_iterations,
+    ColorWork, GpuScene, Method, brute_backward_iterations, reduce_iterations,
+    texel_reduce_iterations, tiled_backward_iterations,
 };
 use super::reference::ColorMode;
 use super::reference_grad::{
     self, Gradients, VertexFaces, camera_grad, lighting_grad_surface, lighting_grad_vertex,
 };
 use crate::error::{Error, Result};
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, specs};
 
 /// Push constants of `grad_tiled.comp` and `grad_brute.comp`: the fine pass's, then the chunk.
 /// Twin of `Push` in `raster_fine.glsl` with `FINE_BACKWARD`.
@@ -120,8 +120,8 @@ struct GatherPush {
 
 /// The backward's pipelines, made once per context.
 pub struct GradKernels {
-    tiled: Kernel,
-    brute: Kernel,
+    tiled: KernelVariants,
+    brute: KernelVariants,
     reduce: Kernel,
     reduce_texels: Kernel,
     world: Kernel,
@@ -132,8 +132,8 @@ impl GradKernels {
     /// Builds the pipelines.
     pub fn new(ctx: &Context) -> Result<Self> {
         Ok(Self {
-            tiled: Kernel::new(ctx, &specs::GRAD_TILED)?,
-            brute: Kernel::new(ctx, &specs::GRAD_BRUTE)?,
+            tiled: KernelVariants::new(&specs::GRAD_TILED),
+            brute: KernelVariants::new(&specs::GRAD_BRUTE),
             reduce: Kernel::new(ctx, &specs::GRAD_REDUCE)?,
             reduce_texels: Kernel::new(ctx, &specs::GRAD_REDUCE_TEXELS)?,
             world: Kernel::new(ctx, &specs::GRAD_WORLD)?,
@@ -194,6 +194,8 @@ pub struct GradBuffers {
     /// Brute force: rows per band and bands per view.
     band_rows: u32,
     bands: u32,
+    /// The upstream gradient has no RGB part ([`GradBuffers::set_alpha_only`]).
+    alpha_only: bool,
 }
 
 fn checked(ctx: &Context, what: &str, bytes: u64) -> Result<u64> {
@@ -232,25 +234,32 @@ fn band_rows(width: u32, height: u32, limit: Option<u64>, cap: Option<u32>) -> R
 
 /// Faces of one tile per workgroup of `grad_tiled.comp` (a multiple of 64), for tiles of at most
 /// `run` entries: all of them, or fewer where `cap` or the driver's loop `limit` asks.
-fn tile_faces(run: u64, tile: u32, limit: Option<u64>, cap: Option<u32>) -> Result<u64> {
+fn tile_faces(
+    run: u64,
+    tile: u32,
+    (subgroup, color): (u32, ColorWork),
+    limit: Option<u64>,
+    cap: Option<u32>,
+) -> Result<u64> {
     let mut faces = run.max(1).div_ceil(64) * 64;
     if let Some(cap) = cap {
         faces = faces.min(u64::from(cap.max(1)).div_ceil(64) * 64);
     }
     if let Some(limit) = limit {
-        let fixed = tiled_backward_iterations(run, tile, 0);
-        let per_batch = tiled_backward_iterations(run.max(64), tile, 64)
-            - tiled_backward_iterations(run.max(64), tile, 0);
+        let iterations = |faces| tiled_backward_iterations(run, tile, faces, subgroup, color);
+        let fixed = iterations(0);
+        let per_batch = tiled_backward_iterations(run.max(64), tile, 64, subgroup, color)
+            - tiled_backward_iterations(run.max(64), tile, 0, subgroup, color);
         let batches = limit.saturating_sub(fixed) / per_batch;
         if batches == 0 {
             return Err(Error::Limit(format!(
                 "one batch of 64 faces over a {tile}x{tile} tile is over the {limit} loop \
                  iterations the driver runs per shader invocation; the tiled backward needs \
-                 tiles of at most 248 pixels there"
+                 smaller tiles there"
             )));
         }
         faces = faces.min(64 * batches);
-        debug_assert!(tiled_backward_iterations(run, tile, faces) <= limit);
+        debug_assert!(iterations(faces) <= limit);
     }
     Ok(faces)
 }
@@ -420,7 +429,35 @@ impl GradBuffers {
             budget_units,
             band_rows,
             bands,
+            alpha_only: false,
         })
+    }
+
+    /// Declares whether the upstream gradient's RGB part is zero everywhere (silhouette losses:
+    /// only alpha has a gradient). Then the backward is recorded without its colour terms, which
+    /// would only add exact zeros: the gradients are the same bits, for less work. Off by
+    /// default; with a non-zero RGB upstream it would drop the colour's share.
+    pub fn set_alpha_only(&mut self, alpha_only: bool) {
+        self.alpha_only = alpha_only;
+    }
+
+    /// The fine kernels' modes for this backward of `scene`.
+    fn modes(&self, scene: &GpuScene) -> FineModes {
+        let modes = FineModes::new(&scene.settings, true);
+        if self.alpha_only {
+            modes.alpha_only()
+        } else {
+            modes
+        }
+    }
+
+    /// What the tiled kernel does per face besides the screen sums.
+    fn color_work(&self, scene: &GpuScene) -> ColorWork {
+        match scene.settings.color_mode {
+            _ if self.alpha_only => ColorWork::None,
+            ColorMode::Vertex => ColorWork::Vertex,
+            ColorMode::Surface => ColorWork::Texels,
+        }
     }
 
     /// The (face, tile) entries one chunk of the tiled partials holds, or `u64::MAX` once the
@@ -483,11 +520,7 @@ impl GradKernels {
             scene.view_count,
             scene.vertex_count,
             scene.texture_res,
-            true,
         );
-        if s.antialias {
-            push.flags |= FLAG_ANTIALIAS;
-        }
         push.out_width = s.width;
         push.out_height = s.height;
         push.grad_stride = stride;
@@ -596,6 +629,9 @@ impl GradKernels {
             offsets: gb.vertex_offsets.whole(),
             per_item: u64::from(gb.bands),
         };
+        let kernel = self
+            .brute
+            .get(rec.context(), &gb.modes(scene).constants())?;
         let mut begin = 0;
         while begin < units {
             let end = units.min(begin + gb.chunk_units);
@@ -608,7 +644,7 @@ impl GradKernels {
                 parts: gb.bands,
             };
             rec.dispatch(
-                &self.brute,
+                &kernel,
                 &[
                     scene.setups.whole(),
                     scene.colors.whole(),
@@ -642,13 +678,17 @@ impl GradKernels {
             )));
         }
         let limit = rec.context().info().shader_loop_limit();
+        let kernel = self
+            .tiled
+            .get(rec.context(), &gb.modes(scene).constants())?;
         for (group, bins) in scene.groups.iter().zip(&scene.bins) {
             if group.entries == 0 {
                 // No face touches these views: their gradients stay zero.
                 continue;
             }
             let run = group.max_tile_entries;
-            let faces = tile_faces(run, tile, limit, gb.split.tile_faces)?;
+            let work = (rec.context().info().subgroup_size, gb.color_work(scene));
+            let faces = tile_faces(run, tile, work, limit, gb.split.tile_faces)?;
             let tiles = grid.tiles_per_view() * u64::from(group.views);
             let units = UnitGroup {
                 first_view: group.first,
@@ -679,7 +719,7 @@ impl GradKernels {
                     parts: parts as u32,
                 };
                 rec.dispatch(
-                    &self.tiled,
+                    &kernel,
                     &[
                         scene.setups.whole(),
                         scene.colors.whole(),
@@ -896,7 +936,7 @@ mod tests {
                 spec.name
             );
         }
-        assert_eq!(std::mem::size_of::<GradPush>(), 128);
+        assert_eq!(std::mem::size_of::<GradPush>(), 112);
         assert_eq!(
             std::mem::size_of::<ReducePush>() as u32,
             specs::GRAD_REDUCE.push_constant_size
@@ -953,25 +993,36 @@ mod tests {
 
     #[test]
     fn tile_parts_are_the_most_batches_under_the_loop_cap() {
-        // blurry-256 at tile 32: all 5 856 faces in one tile.
+        // blurry-256 at tile 32: all 5 856 faces in one tile. llvmpipe's subgroups have 8 lanes
+        // (AVX2); NVIDIA's 32.
         let run = 5856;
-        let faces = tile_faces(run, 32, Some(CAP), None).unwrap();
-        assert_eq!(faces % 64, 0);
-        assert!(tiled_backward_iterations(run, 32, faces) <= CAP);
-        assert!(tiled_backward_iterations(run, 32, faces + 64) > CAP);
-        assert_eq!(run.div_ceil(faces), 2);
-        // Small runs: one part; a cap rounds up to whole batches.
-        assert_eq!(tile_faces(100, 8, Some(CAP), None).unwrap(), 128);
-        assert_eq!(tile_faces(100, 8, None, Some(1)).unwrap(), 64);
-        assert_eq!(tile_faces(1000, 16, None, None).unwrap(), 1024);
-        for tile in [8, 16, 32, 64, 128, 248] {
-            let f = tile_faces(1 << 20, tile, Some(CAP), None).unwrap();
-            assert!(tiled_backward_iterations(1 << 20, tile, f) <= CAP, "{tile}");
+        for sg in [8, 32] {
+            for color in [ColorWork::None, ColorWork::Vertex, ColorWork::Texels] {
+                let faces = tile_faces(run, 32, (sg, color), Some(CAP), None).unwrap();
+                assert_eq!(faces % 64, 0);
+                assert!(tiled_backward_iterations(run, 32, faces, sg, color) <= CAP);
+                assert!(tiled_backward_iterations(run, 32, faces + 64, sg, color) > CAP);
+                assert!(run.div_ceil(faces) > 1, "{sg} {color:?}");
+            }
         }
+        // Small runs: one part; a cap rounds up to whole batches.
+        let llvmpipe = (8, ColorWork::Texels);
+        assert_eq!(tile_faces(100, 8, llvmpipe, Some(CAP), None).unwrap(), 128);
+        assert_eq!(tile_faces(100, 8, llvmpipe, None, Some(1)).unwrap(), 64);
+        assert_eq!(tile_faces(1000, 16, llvmpipe, None, None).unwrap(), 1024);
+        for tile in [8, 16, 32, 64] {
+            let f = tile_faces(1 << 20, tile, llvmpipe, Some(CAP), None).unwrap();
+            assert!(
+                tiled_backward_iterations(1 << 20, tile, f, 8, ColorWork::Texels) <= CAP,
+                "{tile}"
+            );
+        }
+        // Past the cap even for one batch: an error, not a truncation.
         assert!(matches!(
-            tile_faces(100, 256, Some(CAP), None),
+            tile_faces(100, 128, llvmpipe, Some(CAP), None),
             Err(Error::Limit(_))
         ));
+        assert!(tile_faces(100, 112, (8, ColorWork::None), Some(CAP), None).is_ok());
     }
 
     #[test]

@@ -9,8 +9,8 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
-use crate::gpu::{BufferRange, Context, Kernel, Recorder, specs};
-use crate::raster::fine::RasterPush;
+use crate::gpu::{BufferRange, Context, Kernel, KernelVariants, Recorder, specs};
+use crate::raster::fine::{FineModes, RasterPush};
 use crate::raster::reference::RasterSettings;
 
 /// Push constants of `downsample_2x2.comp`.
@@ -40,7 +40,7 @@ pub struct BruteBindings<'a> {
 
 /// The brute-force pipelines, made once per context.
 pub struct BruteRaster {
-    raster: Kernel,
+    raster: KernelVariants,
     downsample: Kernel,
 }
 
@@ -48,7 +48,7 @@ impl BruteRaster {
     /// Builds the pipelines.
     pub fn new(ctx: &Context) -> Result<Self> {
         Ok(Self {
-            raster: Kernel::new(ctx, &specs::RASTER_BRUTE)?,
+            raster: KernelVariants::new(&specs::RASTER_BRUTE),
             downsample: Kernel::new(ctx, &specs::DOWNSAMPLE_2X2)?,
         })
     }
@@ -115,11 +115,13 @@ impl BruteRaster {
             view_count,
             vertex_count,
             texture_res,
-            cull,
         );
+        let kernel = self
+            .raster
+            .get(rec.context(), &FineModes::new(settings, cull).constants())?;
         let groups = pixels.div_ceil(u64::from(specs::RASTER_BRUTE.workgroup_size[0]));
         rec.dispatch(
-            &self.raster,
+            &kernel,
             &[b.setups, b.colors, b.faces, b.image, b.aux],
             &push,
             groups as u32,

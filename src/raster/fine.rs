@@ -7,7 +7,7 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
-use crate::gpu::{BufferRange, Context, Kernel, Recorder, specs};
+use crate::gpu::{BufferRange, Context, KernelVariants, Recorder, specs};
 use crate::primitives::TileGrid;
 use crate::raster::reference::{self, Alpha, ColorMode, RasterSettings, Rgb};
 use crate::raster::setup::dist_code;
@@ -56,11 +56,7 @@ pub(crate) struct RasterPush {
     pub far: f32,
     pub inv_gamma_range: f32,
     pub background_depth: f32,
-    pub dist: u32,
-    pub rgb: u32,
-    pub alpha: u32,
     pub texture_res: u32,
-    pub flags: u32,
     pub first_view: u32,
     pub background: [f32; 4],
     pub tile_size: u32,
@@ -76,29 +72,25 @@ pub(crate) struct RasterPush {
 const FLAG_DOUBLE_SIDED: u32 = 1;
 const FLAG_VERTEX_COLORS: u32 = 2;
 const FLAG_CULL: u32 = 4;
-pub(crate) const FLAG_ANTIALIAS: u32 = 8;
+const FLAG_ANTIALIAS: u32 = 8;
+const FLAG_ALPHA_ONLY: u32 = 16;
 
-impl RasterPush {
-    /// The push constants for `view_count` views of a `width × height` rendered image (first
-    /// view 0, no tiles: set those fields for a group or the tiled kernel).
-    #[allow(clippy::too_many_arguments)]
-    pub fn new(
-        s: &RasterSettings,
-        width: u32,
-        height: u32,
-        face_count: u32,
-        view_count: u32,
-        vertex_count: u32,
-        texture_res: u32,
-        cull: bool,
-    ) -> Self {
-        let range = s.far - s.near;
-        let inv_gamma_range = if s.rgb == Rgb::Softmax {
-            (1.0 / (s.gamma * range)).min(f64::from(f32::MAX)) as f32
-        } else {
-            0.0
-        };
-        let hard = s.dist == reference::Dist::Hard;
+/// The fine kernels' modes: their specialization constants (`MODE_*` in `raster_fine.glsl`), one
+/// pipeline per combination ([`crate::gpu::KernelVariants`]). Only the modes a render uses are
+/// compiled into its kernels, which on llvmpipe halves the cost of a (pixel, face) pair: there a
+/// branch never skips work, so a mode read at run time costs every mode's code.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub(crate) struct FineModes {
+    dist: u32,
+    rgb: u32,
+    alpha: u32,
+    flags: u32,
+}
+
+impl FineModes {
+    /// The modes of `s`; `cull` skips a face outside its grown box at a pixel (the tiled
+    /// kernels always do; the box is conservative, so no pixel changes).
+    pub fn new(s: &RasterSettings, cull: bool) -> Self {
         let mut flags = 0;
         if s.double_sided {
             flags |= FLAG_DOUBLE_SIDED;
@@ -109,6 +101,57 @@ impl RasterPush {
         if cull {
             flags |= FLAG_CULL;
         }
+        // Only the backward reads it (the upstream gradient is at the output's size).
+        if s.antialias {
+            flags |= FLAG_ANTIALIAS;
+        }
+        FineModes {
+            dist: dist_code(s.dist),
+            rgb: match s.rgb {
+                Rgb::Softmax => 0,
+                Rgb::Hard => 1,
+            },
+            alpha: match s.alpha {
+                Alpha::Prod => 0,
+                Alpha::Sum => 1,
+                Alpha::Hard => 2,
+            },
+            flags,
+        }
+    }
+
+    /// The backward's modes for an upstream gradient with no RGB part: the colour terms are left
+    /// out ([`crate::raster::GradBuffers::set_alpha_only`]).
+    pub fn alpha_only(mut self) -> Self {
+        self.flags |= FLAG_ALPHA_ONLY;
+        self
+    }
+
+    /// The specialization constants, by `constant_id`.
+    pub fn constants(&self) -> [u32; 4] {
+        [self.dist, self.rgb, self.alpha, self.flags]
+    }
+}
+
+impl RasterPush {
+    /// The push constants for `view_count` views of a `width × height` rendered image (first
+    /// view 0, no tiles: set those fields for a group or the tiled kernel).
+    pub fn new(
+        s: &RasterSettings,
+        width: u32,
+        height: u32,
+        face_count: u32,
+        view_count: u32,
+        vertex_count: u32,
+        texture_res: u32,
+    ) -> Self {
+        let range = s.far - s.near;
+        let inv_gamma_range = if s.rgb == Rgb::Softmax {
+            (1.0 / (s.gamma * range)).min(f64::from(f32::MAX)) as f32
+        } else {
+            0.0
+        };
+        let hard = s.dist == reference::Dist::Hard;
         RasterPush {
             width,
             height,
@@ -124,18 +167,7 @@ impl RasterPush {
             far: s.far as f32,
             inv_gamma_range,
             background_depth: (s.far - s.eps * range) as f32,
-            dist: dist_code(s.dist),
-            rgb: match s.rgb {
-                Rgb::Softmax => 0,
-                Rgb::Hard => 1,
-            },
-            alpha: match s.alpha {
-                Alpha::Prod => 0,
-                Alpha::Sum => 1,
-                Alpha::Hard => 2,
-            },
             texture_res,
-            flags,
             first_view: 0,
             background: [
                 s.background[0] as f32,
@@ -185,16 +217,16 @@ pub struct TiledBindings<'a> {
     pub ranges: BufferRange<'a>,
 }
 
-/// The tiled fine pass's pipeline.
+/// The tiled fine pass's pipelines, one per combination of modes, each built on first use.
 pub struct TiledRaster {
-    kernel: Kernel,
+    kernel: KernelVariants,
 }
 
 impl TiledRaster {
-    /// Builds the pipeline.
-    pub fn new(ctx: &Context) -> Result<Self> {
+    /// No pipeline is built yet: each mode combination's is built the first time it records.
+    pub fn new(_ctx: &Context) -> Result<Self> {
         Ok(Self {
-            kernel: Kernel::new(ctx, &specs::RASTER_TILED)?,
+            kernel: KernelVariants::new(&specs::RASTER_TILED),
         })
     }
 
@@ -242,8 +274,10 @@ impl TiledRaster {
             view_count,
             vertex_count,
             texture_res,
-            true,
         );
+        let kernel = self
+            .kernel
+            .get(rec.context(), &FineModes::new(settings, true).constants())?;
         push.first_view = first_view;
         push.tile_size = grid.tile_size;
         push.tiles_x = grid.tiles_x;
@@ -254,7 +288,7 @@ impl TiledRaster {
         let groups = u32::try_from(blocks)
             .map_err(|_| Error::Limit(format!("raster_tiled: {blocks} workgroups")))?;
         rec.dispatch(
-            &self.kernel,
+            &kernel,
             &[
                 b.setups,
                 b.colors,
@@ -285,7 +319,7 @@ mod tests {
                 spec.name
             );
         }
-        assert_eq!(std::mem::offset_of!(RasterPush, background), 64);
+        assert_eq!(std::mem::offset_of!(RasterPush, background), 48);
         assert_eq!(std::mem::size_of::<PixelAux>(), 32);
         assert_eq!(specs::RASTER_TILED.bindings.len(), 8);
     }

@@ -147,19 +147,56 @@ pub struct ViewGroup {
     pub max_tile_entries: u64,
 }
 
-/// Loop iterations one invocation of `raster_tiled.comp` runs for a tile of `run` faces.
-pub(crate) fn tiled_forward_iterations(run: u64) -> u64 {
-    run + run.div_ceil(64) + 2
+/// Lanes of a subgroup that the 64-invocation tiled kernels use, and the 32-bit words of its
+/// ballot.
+fn subgroup_lanes(subgroup: u32) -> (u64, u64) {
+    let lanes = u64::from(subgroup.clamp(1, 64));
+    (lanes, u64::from(subgroup.max(1)).div_ceil(32))
+}
+
+/// Loop iterations one invocation of `raster_tiled.comp` runs for a tile of `run` faces with
+/// subgroups of `subgroup` lanes: per batch of one face per lane, one iteration and one per
+/// ballot word, and at most one per face of the run.
+pub(crate) fn tiled_forward_iterations(run: u64, subgroup: u32) -> u64 {
+    let (lanes, words) = subgroup_lanes(subgroup);
+    run + run.div_ceil(lanes) * (1 + words) + 2
+}
+
+/// What `grad_tiled.comp` does per kept face besides the screen sums, for its loop count.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum ColorWork {
+    /// Alpha-only upstream: nothing.
+    None,
+    /// Vertex colours: three more sums.
+    Vertex,
+    /// Surface texels: one loop over the segment's coloured pixels.
+    Texels,
 }
 
 /// Loop iterations one invocation of `grad_tiled.comp` runs for a tile of `run` entries when a
-/// workgroup takes at most `faces` of them: two binary searches over the run (for the chunk's
-/// sub-run), then per batch of 64 faces one iteration and, per 64-pixel chunk of the tile, one
-/// iteration and 64 pixels.
-pub(crate) fn tiled_backward_iterations(run: u64, tile: u32, faces: u64) -> u64 {
-    let chunks = u64::from(tile) * u64::from(tile) / 64;
+/// workgroup takes at most `faces` of them, with subgroups of `subgroup` lanes: two binary
+/// searches over the run (for the chunk's sub-run), then per batch (a subgroup's lanes' faces,
+/// every 64 faces of the workgroup's) one iteration, the final writes (3) and per segment of
+/// `lanes` pixels one iteration, one per ballot word, and per kept face (at most `lanes`) one
+/// iteration, the three screen sums and the colour work.
+pub(crate) fn tiled_backward_iterations(
+    run: u64,
+    tile: u32,
+    faces: u64,
+    subgroup: u32,
+    color: ColorWork,
+) -> u64 {
+    let (lanes, words) = subgroup_lanes(subgroup);
+    let segments = (u64::from(tile) * u64::from(tile)).div_ceil(lanes);
+    let per_face = 1 + 3
+        + match color {
+            ColorWork::None => 0,
+            ColorWork::Vertex => 3,
+            ColorWork::Texels => words + lanes,
+        };
     let search = u64::from(u64::BITS - run.leading_zeros());
-    2 * search + faces.min(run).div_ceil(64) * (1 + 65 * chunks) + 2
+    let batch = 1 + 3 + segments * (1 + words + lanes * per_face);
+    2 * search + faces.min(run).div_ceil(64) * batch + 2
 }
 
 /// Loop iterations one invocation of `grad_brute.comp` runs for a band of `rows` rows of
@@ -206,12 +243,13 @@ fn checked_tile_runs(
     let Some(limit) = ctx.info().shader_loop_limit() else {
         return Ok(total);
     };
-    let run = if tiled_forward_iterations(total) <= limit {
+    let subgroup = ctx.info().subgroup_size;
+    let run = if tiled_forward_iterations(total, subgroup) <= limit {
         total
     } else {
         max_tile_run(ctx, bins, grid.tiles_per_view() * u64::from(views))?
     };
-    if tiled_forward_iterations(run) > limit {
+    if tiled_forward_iterations(run, subgroup) > limit {
         return Err(Error::Limit(format!(
             "a tile holds {run} faces, but {} runs at most {limit} loop iterations per shader \
              invocation (and would silently skip the rest); use smaller tiles, a smaller σ or \
@@ -764,7 +802,7 @@ impl Renderer {
         scene.bins[0].reserve_entry_capacity(ctx, capacity.max(1))?;
         let max_run = capacity.min(u64::from(scene.face_count));
         if let Some(limit) = ctx.info().shader_loop_limit() {
-            if tiled_forward_iterations(max_run) > limit {
+            if tiled_forward_iterations(max_run, ctx.info().subgroup_size) > limit {
                 return Err(Error::Limit(format!(
                     "a tile may hold {max_run} faces, which could put more than {limit} loop \
                      iterations in one shader invocation on {} (which would silently skip the \
