@@ -496,7 +496,7 @@ fn throughput(ctx: &Context, keys: &Keys) {
         .unwrap();
     let step = 2.0 * p.cube.half / f64::from(res - 1);
     let dense = DenseMarch::new(ctx, &p.targets, &rays, &p.cube, step).unwrap();
-    let mut timer = Timer::new(ctx, 8).unwrap();
+    let mut timer = Timer::new(ctx, 16).unwrap();
     let total = |t: &Timer, names: &[&str]| -> f64 {
         t.results(ctx)
             .unwrap()

@@ -32,8 +32,9 @@ use crate::raster::reference::{Dist, RasterSettings, Rgb};
 /// The scenes of SPEC §6, in the order a plain `softvk bench` runs them.
 pub const SCENES: [&str; 4] = ["spot-256", "sphere-64x120", "dense-1024", "blurry-256"];
 
-/// The fitting benchmark's scenes ([`run_fit`]); run only when named (`--scene fit-120`).
-pub const FIT_SCENES: [&str; 1] = ["fit-120"];
+/// The fitting benchmark's scenes ([`run_fit`]); run only when named (`--scene fit-120`,
+/// `--scene fit-field`).
+pub const FIT_SCENES: [&str; 2] = ["fit-120", "fit-field"];
 
 /// Iterations per submission that [`run_fit`]'s loop timing compares with one.
 pub const FIT_BATCH: u32 = 10;
@@ -1030,6 +1031,146 @@ pub fn run_backward(
     Ok(records)
 }
 
+/// The sphere-probing benchmark (`softvk bench --scene fit-field`): a `softvk fit-field`
+/// iteration at its defaults ([`FieldFitOptions::default`](crate::fit::field_fit::FieldFitOptions),
+/// scaled to the cube) on the silhouettes of spot (`spot_triangulated.obj`) rendered hard at 64²
+/// from 24 views (elevation 30°, azimuth every 15°, distance 2.732, viewing angle 15°: setup A
+/// of RESULTS.md), in the cube [`auto_cube`](crate::fit::field_fit::auto_cube) gives.
+///
+/// After one untimed iteration, `opts.repeat` iterations run as the fit runs them (submission 1
+/// and its count read-back, then submission 2 with GPU timestamps): `wall_ms` is the median wall
+/// time of a whole iteration, `gpu_ms` the median of submission 2's passes, and `passes` starts
+/// with `sample (wall)` (submission 1 and its read-back, wall) then every pass of
+/// [`FieldFitter::step_timed`](crate::fit::field_fit::FieldFitter::step_timed) (parts of a pass
+/// indented, after it). `pairs` is 0
+/// (not counted for probing); `entries` is the binning's (anchor, tile) entry count.
+fn run_field_fit(
+    ctx: &Context,
+    opts: &BenchOptions,
+    assets: &Path,
+    progress: &mut impl FnMut(&str),
+) -> Result<BenchRecord> {
+    use crate::fit::field_fit::{FieldFitOptions, FieldFitter, auto_cube, scaled_to_cube};
+    use crate::probe::Targets;
+    let name = "fit-field";
+    let size = 64;
+    let spot = load(assets, "spot_triangulated.obj", 1)?;
+    let cameras: Vec<Camera> = (0..24)
+        .map(|i| Camera {
+            projection: Projection::Perspective {
+                viewing_angle_deg: 15.0,
+            },
+            ..Camera::from_angles(DISTANCE, 30.0, 15.0 * f64::from(i))
+        })
+        .collect();
+    let hard = RasterSettings {
+        width: size,
+        height: size,
+        dist: Dist::Hard,
+        alpha: crate::raster::reference::Alpha::Hard,
+        ..RasterSettings::default()
+    };
+    let masks: Vec<f32> = Renderer::new(ctx)?
+        .render_views(
+            ctx,
+            &spot,
+            &cameras,
+            &Lighting::unlit(),
+            &hard,
+            Method::default(),
+        )?
+        .images
+        .iter()
+        .map(|p| p[3])
+        .collect();
+    let targets = Targets::new(&cameras, size, size, masks)?;
+    let cube = auto_cube(&targets, crate::fit::field_fit::DEFAULT_CUBE_MARGIN)?;
+    let defaults = FieldFitOptions::default();
+    let fit_opts = FieldFitOptions {
+        probe: scaled_to_cube(&defaults.probe, &cube),
+        ..defaults
+    };
+    let mut fitter = FieldFitter::new(ctx, &targets, &fit_opts)?;
+    let s = fit_opts.probe;
+    progress(&format!(
+        "{name}: spot silhouettes, {} views of {size}x{size}, field {:?}, {} rays per view, {} \
+         anchors, tau {:.4}, tile {}, cube centre {:?} half-edge {:.4}",
+        cameras.len(),
+        fit_opts.field,
+        s.rays_per_view,
+        s.anchors,
+        s.tau,
+        s.tile_size,
+        cube.center,
+        cube.half
+    ));
+    let mut entries = fitter.sample(ctx, 1)?;
+    fitter.step(ctx, 1)?;
+    let mut timer = if ctx.info().timestamp_valid_bits > 0 {
+        Some(Timer::new(ctx, 16)?)
+    } else {
+        None
+    };
+    let (mut wall, mut gpu) = (Vec::new(), Vec::new());
+    let mut passes: Vec<(String, Vec<f64>)> = vec![("sample (wall)".into(), Vec::new())];
+    for it in 2..opts.repeat + 2 {
+        let start = Instant::now();
+        entries = fitter.sample(ctx, it)?;
+        let sampled = start.elapsed().as_secs_f64() * 1e3;
+        fitter.step_timed(ctx, it, timer.as_mut())?;
+        wall.push(start.elapsed().as_secs_f64() * 1e3);
+        passes[0].1.push(sampled);
+        if let Some(timer) = &timer {
+            let times = timer.results(ctx)?;
+            // Parts of a pass (indented names) are inside it: not summed again.
+            gpu.push(
+                times
+                    .iter()
+                    .filter(|t| !t.name.starts_with(' '))
+                    .map(|t| t.ms)
+                    .sum(),
+            );
+            for t in times {
+                match passes.iter_mut().find(|(n, _)| *n == t.name) {
+                    Some((_, series)) => series.push(t.ms),
+                    None => passes.push((t.name.clone(), vec![t.ms])),
+                }
+            }
+        }
+    }
+    let timing = Timing {
+        gpu_ms: median(&gpu),
+        wall_ms: median(&wall).unwrap_or(f64::NAN),
+        passes: passes
+            .iter()
+            .filter_map(|(n, series)| Some((n.clone(), median(series)?)))
+            .collect(),
+    };
+    progress(&format!(
+        "{name} fit-iteration: {entries} entries; {}",
+        summary(&timing, opts.repeat)
+    ));
+    Ok(BenchRecord {
+        scene: name.to_string(),
+        method: Method::Tiled { tile: s.tile_size },
+        pass: "fit-iteration",
+        gpu_ms: timing.gpu_ms,
+        wall_ms: timing.wall_ms,
+        pairs: 0,
+        device: ctx.info().name.clone(),
+        driver: ctx.info().driver.clone(),
+        repeats: opts.repeat,
+        passes: timing.passes,
+        views: cameras.len() as u32,
+        faces: spot.face_count() as u32,
+        width: size,
+        height: size,
+        rows: None,
+        entries: Some(entries),
+        identical_to_brute: None,
+    })
+}
+
 /// Runs iterations `it .. it + k` of `fitter` in one submission (again from a stopped one, until
 /// all ran) and advances `it`; the wall time of the submission that ran them all, ms.
 fn fit_iterations(
@@ -1098,6 +1239,10 @@ pub fn run_fit(
     let assets = opts.assets.clone().unwrap_or_else(crate::assets::dir);
     let mut records = Vec::new();
     for name in names {
+        if name == "fit-field" {
+            records.push(run_field_fit(ctx, opts, &assets, &mut progress)?);
+            continue;
+        }
         let mut template = load(&assets, "sphere_1352.obj", 1)?;
         for p in &mut template.positions {
             *p = p.map(|c| c * 0.5);

@@ -12,20 +12,28 @@ layout(push_constant) uniform Push {
     uint tile_size;
     uint tiles_x;
     uint tiles_y;
-    uint mode;           // AGG_*
+    uint mode;           // AGG_* (unused: MODE)
     float inv_s;         // 1 / min(W, H)
     float tau2;          // τ²
     float temperature;   // LSE: T
     float inv_t;         // LSE: 1 / T
-    uint boundary_aware; // skip anchors whose centre is on the other side of the silhouette
+    uint boundary_aware; // unused: BOUNDARY_AWARE
     uint pad0;
     uint pad1;
     uint pad2;
 } pc;
 
+// The aggregation (AGG_*) and boundary-aware assignment as specialization constants (the push
+// constants' `mode` and `boundary_aware` are not read): a pipeline per combination, so that only
+// the chosen mode's code runs (on llvmpipe an `if` on a push constant runs both sides). The
+// tiled and brute-force kernels share these and every per-hit function, so they stay equal bit
+// for bit.
+layout(constant_id = 0) const uint MODE = AGG_MAX;
+layout(constant_id = 1) const uint BOUNDARY_AWARE = 1u;
+
 // Does the boundary-aware assignment let a ray with `label` use an anchor with `flags`?
 bool assigned(float label, uint flags) {
-    return pc.boundary_aware == 0u || (label >= 0.5) == ((flags & FLAG_INSIDE) != 0u);
+    return BOUNDARY_AWARE == 0u || (label >= 0.5) == ((flags & FLAG_INSIDE) != 0u);
 }
 
 #endif

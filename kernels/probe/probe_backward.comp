@@ -1,5 +1,8 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_ballot : require
+#extension GL_KHR_shader_subgroup_shuffle : require
 // Sphere probing, backward, step 2: one invocation per binned (anchor, tile) entry. It visits
 // the rays of its tile in ray order and sums (ψ − S) dψ/dφ_j over those that used anchor j in
 // the forward: max: the rays whose ψ came from j; LSE and union: the rays that hit j (the same
@@ -7,8 +10,18 @@
 // reached j lies in one tile j was binned to, so each (ray, anchor) pair is counted once. The
 // sum lands at the entry's item-major slot; `probe_reduce.comp` then adds each anchor's slots
 // in a fixed order. No atomics. Twin: `probe::prober::cpu::backward`.
+//
+// For llvmpipe's execution model (and without shared memory or barriers on any device): each
+// subgroup works alone. Its entries, consecutive in tile order, mostly share one tile; it takes
+// their tiles one at a time (the lowest lane's first). Per batch of as many of the tile's rays as
+// it has lanes, each lane loads one ray and its forward result (one gathered load per batch
+// instead of loads per (entry, ray) pair), and a loop over the batch broadcasts each ray with
+// shuffles to every entry of the tile. Each entry still adds its rays in ray order with the same
+// expressions, so the partials are what a loop per entry gives, bit for bit. The aggregation
+// and the assignment are specialization constants, as in the forward.
 #include "common.glsl"
 #include "probe.glsl"
+#include "subgroup_face.glsl"
 
 layout(local_size_x = 64) in;
 
@@ -34,49 +47,83 @@ layout(push_constant) uniform Push {
     uint height;
     uint tiles_x;
     uint tiles_y;
-    uint mode;           // AGG_*
-    uint boundary_aware;
+    uint mode;           // AGG_* (unused: MODE)
+    uint boundary_aware; // unused: BOUNDARY_AWARE
     float inv_s;
     float tau2;
     float inv_t;
     float pad0;
 } pc;
 
+layout(constant_id = 0) const uint MODE = AGG_MAX;
+layout(constant_id = 1) const uint BOUNDARY_AWARE = 1u;
+
 void main() {
     uint e = linear_group_id() * 64u + gl_LocalInvocationIndex;
-    if (e >= pc.entries) {
-        return;
-    }
-    uint tile = keys[e].x;
-    uint slot = entries[e];
+    bool live = e < pc.entries;
+    // A lane past the end stands in for entry 0 (pc.entries > 0: the host dispatches nothing
+    // otherwise) and writes nothing.
+    uint tile = keys[live ? e : 0u].x;
+    uint slot = entries[live ? e : 0u];
     uint anchor = entry_items[slot];
     uint view = tile / (pc.tiles_x * pc.tiles_y);
-    uint flags = items[view * pc.anchors + anchor].flags;
-    bool anchor_inside = (flags & FLAG_INSIDE) != 0u;
+    bool anchor_inside = (items[view * pc.anchors + anchor].flags & FLAG_INSIDE) != 0u;
     vec3 p = anchors[anchor].xyz;
     float phi_j = phi[anchor];
-    ProbeView v = views[view];
-    uvec2 range = ray_ranges[tile];
-    float sum = 0.0;
-    for (uint q = range.x; q < range.y; ++q) {
-        uint ray = ray_order[q];
-        RayOut ro = outs[ray];
-        Ray r = rays[ray];
-        if (pc.mode == AGG_MAX) {
-            if (ro.aux == anchor) {
-                sum += ro.psi - r.label;
-            }
-            continue;
-        }
-        if (pc.boundary_aware != 0u && (r.label >= 0.5) != anchor_inside) {
-            continue;
-        }
-        vec3 o;
-        vec3 d;
-        view_ray(v, pixel_to_screen(r.px, r.py, float(pc.width), float(pc.height), pc.inv_s), o, d);
-        if (ray_hits(o, d, hit_bound(d, pc.tau2), p)) {
-            sum += (ro.psi - r.label) * agg_grad(ro, pc.mode, pc.inv_t, phi_j);
-        }
+    ProbeView v;
+    if (MODE != AGG_MAX) {
+        v = views[view];
     }
-    partials[slot] = sum;
+
+    uint lanes = subgroup_lanes(64u);
+    uint lane = gl_SubgroupInvocationID;
+    float sum = 0.0;
+    bool todo = live;
+    uvec4 pending = subgroupBallot(todo);
+    while (pending != uvec4(0u)) {
+        uint t = subgroupShuffle(tile, subgroupBallotFindLSB(pending));
+        bool mine = todo && tile == t;
+        todo = todo && !mine;
+        uvec2 range = ray_ranges[t];
+        for (uint start = range.x; start < range.y; start += lanes) {
+            uint k = start + lane;
+            RayOut ro = RayOut(0.0, 0.0, NO_HIT, 0.0);
+            Ray r = Ray(0.0, 0.0, 0u, 0.0);
+            if (k < range.y && lane < lanes) {
+                uint ray = ray_order[k];
+                ro = outs[ray];
+                r = rays[ray];
+            }
+            float err = ro.psi - r.label;
+            uint count = min(lanes, range.y - start);
+            for (uint i = 0u; i < count; ++i) {
+                float err_i = subgroupShuffle(err, i);
+                uint aux_i = subgroupShuffle(ro.aux, i);
+                if (MODE == AGG_MAX) {
+                    if (mine && aux_i == anchor) {
+                        sum += err_i;
+                    }
+                } else {
+                    RayOut ro_i = RayOut(subgroupShuffle(ro.psi, i), 0.0, aux_i,
+                                         subgroupShuffle(ro.aux_f, i));
+                    float px = subgroupShuffle(r.px, i);
+                    float py = subgroupShuffle(r.py, i);
+                    float label = subgroupShuffle(r.label, i);
+                    bool use = mine
+                        && (BOUNDARY_AWARE == 0u || (label >= 0.5) == anchor_inside);
+                    vec3 o;
+                    vec3 d;
+                    view_ray(v, pixel_to_screen(px, py, float(pc.width), float(pc.height),
+                                                pc.inv_s), o, d);
+                    if (use && ray_hits(o, d, hit_bound(d, pc.tau2), p)) {
+                        sum += err_i * agg_grad(ro_i, MODE, pc.inv_t, phi_j);
+                    }
+                }
+            }
+        }
+        pending = subgroupBallot(todo);
+    }
+    if (live) {
+        partials[slot] = sum;
+    }
 }

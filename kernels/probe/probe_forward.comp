@@ -1,13 +1,28 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
-// Sphere probing, forward, tiled: one invocation per ray; ψ = G(φ of the anchors the ray passes
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_ballot : require
+#extension GL_KHR_shader_subgroup_shuffle : require
+// Sphere probing, forward, tiled: one invocation per ray, the rays taken in tile order
+// (`ray_order`, the stable sort of the rays by tile); ψ = G(φ of the anchors the ray passes
 // within τ of), over the anchors binned to the ray's tile, in anchor order (the binning's stable
 // sort keeps each tile's anchors in index order): the same hits in the same order as
 // `probe_forward_brute.comp`, so the same ψ bit for bit. Anchors on the other side of the
 // silhouette from the ray are skipped (boundary-aware assignment). Writes ψ, (ψ − S)² and the
 // state the backward needs. Twin: `probe::prober::cpu::forward`.
+//
+// For llvmpipe's execution model (and without shared memory or barriers on any device): each
+// subgroup works alone. Its rays, consecutive in tile order, lie in one tile or a few; it takes
+// their tiles one at a time (the lowest lane's first). Per batch of as many of the tile's binned
+// anchors as it has lanes, each lane loads one anchor (its flags, centre and φ: one gathered
+// load per batch instead of a load per hit test); a ballot keeps those that some ray of the
+// tile may use (boundary-aware: an anchor whose side of the silhouette no ray of the tile has is
+// dropped); the loop over the ballot's bits, lowest first (anchor order), broadcasts each kept
+// anchor with shuffles and every ray of the tile tests and aggregates it. Nothing assumes a
+// subgroup size; the workgroup is 64 invocations (a few subgroups on every device).
 #include "common.glsl"
 #include "probe.glsl"
+#include "subgroup_face.glsl"
 
 layout(local_size_x = 64) in;
 
@@ -20,14 +35,17 @@ layout(std430, set = 0, binding = 5) readonly buffer Ranges { uvec2 ranges[]; };
 layout(std430, set = 0, binding = 6) readonly buffer Entries { uint entries[]; };
 layout(std430, set = 0, binding = 7) readonly buffer EntryItems { uint entry_items[]; };
 layout(std430, set = 0, binding = 8) writeonly buffer Outs { RayOut outs[]; };
+// Ray indices sorted by tile (`probe_ray_keys.comp` and the stable sort).
+layout(std430, set = 0, binding = 9) readonly buffer RayOrder { uint ray_order[]; };
 
 #include "probe_forward.glsl"
 
 void main() {
-    uint id = linear_group_id() * 64u + gl_LocalInvocationIndex;
-    if (id >= pc.rays) {
-        return;
-    }
+    uint q = linear_group_id() * 64u + gl_LocalInvocationIndex;
+    bool live = q < pc.rays;
+    // A lane past the end stands in for ray 0 (pc.rays > 0: the host dispatches nothing
+    // otherwise) and aggregates nothing.
+    uint id = live ? ray_order[q] : 0u;
     Ray r = rays[id];
     vec3 o;
     vec3 d;
@@ -35,17 +53,53 @@ void main() {
              pixel_to_screen(r.px, r.py, float(pc.width), float(pc.height), pc.inv_s), o, d);
     float bound = hit_bound(d, pc.tau2);
     uint tile = ray_tile(r, pc.width, pc.height, pc.tile_size, pc.tiles_x, pc.tiles_y);
-    uvec2 range = ranges[tile];
-    uint item_base = r.view * pc.anchors;
-    Agg g = agg_init(pc.mode);
-    for (uint e = range.x; e < range.y; ++e) {
-        uint anchor = entry_items[entries[e]];
-        if (!assigned(r.label, items[item_base + anchor].flags)) {
-            continue;
+    bool inside = r.label >= 0.5;
+    uint tiles_per_view = pc.tiles_x * pc.tiles_y;
+
+    uint lanes = subgroup_lanes(64u);
+    uint lane = gl_SubgroupInvocationID;
+    Agg g = agg_init(MODE);
+    bool todo = live;
+    uvec4 pending = subgroupBallot(todo);
+    while (pending != uvec4(0u)) {
+        uint t = subgroupShuffle(tile, subgroupBallotFindLSB(pending));
+        bool mine = todo && tile == t;
+        todo = todo && !mine;
+        bool any_in = subgroupBallot(mine && inside) != uvec4(0u);
+        bool any_out = subgroupBallot(mine && !inside) != uvec4(0u);
+        uvec2 range = ranges[t];
+        uint item_base = (t / tiles_per_view) * pc.anchors;
+        for (uint start = range.x; start < range.y; start += lanes) {
+            uint k = start + lane;
+            uint anchor = 0u;
+            uint flags = 0u;
+            vec4 a = vec4(0.0);
+            bool loaded = k < range.y && lane < lanes;
+            if (loaded) {
+                anchor = entry_items[entries[k]];
+                flags = items[item_base + anchor].flags;
+                a = vec4(anchors[anchor].xyz, phi[anchor]);
+            }
+            bool side_in = (flags & FLAG_INSIDE) != 0u;
+            bool usable = BOUNDARY_AWARE == 0u || (side_in ? any_in : any_out);
+            uvec4 kept = subgroupBallot(loaded && usable);
+            for (uint word = 0u; word < ballot_words(); ++word) {
+                uint mask = kept[word];
+                while (mask != 0u) {
+                    uint i = 32u * word + uint(findLSB(mask));
+                    mask &= mask - 1u;
+                    uint an = subgroupShuffle(anchor, i);
+                    uint fl = subgroupShuffle(flags, i);
+                    vec4 pa = subgroupShuffle(a, i);
+                    if (mine && assigned(r.label, fl) && ray_hits(o, d, bound, pa.xyz)) {
+                        agg_add(g, MODE, pc.inv_t, pa.w, an);
+                    }
+                }
+            }
         }
-        if (ray_hits(o, d, bound, anchors[anchor].xyz)) {
-            agg_add(g, pc.mode, pc.inv_t, phi[anchor], anchor);
-        }
+        pending = subgroupBallot(todo);
     }
-    outs[id] = agg_finish(g, pc.mode, pc.temperature, r.label);
+    if (live) {
+        outs[id] = agg_finish(g, MODE, pc.temperature, r.label);
+    }
 }

@@ -29,15 +29,15 @@ void main() {
              pixel_to_screen(r.px, r.py, float(pc.width), float(pc.height), pc.inv_s), o, d);
     float bound = hit_bound(d, pc.tau2);
     uint item_base = r.view * pc.anchors;
-    Agg g = agg_init(pc.mode);
+    Agg g = agg_init(MODE);
     for (uint anchor = 0u; anchor < pc.anchors; ++anchor) {
         uint flags = items[item_base + anchor].flags;
         if ((flags & FLAG_VALID) == 0u || !assigned(r.label, flags)) {
             continue;
         }
         if (ray_hits(o, d, bound, anchors[anchor].xyz)) {
-            agg_add(g, pc.mode, pc.inv_t, phi[anchor], anchor);
+            agg_add(g, MODE, pc.inv_t, phi[anchor], anchor);
         }
     }
-    outs[id] = agg_finish(g, pc.mode, pc.temperature, r.label);
+    outs[id] = agg_finish(g, MODE, pc.temperature, r.label);
 }

@@ -481,7 +481,9 @@ impl FieldFitter {
     }
 
     /// [`FieldFitter::step`] with GPU timestamps around its passes (`field eval`, `probe
-    /// forward`, `probe backward`, `geo loss`, `field backward`, `adam`; 6 passes).
+    /// forward`, `probe backward`, `geo loss`, `field backward`, `adam`), and within the probe
+    /// passes their parts (names indented by two spaces: `  bin sort`, `  forward rays`, `  ray
+    /// sort`, `  backward entries`, `  reduce`); 11 passes.
     pub fn step_timed(
         &self,
         ctx: &Context,
@@ -624,7 +626,7 @@ pub fn fit_field(
     let mut log = Vec::new();
     let mut done = 0;
     // Timestamps on the logged iterations only (a device without them is timed by wall only).
-    let mut timer = Timer::new(ctx, 6).ok();
+    let mut timer = Timer::new(ctx, 16).ok();
     let mut timed = 0u32;
     for it in 1..=opts.iterations {
         let logged = it % opts.log_every == 0 || it == opts.iterations;

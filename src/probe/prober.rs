@@ -32,7 +32,11 @@ use super::targets::GpuTargets;
 use crate::error::{Error, Result};
 use crate::fit::reduce::{Sum, SumPush};
 use crate::fit::{GradOut, check_binding, check_floats, groups};
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use std::sync::Arc;
+
+use crate::gpu::{
+    Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, specs,
+};
 use crate::primitives::binning::{self, BinJob, Binner, Bins, ItemLayout, TileGrid};
 use crate::primitives::{RadixSort, SortScratch};
 
@@ -188,10 +192,12 @@ pub struct ProbeRun {
 /// The probing pipelines and their buffers, for one set of targets and settings.
 pub struct Prober {
     items_kernel: Kernel,
-    forward_kernel: Kernel,
-    brute_kernel: Kernel,
+    /// The forward, brute-force forward and backward kernels are specialized on
+    /// [`Prober::modes`] (the aggregation and the assignment).
+    forward_kernel: KernelVariants,
+    brute_kernel: KernelVariants,
     keys_kernel: Kernel,
-    backward_kernel: Kernel,
+    backward_kernel: KernelVariants,
     reduce_kernel: Kernel,
     binner: Binner,
     bins: Bins,
@@ -225,6 +231,33 @@ fn check_loop(ctx: &Context, what: &str, iterations: u64) -> Result<()> {
     Ok(())
 }
 
+/// Lanes of a subgroup the tiled kernels use (`min(gl_SubgroupSize, 64)`) and the words of its
+/// ballot.
+fn lanes(ctx: &Context) -> (u64, u64) {
+    let lanes = u64::from(ctx.info().subgroup_size.clamp(1, 64));
+    (lanes, lanes.div_ceil(32))
+}
+
+/// Loop iterations of one invocation of `probe_forward.comp` at most, when the tiles hold
+/// `total` entries with at most `run` in one tile: a subgroup's rays lie in at most `lanes`
+/// distinct tiles (one pass of the outer loop each); per tile, a batch per `lanes` entries, the
+/// ballot's words per batch and a pass per kept entry.
+fn forward_iterations(ctx: &Context, total: u64, run: u64) -> u64 {
+    let (lanes, words) = lanes(ctx);
+    let entries = total.min(lanes * run);
+    let batches = entries.div_ceil(lanes) + lanes;
+    lanes + batches * (1 + words) + entries
+}
+
+/// Loop iterations of one invocation of `probe_backward.comp` at most, for `rays` rays of which
+/// at most `per_view` in one view (a tile holds one view's rays): a subgroup's entries lie in
+/// at most `lanes` distinct tiles; per tile, a batch per `lanes` rays and a pass per ray.
+fn backward_iterations(ctx: &Context, rays: u64, per_view: u64) -> u64 {
+    let (lanes, _) = lanes(ctx);
+    let visited = rays.min(lanes * per_view);
+    lanes + visited.div_ceil(lanes) + lanes + visited
+}
+
 impl Prober {
     /// Pipelines and buffers for probing `gpu`'s views with `settings`' counts: `anchors`
     /// anchors and `rays_per_view` rays per view.
@@ -254,11 +287,11 @@ impl Prober {
                 grid.tiles_per_view()
             )));
         }
-        // A tile belongs to one view: the backward visits at most one view's rays per entry.
+        // A tile belongs to one view: the backward visits at most one view's rays per tile.
         check_loop(
             ctx,
             &format!("{} rays per view (backward)", settings.rays_per_view),
-            u64::from(settings.rays_per_view),
+            backward_iterations(ctx, rays, u64::from(settings.rays_per_view)),
         )?;
         let items = anchors * u64::from(views);
         check_binding(ctx, "sphere probing: anchor items", 32 * items)?;
@@ -268,10 +301,10 @@ impl Prober {
         let tiles = job.tile_count();
         Ok(Self {
             items_kernel: Kernel::new(ctx, &specs::PROBE_ITEMS)?,
-            forward_kernel: Kernel::new(ctx, &specs::PROBE_FORWARD)?,
-            brute_kernel: Kernel::new(ctx, &specs::PROBE_FORWARD_BRUTE)?,
+            forward_kernel: KernelVariants::new(&specs::PROBE_FORWARD),
+            brute_kernel: KernelVariants::new(&specs::PROBE_FORWARD_BRUTE),
             keys_kernel: Kernel::new(ctx, &specs::PROBE_RAY_KEYS)?,
-            backward_kernel: Kernel::new(ctx, &specs::PROBE_BACKWARD)?,
+            backward_kernel: KernelVariants::new(&specs::PROBE_BACKWARD),
             reduce_kernel: Kernel::new(ctx, &specs::PROBE_REDUCE)?,
             binner: Binner::new(ctx)?,
             bins,
@@ -385,7 +418,11 @@ impl Prober {
         self.bins.reserve_entries(ctx, total)?;
         // A tile belongs to one view and holds each anchor at most once.
         let run = total.min(self.anchors());
-        check_loop(ctx, &format!("a tile of {run} anchors (forward)"), run)?;
+        check_loop(
+            ctx,
+            &format!("{total} entries, up to {run} anchors in a tile (forward)"),
+            forward_iterations(ctx, total, run),
+        )?;
         let views = u64::from(self.job.views);
         let per_anchor = total.min(views * self.job.grid.tiles_per_view());
         check_loop(
@@ -451,11 +488,45 @@ impl Prober {
         rays: BufferRange<'_>,
     ) -> Result<()> {
         self.check_inputs(gpu, &anchors, Some(&phi), Some(&rays))?;
-        self.binner
-            .record_sort(rec, &self.bins, self.items.whole(), &self.job)?;
+        rec.pass("  bin sort", |rec| {
+            self.binner
+                .record_sort(rec, &self.bins, self.items.whole(), &self.job)
+        })?;
+        let rays = rays.sub(0, 16 * self.rays());
+        rec.pass("  ray sort", |rec| self.record_ray_sort(rec, rays))?;
+        if self.rays() > 0 {
+            rec.pass("  forward rays", |rec| {
+                self.dispatch_forward(rec, gpu, &anchors, &phi, &rays)
+            })?;
+        }
+        self.record_loss(rec)
+    }
+
+    /// The specialization constants of the forward, brute-force forward and backward kernels:
+    /// `[MODE, BOUNDARY_AWARE]`.
+    fn modes(&self) -> [u32; 2] {
+        [
+            self.settings.aggregate.code(),
+            u32::from(self.settings.boundary_aware),
+        ]
+    }
+
+    fn variant(&self, rec: &Recorder<'_>, variants: &KernelVariants) -> Result<Arc<Kernel>> {
+        variants.get(rec.context(), &self.modes())
+    }
+
+    fn dispatch_forward(
+        &self,
+        rec: &mut Recorder<'_>,
+        gpu: &GpuTargets,
+        anchors: &BufferRange<'_>,
+        phi: &BufferRange<'_>,
+        rays: &BufferRange<'_>,
+    ) -> Result<()> {
         let n = self.rays();
+        let kernel = self.variant(rec, &self.forward_kernel)?;
         rec.dispatch(
-            &self.forward_kernel,
+            &kernel,
             &[
                 rays.sub(0, 16 * n),
                 gpu.views().whole(),
@@ -466,11 +537,11 @@ impl Prober {
                 self.bins.entries().whole(),
                 self.bins.entry_items().whole(),
                 self.outs.whole(),
+                self.ray_order.whole(),
             ],
             &self.forward_push(),
             groups(n, 64)?,
-        )?;
-        self.record_loss(rec)
+        )
     }
 
     /// The brute-force forward (every anchor for every ray), after [`Prober::record_items`]:
@@ -490,8 +561,13 @@ impl Prober {
             self.anchors(),
         )?;
         let n = self.rays();
+        // The backward reads the rays by tile, which the tiled forward sorts.
+        rec.pass("  ray sort", |rec| {
+            self.record_ray_sort(rec, rays.sub(0, 16 * n))
+        })?;
+        let kernel = self.variant(rec, &self.brute_kernel)?;
         rec.dispatch(
-            &self.brute_kernel,
+            &kernel,
             &[
                 rays.sub(0, 16 * n),
                 gpu.views().whole(),
@@ -528,9 +604,42 @@ impl Prober {
                 "sphere probing: the partials do not hold the entries (finish_count)".into(),
             ));
         }
-        let g = &self.job.grid;
         let n = self.rays();
         let rays = rays.sub(0, 16 * n);
+        let tiles = self.job.tile_count();
+        let ranges = self.ray_ranges.range(0, 8 * tiles);
+        let anchors = anchors.sub(0, 16 * self.anchors());
+        let phi = phi.sub(0, 4 * self.anchors());
+        if total > 0 {
+            rec.pass("  backward entries", |rec| {
+                self.dispatch_backward(rec, gpu, total, anchors, phi, rays, ranges)
+            })?;
+        }
+        rec.pass("  reduce", |rec| {
+            rec.dispatch(
+                &self.reduce_kernel,
+                &[
+                    self.bins.offsets().whole(),
+                    self.partials.whole(),
+                    d_phi.range.sub(0, 4 * self.anchors()),
+                ],
+                &ReducePush {
+                    anchors: self.settings.anchors,
+                    views: self.job.views,
+                    entries: total as u32,
+                    accumulate: u32::from(d_phi.accumulate),
+                    coef: (2.0 * f64::from(d_phi.weight) / n as f64) as f32,
+                    pad: [0; 3],
+                },
+                groups(self.anchors(), 64)?,
+            )
+        })
+    }
+
+    /// The rays' tile keys, their stable sort by tile, and each tile's range in the order.
+    fn record_ray_sort(&self, rec: &mut Recorder<'_>, rays: BufferRange<'_>) -> Result<()> {
+        let g = &self.job.grid;
+        let n = self.rays();
         let tiles = self.job.tile_count();
         rec.dispatch(
             &self.keys_kernel,
@@ -557,13 +666,27 @@ impl Prober {
         let ranges = self.ray_ranges.range(0, 8 * tiles);
         rec.fill(ranges, 0);
         self.binner
-            .record_ranges(rec, self.ray_keys.range(0, 8 * n), ranges, n, tiles)?;
-        let anchors = anchors.sub(0, 16 * self.anchors());
-        let phi = phi.sub(0, 4 * self.anchors());
-        if total > 0 {
+            .record_ranges(rec, self.ray_keys.range(0, 8 * n), ranges, n, tiles)
+    }
+
+    /// Step 2 of the backward: one invocation per binned (anchor, tile) entry.
+    #[allow(clippy::too_many_arguments)]
+    fn dispatch_backward(
+        &self,
+        rec: &mut Recorder<'_>,
+        gpu: &GpuTargets,
+        total: u64,
+        anchors: BufferRange<'_>,
+        phi: BufferRange<'_>,
+        rays: BufferRange<'_>,
+        ranges: BufferRange<'_>,
+    ) -> Result<()> {
+        let g = &self.job.grid;
+        {
             let c = &self.constants;
+            let kernel = self.variant(rec, &self.backward_kernel)?;
             rec.dispatch(
-                &self.backward_kernel,
+                &kernel,
                 &[
                     self.bins.keys().whole(),
                     self.bins.entries().whole(),
@@ -593,25 +716,8 @@ impl Prober {
                     pad: 0.0,
                 },
                 groups(total, 64)?,
-            )?;
+            )
         }
-        rec.dispatch(
-            &self.reduce_kernel,
-            &[
-                self.bins.offsets().whole(),
-                self.partials.whole(),
-                d_phi.range.sub(0, 4 * self.anchors()),
-            ],
-            &ReducePush {
-                anchors: self.settings.anchors,
-                views: self.job.views,
-                entries: total as u32,
-                accumulate: u32::from(d_phi.accumulate),
-                coef: (2.0 * f64::from(d_phi.weight) / n as f64) as f32,
-                pad: [0; 3],
-            },
-            groups(self.anchors(), 64)?,
-        )
     }
 
     /// Convenience (tests, tools): the whole forward (tiled, or brute force with `brute`) and
@@ -955,7 +1061,7 @@ mod tests {
         assert_eq!(std::mem::offset_of!(ProbeItem, flags), 16);
         assert_eq!(std::mem::size_of::<RayOut>(), 16);
         assert_eq!(std::mem::size_of::<super::super::ProbeView>(), 160);
-        assert_eq!(specs::PROBE_FORWARD.bindings.len(), 9);
+        assert_eq!(specs::PROBE_FORWARD.bindings.len(), 10);
         assert_eq!(specs::PROBE_BACKWARD.bindings.len(), 12);
     }
 
