@@ -8,8 +8,8 @@
 // the forward: max: the rays whose ψ came from j; LSE and union: the rays that hit j (the same
 // `precise` hit test and assignment as the forward, so the same decisions). Every ray that
 // reached j lies in one tile j was binned to, so each (ray, anchor) pair is counted once. The
-// sum lands at the entry's item-major slot; `probe_reduce.comp` then adds each anchor's slots
-// in a fixed order. No atomics. Twin: `probe::prober::cpu::backward`.
+// sum lands at the entry's index; `probe_reduce.comp` then adds each anchor's entries in a fixed
+// order (view, then its tiles row by row). No atomics. Twin: `probe::prober::cpu::backward`.
 //
 // For llvmpipe's execution model (and without shared memory or barriers on any device): each
 // subgroup works alone. Its entries, consecutive in tile order, mostly share one tile; it takes
@@ -25,19 +25,19 @@
 
 layout(local_size_x = 64) in;
 
-layout(std430, set = 0, binding = 0) readonly buffer Keys { uvec2 keys[]; };
-layout(std430, set = 0, binding = 1) readonly buffer Entries { uint entries[]; };
-layout(std430, set = 0, binding = 2) readonly buffer EntryItems { uint entry_items[]; };
-layout(std430, set = 0, binding = 3) readonly buffer Items { ProbeItem items[]; };
-layout(std430, set = 0, binding = 4) readonly buffer Anchors { vec4 anchors[]; };
-layout(std430, set = 0, binding = 5) readonly buffer Phi { float phi[]; };
-layout(std430, set = 0, binding = 6) readonly buffer Rays { Ray rays[]; };
-layout(std430, set = 0, binding = 7) readonly buffer Views { ProbeView views[]; };
-layout(std430, set = 0, binding = 8) readonly buffer Outs { RayOut outs[]; };
+// The tile and the anchor of every entry (`probe_mask_list.comp`).
+layout(std430, set = 0, binding = 0) readonly buffer ListTiles { uint list_tiles[]; };
+layout(std430, set = 0, binding = 1) readonly buffer List { uint list[]; };
+layout(std430, set = 0, binding = 2) readonly buffer Items { ProbeItem items[]; };
+layout(std430, set = 0, binding = 3) readonly buffer Anchors { vec4 anchors[]; };
+layout(std430, set = 0, binding = 4) readonly buffer Phi { float phi[]; };
+layout(std430, set = 0, binding = 5) readonly buffer Rays { Ray rays[]; };
+layout(std430, set = 0, binding = 6) readonly buffer Views { ProbeView views[]; };
+layout(std430, set = 0, binding = 7) readonly buffer Outs { RayOut outs[]; };
 // Ray indices sorted by tile, and each tile's [start, end) in them.
-layout(std430, set = 0, binding = 9) readonly buffer RayOrder { uint ray_order[]; };
-layout(std430, set = 0, binding = 10) readonly buffer RayRanges { uvec2 ray_ranges[]; };
-layout(std430, set = 0, binding = 11) writeonly buffer Partials { float partials[]; };
+layout(std430, set = 0, binding = 8) readonly buffer RayOrder { uint ray_order[]; };
+layout(std430, set = 0, binding = 9) readonly buffer RayRanges { uvec2 ray_ranges[]; };
+layout(std430, set = 0, binding = 10) writeonly buffer Partials { float partials[]; };
 
 // Twin of `BackwardPush` (src/probe/prober.rs).
 layout(push_constant) uniform Push {
@@ -63,9 +63,8 @@ void main() {
     bool live = e < pc.entries;
     // A lane past the end stands in for entry 0 (pc.entries > 0: the host dispatches nothing
     // otherwise) and writes nothing.
-    uint tile = keys[live ? e : 0u].x;
-    uint slot = entries[live ? e : 0u];
-    uint anchor = entry_items[slot];
+    uint tile = list_tiles[live ? e : 0u];
+    uint anchor = list[live ? e : 0u];
     uint view = tile / (pc.tiles_x * pc.tiles_y);
     bool anchor_inside = (items[view * pc.anchors + anchor].flags & FLAG_INSIDE) != 0u;
     vec3 p = anchors[anchor].xyz;
@@ -124,6 +123,6 @@ void main() {
         pending = subgroupBallot(todo);
     }
     if (live) {
-        partials[slot] = sum;
+        partials[e] = sum;
     }
 }

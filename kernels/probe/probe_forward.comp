@@ -5,8 +5,8 @@
 #extension GL_KHR_shader_subgroup_shuffle : require
 // Sphere probing, forward, tiled: one invocation per ray, the rays taken in tile order
 // (`ray_order`, the stable sort of the rays by tile); ψ = G(φ of the anchors the ray passes
-// within τ of), over the anchors binned to the ray's tile, in anchor order (the binning's stable
-// sort keeps each tile's anchors in index order): the same hits in the same order as
+// within τ of), over the anchors binned to the ray's tile, in anchor order (the tile's entries,
+// `probe_mask_list.comp`, list its anchors in index order): the same hits in the same order as
 // `probe_forward_brute.comp`, so the same ψ bit for bit. Anchors on the other side of the
 // silhouette from the ray are skipped (boundary-aware assignment). Writes ψ, (ψ − S)² and the
 // state the backward needs. Twin: `probe::prober::cpu::forward`.
@@ -31,12 +31,14 @@ layout(std430, set = 0, binding = 1) readonly buffer Views { ProbeView views[]; 
 layout(std430, set = 0, binding = 2) readonly buffer Anchors { vec4 anchors[]; };
 layout(std430, set = 0, binding = 3) readonly buffer Phi { float phi[]; };
 layout(std430, set = 0, binding = 4) readonly buffer Items { ProbeItem items[]; };
-layout(std430, set = 0, binding = 5) readonly buffer Ranges { uvec2 ranges[]; };
-layout(std430, set = 0, binding = 6) readonly buffer Entries { uint entries[]; };
-layout(std430, set = 0, binding = 7) readonly buffer EntryItems { uint entry_items[]; };
-layout(std430, set = 0, binding = 8) writeonly buffer Outs { RayOut outs[]; };
+// The scanned bit counts of the tiles' anchor-mask words: tile t's entries are
+// [offsets[t W], offsets[(t + 1) W]).
+layout(std430, set = 0, binding = 5) readonly buffer Offsets { uint offsets[]; };
+// The anchor of every entry, sorted by tile, each tile's in index order.
+layout(std430, set = 0, binding = 6) readonly buffer List { uint list[]; };
+layout(std430, set = 0, binding = 7) writeonly buffer Outs { RayOut outs[]; };
 // Ray indices sorted by tile (`probe_ray_keys.comp` and the stable sort).
-layout(std430, set = 0, binding = 9) readonly buffer RayOrder { uint ray_order[]; };
+layout(std430, set = 0, binding = 8) readonly buffer RayOrder { uint ray_order[]; };
 
 #include "probe_forward.glsl"
 
@@ -67,7 +69,7 @@ void main() {
         todo = todo && !mine;
         bool any_in = subgroupBallot(mine && inside) != uvec4(0u);
         bool any_out = subgroupBallot(mine && !inside) != uvec4(0u);
-        uvec2 range = ranges[t];
+        uvec2 range = uvec2(offsets[t * pc.words_per_tile], offsets[(t + 1u) * pc.words_per_tile]);
         uint item_base = (t / tiles_per_view) * pc.anchors;
         for (uint start = range.x; start < range.y; start += lanes) {
             uint k = start + lane;
@@ -76,7 +78,7 @@ void main() {
             vec4 a = vec4(0.0);
             bool loaded = k < range.y && lane < lanes;
             if (loaded) {
-                anchor = entry_items[entries[k]];
+                anchor = list[k];
                 flags = items[item_base + anchor].flags;
                 a = vec4(anchors[anchor].xyz, phi[anchor]);
             }

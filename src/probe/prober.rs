@@ -37,7 +37,8 @@ use std::sync::Arc;
 use crate::gpu::{
     Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, specs,
 };
-use crate::primitives::binning::{self, BinJob, Binner, Bins, ItemLayout, TileGrid};
+use crate::primitives::binning::{self, BinJob, Binner, ItemLayout, TileGrid};
+use crate::primitives::scan::{Scan, ScanScratch};
 use crate::primitives::{RadixSort, SortScratch};
 
 /// [`ProbeItem::flags`]: every corner of the anchor's τ-cube is in front of the camera.
@@ -108,7 +109,36 @@ struct ForwardPush {
     temperature: f32,
     inv_t: f32,
     boundary_aware: u32,
-    pad: [u32; 3],
+    words_per_tile: u32,
+    pad: [u32; 2],
+}
+
+/// Push constants of `probe_masks.comp`: the generic binning's (`BinPush`), whose
+/// `binning.glsl` it shares.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct MaskPush {
+    item_count: u32,
+    items_per_view: u32,
+    first_item: u32,
+    stride_words: u32,
+    box_offset: u32,
+    flag_offset: u32,
+    flag_mask: u32,
+    width: u32,
+    height: u32,
+    tile_size: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+}
+
+/// Push constants of `probe_mask_counts.comp` and `probe_mask_list.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct WordsPush {
+    words: u32,
+    words_per_tile: u32,
+    pad: [u32; 2],
 }
 
 /// Push constants of `probe_ray_keys.comp`.
@@ -151,7 +181,9 @@ struct ReducePush {
     entries: u32,
     accumulate: u32,
     coef: f32,
-    pad: [u32; 3],
+    words_per_tile: u32,
+    tiles_x: u32,
+    tiles_y: u32,
 }
 
 /// The f32 constants the kernels and the twin share.
@@ -199,8 +231,12 @@ pub struct Prober {
     keys_kernel: Kernel,
     backward_kernel: KernelVariants,
     reduce_kernel: Kernel,
+    masks_kernel: Kernel,
+    mask_counts_kernel: Kernel,
+    mask_list_kernel: Kernel,
     binner: Binner,
-    bins: Bins,
+    scan: Scan,
+    scan_scratch: ScanScratch,
     sort: RadixSort,
     sort_scratch: SortScratch,
     sum: Sum,
@@ -212,8 +248,18 @@ pub struct Prober {
     ray_keys: Buffer,
     ray_order: Buffer,
     ray_ranges: Buffer,
+    /// Per tile, a bit per anchor (`W` words): the anchors binned to it.
+    masks: Buffer,
+    /// Per item, its packed tile rectangle.
+    rects: Buffer,
+    /// The exclusive scan of the masks' bit counts, then the entry count: `tiles · W + 1`.
+    offsets: Buffer,
+    /// The anchor and the tile of every entry, sorted by tile, and its partial gradient.
+    list: Buffer,
+    list_tiles: Buffer,
     partials: Buffer,
-    partial_capacity: u64,
+    entry_capacity: u64,
+    entries: Option<u64>,
     loss: Buffer,
 }
 
@@ -229,6 +275,11 @@ fn check_loop(ctx: &Context, what: &str, iterations: u64) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// `W`: the words of a tile's anchor mask.
+fn words_per_tile(anchors: u32) -> u64 {
+    u64::from(anchors).div_ceil(32)
 }
 
 /// Lanes of a subgroup the tiled kernels use (`min(gl_SubgroupSize, 64)`) and the words of its
@@ -296,9 +347,16 @@ impl Prober {
         let items = anchors * u64::from(views);
         check_binding(ctx, "sphere probing: anchor items", 32 * items)?;
         check_binding(ctx, "sphere probing: rays", 16 * rays)?;
-        let mut bins = Bins::new(ctx)?;
-        bins.reserve(ctx, &job)?;
         let tiles = job.tile_count();
+        if grid.tiles_x > 0xFFFF || grid.tiles_y > 0xFFFF {
+            return Err(Error::Limit(format!(
+                "sphere probing: {} x {} tiles per view (at most 65535 each way)",
+                grid.tiles_x, grid.tiles_y
+            )));
+        }
+        let words = tiles * words_per_tile(settings.anchors);
+        check_binding(ctx, "sphere probing: tile anchor masks", 4 * (words + 1))?;
+        check_binding(ctx, "sphere probing: anchor tile rectangles", 8 * items)?;
         Ok(Self {
             items_kernel: Kernel::new(ctx, &specs::PROBE_ITEMS)?,
             forward_kernel: KernelVariants::new(&specs::PROBE_FORWARD),
@@ -306,8 +364,12 @@ impl Prober {
             keys_kernel: Kernel::new(ctx, &specs::PROBE_RAY_KEYS)?,
             backward_kernel: KernelVariants::new(&specs::PROBE_BACKWARD),
             reduce_kernel: Kernel::new(ctx, &specs::PROBE_REDUCE)?,
+            masks_kernel: Kernel::new(ctx, &specs::PROBE_MASKS)?,
+            mask_counts_kernel: Kernel::new(ctx, &specs::PROBE_MASK_COUNTS)?,
+            mask_list_kernel: Kernel::new(ctx, &specs::PROBE_MASK_LIST)?,
             binner: Binner::new(ctx)?,
-            bins,
+            scan: Scan::new(ctx)?,
+            scan_scratch: ScanScratch::new(ctx, words)?,
             sort: RadixSort::new(ctx)?,
             sort_scratch: SortScratch::new(ctx, rays)?,
             sum: Sum::new(ctx)?,
@@ -323,8 +385,18 @@ impl Prober {
                 8 * tiles,
                 MemoryKind::Device,
             )?,
+            masks: ctx.create_buffer("probe tile anchor masks", 4 * words, MemoryKind::Device)?,
+            rects: ctx.create_buffer("probe anchor tile rects", 8 * items, MemoryKind::Device)?,
+            offsets: ctx.create_buffer(
+                "probe mask word offsets",
+                4 * (words + 1),
+                MemoryKind::Device,
+            )?,
+            list: ctx.create_buffer("probe entry anchors", 4, MemoryKind::Device)?,
+            list_tiles: ctx.create_buffer("probe entry tiles", 4, MemoryKind::Device)?,
             partials: ctx.create_buffer("probe partials", 4, MemoryKind::Device)?,
-            partial_capacity: 1,
+            entry_capacity: 1,
+            entries: None,
             loss: ctx.create_buffer("probe silhouette loss", 4, MemoryKind::Device)?,
         })
     }
@@ -392,7 +464,19 @@ impl Prober {
         )
     }
 
-    /// Submission 1: records the anchor items and the binning's count pass.
+    /// `W`: the words of a tile's anchor mask.
+    fn words_per_tile(&self) -> u64 {
+        words_per_tile(self.settings.anchors)
+    }
+
+    /// Words of all tiles' anchor masks.
+    fn words(&self) -> u64 {
+        self.job.tile_count() * self.words_per_tile()
+    }
+
+    /// Submission 1: records the anchor items and the binning's count: every tile's anchor mask
+    /// (`probe_masks.comp`, the generic binning's tile rectangles), the bit count of every mask
+    /// word and their exclusive scan (each word's first entry), and the entry count after them.
     pub fn record_count(
         &self,
         rec: &mut Recorder<'_>,
@@ -400,14 +484,89 @@ impl Prober {
         anchors: BufferRange<'_>,
     ) -> Result<()> {
         self.record_items(rec, gpu, anchors)?;
-        self.binner
-            .record_count(rec, &self.bins, self.items.whole(), &self.job)
+        let words = self.words();
+        let g = &self.job.grid;
+        let l = &self.job.layout;
+        rec.fill(self.masks.whole(), 0);
+        rec.dispatch(
+            &self.masks_kernel,
+            &[self.items.whole(), self.masks.whole(), self.rects.whole()],
+            &MaskPush {
+                item_count: self.job.item_count() as u32,
+                items_per_view: self.job.items_per_view,
+                first_item: self.job.first_item,
+                stride_words: l.stride_words,
+                box_offset: l.box_offset,
+                flag_offset: l.flag_offset,
+                flag_mask: l.flag_mask,
+                width: g.width,
+                height: g.height,
+                tile_size: g.tile_size,
+                tiles_x: g.tiles_x,
+                tiles_y: g.tiles_y,
+            },
+            groups(self.job.item_count(), 64)?,
+        )?;
+        let counts = self.offsets.range(0, 4 * words);
+        rec.dispatch(
+            &self.mask_counts_kernel,
+            &[self.masks.whole(), counts],
+            &WordsPush {
+                words: words as u32,
+                words_per_tile: self.words_per_tile() as u32,
+                pad: [0; 2],
+            },
+            groups(words, 64)?,
+        )?;
+        self.scan
+            .record(rec, &self.scan_scratch, counts, counts, words)?;
+        // offsets[words] = the entry count: the end of the last tile's run.
+        rec.copy(self.scan_scratch.total(), 0, &self.offsets, 4 * words, 4);
+        Ok(())
+    }
+
+    /// Submission 2: the anchor and the tile of every entry, in tile order, from the masks and
+    /// their offsets (`probe_mask_list.comp`). The forwards record it.
+    fn record_list(&self, rec: &mut Recorder<'_>) -> Result<()> {
+        let total = self.entry_count()?;
+        let words = self.words();
+        if total == 0 {
+            return Ok(());
+        }
+        rec.dispatch(
+            &self.mask_list_kernel,
+            &[
+                self.masks.whole(),
+                self.offsets.whole(),
+                self.list.range(0, 4 * total),
+                self.list_tiles.range(0, 4 * total),
+            ],
+            &WordsPush {
+                words: words as u32,
+                words_per_tile: self.words_per_tile() as u32,
+                pad: [0; 2],
+            },
+            groups(words, 64)?,
+        )
+    }
+
+    /// The entry count [`Prober::finish_count`] read, once it fits the entry buffers.
+    fn entry_count(&self) -> Result<u64> {
+        let total = self.entries.ok_or_else(|| {
+            Error::Limit("sphere probing: the entry count is not known yet (finish_count)".into())
+        })?;
+        if total > self.entry_capacity {
+            return Err(Error::Limit(
+                "sphere probing: the entry buffers do not hold the entries (finish_count)".into(),
+            ));
+        }
+        Ok(total)
     }
 
     /// After submission 1 finished: reads the entry count, sizes the entry buffers, and checks
     /// the tiled loops against the driver's cap. Returns the entry count.
     pub fn finish_count(&mut self, ctx: &Context) -> Result<u64> {
-        let total = self.bins.read_total(ctx)?;
+        let total = u64::from(ctx.read_buffer::<u32>(self.scan_scratch.total(), 0, 1)?[0]);
         let max = binning::max_entries(ctx);
         if total > max {
             return Err(Error::Limit(format!(
@@ -415,7 +574,6 @@ impl Prober {
                  hold; use fewer anchors or views, larger tiles or a smaller τ"
             )));
         }
-        self.bins.reserve_entries(ctx, total)?;
         // A tile belongs to one view and holds each anchor at most once.
         let run = total.min(self.anchors());
         check_loop(
@@ -425,16 +583,22 @@ impl Prober {
         )?;
         let views = u64::from(self.job.views);
         let per_anchor = total.min(views * self.job.grid.tiles_per_view());
+        // Per view, a pass of the row loop per tile row and of the column loop per tile.
         check_loop(
             ctx,
             &format!("an anchor binned to {per_anchor} tiles (gradient sum)"),
-            views + per_anchor,
+            views + 2 * per_anchor,
         )?;
-        if total > self.partial_capacity {
+        if total > self.entry_capacity {
             let cap = (total + total / 4).min(max).max(total);
-            self.partials = ctx.create_buffer("probe partials", 4 * cap, MemoryKind::Device)?;
-            self.partial_capacity = cap;
+            let bytes = 4 * cap;
+            check_binding(ctx, "sphere probing: entries", bytes)?;
+            self.list = ctx.create_buffer("probe entry anchors", bytes, MemoryKind::Device)?;
+            self.list_tiles = ctx.create_buffer("probe entry tiles", bytes, MemoryKind::Device)?;
+            self.partials = ctx.create_buffer("probe partials", bytes, MemoryKind::Device)?;
+            self.entry_capacity = cap;
         }
+        self.entries = Some(total);
         Ok(total)
     }
 
@@ -455,7 +619,8 @@ impl Prober {
             temperature: c.temperature,
             inv_t: c.inv_t,
             boundary_aware: u32::from(self.settings.boundary_aware),
-            pad: [0; 3],
+            words_per_tile: self.words_per_tile() as u32,
+            pad: [0; 2],
         }
     }
 
@@ -488,10 +653,7 @@ impl Prober {
         rays: BufferRange<'_>,
     ) -> Result<()> {
         self.check_inputs(gpu, &anchors, Some(&phi), Some(&rays))?;
-        rec.pass("  bin sort", |rec| {
-            self.binner
-                .record_sort(rec, &self.bins, self.items.whole(), &self.job)
-        })?;
+        rec.pass("  bin list", |rec| self.record_list(rec))?;
         let rays = rays.sub(0, 16 * self.rays());
         rec.pass("  ray sort", |rec| self.record_ray_sort(rec, rays))?;
         if self.rays() > 0 {
@@ -533,9 +695,8 @@ impl Prober {
                 anchors.sub(0, 16 * self.anchors()),
                 phi.sub(0, 4 * self.anchors()),
                 self.items.whole(),
-                self.bins.ranges().range(0, 8 * self.job.tile_count()),
-                self.bins.entries().whole(),
-                self.bins.entry_items().whole(),
+                self.offsets.whole(),
+                self.list.whole(),
                 self.outs.whole(),
                 self.ray_order.whole(),
             ],
@@ -561,7 +722,9 @@ impl Prober {
             self.anchors(),
         )?;
         let n = self.rays();
-        // The backward reads the rays by tile, which the tiled forward sorts.
+        // The backward reads the entries and the rays by tile, which the tiled forward lists
+        // and sorts.
+        rec.pass("  bin list", |rec| self.record_list(rec))?;
         rec.pass("  ray sort", |rec| {
             self.record_ray_sort(rec, rays.sub(0, 16 * n))
         })?;
@@ -596,14 +759,7 @@ impl Prober {
     ) -> Result<()> {
         self.check_inputs(gpu, &anchors, Some(&phi), Some(&rays))?;
         check_floats("sphere probing: d_phi", &d_phi.range, self.anchors())?;
-        let total = self.bins.total().ok_or_else(|| {
-            Error::Limit("sphere probing: the entry count is not known yet (finish_count)".into())
-        })?;
-        if total > self.partial_capacity {
-            return Err(Error::Limit(
-                "sphere probing: the partials do not hold the entries (finish_count)".into(),
-            ));
-        }
+        let total = self.entry_count()?;
         let n = self.rays();
         let rays = rays.sub(0, 16 * n);
         let tiles = self.job.tile_count();
@@ -619,7 +775,9 @@ impl Prober {
             rec.dispatch(
                 &self.reduce_kernel,
                 &[
-                    self.bins.offsets().whole(),
+                    self.rects.whole(),
+                    self.masks.whole(),
+                    self.offsets.whole(),
                     self.partials.whole(),
                     d_phi.range.sub(0, 4 * self.anchors()),
                 ],
@@ -629,7 +787,9 @@ impl Prober {
                     entries: total as u32,
                     accumulate: u32::from(d_phi.accumulate),
                     coef: (2.0 * f64::from(d_phi.weight) / n as f64) as f32,
-                    pad: [0; 3],
+                    words_per_tile: self.words_per_tile() as u32,
+                    tiles_x: self.job.grid.tiles_x,
+                    tiles_y: self.job.grid.tiles_y,
                 },
                 groups(self.anchors(), 64)?,
             )
@@ -688,9 +848,8 @@ impl Prober {
             rec.dispatch(
                 &kernel,
                 &[
-                    self.bins.keys().whole(),
-                    self.bins.entries().whole(),
-                    self.bins.entry_items().whole(),
+                    self.list_tiles.whole(),
+                    self.list.whole(),
                     self.items.whole(),
                     anchors,
                     phi,
@@ -736,9 +895,6 @@ impl Prober {
         let d_phi = ctx.create_buffer("probe d_phi", 4 * self.anchors(), MemoryKind::Device)?;
         ctx.submit_and_wait(|rec| {
             if brute {
-                // The backward still needs the binning sorted.
-                self.binner
-                    .record_sort(rec, &self.bins, self.items.whole(), &self.job)?;
                 self.record_forward_brute(rec, gpu, anchors.whole(), phi.whole(), rays.whole())?;
             } else {
                 self.record_forward(rec, gpu, anchors.whole(), phi.whole(), rays.whole())?;
@@ -783,11 +939,6 @@ impl Prober {
     /// The anchor items ([`ProbeItem`], view-major) of the last [`Prober::record_items`].
     pub fn items(&self) -> &Buffer {
         &self.items
-    }
-
-    /// The binning of the anchors.
-    pub fn bins(&self) -> &Bins {
-        &self.bins
     }
 
     /// The binning job (grid, layout, counts).
@@ -1061,8 +1212,8 @@ mod tests {
         assert_eq!(std::mem::offset_of!(ProbeItem, flags), 16);
         assert_eq!(std::mem::size_of::<RayOut>(), 16);
         assert_eq!(std::mem::size_of::<super::super::ProbeView>(), 160);
-        assert_eq!(specs::PROBE_FORWARD.bindings.len(), 10);
-        assert_eq!(specs::PROBE_BACKWARD.bindings.len(), 12);
+        assert_eq!(specs::PROBE_FORWARD.bindings.len(), 9);
+        assert_eq!(specs::PROBE_BACKWARD.bindings.len(), 11);
     }
 
     #[test]
