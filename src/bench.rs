@@ -1038,9 +1038,12 @@ pub fn run_backward(
 /// of RESULTS.md), in the cube [`auto_cube`](crate::fit::field_fit::auto_cube) gives.
 ///
 /// After one untimed iteration, `opts.repeat` iterations run as the fit runs them (submission 1
-/// and its count read-back, then submission 2 with GPU timestamps): `wall_ms` is the median wall
-/// time of a whole iteration, `gpu_ms` the median of submission 2's passes, and `passes` starts
-/// with `sample (wall)` (submission 1 and its read-back, wall) then every pass of
+/// and its count read-back, then submission 2, both with GPU timestamps): `wall_ms` is the
+/// median wall time of a whole iteration, `gpu_ms` the median of the sum of both submissions'
+/// passes, and `passes` starts with `sample (wall)` (submission 1 and its read-back, wall) and
+/// its passes (`sample`, `probe count` of
+/// [`FieldFitter::sample_timed`](crate::fit::field_fit::FieldFitter::sample_timed), indented),
+/// then every pass of
 /// [`FieldFitter::step_timed`](crate::fit::field_fit::FieldFitter::step_timed) (parts of a pass
 /// indented, after it). `pairs` is 0
 /// (not counted for probing); `entries` is the binning's (anchor, tile) entry count.
@@ -1111,25 +1114,41 @@ fn run_field_fit(
     } else {
         None
     };
+    let mut sample_timer = if ctx.info().timestamp_valid_bits > 0 {
+        Some(Timer::new(ctx, 8)?)
+    } else {
+        None
+    };
     let (mut wall, mut gpu) = (Vec::new(), Vec::new());
     let mut passes: Vec<(String, Vec<f64>)> = vec![("sample (wall)".into(), Vec::new())];
     for it in 2..opts.repeat + 2 {
         let start = Instant::now();
-        entries = fitter.sample(ctx, it)?;
+        entries = fitter.sample_timed(ctx, it, sample_timer.as_mut())?;
         let sampled = start.elapsed().as_secs_f64() * 1e3;
         fitter.step_timed(ctx, it, timer.as_mut())?;
         wall.push(start.elapsed().as_secs_f64() * 1e3);
         passes[0].1.push(sampled);
-        if let Some(timer) = &timer {
-            let times = timer.results(ctx)?;
+        if let (Some(timer), Some(sample_timer)) = (&timer, &sample_timer) {
+            let sample_times = sample_timer.results(ctx)?;
+            let step_times = timer.results(ctx)?;
             // Parts of a pass (indented names) are inside it: not summed again.
             gpu.push(
-                times
+                sample_times
                     .iter()
+                    .chain(&step_times)
                     .filter(|t| !t.name.starts_with(' '))
                     .map(|t| t.ms)
                     .sum(),
             );
+            // Submission 1's passes are parts of `sample (wall)`.
+            let mut times: Vec<_> = sample_times
+                .into_iter()
+                .map(|mut t| {
+                    t.name = format!("  {}", t.name);
+                    t
+                })
+                .collect();
+            times.extend(step_times);
             for t in times {
                 match passes.iter_mut().find(|(n, _)| *n == t.name) {
                     Some((_, series)) => series.push(t.ms),

@@ -454,22 +454,38 @@ impl FieldFitter {
     /// Submission 1 of `iteration` and the count read-back: the samples, the geo points, the
     /// points buffer and the binning count.
     pub fn sample(&mut self, ctx: &Context, iteration: u32) -> Result<u64> {
+        self.sample_timed(ctx, iteration, None)
+    }
+
+    /// [`FieldFitter::sample`] with GPU timestamps around its passes (`sample`: the sampler,
+    /// the geo points and the copies; `probe count`: the anchor items and their binning count).
+    pub fn sample_timed(
+        &mut self,
+        ctx: &Context,
+        iteration: u32,
+        timer: Option<&mut Timer>,
+    ) -> Result<u64> {
         let na = u64::from(self.anchors);
-        ctx.submit_and_wait(|rec| {
-            self.sampler.record(rec, &self.gpu, iteration)?;
-            rec.copy(self.sampler.anchors(), 0, &self.points, 0, 16 * na);
-            if let Some(geo) = &self.geo {
-                geo.record_points(rec, self.sampler.candidates().whole())?;
-                rec.copy(
-                    geo.points(),
-                    0,
-                    &self.points,
-                    16 * u64::from(self.geo_start),
-                    16 * u64::from(self.geo_count),
-                );
-            }
-            self.prober
-                .record_count(rec, &self.gpu, self.sampler.anchors().whole())
+        ctx.submit_and_wait_timed(timer, |rec| {
+            rec.pass("sample", |rec| {
+                self.sampler.record(rec, &self.gpu, iteration)?;
+                rec.copy(self.sampler.anchors(), 0, &self.points, 0, 16 * na);
+                if let Some(geo) = &self.geo {
+                    geo.record_points(rec, self.sampler.candidates().whole())?;
+                    rec.copy(
+                        geo.points(),
+                        0,
+                        &self.points,
+                        16 * u64::from(self.geo_start),
+                        16 * u64::from(self.geo_count),
+                    );
+                }
+                Ok(())
+            })?;
+            rec.pass("probe count", |rec| {
+                self.prober
+                    .record_count(rec, &self.gpu, self.sampler.anchors().whole())
+            })
         })?;
         self.prober.finish_count(ctx)
     }

@@ -141,6 +141,26 @@ struct WordsPush {
     pad: [u32; 2],
 }
 
+/// Push constants of `probe_aux_keys.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct AuxKeysPush {
+    rays: u32,
+    anchors: u32,
+    views: u32,
+    pad: u32,
+}
+
+/// Push constants of `probe_max_grad.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct MaxGradPush {
+    anchors: u32,
+    views: u32,
+    accumulate: u32,
+    coef: f32,
+}
+
 /// Push constants of `probe_ray_keys.comp`.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -234,6 +254,8 @@ pub struct Prober {
     masks_kernel: Kernel,
     mask_counts_kernel: Kernel,
     mask_list_kernel: Kernel,
+    aux_keys_kernel: Kernel,
+    max_grad_kernel: Kernel,
     binner: Binner,
     scan: Scan,
     scan_scratch: ScanScratch,
@@ -248,6 +270,10 @@ pub struct Prober {
     ray_keys: Buffer,
     ray_order: Buffer,
     ray_ranges: Buffer,
+    /// G = max: the rays' item keys, the rays sorted by them, each item's range.
+    aux_keys: Buffer,
+    aux_order: Buffer,
+    item_ranges: Buffer,
     /// Per tile, a bit per anchor (`W` words): the anchors binned to it.
     masks: Buffer,
     /// Per item, its packed tile rectangle.
@@ -367,6 +393,8 @@ impl Prober {
             masks_kernel: Kernel::new(ctx, &specs::PROBE_MASKS)?,
             mask_counts_kernel: Kernel::new(ctx, &specs::PROBE_MASK_COUNTS)?,
             mask_list_kernel: Kernel::new(ctx, &specs::PROBE_MASK_LIST)?,
+            aux_keys_kernel: Kernel::new(ctx, &specs::PROBE_AUX_KEYS)?,
+            max_grad_kernel: Kernel::new(ctx, &specs::PROBE_MAX_GRAD)?,
             binner: Binner::new(ctx)?,
             scan: Scan::new(ctx)?,
             scan_scratch: ScanScratch::new(ctx, words)?,
@@ -383,6 +411,13 @@ impl Prober {
             ray_ranges: ctx.create_buffer(
                 "probe ray tile ranges",
                 8 * tiles,
+                MemoryKind::Device,
+            )?,
+            aux_keys: ctx.create_buffer("probe ray item keys", 8 * rays, MemoryKind::Device)?,
+            aux_order: ctx.create_buffer("probe rays by item", 4 * rays, MemoryKind::Device)?,
+            item_ranges: ctx.create_buffer(
+                "probe ray item ranges",
+                8 * (items + 1),
                 MemoryKind::Device,
             )?,
             masks: ctx.create_buffer("probe tile anchor masks", 4 * words, MemoryKind::Device)?,
@@ -483,8 +518,12 @@ impl Prober {
         gpu: &GpuTargets,
         anchors: BufferRange<'_>,
     ) -> Result<()> {
-        self.record_items(rec, gpu, anchors)?;
-        let words = self.words();
+        rec.pass("  items", |rec| self.record_items(rec, gpu, anchors))?;
+        rec.pass("  masks", |rec| self.record_masks(rec))?;
+        rec.pass("  mask scan", |rec| self.record_mask_scan(rec))
+    }
+
+    fn record_masks(&self, rec: &mut Recorder<'_>) -> Result<()> {
         let g = &self.job.grid;
         let l = &self.job.layout;
         rec.fill(self.masks.whole(), 0);
@@ -506,7 +545,11 @@ impl Prober {
                 tiles_y: g.tiles_y,
             },
             groups(self.job.item_count(), 64)?,
-        )?;
+        )
+    }
+
+    fn record_mask_scan(&self, rec: &mut Recorder<'_>) -> Result<()> {
+        let words = self.words();
         let counts = self.offsets.range(0, 4 * words);
         rec.dispatch(
             &self.mask_counts_kernel,
@@ -762,6 +805,10 @@ impl Prober {
         let total = self.entry_count()?;
         let n = self.rays();
         let rays = rays.sub(0, 16 * n);
+        let coef = (2.0 * f64::from(d_phi.weight) / n as f64) as f32;
+        if self.max_by_rays(rec.context()) {
+            return self.record_max_backward(rec, rays, d_phi, coef);
+        }
         let tiles = self.job.tile_count();
         let ranges = self.ray_ranges.range(0, 8 * tiles);
         let anchors = anchors.sub(0, 16 * self.anchors());
@@ -786,10 +833,87 @@ impl Prober {
                     views: self.job.views,
                     entries: total as u32,
                     accumulate: u32::from(d_phi.accumulate),
-                    coef: (2.0 * f64::from(d_phi.weight) / n as f64) as f32,
+                    coef,
                     words_per_tile: self.words_per_tile() as u32,
                     tiles_x: self.job.grid.tiles_x,
                     tiles_y: self.job.grid.tiles_y,
+                },
+                groups(self.anchors(), 64)?,
+            )
+        })
+    }
+
+    /// Whether the backward takes the path of G = max that needs no entries
+    /// ([`Prober::record_max_backward`]): under max, when its gradient sum fits the driver's
+    /// loop cap (an anchor's rays over all views, at most every ray).
+    fn max_by_rays(&self, ctx: &Context) -> bool {
+        self.settings.aggregate == super::Aggregate::Max
+            && ctx
+                .info()
+                .shader_loop_limit()
+                .is_none_or(|limit| u64::from(self.job.views) + self.rays() <= limit)
+    }
+
+    /// The backward under G = max: each ray's ψ − S goes to the one anchor its ψ came from. The
+    /// rays are sorted by that item (`probe_aux_keys.comp`, the stable sort, the ranges pass);
+    /// `probe_max_grad.comp` sums each anchor's, view by view, in ray order.
+    fn record_max_backward(
+        &self,
+        rec: &mut Recorder<'_>,
+        rays: BufferRange<'_>,
+        d_phi: GradOut<'_>,
+        coef: f32,
+    ) -> Result<()> {
+        let n = self.rays();
+        let items = self.job.item_count();
+        // One bucket per item and one for the rays without a hit.
+        let buckets = items + 1;
+        let key_bits = (u64::BITS - (buckets.max(2) - 1).leading_zeros()).max(1);
+        let ranges = self.item_ranges.range(0, 8 * buckets);
+        rec.pass("  ray sort by anchor", |rec| {
+            rec.dispatch(
+                &self.aux_keys_kernel,
+                &[
+                    rays,
+                    self.outs.whole(),
+                    self.aux_keys.whole(),
+                    self.aux_order.whole(),
+                ],
+                &AuxKeysPush {
+                    rays: n as u32,
+                    anchors: self.settings.anchors,
+                    views: self.job.views,
+                    pad: 0,
+                },
+                groups(n, 64)?,
+            )?;
+            self.sort.record(
+                rec,
+                &self.sort_scratch,
+                &self.aux_keys,
+                &self.aux_order,
+                n,
+                key_bits,
+            )?;
+            rec.fill(ranges, 0);
+            self.binner
+                .record_ranges(rec, self.aux_keys.range(0, 8 * n), ranges, n, buckets)
+        })?;
+        rec.pass("  max gradient", |rec| {
+            rec.dispatch(
+                &self.max_grad_kernel,
+                &[
+                    rays,
+                    self.outs.whole(),
+                    self.aux_order.whole(),
+                    ranges,
+                    d_phi.range.sub(0, 4 * self.anchors()),
+                ],
+                &MaxGradPush {
+                    anchors: self.settings.anchors,
+                    views: self.job.views,
+                    accumulate: u32::from(d_phi.accumulate),
+                    coef,
                 },
                 groups(self.anchors(), 64)?,
             )
@@ -1207,6 +1331,23 @@ mod tests {
         assert_eq!(
             std::mem::size_of::<ReducePush>(),
             size(&specs::PROBE_REDUCE)
+        );
+        assert_eq!(std::mem::size_of::<MaskPush>(), size(&specs::PROBE_MASKS));
+        assert_eq!(
+            std::mem::size_of::<WordsPush>(),
+            size(&specs::PROBE_MASK_COUNTS)
+        );
+        assert_eq!(
+            std::mem::size_of::<WordsPush>(),
+            size(&specs::PROBE_MASK_LIST)
+        );
+        assert_eq!(
+            std::mem::size_of::<AuxKeysPush>(),
+            size(&specs::PROBE_AUX_KEYS)
+        );
+        assert_eq!(
+            std::mem::size_of::<MaxGradPush>(),
+            size(&specs::PROBE_MAX_GRAD)
         );
         assert_eq!(std::mem::size_of::<ProbeItem>(), 32);
         assert_eq!(std::mem::offset_of!(ProbeItem, flags), 16);

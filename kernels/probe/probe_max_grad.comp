@@ -1,0 +1,45 @@
+#version 460
+#extension GL_GOOGLE_include_directive : require
+// Sphere probing, backward under G = max: dψ_i/dφ_j is 1 for the one anchor j that ψ_i came
+// from and 0 for every other, so dL/dφ_j = coef · Σ over views, then over the rays of that view
+// whose ψ came from j (in ray order), of ψ_i − S_i: no per-(anchor, tile) entries at all. The
+// rays are sorted by their item (`probe_aux_keys.comp` and the stable sort). One invocation per
+// anchor, one writer per output: deterministic. Twin: `probe::prober::cpu::backward`.
+#include "common.glsl"
+#include "probe.glsl"
+
+layout(local_size_x = 64) in;
+
+layout(std430, set = 0, binding = 0) readonly buffer Rays { Ray rays[]; };
+layout(std430, set = 0, binding = 1) readonly buffer Outs { RayOut outs[]; };
+// Ray indices sorted by item, and each item's [start, end) in them.
+layout(std430, set = 0, binding = 2) readonly buffer Order { uint order[]; };
+layout(std430, set = 0, binding = 3) readonly buffer ItemRanges { uvec2 item_ranges[]; };
+layout(std430, set = 0, binding = 4) buffer DPhi { float d_phi[]; };
+
+// Twin of `MaxGradPush` (src/probe/prober.rs).
+layout(push_constant) uniform Push {
+    uint anchors;
+    uint views;
+    uint accumulate; // add to d_phi instead of overwriting it
+    float coef;
+} pc;
+
+void main() {
+    uint anchor = linear_group_id() * 64u + gl_LocalInvocationIndex;
+    if (anchor >= pc.anchors) {
+        return;
+    }
+    float s = 0.0;
+    for (uint view = 0u; view < pc.views; ++view) {
+        uvec2 range = item_ranges[view * pc.anchors + anchor];
+        float sv = 0.0;
+        for (uint q = range.x; q < range.y; ++q) {
+            uint ray = order[q];
+            sv += outs[ray].psi - rays[ray].label;
+        }
+        s += sv;
+    }
+    float g = pc.coef * s;
+    d_phi[anchor] = pc.accumulate != 0u ? d_phi[anchor] + g : g;
+}
