@@ -18,7 +18,7 @@ layout(push_constant) uniform Push {
     float temperature;   // LSE: T
     float inv_t;         // LSE: 1 / T
     uint boundary_aware; // unused: BOUNDARY_AWARE
-    uint words_per_tile; // tiled: W, the words of a tile's anchor mask
+    uint pad0;
     uint pad1;
     uint pad2;
 } pc;

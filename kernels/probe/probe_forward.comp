@@ -31,8 +31,8 @@ layout(std430, set = 0, binding = 1) readonly buffer Views { ProbeView views[]; 
 layout(std430, set = 0, binding = 2) readonly buffer Anchors { vec4 anchors[]; };
 layout(std430, set = 0, binding = 3) readonly buffer Phi { float phi[]; };
 layout(std430, set = 0, binding = 4) readonly buffer Items { ProbeItem items[]; };
-// The scanned bit counts of the tiles' anchor-mask words: tile t's entries are
-// [offsets[t W], offsets[(t + 1) W]).
+// Each tile's first entry, then the entry count: tile t's entries are [offsets[t], offsets[t + 1])
+// (`probe_mask_counts.comp` and the scan).
 layout(std430, set = 0, binding = 5) readonly buffer Offsets { uint offsets[]; };
 // The anchor of every entry, sorted by tile, each tile's in index order.
 layout(std430, set = 0, binding = 6) readonly buffer List { uint list[]; };
@@ -69,7 +69,7 @@ void main() {
         todo = todo && !mine;
         bool any_in = subgroupBallot(mine && inside) != uvec4(0u);
         bool any_out = subgroupBallot(mine && !inside) != uvec4(0u);
-        uvec2 range = uvec2(offsets[t * pc.words_per_tile], offsets[(t + 1u) * pc.words_per_tile]);
+        uvec2 range = uvec2(offsets[t], offsets[t + 1u]);
         uint item_base = (t / tiles_per_view) * pc.anchors;
         for (uint start = range.x; start < range.y; start += lanes) {
             uint k = start + lane;

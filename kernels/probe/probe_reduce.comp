@@ -3,7 +3,8 @@
 // Sphere probing, backward, step 3: dL/dφ_j = coef · Σ over views, then over the tiles of anchor
 // j's item in that view (its tile rectangle, row by row: the order of the generic binning's
 // item-major slots), of the partials, in that fixed order. An entry is found from the masks:
-// the scanned offset of the anchor's word in the tile's mask plus the set bits below its own.
+// the tile's first entry, the anchor's word's prefix in the tile, and the set bits below its
+// own (`probe_mask_counts.comp`).
 // One invocation per anchor, one writer per output: deterministic. coef is 2 / (number of rays)
 // times the gradient's weight. Twin: `probe::prober::cpu::backward`.
 #include "common.glsl"
@@ -15,8 +16,9 @@ layout(local_size_x = 64) in;
 layout(std430, set = 0, binding = 0) readonly buffer Rects { uvec2 rects[]; };
 layout(std430, set = 0, binding = 1) readonly buffer Masks { uint masks[]; };
 layout(std430, set = 0, binding = 2) readonly buffer Offsets { uint offsets[]; };
-layout(std430, set = 0, binding = 3) readonly buffer Partials { float partials[]; };
-layout(std430, set = 0, binding = 4) buffer DPhi { float d_phi[]; };
+layout(std430, set = 0, binding = 3) readonly buffer WordPrefix { uint word_prefix[]; };
+layout(std430, set = 0, binding = 4) readonly buffer Partials { float partials[]; };
+layout(std430, set = 0, binding = 5) buffer DPhi { float d_phi[]; };
 
 // Twin of `ReducePush` (src/probe/prober.rs).
 layout(push_constant) uniform Push {
@@ -50,8 +52,9 @@ void main() {
         uint y1 = rect.y >> 16u;
         for (uint ty = y0; ty <= y1; ++ty) {
             for (uint tx = x0; tx <= x1; ++tx) {
-                uint w = (view * tiles_per_view + ty * pc.tiles_x + tx) * pc.words_per_tile + word;
-                s += partials[offsets[w] + uint(bitCount(masks[w] & below))];
+                uint t = view * tiles_per_view + ty * pc.tiles_x + tx;
+                uint w = t * pc.words_per_tile + word;
+                s += partials[offsets[t] + word_prefix[w] + uint(bitCount(masks[w] & below))];
             }
         }
     }

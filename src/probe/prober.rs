@@ -109,8 +109,7 @@ struct ForwardPush {
     temperature: f32,
     inv_t: f32,
     boundary_aware: u32,
-    words_per_tile: u32,
-    pad: [u32; 2],
+    pad: [u32; 3],
 }
 
 /// Push constants of `probe_masks.comp`: the generic binning's (`BinPush`), whose
@@ -136,6 +135,7 @@ struct MaskPush {
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct WordsPush {
+    /// `probe_mask_list.comp`: mask words of all tiles; `probe_mask_counts.comp`: tiles.
     words: u32,
     words_per_tile: u32,
     pad: [u32; 2],
@@ -278,8 +278,11 @@ pub struct Prober {
     masks: Buffer,
     /// Per item, its packed tile rectangle.
     rects: Buffer,
-    /// The exclusive scan of the masks' bit counts, then the entry count: `tiles · W + 1`.
+    /// Each tile's first entry (the exclusive scan of their entry counts), then the entry
+    /// count: `tiles + 1`.
     offsets: Buffer,
+    /// Each mask word's first entry within its tile.
+    word_prefix: Buffer,
     /// The anchor and the tile of every entry, sorted by tile, and its partial gradient.
     list: Buffer,
     list_tiles: Buffer,
@@ -381,7 +384,13 @@ impl Prober {
             )));
         }
         let words = tiles * words_per_tile(settings.anchors);
-        check_binding(ctx, "sphere probing: tile anchor masks", 4 * (words + 1))?;
+        check_binding(ctx, "sphere probing: tile anchor masks", 4 * words)?;
+        // A tile's bit count loops over its mask's words.
+        check_loop(
+            ctx,
+            &format!("{} anchors (a tile's mask words)", settings.anchors),
+            words_per_tile(settings.anchors),
+        )?;
         check_binding(ctx, "sphere probing: anchor tile rectangles", 8 * items)?;
         Ok(Self {
             items_kernel: Kernel::new(ctx, &specs::PROBE_ITEMS)?,
@@ -397,7 +406,7 @@ impl Prober {
             max_grad_kernel: Kernel::new(ctx, &specs::PROBE_MAX_GRAD)?,
             binner: Binner::new(ctx)?,
             scan: Scan::new(ctx)?,
-            scan_scratch: ScanScratch::new(ctx, words)?,
+            scan_scratch: ScanScratch::new(ctx, tiles)?,
             sort: RadixSort::new(ctx)?,
             sort_scratch: SortScratch::new(ctx, rays)?,
             sum: Sum::new(ctx)?,
@@ -423,8 +432,13 @@ impl Prober {
             masks: ctx.create_buffer("probe tile anchor masks", 4 * words, MemoryKind::Device)?,
             rects: ctx.create_buffer("probe anchor tile rects", 8 * items, MemoryKind::Device)?,
             offsets: ctx.create_buffer(
-                "probe mask word offsets",
-                4 * (words + 1),
+                "probe tile entry offsets",
+                4 * (tiles + 1),
+                MemoryKind::Device,
+            )?,
+            word_prefix: ctx.create_buffer(
+                "probe mask word prefixes",
+                4 * words,
                 MemoryKind::Device,
             )?,
             list: ctx.create_buffer("probe entry anchors", 4, MemoryKind::Device)?,
@@ -549,22 +563,22 @@ impl Prober {
     }
 
     fn record_mask_scan(&self, rec: &mut Recorder<'_>) -> Result<()> {
-        let words = self.words();
-        let counts = self.offsets.range(0, 4 * words);
+        let tiles = self.job.tile_count();
+        let counts = self.offsets.range(0, 4 * tiles);
         rec.dispatch(
             &self.mask_counts_kernel,
-            &[self.masks.whole(), counts],
+            &[self.masks.whole(), self.word_prefix.whole(), counts],
             &WordsPush {
-                words: words as u32,
+                words: tiles as u32,
                 words_per_tile: self.words_per_tile() as u32,
                 pad: [0; 2],
             },
-            groups(words, 64)?,
+            groups(tiles, 64)?,
         )?;
         self.scan
-            .record(rec, &self.scan_scratch, counts, counts, words)?;
-        // offsets[words] = the entry count: the end of the last tile's run.
-        rec.copy(self.scan_scratch.total(), 0, &self.offsets, 4 * words, 4);
+            .record(rec, &self.scan_scratch, counts, counts, tiles)?;
+        // offsets[tiles] = the entry count: the end of the last tile's run.
+        rec.copy(self.scan_scratch.total(), 0, &self.offsets, 4 * tiles, 4);
         Ok(())
     }
 
@@ -581,6 +595,7 @@ impl Prober {
             &[
                 self.masks.whole(),
                 self.offsets.whole(),
+                self.word_prefix.whole(),
                 self.list.range(0, 4 * total),
                 self.list_tiles.range(0, 4 * total),
             ],
@@ -662,8 +677,7 @@ impl Prober {
             temperature: c.temperature,
             inv_t: c.inv_t,
             boundary_aware: u32::from(self.settings.boundary_aware),
-            words_per_tile: self.words_per_tile() as u32,
-            pad: [0; 2],
+            pad: [0; 3],
         }
     }
 
@@ -825,6 +839,7 @@ impl Prober {
                     self.rects.whole(),
                     self.masks.whole(),
                     self.offsets.whole(),
+                    self.word_prefix.whole(),
                     self.partials.whole(),
                     d_phi.range.sub(0, 4 * self.anchors()),
                 ],
