@@ -1,18 +1,15 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 // Sphere probing, binning step 2: one invocation per tile counts the set bits of its anchor
-// mask (`probe_masks.comp`), word by word: each word's first entry within the tile (the bits of
-// the words before it) and the tile's entry count, which an exclusive scan over the tiles turns
-// into each tile's first entry. Tile t's entries are then `[offsets[t], offsets[t + 1])`, its
-// anchors in index order, and the entry of anchor j in tile t is
-// `offsets[t] + word_prefix[t W + j / 32] + (set bits of that word below j)`.
+// mask (`probe_masks.comp`): the tile's entry count, which an exclusive scan over the tiles
+// turns into each tile's first entry. Tile t's entries are then `[offsets[t], offsets[t + 1])`
+// (`probe_mask_list.comp` writes them), its anchors in index order.
 #include "common.glsl"
 
 layout(local_size_x = 64) in;
 
 layout(std430, set = 0, binding = 0) readonly buffer Masks { uint masks[]; };
-layout(std430, set = 0, binding = 1) writeonly buffer WordPrefix { uint word_prefix[]; };
-layout(std430, set = 0, binding = 2) writeonly buffer Counts { uint counts[]; };
+layout(std430, set = 0, binding = 1) writeonly buffer Counts { uint counts[]; };
 
 layout(push_constant) uniform Push {
     uint tiles;
@@ -29,7 +26,6 @@ void main() {
     uint base = tile * pc.words_per_tile;
     uint c = 0u;
     for (uint w = 0u; w < pc.words_per_tile; ++w) {
-        word_prefix[base + w] = c;
         c += uint(bitCount(masks[base + w]));
     }
     counts[tile] = c;

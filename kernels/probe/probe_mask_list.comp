@@ -1,40 +1,50 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
-// Sphere probing, binning step 3: one invocation per word of the tiles' anchor masks writes
-// its anchors (its set bits, lowest first) and their tile at the word's first entry (the tile's
-// scanned offset plus the word's prefix within the tile, `probe_mask_counts.comp`). The
-// entries come out sorted by tile (view-major), each tile's anchors in index order: what the
-// generic binning's stable sort gives, without a sort.
+// Sphere probing, binning step 3: one invocation per tile writes the tile's anchors (the set
+// bits of its mask, `probe_masks.comp`, word by word, lowest first) from the tile's first entry
+// on (the scan of `probe_mask_counts.comp`'s counts), and where the per-entry backward runs
+// (not under G = max), each entry's tile and each word's first entry within the tile, which the
+// gradient sum (`probe_reduce.comp`) looks entries up by. The entries come out sorted by tile
+// (view-major), each tile's anchors in index order: what the generic binning's stable sort
+// gives, without a sort. (One invocation per tile rather than per word: on llvmpipe the
+// workgroups of a dispatch over every word cost more than the loop.)
 #include "common.glsl"
 
 layout(local_size_x = 64) in;
 
 layout(std430, set = 0, binding = 0) readonly buffer Masks { uint masks[]; };
 layout(std430, set = 0, binding = 1) readonly buffer Offsets { uint offsets[]; };
-layout(std430, set = 0, binding = 2) readonly buffer WordPrefix { uint word_prefix[]; };
+layout(std430, set = 0, binding = 2) writeonly buffer WordPrefix { uint word_prefix[]; };
 layout(std430, set = 0, binding = 3) writeonly buffer List { uint list[]; };
 layout(std430, set = 0, binding = 4) writeonly buffer ListTiles { uint list_tiles[]; };
 
 layout(push_constant) uniform Push {
-    uint words;          // tiles × W
+    uint tiles;
     uint words_per_tile; // W = ⌈anchors / 32⌉
+    uint write_tiles;    // write `list_tiles` and `word_prefix` (the per-entry backward's)
     uint pad0;
-    uint pad1;
 } pc;
 
 void main() {
-    uint i = linear_group_id() * 64u + gl_LocalInvocationIndex;
-    if (i >= pc.words) {
+    uint tile = linear_group_id() * 64u + gl_LocalInvocationIndex;
+    if (tile >= pc.tiles) {
         return;
     }
-    uint m = masks[i];
-    uint tile = i / pc.words_per_tile;
-    uint o = offsets[tile] + word_prefix[i];
-    uint base = 32u * (i - tile * pc.words_per_tile);
-    while (m != 0u) {
-        list[o] = base + uint(findLSB(m));
-        list_tiles[o] = tile;
-        m &= m - 1u;
-        ++o;
+    uint first = offsets[tile];
+    uint o = first;
+    uint base = tile * pc.words_per_tile;
+    for (uint w = 0u; w < pc.words_per_tile; ++w) {
+        uint m = masks[base + w];
+        if (pc.write_tiles != 0u) {
+            word_prefix[base + w] = o - first;
+        }
+        while (m != 0u) {
+            list[o] = 32u * w + uint(findLSB(m));
+            if (pc.write_tiles != 0u) {
+                list_tiles[o] = tile;
+            }
+            m &= m - 1u;
+            ++o;
+        }
     }
 }

@@ -135,10 +135,11 @@ struct MaskPush {
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct WordsPush {
-    /// `probe_mask_list.comp`: mask words of all tiles; `probe_mask_counts.comp`: tiles.
-    words: u32,
+    tiles: u32,
     words_per_tile: u32,
-    pad: [u32; 2],
+    /// `probe_mask_list.comp`: write each entry's tile and each word's prefix too.
+    write_tiles: u32,
+    pad: u32,
 }
 
 /// Push constants of `probe_aux_keys.comp`.
@@ -385,7 +386,7 @@ impl Prober {
         }
         let words = tiles * words_per_tile(settings.anchors);
         check_binding(ctx, "sphere probing: tile anchor masks", 4 * words)?;
-        // A tile's bit count loops over its mask's words.
+        // A tile's bit count loops over its mask's words (its list: `finish_count`).
         check_loop(
             ctx,
             &format!("{} anchors (a tile's mask words)", settings.anchors),
@@ -518,11 +519,6 @@ impl Prober {
         words_per_tile(self.settings.anchors)
     }
 
-    /// Words of all tiles' anchor masks.
-    fn words(&self) -> u64 {
-        self.job.tile_count() * self.words_per_tile()
-    }
-
     /// Submission 1: records the anchor items and the binning's count: every tile's anchor mask
     /// (`probe_masks.comp`, the generic binning's tile rectangles), the bit count of every mask
     /// word and their exclusive scan (each word's first entry), and the entry count after them.
@@ -567,11 +563,12 @@ impl Prober {
         let counts = self.offsets.range(0, 4 * tiles);
         rec.dispatch(
             &self.mask_counts_kernel,
-            &[self.masks.whole(), self.word_prefix.whole(), counts],
+            &[self.masks.whole(), counts],
             &WordsPush {
-                words: tiles as u32,
+                tiles: tiles as u32,
                 words_per_tile: self.words_per_tile() as u32,
-                pad: [0; 2],
+                write_tiles: 0,
+                pad: 0,
             },
             groups(tiles, 64)?,
         )?;
@@ -582,11 +579,12 @@ impl Prober {
         Ok(())
     }
 
-    /// Submission 2: the anchor and the tile of every entry, in tile order, from the masks and
-    /// their offsets (`probe_mask_list.comp`). The forwards record it.
+    /// Submission 2: the anchor and the tile of every entry (the tile only where the backward
+    /// reads it: not under G = max), in tile order, from the masks and their offsets
+    /// (`probe_mask_list.comp`). The forwards record it.
     fn record_list(&self, rec: &mut Recorder<'_>) -> Result<()> {
         let total = self.entry_count()?;
-        let words = self.words();
+        let tiles = self.job.tile_count();
         if total == 0 {
             return Ok(());
         }
@@ -600,11 +598,12 @@ impl Prober {
                 self.list_tiles.range(0, 4 * total),
             ],
             &WordsPush {
-                words: words as u32,
+                tiles: tiles as u32,
                 words_per_tile: self.words_per_tile() as u32,
-                pad: [0; 2],
+                write_tiles: u32::from(!self.max_by_rays(rec.context())),
+                pad: 0,
             },
-            groups(words, 64)?,
+            groups(tiles, 64)?,
         )
     }
 
@@ -634,6 +633,12 @@ impl Prober {
         }
         // A tile belongs to one view and holds each anchor at most once.
         let run = total.min(self.anchors());
+        // The list of a tile loops over its mask's words and its anchors.
+        check_loop(
+            ctx,
+            &format!("a tile of up to {run} anchors (binning list)"),
+            self.words_per_tile() + run,
+        )?;
         check_loop(
             ctx,
             &format!("{total} entries, up to {run} anchors in a tile (forward)"),
