@@ -1,15 +1,16 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
-// Sphere probing, backward under G = max, step 1: every ray's sort key is the item (view-major
-// anchor) its ψ came from (`aux`; rays without a hit get the key past the last item), with the
-// ray's index as the value. A stable sort then lists each item's rays in ray order, and the
-// binning's ranges pass gives each item its run (`probe_item_grad.comp`).
+// Sphere probing, backward under G = max, step 1: every ray's sort key is the anchor its ψ came
+// from (`aux`; rays without a hit get the key past the last anchor), with the ray's index as
+// the value. A stable sort then lists each anchor's rays in ray order (view by view: the rays
+// are view-major), and the binning's ranges pass gives each anchor its run
+// (`probe_max_grad.comp`).
 #include "common.glsl"
 #include "probe.glsl"
 
 layout(local_size_x = 64) in;
 
-layout(std430, set = 0, binding = 0) readonly buffer Rays { Ray rays[]; };
+layout(std430, set = 0, binding = 0) readonly buffer Rays { Ray rays[]; }; // (not read)
 layout(std430, set = 0, binding = 1) readonly buffer Outs { RayOut outs[]; };
 layout(std430, set = 0, binding = 2) writeonly buffer Keys { uvec2 keys[]; };
 layout(std430, set = 0, binding = 3) writeonly buffer Values { uint values[]; };
@@ -27,7 +28,7 @@ void main() {
         return;
     }
     uint aux = outs[id].aux;
-    uint key = aux == NO_HIT ? pc.views * pc.anchors : rays[id].view * pc.anchors + aux;
+    uint key = aux == NO_HIT ? pc.anchors : aux;
     keys[id] = uvec2(key, 0u);
     values[id] = id;
 }

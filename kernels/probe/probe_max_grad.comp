@@ -1,9 +1,9 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 // Sphere probing, backward under G = max: dψ_i/dφ_j is 1 for the one anchor j that ψ_i came
-// from and 0 for every other, so dL/dφ_j = coef · Σ over views, then over the rays of that view
-// whose ψ came from j (in ray order), of ψ_i − S_i: no per-(anchor, tile) entries at all. The
-// rays are sorted by their item (`probe_aux_keys.comp` and the stable sort). One invocation per
+// from and 0 for every other, so dL/dφ_j = coef · Σ over the rays whose ψ came from j, in ray
+// order (view by view), of ψ_i − S_i: no per-(anchor, tile) entries at all. The rays are sorted
+// by that anchor (`probe_aux_keys.comp` and the stable sort). One invocation per
 // anchor, one writer per output: deterministic. Twin: `probe::prober::cpu::backward`.
 #include "common.glsl"
 #include "probe.glsl"
@@ -12,9 +12,9 @@ layout(local_size_x = 64) in;
 
 layout(std430, set = 0, binding = 0) readonly buffer Rays { Ray rays[]; };
 layout(std430, set = 0, binding = 1) readonly buffer Outs { RayOut outs[]; };
-// Ray indices sorted by item, and each item's [start, end) in them.
+// Ray indices sorted by anchor, and each anchor's [start, end) in them.
 layout(std430, set = 0, binding = 2) readonly buffer Order { uint order[]; };
-layout(std430, set = 0, binding = 3) readonly buffer ItemRanges { uvec2 item_ranges[]; };
+layout(std430, set = 0, binding = 3) readonly buffer AnchorRanges { uvec2 anchor_ranges[]; };
 layout(std430, set = 0, binding = 4) buffer DPhi { float d_phi[]; };
 
 // Twin of `MaxGradPush` (src/probe/prober.rs).
@@ -31,14 +31,10 @@ void main() {
         return;
     }
     float s = 0.0;
-    for (uint view = 0u; view < pc.views; ++view) {
-        uvec2 range = item_ranges[view * pc.anchors + anchor];
-        float sv = 0.0;
-        for (uint q = range.x; q < range.y; ++q) {
-            uint ray = order[q];
-            sv += outs[ray].psi - rays[ray].label;
-        }
-        s += sv;
+    uvec2 range = anchor_ranges[anchor];
+    for (uint q = range.x; q < range.y; ++q) {
+        uint ray = order[q];
+        s += outs[ray].psi - rays[ray].label;
     }
     float g = pc.coef * s;
     d_phi[anchor] = pc.accumulate != 0u ? d_phi[anchor] + g : g;

@@ -271,7 +271,7 @@ pub struct Prober {
     ray_keys: Buffer,
     ray_order: Buffer,
     ray_ranges: Buffer,
-    /// G = max: the rays' item keys, the rays sorted by them, each item's range.
+    /// G = max: the rays' anchor keys, the rays sorted by them, each anchor's range.
     aux_keys: Buffer,
     aux_order: Buffer,
     item_ranges: Buffer,
@@ -426,8 +426,8 @@ impl Prober {
             aux_keys: ctx.create_buffer("probe ray item keys", 8 * rays, MemoryKind::Device)?,
             aux_order: ctx.create_buffer("probe rays by item", 4 * rays, MemoryKind::Device)?,
             item_ranges: ctx.create_buffer(
-                "probe ray item ranges",
-                8 * (items + 1),
+                "probe ray anchor ranges",
+                8 * (anchors + 1),
                 MemoryKind::Device,
             )?,
             masks: ctx.create_buffer("probe tile anchor masks", 4 * words, MemoryKind::Device)?,
@@ -871,12 +871,12 @@ impl Prober {
             && ctx
                 .info()
                 .shader_loop_limit()
-                .is_none_or(|limit| u64::from(self.job.views) + self.rays() <= limit)
+                .is_none_or(|limit| self.rays() <= limit)
     }
 
     /// The backward under G = max: each ray's ψ − S goes to the one anchor its ψ came from. The
-    /// rays are sorted by that item (`probe_aux_keys.comp`, the stable sort, the ranges pass);
-    /// `probe_max_grad.comp` sums each anchor's, view by view, in ray order.
+    /// rays are sorted by that anchor (`probe_aux_keys.comp`, the stable sort, the ranges pass);
+    /// `probe_max_grad.comp` sums each anchor's in ray order.
     fn record_max_backward(
         &self,
         rec: &mut Recorder<'_>,
@@ -885,9 +885,8 @@ impl Prober {
         coef: f32,
     ) -> Result<()> {
         let n = self.rays();
-        let items = self.job.item_count();
-        // One bucket per item and one for the rays without a hit.
-        let buckets = items + 1;
+        // One bucket per anchor and one for the rays without a hit.
+        let buckets = self.anchors() + 1;
         let key_bits = (u64::BITS - (buckets.max(2) - 1).leading_zeros()).max(1);
         let ranges = self.item_ranges.range(0, 8 * buckets);
         rec.pass("  ray sort by anchor", |rec| {
