@@ -7,6 +7,9 @@
 // `flag_mask` bits must all be set for the item to be binned at all.
 #ifndef SOFTVK_BINNING_GLSL
 #define SOFTVK_BINNING_GLSL
+// A kernel that defines BINNING_TILE_RECT_ONLY gets `tile_rect` alone, reading `pc.width`,
+// `pc.height` and `pc.tile_size` from its own push constants (sphere probing's items kernel).
+#ifndef BINNING_TILE_RECT_ONLY
 
 // Twin of `BinPush` (src/primitives/binning.rs).
 layout(push_constant) uniform Push {
@@ -23,6 +26,7 @@ layout(push_constant) uniform Push {
     uint tiles_x;
     uint tiles_y;
 } pc;
+#endif
 
 // Columns and rows of pixel centres the box may contain, widened by one pixel on each side
 // against rounding (the fine pass tests the exact box per pixel; a tile too many costs time,
@@ -55,6 +59,7 @@ bool tile_rect(vec4 box, out uvec4 rect) {
     return true;
 }
 
+#ifndef BINNING_TILE_RECT_ONLY
 // The box of item `item` (an index into the whole items buffer), or false when its flags say it
 // is not binned.
 bool item_box(uint item, out vec4 box) {
@@ -65,4 +70,5 @@ bool item_box(uint item, out vec4 box) {
     return (flags & pc.flag_mask) == pc.flag_mask;
 }
 
+#endif
 #endif

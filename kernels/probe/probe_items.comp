@@ -8,6 +8,15 @@
 // projection's denominator positive); an anchor reaching behind the camera is not probed in that
 // view. FLAG_INSIDE: the pixel holding the centre's projection is inside the silhouette (pixels
 // outside the image are outside). Twin: `probe::prober::cpu::items`.
+//
+// It also bins the item (binning step 1, in place of the generic binning's count, scatter and
+// sort): an item the binning would keep (FLAG_VALID, a tile rectangle: `tile_rect`, the generic
+// binning's own) sets its anchor's bit in the anchor mask of every tile of its rectangle: tile
+// t's anchors are the set bits of words `[t W, (t + 1) W)`, W = ⌈anchors / 32⌉, lowest first
+// in anchor order (`probe_mask_counts.comp` and `probe_mask_list.comp` list them). The
+// rectangle is also written (packed, all ones when the item is not binned) for the gradient sum
+// (`probe_reduce.comp`). Integer `atomicOr`: the result does not depend on the order of the
+// writes.
 #include "common.glsl"
 #include "probe.glsl"
 
@@ -17,17 +26,25 @@ layout(std430, set = 0, binding = 0) readonly buffer Views { ProbeView views[]; 
 layout(std430, set = 0, binding = 1) readonly buffer Anchors { vec4 anchors[]; };
 layout(std430, set = 0, binding = 2) readonly buffer Masks { float masks[]; };
 layout(std430, set = 0, binding = 3) writeonly buffer Items { ProbeItem items[]; };
+// Per tile, a bit per anchor; zero before this kernel.
+layout(std430, set = 0, binding = 4) buffer TileMasks { uint tile_masks[]; };
+// Per item: (x0 | x1 << 16, y0 | y1 << 16) of its tile rectangle, or all ones.
+layout(std430, set = 0, binding = 5) writeonly buffer Rects { uvec2 rects[]; };
 
+// Twin of `ItemsPush` (src/probe/prober.rs).
 layout(push_constant) uniform Push {
     uint anchors;
     uint views;
     uint width;
     uint height;
     float tau;
-    float pad0;
-    float pad1;
-    float pad2;
+    uint tile_size;
+    uint tiles_x;
+    uint tiles_y;
 } pc;
+
+#define BINNING_TILE_RECT_ONLY
+#include "binning.glsl"
 
 void main() {
     uint id = linear_group_id() * 64u + gl_LocalInvocationIndex;
@@ -66,4 +83,19 @@ void main() {
     }
     uint flags = (valid ? FLAG_VALID : 0u) | (inside ? FLAG_INSIDE : 0u);
     items[id] = ProbeItem(box, flags, sx, sy, affine(v.depth, p));
+
+    uvec4 rect;
+    if (!(valid && tile_rect(box, rect))) {
+        rects[id] = uvec2(0xFFFFFFFFu);
+        return;
+    }
+    rects[id] = uvec2(rect.x | (rect.z << 16u), rect.y | (rect.w << 16u));
+    uint words = (pc.anchors + 31u) / 32u;
+    uint tile_base = view * pc.tiles_x * pc.tiles_y;
+    uint bit = 1u << (anchor & 31u);
+    for (uint ty = rect.y; ty <= rect.w; ++ty) {
+        for (uint tx = rect.x; tx <= rect.z; ++tx) {
+            atomicOr(tile_masks[(tile_base + ty * pc.tiles_x + tx) * words + anchor / 32u], bit);
+        }
+    }
 }

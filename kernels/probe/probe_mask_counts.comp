@@ -1,7 +1,7 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 // Sphere probing, binning step 2: one invocation per tile counts the set bits of its anchor
-// mask (`probe_masks.comp`): the tile's entry count, which an exclusive scan over the tiles
+// mask (`probe_items.comp`): the tile's entry count, which an exclusive scan over the tiles
 // turns into each tile's first entry. Tile t's entries are then `[offsets[t], offsets[t + 1])`
 // (`probe_mask_list.comp` writes them), its anchors in index order.
 #include "common.glsl"

@@ -1,7 +1,7 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 // Sphere probing, binning step 3: one invocation per tile writes the tile's anchors (the set
-// bits of its mask, `probe_masks.comp`, word by word, lowest first) from the tile's first entry
+// bits of its mask, `probe_items.comp`, word by word, lowest first) from the tile's first entry
 // on (the scan of `probe_mask_counts.comp`'s counts), and where the per-entry backward runs
 // (not under G = max), each entry's tile and each word's first entry within the tile, which the
 // gradient sum (`probe_reduce.comp`) looks entries up by. The entries come out sorted by tile

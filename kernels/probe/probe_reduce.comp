@@ -12,7 +12,7 @@
 layout(local_size_x = 64) in;
 
 // Per item: (x0 | x1 << 16, y0 | y1 << 16) of its tile rectangle, or all ones when not binned
-// (`probe_masks.comp`).
+// (`probe_items.comp`).
 layout(std430, set = 0, binding = 0) readonly buffer Rects { uvec2 rects[]; };
 layout(std430, set = 0, binding = 1) readonly buffer Masks { uint masks[]; };
 layout(std430, set = 0, binding = 2) readonly buffer Offsets { uint offsets[]; };

@@ -89,7 +89,9 @@ struct ItemsPush {
     width: u32,
     height: u32,
     tau: f32,
-    pad: [f32; 3],
+    tile_size: u32,
+    tiles_x: u32,
+    tiles_y: u32,
 }
 
 /// Push constants of `probe_forward.comp` and `probe_forward_brute.comp`.
@@ -110,25 +112,6 @@ struct ForwardPush {
     inv_t: f32,
     boundary_aware: u32,
     pad: [u32; 3],
-}
-
-/// Push constants of `probe_masks.comp`: the generic binning's (`BinPush`), whose
-/// `binning.glsl` it shares.
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct MaskPush {
-    item_count: u32,
-    items_per_view: u32,
-    first_item: u32,
-    stride_words: u32,
-    box_offset: u32,
-    flag_offset: u32,
-    flag_mask: u32,
-    width: u32,
-    height: u32,
-    tile_size: u32,
-    tiles_x: u32,
-    tiles_y: u32,
 }
 
 /// Push constants of `probe_mask_counts.comp` and `probe_mask_list.comp`.
@@ -252,7 +235,6 @@ pub struct Prober {
     keys_kernel: Kernel,
     backward_kernel: KernelVariants,
     reduce_kernel: Kernel,
-    masks_kernel: Kernel,
     mask_counts_kernel: Kernel,
     mask_list_kernel: Kernel,
     aux_keys_kernel: Kernel,
@@ -400,7 +382,6 @@ impl Prober {
             keys_kernel: Kernel::new(ctx, &specs::PROBE_RAY_KEYS)?,
             backward_kernel: KernelVariants::new(&specs::PROBE_BACKWARD),
             reduce_kernel: Kernel::new(ctx, &specs::PROBE_REDUCE)?,
-            masks_kernel: Kernel::new(ctx, &specs::PROBE_MASKS)?,
             mask_counts_kernel: Kernel::new(ctx, &specs::PROBE_MASK_COUNTS)?,
             mask_list_kernel: Kernel::new(ctx, &specs::PROBE_MASK_LIST)?,
             aux_keys_kernel: Kernel::new(ctx, &specs::PROBE_AUX_KEYS)?,
@@ -484,8 +465,8 @@ impl Prober {
         Ok(())
     }
 
-    /// Records the anchor items of every view ([`Prober::items`]); [`Prober::record_count`]
-    /// includes it.
+    /// Records the anchor items of every view ([`Prober::items`]) and their tiles' anchor masks;
+    /// [`Prober::record_count`] includes it.
     pub fn record_items(
         &self,
         rec: &mut Recorder<'_>,
@@ -499,8 +480,11 @@ impl Prober {
             width: self.job.grid.width,
             height: self.job.grid.height,
             tau: self.constants.tau,
-            pad: [0.0; 3],
+            tile_size: self.job.grid.tile_size,
+            tiles_x: self.job.grid.tiles_x,
+            tiles_y: self.job.grid.tiles_y,
         };
+        rec.fill(self.masks.whole(), 0);
         rec.dispatch(
             &self.items_kernel,
             &[
@@ -508,6 +492,8 @@ impl Prober {
                 anchors.sub(0, 16 * self.anchors()),
                 gpu.masks().whole(),
                 self.items.whole(),
+                self.masks.whole(),
+                self.rects.whole(),
             ],
             &push,
             groups(self.job.item_count(), 64)?,
@@ -519,9 +505,10 @@ impl Prober {
         words_per_tile(self.settings.anchors)
     }
 
-    /// Submission 1: records the anchor items and the binning's count: every tile's anchor mask
-    /// (`probe_masks.comp`, the generic binning's tile rectangles), the bit count of every mask
-    /// word and their exclusive scan (each word's first entry), and the entry count after them.
+    /// Submission 1: records the anchor items with every tile's anchor mask (`probe_items.comp`,
+    /// by the generic binning's tile rectangles), each tile's entry count
+    /// (`probe_mask_counts.comp`) and their exclusive scan (each tile's first entry), and the
+    /// entry count after them.
     pub fn record_count(
         &self,
         rec: &mut Recorder<'_>,
@@ -529,33 +516,7 @@ impl Prober {
         anchors: BufferRange<'_>,
     ) -> Result<()> {
         rec.pass("  items", |rec| self.record_items(rec, gpu, anchors))?;
-        rec.pass("  masks", |rec| self.record_masks(rec))?;
         rec.pass("  mask scan", |rec| self.record_mask_scan(rec))
-    }
-
-    fn record_masks(&self, rec: &mut Recorder<'_>) -> Result<()> {
-        let g = &self.job.grid;
-        let l = &self.job.layout;
-        rec.fill(self.masks.whole(), 0);
-        rec.dispatch(
-            &self.masks_kernel,
-            &[self.items.whole(), self.masks.whole(), self.rects.whole()],
-            &MaskPush {
-                item_count: self.job.item_count() as u32,
-                items_per_view: self.job.items_per_view,
-                first_item: self.job.first_item,
-                stride_words: l.stride_words,
-                box_offset: l.box_offset,
-                flag_offset: l.flag_offset,
-                flag_mask: l.flag_mask,
-                width: g.width,
-                height: g.height,
-                tile_size: g.tile_size,
-                tiles_x: g.tiles_x,
-                tiles_y: g.tiles_y,
-            },
-            groups(self.job.item_count(), 64)?,
-        )
     }
 
     fn record_mask_scan(&self, rec: &mut Recorder<'_>) -> Result<()> {
@@ -1351,7 +1312,6 @@ mod tests {
             std::mem::size_of::<ReducePush>(),
             size(&specs::PROBE_REDUCE)
         );
-        assert_eq!(std::mem::size_of::<MaskPush>(), size(&specs::PROBE_MASKS));
         assert_eq!(
             std::mem::size_of::<WordsPush>(),
             size(&specs::PROBE_MASK_COUNTS)
