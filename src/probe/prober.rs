@@ -1,24 +1,35 @@
-//! Sphere probing, forward and backward (SPEC §5), on the generic tile binning.
+//! Sphere probing, forward and backward (SPEC §5), on screen tiles.
 //!
 //! **Forward.** Every anchor j is a sphere of radius τ. Per view k, `probe_items.comp` writes
 //! the anchor as a binning item ([`ProbeItem`]): the screen box of its τ-cube's projected
 //! corners (which holds the sphere's projection), the flag [`FLAG_VALID`] (the cube is wholly in
 //! front of the camera; otherwise the anchor is not probed in that view) and [`FLAG_INSIDE`]
-//! (its centre projects into the silhouette). The items are binned to screen tiles by
-//! [`crate::primitives::binning`] (count → scan → read-back of the entry count → scatter →
-//! stable sort → ranges). Then one invocation per ray (`probe_forward.comp`) visits the anchors
-//! of its tile in anchor order and aggregates, with G of [`Aggregate`](super::Aggregate), the φ of those whose
+//! (its centre projects into the silhouette). The items are binned to screen tiles by the
+//! generic binning's tile rectangles ([`crate::primitives::binning`]'s `tile_rect`), but
+//! without its scatter and sort: the items kernel sets the anchor's bit in an anchor mask per
+//! tile (`⌈anchors / 32⌉` words, integer `atomicOr`), `probe_mask_counts.comp` counts each
+//! tile's bits, a scan gives each tile's first entry, the entry count is read back, and
+//! `probe_mask_list.comp` writes each tile's anchors in index order: the entries the generic
+//! binning's stable sort gives, at a fraction of the cost on llvmpipe. Then one invocation per
+//! ray, the rays taken in tile order (a stable [`RadixSort`] of their tile keys and the
+//! binning's ranges pass), visits the anchors of its tile in anchor order
+//! (`probe_forward.comp`: per subgroup, batches of anchors loaded one per lane and broadcast with
+//! shuffles) and aggregates, with G of [`Aggregate`](super::Aggregate), the φ of those whose
 //! centre lies within τ of the ray's line, skipping under boundary-aware assignment the anchors
 //! whose [`FLAG_INSIDE`] differs from the ray's label. No hit: ψ = 0. The loss is
 //! `L_sil = mean_i (ψ_i − S_i)²` over every ray of every view, summed in a fixed order.
 //! `probe_forward_brute.comp` visits every anchor instead: the baseline the tiled pass equals bit
-//! for bit.
+//! for bit. The aggregation and the assignment are specialization constants of both (and of
+//! the backward): a pipeline per combination, built on first use.
 //!
-//! **Backward.** `dL/dφ_j = (2 / N) Σ_i (ψ_i − S_i) dψ_i/dφ_j`, without float atomics: the rays
-//! are sorted by tile (a stable [`RadixSort`] of their tile keys, then the binning's ranges
-//! pass); one invocation per binned (anchor, tile) entry sums over the tile's rays in ray order
-//! and writes the partial at the entry's item-major slot (`probe_backward.comp`); one invocation
-//! per anchor adds its slots, view by view, in slot order (`probe_reduce.comp`).
+//! **Backward.** `dL/dφ_j = (2 / N) Σ_i (ψ_i − S_i) dψ_i/dφ_j`, without float atomics. Under
+//! G = max, dψ_i/dφ_j is 1 for the anchor ψ_i came from and 0 otherwise: the rays are sorted by
+//! that anchor (a stable sort) and one invocation per anchor sums its rays in ray order
+//! (`probe_aux_keys.comp`, `probe_max_grad.comp`; when all rays fit the driver's loop cap).
+//! Otherwise one invocation per binned (anchor, tile) entry sums over the tile's rays in ray
+//! order and writes the partial at the entry (`probe_backward.comp`: per subgroup, batches of
+//! rays broadcast with shuffles); one invocation per anchor adds its entries, view by view and
+//! tile by tile, finding them from the masks (`probe_reduce.comp`).
 //!
 //! **Recording.** The binning's entry count is read back between two submissions:
 //! [`Prober::record_count`] (submission 1), [`Prober::finish_count`] (host), then
