@@ -47,9 +47,7 @@ use super::reference_grad::{
     self, Gradients, VertexFaces, camera_grad, lighting_grad_surface, lighting_grad_vertex,
 };
 use crate::error::{Error, Result};
-use crate::gpu::{
-    Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, specs,
-};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, specs};
 
 /// Push constants of `grad_tiled.comp` and `grad_brute.comp`: the fine pass's, then the chunk.
 /// Twin of `Push` in `raster_fine.glsl` with `FINE_BACKWARD`.

@@ -188,8 +188,7 @@ pub(crate) fn tiled_backward_iterations(
 ) -> u64 {
     let (lanes, words) = subgroup_lanes(subgroup);
     let segments = (u64::from(tile) * u64::from(tile)).div_ceil(lanes);
-    let per_face = 1
-        + 3
+    let per_face = 1 + 3
         + match color {
             ColorWork::None => 0,
             ColorWork::Vertex => 3,
