@@ -140,9 +140,38 @@ float sigmoid(float x) {
     return 1.0 / (1.0 + exp(-x));
 }
 
-// `reference::coverage`: false when the face is ignored at this pixel (outside and beyond the
-// cut-off `t`); otherwise `d` is the coverage D.
-bool coverage(Face f, vec3 w, vec2 p, uint dist, float sigma, float t, out float d) {
+// The squared distance to the nearest edge as `euclidean_dist2` computes it, and that edge
+// (a, b) (the first of equals) with the parameter `t` of the nearest point a + t (b - a): what
+// the backward needs of the same distance.
+float nearest_edge(Face f, vec2 p, out uint ea, out uint eb, out float t) {
+    float best = uintBitsToFloat(0x7f800000u);
+    ea = 0u;
+    eb = 1u;
+    for (uint i = 0u; i < 3u; ++i) {
+        uint j = i == 2u ? 0u : i + 1u;
+        float d2 = dist2_point_segment(p, f.v[i].xy, f.v[j].xy);
+        if (d2 < best) {
+            best = d2;
+            ea = i;
+            eb = j;
+        }
+    }
+    vec2 a = f.v[ea].xy;
+    vec2 b = f.v[eb].xy;
+    float ex = b.x - a.x;
+    float ey = b.y - a.y;
+    float len2 = ex * ex + ey * ey;
+    t = 0.0;
+    if (len2 > 0.0) {
+        t = clamp(((p.x - a.x) * ex + (p.y - a.y) * ey) / len2, 0.0, 1.0);
+    }
+    return best;
+}
+
+// `reference::coverage` given the squared edge distance `d2` (Euclidean mode only): false when
+// the face is ignored at this pixel (outside and beyond the cut-off `t`); otherwise `d` is the
+// coverage D.
+bool coverage_from(float d2, vec3 w, uint dist, float sigma, float t, out float d) {
     if (dist == DIST_HARD) {
         d = 1.0;
         return inside_closed(w);
@@ -153,13 +182,18 @@ bool coverage(Face f, vec3 w, vec2 p, uint dist, float sigma, float t, out float
         d = sigmoid(s / sigma);
         return -s < t;
     }
-    float d2 = euclidean_dist2(f, p);
     if (strictly_inside(w)) {
         d = sigmoid(d2 / sigma);
         return true;
     }
     d = sigmoid(-d2 / sigma);
     return d2 < t;
+}
+
+// `reference::coverage`.
+bool coverage(Face f, vec3 w, vec2 p, uint dist, float sigma, float t, out float d) {
+    float d2 = dist == DIST_EUCLIDEAN ? euclidean_dist2(f, p) : 0.0;
+    return coverage_from(d2, w, dist, sigma, t, d);
 }
 
 // `reference::clip_barycentric`.

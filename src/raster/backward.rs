@@ -47,7 +47,9 @@ use super::reference_grad::{
     self, Gradients, VertexFaces, camera_grad, lighting_grad_surface, lighting_grad_vertex,
 };
 use crate::error::{Error, Result};
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, specs};
+use crate::gpu::{
+    Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, specs,
+};
 
 /// Push constants of `grad_tiled.comp` and `grad_brute.comp`: the fine pass's, then the chunk.
 /// Twin of `Push` in `raster_fine.glsl` with `FINE_BACKWARD`.
@@ -631,7 +633,7 @@ impl GradKernels {
         };
         let kernel = self
             .brute
-            .get(rec.context(), &gb.modes(scene).constants())?;
+            .get(rec.context(), &gb.modes(scene).constants(rec.context()))?;
         let mut begin = 0;
         while begin < units {
             let end = units.min(begin + gb.chunk_units);
@@ -680,7 +682,7 @@ impl GradKernels {
         let limit = rec.context().info().shader_loop_limit();
         let kernel = self
             .tiled
-            .get(rec.context(), &gb.modes(scene).constants())?;
+            .get(rec.context(), &gb.modes(scene).constants(rec.context()))?;
         for (group, bins) in scene.groups.iter().zip(&scene.bins) {
             if group.entries == 0 {
                 // No face touches these views: their gradients stay zero.

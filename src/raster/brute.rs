@@ -116,9 +116,10 @@ impl BruteRaster {
             vertex_count,
             texture_res,
         );
-        let kernel = self
-            .raster
-            .get(rec.context(), &FineModes::new(settings, cull).constants())?;
+        let kernel = self.raster.get(
+            rec.context(),
+            &FineModes::new(settings, cull).constants(rec.context()),
+        )?;
         let groups = pixels.div_ceil(u64::from(specs::RASTER_BRUTE.workgroup_size[0]));
         rec.dispatch(
             &kernel,
