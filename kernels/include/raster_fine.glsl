@@ -51,8 +51,10 @@ const bool DOUBLE_SIDED = (MODE_FLAGS & FLAG_DOUBLE_SIDED) != 0u;
 const bool VERTEX_COLORS = (MODE_FLAGS & FLAG_VERTEX_COLORS) != 0u;
 const bool CULL = (MODE_FLAGS & FLAG_CULL) != 0u;
 const bool ANTIALIAS = (MODE_FLAGS & FLAG_ANTIALIAS) != 0u;
-// Backward only: the upstream gradient has no RGB part (a silhouette loss), so the colour terms,
-// which would add exact zeros, are left out. The same gradients, bit for bit.
+// Alpha only. Forward: a silhouette render (RGB stays the background, the aux's colour fields
+// their initial values; alpha and its aux fields are the same bits). Backward: the upstream
+// gradient has no RGB part (a silhouette loss), so the colour terms, which would add exact
+// zeros, are left out: the same gradients, bit for bit.
 const bool ALPHA_ONLY = (MODE_FLAGS & FLAG_ALPHA_ONLY) != 0u;
 
 // Twin of `RasterPush` (src/raster/fine.rs).
@@ -135,6 +137,9 @@ void shade_face(inout PixelState s, Face f, uint j, vec2 p) {
     }
     // Alpha counts every non-ignored face, whatever its depth or facing.
     alpha_add(s.alpha, MODE_ALPHA, d);
+    if (ALPHA_ONLY) {
+        return; // a silhouette render: no depth, no colour
+    }
 
     vec3 wc = clip_barycentric(w);
     float z;

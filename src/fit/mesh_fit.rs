@@ -295,6 +295,8 @@ impl<'c> Fitter<'c> {
         template.validate()?;
         let renderer = Renderer::new(ctx)?;
         let mut scene = renderer.prepare(ctx, template, cameras, &Lighting::unlit(), s)?;
+        // Silhouettes: alpha is all the loss reads.
+        scene.set_silhouette_only(true);
         let deform = Deform::new(ctx, &template.positions)?;
         let regs = Regularizers::new(ctx, &template.faces, template.vertex_count())?;
         let sil = SilhouetteLoss::new(ctx, views as u32, s.width, s.height)?;
@@ -335,7 +337,7 @@ impl<'c> Fitter<'c> {
             Method::Tiled { tile: opts.tile },
             capacity,
         )?;
-        // The silhouette loss differentiates alpha only.
+        // The silhouette loss differentiates alpha only (as the scene renders it).
         grads.set_alpha_only(true);
         Ok(Self {
             ctx,

@@ -443,20 +443,21 @@ impl GradBuffers {
         self.alpha_only = alpha_only;
     }
 
+    /// Whether the backward of `scene` differentiates alpha only: declared, or a silhouette
+    /// render (which has no colour to differentiate).
+    fn alpha_only(&self, scene: &GpuScene) -> bool {
+        self.alpha_only || scene.silhouette_only
+    }
+
     /// The fine kernels' modes for this backward of `scene`.
     fn modes(&self, scene: &GpuScene) -> FineModes {
-        let modes = FineModes::new(&scene.settings, true);
-        if self.alpha_only {
-            modes.alpha_only()
-        } else {
-            modes
-        }
+        FineModes::new(&scene.settings, true).alpha_only_if(self.alpha_only(scene))
     }
 
     /// What the tiled kernel does per face besides the screen sums.
     fn color_work(&self, scene: &GpuScene) -> ColorWork {
         match scene.settings.color_mode {
-            _ if self.alpha_only => ColorWork::None,
+            _ if self.alpha_only(scene) => ColorWork::None,
             ColorMode::Vertex => ColorWork::Vertex,
             ColorMode::Surface => ColorWork::Texels,
         }

@@ -120,10 +120,14 @@ impl FineModes {
         }
     }
 
-    /// The backward's modes for an upstream gradient with no RGB part: the colour terms are left
-    /// out ([`crate::raster::backward::GradBuffers::set_alpha_only`]).
-    pub fn alpha_only(mut self) -> Self {
-        self.flags |= FLAG_ALPHA_ONLY;
+    /// Alpha only, if `alpha_only`: the forward renders no colour
+    /// ([`crate::raster::gpu::GpuScene::set_silhouette_only`]) and the backward leaves out the
+    /// colour terms of an upstream gradient with no RGB part
+    /// ([`crate::raster::backward::GradBuffers::set_alpha_only`]).
+    pub fn alpha_only_if(mut self, alpha_only: bool) -> Self {
+        if alpha_only {
+            self.flags |= FLAG_ALPHA_ONLY;
+        }
         self
     }
 
@@ -266,6 +270,7 @@ impl TiledRaster {
         view_count: u32,
         vertex_count: u32,
         texture_res: u32,
+        silhouette_only: bool,
     ) -> Result<()> {
         check_tile_size(grid.tile_size)?;
         let last = u64::from(first_view) + u64::from(view_count);
@@ -298,7 +303,9 @@ impl TiledRaster {
         );
         let kernel = self.kernel.get(
             rec.context(),
-            &FineModes::new(settings, true).constants(rec.context()),
+            &FineModes::new(settings, true)
+                .alpha_only_if(silhouette_only)
+                .constants(rec.context()),
         )?;
         push.first_view = first_view;
         push.tile_size = grid.tile_size;

@@ -126,6 +126,8 @@ pub struct GpuScene {
     pub(crate) groups: Vec<ViewGroup>,
     /// The tile size of the last tiled render.
     pub(crate) tile: Option<u32>,
+    /// Render alpha only ([`GpuScene::set_silhouette_only`]).
+    pub(crate) silhouette_only: bool,
     /// The batch's meshes in f64, the lighting and the views, for the backward's host share.
     pub(crate) meshes: Vec<MeshF64>,
     pub(crate) lighting: Lighting,
@@ -335,6 +337,20 @@ impl GpuScene {
     /// Faces per view.
     pub fn face_count(&self) -> u32 {
         self.face_count
+    }
+
+    /// Renders alpha only from now on (silhouettes, as fits from masks need): the fine passes
+    /// leave out depth, colour and the softmax, the image's RGB is the background and the aux's
+    /// colour fields keep their initial values, while alpha and its aux fields are the same
+    /// bits as a full render's. The backward of such a scene differentiates alpha only (see
+    /// [`crate::raster::backward::GradBuffers::set_alpha_only`]).
+    pub fn set_silhouette_only(&mut self, silhouette_only: bool) {
+        self.silhouette_only = silhouette_only;
+    }
+
+    /// Whether only alpha is rendered ([`GpuScene::set_silhouette_only`]).
+    pub fn silhouette_only(&self) -> bool {
+        self.silhouette_only
     }
 
     /// The (face, tile) entries of the last tiled render, over all view groups.
@@ -675,6 +691,7 @@ impl Renderer {
             bins: Vec::new(),
             groups: Vec::new(),
             tile: None,
+            silhouette_only: false,
             meshes: meshes.iter().map(MeshF64::from_mesh).collect(),
             lighting: lighting.clone(),
             views_host: views.to_vec(),
@@ -717,6 +734,7 @@ impl Renderer {
                 scene.vertex_count,
                 scene.texture_res,
                 cull,
+                scene.silhouette_only,
             )
         })
     }
@@ -769,6 +787,7 @@ impl Renderer {
                 views,
                 scene.vertex_count,
                 scene.texture_res,
+                scene.silhouette_only,
             )
         })
     }
