@@ -140,30 +140,38 @@ float sigmoid(float x) {
     return 1.0 / (1.0 + exp(-x));
 }
 
-// The squared distance to the nearest edge as `euclidean_dist2` computes it, and that edge
-// (a, b) (the first of equals) with the parameter `t` of the nearest point a + t (b - a): what
-// the backward needs of the same distance.
-float nearest_edge(Face f, vec2 p, out uint ea, out uint eb, out float t) {
+// The squared distance to the nearest edge as `euclidean_dist2` computes it, and that edge:
+// its first vertex `a`, its vector `e` = b - a, its vertex indices (ea, eb) (the first of
+// equals) and the parameter `t` of the nearest point a + t e: what the backward needs of the
+// same distance. Selects, not indexing by `ea` (a per-lane index into an array is a scalar
+// loop over the lanes on llvmpipe).
+float nearest_edge(Face f, vec2 p, out vec2 a, out vec2 e, out uint ea, out uint eb,
+                   out float t) {
     float best = uintBitsToFloat(0x7f800000u);
+    a = vec2(0.0);
+    e = vec2(0.0);
     ea = 0u;
     eb = 1u;
+    t = 0.0;
     for (uint i = 0u; i < 3u; ++i) {
         uint j = i == 2u ? 0u : i + 1u;
-        float d2 = dist2_point_segment(p, f.v[i].xy, f.v[j].xy);
-        if (d2 < best) {
-            best = d2;
-            ea = i;
-            eb = j;
+        vec2 va = f.v[i].xy;
+        vec2 ve = f.v[j].xy - va;
+        float len2 = ve.x * ve.x + ve.y * ve.y;
+        float ti = 0.0;
+        if (len2 > 0.0) {
+            ti = clamp(((p.x - va.x) * ve.x + (p.y - va.y) * ve.y) / len2, 0.0, 1.0);
         }
-    }
-    vec2 a = f.v[ea].xy;
-    vec2 b = f.v[eb].xy;
-    float ex = b.x - a.x;
-    float ey = b.y - a.y;
-    float len2 = ex * ex + ey * ey;
-    t = 0.0;
-    if (len2 > 0.0) {
-        t = clamp(((p.x - a.x) * ex + (p.y - a.y) * ey) / len2, 0.0, 1.0);
+        float dx = va.x + ti * ve.x - p.x;
+        float dy = va.y + ti * ve.y - p.y;
+        float d2 = dx * dx + dy * dy;
+        bool nearer = d2 < best;
+        best = nearer ? d2 : best;
+        a = nearer ? va : a;
+        e = nearer ? ve : e;
+        t = nearer ? ti : t;
+        ea = nearer ? i : ea;
+        eb = nearer ? j : eb;
     }
     return best;
 }

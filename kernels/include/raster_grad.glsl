@@ -120,10 +120,12 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
     }
     vec3 w = barycentric(f, p);
     // Euclidean: the nearest edge, once for the coverage and its derivative.
+    vec2 ea_pos = vec2(0.0);
+    vec2 edge = vec2(0.0);
     uint ea = 0u;
     uint eb = 1u;
     float t = 0.0;
-    float d2 = MODE_DIST == DIST_EUCLIDEAN ? nearest_edge(f, p, ea, eb, t) : 0.0;
+    float d2 = MODE_DIST == DIST_EUCLIDEAN ? nearest_edge(f, p, ea_pos, edge, ea, eb, t) : 0.0;
     float d;
     if (!coverage_from(d2, w, MODE_DIST, pc.sigma, pc.cutoff, d)) {
         return false;
@@ -201,16 +203,16 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
             float x = m * abs(m) / pc.sigma;
             d_w[k] += d_cov * sigmoid_grad(x) * 2.0 * abs(m) / pc.sigma;
         } else if (MODE_DIST == DIST_EUCLIDEAN) {
-            // Through the nearest edge (a, b) as `euclidean_dist2` picks it.
-            vec2 a = f.v[ea].xy;
-            vec2 b = f.v[eb].xy;
-            float ex = b.x - a.x;
-            float ey = b.y - a.y;
+            // Through the nearest edge (a, b) as `euclidean_dist2` picks it, to its two
+            // vertices (selects, not a per-lane index; 0 + x = x).
             float sgn = strictly_inside(w) ? 1.0 : -1.0;
             float d_d2 = d_cov * sigmoid_grad(sgn * d2 / pc.sigma) * sgn / pc.sigma;
-            vec2 r = vec2(a.x + t * ex - p.x, a.y + t * ey - p.y);
-            d_xy_cov[ea] += d_d2 * 2.0 * (1.0 - t) * r;
-            d_xy_cov[eb] += d_d2 * 2.0 * t * r;
+            vec2 r = vec2(ea_pos.x + t * edge.x - p.x, ea_pos.y + t * edge.y - p.y);
+            vec2 to_a = d_d2 * 2.0 * (1.0 - t) * r;
+            vec2 to_b = d_d2 * 2.0 * t * r;
+            for (uint k = 0u; k < 3u; ++k) {
+                d_xy_cov[k] = ea == k ? to_a : (eb == k ? to_b : vec2(0.0));
+            }
         }
     }
 
