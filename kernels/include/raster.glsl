@@ -190,12 +190,10 @@ bool coverage_from(float d2, vec3 w, uint dist, float sigma, float t, out float 
         d = sigmoid(s / sigma);
         return -s < t;
     }
-    if (strictly_inside(w)) {
-        d = sigmoid(d2 / sigma);
-        return true;
-    }
-    d = sigmoid(-d2 / sigma);
-    return d2 < t;
+    // Selects rather than branches: on llvmpipe every branch costs masked stores.
+    bool inside = strictly_inside(w);
+    d = sigmoid((inside ? d2 : -d2) / sigma);
+    return inside || d2 < t;
 }
 
 // `reference::coverage`.
@@ -254,6 +252,20 @@ Alpha alpha_init(uint mode) {
     a.acc = mode == ALPHA_PROD ? 1.0 : 0.0;
     a.zeros = 0u;
     return a;
+}
+
+// `alpha_add` where `use`, else nothing; by selects (no branch).
+void alpha_add_if(inout Alpha a, uint mode, float d, bool use) {
+    if (mode == ALPHA_PROD) {
+        float f = 1.0 - d;
+        bool zero = f == 0.0;
+        a.zeros += use && zero ? 1u : 0u;
+        a.acc = use && !zero ? a.acc * f : a.acc;
+    } else if (mode == ALPHA_SUM) {
+        a.acc = use ? a.acc + d : a.acc;
+    } else {
+        a.acc = use && d > 0.5 ? 1.0 : a.acc;
+    }
 }
 
 void alpha_add(inout Alpha a, uint mode, float d) {

@@ -126,18 +126,17 @@ PixelState pixel_init() {
 }
 
 // Folds face j (set up as `f`) into the state of the pixel centred at `p`.
+// Up to the alpha, by selects rather than branches (on llvmpipe a branch skips nothing and
+// costs masked stores); what it computes for an ignored face is discarded.
 void shade_face(inout PixelState s, Face f, uint j, vec2 p) {
-    if ((f.flags & FACE_FINITE) == 0u || (CULL && outside_bbox(f.bbox, p))) {
-        return;
-    }
+    bool live = (f.flags & FACE_FINITE) != 0u && !(CULL && outside_bbox(f.bbox, p));
     vec3 w = barycentric(f, p);
     float d;
-    if (!coverage(f, w, p, MODE_DIST, pc.sigma, pc.cutoff, d)) {
-        return;
-    }
+    bool covered = coverage(f, w, p, MODE_DIST, pc.sigma, pc.cutoff, d);
+    covered = covered && live;
     // Alpha counts every non-ignored face, whatever its depth or facing.
-    alpha_add(s.alpha, MODE_ALPHA, d);
-    if (ALPHA_ONLY) {
+    alpha_add_if(s.alpha, MODE_ALPHA, d, covered);
+    if (ALPHA_ONLY || !covered) {
         return; // a silhouette render: no depth, no colour
     }
 
