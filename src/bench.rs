@@ -26,7 +26,7 @@ use crate::gpu::{Context, Recorded, Timer};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::raster::fine::check_tile_size;
-use crate::raster::gpu::{Frames, GpuScene, Method, Renderer};
+use crate::raster::gpu::{Frames, GpuScene, Method, PairCounts, Renderer};
 use crate::raster::reference::{Dist, RasterSettings, Rgb};
 
 /// The scenes of SPEC §6, in the order a plain `softvk bench` runs them.
@@ -139,8 +139,12 @@ pub struct BenchRecord {
     pub gpu_ms: Option<f64>,
     /// Median host time from submit to fence, ms.
     pub wall_ms: f64,
-    /// (pixel, face) pairs the fine pass evaluated ([`GpuScene::evaluated_pairs`]).
+    /// (pixel, face) pairs binned: every pixel of a tile times its binned faces, or every pixel
+    /// times every face for brute force ([`PairCounts::binned`]).
     pub pairs: u64,
+    /// The pairs the fine kernels visit and accept ([`GpuScene::pair_counts`]), for the
+    /// per-pair costs ([`BenchRecord::ns_per_visited_pair`]).
+    pub counts: Option<PairCounts>,
     /// Device name, as `softvk info` prints it.
     pub device: String,
     /// Driver name and version.
@@ -505,7 +509,7 @@ struct Variant<'a> {
     gpu: GpuScene,
     timer: Option<Timer>,
     recorded: Recorded<'a>,
-    pairs: u64,
+    counts: PairCounts,
     entries: Option<u64>,
     samples: Samples,
 }
@@ -583,7 +587,12 @@ impl<'a> Variant<'a> {
                 Some(gpu.binned_entries())
             }
         };
-        let pairs = gpu.evaluated_pairs(ctx, method)?;
+        // Brute force has not run yet (its setups are not made): counted after its first
+        // timed submission ([`Variant::sample`]).
+        let counts = match method {
+            Method::Tiled { .. } => gpu.pair_counts(ctx, method)?,
+            Method::Brute => PairCounts::default(),
+        };
         // Five passes at most; a device without timestamps still gets wall times.
         let mut timer = if ctx.info().timestamp_valid_bits > 0 {
             Some(Timer::new(ctx, 8)?)
@@ -599,7 +608,7 @@ impl<'a> Variant<'a> {
             gpu,
             timer,
             recorded,
-            pairs,
+            counts,
             entries,
             samples: Samples::default(),
         })
@@ -614,7 +623,12 @@ impl<'a> Variant<'a> {
 
     /// One timed submission of the recording.
     fn sample(&mut self, ctx: &Context) -> Result<()> {
-        self.samples.take(ctx, &self.recorded, self.timer.as_ref())
+        self.samples
+            .take(ctx, &self.recorded, self.timer.as_ref())?;
+        if self.counts == PairCounts::default() {
+            self.counts = self.gpu.pair_counts(ctx, self.method)?;
+        }
+        Ok(())
     }
 
     fn timing(&self) -> Timing {
@@ -652,7 +666,11 @@ fn bench_scene(
         let mut v = Variant::new(ctx, renderer, scene, Method::Brute, repeats)?;
         progress(&format!(
             "{name} brute: {} (pixel, face) pairs; first of {repeats} timed submission(s)",
-            v.pairs
+            u64::from(v.gpu.face_count())
+                * u64::from(scene.settings.width)
+                * u64::from(scene.settings.height)
+                * u64::from(v.gpu.view_count())
+                * if scene.settings.antialias { 4 } else { 1 }
         ));
         v.sample(ctx)?;
         reference = Some((
@@ -681,7 +699,7 @@ fn bench_scene(
         progress(&format!(
             "{name} {}: {outcome}; {} pairs, {} (face, tile) entries",
             v.label(),
-            v.pairs,
+            v.counts.binned,
             v.entries.unwrap_or(0)
         ));
         variants.push(v);
@@ -714,9 +732,10 @@ fn bench_scene(
             _ => String::new(),
         };
         progress(&format!(
-            "{name} {}: {}{speedup}",
+            "{name} {}: {}{speedup}{}",
             v.label(),
-            summary(&t, v.repeats)
+            summary(&t, v.repeats),
+            per_pair_summary(&t.passes, &v.counts)
         ));
         records.push(BenchRecord {
             scene: name.to_string(),
@@ -724,7 +743,8 @@ fn bench_scene(
             pass: "forward",
             gpu_ms: t.gpu_ms,
             wall_ms: t.wall_ms,
-            pairs: v.pairs,
+            pairs: v.counts.binned,
+            counts: Some(v.counts),
             device: ctx.info().name.clone(),
             driver: ctx.info().driver.clone(),
             repeats: v.repeats,
@@ -742,6 +762,38 @@ fn bench_scene(
         });
     }
     Ok(records)
+}
+
+/// Nanoseconds of GPU time per visited (pixel, face) pair of each fine pass in `passes` (ms by
+/// name): the forward's (`raster …`) per [`PairCounts::forward`], the backward's (`grad tiled`,
+/// `grad brute`) per [`PairCounts::backward`].
+pub fn ns_per_visited_pair(passes: &[(String, f64)], counts: &PairCounts) -> Vec<(String, f64)> {
+    passes
+        .iter()
+        .filter_map(|(name, ms)| {
+            let visited = match name.as_str() {
+                "raster tiled" | "raster brute" => counts.forward,
+                "grad tiled" | "grad brute" => counts.backward,
+                _ => return None,
+            };
+            (visited > 0).then(|| (name.clone(), ms * 1e6 / visited as f64))
+        })
+        .collect()
+}
+
+/// `; visited pairs F fwd / B bwd (A accepted); ns per visited pair: raster tiled x, ...`.
+fn per_pair_summary(passes: &[(String, f64)], counts: &PairCounts) -> String {
+    let ns: Vec<String> = ns_per_visited_pair(passes, counts)
+        .iter()
+        .map(|(name, ns)| format!("{name} {ns:.2}"))
+        .collect();
+    format!(
+        "; visited pairs {} fwd / {} bwd ({} accepted); ns per visited pair: {}",
+        counts.forward,
+        counts.backward,
+        counts.accepted,
+        ns.join(", ")
+    )
 }
 
 fn summary(t: &Timing, repeats: u32) -> String {
@@ -854,6 +906,18 @@ pub fn to_json(records: &[BenchRecord]) -> String {
             passes.number(name, Some(*ms));
         }
         o.raw("passes", passes.finish());
+        if let Some(c) = &r.counts {
+            let mut visited = JsonObject::default();
+            visited.raw("forward", c.forward.to_string());
+            visited.raw("backward", c.backward.to_string());
+            o.raw("visited_pairs", visited.finish());
+            o.raw("accepted_pairs", c.accepted.to_string());
+            let mut ns = JsonObject::default();
+            for (name, v) in ns_per_visited_pair(&r.passes, c) {
+                ns.number(&name, Some(v));
+            }
+            o.raw("ns_per_visited_pair", ns.finish());
+        }
         out.push_str("  ");
         out.push_str(&o.finish());
         out.push_str(if i + 1 < records.len() { ",\n" } else { "\n" });
@@ -974,7 +1038,7 @@ pub fn run_backward(
                 }
                 Err(e) => return Err(e),
             };
-            let pairs = gpu.evaluated_pairs(ctx, method)?;
+            let counts = gpu.pair_counts(ctx, method)?;
             let entries = match method {
                 Method::Tiled { .. } => Some(gpu.binned_entries()),
                 Method::Brute => None,
@@ -998,9 +1062,10 @@ pub fn run_backward(
                 drop(recorded);
                 let t = samples.timing();
                 progress(&format!(
-                    "{} {label} {pass}: {}",
+                    "{} {label} {pass}: {}{}",
                     scene.name,
-                    summary(&t, repeats)
+                    summary(&t, repeats),
+                    per_pair_summary(&t.passes, &counts)
                 ));
                 records.push(BenchRecord {
                     scene: scene.name.clone(),
@@ -1012,7 +1077,8 @@ pub fn run_backward(
                     },
                     gpu_ms: t.gpu_ms,
                     wall_ms: t.wall_ms,
-                    pairs,
+                    pairs: counts.binned,
+                    counts: Some(counts),
                     device: ctx.info().name.clone(),
                     driver: ctx.info().driver.clone(),
                     repeats,
@@ -1176,6 +1242,7 @@ fn run_field_fit(
         gpu_ms: timing.gpu_ms,
         wall_ms: timing.wall_ms,
         pairs: 0,
+        counts: None,
         device: ctx.info().name.clone(),
         driver: ctx.info().driver.clone(),
         repeats: opts.repeat,
@@ -1253,19 +1320,17 @@ pub fn run_fit(
     opts: &BenchOptions,
     mut progress: impl FnMut(&str),
 ) -> Result<Vec<BenchRecord>> {
-    use crate::fit::mesh_fit::{Fitter, MeshFitOptions, demo_target};
+    use crate::fit::mesh_fit::{Fitter, MeshFitOptions, default_template, demo_target};
     let names = opts.checked_fit_scenes()?;
-    let assets = opts.assets.clone().unwrap_or_else(crate::assets::dir);
     let mut records = Vec::new();
     for name in names {
         if name == "fit-field" {
+            let assets = opts.assets.clone().unwrap_or_else(crate::assets::dir);
             records.push(run_field_fit(ctx, opts, &assets, &mut progress)?);
             continue;
         }
-        let mut template = load(&assets, "sphere_1352.obj", 1)?;
-        for p in &mut template.positions {
-            *p = p.map(|c| c * 0.5);
-        }
+        // SoftRas's template, as `softvk fit-mesh` uses it by default.
+        let template = default_template();
         let fit_opts = MeshFitOptions {
             log_every: 1,
             ..MeshFitOptions::default()
@@ -1372,14 +1437,19 @@ pub fn run_fit(
             "{name} fit-iteration: {}",
             summary(&timing, opts.repeat)
         ));
-        let pairs = fitter.scene.evaluated_pairs(ctx, method)?;
+        let counts = fitter.scene.pair_counts(ctx, method)?;
+        progress(&format!(
+            "{name} fit-iteration per pair:{}",
+            per_pair_summary(&timing.passes, &counts)
+        ));
         let record = |pass: &'static str, gpu_ms, wall_ms, passes, repeats, entries| BenchRecord {
             scene: name.to_string(),
             method,
             pass,
             gpu_ms,
             wall_ms,
-            pairs,
+            pairs: counts.binned,
+            counts: Some(counts),
             device: ctx.info().name.clone(),
             driver: ctx.info().driver.clone(),
             repeats,
@@ -1597,6 +1667,7 @@ mod tests {
             gpu_ms,
             wall_ms: 12.5,
             pairs: 1 << 40,
+            counts: None,
             device: "llvmpipe \"quoted\" \\ (LLVM)\n".into(),
             driver: "Mesa".into(),
             repeats: 5,

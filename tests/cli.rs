@@ -9,6 +9,7 @@ use std::process::Output;
 
 use glam::DVec3;
 use softvk::camera::{Camera, Projection, pixel_center};
+use softvk::fit::mesh_fit::default_template;
 use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
 use softvk::raster::reference::{
@@ -944,7 +945,32 @@ fn fit_mesh_writes_the_mesh_and_its_report() {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let mesh = Mesh::load_obj(&out, 1).unwrap();
-    assert_eq!(mesh.face_count(), Mesh::icosphere(3).face_count());
+    // SoftRas's sphere_1352 is the default template; the icosphere is one flag away.
+    assert_eq!(mesh.face_count(), default_template().face_count());
+    assert_eq!(mesh.face_count(), 2700);
+    let ico = dir.path("ico.obj");
+    let o = softvk()
+        .args([
+            "fit-mesh",
+            "--iters",
+            "1",
+            "--quiet",
+            "--template",
+            "icosphere",
+        ])
+        .arg("--silhouettes")
+        .arg(&sil)
+        .arg("--cameras")
+        .arg(&cams)
+        .arg("--out")
+        .arg(&ico)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        Mesh::load_obj(&ico, 1).unwrap().face_count(),
+        Mesh::icosphere(3).face_count()
+    );
     let report = dir.path("fitted-report");
     for f in ["ious.csv", "contact_sheet.png", "loss.png", "progress.gif"] {
         assert!(report.join(f).is_file(), "{f} missing");

@@ -764,3 +764,58 @@ fn the_backward_splits_work_past_the_drivers_loop_cap() {
     let (got, _, _) = backward_split(&r, &gpu, &fwd, &w, tile, GradSplit::default());
     assert_close("4 624 faces in one 32-pixel tile", &got, &want, true);
 }
+
+/// An alpha-only backward (a silhouette scene, or one declared alpha-only) gives the full
+/// backward's gradients when the upstream has no RGB part, in every differentiable distance and
+/// alpha mode, tiled and brute force: the colour terms it leaves out only add zeros. (Leaving
+/// out a term that is not zero — the barycentric coverage's d_w, say — fails here.)
+#[test]
+fn alpha_only_backwards_equal_the_full_backward_for_an_alpha_upstream() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let mesh = scene(2, 9);
+    let cams = [
+        Camera::from_angles(2.732, 15.0, 20.0),
+        Camera::from_angles(2.5, -30.0, 140.0),
+    ];
+    let (w, h) = (24, 16);
+    let alpha_upstream: Vec<[f32; 4]> = weights(2 * w * h, 11)
+        .iter()
+        .map(|g| [0.0, 0.0, 0.0, g[3]])
+        .collect();
+    let values = |g: &Gradients| -> Vec<f64> { g.positions.iter().flatten().copied().collect() };
+    for dist in [Dist::Euclidean, Dist::Barycentric] {
+        for alpha in [Alpha::Prod, Alpha::Sum] {
+            let s = RasterSettings {
+                dist,
+                alpha,
+                rgb: if alpha == Alpha::Sum { Rgb::Hard } else { Rgb::Softmax },
+                ..settings(w as u32, h as u32)
+            };
+            for method in [Method::Brute, Method::Tiled { tile: 8 }] {
+                let what = format!("{dist:?} {alpha:?} {method:?}");
+                let full = forward(&r, &gpu, &mesh, &cams, &s, method);
+                let want = r
+                    .backward(&gpu, &full, &alpha_upstream, method, false)
+                    .unwrap();
+                assert!(values(&want).iter().any(|&x| x != 0.0), "{what}");
+                // Declared on the buffers, over the full render.
+                let mut gb = GradBuffers::new(&gpu, &full, method).unwrap();
+                gb.set_alpha_only(true);
+                gb.set_d_image(&gpu, &full, &alpha_upstream).unwrap();
+                let k = r.grad_kernels();
+                gpu.submit_and_wait(|rec| k.record(rec, &full, &gb)).unwrap();
+                let declared = k.finish(&gpu, &full, &gb, false).unwrap();
+                assert!(values(&declared) == values(&want), "{what}: declared");
+                // A silhouette render's backward.
+                let mut sil = r.prepare(&gpu, &mesh, &cams, &lighting(), &s).unwrap();
+                sil.set_silhouette_only(true);
+                r.run(&gpu, &mut sil, method).unwrap();
+                let got = r
+                    .backward(&gpu, &sil, &alpha_upstream, method, false)
+                    .unwrap();
+                assert!(values(&got) == values(&want), "{what}: silhouette");
+            }
+        }
+    }
+}

@@ -1323,3 +1323,57 @@ fn a_batch_of_meshes_renders_as_each_mesh_alone() {
         .unwrap();
     assert!(matches!(err, softvk::Error::Input(_)), "{err}");
 }
+
+/// A silhouette render (alpha only) has the alpha and the alpha aggregates of the full render
+/// bit for bit, by brute force and tiled, in every distance and alpha mode; its RGB is the
+/// background. (Breaking the early return in `shade_face` for alpha-only pipelines, or letting
+/// it skip `alpha_add`, fails here.)
+#[test]
+fn silhouette_renders_have_the_full_renders_alpha() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let mesh = icosphere(2);
+    let cams = [
+        Camera::from_angles(2.5, 10.0, 60.0),
+        Camera::from_angles(2.2, -20.0, 200.0),
+    ];
+    let mut checked = 0;
+    for dist in DISTS {
+        for alpha in ALPHAS {
+            let s = RasterSettings {
+                width: 24,
+                height: 16,
+                sigma: 3e-3,
+                dist,
+                alpha,
+                rgb: if checked % 2 == 0 { Rgb::Softmax } else { Rgb::Hard },
+                background: [0.25, 0.5, 0.75],
+                antialias: checked % 3 == 0,
+                ..RasterSettings::default()
+            };
+            for method in [Method::Brute, Method::Tiled { tile: 8 }] {
+                let render = |silhouette: bool| {
+                    let mut scene = r.prepare(&gpu, &mesh, &cams, &lighting(), &s).unwrap();
+                    scene.set_silhouette_only(silhouette);
+                    r.run(&gpu, &mut scene, method).unwrap();
+                    r.read_frames(&gpu, &scene).unwrap()
+                };
+                let (full, sil) = (render(false), render(true));
+                let what = format!("{dist:?} {alpha:?} {method:?}");
+                assert_eq!(full.images.len(), sil.images.len());
+                for (a, b) in full.images.iter().zip(&sil.images) {
+                    assert_eq!(a[3].to_bits(), b[3].to_bits(), "{what}");
+                    let bg = s.background.map(|c| c as f32);
+                    assert_eq!([b[0], b[1], b[2]], bg, "{what}");
+                }
+                for (a, b) in full.aux.iter().zip(&sil.aux) {
+                    assert_eq!(a.alpha_acc.to_bits(), b.alpha_acc.to_bits(), "{what}");
+                    assert_eq!(a.alpha_zeros, b.alpha_zeros, "{what}");
+                }
+                assert!(full.images.iter().any(|p| p[3] > 0.0), "{what}: nothing drawn");
+                checked += 1;
+            }
+        }
+    }
+    gpu.check_validation().unwrap();
+}

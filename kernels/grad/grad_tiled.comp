@@ -21,7 +21,7 @@
 // pixels as many at a time (a segment), each lane loading one pixel's upstream. A ballot keeps
 // the faces whose box touches the segment's pixels with a non-zero upstream (any other face
 // adds nothing there), and the loop over its bits broadcasts each kept face with shuffles: every
-// lane takes its pixel's contribution, `subgroupAdd` sums them, and the face's own lane adds
+// lane takes its pixel's contribution, `lane_sum` adds them up, and the face's own lane adds
 // the sum to its running total. So a face's partial is summed segment by segment in pixel
 // order, each segment by the subgroup's reduction (a fixed order on a given device: runs are
 // bit-identical; against brute force it differs by float reassociation). Texel slots are added
@@ -78,7 +78,7 @@ void main() {
     uint last = first + min(pc.split, hi - first);
     uint pixels = pc.tile_size * pc.tile_size;
 
-    uint lanes = subgroup_lanes(64u);
+    uint lanes = subgroup_lanes();
     uint lane = gl_SubgroupInvocationID;
     float inf = uintBitsToFloat(0x7f800000u);
     // The workgroup's faces go to its subgroups `lanes` at a time, round robin.
@@ -120,8 +120,14 @@ void main() {
                     bool hit = live && pixel_face_grad(face_shuffle(f, q), fq, u, g);
                     bool mine = lane == q;
                     for (uint c = 0u; c < 3u; ++c) {
-                        vec3 sum = subgroupAdd(hit ? g.screen[c] : vec3(0.0));
-                        acc[c] += mine ? sum : vec3(0.0);
+                        // With an alpha-only upstream no depth has a gradient: z stays +0.
+                        if (ALPHA_ONLY) {
+                            vec2 sum = lane_sum(hit ? g.screen[c].xy : vec2(0.0));
+                            acc[c].xy += mine ? sum : vec2(0.0);
+                        } else {
+                            vec3 sum = lane_sum(hit ? g.screen[c] : vec3(0.0));
+                            acc[c] += mine ? sum : vec3(0.0);
+                        }
                     }
                     if (ALPHA_ONLY) {
                         continue;
@@ -129,7 +135,7 @@ void main() {
                     bool colored = hit && g.colored;
                     if (VERTEX_COLORS) {
                         for (uint c = 0u; c < 3u; ++c) {
-                            vec3 sum = subgroupAdd(colored ? g.color[c] : vec3(0.0));
+                            vec3 sum = lane_sum(colored ? g.color[c] : vec3(0.0));
                             cacc[c] += mine ? sum : vec3(0.0);
                         }
                     } else {

@@ -140,9 +140,46 @@ float sigmoid(float x) {
     return 1.0 / (1.0 + exp(-x));
 }
 
-// `reference::coverage`: false when the face is ignored at this pixel (outside and beyond the
-// cut-off `t`); otherwise `d` is the coverage D.
-bool coverage(Face f, vec3 w, vec2 p, uint dist, float sigma, float t, out float d) {
+// The squared distance to the nearest edge as `euclidean_dist2` computes it, and that edge:
+// its first vertex `a`, its vector `e` = b - a, its vertex indices (ea, eb) (the first of
+// equals) and the parameter `t` of the nearest point a + t e: what the backward needs of the
+// same distance. Selects, not indexing by `ea` (a per-lane index into an array is a scalar
+// loop over the lanes on llvmpipe).
+float nearest_edge(Face f, vec2 p, out vec2 a, out vec2 e, out uint ea, out uint eb,
+                   out float t) {
+    float best = uintBitsToFloat(0x7f800000u);
+    a = vec2(0.0);
+    e = vec2(0.0);
+    ea = 0u;
+    eb = 1u;
+    t = 0.0;
+    for (uint i = 0u; i < 3u; ++i) {
+        uint j = i == 2u ? 0u : i + 1u;
+        vec2 va = f.v[i].xy;
+        vec2 ve = f.v[j].xy - va;
+        float len2 = ve.x * ve.x + ve.y * ve.y;
+        float ti = 0.0;
+        if (len2 > 0.0) {
+            ti = clamp(((p.x - va.x) * ve.x + (p.y - va.y) * ve.y) / len2, 0.0, 1.0);
+        }
+        float dx = va.x + ti * ve.x - p.x;
+        float dy = va.y + ti * ve.y - p.y;
+        float d2 = dx * dx + dy * dy;
+        bool nearer = d2 < best;
+        best = nearer ? d2 : best;
+        a = nearer ? va : a;
+        e = nearer ? ve : e;
+        t = nearer ? ti : t;
+        ea = nearer ? i : ea;
+        eb = nearer ? j : eb;
+    }
+    return best;
+}
+
+// `reference::coverage` given the squared edge distance `d2` (Euclidean mode only): false when
+// the face is ignored at this pixel (outside and beyond the cut-off `t`); otherwise `d` is the
+// coverage D.
+bool coverage_from(float d2, vec3 w, uint dist, float sigma, float t, out float d) {
     if (dist == DIST_HARD) {
         d = 1.0;
         return inside_closed(w);
@@ -153,13 +190,16 @@ bool coverage(Face f, vec3 w, vec2 p, uint dist, float sigma, float t, out float
         d = sigmoid(s / sigma);
         return -s < t;
     }
-    float d2 = euclidean_dist2(f, p);
-    if (strictly_inside(w)) {
-        d = sigmoid(d2 / sigma);
-        return true;
-    }
-    d = sigmoid(-d2 / sigma);
-    return d2 < t;
+    // Selects rather than branches: on llvmpipe every branch costs masked stores.
+    bool inside = strictly_inside(w);
+    d = sigmoid((inside ? d2 : -d2) / sigma);
+    return inside || d2 < t;
+}
+
+// `reference::coverage`.
+bool coverage(Face f, vec3 w, vec2 p, uint dist, float sigma, float t, out float d) {
+    float d2 = dist == DIST_EUCLIDEAN ? euclidean_dist2(f, p) : 0.0;
+    return coverage_from(d2, w, dist, sigma, t, d);
 }
 
 // `reference::clip_barycentric`.
@@ -212,6 +252,20 @@ Alpha alpha_init(uint mode) {
     a.acc = mode == ALPHA_PROD ? 1.0 : 0.0;
     a.zeros = 0u;
     return a;
+}
+
+// `alpha_add` where `use`, else nothing; by selects (no branch).
+void alpha_add_if(inout Alpha a, uint mode, float d, bool use) {
+    if (mode == ALPHA_PROD) {
+        float f = 1.0 - d;
+        bool zero = f == 0.0;
+        a.zeros += use && zero ? 1u : 0u;
+        a.acc = use && !zero ? a.acc * f : a.acc;
+    } else if (mode == ALPHA_SUM) {
+        a.acc = use ? a.acc + d : a.acc;
+    } else {
+        a.acc = use && d > 0.5 ? 1.0 : a.acc;
+    }
 }
 
 void alpha_add(inout Alpha a, uint mode, float d) {

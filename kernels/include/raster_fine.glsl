@@ -51,8 +51,10 @@ const bool DOUBLE_SIDED = (MODE_FLAGS & FLAG_DOUBLE_SIDED) != 0u;
 const bool VERTEX_COLORS = (MODE_FLAGS & FLAG_VERTEX_COLORS) != 0u;
 const bool CULL = (MODE_FLAGS & FLAG_CULL) != 0u;
 const bool ANTIALIAS = (MODE_FLAGS & FLAG_ANTIALIAS) != 0u;
-// Backward only: the upstream gradient has no RGB part (a silhouette loss), so the colour terms,
-// which would add exact zeros, are left out. The same gradients, bit for bit.
+// Alpha only. Forward: a silhouette render (RGB stays the background, the aux's colour fields
+// their initial values; alpha and its aux fields are the same bits). Backward: the upstream
+// gradient has no RGB part (a silhouette loss), so the colour terms, which would add exact
+// zeros, are left out: the same gradients, bit for bit.
 const bool ALPHA_ONLY = (MODE_FLAGS & FLAG_ALPHA_ONLY) != 0u;
 
 // Twin of `RasterPush` (src/raster/fine.rs).
@@ -124,17 +126,19 @@ PixelState pixel_init() {
 }
 
 // Folds face j (set up as `f`) into the state of the pixel centred at `p`.
+// Up to the alpha, by selects rather than branches (on llvmpipe a branch skips nothing and
+// costs masked stores); what it computes for an ignored face is discarded.
 void shade_face(inout PixelState s, Face f, uint j, vec2 p) {
-    if ((f.flags & FACE_FINITE) == 0u || (CULL && outside_bbox(f.bbox, p))) {
-        return;
-    }
+    bool live = (f.flags & FACE_FINITE) != 0u && !(CULL && outside_bbox(f.bbox, p));
     vec3 w = barycentric(f, p);
     float d;
-    if (!coverage(f, w, p, MODE_DIST, pc.sigma, pc.cutoff, d)) {
-        return;
-    }
+    bool covered = coverage(f, w, p, MODE_DIST, pc.sigma, pc.cutoff, d);
+    covered = covered && live;
     // Alpha counts every non-ignored face, whatever its depth or facing.
-    alpha_add(s.alpha, MODE_ALPHA, d);
+    alpha_add_if(s.alpha, MODE_ALPHA, d, covered);
+    if (ALPHA_ONLY || !covered) {
+        return; // a silhouette render: no depth, no colour
+    }
 
     vec3 wc = clip_barycentric(w);
     float z;

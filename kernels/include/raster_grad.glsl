@@ -41,7 +41,7 @@ Upstream zero_upstream() {
 }
 
 bool upstream_is_zero(Upstream u) {
-    return u.d_alpha == 0.0 && u.d_rgb == vec3(0.0);
+    return u.d_alpha == 0.0 && (ALPHA_ONLY || u.d_rgb == vec3(0.0));
 }
 
 // The upstream of rendered pixel (col, row) of view `view` (absolute): with anti-aliasing, the
@@ -119,8 +119,15 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
         return false;
     }
     vec3 w = barycentric(f, p);
+    // Euclidean: the nearest edge, once for the coverage and its derivative.
+    vec2 ea_pos = vec2(0.0);
+    vec2 edge = vec2(0.0);
+    uint ea = 0u;
+    uint eb = 1u;
+    float t = 0.0;
+    float d2 = MODE_DIST == DIST_EUCLIDEAN ? nearest_edge(f, p, ea_pos, edge, ea, eb, t) : 0.0;
     float d;
-    if (!coverage(f, w, p, MODE_DIST, pc.sigma, pc.cutoff, d)) {
+    if (!coverage_from(d2, w, MODE_DIST, pc.sigma, pc.cutoff, d)) {
         return false;
     }
     vec3 wc = clip_barycentric(w);
@@ -146,39 +153,43 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
         }
     }
 
-    // Through w̃: depth and (vertex mode) colour.
-    vec3 d_wc = vec3(0.0);
-    if (d_z != 0.0) {
-        float d_inv = -z * z * d_z;
-        for (uint k = 0u; k < 3u; ++k) {
-            float zk = f.v[k].z;
-            d_wc[k] += d_inv / zk;
-            g.screen[k].z -= d_inv * wc[k] / (zk * zk);
-        }
-    }
-    if (g.colored) {
-        if (VERTEX_COLORS) {
-            uvec3 vi = uvec3(faces[3u * j], faces[3u * j + 1u], faces[3u * j + 2u])
-                     + f.mesh * pc.vertex_count;
+    // Through w̃: depth and colour. None of it with an alpha-only upstream, where d_w would be
+    // (0 - 0) / Σ = +0 exactly.
+    vec3 d_w = vec3(0.0);
+    if (!ALPHA_ONLY) {
+        // Through w̃: depth and (vertex mode) colour.
+        vec3 d_wc = vec3(0.0);
+        if (d_z != 0.0) {
+            float d_inv = -z * z * d_z;
             for (uint k = 0u; k < 3u; ++k) {
-                vec3 ck = vec3(colors[3u * vi[k]], colors[3u * vi[k] + 1u], colors[3u * vi[k] + 2u]);
-                d_wc[k] += dot(d_color, ck);
-                g.color[k] = d_color * wc[k];
+                float zk = f.v[k].z;
+                d_wc[k] += d_inv / zk;
+                g.screen[k].z -= d_inv * wc[k] / (zk * zk);
             }
-        } else {
-            g.texel = surface_texel_index(wc, pc.texture_res);
-            g.color[0] = d_color;
         }
-    }
+        if (g.colored) {
+            if (VERTEX_COLORS) {
+                uvec3 vi = uvec3(faces[3u * j], faces[3u * j + 1u], faces[3u * j + 2u])
+                         + f.mesh * pc.vertex_count;
+                for (uint k = 0u; k < 3u; ++k) {
+                    vec3 ck = vec3(colors[3u * vi[k]], colors[3u * vi[k] + 1u], colors[3u * vi[k] + 2u]);
+                    d_wc[k] += dot(d_color, ck);
+                    g.color[k] = d_color * wc[k];
+                }
+            } else {
+                g.texel = surface_texel_index(wc, pc.texture_res);
+                g.color[0] = d_color;
+            }
+        }
 
-    // Clip: c = clamp(w, 0, 1), w̃ = c / max(Σc, floor).
-    vec3 cl = clamp(w, 0.0, 1.0);
-    float raw_sum = cl.x + cl.y + cl.z;
-    float sum = max(raw_sum, CLIP_SUM_FLOOR);
-    float renorm = raw_sum >= CLIP_SUM_FLOOR ? dot(d_wc, wc) : 0.0;
-    vec3 d_w;
-    for (uint k = 0u; k < 3u; ++k) {
-        d_w[k] = (w[k] > 0.0 && w[k] < 1.0) ? (d_wc[k] - renorm) / sum : 0.0;
+        // Clip: c = clamp(w, 0, 1), w̃ = c / max(Σc, floor).
+        vec3 cl = clamp(w, 0.0, 1.0);
+        float raw_sum = cl.x + cl.y + cl.z;
+        float sum = max(raw_sum, CLIP_SUM_FLOOR);
+        float renorm = raw_sum >= CLIP_SUM_FLOOR ? dot(d_wc, wc) : 0.0;
+        for (uint k = 0u; k < 3u; ++k) {
+            d_w[k] = (w[k] > 0.0 && w[k] < 1.0) ? (d_wc[k] - renorm) / sum : 0.0;
+        }
     }
 
     // Coverage.
@@ -192,55 +203,42 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
             float x = m * abs(m) / pc.sigma;
             d_w[k] += d_cov * sigmoid_grad(x) * 2.0 * abs(m) / pc.sigma;
         } else if (MODE_DIST == DIST_EUCLIDEAN) {
-            // The nearest edge as `euclidean_dist2` picks it (the first of equals).
-            float best = uintBitsToFloat(0x7f800000u);
-            uint ea = 0u;
-            uint eb = 1u;
-            for (uint i = 0u; i < 3u; ++i) {
-                uint jj = i == 2u ? 0u : i + 1u;
-                float d2 = dist2_point_segment(p, f.v[i].xy, f.v[jj].xy);
-                if (d2 < best) {
-                    best = d2;
-                    ea = i;
-                    eb = jj;
-                }
-            }
-            vec2 a = f.v[ea].xy;
-            vec2 b = f.v[eb].xy;
-            float ex = b.x - a.x;
-            float ey = b.y - a.y;
-            float len2 = ex * ex + ey * ey;
-            float t = 0.0;
-            if (len2 > 0.0) {
-                t = clamp(((p.x - a.x) * ex + (p.y - a.y) * ey) / len2, 0.0, 1.0);
-            }
+            // Through the nearest edge (a, b) as `euclidean_dist2` picks it, to its two
+            // vertices (selects, not a per-lane index; 0 + x = x).
             float sgn = strictly_inside(w) ? 1.0 : -1.0;
-            float d_d2 = d_cov * sigmoid_grad(sgn * best / pc.sigma) * sgn / pc.sigma;
-            vec2 r = vec2(a.x + t * ex - p.x, a.y + t * ey - p.y);
-            d_xy_cov[ea] += d_d2 * 2.0 * (1.0 - t) * r;
-            d_xy_cov[eb] += d_d2 * 2.0 * t * r;
+            float d_d2 = d_cov * sigmoid_grad(sgn * d2 / pc.sigma) * sgn / pc.sigma;
+            vec2 r = vec2(ea_pos.x + t * edge.x - p.x, ea_pos.y + t * edge.y - p.y);
+            vec2 to_a = d_d2 * 2.0 * (1.0 - t) * r;
+            vec2 to_b = d_d2 * 2.0 * t * r;
+            for (uint k = 0u; k < 3u; ++k) {
+                d_xy_cov[k] = ea == k ? to_a : (eb == k ? to_b : vec2(0.0));
+            }
         }
     }
 
-    // Barycentrics w_k = n_k / det, det the clamped determinant (constant where clamped).
-    vec2 v0 = f.v[0].xy;
-    vec2 v1 = f.v[1].xy;
-    vec2 v2 = f.v[2].xy;
-    precise float ta = (v1.x - v0.x) * (v2.y - v0.y);
-    precise float tb = (v2.x - v0.x) * (v1.y - v0.y);
-    precise float det_raw = ta - tb;
-    float det = det_raw > 0.0 ? max(det_raw, MIN_DET) : min(det_raw, -MIN_DET);
-    float d_det = det != det_raw ? 0.0 : -dot(d_w, w) / det;
+    // Barycentrics w_k = n_k / det, det the clamped determinant (constant where clamped). With
+    // an alpha-only upstream, d_w is zero unless the coverage is barycentric: then d_xy would be
+    // ±0, and adding ±0 to the edge term changes no bit (x + ±0 = x; +0 + -0 = +0).
     vec2 d_xy[3] = vec2[3](vec2(0.0), vec2(0.0), vec2(0.0));
-    for (uint k = 0u; k < 3u; ++k) {
-        uint ia = k == 2u ? 0u : k + 1u;
-        uint ib = k == 0u ? 2u : k - 1u;
-        vec2 va = f.v[ia].xy;
-        vec2 vb = f.v[ib].xy;
-        float d_n = d_w[k] / det;
-        d_xy[ia] += d_n * vec2(vb.y - p.y, p.x - vb.x);
-        d_xy[ib] += d_n * vec2(p.y - va.y, va.x - p.x);
-        d_xy[k] += d_det * vec2(va.y - vb.y, vb.x - va.x);
+    if (!ALPHA_ONLY || MODE_DIST == DIST_BARYCENTRIC) {
+        vec2 v0 = f.v[0].xy;
+        vec2 v1 = f.v[1].xy;
+        vec2 v2 = f.v[2].xy;
+        precise float ta = (v1.x - v0.x) * (v2.y - v0.y);
+        precise float tb = (v2.x - v0.x) * (v1.y - v0.y);
+        precise float det_raw = ta - tb;
+        float det = det_raw > 0.0 ? max(det_raw, MIN_DET) : min(det_raw, -MIN_DET);
+        float d_det = det != det_raw ? 0.0 : -dot(d_w, w) / det;
+        for (uint k = 0u; k < 3u; ++k) {
+            uint ia = k == 2u ? 0u : k + 1u;
+            uint ib = k == 0u ? 2u : k - 1u;
+            vec2 va = f.v[ia].xy;
+            vec2 vb = f.v[ib].xy;
+            float d_n = d_w[k] / det;
+            d_xy[ia] += d_n * vec2(vb.y - p.y, p.x - vb.x);
+            d_xy[ib] += d_n * vec2(p.y - va.y, va.x - p.x);
+            d_xy[k] += d_det * vec2(va.y - vb.y, vb.x - va.x);
+        }
     }
     for (uint k = 0u; k < 3u; ++k) {
         g.screen[k].xy += d_xy[k] + d_xy_cov[k];

@@ -22,16 +22,57 @@ Face face_shuffle(Face f, uint i) {
     return g;
 }
 
-// Lanes this subgroup has in the workgroup: at most the workgroup's size (a subgroup may be
-// wider than a 64-invocation workgroup). Never assume a size: 8 on llvmpipe with AVX2, 32 on
-// NVIDIA, 64 or 32 on AMD.
-uint subgroup_lanes(uint workgroup_size) {
-    return min(gl_SubgroupSize, workgroup_size);
+// The subgroup size, when the host knows it (constant_id 4, after the fine modes): the device's
+// `subgroupSize`, which a SPIR-V 1.5 pipeline without size control sees as gl_SubgroupSize. As a
+// constant it lets the driver unroll the loops over lanes and ballot words (llvmpipe learns its
+// own size only after its loop unrolling). 0: unknown, and the built-ins decide.
+layout(constant_id = 4) const uint SUBGROUP_SIZE = 0u;
+
+// Lanes this subgroup has in the 64-invocation workgroup: at most 64 (a subgroup may be wider).
+// Never a fixed number: 8 on llvmpipe with AVX2, 32 on NVIDIA, 64 or 32 on AMD.
+uint subgroup_lanes() {
+    return min(SUBGROUP_SIZE != 0u ? SUBGROUP_SIZE : gl_SubgroupSize, 64u);
 }
 
 // Words of a subgroup ballot in use.
 uint ballot_words() {
-    return (gl_SubgroupSize + 31u) / 32u;
+    return ((SUBGROUP_SIZE != 0u ? SUBGROUP_SIZE : gl_SubgroupSize) + 31u) / 32u;
+}
+
+// The sum of `v` over the subgroup, the same bits in every lane. With a known size, a butterfly
+// of shuffles (each step adds a lane's value and its partner's; a + b == b + a exactly): on
+// llvmpipe a shuffle is one permute while `subgroupAdd` is a scalar loop over the lanes with a
+// branch per lane. Either way the order of the additions is fixed for a device.
+vec3 lane_sum(vec3 v) {
+    if (SUBGROUP_SIZE == 0u) {
+        return subgroupAdd(v);
+    }
+    // Unrolled by hand: a constant condition is gone after specialization, while a loop over
+    // `m <<= 1` is not unrolled.
+    uint lane = gl_SubgroupInvocationID;
+    if (SUBGROUP_SIZE > 1u) v += subgroupShuffle(v, lane ^ 1u);
+    if (SUBGROUP_SIZE > 2u) v += subgroupShuffle(v, lane ^ 2u);
+    if (SUBGROUP_SIZE > 4u) v += subgroupShuffle(v, lane ^ 4u);
+    if (SUBGROUP_SIZE > 8u) v += subgroupShuffle(v, lane ^ 8u);
+    if (SUBGROUP_SIZE > 16u) v += subgroupShuffle(v, lane ^ 16u);
+    if (SUBGROUP_SIZE > 32u) v += subgroupShuffle(v, lane ^ 32u);
+    return v;
+}
+
+vec2 lane_sum(vec2 v) {
+    if (SUBGROUP_SIZE == 0u) {
+        return subgroupAdd(v);
+    }
+    // Unrolled by hand: a constant condition is gone after specialization, while a loop over
+    // `m <<= 1` is not unrolled.
+    uint lane = gl_SubgroupInvocationID;
+    if (SUBGROUP_SIZE > 1u) v += subgroupShuffle(v, lane ^ 1u);
+    if (SUBGROUP_SIZE > 2u) v += subgroupShuffle(v, lane ^ 2u);
+    if (SUBGROUP_SIZE > 4u) v += subgroupShuffle(v, lane ^ 4u);
+    if (SUBGROUP_SIZE > 8u) v += subgroupShuffle(v, lane ^ 8u);
+    if (SUBGROUP_SIZE > 16u) v += subgroupShuffle(v, lane ^ 16u);
+    if (SUBGROUP_SIZE > 32u) v += subgroupShuffle(v, lane ^ 32u);
+    return v;
 }
 
 #endif

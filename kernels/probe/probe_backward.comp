@@ -21,9 +21,17 @@
 // and the assignment are specialization constants, as in the forward.
 #include "common.glsl"
 #include "probe.glsl"
-#include "subgroup_face.glsl"
 
 layout(local_size_x = 64) in;
+
+// Lanes of this subgroup in the 64-invocation workgroup (never a fixed number: 8 on llvmpipe
+// with AVX2, 32 on NVIDIA, 64 or 32 on AMD), and the words of its ballots.
+uint subgroup_lanes() {
+    return min(gl_SubgroupSize, 64u);
+}
+uint ballot_words() {
+    return (gl_SubgroupSize + 31u) / 32u;
+}
 
 // The tile and the anchor of every entry (`probe_mask_list.comp`).
 layout(std430, set = 0, binding = 0) readonly buffer ListTiles { uint list_tiles[]; };
@@ -74,7 +82,7 @@ void main() {
         v = views[view];
     }
 
-    uint lanes = subgroup_lanes(64u);
+    uint lanes = subgroup_lanes();
     uint lane = gl_SubgroupInvocationID;
     float sum = 0.0;
     bool todo = live;

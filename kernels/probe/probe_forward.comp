@@ -22,9 +22,17 @@
 // subgroup size; the workgroup is 64 invocations (a few subgroups on every device).
 #include "common.glsl"
 #include "probe.glsl"
-#include "subgroup_face.glsl"
 
 layout(local_size_x = 64) in;
+
+// Lanes of this subgroup in the 64-invocation workgroup (never a fixed number: 8 on llvmpipe
+// with AVX2, 32 on NVIDIA, 64 or 32 on AMD), and the words of its ballots.
+uint subgroup_lanes() {
+    return min(gl_SubgroupSize, 64u);
+}
+uint ballot_words() {
+    return (gl_SubgroupSize + 31u) / 32u;
+}
 
 layout(std430, set = 0, binding = 0) readonly buffer Rays { Ray rays[]; };
 layout(std430, set = 0, binding = 1) readonly buffer Views { ProbeView views[]; };
@@ -58,7 +66,7 @@ void main() {
     bool inside = r.label >= 0.5;
     uint tiles_per_view = pc.tiles_x * pc.tiles_y;
 
-    uint lanes = subgroup_lanes(64u);
+    uint lanes = subgroup_lanes();
     uint lane = gl_SubgroupInvocationID;
     Agg g = agg_init(MODE);
     bool todo = live;

@@ -61,7 +61,7 @@ void main() {
     vec2 lo = subgroupMin(edge);
     vec2 hi = subgroupMax(edge);
 
-    uint lanes = subgroup_lanes(64u);
+    uint lanes = subgroup_lanes();
     uint lane = gl_SubgroupInvocationID;
     PixelState s = pixel_init();
     for (uint start = range.x; start < range.y; start += lanes) {

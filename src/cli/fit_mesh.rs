@@ -16,7 +16,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use softvk::camera::{Camera, Projection};
 use softvk::fit::AdamOptions;
 use softvk::fit::io::{self, Silhouettes};
-use softvk::fit::mesh_fit::{FitLog, MeshFitOptions, default_template, demo_target, fit_mesh};
+use softvk::fit::mesh_fit::{
+    FitLog, MeshFitOptions, default_template, demo_target, fit_mesh, icosphere_template,
+};
 use softvk::fit::report::{self, GifWriter, Series};
 use softvk::gpu::{Context, ContextOptions};
 use softvk::lighting::Lighting;
@@ -104,9 +106,10 @@ pub struct FitMeshArgs {
     #[arg(long, value_name = "M.obj")]
     pub out: PathBuf,
 
-    /// Template to deform (default: a sphere generated in code). Scaled into (-0.5, 0.5)³
-    /// around its centre.
-    #[arg(long, value_name = "T.obj")]
+    /// Template to deform: an OBJ, scaled into (-0.5, 0.5)³ around its centre, or `icosphere`
+    /// for a 642-vertex icosphere of radius 0.5 (default: SoftRas's 1 352-vertex sphere × 0.5,
+    /// built in).
+    #[arg(long, value_name = "T.obj|icosphere")]
     pub template: Option<PathBuf>,
 
     /// Image size; must match the silhouettes (default: theirs).
@@ -363,6 +366,7 @@ pub fn run(args: &FitMeshArgs) -> Result<()> {
     }
     args.fit.options(sil.width, sil.height, FIT_ITERATIONS)?;
     let template = match &args.template {
+        Some(path) if path.as_os_str() == "icosphere" => icosphere_template(),
         Some(path) => normalize_template(Mesh::load_obj(path, 1)?),
         None => default_template(),
     };

@@ -133,10 +133,41 @@ pub struct MeshFitResult {
     pub params: Vec<f32>,
 }
 
-/// The template SoftRas's demo starts from, generated in code: an icosphere (3 subdivisions,
-/// 642 vertices) of radius 0.5, turned so that no coordinate is exactly zero (the
-/// parameterization keeps a zero coordinate at zero forever).
+/// SoftRas's deformation template, `sphere_1352.obj` (MIT; see `assets/README.md`), compiled in.
+const SOFTRAS_SPHERE_OBJ: &str = include_str!("../../assets/sphere_1352.obj");
+
+/// The template SoftRas's demo starts from: its 1 352-vertex sphere (2 700 faces) scaled by
+/// 0.5, as `demo_deform.py` does. It has no coordinate exactly 0 (the parameterization keeps a
+/// zero coordinate at zero forever).
 pub fn default_template() -> Mesh {
+    let options = tobj::LoadOptions {
+        triangulate: true,
+        single_index: false,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    let (models, _) = tobj::load_obj_buf(&mut SOFTRAS_SPHERE_OBJ.as_bytes(), &options, |_| {
+        Err(tobj::LoadError::OpenFileFailed)
+    })
+    .expect("the built-in sphere_1352.obj parses");
+    let m = &models[0].mesh;
+    let positions = m
+        .positions
+        .chunks_exact(3)
+        .map(|p| [p[0] * 0.5, p[1] * 0.5, p[2] * 0.5])
+        .collect();
+    let faces = m
+        .indices
+        .chunks_exact(3)
+        .map(|f| [f[0], f[1], f[2]])
+        .collect();
+    Mesh::new(positions, faces, 1).expect("the built-in sphere_1352.obj is a valid mesh")
+}
+
+/// The smaller template softvk used before (and `--template icosphere` selects): an icosphere
+/// (3 subdivisions, 642 vertices, 1 280 faces) of radius 0.5, turned so that no coordinate is
+/// exactly zero.
+pub fn icosphere_template() -> Mesh {
     let mut mesh = Mesh::icosphere(3);
     let rot = DMat3::from_euler(glam::EulerRot::XYZ, 0.31, 0.47, 0.13);
     for p in &mut mesh.positions {
@@ -264,6 +295,8 @@ impl<'c> Fitter<'c> {
         template.validate()?;
         let renderer = Renderer::new(ctx)?;
         let mut scene = renderer.prepare(ctx, template, cameras, &Lighting::unlit(), s)?;
+        // Silhouettes: alpha is all the loss reads.
+        scene.set_silhouette_only(true);
         let deform = Deform::new(ctx, &template.positions)?;
         let regs = Regularizers::new(ctx, &template.faces, template.vertex_count())?;
         let sil = SilhouetteLoss::new(ctx, views as u32, s.width, s.height)?;
@@ -304,7 +337,7 @@ impl<'c> Fitter<'c> {
             Method::Tiled { tile: opts.tile },
             capacity,
         )?;
-        // The silhouette loss differentiates alpha only.
+        // The silhouette loss differentiates alpha only (as the scene renders it).
         grads.set_alpha_only(true);
         Ok(Self {
             ctx,

@@ -219,7 +219,8 @@ impl Drop for Shared {
             if let Some(path) = &self.cache_path {
                 save_pipeline_cache(&self.device, self.pipeline_cache, path);
             }
-            self.device.destroy_pipeline_cache(self.pipeline_cache, None);
+            self.device
+                .destroy_pipeline_cache(self.pipeline_cache, None);
             std::mem::ManuallyDrop::drop(&mut self.allocator);
             if self.owns_device {
                 let _ = self.device.device_wait_idle();

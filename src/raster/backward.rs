@@ -47,7 +47,9 @@ use super::reference_grad::{
     self, Gradients, VertexFaces, camera_grad, lighting_grad_surface, lighting_grad_vertex,
 };
 use crate::error::{Error, Result};
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, specs};
+use crate::gpu::{
+    Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, specs,
+};
 
 /// Push constants of `grad_tiled.comp` and `grad_brute.comp`: the fine pass's, then the chunk.
 /// Twin of `Push` in `raster_fine.glsl` with `FINE_BACKWARD`.
@@ -441,20 +443,21 @@ impl GradBuffers {
         self.alpha_only = alpha_only;
     }
 
+    /// Whether the backward of `scene` differentiates alpha only: declared, or a silhouette
+    /// render (which has no colour to differentiate).
+    fn alpha_only(&self, scene: &GpuScene) -> bool {
+        self.alpha_only || scene.silhouette_only
+    }
+
     /// The fine kernels' modes for this backward of `scene`.
     fn modes(&self, scene: &GpuScene) -> FineModes {
-        let modes = FineModes::new(&scene.settings, true);
-        if self.alpha_only {
-            modes.alpha_only()
-        } else {
-            modes
-        }
+        FineModes::new(&scene.settings, true).alpha_only_if(self.alpha_only(scene))
     }
 
     /// What the tiled kernel does per face besides the screen sums.
     fn color_work(&self, scene: &GpuScene) -> ColorWork {
         match scene.settings.color_mode {
-            _ if self.alpha_only => ColorWork::None,
+            _ if self.alpha_only(scene) => ColorWork::None,
             ColorMode::Vertex => ColorWork::Vertex,
             ColorMode::Surface => ColorWork::Texels,
         }
@@ -631,7 +634,7 @@ impl GradKernels {
         };
         let kernel = self
             .brute
-            .get(rec.context(), &gb.modes(scene).constants())?;
+            .get(rec.context(), &gb.modes(scene).constants(rec.context()))?;
         let mut begin = 0;
         while begin < units {
             let end = units.min(begin + gb.chunk_units);
@@ -680,7 +683,7 @@ impl GradKernels {
         let limit = rec.context().info().shader_loop_limit();
         let kernel = self
             .tiled
-            .get(rec.context(), &gb.modes(scene).constants())?;
+            .get(rec.context(), &gb.modes(scene).constants(rec.context()))?;
         for (group, bins) in scene.groups.iter().zip(&scene.bins) {
             if group.entries == 0 {
                 // No face touches these views: their gradients stay zero.

@@ -56,6 +56,7 @@ impl BruteRaster {
     /// Records the fine pass over a `width × height` image per view (the *rendered* size: pass
     /// 2× the output size with anti-aliasing, then [`BruteRaster::record_downsample`]).
     ///
+    /// `silhouette_only` renders alpha alone ([`crate::raster::gpu::GpuScene::set_silhouette_only`]).
     /// `cull` skips faces whose grown box excludes the pixel, as SoftRas and the reference's
     /// `render` do; the box is conservative, so it changes no pixel (a test checks this bit for
     /// bit), and the tiled kernels skip exactly what binning skips.
@@ -72,6 +73,7 @@ impl BruteRaster {
         vertex_count: u32,
         texture_res: u32,
         cull: bool,
+        silhouette_only: bool,
     ) -> Result<()> {
         let pixels = u64::from(width) * u64::from(height) * u64::from(view_count);
         let need = |what: &str, range: &BufferRange<'_>, bytes: u64| {
@@ -116,9 +118,12 @@ impl BruteRaster {
             vertex_count,
             texture_res,
         );
-        let kernel = self
-            .raster
-            .get(rec.context(), &FineModes::new(settings, cull).constants())?;
+        let kernel = self.raster.get(
+            rec.context(),
+            &FineModes::new(settings, cull)
+                .alpha_only_if(silhouette_only)
+                .constants(rec.context()),
+        )?;
         let groups = pixels.div_ceil(u64::from(specs::RASTER_BRUTE.workgroup_size[0]));
         rec.dispatch(
             &kernel,

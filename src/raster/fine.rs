@@ -120,16 +120,41 @@ impl FineModes {
         }
     }
 
-    /// The backward's modes for an upstream gradient with no RGB part: the colour terms are left
-    /// out ([`crate::raster::GradBuffers::set_alpha_only`]).
-    pub fn alpha_only(mut self) -> Self {
-        self.flags |= FLAG_ALPHA_ONLY;
+    /// Alpha only, if `alpha_only`: the forward renders no colour
+    /// ([`crate::raster::gpu::GpuScene::set_silhouette_only`]) and the backward leaves out the
+    /// colour terms of an upstream gradient with no RGB part
+    /// ([`crate::raster::backward::GradBuffers::set_alpha_only`]).
+    pub fn alpha_only_if(mut self, alpha_only: bool) -> Self {
+        if alpha_only {
+            self.flags |= FLAG_ALPHA_ONLY;
+        }
         self
     }
 
-    /// The specialization constants, by `constant_id`.
-    pub fn constants(&self) -> [u32; 4] {
-        [self.dist, self.rgb, self.alpha, self.flags]
+    /// The specialization constants, by `constant_id`: the modes, then the subgroup size the
+    /// tiled kernels may rely on ([`known_subgroup_size`]).
+    pub fn constants(&self, ctx: &Context) -> [u32; 5] {
+        [
+            self.dist,
+            self.rgb,
+            self.alpha,
+            self.flags,
+            known_subgroup_size(ctx),
+        ]
+    }
+}
+
+/// The subgroup size the 64-invocation tiled kernels are specialized for (`SUBGROUP_SIZE` in
+/// `kernels/include/subgroup_face.glsl`), or 0 to let them read `gl_SubgroupSize`. The device's
+/// `subgroupSize` is what a SPIR-V 1.5 compute pipeline without subgroup-size control sees, so
+/// it is known whenever it is a power of two that divides the workgroup (the lanes then form
+/// whole subgroups, which the butterfly sums need).
+pub(crate) fn known_subgroup_size(ctx: &Context) -> u32 {
+    let size = ctx.info().subgroup_size;
+    if size.is_power_of_two() && size <= 64 {
+        size
+    } else {
+        0
     }
 }
 
@@ -245,6 +270,7 @@ impl TiledRaster {
         view_count: u32,
         vertex_count: u32,
         texture_res: u32,
+        silhouette_only: bool,
     ) -> Result<()> {
         check_tile_size(grid.tile_size)?;
         let last = u64::from(first_view) + u64::from(view_count);
@@ -275,9 +301,12 @@ impl TiledRaster {
             vertex_count,
             texture_res,
         );
-        let kernel = self
-            .kernel
-            .get(rec.context(), &FineModes::new(settings, true).constants())?;
+        let kernel = self.kernel.get(
+            rec.context(),
+            &FineModes::new(settings, true)
+                .alpha_only_if(silhouette_only)
+                .constants(rec.context()),
+        )?;
         push.first_view = first_view;
         push.tile_size = grid.tile_size;
         push.tiles_x = grid.tiles_x;

@@ -126,6 +126,8 @@ pub struct GpuScene {
     pub(crate) groups: Vec<ViewGroup>,
     /// The tile size of the last tiled render.
     pub(crate) tile: Option<u32>,
+    /// Render alpha only ([`GpuScene::set_silhouette_only`]).
+    pub(crate) silhouette_only: bool,
     /// The batch's meshes in f64, the lighting and the views, for the backward's host share.
     pub(crate) meshes: Vec<MeshF64>,
     pub(crate) lighting: Lighting,
@@ -152,6 +154,71 @@ pub struct ViewGroup {
 fn subgroup_lanes(subgroup: u32) -> (u64, u64) {
     let lanes = u64::from(subgroup.clamp(1, 64));
     (lanes, u64::from(subgroup.max(1)).div_ceil(32))
+}
+
+/// The (pixel, face) pairs of one render's fine passes ([`GpuScene::pair_counts`]): what per
+/// pair costs mean (ns per visited pair) independently of how fast the device is.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PairCounts {
+    /// Every pixel of a tile times the faces binned to it (tiled), or every pixel times every
+    /// face (brute force).
+    pub binned: u64,
+    /// Pairs the forward's fine kernel shades: tiled, for each subgroup of a block's pixels,
+    /// its lanes times the binned faces whose box touches the box of its pixel centres (the
+    /// rest are skipped by the ballot); brute force, all.
+    pub forward: u64,
+    /// Pairs the backward's fine kernel evaluates where no upstream pixel is zero (zero ones
+    /// are skipped too): tiled, for each batch of a subgroup's lanes' faces and each segment of
+    /// as many of the tile's pixels, the lanes times the batch's faces that touch the segment;
+    /// brute force, all.
+    pub backward: u64,
+    /// Pairs whose pixel centre lies in the face's grown box: the ones that can contribute.
+    pub accepted: u64,
+}
+
+/// The pixel centres of a `width × height` image in f32, as the kernels compute them.
+struct PixelCenters {
+    x: Vec<f32>,
+    y: Vec<f32>,
+}
+
+impl PixelCenters {
+    fn new(width: u32, height: u32) -> Self {
+        let (w, h) = (width as f32, height as f32);
+        let s = w.min(h);
+        Self {
+            x: (0..width).map(|c| (2.0 * c as f32 + 1.0 - w) / s).collect(),
+            y: (0..height)
+                .map(|r| (2.0 * (h - 1.0 - r as f32) + 1.0 - h) / s)
+                .collect(),
+        }
+    }
+
+    /// Pixel centres inside `b` (`outside_bbox` false). `x` increases with the column and `y`
+    /// decreases with the row.
+    fn inside(&self, b: [f32; 4]) -> u64 {
+        let cols = (self.x.partition_point(|&x| x <= b[2]))
+            .saturating_sub(self.x.partition_point(|&x| x < b[0]));
+        let rows = (self.y.partition_point(|&y| y >= b[1]))
+            .saturating_sub(self.y.partition_point(|&y| y > b[3]));
+        (cols * rows) as u64
+    }
+
+    /// The box of the centres of `pixels` (col, row), if any.
+    fn hull(&self, pixels: &[(u32, u32)]) -> Option<[f32; 4]> {
+        let mut it = pixels
+            .iter()
+            .map(|&(c, r)| (self.x[c as usize], self.y[r as usize]));
+        let (x, y) = it.next()?;
+        Some(it.fold([x, y, x, y], |b, (x, y)| {
+            [b[0].min(x), b[1].min(y), b[2].max(x), b[3].max(y)]
+        }))
+    }
+}
+
+/// Whether face box `f` can hold a pixel centre of box `p` (the kernels' ballot test).
+fn boxes_touch(f: [f32; 4], p: [f32; 4]) -> bool {
+    !(p[2] < f[0] || p[3] < f[1] || p[0] > f[2] || p[1] > f[3])
 }
 
 /// Loop iterations one invocation of `raster_tiled.comp` runs for a tile of `run` faces with
@@ -188,7 +255,8 @@ pub(crate) fn tiled_backward_iterations(
 ) -> u64 {
     let (lanes, words) = subgroup_lanes(subgroup);
     let segments = (u64::from(tile) * u64::from(tile)).div_ceil(lanes);
-    let per_face = 1 + 3
+    let per_face = 1
+        + 3
         + match color {
             ColorWork::None => 0,
             ColorWork::Vertex => 3,
@@ -271,6 +339,20 @@ impl GpuScene {
         self.face_count
     }
 
+    /// Renders alpha only from now on (silhouettes, as fits from masks need): the fine passes
+    /// leave out depth, colour and the softmax, the image's RGB is the background and the aux's
+    /// colour fields keep their initial values, while alpha and its aux fields are the same
+    /// bits as a full render's. The backward of such a scene differentiates alpha only (see
+    /// [`crate::raster::backward::GradBuffers::set_alpha_only`]).
+    pub fn set_silhouette_only(&mut self, silhouette_only: bool) {
+        self.silhouette_only = silhouette_only;
+    }
+
+    /// Whether only alpha is rendered ([`GpuScene::set_silhouette_only`]).
+    pub fn silhouette_only(&self) -> bool {
+        self.silhouette_only
+    }
+
     /// The (face, tile) entries of the last tiled render, over all view groups.
     pub fn binned_entries(&self) -> u64 {
         self.groups.iter().map(|g| g.entries).sum()
@@ -306,6 +388,102 @@ impl GpuScene {
                 u64::from(r[1] - r[0]) * u64::from(w * h)
             })
             .sum())
+    }
+
+    /// How many (pixel, face) pairs the last run's fine passes bin, visit and accept
+    /// ([`PairCounts`]), counted on the host from the setups and bins read back, by the
+    /// kernels' own rules for this device's subgroup size. Tiled needs the last run to have
+    /// binned every view in one group with this tile size.
+    pub fn pair_counts(&self, ctx: &Context, method: Method) -> Result<PairCounts> {
+        let (w, h) = (self.width, self.height);
+        let faces = self.face_count as usize;
+        let views = self.view_count as usize;
+        let setups: Vec<GpuFaceSetup> = ctx.read_buffer(&self.setups, 0, faces * views)?;
+        let centers = PixelCenters::new(w, h);
+        // Pairs whose pixel lies in the face's box: the box test's (`outside_bbox`) passes.
+        let accepted = setups
+            .iter()
+            .filter(|f| f.flags & FACE_FINITE != 0)
+            .map(|f| centers.inside(f.bbox))
+            .sum();
+        let pixels = u64::from(w) * u64::from(h) * views as u64;
+        let Method::Tiled { tile } = method else {
+            let all = pixels * faces as u64;
+            return Ok(PairCounts {
+                binned: all,
+                forward: all,
+                backward: all,
+                accepted,
+            });
+        };
+        if self.tile != Some(tile) || self.groups.len() != 1 {
+            return Err(Error::Input(
+                "pair_counts needs a previous tiled run with this tile size in one view group"
+                    .into(),
+            ));
+        }
+        let grid = self.grid(tile)?;
+        let per_view = grid.tiles_per_view() as usize;
+        let ranges: Vec<[u32; 2]> = ctx.read_buffer(self.bins[0].ranges(), 0, per_view * views)?;
+        let total = ranges.iter().map(|r| r[1]).max().unwrap_or(0) as usize;
+        let entries: Vec<u32> = ctx.read_buffer(self.bins[0].entries(), 0, total)?;
+        let items: Vec<u32> = ctx.read_buffer(self.bins[0].entry_items(), 0, total)?;
+        let lanes = ctx.info().subgroup_size.clamp(1, 64);
+        let mut counts = PairCounts {
+            accepted,
+            ..PairCounts::default()
+        };
+        for (t, r) in ranges.iter().enumerate() {
+            let view = t / per_view;
+            let in_view = (t % per_view) as u32;
+            let (x0, y0) = (
+                (in_view % grid.tiles_x) * tile,
+                (in_view / grid.tiles_x) * tile,
+            );
+            let run: Vec<&GpuFaceSetup> = (r[0] as usize..r[1] as usize)
+                .map(|k| &setups[view * faces + items[entries[k] as usize] as usize])
+                .collect();
+            let tile_w = (w - x0).min(tile);
+            let tile_h = (h - y0).min(tile);
+            counts.binned += run.len() as u64 * u64::from(tile_w * tile_h);
+            let touching = |faces: &[&GpuFaceSetup], pixels: &[(u32, u32)]| -> u64 {
+                let Some(b) = centers.hull(pixels) else {
+                    return 0;
+                };
+                faces
+                    .iter()
+                    .filter(|f| f.flags & FACE_FINITE != 0 && boxes_touch(f.bbox, b))
+                    .count() as u64
+            };
+            // Forward: per 8×8 block of the tile, per subgroup of its 64 pixels (row-major, edge
+            // pixels clamped into the image), the faces whose box touches the subgroup's.
+            for by in (y0..y0 + tile).step_by(8).filter(|&y| y < h) {
+                for bx in (x0..x0 + tile).step_by(8).filter(|&x| x < w) {
+                    for first in (0..64).step_by(lanes as usize) {
+                        let group: Vec<(u32, u32)> = (first..first + lanes.min(64))
+                            .map(|i| ((bx + i % 8).min(w - 1), (by + i / 8).min(h - 1)))
+                            .collect();
+                        counts.forward += u64::from(lanes) * touching(&run, &group);
+                    }
+                }
+            }
+            // Backward: per batch of `lanes` faces, per segment of `lanes` pixels of the tile
+            // (row-major, those in the image), the batch's faces whose box touches the segment.
+            let tile_pixels: Vec<(u32, u32)> = (0..tile * tile)
+                .map(|i| (x0 + i % tile, y0 + i / tile))
+                .collect();
+            for batch in run.chunks(lanes as usize) {
+                for segment in tile_pixels.chunks(lanes as usize) {
+                    let inside: Vec<(u32, u32)> = segment
+                        .iter()
+                        .copied()
+                        .filter(|&(c, r)| c < w && r < h)
+                        .collect();
+                    counts.backward += u64::from(lanes) * touching(batch, &inside);
+                }
+            }
+        }
+        Ok(counts)
     }
 
     /// The output image buffer (RGBA per output pixel, view-major): the 2×2 average with
@@ -513,6 +691,7 @@ impl Renderer {
             bins: Vec::new(),
             groups: Vec::new(),
             tile: None,
+            silhouette_only: false,
             meshes: meshes.iter().map(MeshF64::from_mesh).collect(),
             lighting: lighting.clone(),
             views_host: views.to_vec(),
@@ -555,6 +734,7 @@ impl Renderer {
                 scene.vertex_count,
                 scene.texture_res,
                 cull,
+                scene.silhouette_only,
             )
         })
     }
@@ -607,6 +787,7 @@ impl Renderer {
                 views,
                 scene.vertex_count,
                 scene.texture_res,
+                scene.silhouette_only,
             )
         })
     }
