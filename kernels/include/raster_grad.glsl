@@ -74,12 +74,8 @@ Upstream load_upstream(uint view, uint col, uint row) {
 float alpha_grad(Upstream u, float d) {
     if (MODE_ALPHA == ALPHA_PROD) {
         float factor = 1.0 - d;
-        float others = 0.0;
-        if (factor == 0.0) {
-            others = u.alpha_zeros == 1u ? u.alpha_acc : 0.0;
-        } else if (u.alpha_zeros == 0u) {
-            others = u.alpha_acc / factor;
-        }
+        float others = factor == 0.0 ? (u.alpha_zeros == 1u ? u.alpha_acc : 0.0)
+                                     : (u.alpha_zeros == 0u ? u.alpha_acc / factor : 0.0);
         return u.d_alpha * others;
     }
     if (MODE_ALPHA == ALPHA_SUM) {
@@ -115,7 +111,10 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
     g.texel = 0u;
     g.colored = false;
     vec2 p = u.p;
-    if ((f.flags & FACE_FINITE) == 0u || outside_bbox(f.bbox, p)) {
+    // With an alpha-only upstream the whole step is branch-free (on llvmpipe a branch skips
+    // nothing and costs masked stores): an untouched face's numbers are computed and discarded.
+    bool live = (f.flags & FACE_FINITE) != 0u && !outside_bbox(f.bbox, p);
+    if (!ALPHA_ONLY && !live) {
         return false;
     }
     vec3 w = barycentric(f, p);
@@ -127,7 +126,8 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
     float t = 0.0;
     float d2 = MODE_DIST == DIST_EUCLIDEAN ? nearest_edge(f, p, ea_pos, edge, ea, eb, t) : 0.0;
     float d;
-    if (!coverage_from(d2, w, MODE_DIST, pc.sigma, pc.cutoff, d)) {
+    bool hit = coverage_from(d2, w, MODE_DIST, pc.sigma, pc.cutoff, d) && live;
+    if (!ALPHA_ONLY && !hit) {
         return false;
     }
     vec3 wc = clip_barycentric(w);
@@ -194,7 +194,7 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
 
     // Coverage.
     vec2 d_xy_cov[3] = vec2[3](vec2(0.0), vec2(0.0), vec2(0.0));
-    if (d_cov != 0.0) {
+    if (ALPHA_ONLY || d_cov != 0.0) {
         if (MODE_DIST == DIST_BARYCENTRIC) {
             uint k = 0u;
             if (w[1] < w[k]) k = 1u;
@@ -243,7 +243,7 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
     for (uint k = 0u; k < 3u; ++k) {
         g.screen[k].xy += d_xy[k] + d_xy_cov[k];
     }
-    return true;
+    return hit;
 }
 
 #endif
