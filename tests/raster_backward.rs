@@ -789,7 +789,11 @@ fn alpha_only_backwards_equal_the_full_backward_for_an_alpha_upstream() {
             let s = RasterSettings {
                 dist,
                 alpha,
-                rgb: if alpha == Alpha::Sum { Rgb::Hard } else { Rgb::Softmax },
+                rgb: if alpha == Alpha::Sum {
+                    Rgb::Hard
+                } else {
+                    Rgb::Softmax
+                },
                 ..settings(w as u32, h as u32)
             };
             for method in [Method::Brute, Method::Tiled { tile: 8 }] {
@@ -804,7 +808,8 @@ fn alpha_only_backwards_equal_the_full_backward_for_an_alpha_upstream() {
                 gb.set_alpha_only(true);
                 gb.set_d_image(&gpu, &full, &alpha_upstream).unwrap();
                 let k = r.grad_kernels();
-                gpu.submit_and_wait(|rec| k.record(rec, &full, &gb)).unwrap();
+                gpu.submit_and_wait(|rec| k.record(rec, &full, &gb))
+                    .unwrap();
                 let declared = k.finish(&gpu, &full, &gb, false).unwrap();
                 assert!(values(&declared) == values(&want), "{what}: declared");
                 // A silhouette render's backward.

@@ -1346,7 +1346,11 @@ fn silhouette_renders_have_the_full_renders_alpha() {
                 sigma: 3e-3,
                 dist,
                 alpha,
-                rgb: if checked % 2 == 0 { Rgb::Softmax } else { Rgb::Hard },
+                rgb: if checked % 2 == 0 {
+                    Rgb::Softmax
+                } else {
+                    Rgb::Hard
+                },
                 background: [0.25, 0.5, 0.75],
                 antialias: checked % 3 == 0,
                 ..RasterSettings::default()
@@ -1370,7 +1374,10 @@ fn silhouette_renders_have_the_full_renders_alpha() {
                     assert_eq!(a.alpha_acc.to_bits(), b.alpha_acc.to_bits(), "{what}");
                     assert_eq!(a.alpha_zeros, b.alpha_zeros, "{what}");
                 }
-                assert!(full.images.iter().any(|p| p[3] > 0.0), "{what}: nothing drawn");
+                assert!(
+                    full.images.iter().any(|p| p[3] > 0.0),
+                    "{what}: nothing drawn"
+                );
                 checked += 1;
             }
         }
