@@ -225,3 +225,64 @@ fn guarded_binning_equals_the_twin_at_any_capacity_that_holds_the_count() {
         }
     }
 }
+
+/// A counted sort (the count in a GPU buffer) sorts exactly the first `count` pairs and leaves
+/// the rest where they were, for odd and even pass counts, counts inside, at and past a block
+/// boundary, zero, and a count over the capacity (clamped to it).
+#[test]
+fn counted_sort_sorts_the_count_and_keeps_the_tail() {
+    use softvk::primitives::SortScratch;
+    use softvk::primitives::sort::{join_key, split_key};
+    let Some(gpu) = common::gpu() else { return };
+    let sort = RadixSort::new(&gpu).unwrap();
+    let mut rng = common::rng(21);
+    let cap = 3 * 4096 + 77;
+    for (count, key_bits) in [
+        (0u32, 8u32),
+        (1, 4),
+        (4095, 12),
+        (4096, 13),
+        (9000, 13),
+        (cap as u32, 9),
+        (u32::MAX, 16),
+    ] {
+        let keys: Vec<u64> = (0..cap).map(|_| rng.random::<u64>()).collect();
+        let values: Vec<u32> = (0..cap as u32).map(|v| v ^ 0x5a5a).collect();
+        let words: Vec<[u32; 2]> = keys.iter().map(|&k| split_key(k)).collect();
+        let key_buf = gpu.upload_buffer("keys", &words).unwrap();
+        let value_buf = gpu.upload_buffer("values", &values).unwrap();
+        let count_buf = gpu.upload_buffer("count", &[count]).unwrap();
+        let scratch = SortScratch::new(&gpu, cap as u64).unwrap();
+        gpu.submit_and_wait(|rec| {
+            sort.record_counted(
+                rec,
+                &scratch,
+                &key_buf,
+                &value_buf,
+                cap as u64,
+                count_buf.whole(),
+                key_bits,
+            )
+        })
+        .unwrap();
+        let got_keys: Vec<u64> = gpu
+            .read_buffer::<[u32; 2]>(&key_buf, 0, cap)
+            .unwrap()
+            .into_iter()
+            .map(join_key)
+            .collect();
+        let got_values: Vec<u32> = gpu.read_buffer(&value_buf, 0, cap).unwrap();
+        let c = (count as usize).min(cap);
+        let (mut want_keys, mut want_values) = sort_pairs(&keys[..c], &values[..c], key_bits);
+        want_keys.extend_from_slice(&keys[c..]);
+        want_values.extend_from_slice(&values[c..]);
+        assert!(
+            got_keys == want_keys,
+            "keys, count {count}, {key_bits} bits"
+        );
+        assert!(
+            got_values == want_values,
+            "values, count {count}, {key_bits} bits"
+        );
+    }
+}

@@ -17,12 +17,16 @@ layout(std430, set = 0, binding = 2) writeonly buffer KeysOut { uvec2 keys_out[]
 layout(std430, set = 0, binding = 3) writeonly buffer ValsOut { uint vals_out[]; };
 // Exclusive scan of radix_count's histogram (digit-major).
 layout(std430, set = 0, binding = 4) readonly buffer Offsets { uint offsets[]; };
+// Counted sorts: the number of pairs to sort, at most `n` (read only when `counted` is set).
+layout(std430, set = 0, binding = 5) readonly buffer Count { uint count[]; };
 
 layout(push_constant) uniform Push {
-    uint n;
+    uint n;          // pairs (counted: the capacity)
     uint shift;
     uint n_blocks;
     uint digit_mask;
+    uint counted;    // 1: sort only the first min(n, count[0]) pairs; the rest stay in place
+    uint copy_tail;  // counted: copy the pairs past the count through to the output
 } pc;
 
 shared uvec4 scan_lo[WG_SIZE]; // packed counters of digits 0..7
@@ -35,11 +39,25 @@ uint packed_get(uvec4 lo, uvec4 hi, uint digit) {
 
 void main() {
     uint block = linear_group_id();
-    if (block * BLOCK >= pc.n) {
+    if (block >= pc.n_blocks) {
         return; // surplus group of a folded 2D grid (uniform: the whole workgroup leaves)
     }
+    uint n = pc.counted != 0u ? min(pc.n, count[0]) : pc.n;
     uint lid = gl_LocalInvocationIndex;
     uint base = block * BLOCK + lid * ITEMS;
+    if (pc.copy_tail != 0u) {
+        // Pairs past the count keep their places (in the output too).
+        for (uint k = 0; k < ITEMS; ++k) {
+            uint i = base + k;
+            if (i >= n && i < pc.n) {
+                keys_out[i] = keys_in[i];
+                vals_out[i] = vals_in[i];
+            }
+        }
+    }
+    if (block * BLOCK >= n) {
+        return; // uniform: the whole block is past the count
+    }
 
     uvec2 key[ITEMS];
     uint val[ITEMS];
@@ -48,7 +66,7 @@ void main() {
     uvec4 lo = uvec4(0), hi = uvec4(0);
     for (uint k = 0; k < ITEMS; ++k) {
         uint i = base + k;
-        if (i < pc.n) {
+        if (i < n) {
             key[k] = keys_in[i];
             val[k] = vals_in[i];
             uint d = key_digit(key[k], pc.shift, pc.digit_mask);
@@ -83,7 +101,7 @@ void main() {
 
     for (uint k = 0; k < ITEMS; ++k) {
         uint i = base + k;
-        if (i < pc.n) {
+        if (i < n) {
             uint d = digit[k];
             uint dst = offsets[d * pc.n_blocks + block] + packed_get(before_lo, before_hi, d)
                 + rank_in_chunk[k];

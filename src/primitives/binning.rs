@@ -572,12 +572,14 @@ impl Binner {
                 groups as u32,
             )?;
         }
-        self.sort.record(
+        // Only the counted entries need sorting: the sentinels after them are already last.
+        self.sort.record_counted(
             rec,
             &bins.sort_scratch,
             &bins.keys,
             &bins.pairs,
             cap,
+            bins.total_buffer().range(0, 4),
             job.padded_key_bits(),
         )?;
         let push = RangesPush {

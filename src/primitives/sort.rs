@@ -9,7 +9,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::scan::{Scan, ScanScratch};
 use crate::error::{Error, Result};
-use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
 
 /// Bits sorted per pass (mirrors `RADIX_BITS` in `kernels/include/radix_config.glsl`).
 pub const RADIX_BITS: u32 = 4;
@@ -25,6 +25,8 @@ struct RadixPush {
     shift: u32,
     n_blocks: u32,
     digit_mask: u32,
+    counted: u32,
+    copy_tail: u32,
 }
 
 /// The sort's pipelines, made once per context.
@@ -99,6 +101,46 @@ impl RadixSort {
         n: u64,
         key_bits: u32,
     ) -> Result<()> {
+        self.record_inner(rec, scratch, keys, values, n, key_bits, None)
+    }
+
+    /// As [`RadixSort::record`] for a count only the GPU knows: sorts the first
+    /// `min(capacity, count[0])` pairs (`count`: a u32 written by earlier GPU work, e.g. a scan's
+    /// total) and leaves the pairs after them where they are. The dispatches are sized for
+    /// `capacity`; the blocks past the count only write zero digit counts (and, in the first
+    /// pass, copy their pairs through to the ping-pong buffers, so every pass count ends with
+    /// the tail in place).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_counted(
+        &self,
+        rec: &mut Recorder<'_>,
+        scratch: &SortScratch,
+        keys: &Buffer,
+        values: &Buffer,
+        capacity: u64,
+        count: BufferRange<'_>,
+        key_bits: u32,
+    ) -> Result<()> {
+        if count.size < 4 {
+            return Err(Error::Limit(format!(
+                "sort count buffer `{}` holds no u32",
+                count.buffer.name()
+            )));
+        }
+        self.record_inner(rec, scratch, keys, values, capacity, key_bits, Some(count))
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn record_inner(
+        &self,
+        rec: &mut Recorder<'_>,
+        scratch: &SortScratch,
+        keys: &Buffer,
+        values: &Buffer,
+        n: u64,
+        key_bits: u32,
+        count: Option<BufferRange<'_>>,
+    ) -> Result<()> {
         if n > scratch.capacity {
             return Err(Error::Limit(format!(
                 "sort of {n} pairs exceeds its scratch capacity {}",
@@ -133,10 +175,14 @@ impl RadixSort {
                 shift,
                 n_blocks: n_blocks as u32,
                 digit_mask: (1 << digit_bits) - 1,
+                counted: u32::from(count.is_some()),
+                copy_tail: u32::from(count.is_some() && pass == 0),
             };
+            // Without a count, any buffer binds there (it is not read).
+            let count_range = count.unwrap_or(counts);
             rec.dispatch(
                 &self.count,
-                &[src.0.range(0, 8 * n), counts],
+                &[src.0.range(0, 8 * n), counts, count_range],
                 &push,
                 n_blocks as u32,
             )?;
@@ -150,6 +196,7 @@ impl RadixSort {
                     dst.0.range(0, 8 * n),
                     dst.1.range(0, 4 * n),
                     counts,
+                    count_range,
                 ],
                 &push,
                 n_blocks as u32,
@@ -229,7 +276,8 @@ mod tests {
         assert_eq!(size, specs::RADIX_COUNT.push_constant_size);
         assert_eq!(size, specs::RADIX_SCATTER.push_constant_size);
         assert_eq!(specs::RADIX_SCATTER.workgroup_size[0] * 16, SORT_BLOCK);
-        assert_eq!(specs::RADIX_SCATTER.bindings.len(), 5);
+        assert_eq!(specs::RADIX_SCATTER.bindings.len(), 6);
+        assert_eq!(specs::RADIX_COUNT.bindings.len(), 3);
     }
 
     #[test]
