@@ -40,7 +40,6 @@ use softvk::fit::AdamOptions;
 use softvk::fit::field_fit::{FieldFitOptions, auto_cube, fit_field, scaled_to_cube};
 use softvk::fit::io::Silhouettes;
 use softvk::gpu::{Context, ContextOptions};
-use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
 use softvk::probe::{Aggregate, ProbeSettings, Targets};
 use softvk::raster::gpu::{Method, Renderer};
@@ -145,19 +144,8 @@ fn render_masks(ctx: &Context, mesh: &Mesh, cams: &[Camera], size: u32) -> Vec<f
     };
     Renderer::new(ctx)
         .unwrap()
-        .render_views(
-            ctx,
-            mesh,
-            cams,
-            &Lighting::unlit(),
-            &hard,
-            Method::default(),
-        )
+        .render_silhouettes(ctx, mesh, cams, &hard, Method::default())
         .unwrap()
-        .images
-        .iter()
-        .map(|p| p[3])
-        .collect()
 }
 
 /// The problem: targets and the object's occupancy at `eval_res` in the cube.

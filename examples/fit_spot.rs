@@ -14,7 +14,6 @@ use softvk::field::voxel::{iou, visual_hull, voxelize_mesh};
 use softvk::fit::io::{Silhouettes, write_obj};
 use softvk::fit::mesh_fit::{MeshFitOptions, default_template, fit_mesh};
 use softvk::gpu::{Context, ContextOptions};
-use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
 use softvk::raster::gpu::{Method, Renderer};
 use softvk::raster::reference::{Alpha, Dist, RasterSettings};
@@ -40,19 +39,8 @@ fn silhouettes(ctx: &Context, mesh: &Mesh, cams: &[Camera], size: u32) -> Vec<f3
     };
     Renderer::new(ctx)
         .unwrap()
-        .render_views(
-            ctx,
-            mesh,
-            cams,
-            &Lighting::unlit(),
-            &hard,
-            Method::default(),
-        )
+        .render_silhouettes(ctx, mesh, cams, &hard, Method::default())
         .unwrap()
-        .images
-        .iter()
-        .map(|p| p[3])
-        .collect()
 }
 
 fn ious(a: &[f32], b: &[f32], px: usize) -> Vec<f64> {

@@ -552,15 +552,7 @@ impl Samples {
 
     /// The medians.
     fn timing(&self) -> Timing {
-        Timing {
-            gpu_ms: median(&self.gpu_ms),
-            wall_ms: median(&self.wall_ms).unwrap_or(f64::NAN),
-            passes: self
-                .passes
-                .iter()
-                .filter_map(|(name, series)| Some((name.clone(), median(series)?)))
-                .collect(),
-        }
+        Timing::medians(&self.gpu_ms, &self.wall_ms, &self.passes)
     }
 }
 
@@ -641,6 +633,21 @@ struct Timing {
     gpu_ms: Option<f64>,
     wall_ms: f64,
     passes: Vec<(String, f64)>,
+}
+
+impl Timing {
+    /// The medians of GPU and wall times and of each pass's series (a pass without samples is
+    /// left out).
+    fn medians(gpu_ms: &[f64], wall_ms: &[f64], passes: &[(String, Vec<f64>)]) -> Timing {
+        Timing {
+            gpu_ms: median(gpu_ms),
+            wall_ms: median(wall_ms).unwrap_or(f64::NAN),
+            passes: passes
+                .iter()
+                .filter_map(|(name, series)| Some((name.clone(), median(series)?)))
+                .collect(),
+        }
+    }
 }
 
 /// Times one scene with brute force (`brute`: its timed submissions, if any) and every tile size.
@@ -1139,19 +1146,8 @@ fn run_field_fit(
         alpha: crate::raster::reference::Alpha::Hard,
         ..RasterSettings::default()
     };
-    let masks: Vec<f32> = Renderer::new(ctx)?
-        .render_views(
-            ctx,
-            &spot,
-            &cameras,
-            &Lighting::unlit(),
-            &hard,
-            Method::default(),
-        )?
-        .images
-        .iter()
-        .map(|p| p[3])
-        .collect();
+    let masks: Vec<f32> =
+        Renderer::new(ctx)?.render_silhouettes(ctx, &spot, &cameras, &hard, Method::default())?;
     let targets = Targets::new(&cameras, size, size, masks)?;
     let cube = auto_cube(&targets, crate::fit::field_fit::DEFAULT_CUBE_MARGIN)?;
     let defaults = FieldFitOptions::default();
@@ -1223,14 +1219,7 @@ fn run_field_fit(
             }
         }
     }
-    let timing = Timing {
-        gpu_ms: median(&gpu),
-        wall_ms: median(&wall).unwrap_or(f64::NAN),
-        passes: passes
-            .iter()
-            .filter_map(|(n, series)| Some((n.clone(), median(series)?)))
-            .collect(),
-    };
+    let timing = Timing::medians(&gpu, &wall, &passes);
     progress(&format!(
         "{name} fit-iteration: {entries} entries; {}",
         summary(&timing, opts.repeat)
@@ -1350,19 +1339,13 @@ pub fn run_fit(
             rgb: Rgb::Hard,
             ..s
         };
-        let targets: Vec<f32> = Renderer::new(ctx)?
-            .render_views(
-                ctx,
-                &demo_target(),
-                &cameras,
-                &Lighting::unlit(),
-                &hard,
-                Method::default(),
-            )?
-            .images
-            .iter()
-            .map(|p| p[3])
-            .collect();
+        let targets: Vec<f32> = Renderer::new(ctx)?.render_silhouettes(
+            ctx,
+            &demo_target(),
+            &cameras,
+            &hard,
+            Method::default(),
+        )?;
         let mut fitter = Fitter::new(ctx, &template, &cameras, &targets, &fit_opts)?;
         let method = Method::Tiled {
             tile: fit_opts.tile,
@@ -1425,14 +1408,7 @@ pub fn run_fit(
                 }
             }
         }
-        let timing = Timing {
-            gpu_ms: median(&gpu),
-            wall_ms: median(&wall).unwrap_or(f64::NAN),
-            passes: passes
-                .iter()
-                .filter_map(|(n, series)| Some((n.clone(), median(series)?)))
-                .collect(),
-        };
+        let timing = Timing::medians(&gpu, &wall, &passes);
         progress(&format!(
             "{name} fit-iteration: {}",
             summary(&timing, opts.repeat)

@@ -43,36 +43,23 @@ uint ballot_words() {
 // of shuffles (each step adds a lane's value and its partner's; a + b == b + a exactly): on
 // llvmpipe a shuffle is one permute while `subgroupAdd` is a scalar loop over the lanes with a
 // branch per lane. Either way the order of the additions is fixed for a device.
-vec3 lane_sum(vec3 v) {
-    if (SUBGROUP_SIZE == 0u) {
-        return subgroupAdd(v);
+// One body for every vector type (GLSL has no generics). Unrolled by hand: a constant condition
+// is gone after specialization, while a loop over `m <<= 1` is not unrolled.
+#define SOFTVK_LANE_SUM(T)                                                     \
+    T lane_sum(T v) {                                                          \
+        if (SUBGROUP_SIZE == 0u) {                                             \
+            return subgroupAdd(v);                                             \
+        }                                                                      \
+        uint lane = gl_SubgroupInvocationID;                                   \
+        if (SUBGROUP_SIZE > 1u) v += subgroupShuffle(v, lane ^ 1u);            \
+        if (SUBGROUP_SIZE > 2u) v += subgroupShuffle(v, lane ^ 2u);            \
+        if (SUBGROUP_SIZE > 4u) v += subgroupShuffle(v, lane ^ 4u);            \
+        if (SUBGROUP_SIZE > 8u) v += subgroupShuffle(v, lane ^ 8u);            \
+        if (SUBGROUP_SIZE > 16u) v += subgroupShuffle(v, lane ^ 16u);          \
+        if (SUBGROUP_SIZE > 32u) v += subgroupShuffle(v, lane ^ 32u);          \
+        return v;                                                              \
     }
-    // Unrolled by hand: a constant condition is gone after specialization, while a loop over
-    // `m <<= 1` is not unrolled.
-    uint lane = gl_SubgroupInvocationID;
-    if (SUBGROUP_SIZE > 1u) v += subgroupShuffle(v, lane ^ 1u);
-    if (SUBGROUP_SIZE > 2u) v += subgroupShuffle(v, lane ^ 2u);
-    if (SUBGROUP_SIZE > 4u) v += subgroupShuffle(v, lane ^ 4u);
-    if (SUBGROUP_SIZE > 8u) v += subgroupShuffle(v, lane ^ 8u);
-    if (SUBGROUP_SIZE > 16u) v += subgroupShuffle(v, lane ^ 16u);
-    if (SUBGROUP_SIZE > 32u) v += subgroupShuffle(v, lane ^ 32u);
-    return v;
-}
-
-vec2 lane_sum(vec2 v) {
-    if (SUBGROUP_SIZE == 0u) {
-        return subgroupAdd(v);
-    }
-    // Unrolled by hand: a constant condition is gone after specialization, while a loop over
-    // `m <<= 1` is not unrolled.
-    uint lane = gl_SubgroupInvocationID;
-    if (SUBGROUP_SIZE > 1u) v += subgroupShuffle(v, lane ^ 1u);
-    if (SUBGROUP_SIZE > 2u) v += subgroupShuffle(v, lane ^ 2u);
-    if (SUBGROUP_SIZE > 4u) v += subgroupShuffle(v, lane ^ 4u);
-    if (SUBGROUP_SIZE > 8u) v += subgroupShuffle(v, lane ^ 8u);
-    if (SUBGROUP_SIZE > 16u) v += subgroupShuffle(v, lane ^ 16u);
-    if (SUBGROUP_SIZE > 32u) v += subgroupShuffle(v, lane ^ 32u);
-    return v;
-}
+SOFTVK_LANE_SUM(vec2)
+SOFTVK_LANE_SUM(vec3)
 
 #endif

@@ -21,7 +21,6 @@ use softvk::fit::mesh_fit::{
 };
 use softvk::fit::report::{self, GifWriter, Series};
 use softvk::gpu::{Context, ContextOptions};
-use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
 use softvk::raster::gpu::{DEFAULT_TILE, Method, Renderer};
 use softvk::raster::reference::{Alpha, Dist, RasterSettings, Rgb};
@@ -267,19 +266,13 @@ fn fit_and_report(
         alpha: Alpha::Hard,
         ..RasterSettings::default()
     };
-    let pred: Vec<f32> = Renderer::new(&ctx)?
-        .render_views(
-            &ctx,
-            &result.mesh,
-            cams,
-            &Lighting::unlit(),
-            &hard,
-            Method::default(),
-        )?
-        .images
-        .iter()
-        .map(|p| p[3])
-        .collect();
+    let pred: Vec<f32> = Renderer::new(&ctx)?.render_silhouettes(
+        &ctx,
+        &result.mesh,
+        cams,
+        &hard,
+        Method::default(),
+    )?;
     let px = sil.pixels();
     let ious: Vec<f32> = (0..views)
         .map(|v| {
@@ -442,19 +435,8 @@ pub fn demo(args: &DemoArgs) -> Result<()> {
         alpha: Alpha::Hard,
         ..RasterSettings::default()
     };
-    let masks: Vec<f32> = Renderer::new(&ctx)?
-        .render_views(
-            &ctx,
-            &target,
-            &cams,
-            &Lighting::unlit(),
-            &hard,
-            Method::default(),
-        )?
-        .images
-        .iter()
-        .map(|p| p[3])
-        .collect();
+    let masks: Vec<f32> =
+        Renderer::new(&ctx)?.render_silhouettes(&ctx, &target, &cams, &hard, Method::default())?;
     drop(ctx);
     let names = io::silhouette_names(rows.len());
     io::write_silhouettes(&sil_dir, &names, args.size, args.size, &masks)?;

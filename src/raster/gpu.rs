@@ -1112,6 +1112,28 @@ impl Renderer {
         self.read_frames(ctx, &scene)
     }
 
+    /// The silhouettes of `mesh` from every camera: the alpha of every output pixel, view-major,
+    /// rendered as a silhouette ([`GpuScene::set_silhouette_only`]: no depth or colour work,
+    /// the alpha of a full render bit for bit), unlit, by `method`.
+    pub fn render_silhouettes(
+        &self,
+        ctx: &Context,
+        mesh: &Mesh,
+        cameras: &[Camera],
+        settings: &RasterSettings,
+        method: Method,
+    ) -> Result<Vec<f32>> {
+        let mut scene = self.prepare(ctx, mesh, cameras, &Lighting::unlit(), settings)?;
+        scene.set_silhouette_only(true);
+        self.run(ctx, &mut scene, method)?;
+        Ok(self
+            .read_frames(ctx, &scene)?
+            .images
+            .iter()
+            .map(|p| p[3])
+            .collect())
+    }
+
     /// Renders `mesh` from every camera with the brute-force kernel and reads back images and aux.
     pub fn render_brute_views(
         &self,
