@@ -148,17 +148,29 @@ fn sort_by_fewer_key_bits_ignores_the_rest_and_keeps_order() {
     }
 }
 
-/// The guarded binning (sentinel keys over the whole capacity, count never read on the host)
-/// gives the exact binning's entries, item slots and ranges at every capacity that holds the
-/// count, including exactly the count, and on a grid whose tile count is a power of two (the
-/// sentinel then needs one key bit more); `offsets[items]` holds the total.
+/// The exact binning equals its twin, and the guarded binning (count never read on the host)
+/// gives the same entries, item
+/// slots and ranges at every capacity that holds the count, including exactly the count, with
+/// both strategies: per-tile masks (small grids), and the sort (sentinel keys over the whole
+/// capacity; a grid over `MASK_MAX_TILES_PER_VIEW` tiles per view), also on a grid whose tile
+/// count is a power of two (the sentinel then needs one key bit more); `offsets[items]` holds
+/// the total.
 #[test]
 fn guarded_binning_equals_the_twin_at_any_capacity_that_holds_the_count() {
-    use softvk::primitives::binning::{self, BinJob, Binner, Bins, ItemLayout, TileGrid};
+    use softvk::primitives::binning::{
+        self, BinJob, BinStrategy, Binner, Bins, ItemLayout, MASK_MAX_TILES_PER_VIEW, TileGrid,
+    };
     let Some(gpu) = common::gpu() else { return };
     let binner = Binner::new(&gpu).unwrap();
     let mut rng = common::rng(7);
-    for (w, h, views) in [(37, 23, 3), (32, 32, 4)] {
+    // (width, height, views, binned by masks): 520×264 is 65×33 tiles of 8, over the masks'
+    // limit; 512×512 is 4096 tiles, a power of two.
+    for (w, h, views, masks) in [
+        (37, 23, 3, true),
+        (32, 32, 4, true),
+        (520, 264, 2, false),
+        (512, 512, 1, false),
+    ] {
         let grid = TileGrid::new(w, h, 8).unwrap();
         let per_view = 60u32;
         let n = (per_view * views) as usize;
@@ -190,7 +202,24 @@ fn guarded_binning_equals_the_twin_at_any_capacity_that_holds_the_count() {
             views,
             first_item: 0,
         };
+        assert_eq!(
+            grid.tiles_per_view() <= MASK_MAX_TILES_PER_VIEW,
+            masks,
+            "{w}x{h}"
+        );
+        assert_eq!(
+            matches!(job.strategy(&gpu), BinStrategy::Masks { .. }),
+            masks,
+            "{w}x{h}: strategy"
+        );
         let twin = binning::cpu::bin(&boxes, per_view, &grid);
+        // The exact binning (count read back between two submissions) first.
+        let mut exact = Bins::new(&gpu).unwrap();
+        let binned = binner.run(&gpu, &mut exact, &items, &job).unwrap();
+        assert!(
+            binned == twin,
+            "{w}x{h}: exact binning differs from the twin"
+        );
         let total = u64::from(twin.total);
         let mut bins = Bins::new(&gpu).unwrap();
         bins.reserve(&gpu, &job).unwrap();
@@ -206,14 +235,16 @@ fn guarded_binning_equals_the_twin_at_any_capacity_that_holds_the_count() {
             let offsets: Vec<u32> = gpu.read_buffer(bins.offsets(), 0, n + 1).unwrap();
             assert_eq!(offsets[..n], twin.offsets[..], "{what}");
             assert_eq!(u64::from(offsets[n]), total, "{what}: offsets[items]");
-            let keys: Vec<[u32; 2]> = gpu.read_buffer(bins.keys(), 0, cap as usize).unwrap();
             let t = total as usize;
-            let tiles: Vec<u32> = keys[..t].iter().map(|k| k[0]).collect();
-            assert_eq!(tiles, twin.tiles, "{what}: sorted tiles");
-            assert!(
-                keys[t..].iter().all(|k| *k == [u32::MAX; 2]),
-                "{what}: sentinels"
-            );
+            if !masks {
+                let keys: Vec<[u32; 2]> = gpu.read_buffer(bins.keys(), 0, cap as usize).unwrap();
+                let tiles: Vec<u32> = keys[..t].iter().map(|k| k[0]).collect();
+                assert_eq!(tiles, twin.tiles, "{what}: sorted tiles");
+                assert!(
+                    keys[t..].iter().all(|k| *k == [u32::MAX; 2]),
+                    "{what}: sentinels"
+                );
+            }
             let slots: Vec<u32> = gpu.read_buffer(bins.entries(), 0, t).unwrap();
             assert_eq!(slots, twin.slots, "{what}: slots");
             let slot_items: Vec<u32> = gpu.read_buffer(bins.entry_items(), 0, t).unwrap();

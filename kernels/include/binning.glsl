@@ -25,6 +25,10 @@ layout(push_constant) uniform Push {
     uint tile_size;       // tile edge in pixels
     uint tiles_x;
     uint tiles_y;
+    uint words_per_tile;  // count: W of the per-tile item masks to set (0: none; see bin_count)
+    uint pad0;
+    uint pad1;
+    uint pad2;
 } pc;
 #endif
 

@@ -40,7 +40,7 @@ layout(std430, set = 0, binding = 2) readonly buffer Anchors { vec4 anchors[]; }
 layout(std430, set = 0, binding = 3) readonly buffer Phi { float phi[]; };
 layout(std430, set = 0, binding = 4) readonly buffer Items { ProbeItem items[]; };
 // Each tile's first entry, then the entry count: tile t's entries are [offsets[t], offsets[t + 1])
-// (`probe_mask_counts.comp` and the scan).
+// (`bin_mask_counts.comp` and the scan).
 layout(std430, set = 0, binding = 5) readonly buffer Offsets { uint offsets[]; };
 // The anchor of every entry, sorted by tile, each tile's in index order.
 layout(std430, set = 0, binding = 6) readonly buffer List { uint list[]; };

@@ -13,7 +13,7 @@
 // sort): an item the binning would keep (FLAG_VALID, a tile rectangle: `tile_rect`, the generic
 // binning's own) sets its anchor's bit in the anchor mask of every tile of its rectangle: tile
 // t's anchors are the set bits of words `[t W, (t + 1) W)`, W = ⌈anchors / 32⌉, lowest first
-// in anchor order (`probe_mask_counts.comp` and `probe_mask_list.comp` list them). The
+// in anchor order (`bin_mask_counts.comp` and `probe_mask_list.comp` list them). The
 // rectangle is also written (packed, all ones when the item is not binned) for the gradient sum
 // (`probe_reduce.comp`). Integer `atomicOr`: the result does not depend on the order of the
 // writes.

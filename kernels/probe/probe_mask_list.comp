@@ -2,7 +2,7 @@
 #extension GL_GOOGLE_include_directive : require
 // Sphere probing, binning step 3: one invocation per tile writes the tile's anchors (the set
 // bits of its mask, `probe_items.comp`, word by word, lowest first) from the tile's first entry
-// on (the scan of `probe_mask_counts.comp`'s counts), and where the per-entry backward runs
+// on (the scan of `bin_mask_counts.comp`'s counts), and where the per-entry backward runs
 // (not under G = max), each entry's tile and each word's first entry within the tile, which the
 // gradient sum (`probe_reduce.comp`) looks entries up by. The entries come out sorted by tile
 // (view-major), each tile's anchors in index order: what the generic binning's stable sort

@@ -4,7 +4,7 @@
 // j's item in that view (its tile rectangle, row by row: the order of the generic binning's
 // item-major slots), of the partials, in that fixed order. An entry is found from the masks:
 // the tile's first entry, the anchor's word's prefix in the tile, and the set bits below its
-// own (`probe_mask_counts.comp`).
+// own (`bin_mask_counts.comp`).
 // One invocation per anchor, one writer per output: deterministic. coef is 2 / (number of rays)
 // times the gradient's weight. Twin: `probe::prober::cpu::backward`.
 #include "common.glsl"

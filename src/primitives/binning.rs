@@ -6,11 +6,26 @@
 //!    and the scan's total sizes that list exactly: the host reads it back between the two
 //!    submissions of a binning ([`Bins::read_total`]), grows the entry buffers if needed, and
 //!    records the rest. Nothing is ever written past a capacity, and nothing is dropped.
-//! 2. **Scatter** (`bin_scatter.comp`): one entry per (item, tile), item-major (view-major, then
-//!    item index), keyed by tile.
-//! 3. **Sort**: the stable [`RadixSort`] by tile, over exactly as many key bits as there are
-//!    tiles. Stability keeps each tile's entries in item order, the order brute force visits.
-//! 4. **Ranges** (`bin_ranges.comp`): `[start, end)` of every tile's run.
+//!
+//! Then the entries are put in tile order, each tile's items in index order (the order brute
+//! force visits), in one of two ways ([`BinStrategy`], chosen per job by [`BinJob::strategy`]):
+//!
+//! - **Masks** (grids of at most [`MASK_MAX_TILES_PER_VIEW`] tiles per view: every image size
+//!   the fits and benchmarks use). The count pass also sets each item's bit in a per-tile mask
+//!   of its view's items (integer `atomicOr`, so order-independent), one invocation per tile
+//!   counts its bits (`bin_mask_counts.comp`), an exclusive [`Scan`] over the tiles gives each
+//!   tile its first entry, and one invocation per tile lists its items, lowest bit first, with
+//!   each entry's item-major slot and its range (`bin_mask_list.comp`). No sort: the masks cost
+//!   about three word visits per tile and mask word, the sort several passes over every entry
+//!   (on llvmpipe the sort was a quarter of a mesh-fitting iteration).
+//! - **Sort** (larger grids, where the masks would be mostly empty words):
+//!   2. **Scatter** (`bin_scatter.comp`): one entry per (item, tile), item-major (view-major,
+//!      then item index), keyed by tile.
+//!   3. **Sort**: the stable [`RadixSort`] by tile, over exactly as many key bits as there are
+//!      tiles. Stability keeps each tile's entries in item order.
+//!   4. **Ranges** (`bin_ranges.comp`): `[start, end)` of every tile's run.
+//!
+//! Both give the same entries, bit for bit.
 //!
 //! Each sorted entry carries its item-major slot, and the item of every slot is kept, so a tiled
 //! backward can write one partial result per (item, tile) at its item-major slot and then reduce
@@ -25,7 +40,8 @@
 //!
 //! **Guarded binning** (a loop that must not wait for the count: mesh fitting). The entry
 //! buffers are reserved with headroom over a count seen before ([`Bins::reserve_entry_capacity`])
-//! and [`Binner::record_sort_guarded`] records the rest without knowing the count: every slot of
+//! and [`Binner::record_sort_guarded`] records the rest without knowing the count. With masks
+//! nothing changes but that no entry is written past the capacity. With the sort, every slot of
 //! the capacity is first filled with a *sentinel* key (all ones, which [`BinJob::padded_key_bits`]
 //! sorts past every tile), the scatter overwrites the first `total` slots, and the sort and the
 //! ranges run over the whole capacity; the sentinels end up after every tile's run and the
@@ -142,6 +158,48 @@ impl BinJob {
     }
 }
 
+/// The most tiles per view binned through masks ([`BinStrategy::Masks`]): up to this many, a
+/// tile's mask (one bit per item of its view) costs at most 64 words per item, about what the
+/// sort spends on a few entries; beyond it, mostly empty mask words would outweigh the sort.
+pub const MASK_MAX_TILES_PER_VIEW: u64 = 2048;
+
+/// How a binning puts its entries in tile order (see the module docs). Either way the entries
+/// are the same, bit for bit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BinStrategy {
+    /// Per-tile item masks of `words_per_tile` = ⌈items per view / 32⌉ words, listed tile by
+    /// tile: no sort.
+    Masks {
+        /// Words of one tile's mask.
+        words_per_tile: u32,
+    },
+    /// Scatter, stable radix sort by tile, ranges.
+    Sort,
+}
+
+impl BinJob {
+    /// The strategy this job bins with on `ctx`'s device: masks when the grid has at most
+    /// [`MASK_MAX_TILES_PER_VIEW`] tiles per view and the masks fit one storage-buffer binding
+    /// (and the kernels' limits: tile coordinates below 2^16, at most 65 535 mask words per
+    /// tile, which llvmpipe's loop cap needs); else the sort.
+    pub fn strategy(&self, ctx: &Context) -> BinStrategy {
+        let words = u64::from(self.items_per_view.div_ceil(32)).max(1);
+        let bytes = 4 * words * self.tile_count();
+        let fits = self.grid.tiles_per_view() <= MASK_MAX_TILES_PER_VIEW
+            && self.grid.tiles_x <= 0xFFFF
+            && self.grid.tiles_y <= 0xFFFF
+            && words <= 0xFFFF
+            && bytes <= u64::from(ctx.info().limits.max_storage_buffer_range);
+        if fits {
+            BinStrategy::Masks {
+                words_per_tile: words as u32,
+            }
+        } else {
+            BinStrategy::Sort
+        }
+    }
+}
+
 /// The most views of `items_per_view` items on `grid` one binning can take without its u32
 /// entry count possibly wrapping (at least 1; a single view that could wrap is an error at
 /// [`Binner::record_count`]).
@@ -166,6 +224,30 @@ struct BinPush {
     tile_size: u32,
     tiles_x: u32,
     tiles_y: u32,
+    /// `bin_count.comp`: W of the masks to set (0: the sort's count, no masks).
+    words_per_tile: u32,
+    pad: [u32; 3],
+}
+
+/// Push constants of `bin_mask_counts.comp` (its first four words).
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct MaskCountsPush {
+    tiles: u32,
+    words_per_tile: u32,
+    pad: [u32; 2],
+}
+
+/// Push constants of `bin_mask_list.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct MaskListPush {
+    tiles: u32,
+    words_per_tile: u32,
+    items_per_view: u32,
+    tiles_x: u32,
+    tiles_per_view: u32,
+    pad: [u32; 3],
 }
 
 /// Push constants of `bin_ranges.comp`.
@@ -182,6 +264,8 @@ pub struct Binner {
     count: Kernel,
     scatter: Kernel,
     ranges: Kernel,
+    mask_counts: Kernel,
+    mask_list: Kernel,
     scan: Scan,
     sort: RadixSort,
 }
@@ -198,6 +282,13 @@ pub struct Bins {
     entry_capacity: u64,
     ranges: Buffer,
     tile_capacity: u64,
+    // Masks (`BinStrategy::Masks`): each item's tile rectangle, the per-tile masks, and the
+    // tiles' entry counts (scanned in place into their first entries).
+    rects: Buffer,
+    masks: Buffer,
+    mask_words: u64,
+    tile_counts: Buffer,
+    tile_scan_scratch: ScanScratch,
     entries: Option<u64>,
 }
 
@@ -220,6 +311,11 @@ impl Bins {
             entry_capacity: entries,
             ranges: ctx.create_buffer("bin ranges", 8 * tiles, MemoryKind::Device)?,
             tile_capacity: tiles,
+            rects: ctx.create_buffer("bin item rectangles", 8 * items, MemoryKind::Device)?,
+            masks: ctx.create_buffer("bin tile masks", 4, MemoryKind::Device)?,
+            mask_words: 1,
+            tile_counts: ctx.create_buffer("bin tile counts", 4 * tiles, MemoryKind::Device)?,
+            tile_scan_scratch: ScanScratch::new(ctx, tiles)?,
             entries: None,
         })
     }
@@ -231,12 +327,27 @@ impl Bins {
             self.counts =
                 ctx.create_buffer("bin counts", 4 * (job.item_count() + 1), MemoryKind::Device)?;
             self.scan_scratch = ScanScratch::new(ctx, job.item_count())?;
+            self.rects = ctx.create_buffer(
+                "bin item rectangles",
+                8 * job.item_count(),
+                MemoryKind::Device,
+            )?;
             self.item_capacity = job.item_count();
         }
         if job.tile_count() > self.tile_capacity {
             self.ranges =
                 ctx.create_buffer("bin ranges", 8 * job.tile_count(), MemoryKind::Device)?;
+            self.tile_counts =
+                ctx.create_buffer("bin tile counts", 4 * job.tile_count(), MemoryKind::Device)?;
+            self.tile_scan_scratch = ScanScratch::new(ctx, job.tile_count())?;
             self.tile_capacity = job.tile_count();
+        }
+        if let BinStrategy::Masks { words_per_tile } = job.strategy(ctx) {
+            let words = u64::from(words_per_tile) * job.tile_count();
+            if words > self.mask_words {
+                self.masks = ctx.create_buffer("bin tile masks", 4 * words, MemoryKind::Device)?;
+                self.mask_words = words;
+            }
         }
         Ok(())
     }
@@ -352,12 +463,14 @@ impl Binner {
             count: Kernel::new(ctx, &specs::BIN_COUNT)?,
             scatter: Kernel::new(ctx, &specs::BIN_SCATTER)?,
             ranges: Kernel::new(ctx, &specs::BIN_RANGES)?,
+            mask_counts: Kernel::new(ctx, &specs::BIN_MASK_COUNTS)?,
+            mask_list: Kernel::new(ctx, &specs::BIN_MASK_LIST)?,
             scan: Scan::new(ctx)?,
             sort: RadixSort::new(ctx)?,
         })
     }
 
-    fn push(job: &BinJob) -> BinPush {
+    fn push(job: &BinJob, words_per_tile: u32) -> BinPush {
         BinPush {
             item_count: job.item_count() as u32,
             items_per_view: job.items_per_view,
@@ -371,10 +484,17 @@ impl Binner {
             tile_size: job.grid.tile_size,
             tiles_x: job.grid.tiles_x,
             tiles_y: job.grid.tiles_y,
+            words_per_tile,
+            pad: [0; 3],
         }
     }
 
-    fn check(job: &BinJob, items: &BufferRange<'_>, bins: &Bins) -> Result<()> {
+    fn check(
+        job: &BinJob,
+        strategy: BinStrategy,
+        items: &BufferRange<'_>,
+        bins: &Bins,
+    ) -> Result<()> {
         if job.max_entries() > u64::from(u32::MAX) {
             return Err(Error::Limit(format!(
                 "binning {} items over {} tiles per view in {} view(s) could count past 2^32 \
@@ -401,7 +521,14 @@ impl Binner {
                 job.layout.flag_offset
             )));
         }
-        if job.item_count() > bins.item_capacity || job.tile_count() > bins.tile_capacity {
+        let mask_words = match strategy {
+            BinStrategy::Masks { words_per_tile } => u64::from(words_per_tile) * job.tile_count(),
+            BinStrategy::Sort => 0,
+        };
+        if job.item_count() > bins.item_capacity
+            || job.tile_count() > bins.tile_capacity
+            || mask_words > bins.mask_words
+        {
             return Err(Error::Limit(format!(
                 "binning {} items over {} tiles: bins hold {} items and {} tiles (call reserve)",
                 job.item_count(),
@@ -422,7 +549,8 @@ impl Binner {
         items: BufferRange<'_>,
         job: &BinJob,
     ) -> Result<()> {
-        Self::check(job, &items, bins)?;
+        let strategy = job.strategy(rec.context());
+        Self::check(job, strategy, &items, bins)?;
         let n = job.item_count();
         if n == 0 {
             rec.fill(bins.scan_scratch.total().whole(), 0);
@@ -430,11 +558,22 @@ impl Binner {
             return Ok(());
         }
         let counts = bins.counts.range(0, 4 * n);
+        let (words_per_tile, masks) = match strategy {
+            BinStrategy::Masks { words_per_tile } => {
+                let masks = bins
+                    .masks
+                    .range(0, 4 * u64::from(words_per_tile) * job.tile_count());
+                rec.fill(masks, 0);
+                (words_per_tile, masks)
+            }
+            // Bound but never written.
+            BinStrategy::Sort => (0, bins.masks.range(0, 4)),
+        };
         let groups = n.div_ceil(u64::from(specs::BIN_COUNT.workgroup_size[0]));
         rec.dispatch(
             &self.count,
-            &[items, counts],
-            &Self::push(job),
+            &[items, counts, bins.rects.range(0, 8 * n), masks],
+            &Self::push(job, words_per_tile),
             groups as u32,
         )?;
         self.scan
@@ -454,7 +593,8 @@ impl Binner {
         items: BufferRange<'_>,
         job: &BinJob,
     ) -> Result<()> {
-        Self::check(job, &items, bins)?;
+        let strategy = job.strategy(rec.context());
+        Self::check(job, strategy, &items, bins)?;
         let total = bins.entries.ok_or_else(|| {
             Error::Limit("binning: the entry count is not known yet (read_total)".into())
         })?;
@@ -463,6 +603,9 @@ impl Binner {
                 "binning: {total} entries, entry buffers hold {} (call reserve_entries)",
                 bins.entry_capacity
             )));
+        }
+        if let BinStrategy::Masks { words_per_tile } = strategy {
+            return self.record_mask_list(rec, bins, job, words_per_tile, total);
         }
         let tiles = job.tile_count();
         rec.fill(bins.ranges.range(0, 8 * tiles), 0);
@@ -480,7 +623,7 @@ impl Binner {
                 bins.pairs.range(0, 4 * total),
                 bins.pair_items.range(0, 4 * total),
             ],
-            &Self::push(job),
+            &Self::push(job, 0),
             groups as u32,
         )?;
         self.sort.record(
@@ -497,6 +640,65 @@ impl Binner {
             bins.ranges.range(0, 8 * tiles),
             total,
             tiles,
+        )
+    }
+
+    /// Masks: counts each tile's entries, scans the counts into each tile's first entry, and
+    /// lists every tile's entries (at most `cap` of them are written) and ranges.
+    fn record_mask_list(
+        &self,
+        rec: &mut Recorder<'_>,
+        bins: &Bins,
+        job: &BinJob,
+        words_per_tile: u32,
+        cap: u64,
+    ) -> Result<()> {
+        let tiles = job.tile_count();
+        let n = job.item_count();
+        let masks = bins.masks.range(0, 4 * u64::from(words_per_tile) * tiles);
+        let tile_counts = bins.tile_counts.range(0, 4 * tiles);
+        let groups =
+            |spec: &crate::gpu::KernelSpec| tiles.div_ceil(u64::from(spec.workgroup_size[0]));
+        let push = MaskCountsPush {
+            tiles: tiles as u32,
+            words_per_tile,
+            pad: [0; 2],
+        };
+        rec.dispatch(
+            &self.mask_counts,
+            &[masks, tile_counts],
+            &push,
+            groups(&specs::BIN_MASK_COUNTS) as u32,
+        )?;
+        self.scan.record(
+            rec,
+            &bins.tile_scan_scratch,
+            tile_counts,
+            tile_counts,
+            tiles,
+        )?;
+        let push = MaskListPush {
+            tiles: tiles as u32,
+            words_per_tile,
+            items_per_view: job.items_per_view,
+            tiles_x: job.grid.tiles_x,
+            tiles_per_view: job.grid.tiles_per_view() as u32,
+            pad: [0; 3],
+        };
+        let cap = cap.max(1);
+        rec.dispatch(
+            &self.mask_list,
+            &[
+                masks,
+                tile_counts,
+                bins.counts.range(0, 4 * n.max(1)),
+                bins.rects.range(0, 8 * n.max(1)),
+                bins.pairs.range(0, 4 * cap),
+                bins.pair_items.range(0, 4 * cap),
+                bins.ranges.range(0, 8 * tiles),
+            ],
+            &push,
+            groups(&specs::BIN_MASK_LIST) as u32,
         )
     }
 
@@ -546,8 +748,12 @@ impl Binner {
         items: BufferRange<'_>,
         job: &BinJob,
     ) -> Result<()> {
-        Self::check(job, &items, bins)?;
+        let strategy = job.strategy(rec.context());
+        Self::check(job, strategy, &items, bins)?;
         let cap = bins.entry_capacity;
+        if let BinStrategy::Masks { words_per_tile } = strategy {
+            return self.record_mask_list(rec, bins, job, words_per_tile, cap);
+        }
         let tiles = job.tile_count();
         if tiles >= u64::from(u32::MAX) {
             return Err(Error::Limit(format!(
@@ -568,7 +774,7 @@ impl Binner {
                     bins.pairs.range(0, 4 * cap),
                     bins.pair_items.range(0, 4 * cap),
                 ],
-                &Self::push(job),
+                &Self::push(job, 0),
                 groups as u32,
             )?;
         }
@@ -614,14 +820,19 @@ impl Binner {
         let t = total as usize;
         let slots: Vec<u32> = ctx.read_buffer(&bins.pairs, 0, t)?;
         let items_of_slot: Vec<u32> = ctx.read_buffer(&bins.pair_items, 0, t)?;
-        let keys: Vec<[u32; 2]> = ctx.read_buffer(&bins.keys, 0, t)?;
+        let ranges: Vec<[u32; 2]> = ctx.read_buffer(&bins.ranges, 0, job.tile_count() as usize)?;
+        // Each entry's tile, from the ranges (the masks have no keys).
+        let mut tiles = vec![0u32; t];
+        for (tile, r) in ranges.iter().enumerate() {
+            tiles[r[0] as usize..r[1] as usize].fill(tile as u32);
+        }
         Ok(cpu::Binned {
             offsets: ctx.read_buffer(&bins.counts, 0, n)?,
             total: total as u32,
-            tiles: keys.iter().map(|k| k[0]).collect(),
+            tiles,
             slots,
             slot_items: items_of_slot,
-            ranges: ctx.read_buffer(&bins.ranges, 0, job.tile_count() as usize)?,
+            ranges,
         })
     }
 }
@@ -750,6 +961,14 @@ mod tests {
         assert_eq!(
             std::mem::size_of::<RangesPush>() as u32,
             specs::BIN_RANGES.push_constant_size
+        );
+        assert_eq!(
+            std::mem::size_of::<MaskCountsPush>() as u32,
+            specs::BIN_MASK_COUNTS.push_constant_size
+        );
+        assert_eq!(
+            std::mem::size_of::<MaskListPush>() as u32,
+            specs::BIN_MASK_LIST.push_constant_size
         );
     }
 

@@ -7,7 +7,7 @@
 //! (its centre projects into the silhouette). The items are binned to screen tiles by the
 //! generic binning's tile rectangles ([`crate::primitives::binning`]'s `tile_rect`), but
 //! without its scatter and sort: the items kernel sets the anchor's bit in an anchor mask per
-//! tile (`⌈anchors / 32⌉` words, integer `atomicOr`), `probe_mask_counts.comp` counts each
+//! tile (`⌈anchors / 32⌉` words, integer `atomicOr`), `bin_mask_counts.comp` counts each
 //! tile's bits, a scan gives each tile's first entry, the entry count is read back, and
 //! `probe_mask_list.comp` writes each tile's anchors in index order: the entries the generic
 //! binning's stable sort gives, at a fraction of the cost on llvmpipe. Then one invocation per
@@ -125,7 +125,7 @@ struct ForwardPush {
     pad: [u32; 3],
 }
 
-/// Push constants of `probe_mask_counts.comp` and `probe_mask_list.comp`.
+/// Push constants of `bin_mask_counts.comp` and `probe_mask_list.comp`.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct WordsPush {
@@ -393,7 +393,7 @@ impl Prober {
             keys_kernel: Kernel::new(ctx, &specs::PROBE_RAY_KEYS)?,
             backward_kernel: KernelVariants::new(&specs::PROBE_BACKWARD),
             reduce_kernel: Kernel::new(ctx, &specs::PROBE_REDUCE)?,
-            mask_counts_kernel: Kernel::new(ctx, &specs::PROBE_MASK_COUNTS)?,
+            mask_counts_kernel: Kernel::new(ctx, &specs::BIN_MASK_COUNTS)?,
             mask_list_kernel: Kernel::new(ctx, &specs::PROBE_MASK_LIST)?,
             aux_keys_kernel: Kernel::new(ctx, &specs::PROBE_AUX_KEYS)?,
             max_grad_kernel: Kernel::new(ctx, &specs::PROBE_MAX_GRAD)?,
@@ -518,7 +518,7 @@ impl Prober {
 
     /// Submission 1: records the anchor items with every tile's anchor mask (`probe_items.comp`,
     /// by the generic binning's tile rectangles), each tile's entry count
-    /// (`probe_mask_counts.comp`) and their exclusive scan (each tile's first entry), and the
+    /// (`bin_mask_counts.comp`) and their exclusive scan (each tile's first entry), and the
     /// entry count after them.
     pub fn record_count(
         &self,
@@ -1325,7 +1325,7 @@ mod tests {
         );
         assert_eq!(
             std::mem::size_of::<WordsPush>(),
-            size(&specs::PROBE_MASK_COUNTS)
+            size(&specs::BIN_MASK_COUNTS)
         );
         assert_eq!(
             std::mem::size_of::<WordsPush>(),

@@ -1,9 +1,10 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
-// Sphere probing, binning step 2: one invocation per tile counts the set bits of its anchor
-// mask (`probe_items.comp`): the tile's entry count, which an exclusive scan over the tiles
-// turns into each tile's first entry. Tile t's entries are then `[offsets[t], offsets[t + 1])`
-// (`probe_mask_list.comp` writes them), its anchors in index order.
+// Binning through per-tile item masks: one invocation per tile counts the set bits of its mask
+// (words `[t W, (t + 1) W)`, set by `bin_count.comp` for faces, `probe_items.comp` for anchors):
+// the tile's entry count, which an exclusive scan over the tiles turns into each tile's first
+// entry. `bin_mask_list.comp` and `probe_mask_list.comp` then write each tile's entries, its
+// items in index order.
 #include "common.glsl"
 
 layout(local_size_x = 64) in;
@@ -13,7 +14,7 @@ layout(std430, set = 0, binding = 1) writeonly buffer Counts { uint counts[]; };
 
 layout(push_constant) uniform Push {
     uint tiles;
-    uint words_per_tile; // W = ⌈anchors / 32⌉
+    uint words_per_tile; // W = ⌈items per view / 32⌉
     uint pad0;
     uint pad1;
 } pc;
