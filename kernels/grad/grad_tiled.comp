@@ -104,8 +104,8 @@ void main() {
             bool live = i < pixels && lane < lanes && col < pc.width && row < pc.height;
             Upstream u = live ? load_upstream(gview, col, row) : zero_upstream();
             live = live && !upstream_is_zero(u);
-            vec2 lo = subgroupMin(live ? u.p : vec2(inf));
-            vec2 hi = subgroupMax(live ? u.p : vec2(-inf));
+            vec2 lo = lane_min(live ? u.p : vec2(inf));
+            vec2 hi = lane_max(live ? u.p : vec2(-inf));
             bool touches = (f.flags & FACE_FINITE) != 0u
                         && !(hi.x < f.bbox.x || hi.y < f.bbox.y || lo.x > f.bbox.z
                              || lo.y > f.bbox.w);

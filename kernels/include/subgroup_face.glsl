@@ -62,4 +62,25 @@ uint ballot_words() {
 SOFTVK_LANE_SUM(vec2)
 SOFTVK_LANE_SUM(vec3)
 
+// The minimum and maximum of `v` over the subgroup, by the same butterfly (min and max are
+// exact in any order): on llvmpipe `subgroupMin`/`subgroupMax` are scalar loops over the lanes.
+// Every lane must be active.
+vec2 lane_min(vec2 v) {
+    if (SUBGROUP_SIZE == 0u) {
+        return subgroupMin(v);
+    }
+    uint lane = gl_SubgroupInvocationID;
+    if (SUBGROUP_SIZE > 1u) v = min(v, subgroupShuffle(v, lane ^ 1u));
+    if (SUBGROUP_SIZE > 2u) v = min(v, subgroupShuffle(v, lane ^ 2u));
+    if (SUBGROUP_SIZE > 4u) v = min(v, subgroupShuffle(v, lane ^ 4u));
+    if (SUBGROUP_SIZE > 8u) v = min(v, subgroupShuffle(v, lane ^ 8u));
+    if (SUBGROUP_SIZE > 16u) v = min(v, subgroupShuffle(v, lane ^ 16u));
+    if (SUBGROUP_SIZE > 32u) v = min(v, subgroupShuffle(v, lane ^ 32u));
+    return v;
+}
+
+vec2 lane_max(vec2 v) {
+    return -lane_min(-v);
+}
+
 #endif
