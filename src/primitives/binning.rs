@@ -18,12 +18,11 @@
 //!   each entry's item-major slot and its range (`bin_mask_list.comp`). No sort: the masks cost
 //!   about three word visits per tile and mask word, the sort several passes over every entry
 //!   (on llvmpipe the sort was a quarter of a mesh-fitting iteration).
-//! - **Sort** (larger grids, where the masks would be mostly empty words):
-//!   2. **Scatter** (`bin_scatter.comp`): one entry per (item, tile), item-major (view-major,
-//!      then item index), keyed by tile.
-//!   3. **Sort**: the stable [`RadixSort`] by tile, over exactly as many key bits as there are
-//!      tiles. Stability keeps each tile's entries in item order.
-//!   4. **Ranges** (`bin_ranges.comp`): `[start, end)` of every tile's run.
+//! - **Sort** (larger grids, where the masks would be mostly empty words): a **scatter**
+//!   (`bin_scatter.comp`) writes one entry per (item, tile), item-major (view-major, then item
+//!   index), keyed by tile; the stable [`RadixSort`] by tile, over exactly as many key bits as
+//!   there are tiles, keeps each tile's entries in item order; the **ranges** pass
+//!   (`bin_ranges.comp`) writes `[start, end)` of every tile's run.
 //!
 //! Both give the same entries, bit for bit.
 //!
