@@ -24,8 +24,9 @@
 // lane takes its pixel's contribution, `lane_sum` adds them up, and the face's own lane adds
 // the sum to its running total. So a face's partial is summed segment by segment in pixel
 // order, each segment by the subgroup's reduction (a fixed order on a given device: runs are
-// bit-identical; against brute force it differs by float reassociation). Texel slots are added
-// one pixel at a time, in pixel order, by the face's lane.
+// bit-identical; against brute force it differs by float reassociation). A texel slot gets,
+// segment by segment, the sum in pixel order of the segment's pixels on that texel, added by the
+// lowest of them (same order on every run).
 // 64 invocations: the forward's block, and a multiple of any subgroup size up to 64.
 #define FINE_BACKWARD
 #include "common.glsl"
@@ -139,23 +140,27 @@ void main() {
                             cacc[c] += mine ? sum : vec3(0.0);
                         }
                     } else {
-                        // Texel slots: one pixel at a time, in pixel order (lanes may share a
-                        // texel), by face q's lane.
-                        uvec4 texels = subgroupBallot(colored);
-                        for (uint tw = 0u; tw < ballot_words(); ++tw) {
-                            uint tmask = texels[tw];
-                            while (tmask != 0u) {
-                                uint l = 32u * tw + uint(findLSB(tmask));
-                                tmask &= tmask - 1u;
-                                uint texel = subgroupShuffle(g.texel, l);
-                                vec3 value = subgroupShuffle(g.color[0], l);
-                                if (mine) {
-                                    uint t = o + 9u + 3u * texel;
-                                    partials[t] += value.x;
-                                    partials[t + 1u] += value.y;
-                                    partials[t + 2u] += value.z;
-                                }
-                            }
+                        // Texel slots: the segment's pixels that share a texel of face q are
+                        // summed in pixel order (one shuffle step per lane: texels are finer
+                        // than pixels, so most pixels have a texel of their own), and the
+                        // lowest of them adds the sum to the slot: one read-modify-write per
+                        // face and segment, each lane on its own texel, rather than one per
+                        // pixel (on llvmpipe each is a scalar loop over the lanes).
+                        uint texel = colored ? g.texel : 0xFFFFFFFFu;
+                        vec3 sum = vec3(0.0);
+                        bool leader = colored;
+                        for (uint k = 0u; k < lanes; ++k) {
+                            bool same = subgroupShuffle(texel, k) == texel;
+                            vec3 value = subgroupShuffle(g.color[0], k);
+                            sum += same ? value : vec3(0.0);
+                            leader = leader && !(same && k < lane);
+                        }
+                        uint oq = subgroupShuffle(o, q);
+                        if (leader) {
+                            uint t = oq + 9u + 3u * texel;
+                            partials[t] += sum.x;
+                            partials[t + 1u] += sum.y;
+                            partials[t + 2u] += sum.z;
                         }
                     }
                 }
