@@ -111,12 +111,11 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
     g.texel = 0u;
     g.colored = false;
     vec2 p = u.p;
-    // With an alpha-only upstream the whole step is branch-free (on llvmpipe a branch skips
-    // nothing and costs masked stores): an untouched face's numbers are computed and discarded.
+    // Branch-free (on llvmpipe a branch skips nothing and costs masked stores): an untouched
+    // face's numbers are computed and discarded (the caller keeps a pair's results only where
+    // this returns true), and every conditional term is a select that leaves the bits of the
+    // branching version. Gathers stay in bounds whatever the numbers (texel indices are clamped).
     bool live = (f.flags & FACE_FINITE) != 0u && !outside_bbox(f.bbox, p);
-    if (!ALPHA_ONLY && !live) {
-        return false;
-    }
     vec3 w = barycentric(f, p);
     // Euclidean: the nearest edge, once for the coverage and its derivative.
     vec2 ea_pos = vec2(0.0);
@@ -127,29 +126,25 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
     float d2 = MODE_DIST == DIST_EUCLIDEAN ? nearest_edge(f, p, ea_pos, edge, ea, eb, t) : 0.0;
     float d;
     bool hit = coverage_from(d2, w, MODE_DIST, pc.sigma, pc.cutoff, d) && live;
-    if (!ALPHA_ONLY && !hit) {
-        return false;
-    }
     vec3 wc = clip_barycentric(w);
     float z = 0.0;
     bool in_range = !ALPHA_ONLY && depth_in_range(f, wc, pc.near, pc.far, z);
-    g.colored = in_range && (DOUBLE_SIDED || (f.flags & FACE_FRONT) != 0u);
+    g.colored = hit && in_range && (DOUBLE_SIDED || (f.flags & FACE_FRONT) != 0u);
 
     float d_cov = alpha_grad(u, d);
     vec3 d_color = vec3(0.0);
     float d_z = 0.0;
-    vec3 c = vec3(0.0);
-    if (g.colored) {
-        c = sample_color(f.mesh, j, wc);
+    if (!ALPHA_ONLY) {
+        vec3 c = sample_color(f.mesh, j, wc);
         if (MODE_RGB == RGB_SOFTMAX) {
             float e = exp((u.ref_depth - z) * pc.inv_gamma_range);
             float weight = d * e;
             float q = (dot(u.d_rgb, c) - u.d_dot) * u.inv_sum;
-            d_color = u.d_rgb * (weight * u.inv_sum);
-            d_cov += q * e;
-            d_z = -q * weight * pc.inv_gamma_range;
-        } else if (u.hard_face == j) {
-            d_color = u.d_rgb;
+            d_color = g.colored ? u.d_rgb * (weight * u.inv_sum) : vec3(0.0);
+            d_cov = g.colored ? d_cov + q * e : d_cov;
+            d_z = g.colored ? -q * weight * pc.inv_gamma_range : 0.0;
+        } else {
+            d_color = g.colored && u.hard_face == j ? u.d_rgb : vec3(0.0);
         }
     }
 
@@ -159,27 +154,24 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
     if (!ALPHA_ONLY) {
         // Through w̃: depth and (vertex mode) colour.
         vec3 d_wc = vec3(0.0);
-        if (d_z != 0.0) {
-            float d_inv = -z * z * d_z;
-            for (uint k = 0u; k < 3u; ++k) {
-                float zk = f.v[k].z;
-                d_wc[k] += d_inv / zk;
-                g.screen[k].z -= d_inv * wc[k] / (zk * zk);
-            }
+        bool depth = d_z != 0.0;
+        float d_inv = -z * z * d_z;
+        for (uint k = 0u; k < 3u; ++k) {
+            float zk = f.v[k].z;
+            d_wc[k] = depth ? d_wc[k] + d_inv / zk : d_wc[k];
+            g.screen[k].z = depth ? g.screen[k].z - d_inv * wc[k] / (zk * zk) : g.screen[k].z;
         }
-        if (g.colored) {
-            if (VERTEX_COLORS) {
-                uvec3 vi = uvec3(faces[3u * j], faces[3u * j + 1u], faces[3u * j + 2u])
-                         + f.mesh * pc.vertex_count;
-                for (uint k = 0u; k < 3u; ++k) {
-                    vec3 ck = vec3(colors[3u * vi[k]], colors[3u * vi[k] + 1u], colors[3u * vi[k] + 2u]);
-                    d_wc[k] += dot(d_color, ck);
-                    g.color[k] = d_color * wc[k];
-                }
-            } else {
-                g.texel = surface_texel_index(wc, pc.texture_res);
-                g.color[0] = d_color;
+        if (VERTEX_COLORS) {
+            uvec3 vi = uvec3(faces[3u * j], faces[3u * j + 1u], faces[3u * j + 2u])
+                     + f.mesh * pc.vertex_count;
+            for (uint k = 0u; k < 3u; ++k) {
+                vec3 ck = vec3(colors[3u * vi[k]], colors[3u * vi[k] + 1u], colors[3u * vi[k] + 2u]);
+                d_wc[k] = g.colored ? d_wc[k] + dot(d_color, ck) : d_wc[k];
+                g.color[k] = g.colored ? d_color * wc[k] : vec3(0.0);
             }
+        } else {
+            g.texel = surface_texel_index(wc, pc.texture_res);
+            g.color[0] = g.colored ? d_color : vec3(0.0);
         }
 
         // Clip: c = clamp(w, 0, 1), w̃ = c / max(Σc, floor).
@@ -194,14 +186,18 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
 
     // Coverage.
     vec2 d_xy_cov[3] = vec2[3](vec2(0.0), vec2(0.0), vec2(0.0));
-    if (ALPHA_ONLY || d_cov != 0.0) {
+    bool cov = ALPHA_ONLY || d_cov != 0.0;
+    {
         if (MODE_DIST == DIST_BARYCENTRIC) {
             uint k = 0u;
             if (w[1] < w[k]) k = 1u;
             if (w[2] < w[k]) k = 2u;
             float m = w[k];
             float x = m * abs(m) / pc.sigma;
-            d_w[k] += d_cov * sigmoid_grad(x) * 2.0 * abs(m) / pc.sigma;
+            float add = d_cov * sigmoid_grad(x) * 2.0 * abs(m) / pc.sigma;
+            for (uint c = 0u; c < 3u; ++c) {
+                d_w[c] = cov && c == k ? d_w[c] + add : d_w[c];
+            }
         } else if (MODE_DIST == DIST_EUCLIDEAN) {
             // Through the nearest edge (a, b) as `euclidean_dist2` picks it, to its two
             // vertices (selects, not a per-lane index; 0 + x = x).
@@ -211,7 +207,7 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
             vec2 to_a = d_d2 * 2.0 * (1.0 - t) * r;
             vec2 to_b = d_d2 * 2.0 * t * r;
             for (uint k = 0u; k < 3u; ++k) {
-                d_xy_cov[k] = ea == k ? to_a : (eb == k ? to_b : vec2(0.0));
+                d_xy_cov[k] = cov ? (ea == k ? to_a : (eb == k ? to_b : vec2(0.0))) : vec2(0.0);
             }
         }
     }
