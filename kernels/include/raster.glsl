@@ -5,7 +5,7 @@
 // Where f32 needs a different arrangement of the same formula than the f64 twin, it is said here:
 // - barycentrics are evaluated relative to a vertex of the opposite edge (`barycentric`);
 // - the face determinant is taken in its translated form (`face_setup.comp`);
-// - the softmax exponents are taken from depth differences, not from z̄ (`softmax_add`).
+// - the softmax exponents are taken from depth differences, not from z̄ (`softmax_add_if`).
 #ifndef SOFTVK_RASTER_GLSL
 #define SOFTVK_RASTER_GLSL
 
@@ -315,16 +315,19 @@ Softmax softmax_init(vec3 background, float background_depth) {
     return s;
 }
 
-void softmax_add(inout Softmax s, float z, float d, vec3 color, float inv_gamma_range) {
-    if (z < s.ref_depth) {
-        float rescale = exp((z - s.ref_depth) * inv_gamma_range);
-        s.sum *= rescale;
-        s.rgb *= rescale;
-        s.ref_depth = z;
-    }
-    float weight = d * exp((s.ref_depth - z) * inv_gamma_range);
-    s.sum += weight;
-    s.rgb += weight * color;
+// Adds a face's (z, D, colour) where `apply`, else nothing, by selects (the same bits as
+// branching on it).
+void softmax_add_if(inout Softmax s, float z, float d, vec3 color, float inv_gamma_range,
+                    bool apply) {
+    bool closer = apply && z < s.ref_depth;
+    float rescale = exp((z - s.ref_depth) * inv_gamma_range);
+    float sum = closer ? s.sum * rescale : s.sum;
+    vec3 rgb = closer ? s.rgb * rescale : s.rgb;
+    float ref_depth = closer ? z : s.ref_depth;
+    float weight = d * exp((ref_depth - z) * inv_gamma_range);
+    s.sum = apply ? sum + weight : s.sum;
+    s.rgb = apply ? rgb + weight * color : s.rgb;
+    s.ref_depth = ref_depth;
 }
 
 vec3 softmax_resolve(Softmax s) {

@@ -126,8 +126,10 @@ PixelState pixel_init() {
 }
 
 // Folds face j (set up as `f`) into the state of the pixel centred at `p`.
-// Up to the alpha, by selects rather than branches (on llvmpipe a branch skips nothing and
-// costs masked stores); what it computes for an ignored face is discarded.
+// By selects rather than branches (on llvmpipe a branch skips nothing and costs masked stores):
+// what it computes for an ignored face is discarded, and the state gets the bits the branching
+// version would give. The colour gather stays in bounds whatever the numbers (texel indices are
+// clamped).
 void shade_face(inout PixelState s, Face f, uint j, vec2 p) {
     bool live = (f.flags & FACE_FINITE) != 0u && !(CULL && outside_bbox(f.bbox, p));
     vec3 w = barycentric(f, p);
@@ -136,25 +138,23 @@ void shade_face(inout PixelState s, Face f, uint j, vec2 p) {
     covered = covered && live;
     // Alpha counts every non-ignored face, whatever its depth or facing.
     alpha_add_if(s.alpha, MODE_ALPHA, d, covered);
-    if (ALPHA_ONLY || !covered) {
+    if (ALPHA_ONLY) {
         return; // a silhouette render: no depth, no colour
     }
 
     vec3 wc = clip_barycentric(w);
     float z;
-    if (!depth_in_range(f, wc, pc.near, pc.far, z)) {
-        return;
-    }
-    if (!(DOUBLE_SIDED || (f.flags & FACE_FRONT) != 0u)) {
-        return;
-    }
+    bool shaded = covered && depth_in_range(f, wc, pc.near, pc.far, z)
+               && (DOUBLE_SIDED || (f.flags & FACE_FRONT) != 0u);
+    vec3 color = sample_color(f.mesh, j, wc);
     if (MODE_RGB == RGB_SOFTMAX) {
-        softmax_add(s.soft, z, d, sample_color(f.mesh, j, wc), pc.inv_gamma_range);
-    } else if (inside_closed(w) && (!s.hard_found || z < s.hard_depth)) {
-        s.hard_found = true;
-        s.hard_depth = z;
-        s.hard_rgb = sample_color(f.mesh, j, wc);
-        s.hard_face = j;
+        softmax_add_if(s.soft, z, d, color, pc.inv_gamma_range, shaded);
+    } else {
+        bool wins = shaded && inside_closed(w) && (!s.hard_found || z < s.hard_depth);
+        s.hard_found = s.hard_found || wins;
+        s.hard_depth = wins ? z : s.hard_depth;
+        s.hard_rgb = wins ? color : s.hard_rgb;
+        s.hard_face = wins ? j : s.hard_face;
     }
 }
 
