@@ -45,7 +45,7 @@ pub struct BenchArgs {
     /// Render only the middle N rows of every scene (quick runs).
     #[arg(long, value_name = "ROWS")]
     pub band: Option<u32>,
-    /// Folder of the meshes (default: SOFTVK_ASSETS, else ../shared/assets).
+    /// Folder of the meshes (default: SOFTVK_ASSETS, else the project's assets/).
     #[arg(long, value_name = "DIR")]
     pub assets: Option<PathBuf>,
 }
