@@ -4,8 +4,31 @@ use std::ffi::OsString;
 use std::fs::{File, OpenOptions};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard};
 
 use crate::error::{Error, Result};
+
+/// The temporary files of every [`AtomicFile`] of the process not yet renamed or removed: what
+/// [`remove_temporaries_then`] removes when a command must stop at once (a second Ctrl-C).
+static PENDING: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+fn pending() -> MutexGuard<'static, Vec<PathBuf>> {
+    // A panic while the lock was held leaves a list that is still right.
+    PENDING.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Removes the temporary file of every [`AtomicFile`] in flight, then runs `then` (which cannot
+/// return: typically `|| std::process::exit(status)`) while still holding the list's lock, so that no
+/// temporary file is created, renamed into place or left between the removal and the end of the
+/// process. For a command line that must stop at once (a second interrupt) without leaving a
+/// partial or temporary file; a normal end never needs it (each file removes its own).
+pub fn remove_temporaries_then(then: impl FnOnce() -> std::convert::Infallible) -> ! {
+    let list = pending();
+    for temp in list.iter() {
+        let _ = std::fs::remove_file(temp);
+    }
+    match then() {}
+}
 
 /// A file written in full or not at all: bytes go to a hidden temporary file beside the target
 /// (same folder, so the final rename stays on one file system and is atomic), renamed into place
@@ -49,6 +72,7 @@ impl AtomicFile {
         temp_name.push(name);
         temp_name.push(format!(".softvk-{}-{n}.tmp", std::process::id()));
         let temp = dir.join(temp_name);
+        let mut list = pending();
         let file = OpenOptions::new()
             .write(true)
             .create_new(true)
@@ -57,6 +81,8 @@ impl AtomicFile {
                 path: target.to_path_buf(),
                 source,
             })?;
+        list.push(temp.clone());
+        drop(list);
         Ok(AtomicFile {
             target: target.to_path_buf(),
             temp,
@@ -91,8 +117,10 @@ impl AtomicFile {
     pub fn persist(mut self, file: File) -> Result<()> {
         file.sync_all().map_err(|e| self.io(e))?;
         drop(file);
+        let mut list = pending();
         std::fs::rename(&self.temp, &self.target).map_err(|e| self.io(e))?;
-        // Renamed: nothing left for Drop to remove.
+        // Renamed: nothing left for Drop (or an interrupt) to remove.
+        list.retain(|t| *t != self.temp);
         self.temp = PathBuf::new();
         Ok(())
     }
@@ -110,7 +138,9 @@ impl Drop for AtomicFile {
     fn drop(&mut self) {
         drop(self.file.take());
         if !self.temp.as_os_str().is_empty() {
+            let mut list = pending();
             let _ = std::fs::remove_file(&self.temp);
+            list.retain(|t| *t != self.temp);
         }
     }
 }

@@ -60,6 +60,15 @@ fn main() -> ExitCode {
         }
         Err(e) => return fail(&cli::clap_error_line(&e)),
     };
+    // The fits stop cleanly on a first Ctrl-C / SIGTERM (see `cli::interrupt`).
+    if matches!(
+        cli.command,
+        Command::FitMesh(_) | Command::FitPose(_) | Command::FitField(_) | Command::Demo(_)
+    ) {
+        if let Err(e) = cli::interrupt::install() {
+            return fail(&e.to_string());
+        }
+    }
     let result = match &cli.command {
         Command::Info => info(),
         Command::Render(args) => cli::render::run(args),
@@ -70,9 +79,16 @@ fn main() -> ExitCode {
         Command::Demo(args) => cli::fit_mesh::demo(args),
         Command::Bench(args) => cli::bench::run(args),
     };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => fail(&e.to_string()),
+    match (result, cli::interrupt::requested()) {
+        (Ok(()), None) => ExitCode::SUCCESS,
+        (Ok(()), Some(signal)) => {
+            eprintln!(
+                "softvk: {}: stopped early; what was written holds the fit as it was then",
+                cli::interrupt::name(signal)
+            );
+            ExitCode::from(cli::interrupt::status(signal) as u8)
+        }
+        (Err(e), _) => fail(&e.to_string()),
     }
 }
 

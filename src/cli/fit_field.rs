@@ -449,7 +449,7 @@ pub fn run(args: &FitFieldArgs) -> Result<()> {
             "loss {:.5} (L_sil {:.5}, L_geo {:.4})",
             l.total, l.silhouette, l.geo
         ));
-        true
+        super::interrupt::requested().is_none()
     })?;
     bar.finish_and_clear();
 
@@ -515,6 +515,7 @@ pub fn run(args: &FitFieldArgs) -> Result<()> {
     report::write_png(&report_dir.join("preview.png"), &preview)?;
     report::write_png(&report_dir.join("loss.png"), &plot)?;
     AtomicFile::create(&report_dir.join("loss.csv"))?.commit(csv.as_bytes())?;
+    super::fit_mesh::write_interrupted(&report_dir, result.iterations, opts.iterations)?;
     iso.write_obj(&args.out)?;
     let t = &result.timings;
     println!(

@@ -27,6 +27,7 @@ use softvk::raster::reference::{Alpha, Dist, RasterSettings, Rgb};
 use softvk::{Error, Result};
 
 use super::args::{AlphaArg, DistArg, finite, positive};
+use super::interrupt;
 use super::output::AtomicFile;
 
 /// The fitting flags shared by `fit-mesh` and `demo`.
@@ -249,7 +250,7 @@ fn fit_and_report(
                     return false;
                 }
             }
-            true
+            interrupt::requested().is_none()
         },
     )?;
     bar.finish_and_clear();
@@ -323,9 +324,10 @@ fn fit_and_report(
             true,
         ),
     )?;
+    let its = result.log.last().map_or(0, |l| l.iteration);
+    write_interrupted(report_dir, its, opts.iterations)?;
     gif.finish()?;
     io::write_obj(out, &result.mesh.positions, &result.mesh.faces)?;
-    let its = result.log.last().map_or(0, |l| l.iteration);
     println!(
         "{its} iterations in {:.1} s ({:.1} ms per iteration); mean IoU {mean:.4} over {views} \
          views; wrote {} and {}",
@@ -334,6 +336,20 @@ fn fit_and_report(
         out.display(),
         report_dir.display()
     );
+    Ok(())
+}
+
+/// After an interrupt (`cli::interrupt`), `interrupted.txt` in the report folder says so: the
+/// report and the result are the fit's state after iteration `done` of `asked`.
+pub fn write_interrupted(report_dir: &Path, done: u32, asked: u32) -> Result<()> {
+    if let Some(signal) = interrupt::requested() {
+        let line = format!(
+            "{}: stopped after iteration {done} of {asked}; the result and this report are the \
+             fit's state then\n",
+            interrupt::name(signal)
+        );
+        AtomicFile::create(&report_dir.join("interrupted.txt"))?.commit(line.as_bytes())?;
+    }
     Ok(())
 }
 

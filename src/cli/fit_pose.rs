@@ -282,7 +282,7 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
             }
             bar.set_position(u64::from(l.iteration));
             bar.set_message(format!("loss {:.5}  σ {:.0e}", l.loss, l.sigma));
-            true
+            super::interrupt::requested().is_none()
         },
     )?;
     bar.finish_and_clear();
@@ -331,6 +331,18 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
     field("initial_loss", json_num(initial_loss));
     field("loss", json_num(result.loss));
     field("iterations", result.iterations.to_string());
+    if let Some(signal) = super::interrupt::requested() {
+        // Stopped early by Ctrl-C / SIGTERM (`cli::interrupt`): the pose after the last step.
+        field(
+            "interrupted",
+            format!(
+                "\"{}: stopped after iteration {} of {}\"",
+                super::interrupt::name(signal),
+                result.iterations,
+                opts.iterations
+            ),
+        );
+    }
     field("sigma", json_num(opts.settings.sigma));
     field("gamma", json_num(opts.settings.gamma));
     field(

@@ -20,6 +20,7 @@ pub mod fit_field;
 pub mod fit_mesh;
 pub mod fit_pose;
 pub mod grad;
+pub mod interrupt;
 pub mod output;
 pub mod render;
 
