@@ -15,9 +15,11 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use softvk::camera::{Camera, Projection};
 use softvk::fit::AdamOptions;
+use softvk::fit::checkpoint::{Checkpoint, FitKind};
 use softvk::fit::io::{self, Silhouettes};
 use softvk::fit::mesh_fit::{
-    FitLog, MeshFitOptions, default_template, demo_target, fit_mesh, icosphere_template,
+    FitLog, MeshFitOptions, MeshFitSnapshot, MeshFitState, default_template, demo_target,
+    fit_mesh_resumable, icosphere_template,
 };
 use softvk::fit::report::{self, GifWriter, Series};
 use softvk::gpu::{Context, ContextOptions};
@@ -89,6 +91,22 @@ pub struct FitArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+
+    /// Write the fit's complete state (parameters, Adam's moments, iteration, log) to
+    /// DIR/mesh-fit.ckpt every --checkpoint-every iterations, at an interrupt and at the end,
+    /// atomically; `--resume DIR` goes on from it.
+    #[arg(long, value_name = "DIR")]
+    pub checkpoint: Option<PathBuf>,
+
+    /// Iterations between checkpoints (rounded up to a multiple of --log-every).
+    #[arg(long, value_name = "N", default_value_t = 100, requires = "checkpoint")]
+    pub checkpoint_every: u32,
+
+    /// Go on from DIR/mesh-fit.ckpt, written by a fit of the same template, targets, cameras
+    /// and options (the iteration count may differ); it ends bit for bit as the fit that never
+    /// stopped.
+    #[arg(long, value_name = "DIR")]
+    pub resume: Option<PathBuf>,
 }
 
 /// The flags of `softvk fit-mesh`.
@@ -206,6 +224,22 @@ fn fit_and_report(
     default_iterations: u32,
 ) -> Result<()> {
     let opts = fit.options(sil.width, sil.height, default_iterations)?;
+    // The checkpoint is checked before anything is written.
+    let fingerprint = MeshFitState::fingerprint(template, cams, &sil.masks, &opts);
+    let resume = match &fit.resume {
+        Some(dir) => {
+            let c = Checkpoint::read(&dir.join(CHECKPOINT_FILE), FitKind::Mesh, fingerprint)?;
+            Some(MeshFitState::from_checkpoint(&c, template)?)
+        }
+        None => None,
+    };
+    if fit.checkpoint_every == 0 {
+        return Err(Error::Input("--checkpoint-every must be at least 1".into()));
+    }
+    if let Some(dir) = &fit.checkpoint {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| Error::Input(format!("cannot create {}: {e}", dir.display())))?;
+    }
     std::fs::create_dir_all(report_dir)
         .map_err(|e| Error::Input(format!("cannot create {}: {e}", report_dir.display())))?;
     let ctx = Context::new(&ContextOptions::from_env())?;
@@ -233,13 +267,23 @@ fn fit_and_report(
         )
     };
     let mut gif_error = None;
-    let result = fit_mesh(
+    let save = |snapshot: &MeshFitSnapshot<'_>| -> Result<()> {
+        match &fit.checkpoint {
+            Some(dir) => snapshot
+                .state()?
+                .to_checkpoint(fingerprint)
+                .write(&dir.join(CHECKPOINT_FILE)),
+            None => Ok(()),
+        }
+    };
+    let result = fit_mesh_resumable(
         &ctx,
         template,
         cams,
         &sil.masks,
         &opts,
-        |l: &FitLog, ious, alphas| {
+        resume.as_ref(),
+        |l: &FitLog, ious, alphas, snapshot| {
             let mean = ious.iter().sum::<f32>() / ious.len().max(1) as f32;
             bar.set_position(u64::from(l.iteration));
             bar.set_message(format!("loss {:.4}  soft IoU {mean:.4}", l.total));
@@ -247,10 +291,15 @@ fn fit_and_report(
                 let frame = report::contact_sheet(a, &sil.masks, views, w, h, columns, Some(ious));
                 if let Err(e) = gif.push(&frame) {
                     gif_error = Some(e);
-                    return false;
+                    return Ok(false);
                 }
             }
-            interrupt::requested().is_none()
+            let go_on = interrupt::requested().is_none();
+            let every = fit.checkpoint_every.div_ceil(opts.log_every) * opts.log_every;
+            if !go_on || l.iteration % every == 0 || l.iteration == opts.iterations {
+                save(snapshot)?;
+            }
+            Ok(go_on)
         },
     )?;
     bar.finish_and_clear();
@@ -396,6 +445,9 @@ pub fn run(args: &FitMeshArgs) -> Result<()> {
         FIT_ITERATIONS,
     )
 }
+
+/// The checkpoint's file in `--checkpoint DIR` / `--resume DIR`.
+pub const CHECKPOINT_FILE: &str = "mesh-fit.ckpt";
 
 /// `fit-mesh`'s default iterations (SoftRas's demo).
 const FIT_ITERATIONS: u32 = 2000;

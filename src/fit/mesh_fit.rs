@@ -28,6 +28,7 @@ use std::time::Instant;
 
 use glam::{DMat3, DVec3};
 
+use super::checkpoint::{Checkpoint, Fingerprint, FitKind, Reader, Writer};
 use super::gate::IterationGate;
 use super::{Adam, AdamOptions, Deform, GradOut, Regularizers, SilhouetteLoss};
 use crate::camera::Camera;
@@ -201,11 +202,202 @@ pub fn fit_mesh(
     opts: &MeshFitOptions,
     mut progress: impl FnMut(&FitLog, &[f32], Option<&[f32]>) -> bool,
 ) -> Result<MeshFitResult> {
+    fit_mesh_resumable(
+        ctx,
+        template,
+        cameras,
+        targets,
+        opts,
+        None,
+        |l, ious, a, _| Ok(progress(l, ious, a)),
+    )
+}
+
+/// A mesh fit's complete state after an iteration: the parameters, Adam's moments, the
+/// iterations done (Adam's step), the log and the time spent. A fit resumed from it
+/// ([`fit_mesh_resumable`]) ends bit for bit as the fit that never stopped (the deformation
+/// fit has no other state: no sampler, no schedule).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeshFitState {
+    /// Iterations done.
+    pub iteration: u32,
+    /// The parameters (`3 V` displacements, then the centre).
+    pub params: Vec<f32>,
+    /// Adam's first moments.
+    pub adam_m: Vec<f32>,
+    /// Adam's second moments.
+    pub adam_v: Vec<f32>,
+    /// The logged losses so far.
+    pub log: Vec<FitLog>,
+    /// Seconds the iterations took so far.
+    pub seconds: f64,
+}
+
+/// A logged iteration's view of the running fit, for a progress callback that wants its state
+/// ([`MeshFitSnapshot::state`], read from the GPU only when asked: checkpoints).
+pub struct MeshFitSnapshot<'a> {
+    fitter: &'a Fitter<'a>,
+    iteration: u32,
+    log: &'a [FitLog],
+    seconds: f64,
+}
+
+impl MeshFitSnapshot<'_> {
+    /// The fit's complete state now.
+    pub fn state(&self) -> Result<MeshFitState> {
+        let (m, v) = self.fitter.adam.moments();
+        let n = self.fitter.deform.param_count() as usize;
+        Ok(MeshFitState {
+            iteration: self.iteration,
+            params: self.fitter.read_params()?,
+            adam_m: self.fitter.ctx.read_buffer(m, 0, n)?,
+            adam_v: self.fitter.ctx.read_buffer(v, 0, n)?,
+            log: self.log.to_vec(),
+            seconds: self.seconds,
+        })
+    }
+}
+
+impl MeshFitState {
+    /// The fingerprint of a fit's inputs that a checkpoint of it must carry: the template, the
+    /// targets, the cameras and every option but the iteration count, the logging and the entry
+    /// capacity (which change no result: a fit may be resumed for more iterations).
+    pub fn fingerprint(
+        template: &Mesh,
+        cameras: &[Camera],
+        targets: &[f32],
+        opts: &MeshFitOptions,
+    ) -> u64 {
+        let mut f = Fingerprint::default();
+        f.add_pod(&template.positions).add_pod(&template.faces);
+        f.add_pod(targets);
+        f.add(format!("{cameras:?}").as_bytes());
+        let o = MeshFitOptions {
+            iterations: 0,
+            log_every: 0,
+            snapshots: false,
+            entry_capacity: None,
+            ..opts.clone()
+        };
+        f.add(format!("{o:?}").as_bytes());
+        f.value()
+    }
+
+    /// As a checkpoint for inputs of `fingerprint`.
+    pub fn to_checkpoint(&self, fingerprint: u64) -> Checkpoint {
+        let mut w = Writer::default();
+        w.f32s(&self.params);
+        w.f32s(&self.adam_m);
+        w.f32s(&self.adam_v);
+        w.u32(self.log.len() as u32);
+        for l in &self.log {
+            w.u32(l.iteration);
+            w.f32(l.silhouette);
+            w.f32(l.laplacian);
+            w.f32(l.flatten);
+            w.f32(l.total);
+            w.u64(l.entries);
+            w.f64(l.seconds);
+        }
+        Checkpoint {
+            kind: FitKind::Mesh,
+            fingerprint,
+            iteration: self.iteration,
+            seconds: self.seconds,
+            payload: w.0,
+        }
+    }
+
+    /// From a checkpoint ([`Checkpoint::read`] checked its kind and inputs) of a fit of
+    /// `template`.
+    pub fn from_checkpoint(c: &Checkpoint, template: &Mesh) -> Result<Self> {
+        let params = 3 * template.vertex_count() + 3;
+        let mut r = Reader::new(&c.payload);
+        let p = r.f32s(params)?;
+        let m = r.f32s(params)?;
+        let v = r.f32s(params)?;
+        if p.len() != params || m.len() != params || v.len() != params {
+            return Err(Error::Input(format!(
+                "checkpoint of {} parameters, the template has {params}",
+                p.len()
+            )));
+        }
+        let n = r.u32()?;
+        if n > c.iteration {
+            return Err(Error::Input(
+                "checkpoint log longer than its iterations".into(),
+            ));
+        }
+        let mut log = Vec::with_capacity(n as usize);
+        for _ in 0..n {
+            log.push(FitLog {
+                iteration: r.u32()?,
+                silhouette: r.f32()?,
+                laplacian: r.f32()?,
+                flatten: r.f32()?,
+                total: r.f32()?,
+                entries: r.u64()?,
+                seconds: r.f64()?,
+            });
+        }
+        if !r.done() {
+            return Err(Error::Input("checkpoint has bytes after its log".into()));
+        }
+        Ok(Self {
+            iteration: c.iteration,
+            params: p,
+            adam_m: m,
+            adam_v: v,
+            log,
+            seconds: c.seconds,
+        })
+    }
+}
+
+/// [`fit_mesh`], optionally from a state a previous fit of the same inputs reached (`resume`:
+/// it goes on with iteration `resume.iteration + 1`), with a progress callback that also gets
+/// a [`MeshFitSnapshot`] (to checkpoint) and may fail. Resumed, the fit ends bit for bit as the
+/// fit that never stopped.
+pub fn fit_mesh_resumable(
+    ctx: &Context,
+    template: &Mesh,
+    cameras: &[Camera],
+    targets: &[f32],
+    opts: &MeshFitOptions,
+    resume: Option<&MeshFitState>,
+    mut progress: impl FnMut(&FitLog, &[f32], Option<&[f32]>, &MeshFitSnapshot<'_>) -> Result<bool>,
+) -> Result<MeshFitResult> {
     let mut fitter = Fitter::new(ctx, template, cameras, targets, opts)?;
     let start = Instant::now();
     let mut log = Vec::new();
-    let every = u64::from(opts.log_every);
     let mut it = 1;
+    let mut earlier = 0.0;
+    if let Some(state) = resume {
+        let n = fitter.deform.param_count() as usize;
+        if [&state.params, &state.adam_m, &state.adam_v]
+            .iter()
+            .any(|v| v.len() != n)
+        {
+            return Err(Error::Input(format!(
+                "resume: the state has {} parameters, the template {n}",
+                state.params.len()
+            )));
+        }
+        if state.iteration > opts.iterations {
+            return Err(Error::Input(format!(
+                "resume: the state is after iteration {}, past the {} asked",
+                state.iteration, opts.iterations
+            )));
+        }
+        let (m, v) = fitter.adam.moments();
+        ctx.write_buffer(&fitter.params, 0, &state.params)?;
+        ctx.write_buffer(m, 0, &state.adam_m)?;
+        ctx.write_buffer(v, 0, &state.adam_v)?;
+        log = state.log.clone();
+        it = state.iteration + 1;
+        earlier = state.seconds;
+    }
+    let every = u64::from(opts.log_every);
     while it <= opts.iterations {
         // Up to the next logged iteration in one submission.
         let next_log = (u64::from(it - 1) / every + 1) * every;
@@ -214,15 +406,22 @@ pub fn fit_mesh(
             it = stopped;
             continue;
         }
-        let (entry, ious, alphas) = fitter.read_progress(last, start.elapsed().as_secs_f64())?;
-        let go_on = progress(&entry, &ious, alphas.as_deref());
+        let seconds = earlier + start.elapsed().as_secs_f64();
+        let (entry, ious, alphas) = fitter.read_progress(last, seconds)?;
         log.push(entry);
+        let snapshot = MeshFitSnapshot {
+            fitter: &fitter,
+            iteration: last,
+            log: &log,
+            seconds,
+        };
+        let go_on = progress(&log[log.len() - 1], &ious, alphas.as_deref(), &snapshot)?;
         if !go_on {
             break;
         }
         it = last + 1;
     }
-    let seconds = start.elapsed().as_secs_f64();
+    let seconds = earlier + start.elapsed().as_secs_f64();
     Ok(MeshFitResult {
         mesh: fitter.mesh(template)?,
         log,

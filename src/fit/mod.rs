@@ -45,6 +45,7 @@
 //!   leading values are used), so whole, alignment-rounded buffers can be passed.
 
 pub mod adam;
+pub mod checkpoint;
 pub mod deform;
 pub mod field_fit;
 pub mod flatten;

@@ -1,0 +1,256 @@
+//! Checkpoints of a fit's complete state, on disk: what `--checkpoint DIR` writes and
+//! `--resume DIR` reads, so that a fit stopped at a checkpoint and resumed ends bit for bit as
+//! the uninterrupted fit (softvk is deterministic).
+//!
+//! The file is a small explicit binary format, written by hand rather than through serde and a
+//! binary codec: it is a handful of little-endian numbers and `f32` arrays, and what matters is
+//! the checks on reading (magic, format, the softvk version that wrote it, the kind of fit, a
+//! fingerprint of the fit's inputs), each refused with one clear line. Layout:
+//!
+//! ```text
+//! b"SOFTVKCK", format u32, version (u32 length + UTF-8), kind u32, fingerprint u64,
+//! iteration u32, seconds f64, then the kind's payload (arrays as u64 length + f32s)
+//! ```
+
+use std::path::Path;
+
+use crate::atomic_file::AtomicFile;
+use crate::error::{Error, Result};
+
+const MAGIC: &[u8; 8] = b"SOFTVKCK";
+const FORMAT: u32 = 1;
+
+/// The kind of fit a checkpoint belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FitKind {
+    /// `fit-mesh` (and `demo`).
+    Mesh = 1,
+}
+
+impl FitKind {
+    fn name(code: u32) -> &'static str {
+        match code {
+            1 => "mesh fit",
+            2 => "field fit",
+            3 => "pose fit",
+            _ => "unknown fit",
+        }
+    }
+}
+
+/// FNV-1a, 64 bits: a fingerprint of a fit's inputs, stable across platforms and Rust versions
+/// (unlike `std`'s hasher). Not a cryptographic hash: it tells a checkpoint of other inputs
+/// apart, it does not authenticate one.
+#[derive(Clone, Copy, Debug)]
+pub struct Fingerprint(u64);
+
+impl Default for Fingerprint {
+    fn default() -> Self {
+        Self(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl Fingerprint {
+    /// Adds bytes.
+    pub fn add(&mut self, bytes: &[u8]) -> &mut Self {
+        for &b in bytes {
+            self.0 ^= u64::from(b);
+            self.0 = self.0.wrapping_mul(0x0100_0000_01b3);
+        }
+        self
+    }
+
+    /// Adds plain data (numbers, arrays of them) by their bytes.
+    pub fn add_pod<T: bytemuck::Pod>(&mut self, data: &[T]) -> &mut Self {
+        self.add(bytemuck::cast_slice(data))
+    }
+
+    /// The value.
+    pub fn value(&self) -> u64 {
+        self.0
+    }
+}
+
+/// A checkpoint's header and payload bytes, as written or read.
+pub struct Checkpoint {
+    /// The kind of fit.
+    pub kind: FitKind,
+    /// The fingerprint of the fit's inputs.
+    pub fingerprint: u64,
+    /// Iterations done.
+    pub iteration: u32,
+    /// Seconds the fit had run.
+    pub seconds: f64,
+    /// The kind's payload ([`Writer`] / [`Reader`]).
+    pub payload: Vec<u8>,
+}
+
+impl Checkpoint {
+    /// Writes the checkpoint to `path` atomically.
+    pub fn write(&self, path: &Path) -> Result<()> {
+        let mut w = Writer::default();
+        w.bytes(MAGIC);
+        w.u32(FORMAT);
+        let version = env!("CARGO_PKG_VERSION").as_bytes();
+        w.u32(version.len() as u32);
+        w.bytes(version);
+        w.u32(self.kind as u32);
+        w.u64(self.fingerprint);
+        w.u32(self.iteration);
+        w.f64(self.seconds);
+        w.bytes(&self.payload);
+        AtomicFile::create(path)?.commit(&w.0)
+    }
+
+    /// Reads a checkpoint of `kind` for inputs of `fingerprint` from `path`; anything else (not
+    /// a checkpoint, another format or softvk version, another kind of fit, other inputs) is a
+    /// clear error.
+    pub fn read(path: &Path, kind: FitKind, fingerprint: u64) -> Result<Checkpoint> {
+        let bytes = std::fs::read(path).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let bad = |why: &str| Error::Input(format!("{}: {why}", path.display()));
+        let mut r = Reader {
+            bytes: &bytes,
+            at: 0,
+        };
+        if r.take(8).ok() != Some(&MAGIC[..]) {
+            return Err(bad("not a softvk checkpoint"));
+        }
+        let format = r.u32().map_err(|_| bad("truncated checkpoint"))?;
+        if format != FORMAT {
+            return Err(bad(&format!(
+                "checkpoint format {format}, this softvk reads format {FORMAT}"
+            )));
+        }
+        let len = r.u32().map_err(|_| bad("truncated checkpoint"))? as usize;
+        let version = r.take(len).map_err(|_| bad("truncated checkpoint"))?;
+        let version = String::from_utf8_lossy(version).into_owned();
+        if version != env!("CARGO_PKG_VERSION") {
+            return Err(bad(&format!(
+                "checkpoint written by softvk {version}, this is softvk {}",
+                env!("CARGO_PKG_VERSION")
+            )));
+        }
+        let code = r.u32().map_err(|_| bad("truncated checkpoint"))?;
+        if code != kind as u32 {
+            return Err(bad(&format!(
+                "a {} checkpoint, not a {}'s",
+                FitKind::name(code),
+                FitKind::name(kind as u32)
+            )));
+        }
+        let found = r.u64().map_err(|_| bad("truncated checkpoint"))?;
+        if found != fingerprint {
+            return Err(bad(
+                "checkpoint of another fit: its template, targets, cameras or options differ",
+            ));
+        }
+        let iteration = r.u32().map_err(|_| bad("truncated checkpoint"))?;
+        let seconds = r.f64().map_err(|_| bad("truncated checkpoint"))?;
+        Ok(Checkpoint {
+            kind,
+            fingerprint,
+            iteration,
+            seconds,
+            payload: r.bytes[r.at..].to_vec(),
+        })
+    }
+}
+
+/// Little-endian writer of a payload.
+#[derive(Default)]
+pub struct Writer(pub Vec<u8>);
+
+impl Writer {
+    /// Raw bytes.
+    pub fn bytes(&mut self, b: &[u8]) {
+        self.0.extend_from_slice(b);
+    }
+    /// A u32.
+    pub fn u32(&mut self, v: u32) {
+        self.bytes(&v.to_le_bytes());
+    }
+    /// A u64.
+    pub fn u64(&mut self, v: u64) {
+        self.bytes(&v.to_le_bytes());
+    }
+    /// An f32.
+    pub fn f32(&mut self, v: f32) {
+        self.bytes(&v.to_le_bytes());
+    }
+    /// An f64.
+    pub fn f64(&mut self, v: f64) {
+        self.bytes(&v.to_le_bytes());
+    }
+    /// An array of f32: its length (u64), then the values.
+    pub fn f32s(&mut self, v: &[f32]) {
+        self.u64(v.len() as u64);
+        for x in v {
+            self.f32(*x);
+        }
+    }
+}
+
+/// Little-endian reader of a payload; every read fails cleanly past the end.
+pub struct Reader<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Reader<'a> {
+    /// Reads `payload`.
+    pub fn new(payload: &'a [u8]) -> Self {
+        Self {
+            bytes: payload,
+            at: 0,
+        }
+    }
+
+    fn take(&mut self, n: usize) -> Result<&'a [u8]> {
+        let end = self
+            .at
+            .checked_add(n)
+            .filter(|&e| e <= self.bytes.len())
+            .ok_or_else(|| Error::Input("truncated checkpoint".into()))?;
+        let b = &self.bytes[self.at..end];
+        self.at = end;
+        Ok(b)
+    }
+
+    fn array<const N: usize>(&mut self) -> Result<[u8; N]> {
+        Ok(self.take(N)?.try_into().expect("N bytes"))
+    }
+
+    /// A u32.
+    pub fn u32(&mut self) -> Result<u32> {
+        Ok(u32::from_le_bytes(self.array()?))
+    }
+    /// A u64.
+    pub fn u64(&mut self) -> Result<u64> {
+        Ok(u64::from_le_bytes(self.array()?))
+    }
+    /// An f32.
+    pub fn f32(&mut self) -> Result<f32> {
+        Ok(f32::from_le_bytes(self.array()?))
+    }
+    /// An f64.
+    pub fn f64(&mut self) -> Result<f64> {
+        Ok(f64::from_le_bytes(self.array()?))
+    }
+    /// An array of f32 written by [`Writer::f32s`], of at most `max` values.
+    pub fn f32s(&mut self, max: usize) -> Result<Vec<f32>> {
+        let n = self.u64()?;
+        if n > max as u64 {
+            return Err(Error::Input(format!(
+                "checkpoint array of {n} values, at most {max} expected"
+            )));
+        }
+        (0..n).map(|_| self.f32()).collect()
+    }
+    /// Whether every byte was read.
+    pub fn done(&self) -> bool {
+        self.at == self.bytes.len()
+    }
+}

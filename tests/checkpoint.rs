@@ -1,0 +1,363 @@
+//! Checkpoints and resume (issue #14): a mesh fit stopped at a checkpoint and resumed ends bit
+//! for bit as the fit that never stopped, in the library and through `softvk fit-mesh`
+//! (`--checkpoint`, `--resume`, also after a real Ctrl-C); checkpoints of other inputs, other
+//! kinds or no checkpoint at all are refused with one clear error.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use common::{TempDir, softvk};
+use softvk::camera::Camera;
+use softvk::fit::checkpoint::{Checkpoint, FitKind};
+use softvk::fit::io::{self, CameraRow};
+use softvk::fit::mesh_fit::{
+    FitLog, MeshFitOptions, MeshFitResult, MeshFitState, fit_mesh, fit_mesh_resumable,
+    icosphere_template,
+};
+use softvk::mesh::Mesh;
+use softvk::raster::reference::RasterSettings;
+
+const SIZE: u32 = 16;
+
+fn rows() -> Vec<CameraRow> {
+    (0..3)
+        .map(|i| CameraRow {
+            distance: 2.732,
+            elevation: 30.0,
+            azimuth: 120.0 * f64::from(i),
+        })
+        .collect()
+}
+
+/// A centred disc in every view.
+fn masks() -> Vec<f32> {
+    let px = (SIZE * SIZE) as usize;
+    let c = (SIZE as f32 - 1.0) / 2.0;
+    let disc: Vec<f32> = (0..px)
+        .map(|i| {
+            let (x, y) = (
+                (i % SIZE as usize) as f32 - c,
+                (i / SIZE as usize) as f32 - c,
+            );
+            f32::from(u8::from(x * x + y * y < 30.0))
+        })
+        .collect();
+    (0..3).flat_map(|_| disc.iter().copied()).collect()
+}
+
+fn options(iterations: u32) -> MeshFitOptions {
+    MeshFitOptions {
+        iterations,
+        log_every: 2,
+        settings: RasterSettings {
+            width: SIZE,
+            height: SIZE,
+            ..MeshFitOptions::default().settings
+        },
+        ..MeshFitOptions::default()
+    }
+}
+
+fn bits(v: &[f32]) -> Vec<u32> {
+    v.iter().map(|x| x.to_bits()).collect()
+}
+
+/// The log without its wall times.
+fn losses(log: &[FitLog]) -> Vec<(u32, u32, u32, u32, u32, u64)> {
+    log.iter()
+        .map(|l| {
+            (
+                l.iteration,
+                l.silhouette.to_bits(),
+                l.laplacian.to_bits(),
+                l.flatten.to_bits(),
+                l.total.to_bits(),
+                l.entries,
+            )
+        })
+        .collect()
+}
+
+fn assert_same_fit(what: &str, a: &MeshFitResult, b: &MeshFitResult) {
+    assert_eq!(bits(&a.params), bits(&b.params), "{what}: parameters");
+    let pos = |m: &Mesh| {
+        m.positions
+            .iter()
+            .flatten()
+            .map(|x| x.to_bits())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(pos(&a.mesh), pos(&b.mesh), "{what}: positions");
+    assert_eq!(losses(&a.log), losses(&b.log), "{what}: logged losses");
+}
+
+#[test]
+fn a_mesh_fit_resumed_from_any_checkpoint_ends_bit_for_bit_as_the_uninterrupted_fit() {
+    let Some(gpu) = common::gpu() else { return };
+    let template = icosphere_template();
+    let cams: Vec<Camera> = rows().iter().map(CameraRow::camera).collect();
+    let targets = masks();
+    let whole = fit_mesh(&gpu, &template, &cams, &targets, &options(8), |_, _, _| {
+        true
+    })
+    .unwrap();
+    let dir = TempDir::new("ckpt-lib");
+    let fingerprint = MeshFitState::fingerprint(&template, &cams, &targets, &options(8));
+    for stop in [2u32, 4, 6] {
+        // Run to `stop`, take the state there (through a file, as the CLI does), resume.
+        let mut state = None;
+        fit_mesh_resumable(
+            &gpu,
+            &template,
+            &cams,
+            &targets,
+            &options(8),
+            None,
+            |l, _, _, snapshot| {
+                if l.iteration == stop {
+                    state = Some(snapshot.state()?);
+                    return Ok(false);
+                }
+                Ok(true)
+            },
+        )
+        .unwrap();
+        let state = state.unwrap();
+        assert_eq!(state.iteration, stop);
+        let path = dir.path(&format!("at-{stop}.ckpt"));
+        state.to_checkpoint(fingerprint).write(&path).unwrap();
+        let read = Checkpoint::read(&path, FitKind::Mesh, fingerprint).unwrap();
+        let back = MeshFitState::from_checkpoint(&read, &template).unwrap();
+        assert_eq!(back, state, "the checkpoint file round trip");
+        let resumed = fit_mesh_resumable(
+            &gpu,
+            &template,
+            &cams,
+            &targets,
+            &options(8),
+            Some(&back),
+            |_, _, _, _| Ok(true),
+        )
+        .unwrap();
+        assert_same_fit(&format!("stopped at {stop}"), &whole, &resumed);
+    }
+}
+
+#[test]
+fn foreign_or_broken_checkpoints_are_refused_with_one_line() {
+    let template = icosphere_template();
+    let cams: Vec<Camera> = rows().iter().map(CameraRow::camera).collect();
+    let targets = masks();
+    let fp = MeshFitState::fingerprint(&template, &cams, &targets, &options(8));
+    // Only the iteration count and the logging may differ.
+    assert_eq!(
+        fp,
+        MeshFitState::fingerprint(&template, &cams, &targets, &options(3000))
+    );
+    let mut other = targets.clone();
+    other[5] = 1.0 - other[5];
+    assert_ne!(
+        fp,
+        MeshFitState::fingerprint(&template, &cams, &other, &options(8))
+    );
+    let dir = TempDir::new("ckpt-bad");
+    let n = 3 * template.vertex_count() + 3;
+    let state = MeshFitState {
+        iteration: 2,
+        params: vec![0.5; n],
+        adam_m: vec![0.25; n],
+        adam_v: vec![0.125; n],
+        log: Vec::new(),
+        seconds: 1.0,
+    };
+    let path = dir.path("c.ckpt");
+    state.to_checkpoint(fp).write(&path).unwrap();
+    let refused = |path: &Path, kind: FitKind, fp: u64, needle: &str| {
+        let e = Checkpoint::read(path, kind, fp)
+            .err()
+            .unwrap_or_else(|| panic!("{needle}: accepted"))
+            .to_string();
+        assert!(e.contains(needle) && !e.contains('\n'), "{needle}: {e}");
+    };
+    refused(&path, FitKind::Mesh, fp ^ 1, "another fit");
+    let bytes = std::fs::read(&path).unwrap();
+    let garbage = dir.path("garbage.ckpt");
+    std::fs::write(&garbage, b"P6 not a checkpoint").unwrap();
+    refused(&garbage, FitKind::Mesh, fp, "not a softvk checkpoint");
+    let short = dir.path("short.ckpt");
+    std::fs::write(&short, &bytes[..20]).unwrap();
+    refused(&short, FitKind::Mesh, fp, "truncated");
+    let mut version = bytes.clone();
+    version[16] ^= 0x01; // a byte of the version string
+    let v = dir.path("version.ckpt");
+    std::fs::write(&v, &version).unwrap();
+    refused(&v, FitKind::Mesh, fp, "written by softvk");
+    refused(&dir.path("missing.ckpt"), FitKind::Mesh, fp, "missing.ckpt");
+    // A payload cut short after a valid header.
+    let cut = dir.path("cut.ckpt");
+    std::fs::write(&cut, &bytes[..bytes.len() - 9]).unwrap();
+    let c = Checkpoint::read(&cut, FitKind::Mesh, fp).unwrap();
+    let e = MeshFitState::from_checkpoint(&c, &template)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("truncated"), "{e}");
+    // A state of another template size.
+    let c = Checkpoint::read(&path, FitKind::Mesh, fp).unwrap();
+    let e = MeshFitState::from_checkpoint(&c, &Mesh::icosphere(1))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("parameters") || e.contains("at most"), "{e}");
+}
+
+fn inputs(dir: &TempDir) -> (PathBuf, PathBuf) {
+    let sil = dir.path("sil");
+    io::write_silhouettes(&sil, &io::silhouette_names(3), SIZE, SIZE, &masks()).unwrap();
+    let cams = dir.path("cameras.csv");
+    io::write_cameras(&cams, &rows()).unwrap();
+    (sil, cams)
+}
+
+fn fit_cmd(sil: &Path, cams: &Path, out: &Path, args: &[&str]) -> std::process::Command {
+    let mut cmd = softvk();
+    cmd.args([
+        "fit-mesh",
+        "--log-every",
+        "2",
+        "--quiet",
+        "--template",
+        "icosphere",
+    ])
+    .arg("--silhouettes")
+    .arg(sil)
+    .arg("--cameras")
+    .arg(cams)
+    .arg("--out")
+    .arg(out)
+    .args(args);
+    cmd
+}
+
+fn run(what: &str, mut cmd: std::process::Command) {
+    let o = cmd.output().unwrap();
+    assert!(
+        o.status.success(),
+        "{what}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+#[test]
+fn fit_mesh_checkpoints_and_resumes_to_the_same_bytes_even_after_ctrl_c() {
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    let dir = TempDir::new("ckpt-cli");
+    let (sil, cams) = inputs(&dir);
+    let whole = dir.path("whole.obj");
+    run("whole", fit_cmd(&sil, &cams, &whole, &["--iters", "10"]));
+
+    // Stopped by its iteration count at 6, with a checkpoint every 4 (and at the end), resumed.
+    let ck = dir.path("ck");
+    let part = dir.path("part.obj");
+    let ck_arg = ck.to_str().unwrap();
+    run(
+        "first part",
+        fit_cmd(
+            &sil,
+            &cams,
+            &part,
+            &[
+                "--iters",
+                "6",
+                "--checkpoint",
+                ck_arg,
+                "--checkpoint-every",
+                "4",
+            ],
+        ),
+    );
+    run(
+        "resumed",
+        fit_cmd(&sil, &cams, &part, &["--iters", "10", "--resume", ck_arg]),
+    );
+    assert_eq!(
+        std::fs::read(&whole).unwrap(),
+        std::fs::read(&part).unwrap(),
+        "resumed at 6"
+    );
+
+    // Interrupted by a real Ctrl-C (its checkpoint is written as it stops), resumed.
+    let ck2 = dir.path("ck2");
+    let ck2_arg = ck2.to_str().unwrap();
+    let long = dir.path("long.obj");
+    let whole_long = dir.path("whole-long.obj");
+    run(
+        "whole, longer",
+        fit_cmd(&sil, &cams, &whole_long, &["--iters", "400"]),
+    );
+    let mut child = fit_cmd(
+        &sil,
+        &cams,
+        &long,
+        &[
+            "--iters",
+            "400",
+            "--checkpoint",
+            ck2_arg,
+            "--checkpoint-every",
+            "1000",
+        ],
+    )
+    .stdout(std::process::Stdio::null())
+    .stderr(std::process::Stdio::null())
+    .spawn()
+    .unwrap();
+    std::thread::sleep(Duration::from_millis(1500));
+    let running = child.try_wait().unwrap().is_none();
+    if running {
+        // SAFETY: kill(2) on our own child's pid.
+        assert_eq!(
+            unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) },
+            0
+        );
+    }
+    let status = child.wait().unwrap();
+    if running {
+        assert_eq!(status.code(), Some(130));
+    } else {
+        eprintln!("the 400-iteration fit ended before the signal: resuming from its end");
+    }
+    let c = std::fs::read(ck2.join("mesh-fit.ckpt")).unwrap();
+    assert!(!c.is_empty());
+    run(
+        "resumed after Ctrl-C",
+        fit_cmd(&sil, &cams, &long, &["--iters", "400", "--resume", ck2_arg]),
+    );
+    assert_eq!(
+        std::fs::read(&whole_long).unwrap(),
+        std::fs::read(&long).unwrap(),
+        "resumed after Ctrl-C"
+    );
+
+    // Another template: refused before anything is written.
+    let other = dir.path("other.obj");
+    let o = softvk()
+        .args(["fit-mesh", "--log-every", "2", "--quiet", "--iters", "10"])
+        .arg("--silhouettes")
+        .arg(&sil)
+        .arg("--cameras")
+        .arg(&cams)
+        .arg("--out")
+        .arg(&other)
+        .args(["--resume", ck_arg])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(stderr.contains("another fit"), "{stderr}");
+    assert!(!other.exists() && !dir.path("other-report").exists());
+}
