@@ -361,3 +361,97 @@ fn fit_mesh_checkpoints_and_resumes_to_the_same_bytes_even_after_ctrl_c() {
     assert!(stderr.contains("another fit"), "{stderr}");
     assert!(!other.exists() && !dir.path("other-report").exists());
 }
+
+/// The field fit, with the geometric regularizer (its own random candidates) and the samplers'
+/// random rays and anchors, both keyed by (seed, iteration): resumed, it ends bit for bit as
+/// the fit that never stopped.
+#[test]
+fn a_field_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_fit() {
+    use softvk::field::FieldKind;
+    use softvk::fit::AdamOptions;
+    use softvk::fit::field_fit::{
+        FieldFitLog, FieldFitOptions, FieldFitState, fit_field, fit_field_resumable,
+    };
+    use softvk::probe::ProbeSettings;
+    use softvk::probe::targets::sphere_silhouettes;
+    let Some(gpu) = common::gpu() else { return };
+    let cams = [
+        Camera::from_angles(2.732, 20.0, 30.0),
+        Camera::from_angles(2.732, -10.0, 130.0),
+    ];
+    let targets = sphere_silhouettes(&cams, 24, 24, 0.5).unwrap();
+    let opts = FieldFitOptions {
+        field: FieldKind::Grid { res: 8 },
+        probe: ProbeSettings {
+            rays_per_view: 96,
+            anchors: 300,
+            tau: 0.1,
+            anchor_sigma: 0.08,
+            hull_resolution: 16,
+            geo_candidates: 12,
+            geo_lambda: 0.1,
+            seed: 7,
+            ..ProbeSettings::default()
+        },
+        adam: AdamOptions {
+            lr: 0.05,
+            betas: (0.9, 0.99),
+            eps: 1e-8,
+        },
+        iterations: 6,
+        log_every: 2,
+        init_logit: 0.0,
+    };
+    let losses = |log: &[FieldFitLog]| -> Vec<(u32, u32, u32, u32)> {
+        log.iter()
+            .map(|l| {
+                (
+                    l.iteration,
+                    l.silhouette.to_bits(),
+                    l.geo.to_bits(),
+                    l.total.to_bits(),
+                )
+            })
+            .collect()
+    };
+    let whole = fit_field(&gpu, &targets, &opts, |_| true).unwrap();
+    let n = whole.field.param_count();
+    let params = |f: &softvk::field::Field| -> Vec<u32> {
+        bits(&gpu.read_buffer::<f32>(f.params(), 0, n).unwrap())
+    };
+    let fp = FieldFitState::fingerprint(&targets, &opts);
+    let dir = TempDir::new("ckpt-field");
+    let mut state = None;
+    fit_field_resumable(&gpu, &targets, &opts, None, |l, snapshot| {
+        if l.iteration == 4 {
+            state = Some(snapshot.state()?);
+            return Ok(false);
+        }
+        Ok(true)
+    })
+    .unwrap();
+    let path = dir.path("f.ckpt");
+    state.unwrap().to_checkpoint(fp).write(&path).unwrap();
+    let c = Checkpoint::read(&path, FitKind::Field, fp).unwrap();
+    let back = FieldFitState::from_checkpoint(&c, &opts).unwrap();
+    assert_eq!(back.iteration, 4);
+    let resumed = fit_field_resumable(&gpu, &targets, &opts, Some(&back), |_, _| Ok(true)).unwrap();
+    assert_eq!(resumed.iterations, 6);
+    assert_eq!(
+        params(&whole.field),
+        params(&resumed.field),
+        "field parameters"
+    );
+    assert_eq!(losses(&whole.log), losses(&resumed.log), "logged losses");
+    // A mesh fit's checkpoint is not a field fit's, and another field type is another fit.
+    let e = Checkpoint::read(&path, FitKind::Mesh, fp)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("field fit checkpoint, not a mesh fit's"), "{e}");
+    let other = FieldFitOptions {
+        field: FieldKind::Grid { res: 9 },
+        ..opts
+    };
+    assert_ne!(fp, FieldFitState::fingerprint(&targets, &other));
+}

@@ -8,6 +8,8 @@
 //! `RasterSettings::validate`'s. Defaults are SoftRas's `SoftRenderer` ones, the same values as
 //! the library's `Default` impls (a unit test keeps them equal).
 
+use std::path::PathBuf;
+
 use clap::{Args, ValueEnum};
 use glam::DVec3;
 use softvk::camera::{Camera, Projection};
@@ -641,5 +643,47 @@ mod tests {
         assert!(b.view.camera().is_err());
         let b = parse(&["--distance", "0"]).unwrap();
         assert!(b.view.camera().is_err());
+    }
+}
+
+/// `--checkpoint DIR`, `--checkpoint-every N`, `--resume DIR`: a fit's complete state on disk
+/// (`fit-mesh`, `demo`, `fit-field`; `softvk::fit::checkpoint`).
+#[derive(Args, Clone, Debug, Default)]
+pub struct CheckpointArgs {
+    /// Write the fit's complete state (parameters, Adam's moments, iteration, log) to a file in
+    /// DIR every --checkpoint-every iterations, at an interrupt and at the end, atomically;
+    /// `--resume DIR` goes on from it.
+    #[arg(long, value_name = "DIR")]
+    pub checkpoint: Option<PathBuf>,
+
+    /// Iterations between checkpoints (rounded up to a multiple of --log-every).
+    #[arg(long, value_name = "N", default_value_t = 100, requires = "checkpoint")]
+    pub checkpoint_every: u32,
+
+    /// Go on from the checkpoint in DIR, written by a fit of the same inputs and options (the
+    /// iteration count may differ); it ends bit for bit as the fit that never stopped.
+    #[arg(long, value_name = "DIR")]
+    pub resume: Option<PathBuf>,
+}
+
+impl CheckpointArgs {
+    /// Checks the flags and creates the checkpoint folder (after the resume checkpoint was
+    /// read and checked: a refused one leaves nothing behind).
+    pub fn prepare(&self) -> Result<()> {
+        if self.checkpoint_every == 0 {
+            return Err(Error::Input("--checkpoint-every must be at least 1".into()));
+        }
+        if let Some(dir) = &self.checkpoint {
+            std::fs::create_dir_all(dir)
+                .map_err(|e| Error::Input(format!("cannot create {}: {e}", dir.display())))?;
+        }
+        Ok(())
+    }
+
+    /// Whether the fit should checkpoint after logged iteration `it` of `asked` (every N
+    /// rounded up to a multiple of `log_every`, at the end, and when it stops early).
+    pub fn due(&self, it: u32, asked: u32, log_every: u32, stopping: bool) -> bool {
+        let every = self.checkpoint_every.div_ceil(log_every) * log_every;
+        self.checkpoint.is_some() && (stopping || it % every == 0 || it == asked)
     }
 }

@@ -22,9 +22,10 @@ use softvk::field::mcubes::MarchingCubes;
 use softvk::field::preview::{PreviewOptions, render_preview};
 use softvk::field::{Cube, FieldKind};
 use softvk::fit::AdamOptions;
+use softvk::fit::checkpoint::{Checkpoint, FitKind};
 use softvk::fit::field_fit::{
-    self, DEFAULT_CUBE_MARGIN, FieldFitLog, FieldFitOptions, auto_cube, check_cameras_outside,
-    fit_field, scaled_to_cube,
+    self, DEFAULT_CUBE_MARGIN, FieldFitLog, FieldFitOptions, FieldFitState, auto_cube,
+    check_cameras_outside, fit_field_resumable, scaled_to_cube,
 };
 use softvk::fit::io;
 use softvk::fit::report::{self, Series};
@@ -32,7 +33,7 @@ use softvk::gpu::{Context, ContextOptions};
 use softvk::probe::{Aggregate, ProbeSettings, Targets};
 use softvk::{Error, Result};
 
-use super::args::{finite, non_negative, positive, viewing_angle};
+use super::args::{CheckpointArgs, finite, non_negative, positive, viewing_angle};
 use super::output::AtomicFile;
 
 /// `--field`.
@@ -313,6 +314,9 @@ pub struct FitFieldArgs {
     /// No progress bar.
     #[arg(long, help_heading = "Output")]
     pub quiet: bool,
+
+    #[command(flatten)]
+    pub checkpoints: CheckpointArgs,
 }
 
 impl FitFieldArgs {
@@ -401,6 +405,9 @@ fn default_report(out: &Path) -> PathBuf {
     out.with_file_name(format!("{stem}-report"))
 }
 
+/// The checkpoint's file in `--checkpoint DIR` / `--resume DIR`.
+pub const CHECKPOINT_FILE: &str = "field-fit.ckpt";
+
 /// Runs `softvk fit-field`.
 pub fn run(args: &FitFieldArgs) -> Result<()> {
     let sil = io::load_silhouettes(&args.silhouettes)?;
@@ -431,6 +438,16 @@ pub fn run(args: &FitFieldArgs) -> Result<()> {
         .report
         .clone()
         .unwrap_or_else(|| default_report(&args.out));
+    // The checkpoint is checked before anything is written.
+    let fingerprint = FieldFitState::fingerprint(&targets, &opts);
+    let resume = match &args.checkpoints.resume {
+        Some(dir) => {
+            let c = Checkpoint::read(&dir.join(CHECKPOINT_FILE), FitKind::Field, fingerprint)?;
+            Some(FieldFitState::from_checkpoint(&c, &opts)?)
+        }
+        None => None,
+    };
+    args.checkpoints.prepare()?;
 
     let ctx = Context::new(&ContextOptions::from_env())?;
     let bar = if args.quiet {
@@ -443,13 +460,25 @@ pub fn run(args: &FitFieldArgs) -> Result<()> {
             .expect("a valid template"),
         )
     };
-    let result = fit_field(&ctx, &targets, &opts, |l: &FieldFitLog| {
+    let result = fit_field_resumable(&ctx, &targets, &opts, resume.as_ref(), |l, snapshot| {
         bar.set_position(u64::from(l.iteration));
         bar.set_message(format!(
             "loss {:.5} (L_sil {:.5}, L_geo {:.4})",
             l.total, l.silhouette, l.geo
         ));
-        super::interrupt::requested().is_none()
+        let go_on = super::interrupt::requested().is_none();
+        if args
+            .checkpoints
+            .due(l.iteration, opts.iterations, opts.log_every, !go_on)
+        {
+            if let Some(dir) = &args.checkpoints.checkpoint {
+                snapshot
+                    .state()?
+                    .to_checkpoint(fingerprint)
+                    .write(&dir.join(CHECKPOINT_FILE))?;
+            }
+        }
+        Ok(go_on)
     })?;
     bar.finish_and_clear();
 

@@ -28,7 +28,7 @@ use softvk::raster::gpu::{DEFAULT_TILE, Method, Renderer};
 use softvk::raster::reference::{Alpha, Dist, RasterSettings, Rgb};
 use softvk::{Error, Result};
 
-use super::args::{AlphaArg, DistArg, finite, positive};
+use super::args::{AlphaArg, CheckpointArgs, DistArg, finite, positive};
 use super::interrupt;
 use super::output::AtomicFile;
 
@@ -92,21 +92,8 @@ pub struct FitArgs {
     #[arg(long)]
     pub quiet: bool,
 
-    /// Write the fit's complete state (parameters, Adam's moments, iteration, log) to
-    /// DIR/mesh-fit.ckpt every --checkpoint-every iterations, at an interrupt and at the end,
-    /// atomically; `--resume DIR` goes on from it.
-    #[arg(long, value_name = "DIR")]
-    pub checkpoint: Option<PathBuf>,
-
-    /// Iterations between checkpoints (rounded up to a multiple of --log-every).
-    #[arg(long, value_name = "N", default_value_t = 100, requires = "checkpoint")]
-    pub checkpoint_every: u32,
-
-    /// Go on from DIR/mesh-fit.ckpt, written by a fit of the same template, targets, cameras
-    /// and options (the iteration count may differ); it ends bit for bit as the fit that never
-    /// stopped.
-    #[arg(long, value_name = "DIR")]
-    pub resume: Option<PathBuf>,
+    #[command(flatten)]
+    pub checkpoints: CheckpointArgs,
 }
 
 /// The flags of `softvk fit-mesh`.
@@ -226,20 +213,14 @@ fn fit_and_report(
     let opts = fit.options(sil.width, sil.height, default_iterations)?;
     // The checkpoint is checked before anything is written.
     let fingerprint = MeshFitState::fingerprint(template, cams, &sil.masks, &opts);
-    let resume = match &fit.resume {
+    let resume = match &fit.checkpoints.resume {
         Some(dir) => {
             let c = Checkpoint::read(&dir.join(CHECKPOINT_FILE), FitKind::Mesh, fingerprint)?;
             Some(MeshFitState::from_checkpoint(&c, template)?)
         }
         None => None,
     };
-    if fit.checkpoint_every == 0 {
-        return Err(Error::Input("--checkpoint-every must be at least 1".into()));
-    }
-    if let Some(dir) = &fit.checkpoint {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| Error::Input(format!("cannot create {}: {e}", dir.display())))?;
-    }
+    fit.checkpoints.prepare()?;
     std::fs::create_dir_all(report_dir)
         .map_err(|e| Error::Input(format!("cannot create {}: {e}", report_dir.display())))?;
     let ctx = Context::new(&ContextOptions::from_env())?;
@@ -268,7 +249,7 @@ fn fit_and_report(
     };
     let mut gif_error = None;
     let save = |snapshot: &MeshFitSnapshot<'_>| -> Result<()> {
-        match &fit.checkpoint {
+        match &fit.checkpoints.checkpoint {
             Some(dir) => snapshot
                 .state()?
                 .to_checkpoint(fingerprint)
@@ -295,8 +276,10 @@ fn fit_and_report(
                 }
             }
             let go_on = interrupt::requested().is_none();
-            let every = fit.checkpoint_every.div_ceil(opts.log_every) * opts.log_every;
-            if !go_on || l.iteration % every == 0 || l.iteration == opts.iterations {
+            if fit
+                .checkpoints
+                .due(l.iteration, opts.iterations, opts.log_every, !go_on)
+            {
                 save(snapshot)?;
             }
             Ok(go_on)

@@ -25,6 +25,8 @@ const FORMAT: u32 = 1;
 pub enum FitKind {
     /// `fit-mesh` (and `demo`).
     Mesh = 1,
+    /// `fit-field`.
+    Field = 2,
 }
 
 impl FitKind {
@@ -253,4 +255,25 @@ impl<'a> Reader<'a> {
     pub fn done(&self) -> bool {
         self.at == self.bytes.len()
     }
+}
+
+/// Writes the parameters and Adam's two moments of an optimizer state.
+pub fn write_optimizer(w: &mut Writer, params: &[f32], m: &[f32], v: &[f32]) {
+    w.f32s(params);
+    w.f32s(m);
+    w.f32s(v);
+}
+
+/// Reads what [`write_optimizer`] wrote for `n` parameters: (parameters, m, v).
+pub fn read_optimizer(r: &mut Reader<'_>, n: usize) -> Result<(Vec<f32>, Vec<f32>, Vec<f32>)> {
+    let p = r.f32s(n)?;
+    let m = r.f32s(n)?;
+    let v = r.f32s(n)?;
+    if p.len() != n || m.len() != n || v.len() != n {
+        return Err(Error::Input(format!(
+            "checkpoint of {} parameters, this fit has {n}",
+            p.len()
+        )));
+    }
+    Ok((p, m, v))
 }

@@ -31,6 +31,9 @@ use std::time::Instant;
 
 use glam::DVec3;
 
+use super::checkpoint::{
+    Checkpoint, Fingerprint, FitKind, Reader, Writer, read_optimizer, write_optimizer,
+};
 use super::{Adam, AdamOptions, GradOut};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -632,6 +635,140 @@ pub fn fit_field(
     opts: &FieldFitOptions,
     mut progress: impl FnMut(&FieldFitLog) -> bool,
 ) -> Result<FieldFitResult> {
+    fit_field_resumable(ctx, targets, opts, None, |l, _| Ok(progress(l)))
+}
+
+/// A field fit's complete state after an iteration: the field's parameters, Adam's moments, the
+/// iterations done (Adam's step) and the log. The samplers need nothing else: their random
+/// numbers are keyed by (seed, iteration), so a fit resumed from it ([`fit_field_resumable`])
+/// ends bit for bit as the fit that never stopped.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FieldFitState {
+    /// Iterations done.
+    pub iteration: u32,
+    /// The field's parameters.
+    pub params: Vec<f32>,
+    /// Adam's first moments.
+    pub adam_m: Vec<f32>,
+    /// Adam's second moments.
+    pub adam_v: Vec<f32>,
+    /// The logged losses so far.
+    pub log: Vec<FieldFitLog>,
+    /// Seconds the iterations took so far.
+    pub seconds: f64,
+}
+
+/// A logged iteration's view of the running field fit ([`FieldFitSnapshot::state`] reads its
+/// state from the GPU when asked: checkpoints).
+pub struct FieldFitSnapshot<'a> {
+    ctx: &'a Context,
+    fitter: &'a FieldFitter,
+    iteration: u32,
+    log: &'a [FieldFitLog],
+    seconds: f64,
+}
+
+impl FieldFitSnapshot<'_> {
+    /// The fit's complete state now.
+    pub fn state(&self) -> Result<FieldFitState> {
+        let n = self.fitter.field.param_count();
+        let (m, v) = self.fitter.adam.moments();
+        Ok(FieldFitState {
+            iteration: self.iteration,
+            params: self.ctx.read_buffer(self.fitter.field.params(), 0, n)?,
+            adam_m: self.ctx.read_buffer(m, 0, n)?,
+            adam_v: self.ctx.read_buffer(v, 0, n)?,
+            log: self.log.to_vec(),
+            seconds: self.seconds,
+        })
+    }
+}
+
+impl FieldFitState {
+    /// The fingerprint of a fit's inputs that a checkpoint of it must carry: the silhouettes,
+    /// the cameras and every option (the field type among them) but the iteration count and
+    /// the logging.
+    pub fn fingerprint(targets: &Targets, opts: &FieldFitOptions) -> u64 {
+        let mut f = Fingerprint::default();
+        f.add_pod(&[targets.width, targets.height]);
+        f.add_pod(&targets.masks);
+        f.add(format!("{:?}", targets.cameras).as_bytes());
+        let o = FieldFitOptions {
+            iterations: 0,
+            log_every: 0,
+            ..*opts
+        };
+        f.add(format!("{o:?}").as_bytes());
+        f.value()
+    }
+
+    /// As a checkpoint for inputs of `fingerprint`.
+    pub fn to_checkpoint(&self, fingerprint: u64) -> Checkpoint {
+        let mut w = Writer::default();
+        write_optimizer(&mut w, &self.params, &self.adam_m, &self.adam_v);
+        w.u32(self.log.len() as u32);
+        for l in &self.log {
+            w.u32(l.iteration);
+            w.f32(l.silhouette);
+            w.f32(l.geo);
+            w.f32(l.total);
+            w.f64(l.seconds);
+        }
+        Checkpoint {
+            kind: FitKind::Field,
+            fingerprint,
+            iteration: self.iteration,
+            seconds: self.seconds,
+            payload: w.0,
+        }
+    }
+
+    /// From a checkpoint ([`Checkpoint::read`] checked its kind and inputs) of a fit with
+    /// `opts` (its field's parameter count).
+    pub fn from_checkpoint(c: &Checkpoint, opts: &FieldFitOptions) -> Result<Self> {
+        let mut r = Reader::new(&c.payload);
+        let (params, adam_m, adam_v) = read_optimizer(&mut r, opts.field.param_count())?;
+        let n = r.u32()?;
+        if n > c.iteration {
+            return Err(Error::Input(
+                "checkpoint log longer than its iterations".into(),
+            ));
+        }
+        let mut log = Vec::with_capacity(n as usize);
+        for _ in 0..n {
+            log.push(FieldFitLog {
+                iteration: r.u32()?,
+                silhouette: r.f32()?,
+                geo: r.f32()?,
+                total: r.f32()?,
+                seconds: r.f64()?,
+            });
+        }
+        if !r.done() {
+            return Err(Error::Input("checkpoint has bytes after its log".into()));
+        }
+        Ok(Self {
+            iteration: c.iteration,
+            params,
+            adam_m,
+            adam_v,
+            log,
+            seconds: c.seconds,
+        })
+    }
+}
+
+/// [`fit_field`], optionally from a state a previous fit of the same inputs reached (`resume`:
+/// it goes on with iteration `resume.iteration + 1`), with a progress callback that also gets
+/// a [`FieldFitSnapshot`] (to checkpoint) and may fail. Resumed, the fit ends bit for bit as the
+/// fit that never stopped.
+pub fn fit_field_resumable(
+    ctx: &Context,
+    targets: &Targets,
+    opts: &FieldFitOptions,
+    resume: Option<&FieldFitState>,
+    mut progress: impl FnMut(&FieldFitLog, &FieldFitSnapshot<'_>) -> Result<bool>,
+) -> Result<FieldFitResult> {
     let setup = Instant::now();
     let mut fitter = FieldFitter::new(ctx, targets, opts)?;
     let mut timings = FieldFitTimings {
@@ -641,10 +778,38 @@ pub fn fit_field(
     let start = Instant::now();
     let mut log = Vec::new();
     let mut done = 0;
+    let mut first = 1;
+    let mut earlier = 0.0;
+    if let Some(state) = resume {
+        let n = fitter.field.param_count();
+        if [&state.params, &state.adam_m, &state.adam_v]
+            .iter()
+            .any(|v| v.len() != n)
+        {
+            return Err(Error::Input(format!(
+                "resume: the state has {} parameters, the field {n}",
+                state.params.len()
+            )));
+        }
+        if state.iteration > opts.iterations {
+            return Err(Error::Input(format!(
+                "resume: the state is after iteration {}, past the {} asked",
+                state.iteration, opts.iterations
+            )));
+        }
+        let (m, v) = fitter.adam.moments();
+        ctx.write_buffer(fitter.field.params(), 0, &state.params)?;
+        ctx.write_buffer(m, 0, &state.adam_m)?;
+        ctx.write_buffer(v, 0, &state.adam_v)?;
+        log = state.log.clone();
+        first = state.iteration + 1;
+        done = state.iteration;
+        earlier = state.seconds;
+    }
     // Timestamps on the logged iterations only (a device without them is timed by wall only).
     let mut timer = Timer::new(ctx, 16).ok();
     let mut timed = 0u32;
-    for it in 1..=opts.iterations {
+    for it in first..=opts.iterations {
         let logged = it % opts.log_every == 0 || it == opts.iterations;
         let t = Instant::now();
         fitter.sample(ctx, it)?;
@@ -675,10 +840,17 @@ pub fn fit_field(
                 silhouette,
                 geo,
                 total: opts.probe.total_loss(f64::from(silhouette), f64::from(geo)) as f32,
-                seconds: start.elapsed().as_secs_f64(),
+                seconds: earlier + start.elapsed().as_secs_f64(),
             };
             log.push(entry);
-            let go_on = progress(&entry);
+            let snapshot = FieldFitSnapshot {
+                ctx,
+                fitter: &fitter,
+                iteration: it,
+                log: &log,
+                seconds: entry.seconds,
+            };
+            let go_on = progress(&entry, &snapshot)?;
             timings.log_s += t2.elapsed().as_secs_f64();
             if !go_on {
                 break;
@@ -688,7 +860,7 @@ pub fn fit_field(
     for p in &mut timings.step_passes_ms {
         p.ms /= f64::from(timed.max(1));
     }
-    timings.iterations_s = start.elapsed().as_secs_f64();
+    timings.iterations_s = earlier + start.elapsed().as_secs_f64();
     Ok(FieldFitResult {
         field: fitter.into_field(),
         log,

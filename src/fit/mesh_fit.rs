@@ -28,7 +28,9 @@ use std::time::Instant;
 
 use glam::{DMat3, DVec3};
 
-use super::checkpoint::{Checkpoint, Fingerprint, FitKind, Reader, Writer};
+use super::checkpoint::{
+    Checkpoint, Fingerprint, FitKind, Reader, Writer, read_optimizer, write_optimizer,
+};
 use super::gate::IterationGate;
 use super::{Adam, AdamOptions, Deform, GradOut, Regularizers, SilhouetteLoss};
 use crate::camera::Camera;
@@ -286,9 +288,7 @@ impl MeshFitState {
     /// As a checkpoint for inputs of `fingerprint`.
     pub fn to_checkpoint(&self, fingerprint: u64) -> Checkpoint {
         let mut w = Writer::default();
-        w.f32s(&self.params);
-        w.f32s(&self.adam_m);
-        w.f32s(&self.adam_v);
+        write_optimizer(&mut w, &self.params, &self.adam_m, &self.adam_v);
         w.u32(self.log.len() as u32);
         for l in &self.log {
             w.u32(l.iteration);
@@ -313,15 +313,7 @@ impl MeshFitState {
     pub fn from_checkpoint(c: &Checkpoint, template: &Mesh) -> Result<Self> {
         let params = 3 * template.vertex_count() + 3;
         let mut r = Reader::new(&c.payload);
-        let p = r.f32s(params)?;
-        let m = r.f32s(params)?;
-        let v = r.f32s(params)?;
-        if p.len() != params || m.len() != params || v.len() != params {
-            return Err(Error::Input(format!(
-                "checkpoint of {} parameters, the template has {params}",
-                p.len()
-            )));
-        }
+        let (p, m, v) = read_optimizer(&mut r, params)?;
         let n = r.u32()?;
         if n > c.iteration {
             return Err(Error::Input(
