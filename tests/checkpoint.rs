@@ -455,3 +455,127 @@ fn a_field_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_f
     };
     assert_ne!(fp, FieldFitState::fingerprint(&targets, &other));
 }
+
+/// The pose fit, across a σ/γ schedule stage change (stages follow from the iteration):
+/// resumed, it ends bit for bit as the fit that never stopped.
+#[test]
+fn a_pose_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_fit() {
+    use glam::DVec3;
+    use softvk::fit::pose::{
+        Pose, PoseFitOptions, PoseFitState, PoseTarget, Schedule, fit_pose, fit_pose_resumable,
+    };
+    use softvk::lighting::Lighting;
+    use softvk::raster::gpu::{Method, Renderer};
+    let Some(gpu) = common::gpu() else { return };
+    let mut mesh = Mesh::cuboid([0.5, 0.32, 0.22]);
+    mesh.textures = (0..mesh.textures.len())
+        .map(|i| {
+            let t = i as f32 / mesh.textures.len() as f32;
+            [0.2 + 0.7 * t, 0.9 - 0.6 * t, 0.3 + 0.5 * (t * 7.0).fract()]
+        })
+        .collect();
+    let camera = Camera::from_angles(2.732, 20.0, -30.0);
+    let lighting = Lighting::default();
+    let opts = PoseFitOptions {
+        iterations: 12,
+        lr_rotation: 0.05,
+        lr_translation: 0.003,
+        schedule: Some(Schedule {
+            sigma_start: 1e-3,
+            gamma_start: 1e-2,
+            stages: 3,
+        }),
+        settings: RasterSettings {
+            width: 24,
+            height: 24,
+            ..RasterSettings::default()
+        },
+        ..PoseFitOptions::default()
+    };
+    let target = Renderer::new(&gpu)
+        .unwrap()
+        .render_views(
+            &gpu,
+            &mesh,
+            &[camera],
+            &lighting,
+            &opts.settings,
+            Method::default(),
+        )
+        .unwrap()
+        .images;
+    let init = Pose {
+        rotation: DVec3::new(0.2, -0.3, 0.1),
+        translation: DVec3::new(0.02, 0.0, -0.01),
+    };
+    let pose_bits = |p: &Pose| p.to_array().map(f64::to_bits);
+    let whole = fit_pose(
+        &gpu,
+        &mesh,
+        &camera,
+        &lighting,
+        PoseTarget::Fixed(&target),
+        &init,
+        &opts,
+        |_| true,
+    )
+    .unwrap();
+    let fp = PoseFitState::fingerprint(&mesh, &camera, &lighting, &target, &init, &opts);
+    let dir = TempDir::new("ckpt-pose");
+    // 5: inside the second of three stages (4 iterations each).
+    let mut state = None;
+    fit_pose_resumable(
+        &gpu,
+        &mesh,
+        &camera,
+        &lighting,
+        PoseTarget::Fixed(&target),
+        &init,
+        &opts,
+        None,
+        |l, snapshot| {
+            if l.iteration == 5 {
+                state = Some(snapshot.state());
+                return Ok(false);
+            }
+            Ok(true)
+        },
+    )
+    .unwrap();
+    let path = dir.path("p.ckpt");
+    state.unwrap().to_checkpoint(fp).write(&path).unwrap();
+    let c = Checkpoint::read(&path, FitKind::Pose, fp).unwrap();
+    let back = PoseFitState::from_checkpoint(&c).unwrap();
+    assert_eq!(back.iteration, 5);
+    let resumed = fit_pose_resumable(
+        &gpu,
+        &mesh,
+        &camera,
+        &lighting,
+        PoseTarget::Fixed(&target),
+        &init,
+        &opts,
+        Some(&back),
+        |_, _| Ok(true),
+    )
+    .unwrap();
+    assert_eq!(resumed.iterations, 12);
+    assert_eq!(pose_bits(&whole.pose), pose_bits(&resumed.pose), "pose");
+    assert_eq!(whole.loss.to_bits(), resumed.loss.to_bits(), "final loss");
+    let log = |r: &softvk::fit::pose::PoseFitResult| -> Vec<(u32, u64, [u64; 6])> {
+        r.log
+            .iter()
+            .map(|l| (l.iteration, l.loss.to_bits(), pose_bits(&l.pose)))
+            .collect()
+    };
+    assert_eq!(log(&whole), log(&resumed), "log");
+    // Another start is another fit.
+    let other = Pose {
+        rotation: DVec3::new(0.2, -0.3, 0.11),
+        ..init
+    };
+    assert_ne!(
+        fp,
+        PoseFitState::fingerprint(&mesh, &camera, &lighting, &target, &other, &opts)
+    );
+}

@@ -25,12 +25,15 @@ use std::path::{Path, PathBuf};
 use clap::Args;
 use glam::DVec3;
 use indicatif::{ProgressBar, ProgressStyle};
-use softvk::fit::pose::{Pose, PoseFitOptions, PoseTarget, Schedule, fit_pose, rotation_distance};
+use softvk::fit::checkpoint::{Checkpoint, FitKind};
+use softvk::fit::pose::{
+    Pose, PoseFitOptions, PoseFitState, PoseTarget, Schedule, fit_pose_resumable, rotation_distance,
+};
 use softvk::gpu::{Context, ContextOptions};
 use softvk::mesh::Mesh;
 use softvk::{Error, Result};
 
-use super::args::{RasterArgs, ViewArgs, positive, triple};
+use super::args::{CheckpointArgs, RasterArgs, ViewArgs, positive, triple};
 use super::output::{AtomicFile, ImageFormat};
 
 /// The defaults of the pose fit (chosen by `examples/pose_study.rs`; RESULTS.md).
@@ -117,7 +120,13 @@ pub struct FitPoseArgs {
 
     #[command(flatten)]
     pub raster: RasterArgs,
+
+    #[command(flatten)]
+    pub checkpoints: CheckpointArgs,
 }
+
+/// The checkpoint's file in `--checkpoint DIR` / `--resume DIR`.
+pub const CHECKPOINT_FILE: &str = "pose-fit.ckpt";
 
 /// `<out stem><suffix>` beside `out`.
 fn beside(out: &Path, suffix: &str) -> PathBuf {
@@ -252,6 +261,16 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
             "--out, --render and --error must be three different files".into(),
         ));
     }
+    // The checkpoint is checked before anything is written.
+    let fingerprint = PoseFitState::fingerprint(&mesh, &camera, &lighting, &target, &init, &opts);
+    let resume = match &args.checkpoints.resume {
+        Some(dir) => {
+            let c = Checkpoint::read(&dir.join(CHECKPOINT_FILE), FitKind::Pose, fingerprint)?;
+            Some(PoseFitState::from_checkpoint(&c)?)
+        }
+        None => None,
+    };
+    args.checkpoints.prepare()?;
     let out = AtomicFile::create(&args.out)?;
     let render_file = AtomicFile::create(&render_path)?;
     let error_file = AtomicFile::create(&error_path)?;
@@ -267,8 +286,12 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
             .expect("a valid template"),
         )
     };
-    let mut initial_loss = f64::NAN;
-    let result = fit_pose(
+    // A resumed fit's first loss is in its checkpoint's log.
+    let mut initial_loss = resume
+        .as_ref()
+        .and_then(|s| s.log.first())
+        .map_or(f64::NAN, |l| l.loss);
+    let result = fit_pose_resumable(
         &ctx,
         &mesh,
         &camera,
@@ -276,13 +299,26 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
         PoseTarget::Fixed(&target),
         &init,
         &opts,
-        |l| {
+        resume.as_ref(),
+        |l, snapshot| {
             if l.iteration == 1 {
                 initial_loss = l.loss;
             }
             bar.set_position(u64::from(l.iteration));
             bar.set_message(format!("loss {:.5}  σ {:.0e}", l.loss, l.sigma));
-            super::interrupt::requested().is_none()
+            let go_on = super::interrupt::requested().is_none();
+            if args
+                .checkpoints
+                .due(l.iteration, opts.iterations, 1, !go_on)
+            {
+                if let Some(dir) = &args.checkpoints.checkpoint {
+                    snapshot
+                        .state()
+                        .to_checkpoint(fingerprint)
+                        .write(&dir.join(CHECKPOINT_FILE))?;
+                }
+            }
+            Ok(go_on)
         },
     )?;
     bar.finish_and_clear();

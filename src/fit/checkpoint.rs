@@ -27,6 +27,8 @@ pub enum FitKind {
     Mesh = 1,
     /// `fit-field`.
     Field = 2,
+    /// `fit-pose`.
+    Pose = 3,
 }
 
 impl FitKind {

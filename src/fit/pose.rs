@@ -53,6 +53,7 @@ use std::time::Instant;
 use glam::{DMat3, DQuat, DVec3};
 
 use super::adam::{self, AdamOptions};
+use super::checkpoint::{Checkpoint, Fingerprint, FitKind, Reader, Writer};
 use super::{GradOut, ImageMse};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -590,10 +591,179 @@ pub fn fit_pose(
     mesh: &Mesh,
     camera: &Camera,
     lighting: &Lighting,
-    mut target: PoseTarget<'_>,
+    target: PoseTarget<'_>,
     init: &Pose,
     opts: &PoseFitOptions,
     mut progress: impl FnMut(&PoseLog) -> bool,
+) -> Result<PoseFitResult> {
+    fit_pose_resumable(
+        ctx,
+        mesh,
+        camera,
+        lighting,
+        target,
+        init,
+        opts,
+        None,
+        |l, _| Ok(progress(l)),
+    )
+}
+
+/// A pose fit's complete state after an iteration: the pose, Adam's moments (on the host, in
+/// f64), the iterations done and the log. The σ/γ stage follows from the iteration, so a fit
+/// resumed from it ([`fit_pose_resumable`]) ends bit for bit as the fit that never stopped.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PoseFitState {
+    /// Iterations done.
+    pub iteration: u32,
+    /// The pose's parameters (axis-angle, translation).
+    pub params: [f64; 6],
+    /// Adam's first moments.
+    pub adam_m: [f64; 6],
+    /// Adam's second moments.
+    pub adam_v: [f64; 6],
+    /// One entry per iteration so far.
+    pub log: Vec<PoseLog>,
+    /// Seconds the iterations took so far.
+    pub seconds: f64,
+}
+
+/// An iteration's view of the running pose fit ([`PoseFitSnapshot::state`]: checkpoints).
+pub struct PoseFitSnapshot<'a> {
+    iteration: u32,
+    params: &'a [f64; 6],
+    m: &'a [f64; 6],
+    v: &'a [f64; 6],
+    log: &'a [PoseLog],
+    seconds: f64,
+}
+
+impl PoseFitSnapshot<'_> {
+    /// The fit's complete state now.
+    pub fn state(&self) -> PoseFitState {
+        PoseFitState {
+            iteration: self.iteration,
+            params: *self.params,
+            adam_m: *self.m,
+            adam_v: *self.v,
+            log: self.log.to_vec(),
+            seconds: self.seconds,
+        }
+    }
+}
+
+impl PoseFitState {
+    /// The fingerprint of a fit's inputs that a checkpoint of it must carry: the mesh with its
+    /// colours, the camera, the lighting, the target, the start and every option (the
+    /// iteration count among them: it spreads the σ/γ schedule).
+    pub fn fingerprint(
+        mesh: &Mesh,
+        camera: &Camera,
+        lighting: &Lighting,
+        target: &[[f32; 4]],
+        init: &Pose,
+        opts: &PoseFitOptions,
+    ) -> u64 {
+        let mut f = Fingerprint::default();
+        f.add_pod(&mesh.positions).add_pod(&mesh.faces);
+        f.add_pod(&[mesh.texture_res]).add_pod(&mesh.textures);
+        if let Some(c) = &mesh.vertex_colors {
+            f.add_pod(c);
+        }
+        f.add_pod(target);
+        f.add(format!("{camera:?} {lighting:?} {init:?} {opts:?}").as_bytes());
+        f.value()
+    }
+
+    /// As a checkpoint for inputs of `fingerprint`.
+    pub fn to_checkpoint(&self, fingerprint: u64) -> Checkpoint {
+        let mut w = Writer::default();
+        for x in self.params.iter().chain(&self.adam_m).chain(&self.adam_v) {
+            w.f64(*x);
+        }
+        w.u32(self.log.len() as u32);
+        for l in &self.log {
+            w.u32(l.iteration);
+            for x in [l.loss, l.sigma, l.gamma]
+                .into_iter()
+                .chain(l.pose.to_array())
+                .chain([l.seconds])
+            {
+                w.f64(x);
+            }
+        }
+        Checkpoint {
+            kind: FitKind::Pose,
+            fingerprint,
+            iteration: self.iteration,
+            seconds: self.seconds,
+            payload: w.0,
+        }
+    }
+
+    /// From a checkpoint ([`Checkpoint::read`] checked its kind and inputs).
+    pub fn from_checkpoint(c: &Checkpoint) -> Result<Self> {
+        let mut r = Reader::new(&c.payload);
+        let mut six = || -> Result<[f64; 6]> {
+            let mut a = [0.0; 6];
+            for x in &mut a {
+                *x = r.f64()?;
+            }
+            Ok(a)
+        };
+        let (params, adam_m, adam_v) = (six()?, six()?, six()?);
+        let n = r.u32()?;
+        if n > c.iteration {
+            return Err(Error::Input(
+                "checkpoint log longer than its iterations".into(),
+            ));
+        }
+        let mut log = Vec::with_capacity(n as usize);
+        for _ in 0..n {
+            let iteration = r.u32()?;
+            let (loss, sigma, gamma) = (r.f64()?, r.f64()?, r.f64()?);
+            let mut pose = [0.0; 6];
+            for x in &mut pose {
+                *x = r.f64()?;
+            }
+            log.push(PoseLog {
+                iteration,
+                loss,
+                sigma,
+                gamma,
+                pose: Pose::from_array(pose),
+                seconds: r.f64()?,
+            });
+        }
+        if !r.done() {
+            return Err(Error::Input("checkpoint has bytes after its log".into()));
+        }
+        Ok(Self {
+            iteration: c.iteration,
+            params,
+            adam_m,
+            adam_v,
+            log,
+            seconds: c.seconds,
+        })
+    }
+}
+
+/// [`fit_pose`], optionally from a state a previous fit of the same inputs reached (`resume`:
+/// it goes on with iteration `resume.iteration + 1`), with a progress callback that also gets
+/// a [`PoseFitSnapshot`] (to checkpoint) and may fail. Resumed, the fit ends bit for bit as the
+/// fit that never stopped.
+#[allow(clippy::too_many_arguments)]
+pub fn fit_pose_resumable(
+    ctx: &Context,
+    mesh: &Mesh,
+    camera: &Camera,
+    lighting: &Lighting,
+    mut target: PoseTarget<'_>,
+    init: &Pose,
+    opts: &PoseFitOptions,
+    resume: Option<&PoseFitState>,
+    mut progress: impl FnMut(&PoseLog, &PoseFitSnapshot<'_>) -> Result<bool>,
 ) -> Result<PoseFitResult> {
     opts.validate()?;
     if !init.is_finite() {
@@ -620,7 +790,22 @@ pub fn fit_pose(
     let mut log = Vec::with_capacity(opts.iterations as usize);
     let start = Instant::now();
     let mut done = 0;
-    for it in 0..opts.iterations {
+    let mut earlier = 0.0;
+    if let Some(state) = resume {
+        if state.iteration > opts.iterations {
+            return Err(Error::Input(format!(
+                "resume: the state is after iteration {}, past the {} asked",
+                state.iteration, opts.iterations
+            )));
+        }
+        params = state.params;
+        m = state.adam_m;
+        v = state.adam_v;
+        log = state.log.clone();
+        done = state.iteration;
+        earlier = state.seconds;
+    }
+    for it in done..opts.iterations {
         let pose = Pose::from_array(params);
         let (sigma, gamma) = opts.sigma_gamma(it);
         if let PoseTarget::PerStage(f) = &mut target
@@ -647,14 +832,22 @@ pub fn fit_pose(
             sigma,
             gamma,
             pose,
-            seconds: start.elapsed().as_secs_f64(),
+            seconds: earlier + start.elapsed().as_secs_f64(),
         };
         log.push(entry);
-        if !progress(&entry) {
+        let snapshot = PoseFitSnapshot {
+            iteration: done,
+            params: &params,
+            m: &m,
+            v: &v,
+            log: &log,
+            seconds: entry.seconds,
+        };
+        if !progress(&entry, &snapshot)? {
             break;
         }
     }
-    let seconds = start.elapsed().as_secs_f64();
+    let seconds = earlier + start.elapsed().as_secs_f64();
     let pose = Pose::from_array(params);
     let s = &opts.settings;
     if let PoseTarget::PerStage(f) = &mut target
