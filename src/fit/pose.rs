@@ -805,7 +805,8 @@ pub fn fit_pose_resumable(
         done = state.iteration;
         earlier = state.seconds;
     }
-    for it in done..opts.iterations {
+    let first = done;
+    for it in first..opts.iterations {
         let pose = Pose::from_array(params);
         let (sigma, gamma) = opts.sigma_gamma(it);
         if let PoseTarget::PerStage(f) = &mut target
