@@ -57,7 +57,11 @@ fn on_signal(signal: i32) {
             "\nsoftvk: {} again: stopped at once, leaving no partial or temporary file",
             name(signal)
         );
-        std::process::exit(status(signal))
+        // `_exit`, not `exit`: the main thread may be inside the Vulkan driver (or its layers),
+        // whose exit-time destructors would then crash under it; nothing of ours needs them
+        // (stderr is unbuffered, every file is either renamed into place or removed).
+        // SAFETY: ends the process; no Rust state is observed afterwards.
+        unsafe { libc::_exit(status(signal)) }
     })
 }
 
