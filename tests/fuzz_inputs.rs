@@ -292,7 +292,7 @@ fn encode_png(spec: &PngSpec) -> Vec<u8> {
                 state ^= state << 13;
                 state ^= state >> 7;
                 state ^= state << 17;
-                if i.is_multiple_of(3) {
+                if i % 3 == 0 {
                     255
                 } else {
                     (state >> 56) as u8
