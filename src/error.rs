@@ -42,6 +42,23 @@ pub enum Error {
         source: gpu_allocator::AllocationError,
     },
 
+    /// A buffer larger than the device can hold was asked for; refused before any Vulkan call.
+    #[error(
+        "buffer `{name}` needs {size} bytes ({}), more than the device allows: {limit} bytes ({}, {what})",
+        human_bytes(*size),
+        human_bytes(*limit)
+    )]
+    BufferTooLarge {
+        /// The buffer's debug name.
+        name: String,
+        /// Requested size in bytes.
+        size: u64,
+        /// The largest buffer the device allows for this memory kind, in bytes.
+        limit: u64,
+        /// Which limit that is, e.g. `maxMemoryAllocationSize`.
+        what: &'static str,
+    },
+
     /// A kernel was recorded with arguments that do not fit its reflected interface.
     #[error("kernel `{kernel}`: {message}")]
     Kernel {
@@ -103,5 +120,51 @@ pub(crate) trait VkContext<T> {
 impl<T> VkContext<T> for std::result::Result<T, vk::Result> {
     fn vk(self, call: &'static str) -> Result<T> {
         self.map_err(|result| Error::Vulkan { call, result })
+    }
+}
+
+/// `text` as it may appear inside a one-line message: control characters (line breaks, carriage
+/// returns, tabs, …) are written as escapes (`\n`, `\r`, `\u{1b}`), everything else as is.
+pub(crate) fn one_line(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        if c.is_control() {
+            out.extend(c.escape_debug());
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// A byte count for people: `512 B`, `1.5 KiB`, `2.00 GiB`, `1024.00 TiB`.
+pub(crate) fn human_bytes(bytes: u64) -> String {
+    const UNITS: [&str; 5] = ["KiB", "MiB", "GiB", "TiB", "PiB"];
+    if bytes < 1024 {
+        return format!("{bytes} B");
+    }
+    let mut value = bytes as f64 / 1024.0;
+    let mut unit = 0;
+    while value >= 1024.0 && unit + 1 < UNITS.len() {
+        value /= 1024.0;
+        unit += 1;
+    }
+    format!("{value:.2} {}", UNITS[unit])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn one_line_escapes_control_characters_only() {
+        assert_eq!(one_line("a\nb\r\tc é"), "a\\nb\\r\\tc é");
+    }
+
+    #[test]
+    fn human_bytes_picks_a_unit() {
+        assert_eq!(human_bytes(512), "512 B");
+        assert_eq!(human_bytes(3 << 29), "1.50 GiB");
+        assert_eq!(human_bytes(u64::MAX), "16384.00 PiB");
     }
 }

@@ -9,6 +9,7 @@
 //! - an MTL `map_Kd` image is sampled once, at load time, into per-face R×R texels at texel-centre
 //!   barycentrics, with SoftRas's bilinear filter and vertical flip; a material without a texture
 //!   gives its `Kd`; no material gives white.
+//!   A missing MTL or texture file is a warning on stderr, not an error (see [`Mesh::load_obj`]).
 //!
 //! tobj does the parsing and the MTL reading. tobj re-indexes positions per object in order of
 //! first use, which loses the file order that SPEC §6 requires, so a light second pass over the
@@ -21,9 +22,15 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
+use crate::error::one_line;
+
 /// Largest accepted per-face texture resolution. SoftRas stores R² texels per face; beyond 64
 /// (4096 texels per face) a mesh of any size would not fit a GPU buffer, so it is a mistake.
 pub const MAX_TEXTURE_RES: u32 = 64;
+
+/// Largest accepted `map_Kd` image, in pixels (8192²): a texture is decoded whole, at 12 bytes
+/// a pixel, before it is sampled into per-face texels.
+pub const MAX_TEXTURE_PIXELS: u64 = 1 << 26;
 
 /// Largest icosphere subdivision level ([`Mesh::icosphere`] clamps to it): 7 gives 327 680 faces.
 pub const MAX_ICOSPHERE_SUBDIVISIONS: u32 = 7;
@@ -71,12 +78,17 @@ impl Location {
     }
 }
 
+/// A path as it may appear in a one-line message (see [`one_line`]).
+fn shown(path: &Path) -> String {
+    one_line(&path.display().to_string())
+}
+
 impl fmt::Display for Location {
     /// Renders as ` (path:line)`, ` (path)` or nothing, to be appended to a message.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match (&self.path, self.line) {
-            (Some(p), Some(l)) => write!(f, " ({}:{l})", p.display()),
-            (Some(p), None) => write!(f, " ({})", p.display()),
+            (Some(p), Some(l)) => write!(f, " ({}:{l})", shown(p)),
+            (Some(p), None) => write!(f, " ({})", shown(p)),
             (None, Some(l)) => write!(f, " (line {l})"),
             (None, None) => Ok(()),
         }
@@ -87,7 +99,7 @@ impl fmt::Display for Location {
 #[derive(Debug, thiserror::Error)]
 pub enum MeshError {
     /// The OBJ file is missing or unreadable.
-    #[error("cannot read mesh file {}: {source}", path.display())]
+    #[error("cannot read mesh file {}: {source}", shown(path))]
     Read {
         /// The file that was asked for.
         path: PathBuf,
@@ -96,7 +108,7 @@ pub enum MeshError {
         source: std::io::Error,
     },
     /// The OBJ text is malformed.
-    #[error("cannot parse OBJ file {}: {message}", path.display())]
+    #[error("cannot parse OBJ file {}: {message}", shown(path))]
     ObjParse {
         /// The OBJ file.
         path: PathBuf,
@@ -104,23 +116,15 @@ pub enum MeshError {
         message: String,
     },
     /// An MTL file exists but is malformed.
-    #[error("cannot parse MTL file {}: {message}", path.display())]
+    #[error("cannot parse MTL file {}: {message}", shown(path))]
     MtlParse {
         /// The MTL file.
         path: PathBuf,
         /// tobj's message.
         message: String,
     },
-    /// A material's `map_Kd` names an image that does not exist.
-    #[error("texture {} of material '{material}' is missing", path.display())]
-    TextureMissing {
-        /// The material that names it.
-        material: String,
-        /// Where it was looked for (relative to the MTL's folder).
-        path: PathBuf,
-    },
     /// A texture image exists but cannot be decoded (only PNG is supported).
-    #[error("cannot decode texture {}: {message}", path.display())]
+    #[error("cannot decode texture {}: {message}", shown(path))]
     TextureDecode {
         /// The image file.
         path: PathBuf,
@@ -258,103 +262,14 @@ impl Mesh {
     ///
     /// A missing MTL file is not an error (SoftRas only reads it when asked for textures, and
     /// OBJ exporters often name one that was never shipped): its faces are white. A missing
-    /// texture image named by an MTL that does exist is an error. `v x y z r g b` lines give
-    /// [`Mesh::vertex_colors`] when every `v` line has a colour.
+    /// texture image is not an error either: its material's faces take the material's `Kd`, or
+    /// white. Each missing file is said once, as one line `softvk: warning: ...` on stderr.
+    /// An MTL or texture that exists but does not parse or decode is an error. `v x y z r g b`
+    /// lines give [`Mesh::vertex_colors`] when every `v` line has a colour.
     pub fn load_obj(path: &Path, texture_res: u32) -> Result<Mesh, MeshError> {
-        check_texture_res(texture_res)?;
-        let text = std::fs::read_to_string(path).map_err(|source| MeshError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        let obj_dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
-
-        let mtl_log = RefCell::new(MtlLog::default());
-        let options = tobj::LoadOptions {
-            triangulate: true,
-            single_index: false,
-            // SoftRas makes no triangle from a point or a line; tobj would make degenerate ones.
-            ignore_points: true,
-            ignore_lines: true,
-        };
-        let loaded = tobj::load_obj_buf(&mut text.as_bytes(), &options, |mtl_path| {
-            let full = obj_dir.join(mtl_path);
-            let result = tobj::load_mtl(&full);
-            mtl_log.borrow_mut().record(&full, &result);
-            result
-        });
-        let scan = scan_obj(&text);
-
-        let (models, materials) = match loaded {
-            Ok(ok) => ok,
-            Err(e) => return Err(explain_tobj_error(path, e, scan)),
-        };
-        let mtl_log = mtl_log.into_inner();
-        if let Some(err) = mtl_log.error {
-            return Err(err);
-        }
-        // Materials from the MTL files that did load; a missing one was logged and is skipped.
-        let materials = materials.unwrap_or_default();
-        let scan = scan.map_err(|e| e.into_mesh_error(path))?;
-
-        check_finite(&scan.positions, |v| {
-            Location::line(path, scan.position_lines[v])
-        })?;
-        if scan.triangles.is_empty() {
-            return Err(MeshError::NoFaces {
-                at: Location::file(path),
-            });
-        }
-        let vertex_count = scan.positions.len();
-        let mut faces = Vec::with_capacity(scan.triangles.len());
-        for (face, tri) in scan.triangles.iter().enumerate() {
-            let mut f = [0u32; 3];
-            for ((slot, &v), &raw) in f.iter_mut().zip(&tri.v).zip(&tri.raw) {
-                if v < 0 || v as usize >= vertex_count {
-                    return Err(MeshError::FaceIndexOutOfRange {
-                        face,
-                        index: raw,
-                        vertex_count,
-                        at: Location::line(path, tri.line),
-                    });
-                }
-                *slot = v as u32;
-            }
-            faces.push(f);
-        }
-
-        let face_materials = match_tobj_models(path, &models, &scan)?;
-
-        let r2 = (texture_res * texture_res) as usize;
-        let mut textures = vec![[1.0f32; 3]; faces.len() * r2];
-        let mut images: HashMap<PathBuf, TextureImage> = HashMap::new();
-        for (face, material) in face_materials.iter().enumerate() {
-            let Some(material) = material.and_then(|id| materials.get(id)) else {
-                continue;
-            };
-            let texels = &mut textures[face * r2..(face + 1) * r2];
-            if let Some(map) = &material.diffuse_texture {
-                let mtl_dir = mtl_log.dirs.get(&material.name).unwrap_or(&obj_dir);
-                let image_path = resolve_texture(mtl_dir, &obj_dir, map, &material.name)?;
-                if !images.contains_key(&image_path) {
-                    let image = TextureImage::load(&image_path)?;
-                    images.insert(image_path.clone(), image);
-                }
-                let uv = scan.face_uv(face);
-                images[&image_path].sample_face(uv, texture_res, texels);
-            } else if let Some(kd) = material.diffuse {
-                texels.fill(kd);
-            }
-        }
-
-        let mesh = Mesh {
-            positions: scan.positions,
-            faces,
-            texture_res,
-            textures,
-            vertex_colors: scan.colors,
-        };
-        mesh.validate()?;
-        Ok(mesh)
+        load_obj_warning(path, texture_res, &mut |warning| {
+            eprintln!("softvk: warning: {warning}");
+        })
     }
 
     /// Unit-radius icosphere: the icosahedron subdivided `subdivisions` times (clamped to
@@ -456,6 +371,157 @@ impl Mesh {
     }
 }
 
+/// [`Mesh::load_obj`], with each warning (a missing MTL or texture file) given to `warn` as one
+/// line instead of printed.
+fn load_obj_warning(
+    path: &Path,
+    texture_res: u32,
+    warn: &mut dyn FnMut(String),
+) -> Result<Mesh, MeshError> {
+    check_texture_res(texture_res)?;
+    let text = std::fs::read_to_string(path).map_err(|source| MeshError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let obj_dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
+
+    let mtl_log = RefCell::new(MtlLog::default());
+    let options = tobj::LoadOptions {
+        triangulate: true,
+        single_index: false,
+        // SoftRas makes no triangle from a point or a line; tobj would make degenerate ones.
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    let loaded = tobj::load_obj_buf(&mut text.as_bytes(), &options, |mtl_path| {
+        mtl_log.borrow_mut().load(&obj_dir.join(mtl_path))
+    });
+    let scan = scan_obj(&text);
+
+    let (models, materials) = match loaded {
+        Ok(ok) => ok,
+        Err(e) => return Err(explain_tobj_error(path, e, scan)),
+    };
+    let mtl_log = mtl_log.into_inner();
+    if let Some(err) = mtl_log.error {
+        return Err(err);
+    }
+    // Materials from the MTL files that did load; a missing one was logged and is skipped.
+    let materials = materials.unwrap_or_default();
+    let scan = scan.map_err(|e| e.into_mesh_error(path))?;
+
+    check_finite(&scan.positions, |v| {
+        Location::line(path, scan.position_lines[v])
+    })?;
+    if scan.triangles.is_empty() {
+        return Err(MeshError::NoFaces {
+            at: Location::file(path),
+        });
+    }
+    let vertex_count = scan.positions.len();
+    let mut faces = Vec::with_capacity(scan.triangles.len());
+    for (face, tri) in scan.triangles.iter().enumerate() {
+        let mut f = [0u32; 3];
+        for ((slot, &v), &raw) in f.iter_mut().zip(&tri.v).zip(&tri.raw) {
+            if v < 0 || v as usize >= vertex_count {
+                return Err(MeshError::FaceIndexOutOfRange {
+                    face,
+                    index: raw,
+                    vertex_count,
+                    at: Location::line(path, tri.line),
+                });
+            }
+            *slot = v as u32;
+        }
+        faces.push(f);
+    }
+
+    let face_materials = match_tobj_models(path, &models, &scan)?;
+
+    // Said only once the mesh has loaded: a failed load is one error line, nothing more.
+    let mut warnings: Vec<String> = mtl_log
+        .missing
+        .iter()
+        .map(|mtl| {
+            format!(
+                "{}: material file {} not found; its faces are white",
+                shown(path),
+                shown(mtl)
+            )
+        })
+        .collect();
+    let r2 = (texture_res * texture_res) as usize;
+    let mut textures = vec![[1.0f32; 3]; faces.len() * r2];
+    let mut images: HashMap<PathBuf, TextureImage> = HashMap::new();
+    let mut missing_textures: Vec<&str> = Vec::new();
+    for (face, material) in face_materials.iter().enumerate() {
+        let Some(material) = material.and_then(|id| materials.get(id)) else {
+            continue;
+        };
+        let texels = &mut textures[face * r2..(face + 1) * r2];
+        let mtl_file = mtl_log.files.get(&material.name);
+        if let Some(kd) = material.diffuse
+            && kd.iter().any(|c| !c.is_finite())
+        {
+            return Err(MeshError::MtlParse {
+                path: mtl_file.cloned().unwrap_or_default(),
+                message: format!(
+                    "material '{}' has a NaN or infinite Kd",
+                    one_line(&material.name)
+                ),
+            });
+        }
+        let mtl_dir = mtl_file
+            .and_then(|f| f.parent())
+            .unwrap_or(obj_dir.as_path());
+        let image_path = material
+            .diffuse_texture
+            .as_ref()
+            .map(|map| (map, resolve_texture(mtl_dir, &obj_dir, map)));
+        if let Some((_, Some(image_path))) = image_path {
+            if !images.contains_key(&image_path) {
+                let image = TextureImage::load(&image_path)?;
+                images.insert(image_path.clone(), image);
+            }
+            let uv = scan.face_uv(face);
+            images[&image_path].sample_face(uv, texture_res, texels);
+            continue;
+        }
+        if let Some((map, None)) = image_path
+            && !missing_textures.contains(&material.name.as_str())
+        {
+            missing_textures.push(&material.name);
+            warnings.push(format!(
+                "{}: texture {} of material '{}' not found; its faces are {}",
+                shown(path),
+                shown(&mtl_dir.join(texture_file_name(map))),
+                one_line(&material.name),
+                if material.diffuse.is_some() {
+                    "its Kd colour"
+                } else {
+                    "white"
+                }
+            ));
+        }
+        if let Some(kd) = material.diffuse {
+            texels.fill(kd);
+        }
+    }
+
+    let mesh = Mesh {
+        positions: scan.positions,
+        faces,
+        texture_res,
+        textures,
+        vertex_colors: scan.colors,
+    };
+    mesh.validate()?;
+    for warning in warnings {
+        warn(warning);
+    }
+    Ok(mesh)
+}
+
 fn white_mesh(positions: Vec<DVec3>, faces: Vec<[u32; 3]>) -> Mesh {
     let textures = vec![[1.0; 3]; faces.len()];
     Mesh {
@@ -528,15 +594,32 @@ impl TextureImage {
             path: path.to_path_buf(),
             message,
         };
-        let image = image::ImageReader::open(path)
-            .map_err(|source| MeshError::Read {
-                path: path.to_path_buf(),
-                source,
-            })?
-            .with_guessed_format()
-            .map_err(|e| decode_err(e.to_string()))?
+        let open = || {
+            image::ImageReader::open(path)
+                .map_err(|source| MeshError::Read {
+                    path: path.to_path_buf(),
+                    source,
+                })?
+                .with_guessed_format()
+                .map_err(|e| decode_err(one_line(&e.to_string())))
+        };
+        // The header first: a small file can claim a picture too large to hold.
+        // Only the header is read here, so the decoder's memory limit (which would refuse with
+        // a vaguer message) is lifted; it holds for the decoding below.
+        let mut header = open()?;
+        header.no_limits();
+        let (width, height) = header
+            .into_dimensions()
+            .map_err(|e| decode_err(one_line(&e.to_string())))?;
+        if u64::from(width) * u64::from(height) > MAX_TEXTURE_PIXELS {
+            return Err(decode_err(format!(
+                "the image is {width}×{height}; textures of at most {MAX_TEXTURE_PIXELS} pixels \
+                 (8192×8192) are supported"
+            )));
+        }
+        let image = open()?
             .decode()
-            .map_err(|e| decode_err(e.to_string()))?;
+            .map_err(|e| decode_err(one_line(&e.to_string())))?;
         // Grey is replicated to RGB and alpha dropped, as SoftRas does.
         let rgb = image.to_rgb32f();
         let (width, height) = (rgb.width() as usize, rgb.height() as usize);
@@ -615,51 +698,82 @@ fn texture_file_name(map_kd: &str) -> &str {
 }
 
 /// Texture paths are relative to the MTL's folder (the usual convention), falling back to the
-/// OBJ's folder (SoftRas's choice); they are the same folder in nearly every model.
-fn resolve_texture(
-    mtl_dir: &Path,
-    obj_dir: &Path,
-    map_kd: &str,
-    material: &str,
-) -> Result<PathBuf, MeshError> {
+/// OBJ's folder (SoftRas's choice); they are the same folder in nearly every model. `None` when
+/// neither holds the file.
+fn resolve_texture(mtl_dir: &Path, obj_dir: &Path, map_kd: &str) -> Option<PathBuf> {
     let name = texture_file_name(map_kd);
-    let candidates = [mtl_dir.join(name), obj_dir.join(name)];
-    match candidates.iter().find(|p| p.is_file()) {
-        Some(p) => Ok(p.clone()),
-        None => Err(MeshError::TextureMissing {
-            material: material.to_owned(),
-            path: candidates[0].clone(),
-        }),
-    }
+    [mtl_dir.join(name), obj_dir.join(name)]
+        .into_iter()
+        .find(|p| p.is_file())
 }
 
 /// What the MTL loader saw, kept beside tobj (which merges materials and drops their origin).
 #[derive(Default)]
 struct MtlLog {
-    /// Folder of the MTL that defined each material, to resolve its texture path.
-    dirs: HashMap<String, PathBuf>,
+    /// The MTL file that defined each material, to resolve its texture path and name it.
+    files: HashMap<String, PathBuf>,
     /// The first MTL that exists but failed to parse.
     error: Option<MeshError>,
+    /// The MTL files that could not be opened, each once, in file order.
+    missing: Vec<PathBuf>,
 }
 
 impl MtlLog {
-    fn record(&mut self, path: &Path, result: &tobj::MTLLoadResult) {
-        match result {
+    /// Reads one MTL file for tobj, noting what happened.
+    fn load(&mut self, path: &Path) -> tobj::MTLLoadResult {
+        let bytes = match std::fs::read(path) {
+            Ok(bytes) => bytes,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                if !self.missing.iter().any(|m| m == path) {
+                    self.missing.push(path.to_path_buf());
+                }
+                return Err(tobj::LoadError::OpenFileFailed);
+            }
+            Err(e) => {
+                self.fail(path, e.to_string());
+                return Err(tobj::LoadError::ReadError);
+            }
+        };
+        if let Err(message) = check_mtl(&bytes) {
+            self.fail(path, message);
+            return Err(tobj::LoadError::MaterialParseError);
+        }
+        let result = tobj::load_mtl_buf(&mut bytes.as_slice());
+        match &result {
             Ok((materials, _)) => {
-                let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
                 for m in materials {
-                    self.dirs.insert(m.name.clone(), dir.clone());
+                    self.files.insert(m.name.clone(), path.to_path_buf());
                 }
             }
-            Err(tobj::LoadError::OpenFileFailed) => {}
-            Err(e) => {
-                self.error.get_or_insert(MeshError::MtlParse {
-                    path: path.to_path_buf(),
-                    message: e.to_string(),
-                });
-            }
+            Err(e) => self.fail(path, e.to_string()),
+        }
+        result
+    }
+
+    fn fail(&mut self, path: &Path, message: String) {
+        self.error.get_or_insert(MeshError::MtlParse {
+            path: path.to_path_buf(),
+            message,
+        });
+    }
+}
+
+/// What tobj 4 does not check before it panics: a colour (`Ka`, `Kd`, `Ks`, `Ke`) with fewer
+/// than three values. The message names the line.
+fn check_mtl(bytes: &[u8]) -> Result<(), String> {
+    for (i, line) in String::from_utf8_lossy(bytes).lines().enumerate() {
+        let mut words = line.split_whitespace();
+        if let Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) = words.next()
+            && words.count() < 3
+        {
+            return Err(format!(
+                "`{key}` needs three numbers at line {}: `{}`",
+                i + 1,
+                one_line(line.trim())
+            ));
         }
     }
+    Ok(())
 }
 
 /// Result of the light pass over the OBJ text: what tobj does not keep in file order.
@@ -731,7 +845,7 @@ fn scan_obj(text: &str) -> Result<ObjScan, ScanError> {
         let line_no = i + 1;
         let fail = |message: &str| ScanError {
             line: line_no,
-            text: line.trim().to_owned(),
+            text: one_line(line.trim()),
             message: message.to_owned(),
         };
         let mut words = line.split_whitespace();
@@ -751,6 +865,9 @@ fn scan_obj(text: &str) -> Result<ObjScan, ScanError> {
                     _ => return Err(fail("a vertex needs x y z, x y z w or x y z r g b")),
                 };
                 if values.len() == 6 {
+                    if !values[3..].iter().all(|c| c.is_finite()) {
+                        return Err(fail("vertex colour is not a finite number"));
+                    }
                     colors.push([values[3], values[4], values[5]]);
                 }
                 positions.push(p);
@@ -764,6 +881,9 @@ fn scan_obj(text: &str) -> Result<ObjScan, ScanError> {
                     .map_err(|_| fail("texture coordinate is not a number"))?;
                 if uv.len() < 2 {
                     return Err(fail("a texture coordinate needs u and v"));
+                }
+                if !uv.iter().all(|c| c.is_finite()) {
+                    return Err(fail("texture coordinate is not a finite number"));
                 }
                 texcoords.push([uv[0], uv[1]]);
             }
@@ -807,12 +927,7 @@ fn scan_obj(text: &str) -> Result<ObjScan, ScanError> {
         {
             return Err(ScanError {
                 line: tri.line,
-                text: text
-                    .lines()
-                    .nth(tri.line - 1)
-                    .unwrap_or("")
-                    .trim()
-                    .to_owned(),
+                text: one_line(text.lines().nth(tri.line - 1).unwrap_or("").trim()),
                 message: "texture coordinate index out of range".into(),
             });
         }
@@ -1036,15 +1151,43 @@ mod tests {
         assert_eq!(&mesh.textures[4..], &[[0.8, 0.1, 0.2]; 4]);
     }
 
+    /// The mesh and the warnings it gave.
+    fn load_warned(path: &Path, res: u32) -> (Result<Mesh, MeshError>, Vec<String>) {
+        let mut warnings = Vec::new();
+        let mesh = load_obj_warning(path, res, &mut |w| warnings.push(w));
+        (mesh, warnings)
+    }
+
     #[test]
-    fn missing_mtl_file_gives_white_faces() {
+    fn missing_mtl_file_gives_white_faces_and_one_warning() {
         let dir = TempDir::new();
         let path = dir.write(
             "nomtl.obj",
-            "mtllib absent.mtl\nusemtl x\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+            "mtllib absent.mtl\nmtllib absent.mtl\nusemtl x\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
         );
-        let mesh = Mesh::load_obj(&path, 1).unwrap();
-        assert_eq!(mesh.textures, vec![[1.0; 3]]);
+        let (mesh, warnings) = load_warned(&path, 1);
+        assert_eq!(mesh.unwrap().textures, vec![[1.0; 3]]);
+        assert_eq!(warnings.len(), 1, "{warnings:?}");
+        assert!(
+            warnings[0].contains("nomtl.obj")
+                && warnings[0].contains("absent.mtl")
+                && warnings[0].contains("not found")
+                && !warnings[0].contains('\n'),
+            "{warnings:?}"
+        );
+        // A failed load says only its error.
+        let bad = dir.write("bad.obj", "mtllib absent.mtl\nv 0 0 0\n");
+        let (mesh, warnings) = load_warned(&bad, 1);
+        assert!(mesh.is_err() && warnings.is_empty(), "{warnings:?}");
+        // Nothing to say when the MTL is there.
+        dir.write("there.mtl", "newmtl x\nKd 1 0 0\n");
+        let ok = dir.write(
+            "ok.obj",
+            "mtllib there.mtl\nusemtl x\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+        );
+        let (mesh, warnings) = load_warned(&ok, 1);
+        assert_eq!(mesh.unwrap().textures, vec![[1.0, 0.0, 0.0]]);
+        assert!(warnings.is_empty(), "{warnings:?}");
     }
 
     /// A 256×2 image whose red is x/255 and whose green is 1 on the top row of the file and 0 on
@@ -1210,17 +1353,42 @@ mod tests {
     }
 
     #[test]
-    fn missing_texture_image_is_an_error() {
+    fn missing_texture_image_falls_back_to_kd_with_one_warning() {
         let dir = TempDir::new();
-        dir.write("t.mtl", "newmtl skin\nmap_Kd gone.png\n");
+        dir.write(
+            "t.mtl",
+            "newmtl skin\nKd 0.5 0.25 1\nmap_Kd gone.png\nnewmtl bare\nmap_Kd gone.png\n",
+        );
         let path = dir.write(
             "t.obj",
-            "mtllib t.mtl\nusemtl skin\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/1 3/1\n",
+            "mtllib t.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nusemtl skin\n\
+             f 1/1 2/1 3/1\nf 1/1 3/1 2/1\nusemtl bare\nf 1 2 3\n",
         );
-        let err = Mesh::load_obj(&path, 1).unwrap_err();
-        assert!(matches!(err, MeshError::TextureMissing { .. }), "{err:?}");
-        let msg = err.to_string();
-        assert!(msg.contains("gone.png") && msg.contains("'skin'"), "{msg}");
+        let (mesh, warnings) = load_warned(&path, 1);
+        assert_eq!(
+            mesh.unwrap().textures,
+            vec![[0.5, 0.25, 1.0], [0.5, 0.25, 1.0], [1.0; 3]]
+        );
+        assert_eq!(warnings.len(), 2, "one per material: {warnings:?}");
+        assert!(
+            warnings[0].contains("t.obj")
+                && warnings[0].contains("gone.png")
+                && warnings[0].contains("'skin'")
+                && warnings[0].contains("Kd"),
+            "{warnings:?}"
+        );
+        assert!(
+            warnings[1].contains("'bare'") && warnings[1].contains("white"),
+            "{warnings:?}"
+        );
+        // A texture that is there but does not decode is still an error.
+        dir.write("gone.png", "not a png");
+        let (mesh, warnings) = load_warned(&path, 1);
+        assert!(
+            matches!(mesh, Err(MeshError::TextureDecode { .. })),
+            "{mesh:?}"
+        );
+        assert!(warnings.is_empty());
     }
 
     #[test]

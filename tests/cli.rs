@@ -709,11 +709,27 @@ fn render_errors_are_one_line_and_write_nothing() {
         assert_eq!(dir.entries(), before, "{what}: a file was written");
     }
 
-    // After the output's temporary file exists: a size the device cannot hold, and no device.
+    // After the output's temporary file exists: scenes the device cannot hold (an image, and
+    // per-face textures), and no device. Each names the buffer and the bytes it needs.
     if !common::no_gpu() {
         let result = render(&triangle, &out_png, &["--size", "16384", "--antialias"]);
         assert_one_error_line("too large for the device", &result, "too large");
+        // 32768² pixels × RGBA f32.
+        assert_one_error_line("too large for the device", &result, "image buffer");
+        assert_one_error_line("too large for the device", &result, "17179869184 bytes");
         assert_eq!(dir.entries(), before, "too large: a file was written");
+
+        let result = render(&spot(), &out_png, &["--size", "8", "--texture-res", "64"]);
+        assert_one_error_line("textures too large", &result, "too large");
+        // 5856 faces × 64² texels × RGB f32.
+        assert_one_error_line("textures too large", &result, "colour buffer");
+        assert_one_error_line("textures too large", &result, "287834112 bytes");
+        assert_one_error_line("textures too large", &result, "--texture-res 64");
+        assert_eq!(
+            dir.entries(),
+            before,
+            "textures too large: a file was written"
+        );
     }
     std::fs::write(&out_png, b"old").unwrap();
     let result = softvk()
@@ -747,6 +763,55 @@ fn render_errors_are_one_line_and_write_nothing() {
     );
     std::fs::remove_file(&out_png).unwrap();
     assert_eq!(dir.entries(), before, "no device: a temporary was left");
+}
+
+/// A mesh whose MTL or texture is missing renders (white, or the material's Kd) with one warning
+/// line naming the missing file; a mesh with all its files renders with nothing on stderr.
+#[test]
+fn render_warns_once_about_a_missing_mtl_or_texture() {
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    let dir = TempDir::new("warnings");
+    dir.write("t.mtl", "newmtl skin\nKd 0.5 0.5 0.5\nmap_Kd gone.png\n");
+    let textured = dir.write(
+        "textured.obj",
+        "mtllib t.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nusemtl skin\nf 1/1 2/1 3/1\n",
+    );
+    let sphere = softvk::assets::dir().join("sphere_642.obj");
+    for (what, mesh, missing) in [
+        ("missing MTL", &sphere, "sphere_642.mtl"),
+        ("missing texture", &textured, "gone.png"),
+    ] {
+        let out = dir.path("out.png");
+        let result = render(mesh, &out, &["--size", "8"]);
+        assert_success(what, &result);
+        assert!(out.is_file(), "{what}: no image");
+        std::fs::remove_file(&out).unwrap();
+        let stderr = String::from_utf8_lossy(&result.stderr);
+        let lines: Vec<&str> = stderr.lines().collect();
+        assert_eq!(
+            lines.len(),
+            1,
+            "{what}: expected one warning line, got:\n{stderr}"
+        );
+        assert!(
+            lines[0].starts_with("softvk: warning: ") && lines[0].contains("not found"),
+            "{what}: {stderr}"
+        );
+        assert!(
+            lines[0].contains(missing) && lines[0].contains(&*mesh.to_string_lossy()),
+            "{what}: the warning should name {missing} and the mesh: {stderr}"
+        );
+    }
+    let result = render(&spot(), &dir.path("spot.png"), &["--size", "8"]);
+    assert_success("spot", &result);
+    assert!(
+        result.stderr.is_empty(),
+        "spot has its MTL and texture: {}",
+        String::from_utf8_lossy(&result.stderr)
+    );
 }
 
 /// Writes an RGBA f32 EXR (row 0 at the top).

@@ -73,6 +73,75 @@ fn buffers_round_sizes_and_round_trip_data() {
     assert!(matches!(too_far, Err(Error::Limit(_))), "{too_far:?}");
 }
 
+/// A buffer beyond the device's heaps (or its largest allocation) is one error naming the buffer,
+/// the size and the limit, before any Vulkan call: no panic (an aligned `u64::MAX` used to wrap
+/// to 0), no device loss, no validation message, and the context still works afterwards.
+#[test]
+fn absurd_buffers_are_one_clear_error_naming_the_buffer_and_the_size() {
+    let Some(gpu) = common::gpu() else { return };
+    for kind in [MemoryKind::Device, MemoryKind::Upload, MemoryKind::Readback] {
+        let (limit, what) = gpu.max_buffer_size(kind);
+        assert!(
+            limit > 0 && limit < 1 << 50,
+            "{kind:?}: limit {limit} ({what})"
+        );
+        let heaps = &gpu.info().memory.memory_heaps[..gpu.info().memory.memory_heap_count as usize];
+        assert!(
+            limit <= heaps.iter().map(|h| h.size).max().unwrap(),
+            "{kind:?}: {limit} is more than every heap"
+        );
+        for size in [1u64 << 50, u64::MAX, u64::MAX - 3, limit + 1] {
+            let err = match gpu.create_buffer("absurd scene", size, kind) {
+                Err(e) => e,
+                Ok(b) => panic!(
+                    "{kind:?}: a buffer of {size} bytes was created ({} bytes)",
+                    b.size()
+                ),
+            };
+            let message = err.to_string();
+            match err {
+                Error::BufferTooLarge {
+                    name,
+                    size: asked,
+                    limit: l,
+                    what: w,
+                } => {
+                    assert_eq!(
+                        (name.as_str(), asked, l, w),
+                        ("absurd scene", size, limit, what)
+                    );
+                }
+                other => panic!("{kind:?}, {size} bytes: not BufferTooLarge: {other:?}"),
+            }
+            assert!(!message.contains('\n'), "{message}");
+            for needle in [
+                "`absurd scene`",
+                &size.to_string(),
+                &limit.to_string(),
+                what,
+            ] {
+                assert!(
+                    message.contains(needle),
+                    "`{needle}` missing from: {message}"
+                );
+            }
+        }
+    }
+    // Still a working device: a small buffer round-trips.
+    let buffer = gpu.upload_buffer("after", &[1u32, 2, 3]).unwrap();
+    assert_eq!(gpu.read_buffer::<u32>(&buffer, 0, 3).unwrap(), [1, 2, 3]);
+    // Reads and writes whose ends overflow u64 are refused too, not wrapped.
+    assert!(matches!(
+        gpu.read_buffer::<u32>(&buffer, u64::MAX - 3, 2),
+        Err(Error::Limit(_))
+    ));
+    assert!(matches!(
+        gpu.write_buffer(&buffer, u64::MAX - 3, &[0u32; 2]),
+        Err(Error::Limit(_))
+    ));
+    gpu.check_validation().unwrap();
+}
+
 #[test]
 fn every_generated_kernel_builds_a_pipeline() {
     let Some(gpu) = common::gpu() else { return };

@@ -78,16 +78,20 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let frames =
         render_frames(&ctx, &mesh, &camera, &lighting, &settings, args.method()).map_err(|e| {
             match e {
-                // Say which request is too large, not only which buffer.
+                // Say which request is too large, not only which buffer: the image, or the
+                // mesh and its per-face textures.
                 Error::Limit(m) => Error::Limit(format!(
-                    "image {}x{}{} is too large: {m}",
+                    "the scene is too large for this device ({}x{} image{}, {} faces at \
+                     --texture-res {}): {m}",
                     settings.width,
                     settings.height,
                     if settings.antialias {
-                        " (rendered at 2x for --antialias)"
+                        " rendered at 2x for --antialias"
                     } else {
                         ""
-                    }
+                    },
+                    mesh.face_count(),
+                    mesh.texture_res
                 )),
                 e => e,
             }

@@ -15,7 +15,8 @@ use std::path::{Path, PathBuf};
 
 pub(crate) use crate::atomic_file::AtomicFile;
 use crate::camera::Camera;
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, one_line};
+use crate::raster::reference::MAX_IMAGE_SIDE;
 
 /// Target silhouettes, one per view, all of one size.
 #[derive(Clone, Debug, PartialEq)]
@@ -134,13 +135,27 @@ fn load_mask(path: &Path) -> Result<(u32, u32, Vec<f32>)> {
         path: path.to_path_buf(),
         source,
     })?;
-    let image =
-        image::load_from_memory_with_format(&bytes, image::ImageFormat::Png).map_err(|e| {
-            Error::Input(format!(
-                "silhouette {}: not a readable PNG: {e}",
-                path.display()
-            ))
-        })?;
+    let not_png = |e: image::ImageError| {
+        Error::Input(format!(
+            "silhouette {}: not a readable PNG: {}",
+            path.display(),
+            one_line(&e.to_string())
+        ))
+    };
+    let format = image::ImageFormat::Png;
+    // The header first: a small file can claim a picture too large to hold.
+    // Only the header is read here, so the decoder's memory limit (which would refuse with a
+    // vaguer message) is lifted; it holds for the decoding below.
+    let mut header = image::ImageReader::with_format(std::io::Cursor::new(&bytes), format);
+    header.no_limits();
+    let (width, height) = header.into_dimensions().map_err(not_png)?;
+    if width.max(height) > MAX_IMAGE_SIDE {
+        return Err(Error::Input(format!(
+            "silhouette {} is {width}×{height}; sides of at most {MAX_IMAGE_SIDE} are supported",
+            path.display()
+        )));
+    }
+    let image = image::load_from_memory_with_format(&bytes, format).map_err(not_png)?;
     let has_alpha = image.color().has_alpha();
     // 16 bits hold 8-bit values exactly (v · 257), so one threshold serves both depths:
     // v8 > 127.5 ⇔ v8 · 257 > 32767.5.
@@ -293,7 +308,7 @@ pub fn load_cameras(path: &Path) -> Result<Vec<CameraRow>> {
         return Err(Error::Input(format!(
             "{}: the header is `{}`, not `{CAMERAS_HEADER}`",
             at(n),
-            header.trim()
+            one_line(header.trim())
         )));
     }
 
@@ -318,14 +333,16 @@ pub fn load_cameras(path: &Path) -> Result<Vec<CameraRow>> {
                 Ok(v) if v.is_finite() => v,
                 Ok(_) => {
                     return Err(Error::Input(format!(
-                        "{}: {name} `{field}` is not a finite number",
-                        at(n)
+                        "{}: {name} `{}` is not a finite number",
+                        at(n),
+                        one_line(field)
                     )));
                 }
                 Err(_) => {
                     return Err(Error::Input(format!(
-                        "{}: {name} `{field}` is not a number",
-                        at(n)
+                        "{}: {name} `{}` is not a number",
+                        at(n),
+                        one_line(field)
                     )));
                 }
             };

@@ -106,6 +106,11 @@ pub struct DeviceInfo {
     pub shader_int64: bool,
     /// Device supports `VK_EXT_shader_atomic_float` (softvk does not need it).
     pub atomic_float: bool,
+    /// `maxMemoryAllocationSize` (Vulkan 1.1): the largest single allocation, so the largest
+    /// buffer (each buffer is one allocation).
+    pub max_memory_allocation_size: u64,
+    /// The device's memory types and heaps.
+    pub memory: vk::PhysicalDeviceMemoryProperties,
 }
 
 impl DeviceInfo {
@@ -766,9 +771,11 @@ fn pick_device(
 fn query_info(instance: &ash::Instance, pd: vk::PhysicalDevice, family: u32) -> DeviceInfo {
     let mut driver = vk::PhysicalDeviceDriverProperties::default();
     let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
+    let mut maintenance3 = vk::PhysicalDeviceMaintenance3Properties::default();
     let mut props2 = vk::PhysicalDeviceProperties2::default()
         .push_next(&mut driver)
-        .push_next(&mut subgroup);
+        .push_next(&mut subgroup)
+        .push_next(&mut maintenance3);
     // SAFETY: `pd` belongs to `instance`, which is Vulkan 1.1+ (properties2 is core).
     unsafe { instance.get_physical_device_properties2(pd, &mut props2) };
     let props = props2.properties;
@@ -776,6 +783,8 @@ fn query_info(instance: &ash::Instance, pd: vk::PhysicalDevice, family: u32) -> 
     let features = unsafe { instance.get_physical_device_features(pd) };
     // SAFETY: as above.
     let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
+    // SAFETY: as above.
+    let memory = unsafe { instance.get_physical_device_memory_properties(pd) };
     // SAFETY: as above.
     let exts = unsafe { instance.enumerate_device_extension_properties(pd) }.unwrap_or_default();
     let cstr = |s: std::result::Result<&CStr, _>| {
@@ -805,5 +814,7 @@ fn query_info(instance: &ash::Instance, pd: vk::PhysicalDevice, family: u32) -> 
         atomic_float: exts
             .iter()
             .any(|e| e.extension_name_as_c_str() == Ok(ash::ext::shader_atomic_float::NAME)),
+        max_memory_allocation_size: maintenance3.max_memory_allocation_size,
+        memory,
     }
 }

@@ -143,9 +143,27 @@ pub fn align_up(value: u64, align: u64) -> u64 {
 impl Context {
     /// Creates a buffer of at least `size` bytes (rounded up to the device's alignment; a zero
     /// size still gets one aligned unit, so empty inputs need no special case downstream).
+    ///
+    /// A size over [`Context::max_buffer_size`] is [`Error::BufferTooLarge`], before any Vulkan
+    /// call; an allocation the device then cannot make is [`Error::Allocation`]. Both name the
+    /// buffer and the size.
     pub fn create_buffer(&self, name: &str, size: u64, kind: MemoryKind) -> Result<Buffer> {
         let align = self.info().buffer_alignment();
-        let size = align_up(size.max(1), align);
+        let (limit, what) = self.max_buffer_size(kind);
+        let too_large = || Error::BufferTooLarge {
+            name: name.to_string(),
+            size,
+            limit,
+            what,
+        };
+        if size > limit {
+            return Err(too_large());
+        }
+        let size = size
+            .max(1)
+            .checked_next_multiple_of(align)
+            .filter(|&s| s <= limit)
+            .ok_or_else(too_large)?;
         let device = &self.shared.device;
         let info = vk::BufferCreateInfo::default()
             .size(size)
@@ -204,6 +222,39 @@ impl Context {
         Ok(buffer)
     }
 
+    /// The largest buffer of `kind` the device can hold, and which limit that is: the largest
+    /// memory heap with a memory type for `kind` (device-local for [`MemoryKind::Device`],
+    /// host-visible and coherent for the others), or `maxMemoryAllocationSize` (a buffer is one
+    /// allocation) when that is smaller.
+    pub fn max_buffer_size(&self, kind: MemoryKind) -> (u64, &'static str) {
+        let info = self.info();
+        let (required, heap) = match kind {
+            MemoryKind::Device => (
+                vk::MemoryPropertyFlags::DEVICE_LOCAL,
+                "the largest device-local memory heap",
+            ),
+            MemoryKind::Upload | MemoryKind::Readback => (
+                vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT,
+                "the largest host-visible memory heap",
+            ),
+        };
+        let memory = &info.memory;
+        let types = &memory.memory_types[..memory.memory_type_count as usize];
+        let largest_heap = types
+            .iter()
+            .filter(|t| t.property_flags.contains(required))
+            .filter_map(|t| memory.memory_heaps.get(t.heap_index as usize))
+            .map(|h| h.size)
+            .max();
+        let allocation = info.max_memory_allocation_size;
+        match largest_heap {
+            // A device without such memory: gpu-allocator says so on allocation.
+            None if allocation == 0 => (u64::MAX, heap),
+            Some(h) if allocation == 0 || h <= allocation => (h, heap),
+            _ => (allocation, "maxMemoryAllocationSize"),
+        }
+    }
+
     /// Creates a device buffer holding `data` (through a staging copy, waited on).
     pub fn upload_buffer<T: bytemuck::Pod>(&self, name: &str, data: &[T]) -> Result<Buffer> {
         let bytes: &[u8] = bytemuck::cast_slice(data);
@@ -224,7 +275,10 @@ impl Context {
         if bytes.is_empty() {
             return Ok(());
         }
-        if offset + bytes.len() as u64 > buffer.size() {
+        if offset
+            .checked_add(bytes.len() as u64)
+            .is_none_or(|end| end > buffer.size())
+        {
             return Err(Error::Limit(format!(
                 "write of {} bytes at {offset} overflows buffer `{}` ({} bytes)",
                 bytes.len(),
@@ -255,11 +309,14 @@ impl Context {
         offset: u64,
         count: usize,
     ) -> Result<Vec<T>> {
-        let len = (count * std::mem::size_of::<T>()) as u64;
+        let len = (count as u64).saturating_mul(std::mem::size_of::<T>() as u64);
         if count == 0 {
             return Ok(Vec::new());
         }
-        if offset + len > buffer.size() {
+        if offset
+            .checked_add(len)
+            .is_none_or(|end| end > buffer.size())
+        {
             return Err(Error::Limit(format!(
                 "read of {len} bytes at {offset} overflows buffer `{}` ({} bytes)",
                 buffer.name(),
