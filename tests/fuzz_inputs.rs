@@ -292,11 +292,7 @@ fn encode_png(spec: &PngSpec) -> Vec<u8> {
                 state ^= state << 13;
                 state ^= state >> 7;
                 state ^= state << 17;
-                if i % 3 == 0 {
-                    255
-                } else {
-                    (state >> 56) as u8
-                }
+                if i % 3 == 0 { 255 } else { (state >> 56) as u8 }
             }
         }
     };
