@@ -32,6 +32,11 @@ use crate::raster::reference::{Dist, RasterSettings, Rgb};
 /// The scenes of SPEC §6, in the order a plain `softvk bench` runs them.
 pub const SCENES: [&str; 4] = ["spot-256", "sphere-64x120", "dense-1024", "blurry-256"];
 
+/// Render scenes run only when named, for their size: `spot3-1024`, spot subdivided three times
+/// (374 784 faces) at 1024², whose worst case (faces × tiles) passes 2^32 entries at 8-pixel
+/// tiles although its real entries fit one binding (issue #14's large scene).
+pub const LARGE_SCENES: [&str; 1] = ["spot3-1024"];
+
 /// The fitting benchmark's scenes ([`run_fit`]); run only when named (`--scene fit-120`,
 /// `--scene fit-field`).
 pub const FIT_SCENES: [&str; 2] = ["fit-120", "fit-field"];
@@ -101,12 +106,13 @@ impl BenchOptions {
         }
         let mut render = Vec::new();
         for name in &self.scenes {
-            if let Some(s) = SCENES.iter().find(|s| *s == name) {
+            if let Some(s) = SCENES.iter().chain(&LARGE_SCENES).find(|s| *s == name) {
                 render.push(*s);
             } else if !FIT_SCENES.contains(&name.as_str()) {
                 return Err(Error::Input(format!(
-                    "bench: unknown scene `{name}`; the scenes are {}, {}",
+                    "bench: unknown scene `{name}`; the scenes are {}, {}, {}",
                     SCENES.join(", "),
+                    LARGE_SCENES.join(", "),
                     FIT_SCENES.join(", ")
                 )));
             }
@@ -205,6 +211,8 @@ impl Scene {
     ///   distance 2.732, elevation 30°, azimuths 0°, 3°, …, 357°.
     /// - `dense-1024`: the 1352-vertex sphere subdivided three times ([`subdivide`]: 172 800
     ///   faces), 1024², the spot view.
+    /// - `spot3-1024` ([`LARGE_SCENES`]): spot (R = 1) subdivided three times, 1024², the spot
+    ///   view.
     pub fn load(name: &str, assets: &Path) -> Result<Scene> {
         let spot_view = Camera::from_angles(DISTANCE, 30.0, 45.0);
         let spot_texture_res = 5;
@@ -260,6 +268,25 @@ impl Scene {
                 mesh: subdivide(&subdivide(&subdivide(&load(
                     assets,
                     "sphere_1352.obj",
+                    1,
+                )?)?)?)?,
+                cameras: vec![spot_view],
+                lighting: Lighting::default(),
+                settings: RasterSettings {
+                    width: 1024,
+                    height: 1024,
+                    sigma: 1e-5,
+                    gamma: 1e-4,
+                    ..base
+                },
+                rows: None,
+            },
+            "spot3-1024" => Scene {
+                name: "spot3-1024".into(),
+                description: String::new(),
+                mesh: subdivide(&subdivide(&subdivide(&load(
+                    assets,
+                    "spot_triangulated.obj",
                     1,
                 )?)?)?)?,
                 cameras: vec![spot_view],

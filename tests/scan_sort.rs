@@ -317,3 +317,65 @@ fn counted_sort_sorts_the_count_and_keeps_the_tail() {
         );
     }
 }
+
+/// A binning whose worst case (items × tiles) passes 2^32 is not refused: its count is exact
+/// (64-bit partial sums where the u32 scan could wrap), whether the real total is small (then
+/// the binning equals the twin) or itself past 2^32 (then it is read back exactly, for the
+/// caller to bin fewer views at once).
+#[test]
+fn binning_past_a_32_bit_worst_case_counts_exactly() {
+    use softvk::primitives::binning::{self, BinJob, Binner, Bins, ItemLayout, TileGrid};
+    let Some(gpu) = common::gpu() else { return };
+    let binner = Binner::new(&gpu).unwrap();
+    // 4096² in 8-pixel tiles: 262 144 tiles; 20 000 items: a worst case of 5.2e9 entries.
+    let grid = TileGrid::new(4096, 4096, 8).unwrap();
+    let per_view = 20_000u32;
+    let layout = ItemLayout {
+        stride_words: 5,
+        box_offset: 0,
+        flag_offset: 4,
+        flag_mask: 1,
+    };
+    let job = BinJob {
+        grid,
+        layout,
+        items_per_view: per_view,
+        views: 1,
+        first_item: 0,
+    };
+    assert!(job.max_entries() > u64::from(u32::MAX));
+    let mut rng = common::rng(31);
+    // Small boxes (a few pixels) anywhere in the image.
+    let mut words = Vec::new();
+    let mut boxes = Vec::new();
+    for _ in 0..per_view {
+        let (x, y) = (
+            rng.random_range(-1.0..1.0f32),
+            rng.random_range(-1.0..1.0f32),
+        );
+        let b = [x, y, x + 0.003, y + 0.002];
+        words.extend_from_slice(&b);
+        words.push(f32::from_bits(1));
+        boxes.push(Some(b));
+    }
+    let items = gpu.upload_buffer("small boxes", &words).unwrap();
+    let twin = binning::cpu::bin(&boxes, per_view, &grid);
+    let mut bins = Bins::new(&gpu).unwrap();
+    let binned = binner.run(&gpu, &mut bins, &items, &job).unwrap();
+    assert!(
+        binned == twin,
+        "small boxes: GPU binning differs from the twin"
+    );
+
+    // Every item on every tile: 20 000 × 262 144 = 5 242 880 000 entries, past 2^32.
+    let all: Vec<f32> = (0..per_view)
+        .flat_map(|_| [-2.0f32, -2.0, 2.0, 2.0, f32::from_bits(1)])
+        .collect();
+    let items = gpu.upload_buffer("whole boxes", &all).unwrap();
+    bins.reserve(&gpu, &job).unwrap();
+    gpu.submit_and_wait(|rec| binner.record_count(rec, &bins, items.whole(), &job))
+        .unwrap();
+    let total = bins.read_total(&gpu).unwrap();
+    assert_eq!(total, u64::from(per_view) * grid.tiles_per_view());
+    assert!(total > u64::from(u32::MAX));
+}

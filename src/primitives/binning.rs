@@ -33,9 +33,12 @@
 //! [`cpu::bin`] is the twin: the same tile rectangles in the same f32 arithmetic, and the same
 //! lists.
 //!
-//! The u32 scan is exact only while the largest possible total (items × tiles) stays below 2^32;
-//! [`Binner::record_count`] refuses a dispatch that could wrap, so callers split their views
-//! into groups ([`max_views_per_group`]).
+//! The u32 scan is exact only while the total stays below 2^32. Where the largest possible total
+//! (items × tiles) could pass it, [`Binner::record_count`] also sums the counts in 64 bits
+//! (`bin_count_sum.comp`, a few thousand partial sums the host adds in [`Bins::read_total`]), so
+//! the total read back is exact whatever the worst case: a binning is refused only when its
+//! real entries do not fit (and then callers bin fewer views at once), never on a bound. The
+//! guarded binning, whose count the host never reads, keeps the worst-case check.
 //!
 //! **Guarded binning** (a loop that must not wait for the count: mesh fitting). The entry
 //! buffers are reserved with headroom over a count seen before ([`Bins::reserve_entry_capacity`])
@@ -199,14 +202,6 @@ impl BinJob {
     }
 }
 
-/// The most views of `items_per_view` items on `grid` one binning can take without its u32
-/// entry count possibly wrapping (at least 1; a single view that could wrap is an error at
-/// [`Binner::record_count`]).
-pub fn max_views_per_group(items_per_view: u32, grid: &TileGrid) -> u32 {
-    let per_view = (u64::from(items_per_view) * grid.tiles_per_view()).max(1);
-    (u64::from(u32::MAX) / per_view).clamp(1, u64::from(u32::MAX)) as u32
-}
-
 /// Push constants of `bin_count.comp` and `bin_scatter.comp`.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -249,6 +244,18 @@ struct MaskListPush {
     pad: [u32; 3],
 }
 
+/// Push constants of `bin_count_sum.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct CountSumPush {
+    n: u32,
+    per_sum: u32,
+    pad: [u32; 2],
+}
+
+/// Counts each invocation of `bin_count_sum.comp` adds (its loop's length).
+const COUNTS_PER_SUM: u64 = 256;
+
 /// Push constants of `bin_ranges.comp`.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -265,6 +272,7 @@ pub struct Binner {
     ranges: Kernel,
     mask_counts: Kernel,
     mask_list: Kernel,
+    count_sum: Kernel,
     scan: Scan,
     sort: RadixSort,
 }
@@ -288,6 +296,10 @@ pub struct Bins {
     mask_words: u64,
     tile_counts: Buffer,
     tile_scan_scratch: ScanScratch,
+    // The 64-bit partial sums of a count whose u32 total could wrap, and how many the last
+    // count pass recorded (0: its u32 total is exact).
+    sums: Buffer,
+    sums_recorded: std::sync::atomic::AtomicU64,
     entries: Option<u64>,
 }
 
@@ -315,6 +327,8 @@ impl Bins {
             mask_words: 1,
             tile_counts: ctx.create_buffer("bin tile counts", 4 * tiles, MemoryKind::Device)?,
             tile_scan_scratch: ScanScratch::new(ctx, tiles)?,
+            sums: ctx.create_buffer("bin count sums", 8, MemoryKind::Device)?,
+            sums_recorded: std::sync::atomic::AtomicU64::new(0),
             entries: None,
         })
     }
@@ -329,6 +343,11 @@ impl Bins {
             self.rects = ctx.create_buffer(
                 "bin item rectangles",
                 8 * job.item_count(),
+                MemoryKind::Device,
+            )?;
+            self.sums = ctx.create_buffer(
+                "bin count sums",
+                8 * job.item_count().div_ceil(COUNTS_PER_SUM),
                 MemoryKind::Device,
             )?;
             self.item_capacity = job.item_count();
@@ -405,9 +424,18 @@ impl Bins {
     }
 
     /// Reads the entry count of the last recorded count pass (after its submission finished),
-    /// and remembers it for [`Binner::record_sort`].
+    /// exactly even past 2^32 (then from its 64-bit partial sums), and remembers it for
+    /// [`Binner::record_sort`].
     pub fn read_total(&mut self, ctx: &Context) -> Result<u64> {
-        let total = u64::from(ctx.read_buffer::<u32>(self.scan_scratch.total(), 0, 1)?[0]);
+        let sums = *self.sums_recorded.get_mut();
+        let total = if sums > 0 {
+            ctx.read_buffer::<[u32; 2]>(&self.sums, 0, sums as usize)?
+                .iter()
+                .map(|s| u64::from(s[0]) | (u64::from(s[1]) << 32))
+                .sum()
+        } else {
+            u64::from(ctx.read_buffer::<u32>(self.scan_scratch.total(), 0, 1)?[0])
+        };
         self.entries = Some(total);
         Ok(total)
     }
@@ -464,6 +492,7 @@ impl Binner {
             ranges: Kernel::new(ctx, &specs::BIN_RANGES)?,
             mask_counts: Kernel::new(ctx, &specs::BIN_MASK_COUNTS)?,
             mask_list: Kernel::new(ctx, &specs::BIN_MASK_LIST)?,
+            count_sum: Kernel::new(ctx, &specs::BIN_COUNT_SUM)?,
             scan: Scan::new(ctx)?,
             sort: RadixSort::new(ctx)?,
         })
@@ -494,13 +523,12 @@ impl Binner {
         items: &BufferRange<'_>,
         bins: &Bins,
     ) -> Result<()> {
-        if job.max_entries() > u64::from(u32::MAX) {
+        if job.item_count() > u64::from(u32::MAX) || job.tile_count() >= u64::from(u32::MAX) {
             return Err(Error::Limit(format!(
-                "binning {} items over {} tiles per view in {} view(s) could count past 2^32 \
-                 entries; bin fewer views at once or use larger tiles",
-                job.items_per_view,
-                job.grid.tiles_per_view(),
-                job.views
+                "binning {} items over {} tiles: past the kernels' 32-bit indices; bin fewer \
+                 views at once",
+                job.item_count(),
+                job.tile_count()
             )));
         }
         let words = u64::from(job.first_item + job.items_per_view * job.views)
@@ -552,6 +580,8 @@ impl Binner {
         Self::check(job, strategy, &items, bins)?;
         let n = job.item_count();
         if n == 0 {
+            bins.sums_recorded
+                .store(0, std::sync::atomic::Ordering::Relaxed);
             rec.fill(bins.scan_scratch.total().whole(), 0);
             rec.fill(bins.counts.range(0, 4), 0);
             return Ok(());
@@ -575,6 +605,26 @@ impl Binner {
             &Self::push(job, words_per_tile),
             groups as u32,
         )?;
+        // Before the scan overwrites the counts with their offsets.
+        let sums = if job.max_entries() > u64::from(u32::MAX) {
+            let sums = n.div_ceil(COUNTS_PER_SUM);
+            let push = CountSumPush {
+                n: n as u32,
+                per_sum: COUNTS_PER_SUM as u32,
+                pad: [0; 2],
+            };
+            rec.dispatch(
+                &self.count_sum,
+                &[counts, bins.sums.range(0, 8 * sums)],
+                &push,
+                sums.div_ceil(u64::from(specs::BIN_COUNT_SUM.workgroup_size[0])) as u32,
+            )?;
+            sums
+        } else {
+            0
+        };
+        bins.sums_recorded
+            .store(sums, std::sync::atomic::Ordering::Relaxed);
         self.scan
             .record(rec, &bins.scan_scratch, counts, counts, n)?;
         // offsets[n] = the total, for consumers that do not know it on the host.
@@ -749,6 +799,16 @@ impl Binner {
     ) -> Result<()> {
         let strategy = job.strategy(rec.context());
         Self::check(job, strategy, &items, bins)?;
+        // The gate and the counted sort read the count's u32 total on the GPU: it must not wrap.
+        if job.max_entries() > u64::from(u32::MAX) {
+            return Err(Error::Limit(format!(
+                "guarded binning of {} items over {} tiles per view in {} view(s) could count \
+                 past 2^32 entries; bin fewer views at once or use larger tiles",
+                job.items_per_view,
+                job.grid.tiles_per_view(),
+                job.views
+            )));
+        }
         let cap = bins.entry_capacity;
         if let BinStrategy::Masks { words_per_tile } = strategy {
             return self.record_mask_list(rec, bins, job, words_per_tile, cap);
@@ -968,6 +1028,10 @@ mod tests {
         assert_eq!(
             std::mem::size_of::<MaskListPush>() as u32,
             specs::BIN_MASK_LIST.push_constant_size
+        );
+        assert_eq!(
+            std::mem::size_of::<CountSumPush>() as u32,
+            specs::BIN_COUNT_SUM.push_constant_size
         );
     }
 

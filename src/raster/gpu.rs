@@ -850,7 +850,10 @@ impl Renderer {
         };
         check_tile_size(tile)?;
         let grid = scene.grid(tile)?;
-        let per_group = binning::max_views_per_group(scene.face_count, &grid);
+        // Every view at once, as far as the kernels' 32-bit item indices allow: the count is
+        // exact (64-bit where it could wrap), and the groups halve only where the real entries
+        // do not fit.
+        let per_group = (u32::MAX / scene.face_count.max(1)).clamp(1, scene.view_count.max(1));
         let max_entries = binning::max_entries(ctx).min(self.entry_budget.unwrap_or(u64::MAX));
         // Groups of views still to render, first view and count; split on demand.
         let mut todo: Vec<(u32, u32)> = (0..scene.view_count)
@@ -1223,9 +1226,6 @@ impl Renderer {
         let scene = self.prepare(ctx, mesh, cameras, &Lighting::unlit(), settings)?;
         let grid = scene.grid(tile)?;
         let job = scene.job(grid, 0, scene.view_count);
-        if job.max_entries() > u64::from(u32::MAX) {
-            return Err(Error::Limit("bin_faces: bin fewer views".into()));
-        }
         ctx.submit_and_wait(|rec| self.record_setup(rec, &scene))?;
         let mut bins = Bins::new(ctx)?;
         let binned = self.binner.run(ctx, &mut bins, &scene.setups, &job)?;
