@@ -379,3 +379,48 @@ fn binning_past_a_32_bit_worst_case_counts_exactly() {
     assert_eq!(total, u64::from(per_view) * grid.tiles_per_view());
     assert!(total > u64::from(u32::MAX));
 }
+
+/// 70 000 items in one tile: listing them from a mask would take that tile's invocation past
+/// llvmpipe's 65 535 loop iterations (which it ends silently), so the strategy falls back to
+/// the sort there; either way the binning equals the twin.
+#[test]
+fn a_crowded_tile_is_binned_whole_under_the_drivers_loop_cap() {
+    use softvk::primitives::binning::{
+        self, BinJob, BinStrategy, Binner, Bins, ItemLayout, TileGrid,
+    };
+    let Some(gpu) = common::gpu() else { return };
+    let grid = TileGrid::new(64, 64, 8).unwrap();
+    let per_view = 70_000u32;
+    let job = BinJob {
+        grid,
+        layout: ItemLayout {
+            stride_words: 4,
+            box_offset: 0,
+            flag_offset: 0,
+            flag_mask: 0,
+        },
+        items_per_view: per_view,
+        views: 1,
+        first_item: 0,
+    };
+    if let Some(limit) = gpu.info().shader_loop_limit() {
+        assert!(u64::from(per_view) > limit);
+        assert_eq!(job.strategy(&gpu), BinStrategy::Sort);
+    }
+    // Tiny boxes around the centre of tile (3, 3) (pixels 24..32).
+    let b = [-0.2f32, 0.1, -0.19, 0.11];
+    let words: Vec<f32> = (0..per_view).flat_map(|_| b).collect();
+    let boxes = vec![Some(b); per_view as usize];
+    let items = gpu.upload_buffer("crowded boxes", &words).unwrap();
+    let twin = binning::cpu::bin(&boxes, per_view, &grid);
+    let busiest = twin.ranges.iter().map(|r| r[1] - r[0]).max().unwrap();
+    assert_eq!(busiest, per_view, "every item in one tile");
+    let binned = Binner::new(&gpu)
+        .unwrap()
+        .run(&gpu, &mut Bins::new(&gpu).unwrap(), &items, &job)
+        .unwrap();
+    assert!(
+        binned == twin,
+        "the crowded tile's binning differs from the twin"
+    );
+}

@@ -181,16 +181,23 @@ pub enum BinStrategy {
 
 impl BinJob {
     /// The strategy this job bins with on `ctx`'s device: masks when the grid has at most
-    /// [`MASK_MAX_TILES_PER_VIEW`] tiles per view and the masks fit one storage-buffer binding
-    /// (and the kernels' limits: tile coordinates below 2^16, at most 65 535 mask words per
-    /// tile, which llvmpipe's loop cap needs); else the sort.
+    /// [`MASK_MAX_TILES_PER_VIEW`] tiles per view and the masks fit one storage-buffer binding,
+    /// within the kernels' limits (tile coordinates below 2^16, at most 65 535 mask words per
+    /// tile) and the driver's loop cap (llvmpipe ends an invocation's loops after 65 535
+    /// iterations in all, silently: a tile's list walks its W words and, at worst, every item
+    /// of its view); else the sort.
     pub fn strategy(&self, ctx: &Context) -> BinStrategy {
         let words = u64::from(self.items_per_view.div_ceil(32)).max(1);
         let bytes = 4 * words * self.tile_count();
+        let list_iterations = words + u64::from(self.items_per_view);
         let fits = self.grid.tiles_per_view() <= MASK_MAX_TILES_PER_VIEW
             && self.grid.tiles_x <= 0xFFFF
             && self.grid.tiles_y <= 0xFFFF
             && words <= 0xFFFF
+            && ctx
+                .info()
+                .shader_loop_limit()
+                .is_none_or(|limit| list_iterations <= limit)
             && bytes <= u64::from(ctx.info().limits.max_storage_buffer_range);
         if fits {
             BinStrategy::Masks {
