@@ -660,8 +660,9 @@ pub struct CheckpointArgs {
     #[arg(long, value_name = "N", default_value_t = 100, requires = "checkpoint")]
     pub checkpoint_every: u32,
 
-    /// Go on from the checkpoint in DIR, written by a fit of the same inputs and options (the
-    /// iteration count may differ); it ends bit for bit as the fit that never stopped.
+    /// Go on from the checkpoint in DIR, written by a fit of the same inputs and options (a mesh
+    /// or field fit may ask for more iterations; a pose fit's schedule is spread over its
+    /// iterations, so they must match); it ends bit for bit as the fit that never stopped.
     #[arg(long, value_name = "DIR")]
     pub resume: Option<PathBuf>,
 }
