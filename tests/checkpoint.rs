@@ -325,8 +325,10 @@ fn fit_mesh_checkpoints_and_resumes_to_the_same_bytes_even_after_ctrl_c() {
         );
     }
     let status = child.wait().unwrap();
+    let note = dir.path("long-report").join("interrupted.txt");
     if running {
         assert_eq!(status.code(), Some(130));
+        assert!(note.is_file(), "the interrupted run's report says so");
     } else {
         eprintln!("the 400-iteration fit ended before the signal: resuming from its end");
     }
@@ -340,6 +342,10 @@ fn fit_mesh_checkpoints_and_resumes_to_the_same_bytes_even_after_ctrl_c() {
         std::fs::read(&whole_long).unwrap(),
         std::fs::read(&long).unwrap(),
         "resumed after Ctrl-C"
+    );
+    assert!(
+        !note.exists(),
+        "the finished report still says it was interrupted"
     );
 
     // Another template: refused before anything is written.

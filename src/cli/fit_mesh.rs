@@ -372,17 +372,26 @@ fn fit_and_report(
 }
 
 /// After an interrupt (`cli::interrupt`), `interrupted.txt` in the report folder says so: the
-/// report and the result are the fit's state after iteration `done` of `asked`.
+/// report and the result are the fit's state after iteration `done` of `asked`. A fit that ends
+/// normally removes one an earlier, interrupted run left (a resumed fit's report is whole).
 pub fn write_interrupted(report_dir: &Path, done: u32, asked: u32) -> Result<()> {
-    if let Some(signal) = interrupt::requested() {
-        let line = format!(
-            "{}: stopped after iteration {done} of {asked}; the result and this report are the \
-             fit's state then\n",
-            interrupt::name(signal)
-        );
-        AtomicFile::create(&report_dir.join("interrupted.txt"))?.commit(line.as_bytes())?;
+    let path = report_dir.join("interrupted.txt");
+    match interrupt::requested() {
+        Some(signal) => {
+            let line = format!(
+                "{}: stopped after iteration {done} of {asked}; the result and this report are \
+                 the fit's state then\n",
+                interrupt::name(signal)
+            );
+            AtomicFile::create(&path)?.commit(line.as_bytes())
+        }
+        None => match std::fs::remove_file(&path) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                Err(Error::Io { path, source: e })
+            }
+            _ => Ok(()),
+        },
     }
-    Ok(())
 }
 
 fn default_report(out: &Path) -> PathBuf {
