@@ -1162,3 +1162,53 @@ fn bench_writes_json_records_for_every_pass() {
         );
     }
 }
+
+/// `softvk demo`'s report is for people: a contact sheet at 3× the view size with each view's
+/// IoU written under it, and a turntable of the fitted mesh beside the target's.
+#[test]
+fn demo_writes_a_labelled_contact_sheet_and_a_turntable() {
+    use image::AnimationDecoder as _;
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    let dir = TempDir::new("demo-report");
+    let o = softvk()
+        .args([
+            "demo", "--views", "3", "--size", "16", "--iters", "2", "--quiet",
+        ])
+        .arg("--out")
+        .arg(&dir.0)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report = dir.path("report");
+    let sheet = image::open(report.join("contact_sheet.png"))
+        .unwrap()
+        .to_rgb8();
+    // Two columns (⌈√3⌉) of 48-pixel tiles, each with a label strip under it.
+    assert!(sheet.width() >= 2 * 3 * 16, "{:?}", sheet.dimensions());
+    assert!(
+        sheet.height() >= 2 * 3 * 16 + 2 * 7,
+        "{:?}",
+        sheet.dimensions()
+    );
+    // The label strip under the first tile holds light text pixels.
+    let strip = (1 + 48..1 + 48 + 10).flat_map(|y| (1..49).map(move |x| (x, y)));
+    let lit = strip
+        .filter(|&(x, y)| sheet.get_pixel(x, y)[0] > 200)
+        .count();
+    assert!(
+        lit > 20,
+        "no label under the first tile ({lit} light pixels)"
+    );
+    let gif = std::io::BufReader::new(std::fs::File::open(report.join("turntable.gif")).unwrap());
+    let frames = image::codecs::gif::GifDecoder::new(gif)
+        .unwrap()
+        .into_frames()
+        .collect_frames()
+        .unwrap();
+    assert_eq!(frames.len(), 24);
+    let (w, h) = frames[0].buffer().dimensions();
+    assert!(w >= 2 * 192 && h >= 192, "fitted beside target: {w}x{h}");
+}

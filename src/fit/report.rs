@@ -15,7 +15,9 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::Path;
 
-use image::{EncodableLayout, ImageBuffer, PixelWithColorType, Rgb, RgbImage, Rgba, RgbaImage};
+use image::{
+    DynamicImage, EncodableLayout, ImageBuffer, PixelWithColorType, Rgb, RgbImage, Rgba, RgbaImage,
+};
 
 use super::io::AtomicFile;
 use crate::error::{Error, Result};
@@ -112,6 +114,116 @@ pub fn contact_sheet(
         }
     }
     sheet
+}
+
+/// The final contact sheet of a fit, for people to read: every view's tile `scale` times the
+/// view's size (nearest neighbour: a silhouette's pixels stay visible), coloured as
+/// [`contact_sheet`]'s, with a label under it, `"<v>: IoU <iou>"` (IoU to three decimals), in the
+/// plots' 5×7 font (doubled from a scale of 3 up). `columns` as [`contact_sheet`]'s; opaque.
+///
+/// # Panics
+/// As [`contact_sheet`] (a caller's bug), or for a zero scale.
+#[allow(clippy::too_many_arguments)]
+pub fn labelled_contact_sheet(
+    pred: &[f32],
+    target: &[f32],
+    ious: &[f32],
+    views: usize,
+    width: u32,
+    height: u32,
+    columns: u32,
+    scale: u32,
+) -> RgbImage {
+    assert!(scale >= 1, "labelled_contact_sheet: scale 0");
+    let small = contact_sheet(pred, target, views, width, height, columns, None);
+    let text_scale: i64 = if scale >= 3 { 2 } else { 1 };
+    let label_h = (font::HEIGHT * text_scale) as u32 + 6;
+    let (columns, rows, _, _) = sheet_grid(views, width, height, columns, false);
+    let (tile_w, tile_h) = (width * scale, height * scale);
+    let (cell_w, cell_h) = (tile_w, tile_h + label_h);
+    let gap = Rgb([GAP[0], GAP[1], GAP[2]]);
+    let mut sheet = RgbImage::from_pixel(1 + columns * (cell_w + 1), 1 + rows * (cell_h + 1), gap);
+    let bounds = Rect {
+        x0: 0,
+        y0: 0,
+        x1: i64::from(sheet.width()) - 1,
+        y1: i64::from(sheet.height()) - 1,
+    };
+    for v in 0..views {
+        let (sx, sy) = tile_origin(v, columns, width, height);
+        let (x0, y0) = tile_origin(v, columns, cell_w, cell_h);
+        for y in 0..tile_h {
+            for x in 0..tile_w {
+                let p = small.get_pixel(sx + x / scale, sy + y / scale);
+                sheet.put_pixel(x0 + x, y0 + y, Rgb([p[0], p[1], p[2]]));
+            }
+        }
+        let label = format!("{v}: IoU {:.3}", ious[v]);
+        let mut canvas = Canvas {
+            img: &mut sheet,
+            clip: Rect {
+                x0: i64::from(x0),
+                y0: i64::from(y0 + tile_h),
+                x1: i64::from(x0 + cell_w) - 1,
+                y1: i64::from(y0 + cell_h) - 1,
+            }
+            .within(&bounds),
+        };
+        canvas.fill(
+            i64::from(x0),
+            i64::from(y0 + tile_h),
+            i64::from(x0 + cell_w) - 1,
+            i64::from(y0 + cell_h) - 1,
+            Rgb([24, 24, 24]),
+        );
+        canvas.text(
+            i64::from(x0) + 3,
+            i64::from(y0 + tile_h) + 3,
+            &label,
+            text_scale,
+            Rgb([235, 235, 235]),
+        );
+    }
+    sheet
+}
+
+/// Renders placed side by side, each `width × height` RGBA (row 0 at the top, values in [0, 1],
+/// composited over black) with its name above it in the plots' font: one frame of a turntable.
+///
+/// # Panics
+/// When an image holds fewer than `width · height` pixels (a caller's bug).
+pub fn side_by_side(images: &[(&str, &[[f32; 4]])], width: u32, height: u32) -> RgbaImage {
+    let label_h = font::HEIGHT as u32 + 6;
+    let n = images.len().max(1) as u32;
+    let mut frame =
+        RgbImage::from_pixel(n * width + (n + 1), height + label_h + 1, Rgb([24, 24, 24]));
+    let bounds = Rect {
+        x0: 0,
+        y0: 0,
+        x1: i64::from(frame.width()) - 1,
+        y1: i64::from(frame.height()) - 1,
+    };
+    for (i, (name, pixels)) in images.iter().enumerate() {
+        assert!(
+            pixels.len() >= (width * height) as usize,
+            "side_by_side: {} pixels for {width}×{height}",
+            pixels.len()
+        );
+        let x0 = 1 + i as u32 * (width + 1);
+        for y in 0..height {
+            for x in 0..width {
+                let p = pixels[(y * width + x) as usize];
+                let c = |v: f32| (v.clamp(0.0, 1.0) * p[3].clamp(0.0, 1.0) * 255.0).round() as u8;
+                frame.put_pixel(x0 + x, label_h + y, Rgb([c(p[0]), c(p[1]), c(p[2])]));
+            }
+        }
+        let mut canvas = Canvas {
+            img: &mut frame,
+            clip: bounds,
+        };
+        canvas.text(i64::from(x0) + 2, 3, name, 1, Rgb([235, 235, 235]));
+    }
+    DynamicImage::ImageRgb8(frame).to_rgba8()
 }
 
 /// Columns (clamped to `1..=views`), rows, and a cell's width and height (tile, and bar).
@@ -309,6 +421,18 @@ struct Rect {
     y0: i64,
     x1: i64,
     y1: i64,
+}
+
+impl Rect {
+    /// The part of `self` inside `outer`.
+    fn within(&self, outer: &Rect) -> Rect {
+        Rect {
+            x0: self.x0.max(outer.x0),
+            y0: self.y0.max(outer.y0),
+            x1: self.x1.min(outer.x1),
+            y1: self.y1.min(outer.y1),
+        }
+    }
 }
 
 /// A tick: its value on the axis (log10 of the data on a log axis) and label (none: minor).
