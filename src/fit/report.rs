@@ -149,7 +149,7 @@ pub fn labelled_contact_sheet(
         x1: i64::from(sheet.width()) - 1,
         y1: i64::from(sheet.height()) - 1,
     };
-    for v in 0..views {
+    for (v, iou) in ious.iter().enumerate().take(views) {
         let (sx, sy) = tile_origin(v, columns, width, height);
         let (x0, y0) = tile_origin(v, columns, cell_w, cell_h);
         for y in 0..tile_h {
@@ -158,7 +158,7 @@ pub fn labelled_contact_sheet(
                 sheet.put_pixel(x0 + x, y0 + y, Rgb([p[0], p[1], p[2]]));
             }
         }
-        let label = format!("{v}: IoU {:.3}", ious[v]);
+        let label = format!("{v}: IoU {iou:.3}");
         let mut canvas = Canvas {
             img: &mut sheet,
             clip: Rect {
