@@ -203,7 +203,11 @@ fn normalize_template(mut mesh: Mesh) -> Mesh {
     mesh
 }
 
-/// Runs a fit and writes the mesh and the report. `targets` are the silhouettes.
+/// Runs a fit and writes the mesh and the report. `targets` are the silhouettes; the
+/// `target_mesh`, when known (`demo`), turns beside the fitted one in the report.
+// The inputs of `fit-mesh` and `demo` are each a caller's; bundling them would only move the
+// count into a struct used once.
+#[allow(clippy::too_many_arguments)]
 fn fit_and_report(
     fit: &FitArgs,
     template: &Mesh,
