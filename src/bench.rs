@@ -216,7 +216,7 @@ impl Scene {
     pub fn load(name: &str, assets: &Path) -> Result<Scene> {
         let spot_view = Camera::from_angles(DISTANCE, 30.0, 45.0);
         let spot_texture_res = 5;
-        let base = RasterSettings::default();
+        let base_settings = RasterSettings::default();
         Ok(match name {
             "spot-256" => Scene {
                 name: "spot-256".into(),
@@ -229,7 +229,7 @@ impl Scene {
                     height: 256,
                     sigma: 1e-5,
                     gamma: 1e-4,
-                    ..base
+                    ..base_settings
                 },
                 rows: None,
             },
@@ -257,49 +257,34 @@ impl Scene {
                         height: 64,
                         sigma: 1e-4,
                         rgb: Rgb::Hard,
-                        ..base
+                        ..base_settings
                     },
                     rows: None,
                 }
             }
-            "dense-1024" => Scene {
-                name: "dense-1024".into(),
-                description: String::new(),
-                mesh: subdivide(&subdivide(&subdivide(&load(
-                    assets,
-                    "sphere_1352.obj",
-                    1,
-                )?)?)?)?,
-                cameras: vec![spot_view],
-                lighting: Lighting::default(),
-                settings: RasterSettings {
-                    width: 1024,
-                    height: 1024,
-                    sigma: 1e-5,
-                    gamma: 1e-4,
-                    ..base
-                },
-                rows: None,
-            },
-            "spot3-1024" => Scene {
-                name: "spot3-1024".into(),
-                description: String::new(),
-                mesh: subdivide(&subdivide(&subdivide(&load(
-                    assets,
-                    "spot_triangulated.obj",
-                    1,
-                )?)?)?)?,
-                cameras: vec![spot_view],
-                lighting: Lighting::default(),
-                settings: RasterSettings {
-                    width: 1024,
-                    height: 1024,
-                    sigma: 1e-5,
-                    gamma: 1e-4,
-                    ..base
-                },
-                rows: None,
-            },
+            // Both subdivided three times ([`subdivide`]), at 1024² from the spot view.
+            "dense-1024" | "spot3-1024" => {
+                let base = if name == "dense-1024" {
+                    "sphere_1352.obj"
+                } else {
+                    "spot_triangulated.obj"
+                };
+                Scene {
+                    name: name.into(),
+                    description: String::new(),
+                    mesh: subdivide(&subdivide(&subdivide(&load(assets, base, 1)?)?)?)?,
+                    cameras: vec![spot_view],
+                    lighting: Lighting::default(),
+                    settings: RasterSettings {
+                        width: 1024,
+                        height: 1024,
+                        sigma: 1e-5,
+                        gamma: 1e-4,
+                        ..base_settings
+                    },
+                    rows: None,
+                }
+            }
             "blurry-256" => Scene {
                 name: "blurry-256".into(),
                 description: String::new(),
@@ -311,7 +296,7 @@ impl Scene {
                     height: 256,
                     sigma: 3e-2,
                     gamma: 3e-1,
-                    ..base
+                    ..base_settings
                 },
                 rows: None,
             },

@@ -5,13 +5,13 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
 use common::{TempDir, softvk};
 use softvk::camera::Camera;
 use softvk::fit::checkpoint::{Checkpoint, FitKind};
-use softvk::fit::io::{self, CameraRow};
+use softvk::fit::io::CameraRow;
 use softvk::fit::mesh_fit::{
     FitLog, MeshFitOptions, MeshFitResult, MeshFitState, fit_mesh, fit_mesh_resumable,
     icosphere_template,
@@ -22,29 +22,11 @@ use softvk::raster::reference::RasterSettings;
 const SIZE: u32 = 16;
 
 fn rows() -> Vec<CameraRow> {
-    (0..3)
-        .map(|i| CameraRow {
-            distance: 2.732,
-            elevation: 30.0,
-            azimuth: 120.0 * f64::from(i),
-        })
-        .collect()
+    common::disc_camera_rows()
 }
 
-/// A centred disc in every view.
 fn masks() -> Vec<f32> {
-    let px = (SIZE * SIZE) as usize;
-    let c = (SIZE as f32 - 1.0) / 2.0;
-    let disc: Vec<f32> = (0..px)
-        .map(|i| {
-            let (x, y) = (
-                (i % SIZE as usize) as f32 - c,
-                (i / SIZE as usize) as f32 - c,
-            );
-            f32::from(u8::from(x * x + y * y < 30.0))
-        })
-        .collect();
-    (0..3).flat_map(|_| disc.iter().copied()).collect()
+    common::disc_masks(SIZE)
 }
 
 fn options(iterations: u32) -> MeshFitOptions {
@@ -211,14 +193,6 @@ fn foreign_or_broken_checkpoints_are_refused_with_one_line() {
     assert!(e.contains("parameters") || e.contains("at most"), "{e}");
 }
 
-fn inputs(dir: &TempDir) -> (PathBuf, PathBuf) {
-    let sil = dir.path("sil");
-    io::write_silhouettes(&sil, &io::silhouette_names(3), SIZE, SIZE, &masks()).unwrap();
-    let cams = dir.path("cameras.csv");
-    io::write_cameras(&cams, &rows()).unwrap();
-    (sil, cams)
-}
-
 fn fit_cmd(sil: &Path, cams: &Path, out: &Path, args: &[&str]) -> std::process::Command {
     let mut cmd = softvk();
     cmd.args([
@@ -255,7 +229,7 @@ fn fit_mesh_checkpoints_and_resumes_to_the_same_bytes_even_after_ctrl_c() {
         return;
     }
     let dir = TempDir::new("ckpt-cli");
-    let (sil, cams) = inputs(&dir);
+    let (sil, cams) = common::write_disc_inputs(&dir, SIZE);
     let whole = dir.path("whole.obj");
     run("whole", fit_cmd(&sil, &cams, &whole, &["--iters", "10"]));
 

@@ -6,42 +6,12 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, ExitStatus};
 use std::time::{Duration, Instant};
 
-use common::{TempDir, softvk};
-use softvk::fit::io::{self, CameraRow};
+use common::{TempDir, softvk, write_disc_inputs};
 use softvk::mesh::Mesh;
-
-/// Three views of a centred disc, `size`², and their cameras.
-fn disc_inputs(dir: &TempDir, size: u32) -> (PathBuf, PathBuf) {
-    let px = (size * size) as usize;
-    let c = (size as f32 - 1.0) / 2.0;
-    let r2 = (0.35 * size as f32).powi(2);
-    let disc: Vec<f32> = (0..px)
-        .map(|i| {
-            let (x, y) = (
-                (i % size as usize) as f32 - c,
-                (i / size as usize) as f32 - c,
-            );
-            f32::from(u8::from(x * x + y * y < r2))
-        })
-        .collect();
-    let masks: Vec<f32> = (0..3).flat_map(|_| disc.iter().copied()).collect();
-    let sil = dir.path("sil");
-    io::write_silhouettes(&sil, &io::silhouette_names(3), size, size, &masks).unwrap();
-    let rows: Vec<CameraRow> = (0..3)
-        .map(|i| CameraRow {
-            distance: 2.732,
-            elevation: 30.0,
-            azimuth: 120.0 * f64::from(i),
-        })
-        .collect();
-    let cams = dir.path("cameras.csv");
-    io::write_cameras(&cams, &rows).unwrap();
-    (sil, cams)
-}
 
 fn signal(child: &Child, sig: i32) {
     // SAFETY: kill(2) on our own child's pid, a plain signal number.
@@ -123,7 +93,7 @@ fn ctrl_c_during_fit_mesh_writes_the_result_and_report_marked_interrupted() {
         return;
     }
     let dir = TempDir::new("intr-mesh");
-    let (sil, cams) = disc_inputs(&dir, 16);
+    let (sil, cams) = write_disc_inputs(&dir, 16);
     let out = dir.path("fitted.obj");
     let child = spawn(
         softvk()
@@ -173,7 +143,7 @@ fn sigterm_during_fit_field_writes_the_surface_and_report_marked_interrupted() {
         return;
     }
     let dir = TempDir::new("intr-field");
-    let (sil, cams) = disc_inputs(&dir, 24);
+    let (sil, cams) = write_disc_inputs(&dir, 24);
     let out = dir.path("field.obj");
     let child = spawn(
         softvk()
@@ -300,7 +270,7 @@ fn a_second_ctrl_c_stops_at_once_leaving_no_partial_or_temporary_file() {
         return;
     }
     let dir = TempDir::new("intr-twice");
-    let (sil, cams) = disc_inputs(&dir, 16);
+    let (sil, cams) = write_disc_inputs(&dir, 16);
     let out = dir.path("fitted.obj");
     // A first log (and so the first look at the interrupt) only after 100 000 iterations.
     let mut child = spawn(

@@ -14,8 +14,10 @@
 
 use std::path::Path;
 
+use super::Adam;
 use crate::atomic_file::AtomicFile;
 use crate::error::{Error, Result};
+use crate::gpu::{Buffer, Context};
 
 const MAGIC: &[u8; 8] = b"SOFTVKCK";
 const FORMAT: u32 = 1;
@@ -278,4 +280,64 @@ pub fn read_optimizer(r: &mut Reader<'_>, n: usize) -> Result<(Vec<f32>, Vec<f32
         )));
     }
     Ok((p, m, v))
+}
+
+/// Writes a fit's log: its length, then each entry by `entry`.
+pub fn write_log<T>(w: &mut Writer, log: &[T], mut entry: impl FnMut(&mut Writer, &T)) {
+    w.u32(log.len() as u32);
+    for l in log {
+        entry(w, l);
+    }
+}
+
+/// Reads what [`write_log`] wrote for a checkpoint after `iterations` (a log has at most one
+/// entry per iteration), each entry by `entry`; the log must end the payload.
+pub fn read_log<T>(
+    r: &mut Reader<'_>,
+    iterations: u32,
+    mut entry: impl FnMut(&mut Reader<'_>) -> Result<T>,
+) -> Result<Vec<T>> {
+    let n = r.u32()?;
+    if n > iterations {
+        return Err(Error::Input(
+            "checkpoint log longer than its iterations".into(),
+        ));
+    }
+    let log = (0..n).map(|_| entry(r)).collect::<Result<Vec<T>>>()?;
+    if !r.done() {
+        return Err(Error::Input("checkpoint has bytes after its log".into()));
+    }
+    Ok(log)
+}
+
+/// Checks that a state after `iteration` can go on to the `asked` iterations.
+pub(crate) fn check_resume(iteration: u32, asked: u32) -> Result<()> {
+    if iteration > asked {
+        return Err(Error::Input(format!(
+            "resume: the state is after iteration {iteration}, past the {asked} asked"
+        )));
+    }
+    Ok(())
+}
+
+/// Puts a resumed state's parameters and Adam's moments back on the GPU, after checking that
+/// each holds the `params` buffer's `n` values (`what`: whose parameters, for the error).
+pub(crate) fn restore_optimizer(
+    ctx: &Context,
+    params: &Buffer,
+    adam: &Adam,
+    n: usize,
+    state: [&[f32]; 3],
+    what: &str,
+) -> Result<()> {
+    if state.iter().any(|v| v.len() != n) {
+        return Err(Error::Input(format!(
+            "resume: the state has {} parameters, {what} {n}",
+            state[0].len()
+        )));
+    }
+    let (m, v) = adam.moments();
+    ctx.write_buffer(params, 0, state[0])?;
+    ctx.write_buffer(m, 0, state[1])?;
+    ctx.write_buffer(v, 0, state[2])
 }

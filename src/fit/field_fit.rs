@@ -32,7 +32,8 @@ use std::time::Instant;
 use glam::DVec3;
 
 use super::checkpoint::{
-    Checkpoint, Fingerprint, FitKind, Reader, Writer, read_optimizer, write_optimizer,
+    Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, read_log, read_optimizer,
+    restore_optimizer, write_log, write_optimizer,
 };
 use super::{Adam, AdamOptions, GradOut};
 use crate::camera::Camera;
@@ -706,14 +707,13 @@ impl FieldFitState {
     pub fn to_checkpoint(&self, fingerprint: u64) -> Checkpoint {
         let mut w = Writer::default();
         write_optimizer(&mut w, &self.params, &self.adam_m, &self.adam_v);
-        w.u32(self.log.len() as u32);
-        for l in &self.log {
+        write_log(&mut w, &self.log, |w, l| {
             w.u32(l.iteration);
             w.f32(l.silhouette);
             w.f32(l.geo);
             w.f32(l.total);
             w.f64(l.seconds);
-        }
+        });
         Checkpoint {
             kind: FitKind::Field,
             fingerprint,
@@ -728,25 +728,15 @@ impl FieldFitState {
     pub fn from_checkpoint(c: &Checkpoint, opts: &FieldFitOptions) -> Result<Self> {
         let mut r = Reader::new(&c.payload);
         let (params, adam_m, adam_v) = read_optimizer(&mut r, opts.field.param_count())?;
-        let n = r.u32()?;
-        if n > c.iteration {
-            return Err(Error::Input(
-                "checkpoint log longer than its iterations".into(),
-            ));
-        }
-        let mut log = Vec::with_capacity(n as usize);
-        for _ in 0..n {
-            log.push(FieldFitLog {
+        let log = read_log(&mut r, c.iteration, |r| {
+            Ok(FieldFitLog {
                 iteration: r.u32()?,
                 silhouette: r.f32()?,
                 geo: r.f32()?,
                 total: r.f32()?,
                 seconds: r.f64()?,
-            });
-        }
-        if !r.done() {
-            return Err(Error::Input("checkpoint has bytes after its log".into()));
-        }
+            })
+        })?;
         Ok(Self {
             iteration: c.iteration,
             params,
@@ -781,26 +771,15 @@ pub fn fit_field_resumable(
     let mut first = 1;
     let mut earlier = 0.0;
     if let Some(state) = resume {
-        let n = fitter.field.param_count();
-        if [&state.params, &state.adam_m, &state.adam_v]
-            .iter()
-            .any(|v| v.len() != n)
-        {
-            return Err(Error::Input(format!(
-                "resume: the state has {} parameters, the field {n}",
-                state.params.len()
-            )));
-        }
-        if state.iteration > opts.iterations {
-            return Err(Error::Input(format!(
-                "resume: the state is after iteration {}, past the {} asked",
-                state.iteration, opts.iterations
-            )));
-        }
-        let (m, v) = fitter.adam.moments();
-        ctx.write_buffer(fitter.field.params(), 0, &state.params)?;
-        ctx.write_buffer(m, 0, &state.adam_m)?;
-        ctx.write_buffer(v, 0, &state.adam_v)?;
+        check_resume(state.iteration, opts.iterations)?;
+        restore_optimizer(
+            ctx,
+            fitter.field.params(),
+            &fitter.adam,
+            fitter.field.param_count(),
+            [&state.params, &state.adam_m, &state.adam_v],
+            "the field",
+        )?;
         log = state.log.clone();
         first = state.iteration + 1;
         done = state.iteration;

@@ -29,7 +29,8 @@ use std::time::Instant;
 use glam::{DMat3, DVec3};
 
 use super::checkpoint::{
-    Checkpoint, Fingerprint, FitKind, Reader, Writer, read_optimizer, write_optimizer,
+    Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, read_log, read_optimizer,
+    restore_optimizer, write_log, write_optimizer,
 };
 use super::gate::IterationGate;
 use super::{Adam, AdamOptions, Deform, GradOut, Regularizers, SilhouetteLoss};
@@ -289,8 +290,7 @@ impl MeshFitState {
     pub fn to_checkpoint(&self, fingerprint: u64) -> Checkpoint {
         let mut w = Writer::default();
         write_optimizer(&mut w, &self.params, &self.adam_m, &self.adam_v);
-        w.u32(self.log.len() as u32);
-        for l in &self.log {
+        write_log(&mut w, &self.log, |w, l| {
             w.u32(l.iteration);
             w.f32(l.silhouette);
             w.f32(l.laplacian);
@@ -298,7 +298,7 @@ impl MeshFitState {
             w.f32(l.total);
             w.u64(l.entries);
             w.f64(l.seconds);
-        }
+        });
         Checkpoint {
             kind: FitKind::Mesh,
             fingerprint,
@@ -314,15 +314,8 @@ impl MeshFitState {
         let params = 3 * template.vertex_count() + 3;
         let mut r = Reader::new(&c.payload);
         let (p, m, v) = read_optimizer(&mut r, params)?;
-        let n = r.u32()?;
-        if n > c.iteration {
-            return Err(Error::Input(
-                "checkpoint log longer than its iterations".into(),
-            ));
-        }
-        let mut log = Vec::with_capacity(n as usize);
-        for _ in 0..n {
-            log.push(FitLog {
+        let log = read_log(&mut r, c.iteration, |r| {
+            Ok(FitLog {
                 iteration: r.u32()?,
                 silhouette: r.f32()?,
                 laplacian: r.f32()?,
@@ -330,11 +323,8 @@ impl MeshFitState {
                 total: r.f32()?,
                 entries: r.u64()?,
                 seconds: r.f64()?,
-            });
-        }
-        if !r.done() {
-            return Err(Error::Input("checkpoint has bytes after its log".into()));
-        }
+            })
+        })?;
         Ok(Self {
             iteration: c.iteration,
             params: p,
@@ -365,26 +355,15 @@ pub fn fit_mesh_resumable(
     let mut it = 1;
     let mut earlier = 0.0;
     if let Some(state) = resume {
-        let n = fitter.deform.param_count() as usize;
-        if [&state.params, &state.adam_m, &state.adam_v]
-            .iter()
-            .any(|v| v.len() != n)
-        {
-            return Err(Error::Input(format!(
-                "resume: the state has {} parameters, the template {n}",
-                state.params.len()
-            )));
-        }
-        if state.iteration > opts.iterations {
-            return Err(Error::Input(format!(
-                "resume: the state is after iteration {}, past the {} asked",
-                state.iteration, opts.iterations
-            )));
-        }
-        let (m, v) = fitter.adam.moments();
-        ctx.write_buffer(&fitter.params, 0, &state.params)?;
-        ctx.write_buffer(m, 0, &state.adam_m)?;
-        ctx.write_buffer(v, 0, &state.adam_v)?;
+        check_resume(state.iteration, opts.iterations)?;
+        restore_optimizer(
+            ctx,
+            &fitter.params,
+            &fitter.adam,
+            fitter.deform.param_count() as usize,
+            [&state.params, &state.adam_m, &state.adam_v],
+            "the template",
+        )?;
         log = state.log.clone();
         it = state.iteration + 1;
         earlier = state.seconds;

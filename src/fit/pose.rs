@@ -53,7 +53,9 @@ use std::time::Instant;
 use glam::{DMat3, DQuat, DVec3};
 
 use super::adam::{self, AdamOptions};
-use super::checkpoint::{Checkpoint, Fingerprint, FitKind, Reader, Writer};
+use super::checkpoint::{
+    Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, read_log, write_log,
+};
 use super::{GradOut, ImageMse};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -681,8 +683,7 @@ impl PoseFitState {
         for x in self.params.iter().chain(&self.adam_m).chain(&self.adam_v) {
             w.f64(*x);
         }
-        w.u32(self.log.len() as u32);
-        for l in &self.log {
+        write_log(&mut w, &self.log, |w, l| {
             w.u32(l.iteration);
             for x in [l.loss, l.sigma, l.gamma]
                 .into_iter()
@@ -691,7 +692,7 @@ impl PoseFitState {
             {
                 w.f64(x);
             }
-        }
+        });
         Checkpoint {
             kind: FitKind::Pose,
             fingerprint,
@@ -712,32 +713,22 @@ impl PoseFitState {
             Ok(a)
         };
         let (params, adam_m, adam_v) = (six()?, six()?, six()?);
-        let n = r.u32()?;
-        if n > c.iteration {
-            return Err(Error::Input(
-                "checkpoint log longer than its iterations".into(),
-            ));
-        }
-        let mut log = Vec::with_capacity(n as usize);
-        for _ in 0..n {
+        let log = read_log(&mut r, c.iteration, |r| {
             let iteration = r.u32()?;
             let (loss, sigma, gamma) = (r.f64()?, r.f64()?, r.f64()?);
             let mut pose = [0.0; 6];
             for x in &mut pose {
                 *x = r.f64()?;
             }
-            log.push(PoseLog {
+            Ok(PoseLog {
                 iteration,
                 loss,
                 sigma,
                 gamma,
                 pose: Pose::from_array(pose),
                 seconds: r.f64()?,
-            });
-        }
-        if !r.done() {
-            return Err(Error::Input("checkpoint has bytes after its log".into()));
-        }
+            })
+        })?;
         Ok(Self {
             iteration: c.iteration,
             params,
@@ -792,12 +783,7 @@ pub fn fit_pose_resumable(
     let mut done = 0;
     let mut earlier = 0.0;
     if let Some(state) = resume {
-        if state.iteration > opts.iterations {
-            return Err(Error::Input(format!(
-                "resume: the state is after iteration {}, past the {} asked",
-                state.iteration, opts.iterations
-            )));
-        }
+        check_resume(state.iteration, opts.iterations)?;
         params = state.params;
         m = state.adam_m;
         v = state.adam_v;

@@ -112,3 +112,46 @@ impl Drop for TempDir {
         let _ = std::fs::remove_dir_all(&self.0);
     }
 }
+
+/// Three views (elevation 30°, azimuths 0°, 120°, 240°) of a centred disc of radius 0.35 of
+/// a `size`² image: the silhouettes (`sil/`) and cameras (`cameras.csv`) of a tiny fit, written
+/// into `dir` by the library's own writers. Returns their paths.
+pub fn write_disc_inputs(dir: &TempDir, size: u32) -> (std::path::PathBuf, std::path::PathBuf) {
+    use softvk::fit::io;
+    let sil = dir.path("sil");
+    io::write_silhouettes(
+        &sil,
+        &io::silhouette_names(3),
+        size,
+        size,
+        &disc_masks(size),
+    )
+    .unwrap();
+    let cams = dir.path("cameras.csv");
+    io::write_cameras(&cams, &disc_camera_rows()).unwrap();
+    (sil, cams)
+}
+
+/// The masks of [`write_disc_inputs`], view-major.
+pub fn disc_masks(size: u32) -> Vec<f32> {
+    let c = (size as f32 - 1.0) / 2.0;
+    let r2 = (0.35 * size as f32).powi(2);
+    let disc: Vec<f32> = (0..size * size)
+        .map(|i| {
+            let (x, y) = ((i % size) as f32 - c, (i / size) as f32 - c);
+            f32::from(u8::from(x * x + y * y < r2))
+        })
+        .collect();
+    (0..3).flat_map(|_| disc.iter().copied()).collect()
+}
+
+/// The cameras of [`write_disc_inputs`].
+pub fn disc_camera_rows() -> Vec<softvk::fit::io::CameraRow> {
+    (0..3)
+        .map(|i| softvk::fit::io::CameraRow {
+            distance: 2.732,
+            elevation: 30.0,
+            azimuth: 120.0 * f64::from(i),
+        })
+        .collect()
+}
