@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use common::{TempDir, softvk};
 use softvk::camera::Camera;
-use softvk::fit::checkpoint::{Checkpoint, FitKind};
+use softvk::fit::checkpoint::{Checkpoint, Fingerprint, FitKind};
 use softvk::fit::io::CameraRow;
 use softvk::fit::mesh_fit::{
     FitLog, MeshFitOptions, MeshFitResult, MeshFitState, fit_mesh, fit_mesh_resumable,
@@ -171,15 +171,29 @@ fn foreign_or_broken_checkpoints_are_refused_with_one_line() {
     let short = dir.path("short.ckpt");
     std::fs::write(&short, &bytes[..20]).unwrap();
     refused(&short, FitKind::Mesh, fp, "truncated");
-    let mut version = bytes.clone();
+    // Any damaged byte: the checksum (the last 8 bytes) refuses the file.
+    let mut damaged = bytes.clone();
+    damaged[bytes.len() / 2] ^= 0x10;
+    let d = dir.path("damaged.ckpt");
+    std::fs::write(&d, &damaged).unwrap();
+    refused(&d, FitKind::Mesh, fp, "damaged");
+    // The checks behind the checksum, on files resealed with a right one.
+    let body = &bytes[..bytes.len() - 8];
+    let sealed = |body: &[u8]| {
+        let mut b = body.to_vec();
+        b.extend(Fingerprint::default().add(body).value().to_le_bytes());
+        b
+    };
+    assert_eq!(sealed(body), bytes, "the checksum is FNV-1a of the rest");
+    let mut version = body.to_vec();
     version[16] ^= 0x01; // a byte of the version string
     let v = dir.path("version.ckpt");
-    std::fs::write(&v, &version).unwrap();
+    std::fs::write(&v, sealed(&version)).unwrap();
     refused(&v, FitKind::Mesh, fp, "written by softvk");
     refused(&dir.path("missing.ckpt"), FitKind::Mesh, fp, "missing.ckpt");
     // A payload cut short after a valid header.
     let cut = dir.path("cut.ckpt");
-    std::fs::write(&cut, &bytes[..bytes.len() - 9]).unwrap();
+    std::fs::write(&cut, sealed(&body[..body.len() - 9])).unwrap();
     let c = Checkpoint::read(&cut, FitKind::Mesh, fp).unwrap();
     let e = MeshFitState::from_checkpoint(&c, &template)
         .unwrap_err()

@@ -933,3 +933,160 @@ fn absurd_image_headers_are_refused_before_decoding() {
         assert!(message.contains("sides of at most 16384"), "{message}");
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Checkpoints.
+
+/// A valid checkpoint file of each kind of fit, with a reader that restores its state: mesh
+/// (an icosphere(1) template), field (the default options' field) and pose.
+type CheckpointReader = Box<dyn Fn(&Path) -> Result<(), softvk::Error>>;
+
+fn checkpoint_cases() -> Vec<(&'static str, Vec<u8>, CheckpointReader)> {
+    use softvk::fit::checkpoint::{Checkpoint, FitKind};
+    use softvk::fit::field_fit::{FieldFitLog, FieldFitOptions, FieldFitState};
+    use softvk::fit::mesh_fit::{FitLog, MeshFitState};
+    use softvk::fit::pose::{Pose, PoseFitState, PoseLog};
+    const FINGERPRINT: u64 = 0x5eed;
+    let ramp = |n: usize, scale: f32| -> Vec<f32> { (0..n).map(|i| scale * i as f32).collect() };
+    let dir = CaseDir::new("checkpoint-seed");
+    let bytes = |c: Checkpoint| {
+        let path = dir.0.join("seed.ckpt");
+        c.write(&path).unwrap();
+        std::fs::read(&path).unwrap()
+    };
+
+    let template = Mesh::icosphere(1);
+    let n = 3 * template.vertex_count() + 3;
+    let mesh = MeshFitState {
+        iteration: 3,
+        params: ramp(n, 0.01),
+        adam_m: ramp(n, -0.001),
+        adam_v: ramp(n, 1e-6),
+        log: (1..=3)
+            .map(|i| FitLog {
+                iteration: i,
+                silhouette: 0.5 / i as f32,
+                laplacian: 0.1,
+                flatten: 0.2,
+                total: 0.8,
+                entries: 1000 + u64::from(i),
+                seconds: 0.1 * f64::from(i),
+            })
+            .collect(),
+        seconds: 0.3,
+    };
+    let opts = FieldFitOptions::default();
+    let n = opts.field.param_count();
+    let field = FieldFitState {
+        iteration: 2,
+        params: ramp(n, 1e-3),
+        adam_m: ramp(n, 1e-4),
+        adam_v: ramp(n, 1e-8),
+        log: (1..=2)
+            .map(|i| FieldFitLog {
+                iteration: i,
+                silhouette: 0.3,
+                geo: 0.01,
+                total: 0.31,
+                seconds: 0.5,
+            })
+            .collect(),
+        seconds: 1.0,
+    };
+    let pose = PoseFitState {
+        iteration: 1,
+        params: [0.1, -0.2, 0.3, 0.0, 0.05, 2.0],
+        adam_m: [0.01; 6],
+        adam_v: [1e-4; 6],
+        log: vec![PoseLog {
+            iteration: 1,
+            loss: 0.2,
+            sigma: 1e-4,
+            gamma: 1e-4,
+            pose: Pose::from_array([0.1, -0.2, 0.3, 0.0, 0.05, 2.0]),
+            seconds: 0.2,
+        }],
+        seconds: 0.2,
+    };
+    vec![
+        (
+            "mesh",
+            bytes(mesh.to_checkpoint(FINGERPRINT)),
+            Box::new(move |p: &Path| {
+                let c = Checkpoint::read(p, FitKind::Mesh, FINGERPRINT)?;
+                MeshFitState::from_checkpoint(&c, &template).map(drop)
+            }),
+        ),
+        (
+            "field",
+            bytes(field.to_checkpoint(FINGERPRINT)),
+            Box::new(move |p: &Path| {
+                let c = Checkpoint::read(p, FitKind::Field, FINGERPRINT)?;
+                FieldFitState::from_checkpoint(&c, &opts).map(drop)
+            }),
+        ),
+        (
+            "pose",
+            bytes(pose.to_checkpoint(FINGERPRINT)),
+            Box::new(|p: &Path| {
+                let c = Checkpoint::read(p, FitKind::Pose, FINGERPRINT)?;
+                PoseFitState::from_checkpoint(&c).map(drop)
+            }),
+        ),
+    ]
+}
+
+/// Checkpoints of every kind, mutated (truncated, bytes set, runs inserted): never a panic, a
+/// damaged file is always refused in one line (the checksum sees every edit that changes a
+/// byte), and an unchanged one is read back.
+#[test]
+fn checkpoints_never_panic_and_refuse_damage_in_one_line() {
+    for (seed, (kind, valid, read)) in checkpoint_cases().into_iter().enumerate() {
+        let dir = CaseDir::new("checkpoint");
+        read(&dir.write("valid.ckpt", &valid)).unwrap_or_else(|e| panic!("{kind}: {e}"));
+        fuzz(40 + seed as u8, byte_edits(), |edits| {
+            let bytes = apply_bytes(valid.clone(), &edits);
+            let path = dir.write("case.ckpt", &bytes);
+            match read(&path) {
+                Ok(()) => prop_assert!(bytes == valid, "{kind}: a damaged checkpoint was read"),
+                Err(e) => {
+                    prop_assert!(bytes != valid, "{kind}: the valid file was refused: {e}");
+                    one_line(kind, &e.to_string())?;
+                }
+            }
+            Ok(())
+        });
+    }
+}
+
+/// A well-formed checkpoint (checksum right) whose state holds a NaN, an infinity or a negative
+/// second moment is refused: a resumed fit would otherwise run on garbage.
+#[test]
+fn checkpoints_with_non_finite_states_are_refused() {
+    use softvk::fit::checkpoint::{Checkpoint, FitKind};
+    use softvk::fit::mesh_fit::MeshFitState;
+    let template = Mesh::icosphere(0);
+    let n = 3 * template.vertex_count() + 3;
+    let dir = CaseDir::new("checkpoint-nan");
+    let path = dir.0.join("state.ckpt");
+    for (what, at, value) in [
+        ("NaN parameter", 0, f32::NAN),
+        ("infinite first moment", n + 1, f32::INFINITY),
+        ("negative second moment", 2 * n + 2, -1.0),
+    ] {
+        let mut flat = vec![0.5f32; 3 * n];
+        flat[at] = value;
+        let state = MeshFitState {
+            iteration: 0,
+            params: flat[..n].to_vec(),
+            adam_m: flat[n..2 * n].to_vec(),
+            adam_v: flat[2 * n..].to_vec(),
+            log: Vec::new(),
+            seconds: 0.0,
+        };
+        state.to_checkpoint(7).write(&path).unwrap();
+        let c = Checkpoint::read(&path, FitKind::Mesh, 7).unwrap();
+        let err = MeshFitState::from_checkpoint(&c, &template).unwrap_err();
+        assert!(err.to_string().contains("non-finite"), "{what}: {err}");
+    }
+}

@@ -15,6 +15,7 @@ use rand::RngExt;
 use softvk::camera::{Camera, Projection};
 use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
+use softvk::primitives::binning::MASK_MAX_TILES_PER_VIEW;
 use softvk::raster::backward::{GradBuffers, GradSplit};
 use softvk::raster::gpu::{GpuScene, Method, Renderer};
 use softvk::raster::reference::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
@@ -821,6 +822,96 @@ fn alpha_only_backwards_equal_the_full_backward_for_an_alpha_upstream() {
                     .unwrap();
                 assert!(values(&got) == values(&want), "{what}: silhouette");
             }
+        }
+    }
+}
+
+fn frame_bits(f: &softvk::raster::gpu::Frames) -> Vec<u32> {
+    f.images
+        .iter()
+        .flatten()
+        .map(|c| c.to_bits())
+        .chain(f.aux.iter().flat_map(|a| {
+            [
+                a.softmax_ref_depth.to_bits(),
+                a.softmax_sum.to_bits(),
+                a.alpha_acc.to_bits(),
+                a.alpha_zeros,
+                a.hard_face,
+            ]
+        }))
+        .collect()
+}
+
+/// One view whose (face, tile) entries do not fit what one binding may hold (here an entry
+/// budget of 60 % of them) is binned, rendered and differentiated window by window of tile
+/// rows: each window binned alone, through masks (a 5×6-tile grid) or the sort (257 × 18 tiles,
+/// windows of 9 rows, above the masks' 2 048 tiles), with every entry binned once. The image
+/// and aux are bit for bit one binning's and brute force's; the gradients are bit for bit one
+/// binning's (each face's running sums add its tiles in the same order), match brute force, and
+/// the small case matches the twin.
+#[test]
+fn one_view_past_the_entry_budget_renders_and_differentiates_window_by_window() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let cams = [Camera::from_angles(2.732, 15.0, 20.0)];
+    let tile = Method::Tiled { tile: 8 };
+    for (w_px, h_px, color_mode, res) in [
+        (40, 48, ColorMode::Surface, 3),
+        (2056, 144, ColorMode::Vertex, 1),
+    ] {
+        let what = format!("{w_px}x{h_px} {color_mode:?}");
+        let mesh = scene(res, 61);
+        let s = RasterSettings {
+            color_mode,
+            ..settings(w_px, h_px)
+        };
+        let w = weights((w_px * h_px) as usize, 62);
+        let whole = forward(&r, &gpu, &mesh, &cams, &s, tile);
+        assert_eq!(whole.groups().len(), 1, "{what}");
+        let entries = whole.binned_entries();
+        let budget = entries * 3 / 5;
+        let windowed = Renderer::new(&gpu).unwrap().with_entry_budget(budget);
+        let win = forward(&windowed, &gpu, &mesh, &cams, &s, tile);
+        let groups = win.groups();
+        assert!(groups.len() >= 2, "{what}: {groups:?}");
+        let rows = s.height.div_ceil(8);
+        let mut next_row = 0;
+        for g in groups {
+            assert_eq!((g.first, g.views), (0, 1), "{what}");
+            assert_eq!(g.tile_rows.0, next_row, "{what}: windows in order, no gap");
+            assert!(g.entries <= budget, "{what}: {g:?} over {budget}");
+            next_row += g.tile_rows.1;
+        }
+        assert_eq!(next_row, rows, "{what}: windows cover every tile row");
+        assert_eq!(win.binned_entries(), entries, "{what}: each entry once");
+        assert_eq!(
+            win.pair_counts(&gpu, tile).unwrap(),
+            whole.pair_counts(&gpu, tile).unwrap(),
+            "{what}: the same pairs visited"
+        );
+        // Which way the windows were binned: masks up to 2 048 tiles, the sort beyond.
+        let window_tiles = u64::from(s.width.div_ceil(8)) * u64::from(groups[0].tile_rows.1);
+        assert_eq!(
+            window_tiles > MASK_MAX_TILES_PER_VIEW,
+            w_px > 1000,
+            "{what}: {window_tiles} tiles per window"
+        );
+        let brute = forward(&r, &gpu, &mesh, &cams, &s, Method::Brute);
+        let frames = |scene: &GpuScene| frame_bits(&r.read_frames(&gpu, scene).unwrap());
+        let want = frames(&whole);
+        assert!(frames(&win) == want, "{what}: windows changed the forward");
+        assert!(frames(&brute) == want, "{what}: tiled differs from brute");
+
+        let (one, _, _) = backward_split(&r, &gpu, &whole, &w, tile, GradSplit::default());
+        let (many, _, _) = backward_split(&windowed, &gpu, &win, &w, tile, GradSplit::default());
+        assert!(bits(&many) == bits(&one), "{what}: windows changed a sum");
+        let (b, _, _) = backward_split(&r, &gpu, &brute, &w, Method::Brute, GradSplit::default());
+        assert_close(&format!("{what} windows vs brute"), &many, &b, true);
+        if w_px * h_px < 4096 {
+            let w64: Vec<[f64; 4]> = w.iter().map(|g| g.map(f64::from)).collect();
+            let twin = reference_grad::grad(&mesh, &cams, &lighting(), &s, &w64).unwrap();
+            assert_close(&format!("{what} windows vs twin"), &many, &twin, true);
         }
     }
 }

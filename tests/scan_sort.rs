@@ -149,12 +149,12 @@ fn sort_by_fewer_key_bits_ignores_the_rest_and_keeps_order() {
 }
 
 /// The exact binning equals its twin, and the guarded binning (count never read on the host)
-/// gives the same entries, item
-/// slots and ranges at every capacity that holds the count, including exactly the count, with
-/// both strategies: per-tile masks (small grids), and the sort (sentinel keys over the whole
-/// capacity; a grid over `MASK_MAX_TILES_PER_VIEW` tiles per view), also on a grid whose tile
-/// count is a power of two (the sentinel then needs one key bit more); `offsets[items]` holds
-/// the total.
+/// gives the same entries, item slots and ranges at every capacity that holds the count,
+/// including exactly the count, with both strategies: per-tile masks (small grids), and the sort
+/// (sentinel keys over the whole capacity; a grid over `MASK_MAX_TILES_PER_VIEW` tiles per
+/// view), also on a grid whose tile count is a power of two (the sentinel then needs one key bit
+/// more); `offsets[items]` holds the total. The same over a window of each grid's tile rows
+/// (`TileGrid::window`, what a view too large for one binding is binned in).
 #[test]
 fn guarded_binning_equals_the_twin_at_any_capacity_that_holds_the_count() {
     use softvk::primitives::binning::{
@@ -171,88 +171,99 @@ fn guarded_binning_equals_the_twin_at_any_capacity_that_holds_the_count() {
         (520, 264, 2, false),
         (512, 512, 1, false),
     ] {
-        let grid = TileGrid::new(w, h, 8).unwrap();
-        let per_view = 60u32;
-        let n = (per_view * views) as usize;
-        // Boxes in pixel-centre coordinates (x, y in about [-1.2, 1.2]), a fifth not binned.
-        let mut words = Vec::with_capacity(5 * n);
-        let mut boxes = Vec::with_capacity(n);
-        for _ in 0..n {
-            let (x, y) = (
-                rng.random_range(-1.2..1.2f32),
-                rng.random_range(-1.2..1.2f32),
-            );
-            let (dx, dy) = (rng.random_range(0.0..0.6f32), rng.random_range(0.0..0.4f32));
-            let b = [x, y, x + dx, y + dy];
-            let binned = rng.random_range(0..5) != 0;
-            words.extend_from_slice(&b);
-            words.push(f32::from_bits(u32::from(binned)));
-            boxes.push(binned.then_some(b));
-        }
-        let items = gpu.upload_buffer("boxes", &words).unwrap();
-        let job = BinJob {
-            grid,
-            layout: ItemLayout {
-                stride_words: 5,
-                box_offset: 0,
-                flag_offset: 4,
-                flag_mask: 1,
-            },
-            items_per_view: per_view,
-            views,
-            first_item: 0,
-        };
+        let image = TileGrid::new(w, h, 8).unwrap();
         assert_eq!(
-            grid.tiles_per_view() <= MASK_MAX_TILES_PER_VIEW,
+            image.tiles_per_view() <= MASK_MAX_TILES_PER_VIEW,
             masks,
             "{w}x{h}"
         );
-        assert_eq!(
-            matches!(job.strategy(&gpu), BinStrategy::Masks { .. }),
-            masks,
-            "{w}x{h}: strategy"
-        );
-        let twin = binning::cpu::bin(&boxes, per_view, &grid);
-        // The exact binning (count read back between two submissions) first.
-        let mut exact = Bins::new(&gpu).unwrap();
-        let binned = binner.run(&gpu, &mut exact, &items, &job).unwrap();
-        assert!(
-            binned == twin,
-            "{w}x{h}: exact binning differs from the twin"
-        );
-        let total = u64::from(twin.total);
-        let mut bins = Bins::new(&gpu).unwrap();
-        bins.reserve(&gpu, &job).unwrap();
-        for cap in [total, total + 1, 2 * total + 100] {
-            bins.reserve_entry_capacity(&gpu, cap).unwrap();
-            assert_eq!(bins.entry_capacity(), cap);
-            gpu.submit_and_wait(|rec| {
-                binner.record_count(rec, &bins, items.whole(), &job)?;
-                binner.record_sort_guarded(rec, &bins, items.whole(), &job)
-            })
-            .unwrap();
-            let what = format!("{w}x{h}, {views} views, capacity {cap} for {total} entries");
-            let offsets: Vec<u32> = gpu.read_buffer(bins.offsets(), 0, n + 1).unwrap();
-            assert_eq!(offsets[..n], twin.offsets[..], "{what}");
-            assert_eq!(u64::from(offsets[n]), total, "{what}: offsets[items]");
-            let t = total as usize;
-            if !masks {
-                let keys: Vec<[u32; 2]> = gpu.read_buffer(bins.keys(), 0, cap as usize).unwrap();
-                let tiles: Vec<u32> = keys[..t].iter().map(|k| k[0]).collect();
-                assert_eq!(tiles, twin.tiles, "{what}: sorted tiles");
-                assert!(
-                    keys[t..].iter().all(|k| *k == [u32::MAX; 2]),
-                    "{what}: sentinels"
+        // The whole grid, and a window of its tile rows (as a view too large for one binding
+        // is binned): rows 1 .. rows - 1, whose tiles are numbered from its first row.
+        let window = image.window(1, image.tiles_y - 2).unwrap();
+        for grid in [image, window] {
+            // 520×264's window (65 × 31 tiles) is binned by masks, 512×512's by the sort.
+            let masks = grid.tiles_per_view() <= MASK_MAX_TILES_PER_VIEW;
+            let per_view = 60u32;
+            let n = (per_view * views) as usize;
+            // Boxes in pixel-centre coordinates (x, y in about [-1.2, 1.2]), a fifth not binned.
+            let mut words = Vec::with_capacity(5 * n);
+            let mut boxes = Vec::with_capacity(n);
+            for _ in 0..n {
+                let (x, y) = (
+                    rng.random_range(-1.2..1.2f32),
+                    rng.random_range(-1.2..1.2f32),
                 );
+                let (dx, dy) = (rng.random_range(0.0..0.6f32), rng.random_range(0.0..0.4f32));
+                let b = [x, y, x + dx, y + dy];
+                let binned = rng.random_range(0..5) != 0;
+                words.extend_from_slice(&b);
+                words.push(f32::from_bits(u32::from(binned)));
+                boxes.push(binned.then_some(b));
             }
-            let slots: Vec<u32> = gpu.read_buffer(bins.entries(), 0, t).unwrap();
-            assert_eq!(slots, twin.slots, "{what}: slots");
-            let slot_items: Vec<u32> = gpu.read_buffer(bins.entry_items(), 0, t).unwrap();
-            assert_eq!(slot_items, twin.slot_items, "{what}: slot items");
-            let ranges: Vec<[u32; 2]> = gpu
-                .read_buffer(bins.ranges(), 0, job.tile_count() as usize)
+            let items = gpu.upload_buffer("boxes", &words).unwrap();
+            let job = BinJob {
+                grid,
+                layout: ItemLayout {
+                    stride_words: 5,
+                    box_offset: 0,
+                    flag_offset: 4,
+                    flag_mask: 1,
+                },
+                items_per_view: per_view,
+                views,
+                first_item: 0,
+            };
+            assert_eq!(
+                matches!(job.strategy(&gpu), BinStrategy::Masks { .. }),
+                masks,
+                "{w}x{h}: strategy"
+            );
+            let twin = binning::cpu::bin(&boxes, per_view, &grid);
+            // The exact binning (count read back between two submissions) first.
+            let mut exact = Bins::new(&gpu).unwrap();
+            let binned = binner.run(&gpu, &mut exact, &items, &job).unwrap();
+            assert!(
+                binned == twin,
+                "{w}x{h}: exact binning differs from the twin"
+            );
+            let total = u64::from(twin.total);
+            let mut bins = Bins::new(&gpu).unwrap();
+            bins.reserve(&gpu, &job).unwrap();
+            for cap in [total, total + 1, 2 * total + 100] {
+                bins.reserve_entry_capacity(&gpu, cap).unwrap();
+                assert_eq!(bins.entry_capacity(), cap);
+                gpu.submit_and_wait(|rec| {
+                    binner.record_count(rec, &bins, items.whole(), &job)?;
+                    binner.record_sort_guarded(rec, &bins, items.whole(), &job)
+                })
                 .unwrap();
-            assert_eq!(ranges, twin.ranges, "{what}: ranges");
+                let what = format!(
+                    "{w}x{h} rows {}+{}, {views} views, capacity {cap} for {total} entries",
+                    grid.first_row, grid.tiles_y
+                );
+                let offsets: Vec<u32> = gpu.read_buffer(bins.offsets(), 0, n + 1).unwrap();
+                assert_eq!(offsets[..n], twin.offsets[..], "{what}");
+                assert_eq!(u64::from(offsets[n]), total, "{what}: offsets[items]");
+                let t = total as usize;
+                if !masks {
+                    let keys: Vec<[u32; 2]> =
+                        gpu.read_buffer(bins.keys(), 0, cap as usize).unwrap();
+                    let tiles: Vec<u32> = keys[..t].iter().map(|k| k[0]).collect();
+                    assert_eq!(tiles, twin.tiles, "{what}: sorted tiles");
+                    assert!(
+                        keys[t..].iter().all(|k| *k == [u32::MAX; 2]),
+                        "{what}: sentinels"
+                    );
+                }
+                let slots: Vec<u32> = gpu.read_buffer(bins.entries(), 0, t).unwrap();
+                assert_eq!(slots, twin.slots, "{what}: slots");
+                let slot_items: Vec<u32> = gpu.read_buffer(bins.entry_items(), 0, t).unwrap();
+                assert_eq!(slot_items, twin.slot_items, "{what}: slot items");
+                let ranges: Vec<[u32; 2]> = gpu
+                    .read_buffer(bins.ranges(), 0, job.tile_count() as usize)
+                    .unwrap();
+                assert_eq!(ranges, twin.ranges, "{what}: ranges");
+            }
         }
     }
 }

@@ -32,7 +32,7 @@ void main() {
     vec4 box;
     uvec4 rect;
     uint count = 0u;
-    bool binned = item_box(pc.first_item + id, box) && tile_rect(box, rect);
+    bool binned = item_box(pc.first_item + id, box) && tile_rect(box, rect) && window_rect(rect);
     if (binned) {
         count = (rect.z - rect.x + 1u) * (rect.w - rect.y + 1u);
     }

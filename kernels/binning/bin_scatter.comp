@@ -27,7 +27,7 @@ void main() {
     }
     vec4 box;
     uvec4 rect;
-    if (!(item_box(pc.first_item + id, box) && tile_rect(box, rect))) {
+    if (!(item_box(pc.first_item + id, box) && tile_rect(box, rect) && window_rect(rect))) {
         return;
     }
     uint view = id / pc.items_per_view;

@@ -101,7 +101,7 @@ void main() {
         for (uint base = 0u; base < pixels; base += lanes) {
             uint i = base + lane;
             uint col = tx * pc.tile_size + i % pc.tile_size;
-            uint row = ty * pc.tile_size + i / pc.tile_size;
+            uint row = (pc.first_row + ty) * pc.tile_size + i / pc.tile_size;
             bool live = i < pixels && lane < lanes && col < pc.width && row < pc.height;
             Upstream u = live ? load_upstream(gview, col, row) : zero_upstream();
             live = live && !upstream_is_zero(u);

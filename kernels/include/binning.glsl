@@ -26,7 +26,7 @@ layout(push_constant) uniform Push {
     uint tiles_x;
     uint tiles_y;
     uint words_per_tile;  // count: W of the per-tile item masks to set (0: none; see bin_count)
-    uint pad0;
+    uint first_row;       // the window's first tile row (tiles_y rows from it; 0: the image)
     uint pad1;
     uint pad2;
 } pc;
@@ -64,6 +64,19 @@ bool tile_rect(vec4 box, out uvec4 rect) {
 }
 
 #ifndef BINNING_TILE_RECT_ONLY
+// The part of a tile rectangle inside the window of tile rows `first_row .. first_row + tiles_y`
+// (`TileGrid::window`), its rows numbered from the window's first; false when none is. Twin:
+// `binning::cpu::window_rect`.
+bool window_rect(inout uvec4 rect) {
+    uint last = pc.first_row + pc.tiles_y - 1u;
+    if (rect.w < pc.first_row || rect.y > last) {
+        return false;
+    }
+    rect.y = max(rect.y, pc.first_row) - pc.first_row;
+    rect.w = min(rect.w, last) - pc.first_row;
+    return true;
+}
+
 // The box of item `item` (an index into the whole items buffer), or false when its flags say it
 // is not binned.
 bool item_box(uint item, out vec4 box) {

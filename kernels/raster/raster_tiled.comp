@@ -32,8 +32,12 @@ layout(std430, set = 0, binding = 6) readonly buffer PairItems { uint pair_items
 layout(std430, set = 0, binding = 7) readonly buffer Ranges { uvec2 ranges[]; };
 
 void main() {
+    // The pixel rows of the grid's window of tile rows (all of them unless a view was binned
+    // window by window); tiles are multiples of 8 pixels, so blocks never straddle two tiles.
+    uint row0 = pc.first_row * pc.tile_size;
+    uint rows = min(pc.height - row0, pc.tiles_y * pc.tile_size);
     uint blocks_x = (pc.width + 7u) / 8u;
-    uint blocks_y = (pc.height + 7u) / 8u;
+    uint blocks_y = (rows + 7u) / 8u;
     uint blocks_per_view = blocks_x * blocks_y;
     uint block = linear_group_id();
     uint view = block / blocks_per_view;
@@ -45,7 +49,7 @@ void main() {
     uint bx = in_view - by * blocks_x;
     uint lid = gl_LocalInvocationIndex;
     uint col = bx * 8u + (lid & 7u);
-    uint row = by * 8u + (lid >> 3u);
+    uint row = row0 + by * 8u + (lid >> 3u);
     bool valid = col < pc.width && row < pc.height;
 
     uint blocks_per_tile = pc.tile_size / 8u;

@@ -9,8 +9,12 @@
 //!
 //! ```text
 //! b"SOFTVKCK", format u32, version (u32 length + UTF-8), kind u32, fingerprint u64,
-//! iteration u32, seconds f64, then the kind's payload (arrays as u64 length + f32s)
+//! iteration u32, seconds f64, then the kind's payload (arrays as u64 length + f32s),
+//! then a checksum u64 (FNV-1a of every byte before it)
 //! ```
+//!
+//! The checksum refuses a damaged or truncated file before anything in it is believed; the
+//! readers refuse non-finite parameters and moments besides, whatever wrote them.
 
 use std::path::Path;
 
@@ -20,7 +24,7 @@ use crate::error::{Error, Result};
 use crate::gpu::{Buffer, Context};
 
 const MAGIC: &[u8; 8] = b"SOFTVKCK";
-const FORMAT: u32 = 1;
+const FORMAT: u32 = 2;
 
 /// The kind of fit a checkpoint belongs to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -105,6 +109,8 @@ impl Checkpoint {
         w.u32(self.iteration);
         w.f64(self.seconds);
         w.bytes(&self.payload);
+        let checksum = Fingerprint::default().add(&w.0).value();
+        w.u64(checksum);
         AtomicFile::create(path)?.commit(&w.0)
     }
 
@@ -117,13 +123,18 @@ impl Checkpoint {
             source,
         })?;
         let bad = |why: &str| Error::Input(format!("{}: {why}", path.display()));
-        let mut r = Reader {
-            bytes: &bytes,
-            at: 0,
-        };
-        if r.take(8).ok() != Some(&MAGIC[..]) {
+        if bytes.get(..8) != Some(&MAGIC[..]) {
             return Err(bad("not a softvk checkpoint"));
         }
+        // The checksum first: nothing of a damaged file is believed, not even its format.
+        let (body, sum) = bytes.split_at(bytes.len().max(16) - 8);
+        let sum: [u8; 8] = sum.try_into().map_err(|_| bad("truncated checkpoint"))?;
+        if Fingerprint::default().add(body).value() != u64::from_le_bytes(sum) {
+            return Err(bad(
+                "damaged or truncated checkpoint (its checksum does not match)",
+            ));
+        }
+        let mut r = Reader { bytes: body, at: 8 };
         let format = r.u32().map_err(|_| bad("truncated checkpoint"))?;
         if format != FORMAT {
             return Err(bad(&format!(
@@ -279,7 +290,20 @@ pub fn read_optimizer(r: &mut Reader<'_>, n: usize) -> Result<(Vec<f32>, Vec<f32
             p.len()
         )));
     }
+    check_state(&p, &m, &v)?;
     Ok((p, m, v))
+}
+
+/// Refuses an optimizer state with a non-finite parameter or moment, or a negative second
+/// moment (Adam's `v` is a mean of squares).
+pub fn check_state<T: Copy + Into<f64>>(params: &[T], m: &[T], v: &[T]) -> Result<()> {
+    let finite = |a: &[T]| a.iter().all(|&x| x.into().is_finite());
+    if !(finite(params) && finite(m) && finite(v)) || v.iter().any(|&x| x.into() < 0.0) {
+        return Err(Error::Input(
+            "checkpoint holds a non-finite parameter or moment, or a negative second moment".into(),
+        ));
+    }
+    Ok(())
 }
 
 /// Writes a fit's log: its length, then each entry by `entry`.

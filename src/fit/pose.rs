@@ -54,7 +54,8 @@ use glam::{DMat3, DQuat, DVec3};
 
 use super::adam::{self, AdamOptions};
 use super::checkpoint::{
-    Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, read_log, write_log,
+    Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, check_state, read_log,
+    write_log,
 };
 use super::{GradOut, ImageMse};
 use crate::camera::Camera;
@@ -713,6 +714,7 @@ impl PoseFitState {
             Ok(a)
         };
         let (params, adam_m, adam_v) = (six()?, six()?, six()?);
+        check_state(&params, &adam_m, &adam_v)?;
         let log = read_log(&mut r, c.iteration, |r| {
             let iteration = r.u32()?;
             let (loss, sigma, gamma) = (r.f64()?, r.f64()?, r.f64()?);

@@ -56,6 +56,10 @@
 //!
 //! The offsets buffer holds one entry more than the items: `offsets[items]` is the total, so a
 //! consumer can find the end of the last item's entries without knowing the count on the host.
+//!
+//! **Windows.** A job's grid may be a window of the image's tile rows ([`TileGrid::window`]):
+//! then only those rows are binned, their tiles numbered from the window's first row, so a
+//! view whose entries do not fit one binding is binned (and rendered) a window at a time.
 
 use bytemuck::{Pod, Zeroable};
 
@@ -75,8 +79,11 @@ pub struct TileGrid {
     pub tile_size: u32,
     /// Tiles per row.
     pub tiles_x: u32,
-    /// Tiles per column.
+    /// Tile rows of the grid: all of the image's, or a window's ([`TileGrid::window`]).
     pub tiles_y: u32,
+    /// First tile row: 0 for the whole image; a window covers tile rows
+    /// `first_row .. first_row + tiles_y`, and its tiles are numbered from its first row.
+    pub first_row: u32,
 }
 
 impl TileGrid {
@@ -93,7 +100,31 @@ impl TileGrid {
             tile_size,
             tiles_x: width.div_ceil(tile_size),
             tiles_y: height.div_ceil(tile_size),
+            first_row: 0,
         })
+    }
+
+    /// The window of `rows` tile rows from `first_row` (of the whole image's grid): binning and
+    /// the tiled passes over it cover only those rows' pixels. Views whose (item, tile) entries
+    /// do not fit one binding are binned and rendered window by window.
+    pub fn window(&self, first_row: u32, rows: u32) -> Result<Self> {
+        let all = self.height.div_ceil(self.tile_size);
+        if rows == 0 || first_row.checked_add(rows).is_none_or(|end| end > all) {
+            return Err(Error::Input(format!(
+                "tile rows {first_row}..{} of a grid of {all}",
+                u64::from(first_row) + u64::from(rows)
+            )));
+        }
+        Ok(Self {
+            tiles_y: rows,
+            first_row,
+            ..*self
+        })
+    }
+
+    /// Tile rows of the whole image (a window's `tiles_y` counts its own).
+    pub fn image_rows(&self) -> u32 {
+        self.height.div_ceil(self.tile_size)
     }
 
     /// Tiles per view.
@@ -227,7 +258,9 @@ struct BinPush {
     tiles_y: u32,
     /// `bin_count.comp`: W of the masks to set (0: the sort's count, no masks).
     words_per_tile: u32,
-    pad: [u32; 3],
+    /// First tile row of the grid's window ([`TileGrid::window`]).
+    first_row: u32,
+    pad: [u32; 2],
 }
 
 /// Push constants of `bin_mask_counts.comp` (its first four words).
@@ -520,7 +553,8 @@ impl Binner {
             tiles_x: job.grid.tiles_x,
             tiles_y: job.grid.tiles_y,
             words_per_tile,
-            pad: [0; 3],
+            first_row: job.grid.first_row,
+            pad: [0; 2],
         }
     }
 
@@ -962,15 +996,34 @@ pub mod cpu {
         ])
     }
 
+    /// `window_rect` of `binning.glsl`: the part of a tile rectangle inside `grid`'s window of
+    /// tile rows ([`TileGrid::window`]), its rows numbered from the window's first.
+    pub fn window_rect(r: [u32; 4], grid: &TileGrid) -> Option<[u32; 4]> {
+        let last = grid.first_row + grid.tiles_y - 1;
+        if r[3] < grid.first_row || r[1] > last {
+            return None;
+        }
+        Some([
+            r[0],
+            r[1].max(grid.first_row) - grid.first_row,
+            r[2],
+            r[3].min(last) - grid.first_row,
+        ])
+    }
+
     /// Bins `boxes` (`views × items_per_view`, view-major; `None` = not binned) exactly as the
-    /// GPU does: count, exclusive scan, item-major scatter, stable sort by tile, ranges.
+    /// GPU does: count, exclusive scan, item-major scatter, stable sort by tile, ranges. Over a
+    /// window, only its tile rows.
     pub fn bin(boxes: &[Option<[f32; 4]>], items_per_view: u32, grid: &TileGrid) -> Binned {
         let per_view = grid.tiles_per_view() as u32;
         let mut offsets = Vec::with_capacity(boxes.len());
         let mut entries: Vec<(u32, u32, u32)> = Vec::new(); // (tile, slot, item)
         for (id, b) in boxes.iter().enumerate() {
             offsets.push(entries.len() as u32);
-            let Some(rect) = b.and_then(|b| tile_rect(b, grid)) else {
+            let Some(rect) = b
+                .and_then(|b| tile_rect(b, grid))
+                .and_then(|r| window_rect(r, grid))
+            else {
                 continue;
             };
             let view = id as u32 / items_per_view.max(1);

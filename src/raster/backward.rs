@@ -685,6 +685,7 @@ impl GradKernels {
             .tiled
             .get(rec.context(), &gb.modes(scene).constants(rec.context()))?;
         for (group, bins) in scene.groups.iter().zip(&scene.bins) {
+            let grid = grid.window(group.tile_rows.0, group.tile_rows.1)?;
             if group.entries == 0 {
                 // No face touches these views: their gradients stay zero.
                 continue;
@@ -712,6 +713,7 @@ impl GradKernels {
                 fine.tile_size = tile;
                 fine.tiles_x = grid.tiles_x;
                 fine.tiles_y = grid.tiles_y;
+                fine.first_row = grid.first_row;
                 fine.entry_total = group.entries as u32;
                 let parts = run.min(end - begin).div_ceil(faces).max(1);
                 let push = GradPush {
@@ -939,7 +941,7 @@ mod tests {
                 spec.name
             );
         }
-        assert_eq!(std::mem::size_of::<GradPush>(), 112);
+        assert_eq!(std::mem::size_of::<GradPush>(), 116);
         assert_eq!(
             std::mem::size_of::<ReducePush>() as u32,
             specs::GRAD_REDUCE.push_constant_size

@@ -67,6 +67,7 @@ pub(crate) struct RasterPush {
     pub out_height: u32,
     pub entry_total: u32,
     pub grad_stride: u32,
+    pub first_row: u32,
 }
 
 const FLAG_DOUBLE_SIDED: u32 = 1;
@@ -208,8 +209,17 @@ impl RasterPush {
             out_height: 0,
             entry_total: 0,
             grad_stride: 0,
+            first_row: 0,
         }
     }
+}
+
+/// Pixel rows of `grid`'s window of tile rows (the image's last tile row may be partial).
+pub(crate) fn window_pixel_rows(grid: &TileGrid) -> u32 {
+    let first = grid.first_row * grid.tile_size;
+    grid.height
+        .saturating_sub(first)
+        .min(grid.tiles_y.saturating_mul(grid.tile_size))
 }
 
 /// Tile sizes the tiled kernel supports: multiples of its 8×8 workgroup block.
@@ -311,8 +321,9 @@ impl TiledRaster {
         push.tile_size = grid.tile_size;
         push.tiles_x = grid.tiles_x;
         push.tiles_y = grid.tiles_y;
+        push.first_row = grid.first_row;
         let blocks = u64::from(grid.width.div_ceil(8))
-            * u64::from(grid.height.div_ceil(8))
+            * u64::from(window_pixel_rows(grid).div_ceil(8))
             * u64::from(view_count);
         let groups = u32::try_from(blocks)
             .map_err(|_| Error::Limit(format!("raster_tiled: {blocks} workgroups")))?;

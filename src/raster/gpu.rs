@@ -13,7 +13,10 @@
 //! Binning sizes its entry list exactly: the count pass's total is read back before the rest is
 //! recorded (two submissions per group of views). Views are binned in groups small enough that
 //! the count cannot wrap and the entries fit one storage-buffer binding; a group whose entries do
-//! not fit is split and re-counted. [`Renderer`] makes the pipelines once; a [`GpuScene`] keeps a
+//! not fit is split and re-counted, down to one view, and a view whose entries alone do not fit
+//! is split into windows of tile rows ([`TileGrid::window`]), each binned, rendered and
+//! differentiated alone (a face's gradient sums its windows' partials in tile order, the order
+//! of one binning, so the result is bit for bit the same). [`Renderer`] makes the pipelines once; a [`GpuScene`] keeps a
 //! scene's buffers so it can be rendered again (benchmarks record it once and resubmit).
 //!
 //! Fitting loops, which must not wait for the count, bin *guarded* instead
@@ -141,6 +144,10 @@ pub struct ViewGroup {
     pub first: u32,
     /// Views in the group.
     pub views: u32,
+    /// The group's window of tile rows ([`TileGrid::window`]): `(first row, rows)`, every row of
+    /// the image unless one view held more entries than one binding and was binned window by
+    /// window.
+    pub tile_rows: (u32, u32),
     /// (face, tile) entries binned; for a guarded binning ([`Renderer::reserve_guarded`], whose
     /// count stays on the GPU), the entry capacity, an upper bound.
     pub entries: u64,
@@ -358,42 +365,10 @@ impl GpuScene {
         self.groups.iter().map(|g| g.entries).sum()
     }
 
-    /// The (pixel, face) pairs the last run's fine pass evaluated: every face for every pixel
-    /// with [`Method::Brute`]; with [`Method::Tiled`], per tile its pixels (clipped to the image)
-    /// times its binned faces, read back from the bins. Tiled needs the last run to have binned
-    /// every view in one group.
-    pub fn evaluated_pairs(&self, ctx: &Context, method: Method) -> Result<u64> {
-        let pixels = u64::from(self.width) * u64::from(self.height) * u64::from(self.view_count);
-        let Method::Tiled { tile } = method else {
-            return Ok(pixels * u64::from(self.face_count));
-        };
-        if self.tile != Some(tile) || self.groups.len() != 1 {
-            return Err(Error::Input(
-                "evaluated_pairs needs a previous tiled run with this tile size in one view group"
-                    .into(),
-            ));
-        }
-        let grid = self.grid(tile)?;
-        let tiles = (grid.tiles_per_view() * u64::from(self.view_count)) as usize;
-        let ranges: Vec<[u32; 2]> = ctx.read_buffer(self.bins[0].ranges(), 0, tiles)?;
-        let per_view = grid.tiles_per_view() as usize;
-        Ok(ranges
-            .iter()
-            .enumerate()
-            .map(|(t, r)| {
-                let t = (t % per_view) as u32;
-                let (tx, ty) = (t % grid.tiles_x, t / grid.tiles_x);
-                let w = (grid.width - tx * tile).min(tile);
-                let h = (grid.height - ty * tile).min(tile);
-                u64::from(r[1] - r[0]) * u64::from(w * h)
-            })
-            .sum())
-    }
-
     /// How many (pixel, face) pairs the last run's fine passes bin, visit and accept
     /// ([`PairCounts`]), counted on the host from the setups and bins read back, by the
     /// kernels' own rules for this device's subgroup size. Tiled needs the last run to have
-    /// binned every view in one group with this tile size.
+    /// been tiled with this tile size (in any view groups and windows).
     pub fn pair_counts(&self, ctx: &Context, method: Method) -> Result<PairCounts> {
         let (w, h) = (self.width, self.height);
         let faces = self.face_count as usize;
@@ -416,70 +391,74 @@ impl GpuScene {
                 accepted,
             });
         };
-        if self.tile != Some(tile) || self.groups.len() != 1 {
+        if self.tile != Some(tile) || self.groups.is_empty() {
             return Err(Error::Input(
-                "pair_counts needs a previous tiled run with this tile size in one view group"
-                    .into(),
+                "pair_counts needs a previous tiled run with this tile size".into(),
             ));
         }
-        let grid = self.grid(tile)?;
-        let per_view = grid.tiles_per_view() as usize;
-        let ranges: Vec<[u32; 2]> = ctx.read_buffer(self.bins[0].ranges(), 0, per_view * views)?;
-        let total = ranges.iter().map(|r| r[1]).max().unwrap_or(0) as usize;
-        let entries: Vec<u32> = ctx.read_buffer(self.bins[0].entries(), 0, total)?;
-        let items: Vec<u32> = ctx.read_buffer(self.bins[0].entry_items(), 0, total)?;
         let lanes = ctx.info().subgroup_size.clamp(1, 64);
         let mut counts = PairCounts {
             accepted,
             ..PairCounts::default()
         };
-        for (t, r) in ranges.iter().enumerate() {
-            let view = t / per_view;
-            let in_view = (t % per_view) as u32;
-            let (x0, y0) = (
-                (in_view % grid.tiles_x) * tile,
-                (in_view / grid.tiles_x) * tile,
-            );
-            let run: Vec<&GpuFaceSetup> = (r[0] as usize..r[1] as usize)
-                .map(|k| &setups[view * faces + items[entries[k] as usize] as usize])
-                .collect();
-            let tile_w = (w - x0).min(tile);
-            let tile_h = (h - y0).min(tile);
-            counts.binned += run.len() as u64 * u64::from(tile_w * tile_h);
-            let touching = |faces: &[&GpuFaceSetup], pixels: &[(u32, u32)]| -> u64 {
-                let Some(b) = centers.hull(pixels) else {
-                    return 0;
+        // Every group of views, or window of one view's tile rows, with its own bins.
+        for (group, bins) in self.groups.iter().zip(&self.bins) {
+            let (first_row, rows) = group.tile_rows;
+            let grid = self.grid(tile)?.window(first_row, rows)?;
+            let per_view = grid.tiles_per_view() as usize;
+            let tiles = per_view * group.views as usize;
+            let ranges: Vec<[u32; 2]> = ctx.read_buffer(bins.ranges(), 0, tiles)?;
+            let total = ranges.iter().map(|r| r[1]).max().unwrap_or(0) as usize;
+            let entries: Vec<u32> = ctx.read_buffer(bins.entries(), 0, total)?;
+            let items: Vec<u32> = ctx.read_buffer(bins.entry_items(), 0, total)?;
+            for (t, r) in ranges.iter().enumerate() {
+                let view = group.first as usize + t / per_view;
+                let in_view = (t % per_view) as u32;
+                let (x0, y0) = (
+                    (in_view % grid.tiles_x) * tile,
+                    (grid.first_row + in_view / grid.tiles_x) * tile,
+                );
+                let run: Vec<&GpuFaceSetup> = (r[0] as usize..r[1] as usize)
+                    .map(|k| &setups[view * faces + items[entries[k] as usize] as usize])
+                    .collect();
+                let tile_w = (w - x0).min(tile);
+                let tile_h = (h - y0).min(tile);
+                counts.binned += run.len() as u64 * u64::from(tile_w * tile_h);
+                let touching = |faces: &[&GpuFaceSetup], pixels: &[(u32, u32)]| -> u64 {
+                    let Some(b) = centers.hull(pixels) else {
+                        return 0;
+                    };
+                    faces
+                        .iter()
+                        .filter(|f| f.flags & FACE_FINITE != 0 && boxes_touch(f.bbox, b))
+                        .count() as u64
                 };
-                faces
-                    .iter()
-                    .filter(|f| f.flags & FACE_FINITE != 0 && boxes_touch(f.bbox, b))
-                    .count() as u64
-            };
-            // Forward: per 8×8 block of the tile, per subgroup of its 64 pixels (row-major, edge
-            // pixels clamped into the image), the faces whose box touches the subgroup's.
-            for by in (y0..y0 + tile).step_by(8).filter(|&y| y < h) {
-                for bx in (x0..x0 + tile).step_by(8).filter(|&x| x < w) {
-                    for first in (0..64).step_by(lanes as usize) {
-                        let group: Vec<(u32, u32)> = (first..first + lanes.min(64))
-                            .map(|i| ((bx + i % 8).min(w - 1), (by + i / 8).min(h - 1)))
-                            .collect();
-                        counts.forward += u64::from(lanes) * touching(&run, &group);
+                // Forward: per 8×8 block of the tile, per subgroup of its 64 pixels (row-major, edge
+                // pixels clamped into the image), the faces whose box touches the subgroup's.
+                for by in (y0..y0 + tile).step_by(8).filter(|&y| y < h) {
+                    for bx in (x0..x0 + tile).step_by(8).filter(|&x| x < w) {
+                        for first in (0..64).step_by(lanes as usize) {
+                            let group: Vec<(u32, u32)> = (first..first + lanes.min(64))
+                                .map(|i| ((bx + i % 8).min(w - 1), (by + i / 8).min(h - 1)))
+                                .collect();
+                            counts.forward += u64::from(lanes) * touching(&run, &group);
+                        }
                     }
                 }
-            }
-            // Backward: per batch of `lanes` faces, per segment of `lanes` pixels of the tile
-            // (row-major, those in the image), the batch's faces whose box touches the segment.
-            let tile_pixels: Vec<(u32, u32)> = (0..tile * tile)
-                .map(|i| (x0 + i % tile, y0 + i / tile))
-                .collect();
-            for batch in run.chunks(lanes as usize) {
-                for segment in tile_pixels.chunks(lanes as usize) {
-                    let inside: Vec<(u32, u32)> = segment
-                        .iter()
-                        .copied()
-                        .filter(|&(c, r)| c < w && r < h)
-                        .collect();
-                    counts.backward += u64::from(lanes) * touching(batch, &inside);
+                // Backward: per batch of `lanes` faces, per segment of `lanes` pixels of the tile
+                // (row-major, those in the image), the batch's faces whose box touches the segment.
+                let tile_pixels: Vec<(u32, u32)> = (0..tile * tile)
+                    .map(|i| (x0 + i % tile, y0 + i / tile))
+                    .collect();
+                for batch in run.chunks(lanes as usize) {
+                    for segment in tile_pixels.chunks(lanes as usize) {
+                        let inside: Vec<(u32, u32)> = segment
+                            .iter()
+                            .copied()
+                            .filter(|&(c, r)| c < w && r < h)
+                            .collect();
+                        counts.backward += u64::from(lanes) * touching(batch, &inside);
+                    }
                 }
             }
         }
@@ -856,15 +835,17 @@ impl Renderer {
         let per_group = (u32::MAX / scene.face_count.max(1)).clamp(1, scene.view_count.max(1));
         let max_entries = binning::max_entries(ctx).min(self.entry_budget.unwrap_or(u64::MAX));
         // Groups of views still to render, first view and count; split on demand.
-        let mut todo: Vec<(u32, u32)> = (0..scene.view_count)
+        let all_rows = (0, grid.tiles_y);
+        let mut todo: Vec<(u32, u32, (u32, u32))> = (0..scene.view_count)
             .step_by(per_group as usize)
-            .map(|v| (v, per_group.min(scene.view_count - v)))
+            .map(|v| (v, per_group.min(scene.view_count - v), all_rows))
             .rev()
             .collect();
         scene.groups.clear();
         scene.tile = Some(tile);
         let mut setup_done = false;
-        while let Some((first, views)) = todo.pop() {
+        while let Some((first, views, tile_rows)) = todo.pop() {
+            let grid = grid.window(tile_rows.0, tile_rows.1)?;
             let job = scene.job(grid, first, views);
             let index = scene.groups.len();
             if scene.bins.len() <= index {
@@ -882,16 +863,24 @@ impl Renderer {
             let total = bins.read_total(ctx)?;
             if total > max_entries {
                 scene.bins[index] = bins;
-                if views == 1 {
+                // Too many entries at once: bin two halves separately, of the views or, for one
+                // view, of its tile rows (windows render the rows they cover, nothing else).
+                let (row0, rows) = tile_rows;
+                if views > 1 {
+                    let half = views / 2;
+                    todo.push((first + half, views - half, tile_rows));
+                    todo.push((first, half, tile_rows));
+                } else if rows > 1 {
+                    let half = rows / 2;
+                    todo.push((first, 1, (row0 + half, rows - half)));
+                    todo.push((first, 1, (row0, half)));
+                } else {
                     return Err(Error::Limit(format!(
-                        "one view needs {total} (face, tile) entries, over the {max_entries} \
-                         one binning may hold; use larger tiles, a smaller σ or fewer faces"
+                        "one row of {tile}-pixel tiles of one view needs {total} (face, tile) \
+                         entries, over the {max_entries} one binning may hold; use a smaller σ \
+                         or fewer faces"
                     )));
                 }
-                // Too many entries at once: bin the two halves separately.
-                let half = views / 2;
-                todo.push((first + half, views - half));
-                todo.push((first, half));
                 continue;
             }
             bins.reserve_entries(ctx, total)?;
@@ -910,6 +899,7 @@ impl Renderer {
             scene.groups.push(ViewGroup {
                 first,
                 views,
+                tile_rows,
                 entries: total,
                 max_tile_entries: max_tile_entries?,
             });
@@ -999,6 +989,7 @@ impl Renderer {
         scene.groups = vec![ViewGroup {
             first: 0,
             views: scene.view_count,
+            tile_rows: (0, grid.tiles_y),
             entries: capacity.max(1),
             max_tile_entries: max_run,
         }];
@@ -1029,9 +1020,10 @@ impl Renderer {
     }
 
     /// Records the whole tiled forward of `scene` into one command buffer, for resubmission
-    /// (benchmarks): face setup, count, scatter, sort, ranges, fine pass, downsampling. Needs a
-    /// previous [`Renderer::run`] with the same method that binned all views in one group (its
-    /// entry count sizes the buffers; resubmitting the same scene reproduces it).
+    /// (benchmarks): face setup, then per view group (or window) of the last run count,
+    /// scatter, sort, ranges and fine pass, then downsampling. Needs a previous
+    /// [`Renderer::run`] with the same method (its entry counts size the buffers; resubmitting
+    /// the same scene reproduces them).
     pub fn record_forward(
         &self,
         rec: &mut Recorder<'_>,
@@ -1042,20 +1034,17 @@ impl Renderer {
         match method {
             Method::Brute => self.record_brute(rec, scene, true)?,
             Method::Tiled { tile } => {
-                let grid = scene.grid(tile)?;
-                if scene.tile != Some(tile)
-                    || scene.groups.len() != 1
-                    || scene.groups[0].views != scene.view_count
-                {
+                if scene.tile != Some(tile) || scene.groups.is_empty() {
                     return Err(Error::Input(
-                        "record_forward needs a previous tiled run with the same tile size that \
-                         binned every view in one group"
-                            .into(),
+                        "record_forward needs a previous tiled run with the same tile size".into(),
                     ));
                 }
-                let bins = &scene.bins[0];
-                self.record_count(rec, scene, bins, grid, 0, scene.view_count)?;
-                self.record_group(rec, scene, bins, grid, 0, scene.view_count)?;
+                for (group, bins) in scene.groups.iter().zip(&scene.bins) {
+                    let (first_row, rows) = group.tile_rows;
+                    let grid = scene.grid(tile)?.window(first_row, rows)?;
+                    self.record_count(rec, scene, bins, grid, group.first, group.views)?;
+                    self.record_group(rec, scene, bins, grid, group.first, group.views)?;
+                }
             }
         }
         self.record_downsample(rec, scene)
