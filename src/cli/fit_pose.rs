@@ -19,12 +19,12 @@
 //! default `<out stem>-error.png`). Every file is written atomically after the fit; any error
 //! is one line and leaves no file.
 
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use clap::Args;
 use glam::DVec3;
 use indicatif::{ProgressBar, ProgressStyle};
+use serde_json::{Value, json};
 use softvk::fit::checkpoint::{Checkpoint, FitKind};
 use softvk::fit::pose::{
     Pose, PoseFitOptions, PoseFitState, PoseTarget, Schedule, fit_pose_resumable, rotation_distance,
@@ -180,20 +180,6 @@ pub fn error_map(render: &[[f32; 4]], target: &[[f32; 4]]) -> Vec<[f32; 4]> {
         .collect()
 }
 
-fn json_vec(v: &[f64]) -> String {
-    let items: Vec<String> = v.iter().map(|x| json_num(*x)).collect();
-    format!("[{}]", items.join(", "))
-}
-
-/// A finite number in JSON (shortest round-trip form); non-finite values are `null`.
-fn json_num(x: f64) -> String {
-    if x.is_finite() {
-        format!("{x:?}")
-    } else {
-        "null".into()
-    }
-}
-
 /// Runs `softvk fit-pose`.
 pub fn run(args: &FitPoseArgs) -> Result<()> {
     let d = defaults();
@@ -328,72 +314,52 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
     let m = pose.matrix();
     let q = pose.quaternion();
     let angle = pose.rotation.length();
-    let mut json = String::from("{\n");
-    let mut field = |name: &str, value: String| {
-        writeln!(json, "  \"{name}\": {value},").expect("write to a String");
-    };
-    field(
-        "convention",
-        "\"p' = R (p - centre) + centre + translation; rotation as axis-angle (radians), \
-         matrix row-major, quaternion w, x, y, z\""
-            .into(),
-    );
-    field("rotation_axis_angle", json_vec(&pose.rotation.to_array()));
-    field("rotation_angle_degrees", json_num(angle.to_degrees()));
-    field(
-        "rotation_axis",
-        json_vec(&if angle > 0.0 {
+    // Non-finite numbers become null (serde_json's f64 conversion).
+    let mut json = json!({
+        "convention": "p' = R (p - centre) + centre + translation; rotation as axis-angle \
+                       (radians), matrix row-major, quaternion w, x, y, z",
+        "rotation_axis_angle": pose.rotation.to_array(),
+        "rotation_angle_degrees": angle.to_degrees(),
+        "rotation_axis": if angle > 0.0 {
             (pose.rotation / angle).to_array()
         } else {
             [1.0, 0.0, 0.0]
-        }),
-    );
-    field(
-        "rotation_matrix",
-        format!(
-            "[{}, {}, {}]",
-            json_vec(&m.row(0).to_array()),
-            json_vec(&m.row(1).to_array()),
-            json_vec(&m.row(2).to_array())
-        ),
-    );
-    field("quaternion_wxyz", json_vec(&[q.w, q.x, q.y, q.z]));
-    field("translation", json_vec(&pose.translation.to_array()));
-    field("centre", json_vec(&result.centre.to_array()));
-    field(
-        "angle_to_init_degrees",
-        json_num(rotation_distance(pose.rotation, init.rotation).to_degrees()),
-    );
-    field("initial_loss", json_num(initial_loss));
-    field("loss", json_num(result.loss));
-    field("iterations", result.iterations.to_string());
+        },
+        "rotation_matrix": [m.row(0).to_array(), m.row(1).to_array(), m.row(2).to_array()],
+        "quaternion_wxyz": [q.w, q.x, q.y, q.z],
+        "translation": pose.translation.to_array(),
+        "centre": result.centre.to_array(),
+        "angle_to_init_degrees": rotation_distance(pose.rotation, init.rotation).to_degrees(),
+        "initial_loss": initial_loss,
+        "loss": result.loss,
+        "iterations": result.iterations,
+    });
+    let fields = json.as_object_mut().expect("an object");
     if let Some(signal) = super::interrupt::requested() {
         // Stopped early by Ctrl-C / SIGTERM (`cli::interrupt`): the pose after the last step.
-        field(
-            "interrupted",
-            format!(
-                "\"{}: stopped after iteration {} of {}\"",
+        fields.insert(
+            "interrupted".into(),
+            json!(format!(
+                "{}: stopped after iteration {} of {}",
                 super::interrupt::name(signal),
                 result.iterations,
                 opts.iterations
-            ),
+            )),
         );
     }
-    field("sigma", json_num(opts.settings.sigma));
-    field("gamma", json_num(opts.settings.gamma));
-    field(
-        "schedule",
-        match &opts.schedule {
-            Some(s) => format!(
-                "{{\"sigma_start\": {}, \"gamma_start\": {}, \"stages\": {}}}",
-                json_num(s.sigma_start),
-                json_num(s.gamma_start),
-                s.stages
-            ),
-            None => "null".into(),
-        },
+    fields.insert("sigma".into(), json!(opts.settings.sigma));
+    fields.insert("gamma".into(), json!(opts.settings.gamma));
+    fields.insert(
+        "schedule".into(),
+        opts.schedule.as_ref().map_or(Value::Null, |s| {
+            json!({"sigma_start": s.sigma_start, "gamma_start": s.gamma_start, "stages": s.stages})
+        }),
     );
-    writeln!(json, "  \"seconds\": {}\n}}", json_num(result.seconds)).expect("write to a String");
+    fields.insert("seconds".into(), json!(result.seconds));
+    let json = format!(
+        "{}\n",
+        serde_json::to_string_pretty(&json).expect("JSON of numbers")
+    );
 
     let (w, h) = size;
     let png = |pixels: &[[f32; 4]], path: &Path| {
@@ -458,8 +424,9 @@ mod tests {
 
     #[test]
     fn json_numbers_are_finite_or_null() {
-        assert_eq!(json_num(0.1), "0.1");
-        assert_eq!(json_num(f64::NAN), "null");
-        assert_eq!(json_vec(&[1.0, -2.5]), "[1.0, -2.5]");
+        // What pose.json relies on: a non-finite loss or pose is written as null.
+        assert_eq!(json!(0.1).to_string(), "0.1");
+        assert!(json!(f64::NAN).is_null() && json!(f64::INFINITY).is_null());
+        assert_eq!(json!([1.0, -2.5]).to_string(), "[1.0,-2.5]");
     }
 }
