@@ -529,6 +529,7 @@ fn fit_pose_writes_the_pose_json_and_both_images() {
         dir.entries(),
         [
             "blob.obj",
+            "pose-compare.png",
             "pose-error.png",
             "pose-render.png",
             "pose.json",
@@ -571,6 +572,41 @@ fn fit_pose_writes_the_pose_json_and_both_images() {
         let img = image::open(dir.path(f)).unwrap();
         assert_eq!((img.width(), img.height()), (32, 32), "{f}");
     }
+    // Target, start and result side by side under their labels (1-pixel gaps): the result
+    // panel is the final render, the start panel (12° off) differs from it, and the result is
+    // nearer the target than the start.
+    let sheet = image::open(dir.path("pose-compare.png")).unwrap().to_rgb8();
+    assert_eq!(sheet.width(), 3 * 32 + 4);
+    assert!(sheet.height() > 32 + 8, "no room for the labels");
+    let panel = |i: u32| -> Vec<f64> {
+        let (x0, y0) = (1 + 33 * i, sheet.height() - 33);
+        (0..32 * 32)
+            .flat_map(|k| sheet.get_pixel(x0 + k % 32, y0 + k / 32).0)
+            .map(f64::from)
+            .collect()
+    };
+    let diff = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum::<f64>();
+    let render = image::open(dir.path("pose-render.png")).unwrap().to_rgba8();
+    let result_panel: Vec<f64> = render
+        .pixels()
+        .flat_map(|p| {
+            p.0[..3]
+                .iter()
+                .map(move |&c| (f64::from(c) * f64::from(p.0[3]) / 255.0).round())
+        })
+        .collect();
+    assert!(
+        diff(&panel(2), &result_panel) <= 3.0 * 32.0 * 32.0,
+        "result panel"
+    );
+    let (goal, start, result) = (panel(0), panel(1), panel(2));
+    assert!(diff(&start, &result) > 0.0, "start panel equals the result");
+    assert!(
+        diff(&result, &goal) < 0.5 * diff(&start, &goal),
+        "result {} vs start {} from the target",
+        diff(&result, &goal),
+        diff(&start, &goal)
+    );
 
     // The schedule's flags reach the fit; --render and --error name the images.
     let out2 = dir.path("scheduled.json");

@@ -256,7 +256,7 @@ fn ctrl_c_during_fit_pose_writes_the_pose_marked_interrupted() {
         note.contains("SIGINT") && note.contains("of 1000000"),
         "{json}"
     );
-    for f in ["pose-render.png", "pose-error.png"] {
+    for f in ["pose-render.png", "pose-error.png", "pose-compare.png"] {
         image::open(dir.path(f)).unwrap();
     }
 }

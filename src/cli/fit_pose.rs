@@ -15,9 +15,10 @@
 //!
 //! Writes `pose.json` (rotation as axis-angle, 3×3 matrix and quaternion, translation, centre,
 //! final loss, iterations, angle to the initial rotation), the final render (`--render`,
-//! default `<out stem>-render.png` beside it) and a heat map of |render − target| (`--error`,
-//! default `<out stem>-error.png`). Every file is written atomically after the fit; any error
-//! is one line and leaves no file.
+//! default `<out stem>-render.png` beside it), a heat map of |render − target| (`--error`,
+//! default `<out stem>-error.png`) and the target, the start and the result side by side
+//! (`--compare`, default `<out stem>-compare.png`). Every file is written atomically after the
+//! fit; any error is one line and leaves no file.
 
 use std::path::{Path, PathBuf};
 
@@ -29,8 +30,10 @@ use softvk::fit::checkpoint::{Checkpoint, FitKind};
 use softvk::fit::pose::{
     Pose, PoseFitOptions, PoseFitState, PoseTarget, Schedule, fit_pose_resumable, rotation_distance,
 };
+use softvk::fit::report;
 use softvk::gpu::{Context, ContextOptions};
 use softvk::mesh::Mesh;
+use softvk::raster::gpu::{Method, Renderer};
 use softvk::{Error, Result};
 
 use super::args::{CheckpointArgs, RasterArgs, ViewArgs, positive, triple};
@@ -63,6 +66,11 @@ pub struct FitPoseArgs {
     /// Heat map of |render − target| (PNG) [default: <out stem>-error.png beside --out].
     #[arg(long, value_name = "E.png")]
     pub error: Option<PathBuf>,
+
+    /// Target, start and result side by side, labelled (PNG) [default: <out stem>-compare.png
+    /// beside --out]. The start is rendered at the final σ and γ, as the result is.
+    #[arg(long, value_name = "C.png")]
+    pub compare: Option<PathBuf>,
 
     /// Iterations [default: 80].
     #[arg(long = "iters", value_name = "N")]
@@ -237,14 +245,19 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
         .error
         .clone()
         .unwrap_or_else(|| beside(&args.out, "-error.png"));
-    for p in [&render_path, &error_path] {
+    let compare_path = args
+        .compare
+        .clone()
+        .unwrap_or_else(|| beside(&args.out, "-compare.png"));
+    for p in [&render_path, &error_path, &compare_path] {
         if ImageFormat::from_path(p)? != ImageFormat::Png {
             return Err(Error::Input(format!("{}: must be a .png", p.display())));
         }
     }
-    if args.out == render_path || args.out == error_path || render_path == error_path {
+    let paths = [&args.out, &render_path, &error_path, &compare_path];
+    if (1..paths.len()).any(|i| paths[..i].contains(&paths[i])) {
         return Err(Error::Input(
-            "--out, --render and --error must be three different files".into(),
+            "--out, --render, --error and --compare must be four different files".into(),
         ));
     }
     // The checkpoint is checked before anything is written.
@@ -260,6 +273,7 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
     let out = AtomicFile::create(&args.out)?;
     let render_file = AtomicFile::create(&render_path)?;
     let error_file = AtomicFile::create(&error_path)?;
+    let compare_file = AtomicFile::create(&compare_path)?;
 
     let ctx = Context::new(&ContextOptions::from_env())?;
     let bar = if args.quiet {
@@ -369,12 +383,56 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
     };
     let render_png = png(&result.image, &render_path)?;
     let error_png = png(&error_map(&result.image, &target), &error_path)?;
+    // The start, posed about the same centre and rendered as the result was.
+    let start_mesh = Mesh {
+        positions: init
+            .apply(
+                &mesh
+                    .positions
+                    .iter()
+                    .map(|p| DVec3::from(p.map(f64::from)))
+                    .collect::<Vec<_>>(),
+                result.centre,
+            )
+            .iter()
+            .map(|p| p.as_vec3().to_array())
+            .collect(),
+        ..mesh.clone()
+    };
+    let start = Renderer::new(&ctx)?
+        .render_views(
+            &ctx,
+            &start_mesh,
+            &[camera],
+            &lighting,
+            &opts.settings,
+            Method::Tiled { tile },
+        )?
+        .images;
+    ctx.check_validation()?;
+    let sheet = report::side_by_side(
+        &[
+            ("target", &target),
+            ("start", &start),
+            ("result", &result.image),
+        ],
+        w,
+        h,
+    );
+    let sheet_pixels: Vec<[f32; 4]> = sheet
+        .pixels()
+        .map(|p| p.0.map(|c| f32::from(c) / 255.0))
+        .collect();
+    let compare_png = ImageFormat::Png
+        .encode(&sheet_pixels, sheet.width(), sheet.height())
+        .map_err(|e| Error::Input(format!("{}: {e}", compare_path.display())))?;
     out.commit(json.as_bytes())?;
     render_file.commit(&render_png)?;
     error_file.commit(&error_png)?;
+    compare_file.commit(&compare_png)?;
     println!(
         "{} iterations in {:.1} s ({:.1} ms per iteration); loss {:.3e} → {:.3e}; rotation \
-         {:.2}° about {:?}, translation {:?}; wrote {}, {} and {}",
+         {:.2}° about {:?}, translation {:?}; wrote {}, {}, {} and {}",
         result.iterations,
         result.seconds,
         1e3 * result.seconds / f64::from(result.iterations.max(1)),
@@ -388,7 +446,8 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
         pose.translation.to_array().map(|c| (c * 1e4).round() / 1e4),
         args.out.display(),
         render_path.display(),
-        error_path.display()
+        error_path.display(),
+        compare_path.display()
     );
     Ok(())
 }
