@@ -489,8 +489,25 @@ fn fit_field_writes_the_mesh_the_preview_and_the_loss_plot() {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let report = dir.path("field-report");
-    for f in ["preview.png", "loss.png", "loss.csv"] {
+    for f in ["preview.png", "compare.png", "loss.png", "loss.csv"] {
         assert!(report.join(f).is_file(), "{f} missing");
+    }
+    // The visual hull's surface beside the fitted one: two labelled 32² panels, both showing a
+    // lit shape (the hull of a sphere's silhouettes is a blob; the fitted surface is not empty).
+    let sheet = image::open(report.join("compare.png")).unwrap().to_rgb8();
+    assert_eq!(sheet.width(), 2 * 32 + 3);
+    for (i, name) in ["visual hull", "fitted"].iter().enumerate() {
+        let (x0, y0) = (1 + 33 * i as u32, sheet.height() - 33);
+        let lit = (0..32 * 32)
+            .filter(|k| {
+                sheet
+                    .get_pixel(x0 + k % 32, y0 + k / 32)
+                    .0
+                    .iter()
+                    .any(|&c| c > 40)
+            })
+            .count();
+        assert!(lit > 20, "{name}: {lit} lit pixels");
     }
     let csv_text = std::fs::read_to_string(report.join("loss.csv")).unwrap();
     assert_eq!(csv_text.lines().count(), 1 + 2, "{csv_text}");

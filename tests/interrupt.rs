@@ -178,7 +178,13 @@ fn sigterm_during_fit_field_writes_the_surface_and_report_marked_interrupted() {
     assert_no_temporaries("fit-field", &dir.0);
     assert!(Mesh::load_obj(&out, 1).unwrap().face_count() > 0);
     let report = dir.path("field-report");
-    for f in ["preview.png", "loss.png", "loss.csv", "interrupted.txt"] {
+    for f in [
+        "preview.png",
+        "compare.png",
+        "loss.png",
+        "loss.csv",
+        "interrupted.txt",
+    ] {
         assert!(report.join(f).is_file(), "{f} missing: {:?}", files(&dir.0));
     }
     let note = std::fs::read_to_string(report.join("interrupted.txt")).unwrap();
