@@ -1678,6 +1678,7 @@ mod tests {
         assert!(subdivide(&mesh).is_err());
     }
 
+    #[cfg(feature = "json")]
     fn sample(method: Method, gpu_ms: Option<f64>) -> BenchRecord {
         BenchRecord {
             scene: "spot-256".into(),
