@@ -82,6 +82,25 @@ pub enum Error {
         first: String,
     },
 
+    /// A call made out of order, or in a state that does not allow it: a bug in the caller,
+    /// not bad input (e.g. recording a pass that needs a previous run, or binning into bins
+    /// never reserved).
+    #[error("{0}")]
+    Misuse(String),
+
+    /// A buffer given to a call holds less than the call needs.
+    #[error("buffer `{buffer}` holds {have} bytes; {what} needs {need}")]
+    BufferTooSmall {
+        /// The buffer's debug name.
+        buffer: String,
+        /// Bytes it holds (of the range given).
+        have: u64,
+        /// Bytes the call needs there.
+        need: u64,
+        /// What needs them.
+        what: String,
+    },
+
     /// Bad user input: the message names the input and what is wrong with it.
     #[error("{0}")]
     Input(String),

@@ -1384,3 +1384,79 @@ fn silhouette_renders_have_the_full_renders_alpha() {
     }
     gpu.check_validation().unwrap();
 }
+
+/// Errors are matched by kind: a call out of order is `Misuse` (a caller's bug, apart from bad
+/// input and device limits), and a buffer that holds too little for a call is `BufferTooSmall`,
+/// naming the buffer and both sizes.
+#[test]
+fn misuse_and_small_buffers_are_matchable_errors() {
+    use softvk::Error;
+    use softvk::primitives::binning::{BinJob, Binner, Bins, ItemLayout};
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let s = RasterSettings {
+        width: 16,
+        height: 16,
+        ..RasterSettings::default()
+    };
+    let scene = r
+        .prepare(
+            &gpu,
+            &Mesh::icosphere(1),
+            &[Camera::default()],
+            &lighting(),
+            &s,
+        )
+        .unwrap();
+    // The tiled forward recorded, or its pairs counted, before any tiled run.
+    let tiled = Method::Tiled { tile: 8 };
+    let err = gpu
+        .submit_and_wait(|rec| r.record_forward(rec, &scene, tiled))
+        .unwrap_err();
+    assert!(matches!(err, Error::Misuse(_)), "{err}");
+    let err = scene.pair_counts(&gpu, tiled).unwrap_err();
+    assert!(matches!(err, Error::Misuse(_)), "{err}");
+
+    // Binning into bins never reserved, and sorting before the count is read.
+    let binner = Binner::new(&gpu).unwrap();
+    let items = gpu.upload_buffer("boxes", &[0.0f32; 10]).unwrap();
+    let job = |items_per_view| BinJob {
+        grid: TileGrid::new(16, 16, 8).unwrap(),
+        layout: ItemLayout {
+            stride_words: 5,
+            box_offset: 0,
+            flag_offset: 4,
+            flag_mask: 0,
+        },
+        items_per_view,
+        views: 1,
+        first_item: 0,
+    };
+    let mut bins = Bins::new(&gpu).unwrap();
+    let err = gpu
+        .submit_and_wait(|rec| binner.record_count(rec, &bins, items.whole(), &job(2)))
+        .unwrap_err();
+    assert!(matches!(err, Error::Misuse(_)), "{err}");
+    bins.reserve(&gpu, &job(2)).unwrap();
+    let err = gpu
+        .submit_and_wait(|rec| binner.record_sort(rec, &bins, items.whole(), &job(2)))
+        .unwrap_err();
+    assert!(matches!(err, Error::Misuse(_)), "{err}");
+
+    // Four items of five words in a buffer of two (whose size is rounded up to 64 bytes).
+    bins.reserve(&gpu, &job(4)).unwrap();
+    let err = gpu
+        .submit_and_wait(|rec| binner.record_count(rec, &bins, items.whole(), &job(4)))
+        .unwrap_err();
+    match &err {
+        Error::BufferTooSmall {
+            buffer, have, need, ..
+        } => assert_eq!(
+            (buffer.as_str(), *have, *need),
+            ("boxes", items.size(), 4 * 5 * 4)
+        ),
+        other => panic!("not BufferTooSmall: {other}"),
+    }
+    assert!(!err.to_string().contains('\n'));
+    gpu.check_validation().unwrap();
+}

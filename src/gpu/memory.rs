@@ -120,6 +120,20 @@ pub struct BufferRange<'a> {
 }
 
 impl<'a> BufferRange<'a> {
+    /// `Ok` when this range holds `need` bytes; else [`Error::BufferTooSmall`] naming the
+    /// buffer, both sizes and `what` needs them.
+    pub fn require(&self, need: u64, what: &str) -> Result<()> {
+        if self.size < need {
+            return Err(Error::BufferTooSmall {
+                buffer: self.buffer.name().to_string(),
+                have: self.size,
+                need,
+                what: what.to_string(),
+            });
+        }
+        Ok(())
+    }
+
     /// `size` bytes starting `offset` bytes into this range.
     pub fn sub(&self, offset: u64, size: u64) -> BufferRange<'a> {
         debug_assert!(

@@ -574,21 +574,22 @@ impl Binner {
         }
         let words = u64::from(job.first_item + job.items_per_view * job.views)
             * u64::from(job.layout.stride_words);
-        if items.size < 4 * words
-            || job.layout.box_offset + 4 > job.layout.stride_words
+        if job.layout.box_offset + 4 > job.layout.stride_words
             || job.layout.flag_offset >= job.layout.stride_words
         {
-            return Err(Error::Limit(format!(
-                "binning: items buffer `{}` ({} bytes) does not hold {} items of {} words with \
-                 the box at {} and flags at {}",
-                items.buffer.name(),
-                items.size,
-                job.first_item + job.items_per_view * job.views,
-                job.layout.stride_words,
-                job.layout.box_offset,
-                job.layout.flag_offset
+            return Err(Error::Misuse(format!(
+                "binning: items of {} words cannot have the box at {} and flags at {}",
+                job.layout.stride_words, job.layout.box_offset, job.layout.flag_offset
             )));
         }
+        items.require(
+            4 * words,
+            &format!(
+                "binning {} items of {} words",
+                job.first_item + job.items_per_view * job.views,
+                job.layout.stride_words
+            ),
+        )?;
         let mask_words = match strategy {
             BinStrategy::Masks { words_per_tile } => u64::from(words_per_tile) * job.tile_count(),
             BinStrategy::Sort => 0,
@@ -597,7 +598,7 @@ impl Binner {
             || job.tile_count() > bins.tile_capacity
             || mask_words > bins.mask_words
         {
-            return Err(Error::Limit(format!(
+            return Err(Error::Misuse(format!(
                 "binning {} items over {} tiles: bins hold {} items and {} tiles (call reserve)",
                 job.item_count(),
                 job.tile_count(),
@@ -686,10 +687,10 @@ impl Binner {
         let strategy = job.strategy(rec.context());
         Self::check(job, strategy, &items, bins)?;
         let total = bins.entries.ok_or_else(|| {
-            Error::Limit("binning: the entry count is not known yet (read_total)".into())
+            Error::Misuse("binning: the entry count is not known yet (read_total)".into())
         })?;
         if total > bins.entry_capacity {
-            return Err(Error::Limit(format!(
+            return Err(Error::Misuse(format!(
                 "binning: {total} entries, entry buffers hold {} (call reserve_entries)",
                 bins.entry_capacity
             )));

@@ -582,7 +582,7 @@ impl Prober {
     /// The entry count [`Prober::finish_count`] read, once it fits the entry buffers.
     fn entry_count(&self) -> Result<u64> {
         let total = self.entries.ok_or_else(|| {
-            Error::Limit("sphere probing: the entry count is not known yet (finish_count)".into())
+            Error::Misuse("sphere probing: the entry count is not known yet (finish_count)".into())
         })?;
         if total > self.entry_capacity {
             return Err(Error::Limit(

@@ -676,7 +676,7 @@ impl GradKernels {
     ) -> Result<()> {
         let grid = scene.grid(tile)?;
         if scene.tile != Some(tile) {
-            return Err(Error::Input(format!(
+            return Err(Error::Misuse(format!(
                 "the tiled backward (tile {tile}) needs the scene binned with those tiles"
             )));
         }

@@ -285,17 +285,16 @@ impl TiledRaster {
         check_tile_size(grid.tile_size)?;
         let last = u64::from(first_view) + u64::from(view_count);
         let pixels = u64::from(grid.width) * u64::from(grid.height);
-        if b.image.size < 16 * pixels * last
-            || b.aux.size < 32 * pixels * last
-            || b.setups.size < 128 * u64::from(face_count) * last
-            || b.ranges.size < 8 * grid.tiles_per_view() * u64::from(view_count)
-        {
-            return Err(Error::Limit(format!(
-                "raster_tiled: buffers too small for views {first_view}..{last} of \
-                 {}x{} pixels and {face_count} faces",
-                grid.width, grid.height
-            )));
-        }
+        let what = format!(
+            "raster_tiled over views {first_view}..{last} of {}x{} pixels and {face_count} faces",
+            grid.width, grid.height
+        );
+        b.image.require(16 * pixels * last, &what)?;
+        b.aux.require(32 * pixels * last, &what)?;
+        b.setups
+            .require(128 * u64::from(face_count) * last, &what)?;
+        b.ranges
+            .require(8 * grid.tiles_per_view() * u64::from(view_count), &what)?;
         if pixels * last > u64::from(u32::MAX) || face_count == 0 {
             return Err(Error::Limit(format!(
                 "raster_tiled: {} pixels and {face_count} faces (need 1..2^32 pixels, > 0 faces)",

@@ -392,7 +392,7 @@ impl GpuScene {
             });
         };
         if self.tile != Some(tile) || self.groups.is_empty() {
-            return Err(Error::Input(
+            return Err(Error::Misuse(
                 "pair_counts needs a previous tiled run with this tile size".into(),
             ));
         }
@@ -918,12 +918,12 @@ impl Renderer {
     ) -> Result<()> {
         let tile = scene
             .tile
-            .ok_or_else(|| Error::Input("record_setup_and_count before reserve_guarded".into()))?;
+            .ok_or_else(|| Error::Misuse("record_setup_and_count before reserve_guarded".into()))?;
         let grid = scene.grid(tile)?;
         let bins = scene
             .bins
             .first()
-            .ok_or_else(|| Error::Input("record_setup_and_count before reserve_guarded".into()))?;
+            .ok_or_else(|| Error::Misuse("record_setup_and_count before reserve_guarded".into()))?;
         self.record_setup(rec, scene)?;
         self.record_count(rec, scene, bins, grid, 0, scene.view_count)
     }
@@ -1007,7 +1007,7 @@ impl Renderer {
     ) -> Result<()> {
         let tile = scene
             .tile
-            .ok_or_else(|| Error::Input("record_rest_guarded before reserve_guarded".into()))?;
+            .ok_or_else(|| Error::Misuse("record_rest_guarded before reserve_guarded".into()))?;
         let grid = scene.grid(tile)?;
         let job = scene.job(grid, 0, scene.view_count);
         let bins = &scene.bins[0];
@@ -1035,7 +1035,7 @@ impl Renderer {
             Method::Brute => self.record_brute(rec, scene, true)?,
             Method::Tiled { tile } => {
                 if scene.tile != Some(tile) || scene.groups.is_empty() {
-                    return Err(Error::Input(
+                    return Err(Error::Misuse(
                         "record_forward needs a previous tiled run with the same tile size".into(),
                     ));
                 }
