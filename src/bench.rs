@@ -15,7 +15,6 @@
 //! sum of the GPU timestamps of the passes (`face setup`, `bin count`, `bin sort`, `raster tiled`
 //! or `raster brute`, `downsample 2x2`), each also reported on its own in `passes`.
 
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -151,7 +150,7 @@ pub struct BenchRecord {
     /// times every face for brute force ([`PairCounts::binned`]).
     pub pairs: u64,
     /// The pairs the fine kernels visit and accept ([`GpuScene::pair_counts`]), for the
-    /// per-pair costs ([`BenchRecord::ns_per_visited_pair`]).
+    /// per-pair costs ([`ns_per_visited_pair`]).
     pub counts: Option<PairCounts>,
     /// Device name, as `softvk info` prints it.
     pub device: String,
@@ -211,7 +210,7 @@ impl Scene {
     /// - `sphere-64x120`: as SoftRas's `demo_deform.py` renders its template: the 1352-vertex
     ///   sphere scaled by 0.5, 64², viewing angle 15°, hard colour, σ = 1e-4, 120 views at
     ///   distance 2.732, elevation 30°, azimuths 0°, 3°, …, 357°.
-    /// - `dense-1024`: the 1352-vertex sphere subdivided three times ([`subdivide`]: 172 800
+    /// - `dense-1024`: the 1352-vertex sphere subdivided three times ([`Mesh::subdivided`]: 172 800
     ///   faces), 1024², the spot view.
     /// - `spot3-1024` ([`LARGE_SCENES`]): spot (R = 1) subdivided three times, 1024², the spot
     ///   view.
@@ -265,7 +264,7 @@ impl Scene {
                     rows: None,
                 }
             }
-            // Both subdivided three times ([`subdivide`]), at 1024² from the spot view.
+            // Both subdivided three times (`Mesh::subdivided`), at 1024² from the spot view.
             "dense-1024" | "spot3-1024" => {
                 let base = if name == "dense-1024" {
                     "sphere_1352.obj"
@@ -275,7 +274,10 @@ impl Scene {
                 Scene {
                     name: name.into(),
                     description: String::new(),
-                    mesh: subdivide(&subdivide(&subdivide(&load(assets, base, 1)?)?)?)?,
+                    mesh: load(assets, base, 1)?
+                        .subdivided()?
+                        .subdivided()?
+                        .subdivided()?,
                     cameras: vec![spot_view],
                     lighting: Lighting::default(),
                     settings: RasterSettings {
@@ -405,61 +407,6 @@ impl Scene {
         );
         self
     }
-}
-
-/// Midpoint subdivision: every triangle `(a, b, c)` becomes `(a, ab, ca)`, `(b, bc, ab)`,
-/// `(c, ca, bc)`, `(ab, bc, ca)`, each wound as its parent and lying in its plane.
-///
-/// Faces that share an edge share its midpoint (one new vertex per undirected edge, appended in
-/// order of first use), so a watertight mesh stays watertight. Children copy their parent's
-/// texels (exact for R = 1; for R > 1 each child shows the whole parent texture, the benchmark
-/// only needs R = 1); per-vertex colours are averaged at midpoints.
-pub fn subdivide(mesh: &Mesh) -> Result<Mesh> {
-    mesh.validate()?;
-    let mut positions = mesh.positions.clone();
-    let mut colors = mesh.vertex_colors.clone();
-    let mut midpoints: HashMap<(u32, u32), u32> = HashMap::with_capacity(mesh.faces.len() * 3 / 2);
-    let mut midpoint = |a: u32, b: u32| -> Result<u32> {
-        let key = (a.min(b), a.max(b));
-        if let Some(&m) = midpoints.get(&key) {
-            return Ok(m);
-        }
-        let m = u32::try_from(positions.len())
-            .map_err(|_| Error::Limit("subdivide: more than 2^32 vertices".into()))?;
-        let mid = |p: &[[f32; 3]]| {
-            let (p, q) = (p[a as usize], p[b as usize]);
-            // f32 + f32 is exact in f64, so this is the correctly rounded midpoint.
-            [0, 1, 2].map(|k| ((f64::from(p[k]) + f64::from(q[k])) / 2.0) as f32)
-        };
-        positions.push(mid(&positions));
-        if let Some(c) = colors.as_mut() {
-            c.push(mid(c));
-        }
-        midpoints.insert(key, m);
-        Ok(m)
-    };
-    let mut faces = Vec::with_capacity(4 * mesh.faces.len());
-    for &[a, b, c] in &mesh.faces {
-        let ab = midpoint(a, b)?;
-        let bc = midpoint(b, c)?;
-        let ca = midpoint(c, a)?;
-        faces.extend_from_slice(&[[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
-    }
-    let r2 = (mesh.texture_res * mesh.texture_res) as usize;
-    let textures = mesh
-        .textures
-        .chunks_exact(r2)
-        .flat_map(|parent| std::iter::repeat_n(parent, 4).flatten().copied())
-        .collect();
-    let out = Mesh {
-        positions,
-        faces,
-        texture_res: mesh.texture_res,
-        textures,
-        vertex_colors: colors,
-    };
-    out.validate()?;
-    Ok(out)
 }
 
 /// Runs the benchmark: every scene of `opts`, brute force then each tile size, with one line of
@@ -1539,144 +1486,6 @@ pub fn run_fit(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::DVec3;
-    use std::collections::HashSet;
-
-    fn pos(m: &Mesh, i: u32) -> DVec3 {
-        DVec3::from(m.positions[i as usize].map(f64::from))
-    }
-
-    /// Twice the signed area vector of face `f`, along the SPEC normal.
-    fn area_vector(m: &Mesh, f: [u32; 3]) -> DVec3 {
-        let [a, b, c] = f.map(|i| pos(m, i));
-        (c - b).cross(a - b)
-    }
-
-    /// Every directed edge of a closed, consistently wound mesh appears once, and so does its
-    /// reverse.
-    fn is_closed_and_consistent(m: &Mesh) -> bool {
-        let mut directed = HashSet::new();
-        for &[a, b, c] in &m.faces {
-            for e in [(a, b), (b, c), (c, a)] {
-                if !directed.insert(e) {
-                    return false;
-                }
-            }
-        }
-        directed.iter().all(|&(a, b)| directed.contains(&(b, a)))
-    }
-
-    fn edge_count(m: &Mesh) -> usize {
-        let mut edges = HashSet::new();
-        for &[a, b, c] in &m.faces {
-            for (p, q) in [(a, b), (b, c), (c, a)] {
-                edges.insert((p.min(q), p.max(q)));
-            }
-        }
-        edges.len()
-    }
-
-    #[test]
-    fn subdivision_makes_four_faces_each_and_one_vertex_per_edge() {
-        for mesh in [Mesh::cuboid([1.0, 2.0, 0.5]), Mesh::icosphere(1)] {
-            let once = subdivide(&mesh).unwrap();
-            assert_eq!(once.face_count(), 4 * mesh.face_count());
-            assert_eq!(once.vertex_count(), mesh.vertex_count() + edge_count(&mesh));
-            assert_eq!(once.positions[..mesh.vertex_count()], mesh.positions[..]);
-            let twice = subdivide(&once).unwrap();
-            assert_eq!(twice.face_count(), 16 * mesh.face_count());
-        }
-    }
-
-    #[test]
-    fn subdivision_keeps_a_closed_mesh_closed_and_consistently_wound() {
-        let mut mesh = Mesh::icosphere(0);
-        assert!(is_closed_and_consistent(&mesh));
-        for _ in 0..3 {
-            mesh = subdivide(&mesh).unwrap();
-            assert!(is_closed_and_consistent(&mesh));
-            // Euler characteristic of a sphere: shared edges really share their midpoint.
-            let chi =
-                mesh.vertex_count() as i64 - edge_count(&mesh) as i64 + mesh.face_count() as i64;
-            assert_eq!(chi, 2);
-        }
-    }
-
-    #[test]
-    fn subdivided_children_tile_their_parent_with_its_normal() {
-        let mesh = Mesh::cuboid([1.0, 0.25, 3.0]);
-        let sub = subdivide(&mesh).unwrap();
-        for (f, &parent) in mesh.faces.iter().enumerate() {
-            let whole = area_vector(&mesh, parent);
-            let children = &sub.faces[4 * f..4 * f + 4];
-            let sum: DVec3 = children.iter().map(|&c| area_vector(&sub, c)).sum();
-            assert!((sum - whole).length() <= 1e-6 * whole.length(), "face {f}");
-            for &c in children {
-                let child = area_vector(&sub, c);
-                // Same plane, same side: a quarter of the parent's area vector.
-                assert!((4.0 * child - whole).length() <= 1e-6 * whole.length());
-            }
-        }
-    }
-
-    #[test]
-    fn subdivided_icosahedron_is_the_icosphere_before_projection() {
-        // Mesh::icosphere makes the same midpoints in the same order, then puts them on the
-        // unit sphere: same faces, and directions within f32 rounding.
-        let sub = subdivide(&Mesh::icosphere(0)).unwrap();
-        let ico = Mesh::icosphere(1);
-        assert_eq!(sub.faces, ico.faces);
-        for (p, q) in sub.positions.iter().zip(&ico.positions) {
-            let p = DVec3::from(p.map(f64::from)).normalize();
-            let q = DVec3::from(q.map(f64::from));
-            assert!((p - q).length() < 1e-6);
-        }
-    }
-
-    #[test]
-    fn subdivision_copies_texels_and_averages_vertex_colors() {
-        let mut mesh = Mesh::new(
-            vec![
-                [0.0, 0.0, 0.0],
-                [1.0, 0.0, 0.0],
-                [0.0, 1.0, 0.0],
-                [1.0, 1.0, 0.0],
-            ],
-            vec![[0, 1, 2], [1, 3, 2]],
-            2,
-        )
-        .unwrap();
-        for (i, t) in mesh.textures.iter_mut().enumerate() {
-            *t = [i as f32, 0.5, 1.0];
-        }
-        mesh.vertex_colors = Some(vec![
-            [0.0, 0.0, 0.0],
-            [1.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0],
-            [0.0, 0.0, 1.0],
-        ]);
-        let sub = subdivide(&mesh).unwrap();
-        assert_eq!(sub.texture_res, 2);
-        for (f, child) in sub.textures.chunks_exact(4).enumerate() {
-            assert_eq!(child, &mesh.textures[4 * (f / 4)..4 * (f / 4) + 4]);
-        }
-        let colors = sub.vertex_colors.as_ref().unwrap();
-        assert_eq!(colors.len(), sub.vertex_count());
-        // Face 0's middle child is (ab, bc, ca); its bc is the midpoint of the shared edge
-        // (1, 2), which face 1's children use too, and holds the average of its ends.
-        let bc = sub.faces[3][1] as usize;
-        assert_eq!(sub.positions[bc], [0.5, 0.5, 0.0]);
-        assert_eq!(colors[bc], [0.5, 0.5, 0.0]);
-        assert!(sub.faces[4..].iter().flatten().any(|&i| i as usize == bc));
-        assert_eq!(sub.vertex_count(), 4 + 5);
-    }
-
-    #[test]
-    fn subdivision_rejects_an_invalid_mesh() {
-        let mut mesh = Mesh::cuboid([1.0; 3]);
-        mesh.faces[0][1] = 99;
-        assert!(subdivide(&mesh).is_err());
-    }
 
     #[cfg(feature = "json")]
     fn sample(method: Method, gpu_ms: Option<f64>) -> BenchRecord {
@@ -1866,7 +1675,7 @@ mod tests {
         }
         // The subdivided sphere is as watertight as the asset.
         let dense = Scene::load("dense-1024", &assets).unwrap().mesh;
-        assert!(is_closed_and_consistent(&dense));
+        assert!(crate::mesh::tests::is_closed_and_consistent(&dense));
         assert!(Scene::load("nope", &assets).is_err());
     }
 }

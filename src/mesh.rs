@@ -317,26 +317,57 @@ impl Mesh {
             [9, 8, 1],
         ];
         for _ in 0..subdivisions.min(MAX_ICOSPHERE_SUBDIVISIONS) {
-            let mut midpoints: HashMap<(u32, u32), u32> = HashMap::new();
-            let mut midpoint = |a: u32, b: u32, positions: &mut Vec<DVec3>| -> u32 {
-                let key = (a.min(b), a.max(b));
-                *midpoints.entry(key).or_insert_with(|| {
-                    let p = (positions[a as usize] + positions[b as usize]).normalize();
-                    positions.push(p);
-                    (positions.len() - 1) as u32
-                })
-            };
-            let mut next = Vec::with_capacity(faces.len() * 4);
-            for &[a, b, c] in &faces {
-                let ab = midpoint(a, b, &mut positions);
-                let bc = midpoint(b, c, &mut positions);
-                let ca = midpoint(c, a, &mut positions);
-                // Same winding as the parent in each child keeps the normals outward.
-                next.extend_from_slice(&[[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
-            }
-            faces = next;
+            // In f64, each midpoint pushed back onto the unit sphere.
+            faces = subdivide_faces(&faces, |a, b| {
+                positions.push((positions[a as usize] + positions[b as usize]).normalize());
+                Ok::<u32, std::convert::Infallible>((positions.len() - 1) as u32)
+            })
+            .unwrap_or_else(|never| match never {});
         }
         white_mesh(positions, faces)
+    }
+
+    /// Midpoint subdivision: every triangle `(a, b, c)` becomes `(a, ab, ca)`, `(b, bc, ab)`,
+    /// `(c, ca, bc)`, `(ab, bc, ca)`, each wound as its parent and lying in its plane
+    /// ([`subdivide_faces`], which the icosphere uses too).
+    ///
+    /// Faces that share an edge share its midpoint (one new vertex per undirected edge,
+    /// appended in order of first use), so a watertight mesh stays watertight. Midpoints are
+    /// correctly rounded; per-vertex colours are averaged at them. Children copy their parent's
+    /// texels (exact for R = 1; for R > 1 each child shows the whole parent texture).
+    pub fn subdivided(&self) -> crate::Result<Mesh> {
+        self.validate()?;
+        let mut positions = self.positions.clone();
+        let mut colors = self.vertex_colors.clone();
+        let faces = subdivide_faces(&self.faces, |a, b| {
+            let m = u32::try_from(positions.len())
+                .map_err(|_| crate::Error::Limit("subdivision: more than 2^32 vertices".into()))?;
+            let mid = |p: &[[f32; 3]]| {
+                let (p, q) = (p[a as usize], p[b as usize]);
+                // f32 + f32 is exact in f64, so this is the correctly rounded midpoint.
+                [0, 1, 2].map(|k| ((f64::from(p[k]) + f64::from(q[k])) / 2.0) as f32)
+            };
+            positions.push(mid(&positions));
+            if let Some(c) = colors.as_mut() {
+                c.push(mid(c));
+            }
+            Ok::<u32, crate::Error>(m)
+        })?;
+        let r2 = (self.texture_res * self.texture_res) as usize;
+        let textures = self
+            .textures
+            .chunks_exact(r2)
+            .flat_map(|parent| std::iter::repeat_n(parent, 4).flatten().copied())
+            .collect();
+        let out = Mesh {
+            positions,
+            faces,
+            texture_res: self.texture_res,
+            textures,
+            vertex_colors: colors,
+        };
+        out.validate()?;
+        Ok(out)
     }
 
     /// Axis-aligned box centred at the origin with the given half extents: 8 vertices,
@@ -520,6 +551,36 @@ fn load_obj_warning(
         warn(warning);
     }
     Ok(mesh)
+}
+
+/// The topology of one midpoint subdivision: each face `(a, b, c)` becomes `(a, ab, ca)`,
+/// `(b, bc, ab)`, `(c, ca, bc)`, `(ab, bc, ca)`, and `new_vertex(a, b)` makes the midpoint of
+/// each undirected edge once, on its first use (faces in order, edges ab, bc, ca), returning its
+/// index. The one subdivision of the crate: [`Mesh::subdivided`] and [`Mesh::icosphere`] differ
+/// only in how they place a midpoint.
+pub fn subdivide_faces<E>(
+    faces: &[[u32; 3]],
+    mut new_vertex: impl FnMut(u32, u32) -> std::result::Result<u32, E>,
+) -> std::result::Result<Vec<[u32; 3]>, E> {
+    let mut midpoints: HashMap<(u32, u32), u32> = HashMap::with_capacity(faces.len() * 3 / 2);
+    let mut midpoint = |a: u32, b: u32| -> std::result::Result<u32, E> {
+        let key = (a.min(b), a.max(b));
+        if let Some(&m) = midpoints.get(&key) {
+            return Ok(m);
+        }
+        let m = new_vertex(a, b)?;
+        midpoints.insert(key, m);
+        Ok(m)
+    };
+    let mut next = Vec::with_capacity(faces.len() * 4);
+    for &[a, b, c] in faces {
+        let ab = midpoint(a, b)?;
+        let bc = midpoint(b, c)?;
+        let ca = midpoint(c, a)?;
+        // Same winding as the parent in each child keeps the normals outward.
+        next.extend_from_slice(&[[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+    }
+    Ok(next)
 }
 
 fn white_mesh(positions: Vec<DVec3>, faces: Vec<[u32; 3]>) -> Mesh {
@@ -1021,8 +1082,13 @@ fn match_tobj_models(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
+    use std::collections::HashSet;
+
+    fn pos(m: &Mesh, i: u32) -> DVec3 {
+        DVec3::from(m.positions[i as usize].map(f64::from))
+    }
     use std::sync::atomic::{AtomicUsize, Ordering};
 
     fn spot() -> std::path::PathBuf {
@@ -1458,5 +1524,139 @@ mod tests {
         assert_eq!(wrap_uv(1.0), 1.0);
         assert!((wrap_uv(1.25) - 0.25).abs() < 1e-12);
         assert!((wrap_uv(-0.25) - 0.75).abs() < 1e-12);
+    }
+
+    // Subdivision (`Mesh::subdivided`, and the icosphere through `subdivide_faces`).
+
+    /// Twice the signed area vector of face `f`, along the SPEC normal.
+    fn area_vector(m: &Mesh, f: [u32; 3]) -> DVec3 {
+        let [a, b, c] = f.map(|i| pos(m, i));
+        (c - b).cross(a - b)
+    }
+
+    /// Every directed edge of a closed, consistently wound mesh appears once, and so does its
+    /// reverse.
+    pub(crate) fn is_closed_and_consistent(m: &Mesh) -> bool {
+        let mut directed = HashSet::new();
+        for &[a, b, c] in &m.faces {
+            for e in [(a, b), (b, c), (c, a)] {
+                if !directed.insert(e) {
+                    return false;
+                }
+            }
+        }
+        directed.iter().all(|&(a, b)| directed.contains(&(b, a)))
+    }
+
+    fn edge_count(m: &Mesh) -> usize {
+        let mut edges = HashSet::new();
+        for &[a, b, c] in &m.faces {
+            for (p, q) in [(a, b), (b, c), (c, a)] {
+                edges.insert((p.min(q), p.max(q)));
+            }
+        }
+        edges.len()
+    }
+
+    #[test]
+    fn subdivision_makes_four_faces_each_and_one_vertex_per_edge() {
+        for mesh in [Mesh::cuboid([1.0, 2.0, 0.5]), Mesh::icosphere(1)] {
+            let once = mesh.subdivided().unwrap();
+            assert_eq!(once.face_count(), 4 * mesh.face_count());
+            assert_eq!(once.vertex_count(), mesh.vertex_count() + edge_count(&mesh));
+            assert_eq!(once.positions[..mesh.vertex_count()], mesh.positions[..]);
+            let twice = once.subdivided().unwrap();
+            assert_eq!(twice.face_count(), 16 * mesh.face_count());
+        }
+    }
+
+    #[test]
+    fn subdivision_keeps_a_closed_mesh_closed_and_consistently_wound() {
+        let mut mesh = Mesh::icosphere(0);
+        assert!(is_closed_and_consistent(&mesh));
+        for _ in 0..3 {
+            mesh = mesh.subdivided().unwrap();
+            assert!(is_closed_and_consistent(&mesh));
+            // Euler characteristic of a sphere: shared edges really share their midpoint.
+            let chi =
+                mesh.vertex_count() as i64 - edge_count(&mesh) as i64 + mesh.face_count() as i64;
+            assert_eq!(chi, 2);
+        }
+    }
+
+    #[test]
+    fn subdivided_children_tile_their_parent_with_its_normal() {
+        let mesh = Mesh::cuboid([1.0, 0.25, 3.0]);
+        let sub = mesh.subdivided().unwrap();
+        for (f, &parent) in mesh.faces.iter().enumerate() {
+            let whole = area_vector(&mesh, parent);
+            let children = &sub.faces[4 * f..4 * f + 4];
+            let sum: DVec3 = children.iter().map(|&c| area_vector(&sub, c)).sum();
+            assert!((sum - whole).length() <= 1e-6 * whole.length(), "face {f}");
+            for &c in children {
+                let child = area_vector(&sub, c);
+                // Same plane, same side: a quarter of the parent's area vector.
+                assert!((4.0 * child - whole).length() <= 1e-6 * whole.length());
+            }
+        }
+    }
+
+    #[test]
+    fn subdivided_icosahedron_is_the_icosphere_before_projection() {
+        // Mesh::icosphere makes the same midpoints in the same order, then puts them on the
+        // unit sphere: same faces, and directions within f32 rounding.
+        let sub = Mesh::icosphere(0).subdivided().unwrap();
+        let ico = Mesh::icosphere(1);
+        assert_eq!(sub.faces, ico.faces);
+        for (p, q) in sub.positions.iter().zip(&ico.positions) {
+            let p = DVec3::from(p.map(f64::from)).normalize();
+            let q = DVec3::from(q.map(f64::from));
+            assert!((p - q).length() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn subdivision_copies_texels_and_averages_vertex_colors() {
+        let mut mesh = Mesh::new(
+            vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [1.0, 1.0, 0.0],
+            ],
+            vec![[0, 1, 2], [1, 3, 2]],
+            2,
+        )
+        .unwrap();
+        for (i, t) in mesh.textures.iter_mut().enumerate() {
+            *t = [i as f32, 0.5, 1.0];
+        }
+        mesh.vertex_colors = Some(vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+        ]);
+        let sub = mesh.subdivided().unwrap();
+        assert_eq!(sub.texture_res, 2);
+        for (f, child) in sub.textures.chunks_exact(4).enumerate() {
+            assert_eq!(child, &mesh.textures[4 * (f / 4)..4 * (f / 4) + 4]);
+        }
+        let colors = sub.vertex_colors.as_ref().unwrap();
+        assert_eq!(colors.len(), sub.vertex_count());
+        // Face 0's middle child is (ab, bc, ca); its bc is the midpoint of the shared edge
+        // (1, 2), which face 1's children use too, and holds the average of its ends.
+        let bc = sub.faces[3][1] as usize;
+        assert_eq!(sub.positions[bc], [0.5, 0.5, 0.0]);
+        assert_eq!(colors[bc], [0.5, 0.5, 0.0]);
+        assert!(sub.faces[4..].iter().flatten().any(|&i| i as usize == bc));
+        assert_eq!(sub.vertex_count(), 4 + 5);
+    }
+
+    #[test]
+    fn subdivision_rejects_an_invalid_mesh() {
+        let mut mesh = Mesh::cuboid([1.0; 3]);
+        mesh.faces[0][1] = 99;
+        assert!(mesh.subdivided().is_err());
     }
 }
