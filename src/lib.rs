@@ -29,6 +29,7 @@
 
 pub mod assets;
 pub mod atomic_file;
+#[cfg(feature = "bench")]
 pub mod bench;
 pub mod camera;
 pub mod error;

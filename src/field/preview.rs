@@ -3,7 +3,7 @@
 //! bisection to φ = 0.5, and shaded Lambertian with the normal `−∇φ / |∇φ|` from central
 //! differences. The rays, bisection and shading run on the host; φ is evaluated in batches, on
 //! the GPU by [`render_preview`] (through [`Field::eval`]) or by any evaluator (the twin) with
-//! [`render_preview_with`]. A PNG is then one [`crate::fit::report::write_png`] away.
+//! [`render_preview_with`]. A PNG is then one `fit::report::write_png` away (feature `plots`).
 //!
 //! The march samples `t₀ + iΔ` with `Δ = 2√3 h / steps` (`steps` samples along the cube's
 //! diagonal) from where the ray enters the cube; the first sample with φ > 0.5 is a hit, so a

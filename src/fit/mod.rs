@@ -56,6 +56,7 @@ pub mod mesh_fit;
 pub mod pose;
 pub(crate) mod reduce;
 mod regularizers;
+#[cfg(feature = "plots")]
 pub mod report;
 pub mod silhouette;
 

@@ -4,8 +4,9 @@
 //! ([`GifWriter`]), and atomic PNG writing ([`write_png`]). All CPU, all deterministic: the same
 //! inputs give the same pixels.
 //!
-//! Text and plots are drawn by `plotters` (behind the `plots` feature, which the command line
-//! enables) in DejaVu Sans, embedded through the `dejavu` crate and registered with plotters'
+//! The whole module is behind the `plots` feature (which the command line enables), so the
+//! engine library alone pulls no plotting, font or GIF crate. Text and plots are drawn by
+//! `plotters` in DejaVu Sans, embedded through the `dejavu` crate and registered with plotters'
 //! `ab_glyph` engine, so no system font is looked up. Still hand-written, because no crate does
 //! it: the contact sheet's per-pixel colouring (a few loops over the silhouettes), and the GIF
 //! writer's atomic temporary file around the `gif` crate's encoder.
@@ -14,7 +15,6 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::Path;
 
-#[cfg(feature = "plots")]
 use image::{DynamicImage, RgbImage};
 use image::{EncodableLayout, ImageBuffer, PixelWithColorType, Rgb, Rgba, RgbaImage};
 
@@ -122,7 +122,6 @@ pub fn contact_sheet(
 ///
 /// # Panics
 /// As [`contact_sheet`] (a caller's bug), or for a zero scale.
-#[cfg(feature = "plots")]
 #[allow(clippy::too_many_arguments)]
 pub fn labelled_contact_sheet(
     pred: &[f32],
@@ -170,7 +169,6 @@ pub fn labelled_contact_sheet(
 ///
 /// # Panics
 /// When an image holds fewer than `width · height` pixels (a caller's bug).
-#[cfg(feature = "plots")]
 pub fn side_by_side(images: &[(&str, &[[f32; 4]])], width: u32, height: u32) -> RgbaImage {
     let text_px = 11;
     let label_h = text_px + 3;
@@ -232,7 +230,6 @@ fn tile_origin(v: usize, columns: u32, cell_w: u32, cell_h: u32) -> (u32, u32) {
 }
 
 /// One line of a [`loss_plot`].
-#[cfg(feature = "plots")]
 #[derive(Clone, Debug, PartialEq)]
 pub struct Series {
     /// Shown in the legend beside a swatch of `color`.
@@ -250,7 +247,6 @@ pub const PLOT_BACKGROUND: Rgb<u8> = Rgb([255, 255, 255]);
 /// The typeface of every picture's text: DejaVu Sans, embedded in the binary by the `dejavu`
 /// crate and registered once with plotters' `ab_glyph` engine, so nothing depends on the
 /// machine's fonts (CI images have none) and every machine draws the same pixels.
-#[cfg(feature = "plots")]
 fn typeface() -> &'static str {
     const NAME: &str = "softvk-dejavu-sans";
     static REGISTERED: std::sync::Once = std::sync::Once::new();
@@ -269,7 +265,6 @@ fn typeface() -> &'static str {
 }
 
 /// Draws `(x, y, text)` labels (top-left corners) onto `img` in [`LABEL_INK`], `px` pixels tall.
-#[cfg(feature = "plots")]
 fn draw_labels(img: &mut RgbImage, labels: &[(u32, u32, String)], px: u32) {
     use plotters::prelude::*;
     let (w, h) = img.dimensions();
@@ -293,7 +288,6 @@ fn draw_labels(img: &mut RgbImage, labels: &[(u32, u32, String)], px: u32) {
 /// drawable neighbour is drawn as a small square, so a single value still shows. Series may be
 /// empty; with no drawable point at all the axes span [0, 1] (1 to 10 with `log_y`). Too small
 /// an image gives what fits, never a panic.
-#[cfg(feature = "plots")]
 pub fn loss_plot(series: &[Series], width: u32, height: u32, log_y: bool) -> RgbImage {
     let (w, h) = (width.max(1), height.max(1));
     let mut img = RgbImage::from_pixel(w, h, PLOT_BACKGROUND);
@@ -354,7 +348,6 @@ pub fn loss_plot(series: &[Series], width: u32, height: u32, log_y: bool) -> Rgb
 }
 
 /// A range with room: a single value becomes ±0.5 (or ±5 % of it) around it.
-#[cfg(feature = "plots")]
 fn widen((lo, hi): (f64, f64)) -> (f64, f64) {
     if hi > lo {
         (lo, hi)
@@ -364,12 +357,10 @@ fn widen((lo, hi): (f64, f64)) -> (f64, f64) {
     }
 }
 
-#[cfg(feature = "plots")]
 type Area<'a> =
     plotters::drawing::DrawingArea<plotters::prelude::BitMapBackend<'a>, plotters::coord::Shift>;
 
 /// [`loss_plot`]'s chart over either kind of y axis.
-#[cfg(feature = "plots")]
 fn draw_chart<Y>(
     root: &Area<'_>,
     font: &'static str,
@@ -648,7 +639,6 @@ mod tests {
         contact_sheet(&[0.0; 3], &[0.0; 8], 2, 2, 2, 1, None);
     }
 
-    #[cfg(feature = "plots")]
     fn line(name: &str, color: [u8; 3], points: &[(f64, f64)]) -> Series {
         Series {
             name: name.into(),
@@ -657,19 +647,15 @@ mod tests {
         }
     }
 
-    #[cfg(feature = "plots")]
     const RED: [u8; 3] = [200, 0, 0];
-    #[cfg(feature = "plots")]
     const BLUE: [u8; 3] = [0, 0, 200];
 
     /// Pixels of exactly `colour`.
-    #[cfg(feature = "plots")]
     fn count(img: &RgbImage, colour: [u8; 3]) -> usize {
         img.pixels().filter(|p| p.0 == colour).count()
     }
 
     /// Pixels of neither the background nor a series' colour: text, grid, frame.
-    #[cfg(feature = "plots")]
     fn ink(img: &RgbImage) -> usize {
         img.pixels()
             .filter(|p| p.0 != PLOT_BACKGROUND.0 && p.0 != RED && p.0 != BLUE)
@@ -677,7 +663,6 @@ mod tests {
     }
 
     #[test]
-    #[cfg(feature = "plots")]
     fn loss_plot_has_its_size_background_axes_and_each_series_in_its_colour() {
         let series = [
             line("silhouette", RED, &[(0.0, 1.0), (50.0, 0.4), (100.0, 0.2)]),
@@ -702,7 +687,6 @@ mod tests {
     }
 
     #[test]
-    #[cfg(feature = "plots")]
     fn log_y_leaves_out_non_positive_values() {
         // Only (2, 0.5) and (3, 0.25) are drawable on a log axis: one short line.
         let s = [line(
@@ -720,7 +704,6 @@ mod tests {
     }
 
     #[test]
-    #[cfg(feature = "plots")]
     fn degenerate_plots_do_not_panic() {
         let nan = line(
             "nan",
@@ -747,7 +730,6 @@ mod tests {
     }
 
     #[test]
-    #[cfg(feature = "plots")]
     fn labels_are_drawn_in_the_label_ink_over_their_background() {
         let pixels = vec![[1.0f32, 1.0, 1.0, 1.0]; 32 * 24];
         let frame = side_by_side(&[("target", &pixels), ("result", &pixels)], 32, 24);
