@@ -101,6 +101,19 @@ pub enum Error {
         what: String,
     },
 
+    /// A line of a text input the user gave is malformed (the file and line, and what is wrong).
+    #[error("{what} {}:{line}: {message}", path.display())]
+    Parse {
+        /// What the file is, e.g. `cameras file`.
+        what: &'static str,
+        /// The file.
+        path: std::path::PathBuf,
+        /// The line, from 1.
+        line: usize,
+        /// What is wrong with it.
+        message: String,
+    },
+
     /// Bad user input: the message names the input and what is wrong with it.
     #[error("{0}")]
     Input(String),

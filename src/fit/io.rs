@@ -290,7 +290,12 @@ pub fn load_cameras(path: &Path) -> Result<Vec<CameraRow>> {
         }
     };
     let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
-    let at = |line: usize| format!("cameras file {}:{line}", path.display());
+    let bad = |line: usize, message: String| Error::Parse {
+        what: "cameras file",
+        path: path.to_path_buf(),
+        line,
+        message,
+    };
 
     let mut lines = text
         .lines()
@@ -305,22 +310,23 @@ pub fn load_cameras(path: &Path) -> Result<Vec<CameraRow>> {
     };
     let fields: Vec<&str> = header.split(',').map(str::trim).collect();
     if fields != ["distance", "elevation", "azimuth"] {
-        return Err(Error::Input(format!(
-            "{}: the header is `{}`, not `{CAMERAS_HEADER}`",
-            at(n),
-            one_line(header.trim())
-        )));
+        return Err(bad(
+            n,
+            format!(
+                "the header is `{}`, not `{CAMERAS_HEADER}`",
+                one_line(header.trim())
+            ),
+        ));
     }
 
     let mut rows = Vec::new();
     for (n, line) in lines {
         let fields: Vec<&str> = line.split(',').map(str::trim).collect();
         if fields.len() != 3 {
-            return Err(Error::Input(format!(
-                "{}: {} field(s), expected 3 ({CAMERAS_HEADER})",
-                at(n),
-                fields.len()
-            )));
+            return Err(bad(
+                n,
+                format!("{} field(s), expected 3 ({CAMERAS_HEADER})", fields.len()),
+            ));
         }
         let mut values = [0.0f64; 3];
         for ((value, field), name) in
@@ -332,27 +338,22 @@ pub fn load_cameras(path: &Path) -> Result<Vec<CameraRow>> {
             *value = match field.parse::<f64>() {
                 Ok(v) if v.is_finite() => v,
                 Ok(_) => {
-                    return Err(Error::Input(format!(
-                        "{}: {name} `{}` is not a finite number",
-                        at(n),
-                        one_line(field)
-                    )));
+                    return Err(bad(
+                        n,
+                        format!("{name} `{}` is not a finite number", one_line(field)),
+                    ));
                 }
                 Err(_) => {
-                    return Err(Error::Input(format!(
-                        "{}: {name} `{}` is not a number",
-                        at(n),
-                        one_line(field)
-                    )));
+                    return Err(bad(
+                        n,
+                        format!("{name} `{}` is not a number", one_line(field)),
+                    ));
                 }
             };
         }
         let [distance, elevation, azimuth] = values;
         if distance <= 0.0 {
-            return Err(Error::Input(format!(
-                "{}: distance {distance} must be > 0",
-                at(n)
-            )));
+            return Err(bad(n, format!("distance {distance} must be > 0")));
         }
         rows.push(CameraRow {
             distance,
@@ -853,8 +854,20 @@ mod tests {
         for (name, text, expected) in cases {
             let path = dir.path(name);
             std::fs::write(&path, text).unwrap();
-            let e = input_error(load_cameras(&path));
+            // A fault on a line is `Error::Parse` with that line; a file-wide one `Input`.
+            let e = match load_cameras(&path) {
+                Err(Error::Parse { line, ref path, .. }) => {
+                    assert!(path.ends_with(name));
+                    let e = load_cameras(&dir.path(name)).unwrap_err().to_string();
+                    assert!(e.contains(&format!("{name}:{line}: ")), "{name}: {e}");
+                    e
+                }
+                other => input_error(other),
+            };
             assert!(e.contains(expected) && e.contains(name), "{name}: {e}");
+            let file_wide = ["empty.csv", "norows.csv"].contains(&name);
+            let parsed = matches!(load_cameras(&path), Err(Error::Parse { .. }));
+            assert_eq!(parsed, !file_wide, "{name}: {e}");
         }
     }
 
