@@ -215,7 +215,10 @@ fn emit_kernel(out: &mut String, name: &str, path: &Path, spirv: &[u32]) {
                 path.display(),
                 info.name
             );
-            bindings.push((*binding, info.name.clone()));
+            let block = block_of(&reflection.0, *binding).unwrap_or_else(|| {
+                panic!("{}: binding {binding} has no named block", path.display())
+            });
+            bindings.push((*binding, block));
         }
     }
     let push_size = reflection
@@ -230,10 +233,11 @@ fn emit_kernel(out: &mut String, name: &str, path: &Path, spirv: &[u32]) {
     let _ = writeln!(out, "    source: {:?},", path.display().to_string());
     let _ = writeln!(out, "    workgroup_size: [{x}, {y}, {z}],");
     let _ = write!(out, "    bindings: &[");
-    for (binding, bname) in &bindings {
+    for (binding, block) in &bindings {
         let _ = write!(
             out,
-            "BindingSpec {{ binding: {binding}, name: {bname:?} }}, "
+            "BindingSpec {{ binding: {binding}, name: {:?}, writable: {} }}, ",
+            block.name, block.writable
         );
     }
     let _ = writeln!(out, "],");
@@ -246,4 +250,144 @@ fn emit_kernel(out: &mut String, name: &str, path: &Path, spirv: &[u32]) {
         let _ = write!(out, "0x{word:08x}, ");
     }
     let _ = writeln!(out, "\n    ],\n}};\n");
+    emit_bindings_struct(out, name, &bindings);
+}
+
+/// A storage buffer's block as the kernel declares it.
+struct Block {
+    /// The block's type name (`buffer Partials { ... }` → `Partials`).
+    name: String,
+    /// False when every member is `readonly` (or the variable is).
+    writable: bool,
+}
+
+/// The block bound at set 0, `binding`: its type name and whether the kernel may write it.
+fn block_of(module: &rspirv_reflect::rspirv::dr::Module, binding: u32) -> Option<Block> {
+    use rspirv_reflect::rspirv::dr::Operand;
+    use rspirv_reflect::spirv::{Decoration, Op};
+    let decorated = |id: u32, what: Decoration, value: Option<u32>| {
+        module.annotations.iter().any(|a| {
+            a.class.opcode == Op::Decorate
+                && a.operands.first() == Some(&Operand::IdRef(id))
+                && a.operands.get(1) == Some(&Operand::Decoration(what))
+                && value.is_none_or(|v| a.operands.get(2) == Some(&Operand::LiteralBit32(v)))
+        })
+    };
+    let var = module.types_global_values.iter().find(|i| {
+        i.class.opcode == Op::Variable
+            && i.result_id.is_some_and(|id| {
+                decorated(id, Decoration::DescriptorSet, Some(0))
+                    && decorated(id, Decoration::Binding, Some(binding))
+            })
+    })?;
+    let var_id = var.result_id?;
+    let pointer = module
+        .types_global_values
+        .iter()
+        .find(|i| i.result_id == var.result_type)?;
+    let Some(Operand::IdRef(block)) = pointer.operands.get(1) else {
+        return None;
+    };
+    let name = module
+        .debug_names
+        .iter()
+        .find_map(|n| match n.operands.as_slice() {
+            [Operand::IdRef(id), Operand::LiteralString(s)] if id == block => Some(s.clone()),
+            _ => None,
+        })?;
+    let members = module
+        .types_global_values
+        .iter()
+        .find(|i| i.result_id == Some(*block))
+        .map_or(0, |s| s.operands.len());
+    let readonly_members = module
+        .annotations
+        .iter()
+        .filter(|a| {
+            a.class.opcode == Op::MemberDecorate
+                && a.operands.first() == Some(&Operand::IdRef(*block))
+                && a.operands.get(2) == Some(&Operand::Decoration(Decoration::NonWritable))
+        })
+        .count();
+    let writable =
+        !(decorated(var_id, Decoration::NonWritable, None) || readonly_members >= members.max(1));
+    Some(Block { name, writable })
+}
+
+/// `PairItems` → `pair_items`, `DImage` → `d_image`.
+fn snake(name: &str) -> String {
+    let mut out = String::new();
+    let chars: Vec<char> = name.chars().collect();
+    for (i, &c) in chars.iter().enumerate() {
+        if c.is_ascii_uppercase() {
+            let prev_lower = i > 0 && !chars[i - 1].is_ascii_uppercase();
+            let next_lower = chars.get(i + 1).is_some_and(|n| n.is_ascii_lowercase());
+            if i > 0 && (prev_lower || (next_lower && chars[i - 1].is_ascii_uppercase())) {
+                out.push('_');
+            }
+            out.push(c.to_ascii_lowercase());
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// `grad_tiled` → `GradTiled`.
+fn camel(name: &str) -> String {
+    name.split('_')
+        .map(|w| {
+            let mut c = w.chars();
+            c.next().map_or(String::new(), |f| {
+                f.to_ascii_uppercase().to_string() + c.as_str()
+            })
+        })
+        .collect()
+}
+
+/// One struct per kernel, a field per binding named after its block, so a call binds buffers
+/// by name: two of them cannot be swapped by position, and a missing one does not compile.
+fn emit_bindings_struct(out: &mut String, name: &str, bindings: &[(u32, Block)]) {
+    let ty = format!("{}Bindings", camel(name));
+    let _ = writeln!(
+        out,
+        "/// The buffers of `{name}`, by block name (binding order: `{}`).",
+        bindings
+            .iter()
+            .map(|(_, b)| b.name.as_str())
+            .collect::<Vec<_>>()
+            .join("`, `")
+    );
+    let _ = writeln!(out, "#[derive(Clone, Copy)]");
+    let _ = writeln!(out, "pub struct {ty}<'a> {{");
+    for (binding, block) in bindings {
+        let access = if block.writable {
+            "read-write"
+        } else {
+            "read-only"
+        };
+        let _ = writeln!(
+            out,
+            "    /// Binding {binding}, `{}` ({access}).",
+            block.name
+        );
+        let _ = writeln!(out, "    pub {}: BufferRange<'a>,", snake(&block.name));
+    }
+    let _ = writeln!(out, "}}\n");
+    let _ = writeln!(out, "impl<'a> {ty}<'a> {{");
+    let _ = writeln!(
+        out,
+        "    /// In binding order, as `Recorder::dispatch` takes them."
+    );
+    let _ = writeln!(
+        out,
+        "    pub fn ranges(&self) -> [BufferRange<'a>; {}] {{",
+        bindings.len()
+    );
+    let fields: Vec<String> = bindings
+        .iter()
+        .map(|(_, b)| format!("self.{}", snake(&b.name)))
+        .collect();
+    let _ = writeln!(out, "        [{}]", fields.join(", "));
+    let _ = writeln!(out, "    }}\n}}\n");
 }

@@ -276,3 +276,71 @@ fn gated_dispatches_run_with_their_grids_and_not_with_zero_grids() {
         assert_eq!(got, if run { want.clone() } else { sentinel.clone() });
     }
 }
+
+/// Bindings are declared once, by the kernels: `build.rs` reflects each storage block's name and
+/// access, and generates a struct per kernel whose fields are the blocks, so calls bind buffers
+/// by name (a positional swap cannot be written). Every block is named, names are unique per
+/// kernel, bindings are numbered 0.. in order, and a generated struct hands its fields to
+/// `dispatch` in binding order; read-only blocks are marked so.
+#[test]
+fn bindings_are_declared_by_the_kernels_and_bound_by_name() {
+    for spec in specs::ALL {
+        let mut names: Vec<&str> = spec.bindings.iter().map(|b| b.name).collect();
+        assert!(
+            names.iter().all(|n| !n.is_empty()),
+            "{}: unnamed block",
+            spec.name
+        );
+        for (i, b) in spec.bindings.iter().enumerate() {
+            assert_eq!(
+                b.binding as usize, i,
+                "{}: bindings out of order",
+                spec.name
+            );
+        }
+        names.sort_unstable();
+        names.dedup();
+        assert_eq!(
+            names.len(),
+            spec.bindings.len(),
+            "{}: repeated block",
+            spec.name
+        );
+    }
+    let access: Vec<(&str, bool)> = specs::GRAD_TILED
+        .bindings
+        .iter()
+        .map(|b| (b.name, b.writable))
+        .collect();
+    assert!(access.contains(&("Partials", true)) && access.contains(&("Setups", false)));
+
+    let Some(gpu) = common::gpu() else { return };
+    let buffers: Vec<_> = specs::GRAD_TILED
+        .bindings
+        .iter()
+        .map(|b| gpu.upload_buffer(b.name, &[0u32; 4]).unwrap())
+        .collect();
+    let by_name = |name: &str| {
+        buffers
+            .iter()
+            .find(|b| b.name() == name)
+            .expect("a buffer per block")
+            .whole()
+    };
+    let bindings = specs::GradTiledBindings {
+        // Written out of binding order on purpose: names, not positions, decide.
+        ranges: by_name("Ranges"),
+        partials: by_name("Partials"),
+        setups: by_name("Setups"),
+        colors: by_name("Colors"),
+        faces: by_name("Faces"),
+        image: by_name("Image"),
+        aux: by_name("Aux"),
+        d_image: by_name("DImage"),
+        pairs: by_name("Pairs"),
+        pair_items: by_name("PairItems"),
+    };
+    let order: Vec<&str> = bindings.ranges().iter().map(|r| r.buffer.name()).collect();
+    let want: Vec<&str> = specs::GRAD_TILED.bindings.iter().map(|b| b.name).collect();
+    assert_eq!(order, want);
+}

@@ -641,9 +641,15 @@ impl Binner {
             BinStrategy::Sort => (0, bins.masks.range(0, 4)),
         };
         let groups = n.div_ceil(u64::from(specs::BIN_COUNT.workgroup_size[0]));
+        let bindings = specs::BinCountBindings {
+            items,
+            counts,
+            rects: bins.rects.range(0, 8 * n),
+            tile_masks: masks,
+        };
         rec.dispatch(
             &self.count,
-            &[items, counts, bins.rects.range(0, 8 * n), masks],
+            &bindings.ranges(),
             &Self::push(job, words_per_tile),
             groups as u32,
         )?;
@@ -705,15 +711,16 @@ impl Binner {
         }
         let n = job.item_count();
         let groups = n.div_ceil(u64::from(specs::BIN_SCATTER.workgroup_size[0]));
+        let bindings = specs::BinScatterBindings {
+            items,
+            offsets: bins.counts.range(0, 4 * n),
+            keys: bins.keys.range(0, 8 * total),
+            pairs: bins.pairs.range(0, 4 * total),
+            pair_items: bins.pair_items.range(0, 4 * total),
+        };
         rec.dispatch(
             &self.scatter,
-            &[
-                items,
-                bins.counts.range(0, 4 * n),
-                bins.keys.range(0, 8 * total),
-                bins.pairs.range(0, 4 * total),
-                bins.pair_items.range(0, 4 * total),
-            ],
+            &bindings.ranges(),
             &Self::push(job, 0),
             groups as u32,
         )?;
@@ -777,17 +784,18 @@ impl Binner {
             pad: [0; 3],
         };
         let cap = cap.max(1);
+        let bindings = specs::BinMaskListBindings {
+            masks,
+            tile_offsets: tile_counts,
+            item_offsets: bins.counts.range(0, 4 * n.max(1)),
+            rects: bins.rects.range(0, 8 * n.max(1)),
+            entries: bins.pairs.range(0, 4 * cap),
+            entry_items: bins.pair_items.range(0, 4 * cap),
+            ranges: bins.ranges.range(0, 8 * tiles),
+        };
         rec.dispatch(
             &self.mask_list,
-            &[
-                masks,
-                tile_counts,
-                bins.counts.range(0, 4 * n.max(1)),
-                bins.rects.range(0, 8 * n.max(1)),
-                bins.pairs.range(0, 4 * cap),
-                bins.pair_items.range(0, 4 * cap),
-                bins.ranges.range(0, 8 * tiles),
-            ],
+            &bindings.ranges(),
             &push,
             groups(&specs::BIN_MASK_LIST) as u32,
         )

@@ -723,20 +723,21 @@ impl GradKernels {
                     split: faces as u32,
                     parts: parts as u32,
                 };
+                let bindings = specs::GradTiledBindings {
+                    setups: scene.setups.whole(),
+                    colors: scene.colors.whole(),
+                    faces: scene.faces.whole(),
+                    image: scene.image.whole(),
+                    aux: scene.aux.whole(),
+                    d_image: gb.d_image.whole(),
+                    partials: gb.partials.whole(),
+                    pairs: bins.entries().whole(),
+                    pair_items: bins.entry_items().whole(),
+                    ranges: bins.ranges().whole(),
+                };
                 rec.dispatch(
                     &kernel,
-                    &[
-                        scene.setups.whole(),
-                        scene.colors.whole(),
-                        scene.faces.whole(),
-                        scene.image.whole(),
-                        scene.aux.whole(),
-                        gb.d_image.whole(),
-                        gb.partials.whole(),
-                        bins.entries().whole(),
-                        bins.entry_items().whole(),
-                        bins.ranges().whole(),
-                    ],
+                    &bindings.ranges(),
                     &push,
                     groups(tiles * parts, 1)?,
                 )?;

@@ -23,20 +23,13 @@ struct DownsamplePush {
     pad0: u32,
 }
 
-/// The buffers one brute-force render reads and writes.
-pub struct BruteBindings<'a> {
-    /// `view_count * face_count` [`crate::raster::setup::GpuFaceSetup`]s.
-    pub setups: BufferRange<'a>,
-    /// Lit colours as packed f32 triples, mesh after mesh of the batch: `F R²` texels (surface)
-    /// or one per vertex (vertex mode) per mesh.
-    pub colors: BufferRange<'a>,
-    /// The mesh's faces as packed u32 triples (read in vertex colour mode).
-    pub faces: BufferRange<'a>,
-    /// RGBA f32 per rendered pixel, view-major, row 0 at the top.
-    pub image: BufferRange<'a>,
-    /// One [`crate::raster::fine::PixelAux`] per rendered pixel.
-    pub aux: BufferRange<'a>,
-}
+/// The buffers one brute-force render reads and writes, by the kernel's block names (generated
+/// by `build.rs` from `raster_brute.comp`): setups (`view_count × face_count`
+/// [`crate::raster::setup::GpuFaceSetup`]s), lit colours (packed f32 triples, mesh after mesh:
+/// `F R²` texels or one per vertex), faces (packed u32 triples), image (RGBA f32 per rendered
+/// pixel, view-major, row 0 at the top) and aux (one [`crate::raster::fine::PixelAux`] per
+/// rendered pixel).
+pub use crate::gpu::specs::RasterBruteBindings as BruteBindings;
 
 /// The brute-force pipelines, made once per context.
 pub struct BruteRaster {
@@ -125,12 +118,7 @@ impl BruteRaster {
                 .constants(rec.context()),
         )?;
         let groups = pixels.div_ceil(u64::from(specs::RASTER_BRUTE.workgroup_size[0]));
-        rec.dispatch(
-            &kernel,
-            &[b.setups, b.colors, b.faces, b.image, b.aux],
-            &push,
-            groups as u32,
-        )
+        rec.dispatch(&kernel, &b.ranges(), &push, groups as u32)
     }
 
     /// Records the 2×2 average of `big` (`2W × 2H` per view) into `small` (`W × H` per view).
