@@ -389,5 +389,23 @@ fn emit_bindings_struct(out: &mut String, name: &str, bindings: &[(u32, Block)])
         .map(|(_, b)| format!("self.{}", snake(&b.name)))
         .collect();
     let _ = writeln!(out, "        [{}]", fields.join(", "));
+    let _ = writeln!(out, "    }}\n");
+    let _ = writeln!(out, "    /// The kernel these buffers are for.");
+    let _ = writeln!(out, "    pub const KERNEL: &'static str = {name:?};\n");
+    let _ = writeln!(
+        out,
+        "    /// [`Self::ranges`], once `kernel` is shown to be `{name}` (any specialization of it):"
+    );
+    let _ = writeln!(
+        out,
+        "    /// another kernel's pipeline is an error, not a dispatch over the wrong buffers."
+    );
+    let _ = writeln!(
+        out,
+        "    pub fn for_kernel(&self, kernel: &crate::gpu::Kernel) -> crate::Result<[BufferRange<'a>; {}]> {{",
+        bindings.len()
+    );
+    let _ = writeln!(out, "        kernel.expect(Self::KERNEL)?;");
+    let _ = writeln!(out, "        Ok(self.ranges())");
     let _ = writeln!(out, "    }}\n}}\n");
 }

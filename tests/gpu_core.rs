@@ -280,8 +280,9 @@ fn gated_dispatches_run_with_their_grids_and_not_with_zero_grids() {
 /// Bindings are declared once, by the kernels: `build.rs` reflects each storage block's name and
 /// access, and generates a struct per kernel whose fields are the blocks, so calls bind buffers
 /// by name (a positional swap cannot be written). Every block is named, names are unique per
-/// kernel, bindings are numbered 0.. in order, and a generated struct hands its fields to
-/// `dispatch` in binding order; read-only blocks are marked so.
+/// kernel, bindings are numbered 0.. in order, a generated struct hands its fields to
+/// `dispatch` in binding order, read-only blocks are marked so, and a struct given to another
+/// kernel's pipeline is an error.
 #[test]
 fn bindings_are_declared_by_the_kernels_and_bound_by_name() {
     for spec in specs::ALL {
@@ -343,4 +344,32 @@ fn bindings_are_declared_by_the_kernels_and_bound_by_name() {
     let order: Vec<&str> = bindings.ranges().iter().map(|r| r.buffer.name()).collect();
     let want: Vec<&str> = specs::GRAD_TILED.bindings.iter().map(|b| b.name).collect();
     assert_eq!(order, want);
+
+    // A kernel given another kernel's buffers is caught before anything is recorded (the
+    // library's dispatches all go through `for_kernel`).
+    let sum = Kernel::new(&gpu, &specs::FIT_SUM).unwrap();
+    let x = by_name("Partials");
+    let mse = specs::MseViewsBindings {
+        images: x,
+        targets: x,
+        partials: x,
+    };
+    let err = mse.for_kernel(&sum).err().expect("a mismatch");
+    assert!(
+        matches!(
+            err,
+            Error::Kernel {
+                kernel: "fit_sum",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert!(err.to_string().contains("mse_views"), "{err}");
+    let fit_sum = specs::FitSumBindings {
+        values: x,
+        outputs: x,
+    };
+    assert!(fit_sum.for_kernel(&sum).is_ok());
+    assert!(bindings.for_kernel(&sum).is_err());
 }

@@ -154,12 +154,13 @@ impl Adam {
         }
         rec.dispatch(
             &self.kernel,
-            &[
-                params.sub(0, 4 * n),
-                grads.sub(0, 4 * n),
-                self.m.whole(),
-                self.v.whole(),
-            ],
+            &specs::AdamStepBindings {
+                params: params.sub(0, 4 * n),
+                grads: grads.sub(0, 4 * n),
+                first_moment: self.m.whole(),
+                second_moment: self.v.whole(),
+            }
+            .for_kernel(&self.kernel)?,
             &AdamPush::new(self.n, &self.options, step),
             groups(n, 64)?,
         )

@@ -94,12 +94,13 @@ impl Deform {
         check_floats("deform: positions", &positions, n)?;
         rec.dispatch(
             &self.forward,
-            &[
-                params.sub(0, 4 * (n + 3)),
-                self.base.whole(),
-                self.signs.whole(),
-                positions.sub(0, 4 * n),
-            ],
+            &specs::DeformForwardBindings {
+                params: params.sub(0, 4 * (n + 3)),
+                base: self.base.whole(),
+                signs: self.signs.whole(),
+                positions: positions.sub(0, 4 * n),
+            }
+            .for_kernel(&self.forward)?,
             &DeformPush {
                 vertex_count: self.vertex_count,
             },
@@ -123,14 +124,15 @@ impl Deform {
         let d_params = d_params.sub(0, 4 * (n + 3));
         rec.dispatch(
             &self.backward,
-            &[
-                params.sub(0, 4 * (n + 3)),
-                self.base.whole(),
-                self.signs.whole(),
-                d_positions.sub(0, 4 * n),
+            &specs::DeformBackwardBindings {
+                params: params.sub(0, 4 * (n + 3)),
+                base: self.base.whole(),
+                signs: self.signs.whole(),
+                d_positions: d_positions.sub(0, 4 * n),
                 d_params,
-                self.partials.whole(),
-            ],
+                partials: self.partials.whole(),
+            }
+            .for_kernel(&self.backward)?,
             &DeformPush {
                 vertex_count: self.vertex_count,
             },

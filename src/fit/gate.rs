@@ -97,12 +97,13 @@ impl IterationGate {
         rec.pass("gate", |rec| {
             rec.dispatch(
                 &self.kernel,
-                &[
+                &specs::IterationGateBindings {
                     total,
-                    self.status.whole(),
-                    self.grids.whole(),
-                    self.args.whole(),
-                ],
+                    status: self.status.whole(),
+                    grids: self.grids.whole(),
+                    args: self.args.whole(),
+                }
+                .for_kernel(&self.kernel)?,
                 &push,
                 1,
             )

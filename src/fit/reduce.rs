@@ -44,6 +44,12 @@ impl Sum {
         push: SumPush,
         components: u32,
     ) -> Result<()> {
-        rec.dispatch(&self.kernel, &[values, outputs], &push, components)
+        let bindings = specs::FitSumBindings { values, outputs };
+        rec.dispatch(
+            &self.kernel,
+            &bindings.for_kernel(&self.kernel)?,
+            &push,
+            components,
+        )
     }
 }

@@ -148,12 +148,13 @@ impl Regularizers {
         let vertex_groups = groups(u64::from(self.vertex_count), 64)?;
         rec.dispatch(
             &self.apply,
-            &[
-                self.lap_offsets.whole(),
-                self.lap_neighbours.whole(),
-                positions.sub(0, 4 * n),
-                self.applied.whole(),
-            ],
+            &specs::LaplacianApplyBindings {
+                offsets: self.lap_offsets.whole(),
+                neighbours: self.lap_neighbours.whole(),
+                positions: positions.sub(0, 4 * n),
+                applied: self.applied.whole(),
+            }
+            .for_kernel(&self.apply)?,
             &ApplyPush {
                 vertex_count: self.vertex_count,
             },
@@ -176,12 +177,13 @@ impl Regularizers {
         if let Some(g) = grad {
             rec.dispatch(
                 &self.lap_grad,
-                &[
-                    self.lap_offsets.whole(),
-                    self.lap_neighbours.whole(),
-                    self.applied.whole(),
-                    g.range.sub(0, 4 * n),
-                ],
+                &specs::LaplacianGradBindings {
+                    offsets: self.lap_offsets.whole(),
+                    neighbours: self.lap_neighbours.whole(),
+                    applied: self.applied.whole(),
+                    grads: g.range.sub(0, 4 * n),
+                }
+                .for_kernel(&self.lap_grad)?,
                 &WeightedPush {
                     vertex_count: self.vertex_count,
                     weight: g.weight,
@@ -205,12 +207,13 @@ impl Regularizers {
         let n = self.check("flatten loss", &positions, &grad)?;
         rec.dispatch(
             &self.edges_kernel,
-            &[
-                self.quads.whole(),
-                positions.sub(0, 4 * n),
-                self.edge_loss.whole(),
-                self.slots.whole(),
-            ],
+            &specs::FlattenEdgesBindings {
+                quads: self.quads.whole(),
+                positions: positions.sub(0, 4 * n),
+                edge_loss: self.edge_loss.whole(),
+                slots: self.slots.whole(),
+            }
+            .for_kernel(&self.edges_kernel)?,
             &EdgesPush {
                 edge_count: self.edge_count,
             },
@@ -233,12 +236,13 @@ impl Regularizers {
         if let Some(g) = grad {
             rec.dispatch(
                 &self.gather,
-                &[
-                    self.slot_offsets.whole(),
-                    self.vertex_slots.whole(),
-                    self.slots.whole(),
-                    g.range.sub(0, 4 * n),
-                ],
+                &specs::FlattenGatherBindings {
+                    offsets: self.slot_offsets.whole(),
+                    vertex_slots: self.vertex_slots.whole(),
+                    slots: self.slots.whole(),
+                    grads: g.range.sub(0, 4 * n),
+                }
+                .for_kernel(&self.gather)?,
                 &WeightedPush {
                     vertex_count: self.vertex_count,
                     weight: g.weight,

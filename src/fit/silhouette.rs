@@ -130,11 +130,12 @@ impl SilhouetteLoss {
         };
         rec.dispatch(
             &self.views_kernel,
-            &[
-                images.sub(0, 16 * n),
-                targets.sub(0, 4 * n),
-                self.stats.whole(),
-            ],
+            &specs::IouViewsBindings {
+                images: images.sub(0, 16 * n),
+                targets: targets.sub(0, 4 * n),
+                stats: self.stats.whole(),
+            }
+            .for_kernel(&self.views_kernel)?,
             &views,
             self.shape.views,
         )?;
@@ -162,11 +163,12 @@ impl SilhouetteLoss {
             };
             rec.dispatch(
                 &self.grad_kernel,
-                &[
-                    targets.sub(0, 4 * n),
-                    self.stats.whole(),
-                    d.range.sub(0, 16 * n),
-                ],
+                &specs::IouGradBindings {
+                    targets: targets.sub(0, 4 * n),
+                    stats: self.stats.whole(),
+                    d_image: d.range.sub(0, 16 * n),
+                }
+                .for_kernel(&self.grad_kernel)?,
                 &push,
                 groups(n, 64)?,
             )?;
@@ -246,7 +248,12 @@ impl ImageMse {
         };
         rec.dispatch(
             &self.views_kernel,
-            &[images, targets, self.partials.whole()],
+            &specs::MseViewsBindings {
+                images,
+                targets,
+                partials: self.partials.whole(),
+            }
+            .for_kernel(&self.views_kernel)?,
             &views,
             self.shape.views,
         )?;
@@ -274,7 +281,12 @@ impl ImageMse {
             };
             rec.dispatch(
                 &self.grad_kernel,
-                &[images, targets, d.range.sub(0, 16 * n)],
+                &specs::MseGradBindings {
+                    images,
+                    targets,
+                    d_image: d.range.sub(0, 16 * n),
+                }
+                .for_kernel(&self.grad_kernel)?,
                 &push,
                 groups(n, 64)?,
             )?;

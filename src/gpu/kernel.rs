@@ -12,7 +12,7 @@ use std::sync::{Arc, Mutex};
 use ash::vk;
 
 use super::context::{Context, Shared};
-use crate::error::{Result, VkContext};
+use crate::error::{Error, Result, VkContext};
 
 /// A storage-buffer binding of a kernel, reflected from its SPIR-V.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -61,6 +61,23 @@ pub struct Kernel {
 }
 
 impl Kernel {
+    /// The kernel's name (its `.comp` file stem).
+    pub fn name(&self) -> &'static str {
+        self.spec.name
+    }
+
+    /// `Ok` when this is kernel `name`; else [`Error::Kernel`] saying which buffers were
+    /// given to which kernel (the generated `<Kernel>Bindings::for_kernel` checks this).
+    pub fn expect(&self, name: &str) -> Result<()> {
+        if self.spec.name == name {
+            return Ok(());
+        }
+        Err(Error::Kernel {
+            kernel: self.spec.name,
+            message: format!("given the buffers of `{name}`"),
+        })
+    }
+
     /// Builds the pipeline for `spec` on `ctx`'s device (specialization constants, if any, keep
     /// their defaults).
     pub fn new(ctx: &Context, spec: &'static KernelSpec) -> Result<Self> {

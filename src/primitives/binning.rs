@@ -649,7 +649,7 @@ impl Binner {
         };
         rec.dispatch(
             &self.count,
-            &bindings.ranges(),
+            &bindings.for_kernel(&self.count)?,
             &Self::push(job, words_per_tile),
             groups as u32,
         )?;
@@ -720,7 +720,7 @@ impl Binner {
         };
         rec.dispatch(
             &self.scatter,
-            &bindings.ranges(),
+            &bindings.for_kernel(&self.scatter)?,
             &Self::push(job, 0),
             groups as u32,
         )?;
@@ -795,7 +795,7 @@ impl Binner {
         };
         rec.dispatch(
             &self.mask_list,
-            &bindings.ranges(),
+            &bindings.for_kernel(&self.mask_list)?,
             &push,
             groups(&specs::BIN_MASK_LIST) as u32,
         )

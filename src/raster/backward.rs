@@ -560,14 +560,15 @@ impl GradKernels {
         rec.pass("grad world", |rec| {
             rec.dispatch(
                 &self.world,
-                &[
-                    scene.positions.whole(),
-                    scene.faces.whole(),
-                    scene.views.whole(),
-                    gb.face_grads.whole(),
-                    gb.corner_world.whole(),
-                    gb.corner_cam.whole(),
-                ],
+                &specs::GradWorldBindings {
+                    positions: scene.positions.whole(),
+                    faces: scene.faces.whole(),
+                    views: scene.views.whole(),
+                    face_grads: gb.face_grads.whole(),
+                    corner_world: gb.corner_world.whole(),
+                    corner_cam: gb.corner_cam.whole(),
+                }
+                .for_kernel(&self.world)?,
                 &world,
                 items.div_ceil(64),
             )
@@ -586,15 +587,16 @@ impl GradKernels {
         rec.pass("grad gather", |rec| {
             rec.dispatch(
                 &self.gather,
-                &[
-                    gb.vertex_offsets.whole(),
-                    gb.vertex_slots.whole(),
-                    scene.views.whole(),
-                    gb.corner_world.whole(),
-                    gb.face_grads.whole(),
-                    gb.position_grads.whole(),
-                    gb.color_grads.whole(),
-                ],
+                &specs::GradGatherBindings {
+                    offsets: gb.vertex_offsets.whole(),
+                    slots: gb.vertex_slots.whole(),
+                    views: scene.views.whole(),
+                    corner_world: gb.corner_world.whole(),
+                    face_grads: gb.face_grads.whole(),
+                    position_grads: gb.position_grads.whole(),
+                    color_grads: gb.color_grads.whole(),
+                }
+                .for_kernel(&self.gather)?,
                 &gather,
                 (scene.vertex_count * meshes).div_ceil(64),
             )
@@ -648,15 +650,16 @@ impl GradKernels {
             };
             rec.dispatch(
                 &kernel,
-                &[
-                    scene.setups.whole(),
-                    scene.colors.whole(),
-                    scene.faces.whole(),
-                    scene.image.whole(),
-                    scene.aux.whole(),
-                    gb.d_image.whole(),
-                    gb.partials.whole(),
-                ],
+                &specs::GradBruteBindings {
+                    setups: scene.setups.whole(),
+                    colors: scene.colors.whole(),
+                    faces: scene.faces.whole(),
+                    image: scene.image.whole(),
+                    aux: scene.aux.whole(),
+                    d_image: gb.d_image.whole(),
+                    partials: gb.partials.whole(),
+                }
+                .for_kernel(&kernel)?,
                 &push,
                 groups(end - begin, 64)?,
             )?;
@@ -737,7 +740,7 @@ impl GradKernels {
                 };
                 rec.dispatch(
                     &kernel,
-                    &bindings.ranges(),
+                    &bindings.for_kernel(&kernel)?,
                     &push,
                     groups(tiles * parts, 1)?,
                 )?;
@@ -794,7 +797,12 @@ impl GradKernels {
             };
             rec.dispatch(
                 &self.reduce,
-                &[group.offsets, gb.partials.whole(), gb.face_grads.whole()],
+                &specs::GradReduceBindings {
+                    offsets: group.offsets,
+                    partials: gb.partials.whole(),
+                    face_grads: gb.face_grads.whole(),
+                }
+                .for_kernel(&self.reduce)?,
                 &push,
                 groups(u64::from(item_count), 64)?,
             )?;
@@ -826,12 +834,13 @@ impl GradKernels {
                 };
                 rec.dispatch(
                     &self.reduce_texels,
-                    &[
-                        scene.views.whole(),
-                        group.offsets,
-                        gb.partials.whole(),
-                        gb.color_grads.whole(),
-                    ],
+                    &specs::GradReduceTexelsBindings {
+                        views: scene.views.whole(),
+                        offsets: group.offsets,
+                        partials: gb.partials.whole(),
+                        texel_grads: gb.color_grads.whole(),
+                    }
+                    .for_kernel(&self.reduce_texels)?,
                     &push,
                     groups(u64::from(scene.face_count) * u64::from(texels), 64)?,
                 )?;

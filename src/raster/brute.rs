@@ -118,7 +118,7 @@ impl BruteRaster {
                 .constants(rec.context()),
         )?;
         let groups = pixels.div_ceil(u64::from(specs::RASTER_BRUTE.workgroup_size[0]));
-        rec.dispatch(&kernel, &b.ranges(), &push, groups as u32)
+        rec.dispatch(&kernel, &b.for_kernel(&kernel)?, &push, groups as u32)
     }
 
     /// Records the 2×2 average of `big` (`2W × 2H` per view) into `small` (`W × H` per view).
@@ -149,7 +149,13 @@ impl BruteRaster {
             pad0: 0,
         };
         let groups = pixels.div_ceil(u64::from(specs::DOWNSAMPLE_2X2.workgroup_size[0]));
-        rec.dispatch(&self.downsample, &[big, small], &push, groups as u32)
+        let bindings = specs::Downsample2x2Bindings { big, small };
+        rec.dispatch(
+            &self.downsample,
+            &bindings.for_kernel(&self.downsample)?,
+            &push,
+            groups as u32,
+        )
     }
 }
 

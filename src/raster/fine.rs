@@ -313,7 +313,7 @@ impl TiledRaster {
             * u64::from(view_count);
         let groups = u32::try_from(blocks)
             .map_err(|_| Error::Limit(format!("raster_tiled: {blocks} workgroups")))?;
-        rec.dispatch(&kernel, &b.ranges(), &push, groups)
+        rec.dispatch(&kernel, &b.for_kernel(&kernel)?, &push, groups)
     }
 }
 

@@ -229,7 +229,13 @@ impl FaceSetupKernel {
         let groups = n.div_ceil(u64::from(specs::FACE_SETUP.workgroup_size[0]));
         rec.dispatch(
             &self.kernel,
-            &[positions, faces, views, setups],
+            &specs::FaceSetupBindings {
+                positions,
+                faces,
+                views,
+                setups,
+            }
+            .for_kernel(&self.kernel)?,
             &push,
             groups as u32,
         )
