@@ -6,13 +6,9 @@
 //! `-report/`): `preview.png` (the field's surface shaded by ray marching, from the first
 //! camera's direction), `compare.png` (the visual hull's surface beside the fitted one, both
 //! rasterized by softvk from that camera), `loss.png` (L_sil against the iteration; with λ > 0
-//! also λ L_geo and the sum) and `loss.csv` (the same numbers). Every input is checked before anything is written, and the
-//! files are computed in memory first, so a failure writes nothing.
-//!
-//! **Lengths are in cube units**: τ, σ_a, δ and δ_n are fractions of the cube's half-edge (the
-//! library's [`ProbeSettings`] takes world units; the two agree on the cube [-1, 1]³), so the
-//! defaults hold whatever the object's size. The cube is by default the visual hull's
-//! bounding cube grown by `--cube-margin` ([`auto_cube`]).
+//! also λ L_geo and the sum) and `loss.csv` (the same numbers). Every input is checked before
+//! anything is written, and the files are computed in memory first, so a failure writes
+//! nothing.
 
 use std::path::{Path, PathBuf};
 

@@ -110,7 +110,7 @@ impl TileGrid {
     pub fn window(&self, first_row: u32, rows: u32) -> Result<Self> {
         let all = self.height.div_ceil(self.tile_size);
         if rows == 0 || first_row.checked_add(rows).is_none_or(|end| end > all) {
-            return Err(Error::Input(format!(
+            return Err(Error::Misuse(format!(
                 "tile rows {first_row}..{} of a grid of {all}",
                 u64::from(first_row) + u64::from(rows)
             )));

@@ -16,8 +16,9 @@
 //! not fit is split and re-counted, down to one view, and a view whose entries alone do not fit
 //! is split into windows of tile rows ([`TileGrid::window`]), each binned, rendered and
 //! differentiated alone (a face's gradient sums its windows' partials in tile order, the order
-//! of one binning, so the result is bit for bit the same). [`Renderer`] makes the pipelines once; a [`GpuScene`] keeps a
-//! scene's buffers so it can be rendered again (benchmarks record it once and resubmit).
+//! of one binning, so the result is bit for bit the same). [`Renderer`] makes the pipelines
+//! once; a [`GpuScene`] keeps a scene's buffers so it can be rendered again (benchmarks record
+//! it once and resubmit).
 //!
 //! Fitting loops, which must not wait for the count, bin *guarded* instead
 //! ([`Renderer::reserve_guarded`], [`Renderer::record_setup_and_count`],
