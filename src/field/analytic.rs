@@ -70,7 +70,12 @@ impl ShapeGpu {
     ) -> Result<()> {
         rec.dispatch(
             &self.eval,
-            &[params, points, phi],
+            &specs::FieldShapeEvalBindings {
+                params,
+                points,
+                phi,
+            }
+            .for_kernel(&self.eval)?,
             &self.push(n, 0),
             n.div_ceil(64),
         )
@@ -94,7 +99,13 @@ impl ShapeGpu {
         let partial = self.partial.range(0, 4 * p * u64::from(chunks));
         rec.dispatch(
             &self.grad,
-            &[params, points, d_phi, partial],
+            &specs::FieldShapeGradBindings {
+                params,
+                points,
+                d_phi,
+                partial,
+            }
+            .for_kernel(&self.grad)?,
             &self.push(n, chunks),
             super::groups(p * u64::from(chunks), 64)?,
         )?;

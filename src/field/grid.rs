@@ -113,7 +113,12 @@ impl GridGpu {
     ) -> Result<()> {
         rec.dispatch(
             &self.eval,
-            &[params, points, phi],
+            &specs::FieldGridEvalBindings {
+                params,
+                points,
+                phi,
+            }
+            .for_kernel(&self.eval)?,
             &self.push(cube, n),
             n.div_ceil(64),
         )
@@ -134,14 +139,15 @@ impl GridGpu {
     ) -> Result<()> {
         rec.dispatch(
             &self.keys_kernel,
-            &[
+            &specs::FieldGridKeysBindings {
                 params,
                 points,
                 d_phi,
-                self.keys.whole(),
-                self.values.whole(),
-                self.records.whole(),
-            ],
+                keys: self.keys.whole(),
+                values: self.values.whole(),
+                records: self.records.whole(),
+            }
+            .for_kernel(&self.keys_kernel)?,
             &self.push(cube, n),
             n.div_ceil(64),
         )?;
@@ -159,34 +165,37 @@ impl GridGpu {
         rec.fill(self.cell_end.whole(), 0);
         rec.dispatch(
             &self.bounds,
-            &[
-                self.keys.whole(),
-                self.cell_start.whole(),
-                self.cell_end.whole(),
-            ],
+            &specs::FieldGridBoundsBindings {
+                keys: self.keys.whole(),
+                cell_start: self.cell_start.whole(),
+                cell_end: self.cell_end.whole(),
+            }
+            .for_kernel(&self.bounds)?,
             &CountPush { n },
             n.div_ceil(64),
         )?;
         rec.dispatch(
             &self.chunks,
-            &[
-                self.keys.whole(),
-                self.values.whole(),
-                self.records.whole(),
-                self.partial.whole(),
-            ],
+            &specs::FieldGridChunksBindings {
+                keys: self.keys.whole(),
+                values: self.values.whole(),
+                records: self.records.whole(),
+                partial: self.partial.whole(),
+            }
+            .for_kernel(&self.chunks)?,
             &CountPush { n },
             n.div_ceil(GRID_CHUNK).div_ceil(64),
         )?;
         let nodes = u64::from(self.res).pow(3);
         rec.dispatch(
             &self.gather,
-            &[
-                self.cell_start.whole(),
-                self.cell_end.whole(),
-                self.partial.whole(),
+            &specs::FieldGridGatherBindings {
+                cell_start: self.cell_start.whole(),
+                cell_end: self.cell_end.whole(),
+                partial: self.partial.whole(),
                 d_params,
-            ],
+            }
+            .for_kernel(&self.gather)?,
             &GatherPush {
                 res: self.res,
                 accumulate: u32::from(accumulate),

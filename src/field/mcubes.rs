@@ -403,7 +403,10 @@ impl MarchingCubes {
             let n = EVAL_BATCH.min(nodes - base);
             rec.dispatch(
                 &self.lattice,
-                &[points.whole()],
+                &specs::FieldLatticeBindings {
+                    points: points.whole(),
+                }
+                .for_kernel(&self.lattice)?,
                 &LatticePush {
                     cube: field.cube().to_f32(),
                     res,
@@ -456,7 +459,12 @@ impl MarchingCubes {
             self.record_lattice(rec, field, res, &points, &phi)?;
             rec.dispatch(
                 &self.cases,
-                &[phi.whole(), self.table.whole(), offsets.whole()],
+                &specs::McCasesBindings {
+                    phi: phi.whole(),
+                    table: self.table.whole(),
+                    counts: offsets.whole(),
+                }
+                .for_kernel(&self.cases)?,
                 &cases_push,
                 groups(cells, 64)?,
             )?;
@@ -485,13 +493,14 @@ impl MarchingCubes {
         ctx.submit_and_wait(|rec| {
             rec.dispatch(
                 &self.emit,
-                &[
-                    phi.whole(),
-                    self.table.whole(),
-                    offsets.whole(),
-                    tri_edges.whole(),
-                    tri_points.whole(),
-                ],
+                &specs::McEmitBindings {
+                    phi: phi.whole(),
+                    table: self.table.whole(),
+                    offsets: offsets.whole(),
+                    tri_edges: tri_edges.whole(),
+                    tri_points: tri_points.whole(),
+                }
+                .for_kernel(&self.emit)?,
                 &EmitPush {
                     cube: field.cube().to_f32(),
                     res,

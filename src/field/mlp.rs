@@ -269,7 +269,12 @@ impl MlpGpu {
     ) -> Result<()> {
         rec.dispatch(
             &self.eval,
-            &[params, points, phi],
+            &specs::FieldMlpEvalBindings {
+                params,
+                points,
+                phi,
+            }
+            .for_kernel(&self.eval)?,
             &self.push(cube, n, 0),
             n.div_ceil(64),
         )
@@ -294,13 +299,14 @@ impl MlpGpu {
         let push = self.push(cube, n, chunks);
         rec.dispatch(
             &self.point,
-            &[
+            &specs::FieldMlpPointBindings {
                 params,
                 points,
                 d_phi,
-                self.acts.whole(),
-                self.deltas.whole(),
-            ],
+                acts: self.acts.whole(),
+                deltas: self.deltas.whole(),
+            }
+            .for_kernel(&self.point)?,
             &push,
             n.div_ceil(64),
         )?;
@@ -309,7 +315,12 @@ impl MlpGpu {
         let invocations = p * u64::from(chunks);
         rec.dispatch(
             &self.wgrad,
-            &[self.acts.whole(), self.deltas.whole(), partial],
+            &specs::FieldMlpWgradBindings {
+                acts: self.acts.whole(),
+                deltas: self.deltas.whole(),
+                partial,
+            }
+            .for_kernel(&self.wgrad)?,
             &push,
             super::groups(invocations, 64)?,
         )?;

@@ -524,7 +524,7 @@ impl SumChunks {
     ) -> Result<()> {
         rec.dispatch(
             &self.kernel,
-            &[partial, d_params],
+            &specs::FieldSumChunksBindings { partial, d_params }.for_kernel(&self.kernel)?,
             &SumPush {
                 param_count,
                 chunks,

@@ -663,7 +663,11 @@ impl Binner {
             };
             rec.dispatch(
                 &self.count_sum,
-                &[counts, bins.sums.range(0, 8 * sums)],
+                &specs::BinCountSumBindings {
+                    counts,
+                    sums: bins.sums.range(0, 8 * sums),
+                }
+                .for_kernel(&self.count_sum)?,
                 &push,
                 sums.div_ceil(u64::from(specs::BIN_COUNT_SUM.workgroup_size[0])) as u32,
             )?;
@@ -764,7 +768,11 @@ impl Binner {
         };
         rec.dispatch(
             &self.mask_counts,
-            &[masks, tile_counts],
+            &specs::BinMaskCountsBindings {
+                masks,
+                counts: tile_counts,
+            }
+            .for_kernel(&self.mask_counts)?,
             &push,
             groups(&specs::BIN_MASK_COUNTS) as u32,
         )?;
@@ -832,7 +840,13 @@ impl Binner {
             pad: [0; 2],
         };
         let groups = n.div_ceil(u64::from(specs::BIN_RANGES.workgroup_size[0]));
-        rec.dispatch(&self.ranges, &[keys, ranges], &push, groups as u32)
+        let bindings = specs::BinRangesBindings { keys, ranges };
+        rec.dispatch(
+            &self.ranges,
+            &bindings.for_kernel(&self.ranges)?,
+            &push,
+            groups as u32,
+        )
     }
 
     /// Records scatter, sort and ranges over the whole entry capacity, for a count the host does
@@ -876,13 +890,14 @@ impl Binner {
             let groups = n.div_ceil(u64::from(specs::BIN_SCATTER.workgroup_size[0]));
             rec.dispatch(
                 &self.scatter,
-                &[
+                &specs::BinScatterBindings {
                     items,
-                    bins.counts.range(0, 4 * n),
-                    bins.keys.range(0, 8 * cap),
-                    bins.pairs.range(0, 4 * cap),
-                    bins.pair_items.range(0, 4 * cap),
-                ],
+                    offsets: bins.counts.range(0, 4 * n),
+                    keys: bins.keys.range(0, 8 * cap),
+                    pairs: bins.pairs.range(0, 4 * cap),
+                    pair_items: bins.pair_items.range(0, 4 * cap),
+                }
+                .for_kernel(&self.scatter)?,
                 &Self::push(job, 0),
                 groups as u32,
             )?;
@@ -905,7 +920,11 @@ impl Binner {
         let groups = cap.div_ceil(u64::from(specs::BIN_RANGES.workgroup_size[0]));
         rec.dispatch(
             &self.ranges,
-            &[bins.keys.range(0, 8 * cap), bins.ranges.range(0, 8 * tiles)],
+            &specs::BinRangesBindings {
+                keys: bins.keys.range(0, 8 * cap),
+                ranges: bins.ranges.range(0, 8 * tiles),
+            }
+            .for_kernel(&self.ranges)?,
             &push,
             groups as u32,
         )

@@ -147,7 +147,11 @@ impl Scan {
                 };
                 rec.dispatch(
                     &self.reduce,
-                    &[input.sub(4 * start, 4 * len), sums.range(0, 4 * blocks)],
+                    &specs::ScanReduceBindings {
+                        input: input.sub(4 * start, 4 * len),
+                        block_sums: sums.range(0, 4 * blocks),
+                    }
+                    .for_kernel(&self.reduce)?,
                     &push,
                     len.div_ceil(block) as u32,
                 )?;
@@ -183,12 +187,13 @@ impl Scan {
             let offsets = sums.unwrap_or_else(|| scratch.total.whole());
             rec.dispatch(
                 &self.block,
-                &[
-                    input.sub(4 * start, 4 * len),
-                    output.sub(4 * start, 4 * len),
-                    offsets,
-                    scratch.total.whole(),
-                ],
+                &specs::ScanBlockBindings {
+                    input: input.sub(4 * start, 4 * len),
+                    output: output.sub(4 * start, 4 * len),
+                    block_offsets: offsets,
+                    total: scratch.total.whole(),
+                }
+                .for_kernel(&self.block)?,
                 &push,
                 len.div_ceil(block) as u32,
             )?;

@@ -182,7 +182,12 @@ impl RadixSort {
             let count_range = count.unwrap_or(counts);
             rec.dispatch(
                 &self.count,
-                &[src.0.range(0, 8 * n), counts, count_range],
+                &specs::RadixCountBindings {
+                    keys: src.0.range(0, 8 * n),
+                    counts,
+                    count: count_range,
+                }
+                .for_kernel(&self.count)?,
                 &push,
                 n_blocks as u32,
             )?;
@@ -190,14 +195,15 @@ impl RadixSort {
                 .record(rec, &scratch.scan, counts, counts, RADIX * n_blocks)?;
             rec.dispatch(
                 &self.scatter,
-                &[
-                    src.0.range(0, 8 * n),
-                    src.1.range(0, 4 * n),
-                    dst.0.range(0, 8 * n),
-                    dst.1.range(0, 4 * n),
-                    counts,
-                    count_range,
-                ],
+                &specs::RadixScatterBindings {
+                    keys_in: src.0.range(0, 8 * n),
+                    vals_in: src.1.range(0, 4 * n),
+                    keys_out: dst.0.range(0, 8 * n),
+                    vals_out: dst.1.range(0, 4 * n),
+                    offsets: counts,
+                    count: count_range,
+                }
+                .for_kernel(&self.scatter)?,
                 &push,
                 n_blocks as u32,
             )?;

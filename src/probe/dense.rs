@@ -161,12 +161,13 @@ impl DenseMarch {
         let c = self.cube.to_f32();
         rec.dispatch(
             &self.points_kernel,
-            &[
-                rays.sub(0, 16 * u64::from(self.rays)),
-                gpu.views().whole(),
-                self.offsets.whole(),
-                self.points.whole(),
-            ],
+            &specs::ProbeDensePointsBindings {
+                rays: rays.sub(0, 16 * u64::from(self.rays)),
+                views: gpu.views().whole(),
+                offsets: self.offsets.whole(),
+                points: self.points.whole(),
+            }
+            .for_kernel(&self.points_kernel)?,
             &DensePointsPush {
                 rays: self.rays,
                 width: self.width,
@@ -192,13 +193,14 @@ impl DenseMarch {
     ) -> Result<()> {
         rec.dispatch(
             &self.max_kernel,
-            &[
-                rays.sub(0, 16 * u64::from(self.rays)),
-                self.offsets.whole(),
-                self.phi.whole(),
-                self.psi.whole(),
-                self.d_phi.whole(),
-            ],
+            &specs::ProbeDenseMaxBindings {
+                rays: rays.sub(0, 16 * u64::from(self.rays)),
+                offsets: self.offsets.whole(),
+                phi: self.phi.whole(),
+                psi: self.psi.whole(),
+                d_phi: self.d_phi.whole(),
+            }
+            .for_kernel(&self.max_kernel)?,
             &DenseMaxPush {
                 rays: self.rays,
                 write_grad: u32::from(grad),

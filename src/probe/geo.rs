@@ -104,10 +104,11 @@ impl GeoRegularizer {
         )?;
         rec.dispatch(
             &self.points_kernel,
-            &[
-                candidates.sub(0, 16 * self.candidates()),
-                self.points.whole(),
-            ],
+            &specs::ProbeGeoPointsBindings {
+                candidates: candidates.sub(0, 16 * self.candidates()),
+                points: self.points.whole(),
+            }
+            .for_kernel(&self.points_kernel)?,
             &PointsPush {
                 candidates: self.settings.geo_candidates,
                 delta: self.settings.geo_delta as f32,
@@ -152,7 +153,12 @@ impl GeoRegularizer {
         let d_range = d_phi.map_or(self.terms.whole(), |d| d.range.sub(0, 4 * m));
         rec.dispatch(
             &self.loss_kernel,
-            &[phi.sub(0, 4 * m), self.terms.whole(), d_range],
+            &specs::ProbeGeoLossBindings {
+                phi: phi.sub(0, 4 * m),
+                terms: self.terms.whole(),
+                d_phi: d_range,
+            }
+            .for_kernel(&self.loss_kernel)?,
             &push,
             groups(n, 64)?,
         )?;

@@ -498,14 +498,15 @@ impl Prober {
         rec.fill(self.masks.whole(), 0);
         rec.dispatch(
             &self.items_kernel,
-            &[
-                gpu.views().whole(),
-                anchors.sub(0, 16 * self.anchors()),
-                gpu.masks().whole(),
-                self.items.whole(),
-                self.masks.whole(),
-                self.rects.whole(),
-            ],
+            &specs::ProbeItemsBindings {
+                views: gpu.views().whole(),
+                anchors: anchors.sub(0, 16 * self.anchors()),
+                masks: gpu.masks().whole(),
+                items: self.items.whole(),
+                tile_masks: self.masks.whole(),
+                rects: self.rects.whole(),
+            }
+            .for_kernel(&self.items_kernel)?,
             &push,
             groups(self.job.item_count(), 64)?,
         )
@@ -535,7 +536,11 @@ impl Prober {
         let counts = self.offsets.range(0, 4 * tiles);
         rec.dispatch(
             &self.mask_counts_kernel,
-            &[self.masks.whole(), counts],
+            &specs::BinMaskCountsBindings {
+                masks: self.masks.whole(),
+                counts,
+            }
+            .for_kernel(&self.mask_counts_kernel)?,
             &WordsPush {
                 tiles: tiles as u32,
                 words_per_tile: self.words_per_tile() as u32,
@@ -562,13 +567,14 @@ impl Prober {
         }
         rec.dispatch(
             &self.mask_list_kernel,
-            &[
-                self.masks.whole(),
-                self.offsets.whole(),
-                self.word_prefix.whole(),
-                self.list.range(0, 4 * total),
-                self.list_tiles.range(0, 4 * total),
-            ],
+            &specs::ProbeMaskListBindings {
+                masks: self.masks.whole(),
+                offsets: self.offsets.whole(),
+                word_prefix: self.word_prefix.whole(),
+                list: self.list.range(0, 4 * total),
+                list_tiles: self.list_tiles.range(0, 4 * total),
+            }
+            .for_kernel(&self.mask_list_kernel)?,
             &WordsPush {
                 tiles: tiles as u32,
                 words_per_tile: self.words_per_tile() as u32,
@@ -723,17 +729,18 @@ impl Prober {
         let kernel = self.variant(rec, &self.forward_kernel)?;
         rec.dispatch(
             &kernel,
-            &[
-                rays.sub(0, 16 * n),
-                gpu.views().whole(),
-                anchors.sub(0, 16 * self.anchors()),
-                phi.sub(0, 4 * self.anchors()),
-                self.items.whole(),
-                self.offsets.whole(),
-                self.list.whole(),
-                self.outs.whole(),
-                self.ray_order.whole(),
-            ],
+            &specs::ProbeForwardBindings {
+                rays: rays.sub(0, 16 * n),
+                views: gpu.views().whole(),
+                anchors: anchors.sub(0, 16 * self.anchors()),
+                phi: phi.sub(0, 4 * self.anchors()),
+                items: self.items.whole(),
+                offsets: self.offsets.whole(),
+                list: self.list.whole(),
+                outs: self.outs.whole(),
+                ray_order: self.ray_order.whole(),
+            }
+            .for_kernel(&kernel)?,
             &self.forward_push(),
             groups(n, 64)?,
         )
@@ -765,14 +772,15 @@ impl Prober {
         let kernel = self.variant(rec, &self.brute_kernel)?;
         rec.dispatch(
             &kernel,
-            &[
-                rays.sub(0, 16 * n),
-                gpu.views().whole(),
-                anchors.sub(0, 16 * self.anchors()),
-                phi.sub(0, 4 * self.anchors()),
-                self.items.whole(),
-                self.outs.whole(),
-            ],
+            &specs::ProbeForwardBruteBindings {
+                rays: rays.sub(0, 16 * n),
+                views: gpu.views().whole(),
+                anchors: anchors.sub(0, 16 * self.anchors()),
+                phi: phi.sub(0, 4 * self.anchors()),
+                items: self.items.whole(),
+                outs: self.outs.whole(),
+            }
+            .for_kernel(&kernel)?,
             &self.forward_push(),
             groups(n, 64)?,
         )?;
@@ -812,14 +820,15 @@ impl Prober {
         rec.pass("  reduce", |rec| {
             rec.dispatch(
                 &self.reduce_kernel,
-                &[
-                    self.rects.whole(),
-                    self.masks.whole(),
-                    self.offsets.whole(),
-                    self.word_prefix.whole(),
-                    self.partials.whole(),
-                    d_phi.range.sub(0, 4 * self.anchors()),
-                ],
+                &specs::ProbeReduceBindings {
+                    rects: self.rects.whole(),
+                    masks: self.masks.whole(),
+                    offsets: self.offsets.whole(),
+                    word_prefix: self.word_prefix.whole(),
+                    partials: self.partials.whole(),
+                    d_phi: d_phi.range.sub(0, 4 * self.anchors()),
+                }
+                .for_kernel(&self.reduce_kernel)?,
                 &ReducePush {
                     anchors: self.settings.anchors,
                     views: self.job.views,
@@ -864,12 +873,13 @@ impl Prober {
         rec.pass("  ray sort by anchor", |rec| {
             rec.dispatch(
                 &self.aux_keys_kernel,
-                &[
+                &specs::ProbeAuxKeysBindings {
                     rays,
-                    self.outs.whole(),
-                    self.aux_keys.whole(),
-                    self.aux_order.whole(),
-                ],
+                    outs: self.outs.whole(),
+                    keys: self.aux_keys.whole(),
+                    values: self.aux_order.whole(),
+                }
+                .for_kernel(&self.aux_keys_kernel)?,
                 &AuxKeysPush {
                     rays: n as u32,
                     anchors: self.settings.anchors,
@@ -893,13 +903,14 @@ impl Prober {
         rec.pass("  max gradient", |rec| {
             rec.dispatch(
                 &self.max_grad_kernel,
-                &[
+                &specs::ProbeMaxGradBindings {
                     rays,
-                    self.outs.whole(),
-                    self.aux_order.whole(),
-                    ranges,
-                    d_phi.range.sub(0, 4 * self.anchors()),
-                ],
+                    outs: self.outs.whole(),
+                    order: self.aux_order.whole(),
+                    anchor_ranges: ranges,
+                    d_phi: d_phi.range.sub(0, 4 * self.anchors()),
+                }
+                .for_kernel(&self.max_grad_kernel)?,
                 &MaxGradPush {
                     anchors: self.settings.anchors,
                     views: self.job.views,
@@ -918,7 +929,12 @@ impl Prober {
         let tiles = self.job.tile_count();
         rec.dispatch(
             &self.keys_kernel,
-            &[rays, self.ray_keys.whole(), self.ray_order.whole()],
+            &specs::ProbeRayKeysBindings {
+                rays,
+                keys: self.ray_keys.whole(),
+                values: self.ray_order.whole(),
+            }
+            .for_kernel(&self.keys_kernel)?,
             &KeysPush {
                 rays: n as u32,
                 width: g.width,
@@ -962,19 +978,20 @@ impl Prober {
             let kernel = self.variant(rec, &self.backward_kernel)?;
             rec.dispatch(
                 &kernel,
-                &[
-                    self.list_tiles.whole(),
-                    self.list.whole(),
-                    self.items.whole(),
+                &specs::ProbeBackwardBindings {
+                    list_tiles: self.list_tiles.whole(),
+                    list: self.list.whole(),
+                    items: self.items.whole(),
                     anchors,
                     phi,
                     rays,
-                    gpu.views().whole(),
-                    self.outs.whole(),
-                    self.ray_order.whole(),
-                    ranges,
-                    self.partials.whole(),
-                ],
+                    views: gpu.views().whole(),
+                    outs: self.outs.whole(),
+                    ray_order: self.ray_order.whole(),
+                    ray_ranges: ranges,
+                    partials: self.partials.whole(),
+                }
+                .for_kernel(&kernel)?,
                 &BackwardPush {
                     entries: total as u32,
                     anchors: self.settings.anchors,

@@ -248,12 +248,13 @@ impl Sampler {
         let rays = self.ray_count();
         rec.dispatch(
             &self.rays_kernel,
-            &[
-                gpu.masks().whole(),
-                self.weights.whole(),
-                self.cdf.whole(),
-                self.rays.whole(),
-            ],
+            &specs::ProbeSampleRaysBindings {
+                masks: gpu.masks().whole(),
+                weights: self.weights.whole(),
+                cdf: self.cdf.whole(),
+                rays: self.rays.whole(),
+            }
+            .for_kernel(&self.rays_kernel)?,
             &push,
             groups(rays, 64)?,
         )?;
@@ -263,7 +264,11 @@ impl Sampler {
         ] {
             rec.dispatch(
                 &self.points_kernel,
-                &[self.boundary.whole(), out.whole()],
+                &specs::ProbeSamplePointsBindings {
+                    boundary: self.boundary.whole(),
+                    points: out.whole(),
+                }
+                .for_kernel(&self.points_kernel)?,
                 &push,
                 groups(u64::from(push.count), 64)?,
             )?;
