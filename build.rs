@@ -405,7 +405,7 @@ fn emit_bindings_struct(out: &mut String, name: &str, bindings: &[(u32, Block)])
         "    pub fn for_kernel(&self, kernel: &crate::gpu::Kernel) -> crate::Result<[BufferRange<'a>; {}]> {{",
         bindings.len()
     );
-    let _ = writeln!(out, "        kernel.expect(Self::KERNEL)?;");
+    let _ = writeln!(out, "        kernel.check_name(Self::KERNEL)?;");
     let _ = writeln!(out, "        Ok(self.ranges())");
     let _ = writeln!(out, "    }}\n}}\n");
 }

@@ -68,7 +68,7 @@ impl Kernel {
 
     /// `Ok` when this is kernel `name`; else [`Error::Kernel`] saying which buffers were
     /// given to which kernel (the generated `<Kernel>Bindings::for_kernel` checks this).
-    pub fn expect(&self, name: &str) -> Result<()> {
+    pub fn check_name(&self, name: &str) -> Result<()> {
         if self.spec.name == name {
             return Ok(());
         }
