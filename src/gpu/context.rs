@@ -4,6 +4,7 @@
 
 use std::ffi::{CStr, CString, c_void};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 use ash::vk;
@@ -252,7 +253,27 @@ pub struct Context {
     pub(crate) command_pool: vk::CommandPool,
     /// Serializes use of `command_pool` and `queue` (both need external synchronization).
     pub(crate) pool_lock: Mutex<()>,
+    /// What softvk did on its own behalf ([`Context::counters`]).
+    pub(crate) counters: CounterCells,
     info: DeviceInfo,
+}
+
+/// The atomic cells behind [`Counters`].
+#[derive(Default)]
+pub(crate) struct CounterCells {
+    pub(crate) submissions: AtomicU64,
+    pub(crate) staging_copies: AtomicU64,
+}
+
+/// What a [`Context`] has done on its own behalf since it was made: a host engine that records
+/// softvk into its own command buffers checks that these stay put during its frames.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Counters {
+    /// Submissions to the context's queue (its submit-and-wait conveniences).
+    pub submissions: u64,
+    /// Staging copies between host and device memory ([`Context::write_buffer`],
+    /// [`Context::read_buffer`], [`Context::upload_buffer`]).
+    pub staging_copies: u64,
 }
 
 unsafe extern "system" fn on_validation_message(
@@ -558,6 +579,7 @@ impl Context {
             push_descriptor,
             command_pool,
             pool_lock: Mutex::new(()),
+            counters: CounterCells::default(),
             info,
         })
     }
@@ -575,6 +597,14 @@ impl Context {
     /// The raw `ash` instance.
     pub fn instance(&self) -> &ash::Instance {
         &self.shared.instance
+    }
+
+    /// Submissions and staging copies softvk has made so far ([`Counters`]).
+    pub fn counters(&self) -> Counters {
+        Counters {
+            submissions: self.counters.submissions.load(Ordering::Relaxed),
+            staging_copies: self.counters.staging_copies.load(Ordering::Relaxed),
+        }
     }
 
     /// The physical device.

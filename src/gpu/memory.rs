@@ -33,9 +33,14 @@ impl MemoryKind {
 }
 
 /// A GPU buffer. Usable as a storage buffer and as a copy source and destination.
+///
+/// Made by [`Context::create_buffer`] (softvk owns it and frees it on drop) or borrowed from a
+/// host engine by [`Context::import_buffer`] (the host owns it; drop only forgets the handle).
 pub struct Buffer {
     pub(crate) raw: vk::Buffer,
     allocation: Option<Allocation>,
+    /// Whether drop destroys `raw` (false for an imported host buffer).
+    owned: bool,
     size: u64,
     kind: MemoryKind,
     name: String,
@@ -56,6 +61,11 @@ impl Buffer {
     /// The debug name given at creation.
     pub fn name(&self) -> &str {
         &self.name
+    }
+
+    /// Whether softvk owns this buffer (false: borrowed by [`Context::import_buffer`]).
+    pub fn is_owned(&self) -> bool {
+        self.owned
     }
 
     /// Memory kind chosen at creation.
@@ -97,6 +107,10 @@ impl Buffer {
 
 impl Drop for Buffer {
     fn drop(&mut self) {
+        if !self.owned {
+            // The host's buffer: the host destroys it.
+            return;
+        }
         // SAFETY: the buffer belongs to `shared.device`, which outlives it (we hold the Arc);
         // callers wait for GPU work using the buffer before dropping it.
         unsafe { self.shared.device.destroy_buffer(self.raw, None) };
@@ -223,6 +237,7 @@ impl Context {
         let buffer = Buffer {
             raw,
             allocation: Some(allocation),
+            owned: true,
             size,
             kind,
             name: name.to_string(),
@@ -234,6 +249,29 @@ impl Context {
             .vk("vkBindBufferMemory")?;
         self.name(raw, name);
         Ok(buffer)
+    }
+
+    /// Borrows a buffer a host engine made on this context's device, so softvk can bind ranges
+    /// of it (a host's vertex buffer as a scene's positions, a host's image as an upstream
+    /// gradient). softvk never destroys, frees or maps it; [`Buffer::kind`] reports
+    /// [`MemoryKind::Device`] and [`Buffer::mapped`] `None`.
+    ///
+    /// # Safety
+    /// `raw` is a buffer of this context's device with at least `size` bytes bound to memory,
+    /// created with `STORAGE_BUFFER` usage (and `TRANSFER_SRC`/`TRANSFER_DST` where softvk
+    /// copies or fills it), and it outlives the returned `Buffer` and every command buffer that
+    /// uses it.
+    pub unsafe fn import_buffer(&self, raw: vk::Buffer, size: u64, name: &str) -> Buffer {
+        self.name(raw, name);
+        Buffer {
+            raw,
+            allocation: None,
+            owned: false,
+            size,
+            kind: MemoryKind::Device,
+            name: name.to_string(),
+            shared: Arc::clone(&self.shared),
+        }
     }
 
     /// The largest buffer of `kind` the device can hold, and which limit that is: the largest
@@ -309,6 +347,9 @@ impl Context {
             .mapped_mut()
             .ok_or_else(|| Error::Limit("upload memory is not host-mapped".into()))?[..bytes.len()]
             .copy_from_slice(bytes);
+        self.counters
+            .staging_copies
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         self.submit_and_wait(|rec| {
             rec.copy(&staging, 0, buffer, offset, bytes.len() as u64);
             Ok(())
@@ -342,6 +383,9 @@ impl Context {
             len,
             MemoryKind::Readback,
         )?;
+        self.counters
+            .staging_copies
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         self.submit_and_wait(|rec| {
             rec.copy(buffer, offset, &readback, 0, len);
             Ok(())

@@ -6,7 +6,7 @@ mod memory;
 mod record;
 
 pub use context::{
-    Context, ContextOptions, DeviceInfo, PhysicalDeviceEntry, REQUIRED_DEVICE_EXTENSIONS,
+    Context, ContextOptions, Counters, DeviceInfo, PhysicalDeviceEntry, REQUIRED_DEVICE_EXTENSIONS,
     RawHandles, list_devices,
 };
 pub use kernel::{BindingSpec, Kernel, KernelSpec, KernelVariants, specs};

@@ -385,6 +385,30 @@ impl<'a> Recorder<'a> {
         };
     }
 
+    /// For a host engine that hands softvk its command buffer between its own passes (and
+    /// records no barrier of its own for softvk's buffers, as wgpu cannot): makes every write
+    /// recorded before this point available to everything after it, and orders all earlier
+    /// commands before all later ones. Record one before softvk's first dispatch (the host's
+    /// writes become visible to softvk) and one after its last (softvk's writes become visible
+    /// to the host's next pass).
+    pub fn full_barrier(&mut self) {
+        let barrier = [vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::MEMORY_WRITE)
+            .dst_access_mask(vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE)];
+        // SAFETY: recording command buffer.
+        unsafe {
+            self.ctx.device().cmd_pipeline_barrier(
+                self.cmd,
+                vk::PipelineStageFlags::ALL_COMMANDS,
+                vk::PipelineStageFlags::ALL_COMMANDS,
+                vk::DependencyFlags::empty(),
+                &barrier,
+                &[],
+                &[],
+            )
+        };
+    }
+
     fn host_barrier(&mut self) {
         let barrier = [vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
@@ -503,6 +527,10 @@ impl Recorded<'_> {
         let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
         // Queue access must be externally synchronized; the pool lock covers it.
         let _guard = self.ctx.pool_lock.lock();
+        self.ctx
+            .counters
+            .submissions
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         // SAFETY: the fence is unsignaled (reset after every wait), the command buffer is
         // executable and not pending (we waited for the previous submit).
         unsafe {
