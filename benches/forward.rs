@@ -79,7 +79,7 @@ fn forward(c: &mut Criterion) {
             let mut timer = Timer::new(&ctx, 8).unwrap();
             let recorded = ctx
                 .record(Some(&mut timer), |rec| {
-                    renderer.record_forward(rec, &gpu, method)
+                    renderer.record_forward(rec, &gpu, method).map(|_| ())
                 })
                 .unwrap();
             for (clock, gpu_clock) in [("wall", false), ("gpu", true)] {

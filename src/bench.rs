@@ -566,7 +566,7 @@ impl<'a> Variant<'a> {
             None
         };
         let recorded = ctx.record(timer.as_mut(), |rec| {
-            renderer.record_forward(rec, &gpu, method)
+            renderer.record_forward(rec, &gpu, method).map(|_| ())
         })?;
         Ok(Self {
             method,
@@ -1020,21 +1020,22 @@ pub fn run_backward(
                 &scene.lighting,
                 &scene.settings,
             )?;
-            let prepared = renderer.run(ctx, &mut gpu, method).and_then(|()| {
-                let gb = GradBuffers::new(ctx, &gpu, method)?;
-                gb.set_d_image(ctx, &gpu, &d_image)?;
+            let prepared = renderer.run(ctx, &mut gpu, method).and_then(|binned| {
+                let gb = GradBuffers::new(ctx, binned.scene(), method)?;
+                gb.set_d_image(ctx, binned.scene(), &d_image)?;
                 // A first, untimed backward: it also tells whether the device can run it.
-                renderer.backward(ctx, &gpu, &d_image, method, false)?;
-                Ok(gb)
+                renderer.backward(ctx, &binned, &d_image, false)?;
+                Ok((binned, gb))
             });
-            let gb = match prepared {
-                Ok(gb) => gb,
+            let (binned, gb) = match prepared {
+                Ok(prepared) => prepared,
                 Err(Error::Limit(why)) => {
                     progress(&format!("{} {label}: skipped: {why}", scene.name));
                     continue;
                 }
                 Err(e) => return Err(e),
             };
+            let gpu = binned.scene();
             let counts = gpu.pair_counts(ctx, method)?;
             let entries = match method {
                 Method::Tiled { .. } => Some(gpu.binned_entries()),
@@ -1047,10 +1048,12 @@ pub fn run_backward(
                     None
                 };
                 let recorded = ctx.record(timer.as_mut(), |rec| {
-                    if pass == "forward+backward" {
-                        renderer.record_forward(rec, &gpu, method)?;
-                    }
-                    renderer.grad_kernels().record(rec, &gpu, &gb)
+                    let binned = if pass == "forward+backward" {
+                        renderer.record_forward(rec, gpu, method)?
+                    } else {
+                        binned
+                    };
+                    renderer.grad_kernels().record(rec, &binned, &gb, &gb.io())
                 })?;
                 let mut samples = Samples::default();
                 for _ in 0..repeats {

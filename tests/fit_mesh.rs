@@ -305,11 +305,11 @@ fn a_fit_that_outgrows_its_entry_capacity_equals_one_that_never_did() {
 
 #[test]
 fn the_iteration_gate_matches_its_twin_and_its_stop_is_sticky() {
-    use softvk::fit::gate::{GATE_SLOTS, IterationGate, cpu};
+    use softvk::gpu::gate::{GATE_SLOTS, IterationGate, cpu};
     let Some(gpu) = common::gpu() else { return };
     let mut gate = IterationGate::new(&gpu).unwrap();
     let grids = [[3, 1, 1], [7, 2, 1], [1, 1, 1]];
-    gate.upload(&gpu, &grids).unwrap();
+    gate.upload(&grids).unwrap();
     let total = gpu.upload_buffer("total", &[0u32]).unwrap();
     let capacity = 100;
     let mut status = [0u32; 4];

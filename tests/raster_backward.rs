@@ -156,7 +156,7 @@ fn check(
     for method in METHODS {
         let scene = forward(r, gpu, mesh, cams, s, method);
         let got = r
-            .backward(gpu, &scene, &w, method, cameras)
+            .backward(gpu, &scene.binned(method).unwrap(), &w, cameras)
             .unwrap_or_else(|e| panic!("{what} {method:?}: {e}"));
         worst = worst.max(assert_close(
             &format!("{what} {method:?} vs twin"),
@@ -295,24 +295,14 @@ fn repeated_backward_runs_are_bit_identical() {
         Method::Tiled { tile: 8 },
         Method::Tiled { tile: 16 },
     ] {
+        let a_scene = forward(&r, &gpu, &mesh, &cams, &s, method);
         let a = r
-            .backward(
-                &gpu,
-                &forward(&r, &gpu, &mesh, &cams, &s, method),
-                &w,
-                method,
-                true,
-            )
+            .backward(&gpu, &a_scene.binned(method).unwrap(), &w, true)
             .unwrap();
         let r2 = Renderer::new(&gpu).unwrap();
+        let b_scene = forward(&r2, &gpu, &mesh, &cams, &s, method);
         let b = r2
-            .backward(
-                &gpu,
-                &forward(&r2, &gpu, &mesh, &cams, &s, method),
-                &w,
-                method,
-                true,
-            )
+            .backward(&gpu, &b_scene.binned(method).unwrap(), &w, true)
             .unwrap();
         assert!(bits(&a) == bits(&b), "{method:?}");
     }
@@ -404,7 +394,7 @@ fn gradient_descent_on_one_triangle_matches_a_silhouette() {
                 .map(|(p, t)| [0.0, 0.0, 0.0, 2.0 * (p[3] - t[3])])
                 .collect();
             let g = r
-                .backward(&gpu, &scene, &d, Method::default(), false)
+                .backward(&gpu, &scene.binned(Method::default()).unwrap(), &d, false)
                 .unwrap();
             for k in 0..3 {
                 for c in 0..2 {
@@ -432,31 +422,18 @@ fn backward_input_errors() {
     let s = settings(8, 8);
     let scene = forward(&r, &gpu, &mesh, &cams, &s, Method::Tiled { tile: 8 });
     let err = r
-        .backward(
-            &gpu,
-            &scene,
-            &weights(10, 1),
-            Method::Tiled { tile: 8 },
-            false,
-        )
+        .backward(&gpu, &scene.binned(Method::Tiled { tile: 8 }).unwrap(), &weights(10, 1), false)
         .unwrap_err();
     assert!(matches!(err, softvk::Error::Input(_)), "{err}");
     let mut w = weights(64, 1);
     w[3][1] = f32::NAN;
     let err = r
-        .backward(&gpu, &scene, &w, Method::Tiled { tile: 8 }, false)
+        .backward(&gpu, &scene.binned(Method::Tiled { tile: 8 }).unwrap(), &w, false)
         .unwrap_err();
     assert!(err.to_string().contains("not finite"), "{err}");
-    let err = r
-        .backward(
-            &gpu,
-            &scene,
-            &weights(64, 1),
-            Method::Tiled { tile: 16 },
-            false,
-        )
-        .unwrap_err();
-    assert!(matches!(err, softvk::Error::Input(_)), "{err}");
+    // A backward over tiles the scene was not binned with: misuse, caught before any work.
+    let err = scene.binned(Method::Tiled { tile: 16 }).unwrap_err();
+    assert!(matches!(err, softvk::Error::Misuse(_)), "{err}");
 }
 
 /// A batch of two meshes of equal topology, four views: each mesh's gradients (positions,
@@ -487,7 +464,7 @@ fn a_batch_differentiates_as_each_mesh_alone() {
             .prepare_batch(&gpu, &meshes, &views, &lighting(), &s)
             .unwrap();
         r.run(&gpu, &mut scene, method).unwrap();
-        let batch = r.backward(&gpu, &scene, &w, method, true).unwrap();
+        let batch = r.backward(&gpu, &scene.binned(method).unwrap(), &w, true).unwrap();
         let nv = meshes[0].vertex_count();
         let nc = batch.colors.len() / 2;
         for (m, mesh) in meshes.iter().enumerate() {
@@ -498,7 +475,7 @@ fn a_batch_differentiates_as_each_mesh_alone() {
                 .flat_map(|&v| w[v * px..(v + 1) * px].iter().copied())
                 .collect();
             let alone_scene = forward(&r, &gpu, mesh, &my_cams, &s, method);
-            let alone = r.backward(&gpu, &alone_scene, &my_w, method, true).unwrap();
+            let alone = r.backward(&gpu, &alone_scene.binned(method).unwrap(), &my_w, true).unwrap();
             let what = format!("{method:?} mesh {m}");
             assert!(
                 batch.positions[m * nv..(m + 1) * nv] == alone.positions[..],
@@ -574,9 +551,10 @@ fn backward_split(
 ) -> (Gradients, u64, u32) {
     let gb = GradBuffers::with_split(gpu, scene, method, split).unwrap();
     gb.set_d_image(gpu, scene, w).unwrap();
-    gpu.submit_and_wait(|rec| r.grad_kernels().record(rec, scene, &gb))
+    let binned = scene.binned(method).unwrap();
+    gpu.submit_and_wait(|rec| r.grad_kernels().record(rec, &binned, &gb, &gb.io()))
         .unwrap();
-    let g = r.grad_kernels().finish(gpu, scene, &gb, true).unwrap();
+    let g = r.grad_kernels().finish(gpu, scene, &gb, &gb.io(), true).unwrap();
     (g, gb.chunk_units(), gb.bands())
 }
 
@@ -801,7 +779,7 @@ fn alpha_only_backwards_equal_the_full_backward_for_an_alpha_upstream() {
                 let what = format!("{dist:?} {alpha:?} {method:?}");
                 let full = forward(&r, &gpu, &mesh, &cams, &s, method);
                 let want = r
-                    .backward(&gpu, &full, &alpha_upstream, method, false)
+                    .backward(&gpu, &full.binned(method).unwrap(), &alpha_upstream, false)
                     .unwrap();
                 assert!(values(&want).iter().any(|&x| x != 0.0), "{what}");
                 // Declared on the buffers, over the full render.
@@ -809,16 +787,17 @@ fn alpha_only_backwards_equal_the_full_backward_for_an_alpha_upstream() {
                 gb.set_alpha_only(true);
                 gb.set_d_image(&gpu, &full, &alpha_upstream).unwrap();
                 let k = r.grad_kernels();
-                gpu.submit_and_wait(|rec| k.record(rec, &full, &gb))
+                let binned = full.binned(method).unwrap();
+                gpu.submit_and_wait(|rec| k.record(rec, &binned, &gb, &gb.io()))
                     .unwrap();
-                let declared = k.finish(&gpu, &full, &gb, false).unwrap();
+                let declared = k.finish(&gpu, &full, &gb, &gb.io(), false).unwrap();
                 assert!(values(&declared) == values(&want), "{what}: declared");
                 // A silhouette render's backward.
                 let mut sil = r.prepare(&gpu, &mesh, &cams, &lighting(), &s).unwrap();
                 sil.set_silhouette_only(true);
                 r.run(&gpu, &mut sil, method).unwrap();
                 let got = r
-                    .backward(&gpu, &sil, &alpha_upstream, method, false)
+                    .backward(&gpu, &sil.binned(method).unwrap(), &alpha_upstream, false)
                     .unwrap();
                 assert!(values(&got) == values(&want), "{what}: silhouette");
             }

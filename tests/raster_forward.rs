@@ -1411,7 +1411,7 @@ fn misuse_and_small_buffers_are_matchable_errors() {
     // The tiled forward recorded, or its pairs counted, before any tiled run.
     let tiled = Method::Tiled { tile: 8 };
     let err = gpu
-        .submit_and_wait(|rec| r.record_forward(rec, &scene, tiled))
+        .submit_and_wait(|rec| r.record_forward(rec, &scene, tiled).map(|_| ()))
         .unwrap_err();
     assert!(matches!(err, Error::Misuse(_)), "{err}");
     let err = scene.pair_counts(&gpu, tiled).unwrap_err();

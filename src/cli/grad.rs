@@ -131,8 +131,8 @@ pub fn run(args: &GradArgs) -> Result<()> {
     };
     let renderer = Renderer::new(&ctx)?;
     let mut scene = renderer.prepare(&ctx, &mesh, &[camera], &lighting, &settings)?;
-    renderer.run(&ctx, &mut scene, method)?;
-    let grads = renderer.backward(&ctx, &scene, &weights, method, camera_out.is_some())?;
+    let binned = renderer.run(&ctx, &mut scene, method)?;
+    let grads = renderer.backward(&ctx, &binned, &weights, camera_out.is_some())?;
     ctx.check_validation()?;
 
     let mut csv = String::from("vertex,dx,dy,dz\n");

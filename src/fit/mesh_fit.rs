@@ -32,7 +32,7 @@ use super::checkpoint::{
     Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, read_log, read_optimizer,
     restore_optimizer, write_log, write_optimizer,
 };
-use super::gate::IterationGate;
+use crate::gpu::gate::IterationGate;
 use super::{Adam, AdamOptions, Deform, GradOut, Regularizers, SilhouetteLoss};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -403,6 +403,20 @@ pub fn fit_mesh_resumable(
     })
 }
 
+/// The parts of a fit an iteration records, borrowed apart from the scene and the gate.
+#[derive(Clone, Copy)]
+struct FitParts<'a> {
+    opts: &'a MeshFitOptions,
+    deform: &'a Deform,
+    regs: &'a Regularizers,
+    sil: &'a SilhouetteLoss,
+    adam: &'a Adam,
+    params: &'a Buffer,
+    d_params: &'a Buffer,
+    targets: &'a Buffer,
+    grads: &'a GradBuffers,
+}
+
 /// A fit's GPU state: the scene, the losses, the optimizer, the parameters and the guarded
 /// bins, ready to run iterations ([`Fitter::run`]). Also what the fitting benchmark times.
 pub(crate) struct Fitter<'c> {
@@ -491,13 +505,11 @@ impl<'c> Fitter<'c> {
             Some(c) => c.min(max_capacity),
             None => {
                 // One counting submission on the template.
-                renderer.reserve_guarded(ctx, &mut scene, opts.tile, 1)?;
                 ctx.submit_and_wait(|rec| {
-                    deform.record_forward(rec, params.whole(), scene.positions.whole())?;
-                    renderer.record_setup_and_count(rec, &scene)
+                    deform.record_forward(rec, params.whole(), scene.positions().whole())
                 })?;
-                let total: Vec<u32> = ctx.read_buffer(scene.bins[0].total_buffer(), 0, 1)?;
-                with_headroom(u64::from(total[0]), max_capacity, views)?
+                let total = renderer.count_entries(ctx, &mut scene, opts.tile)?;
+                with_headroom(total, max_capacity, views)?
             }
         };
         renderer.reserve_guarded(ctx, &mut scene, opts.tile, capacity)?;
@@ -530,53 +542,58 @@ impl<'c> Fitter<'c> {
         })
     }
 
-    /// Records iteration `it`: the forward up to the count, the gate, and the rest gated on it.
-    /// Returns the gated dispatches' grids.
-    fn record_iteration(&self, rec: &mut Recorder<'_>, it: u32) -> Result<Vec<[u32; 3]>> {
-        let o = &self.opts;
-        let scene = &self.scene;
-        let g = &self.grads;
+    /// Records iteration `it`: the deformation, then the guarded forward with the rest of the
+    /// iteration (loss, backward, regularizers, deformation backward, Adam) gated on the count.
+    fn record_iteration(
+        renderer: &Renderer,
+        scene: &GpuScene,
+        gate: &mut IterationGate,
+        parts: &FitParts,
+        rec: &mut Recorder<'_>,
+        it: u32,
+    ) -> Result<()> {
+        let FitParts {
+            opts: o,
+            deform,
+            regs,
+            sil,
+            adam,
+            params,
+            d_params,
+            targets,
+            grads: g,
+        } = *parts;
         rec.pass("deform", |rec| {
-            self.deform
-                .record_forward(rec, self.params.whole(), scene.positions.whole())
+            deform.record_forward(rec, params.whole(), scene.positions().whole())
         })?;
-        self.renderer.record_setup_and_count(rec, scene)?;
-        self.gate
-            .record_check(rec, scene.bins[0].total_buffer().whole(), it, self.capacity)?;
-        self.gate.record_gated(rec, |rec| {
-            self.renderer.record_rest_guarded(rec, scene)?;
+        renderer.record_forward_guarded(rec, scene, gate, it, |rec, binned| {
+            let io = g.io();
             rec.pass("silhouette loss", |rec| {
-                self.sil.record(
+                sil.record(
                     rec,
                     scene.output().whole(),
-                    self.targets.whole(),
-                    Some(GradOut::write(g.d_image.whole())),
+                    targets.whole(),
+                    Some(GradOut::write(io.upstream)),
                 )
             })?;
-            self.renderer.grad_kernels().record(rec, scene, g)?;
+            renderer.grad_kernels().record(rec, &binned, g, &io)?;
             rec.pass("regularizers", |rec| {
-                self.regs.record_laplacian(
+                regs.record_laplacian(
                     rec,
-                    scene.positions.whole(),
-                    Some(GradOut::accumulate(g.position_grads.whole(), o.laplacian)),
+                    scene.positions().whole(),
+                    Some(GradOut::accumulate(io.positions, o.laplacian)),
                 )?;
-                self.regs.record_flatten(
+                regs.record_flatten(
                     rec,
-                    scene.positions.whole(),
-                    Some(GradOut::accumulate(g.position_grads.whole(), o.flatten)),
+                    scene.positions().whole(),
+                    Some(GradOut::accumulate(io.positions, o.flatten)),
                 )
             })?;
             rec.pass("deform backward", |rec| {
-                self.deform.record_backward(
-                    rec,
-                    self.params.whole(),
-                    g.position_grads.whole(),
-                    self.d_params.whole(),
-                )
+                deform.record_backward(rec, params.whole(), io.positions, d_params.whole())
             })?;
             rec.pass("adam", |rec| {
-                self.adam
-                    .record_step(rec, self.params.whole(), self.d_params.whole(), it)
+                adam.record_step(rec, params.whole(), d_params.whole(), it)
             })
         })
     }
@@ -590,28 +607,25 @@ impl<'c> Fitter<'c> {
         last: u32,
         timer: Option<&mut Timer>,
     ) -> Result<Option<u32>> {
-        let mut grids: Option<Vec<[u32; 3]>> = None;
-        let recorded = self.ctx.record(timer, |rec| {
-            self.gate.record_reset(rec);
+        let parts = FitParts {
+            opts: &self.opts,
+            deform: &self.deform,
+            regs: &self.regs,
+            sil: &self.sil,
+            adam: &self.adam,
+            params: &self.params,
+            d_params: &self.d_params,
+            targets: &self.targets,
+            grads: &self.grads,
+        };
+        let (renderer, scene, gate) = (&self.renderer, &self.scene, &mut self.gate);
+        self.ctx.submit_and_wait_timed(timer, |rec| {
+            gate.record_reset(rec);
             for it in first..=last {
-                let g = self.record_iteration(rec, it)?;
-                match &grids {
-                    None => grids = Some(g),
-                    Some(same) if *same == g => {}
-                    Some(_) => {
-                        return Err(Error::Limit(
-                            "fit: iterations of one submission recorded different dispatches"
-                                .into(),
-                        ));
-                    }
-                }
+                Self::record_iteration(renderer, scene, gate, &parts, rec, it)?;
             }
             Ok(())
         })?;
-        self.gate
-            .upload(self.ctx, grids.as_deref().unwrap_or_default())?;
-        recorded.submit_and_wait()?;
-        drop(recorded);
         let status = self.gate.read(self.ctx)?;
         if let Some((stopped, total)) = status.stopped {
             if stopped < first || stopped > last || total <= self.capacity {
@@ -677,12 +691,12 @@ impl<'c> Fitter<'c> {
     pub(crate) fn mesh(&self, template: &Mesh) -> Result<Mesh> {
         self.ctx.submit_and_wait(|rec| {
             self.deform
-                .record_forward(rec, self.params.whole(), self.scene.positions.whole())
+                .record_forward(rec, self.params.whole(), self.scene.positions().whole())
         })?;
         let mut mesh = template.clone();
         mesh.positions = self
             .ctx
-            .read_buffer(&self.scene.positions, 0, template.vertex_count())?;
+            .read_buffer(self.scene.positions(), 0, template.vertex_count())?;
         Ok(mesh)
     }
 

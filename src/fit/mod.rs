@@ -49,7 +49,6 @@ pub mod checkpoint;
 pub mod deform;
 pub mod field_fit;
 pub mod flatten;
-pub mod gate;
 pub mod io;
 pub mod laplacian;
 pub mod mesh_fit;

@@ -65,7 +65,7 @@ use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::raster::backward::GradBuffers;
 use crate::raster::gpu::{GpuScene, Method, Renderer};
-use crate::raster::reference::{ColorMode, FaceColors, RasterSettings};
+use crate::raster::reference::{ColorMode, RasterSettings};
 
 /// A rigid pose: `p' = R(rotation) (p − c) + c + translation` (see the [module docs](self)).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -372,7 +372,7 @@ impl PoseProblem {
         let renderer = Renderer::new(ctx)?;
         let scene =
             renderer.prepare(ctx, mesh, std::slice::from_ref(camera), lighting, settings)?;
-        let rest = scene.meshes[0].positions.clone();
+        let rest = scene.host_meshes()[0].positions.clone();
         let position_bytes = 12 * rest.len() as u64;
         let color_bytes = 12
             * match settings.color_mode {
@@ -401,7 +401,7 @@ impl PoseProblem {
 
     /// Replaces the target (same size, finite).
     pub fn set_target(&mut self, ctx: &Context, target: &[[f32; 4]]) -> Result<()> {
-        check_target(target, &self.scene.settings)?;
+        check_target(target, self.scene.settings())?;
         ctx.write_buffer(&self.target, 0, target)
     }
 
@@ -424,19 +424,18 @@ impl PoseProblem {
         }
         self.set_pose(pose)?;
         let scene = &mut self.scene;
-        scene.settings.sigma = sigma;
-        scene.settings.gamma = gamma;
-        scene.settings.validate()?;
+        scene.set_blur(sigma, gamma)?;
         let (renderer, tile) = (&self.renderer, self.tile);
         let (staging, split, colors) = (&self.staging, self.position_bytes, self.color_bytes);
         ctx.submit_and_wait(|rec| {
-            rec.copy(staging, 0, &scene.positions, 0, split);
-            rec.copy(staging, split, &scene.colors, 0, colors);
+            rec.copy(staging, 0, scene.positions(), 0, split);
+            rec.copy(staging, split, scene.colors(), 0, colors);
             Ok(())
         })?;
         // The exact-sized tiled forward (its count is read back: the host round trip of this
         // loop is the pose chain's anyway).
-        renderer.run(ctx, scene, Method::Tiled { tile })?;
+        let binned = renderer.run(ctx, scene, Method::Tiled { tile })?;
+        let scene = binned.scene();
         let entries = scene.binned_entries();
         if self
             .grads
@@ -448,18 +447,19 @@ impl PoseProblem {
             self.grads = Some(GradBuffers::new(ctx, scene, Method::Tiled { tile })?);
         }
         let gb = self.grads.as_ref().expect("made above");
+        let io = gb.io();
         let kernels = renderer.grad_kernels();
         ctx.submit_and_wait(|rec| {
             self.mse.record(
                 rec,
                 scene.output().whole(),
                 self.target.whole(),
-                Some(GradOut::write(gb.d_image.whole())),
+                Some(GradOut::write(io.upstream)),
             )?;
-            kernels.record(rec, scene, gb)
+            kernels.record(rec, &binned, gb, &io)
         })?;
         let loss = f64::from(self.mse.read_loss(ctx)?);
-        let g = kernels.finish(ctx, scene, gb, false)?;
+        let g = kernels.finish(ctx, scene, gb, &io, false)?;
         Ok(Evaluation {
             loss,
             gradient: pose_gradient(&self.rest, self.centre, pose, &g.positions),
@@ -468,7 +468,7 @@ impl PoseProblem {
 
     /// The last evaluation's image: RGBA per pixel, row 0 at the top.
     pub fn read_image(&self, ctx: &Context) -> Result<Vec<[f32; 4]>> {
-        let s = &self.scene.settings;
+        let s = self.scene.settings();
         ctx.read_buffer(self.scene.output(), 0, (s.width * s.height) as usize)
     }
 
@@ -480,19 +480,7 @@ impl PoseProblem {
             .iter()
             .map(|p| [p.x as f32, p.y as f32, p.z as f32])
             .collect();
-        let mesh = &mut self.scene.meshes[0];
-        for (dst, src) in mesh.positions.iter_mut().zip(&posed) {
-            *dst = DVec3::from(src.map(f64::from));
-        }
-        let colors: Vec<f32> =
-            match FaceColors::of(mesh, &self.scene.lighting, self.scene.settings.color_mode) {
-                FaceColors::Surface { texels, .. } => texels,
-                FaceColors::Vertex { colors, .. } => colors,
-            }
-            .iter()
-            .flatten()
-            .map(|&c| c as f32)
-            .collect();
+        let colors = self.scene.relight(0, &posed)?;
         let (split, color_bytes) = (self.position_bytes as usize, self.color_bytes as usize);
         let bytes = self
             .staging

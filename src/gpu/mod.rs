@@ -1,6 +1,7 @@
 //! The Vulkan compute core: context, memory, kernels and recording.
 
 mod context;
+pub mod gate;
 mod kernel;
 mod memory;
 mod record;

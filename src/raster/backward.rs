@@ -39,7 +39,7 @@ use glam::DVec3;
 
 use super::fine::{FineModes, RasterPush};
 use super::gpu::{
-    ColorWork, GpuScene, Method, brute_backward_iterations, reduce_iterations,
+    Binned, ColorWork, GpuScene, Method, brute_backward_iterations, reduce_iterations,
     texel_reduce_iterations, tiled_backward_iterations,
 };
 use super::reference::ColorMode;
@@ -177,14 +177,14 @@ pub struct GradSplit {
 
 /// The buffers of one scene's backward, reusable across backward passes of that scene.
 pub struct GradBuffers {
-    pub(crate) d_image: Buffer,
+    d_image: Buffer,
     partials: Buffer,
     face_grads: Buffer,
     corner_world: Buffer,
     corner_cam: Buffer,
     vertex_offsets: Buffer,
     vertex_slots: Buffer,
-    pub(crate) position_grads: Buffer,
+    position_grads: Buffer,
     color_grads: Buffer,
     method: Method,
     stride: u32,
@@ -198,6 +198,44 @@ pub struct GradBuffers {
     bands: u32,
     /// The upstream gradient has no RGB part ([`GradBuffers::set_alpha_only`]).
     alpha_only: bool,
+}
+
+/// Where a backward reads its upstream gradient and writes its results ([`GradKernels::record`]):
+/// buffer ranges that may belong to a host. [`GradBuffers::io`] gives the buffers' own.
+#[derive(Clone, Copy)]
+pub struct GradIo<'a> {
+    /// dL/d(output RGBA): 4 floats per output pixel, view-major, row-major.
+    pub upstream: BufferRange<'a>,
+    /// dL/d(world positions), written: 3 floats per vertex, mesh after mesh.
+    pub positions: BufferRange<'a>,
+    /// dL/d(lit colours), written: 3 floats per texel slot (surface colours, face after face)
+    /// or per vertex (vertex colours), mesh after mesh.
+    pub colors: BufferRange<'a>,
+}
+
+impl GradIo<'_> {
+    /// Bytes each range needs for the backward of `scene`.
+    pub fn sizes(scene: &GpuScene) -> [u64; 3] {
+        let s = &scene.settings;
+        let batch = scene.meshes.len() as u64;
+        let outputs = u64::from(s.width) * u64::from(s.height) * u64::from(scene.view_count);
+        let vertices = u64::from(scene.vertex_count) * batch;
+        let colors = match s.color_mode {
+            ColorMode::Surface => {
+                u64::from(scene.face_count) * u64::from(scene.texture_res).pow(2) * batch
+            }
+            ColorMode::Vertex => vertices,
+        };
+        [16 * outputs, 12 * vertices, 12 * colors]
+    }
+
+    /// [`Error::BufferTooSmall`] when a range is smaller than the backward of `scene` needs.
+    fn check(&self, scene: &GpuScene) -> Result<()> {
+        let [upstream, positions, colors] = Self::sizes(scene);
+        self.upstream.require(upstream, "the backward's upstream gradient")?;
+        self.positions.require(positions, "the backward's position gradients")?;
+        self.colors.require(colors, "the backward's colour gradients")
+    }
 }
 
 fn checked(ctx: &Context, what: &str, bytes: u64) -> Result<u64> {
@@ -338,7 +376,7 @@ impl GradBuffers {
     /// As [`GradBuffers::new`], with tiled partials for `entries` (face, tile) entries (at least
     /// the scene's largest group; at most what one binding holds, more take several chunks): a
     /// guarded fitting loop sizes them as its bins.
-    pub(crate) fn with_entry_capacity(
+    pub fn with_entry_capacity(
         ctx: &Context,
         scene: &GpuScene,
         method: Method,
@@ -433,6 +471,16 @@ impl GradBuffers {
             bands,
             alpha_only: false,
         })
+    }
+
+    /// The buffers' own upstream gradient (written by [`GradBuffers::set_d_image`], or by a
+    /// loss recorded before the backward) and results, as the backward's ranges.
+    pub fn io(&self) -> GradIo<'_> {
+        GradIo {
+            upstream: self.d_image.whole(),
+            positions: self.position_grads.whole(),
+            colors: self.color_grads.whole(),
+        }
     }
 
     /// Declares whether the upstream gradient's RGB part is zero everywhere (silhouette losses:
@@ -530,12 +578,30 @@ impl GradKernels {
         push
     }
 
-    /// Records the whole backward of `scene` into `gb` (after its forward and
-    /// [`GradBuffers::set_d_image`]): per-face gradients by `gb`'s method (partials chunk by
-    /// chunk, each chunk reduced into the running per-face and per-texel sums), then the world
-    /// chain and the vertex sums. [`GradKernels::finish`] reads them back and adds the host's
-    /// share.
-    pub fn record(&self, rec: &mut Recorder<'_>, scene: &GpuScene, gb: &GradBuffers) -> Result<()> {
+    /// Records the backward of the forward that left `binned`: dL/d(output RGBA) is read from
+    /// `io.upstream` (view-major, as [`GradBuffers::set_d_image`] lays it out), dL/d(positions)
+    /// and dL/d(lit colours) are written to `io.positions` and `io.colors` (xyz / RGB triples,
+    /// mesh after mesh); `gb` holds the intermediate sums. Per-face gradients by `gb`'s method
+    /// (partials chunk by chunk, each chunk reduced into the running per-face and per-texel
+    /// sums), then the world chain and the vertex sums. Any of the ranges may be a host's
+    /// ([`Context::import_buffer`]). [`GradKernels::finish`] reads the results back and adds the
+    /// host's share.
+    pub fn record(
+        &self,
+        rec: &mut Recorder<'_>,
+        binned: &Binned<'_>,
+        gb: &GradBuffers,
+        io: &GradIo<'_>,
+    ) -> Result<()> {
+        let scene = binned.scene();
+        if binned.method() != gb.method {
+            return Err(Error::Misuse(format!(
+                "the backward buffers were made for {:?}, the forward ran {:?}",
+                gb.method,
+                binned.method()
+            )));
+        }
+        io.check(scene)?;
         let items = scene.face_count * scene.view_count;
         let name = match gb.method {
             Method::Brute => "grad brute",
@@ -544,11 +610,11 @@ impl GradKernels {
         rec.pass(name, |rec| {
             rec.fill(gb.face_grads.whole(), 0);
             if scene.settings.color_mode == ColorMode::Surface {
-                rec.fill(gb.color_grads.whole(), 0);
+                rec.fill(io.colors, 0);
             }
             match gb.method {
-                Method::Brute => self.record_brute(rec, scene, gb),
-                Method::Tiled { tile } => self.record_tiled(rec, scene, gb, tile),
+                Method::Brute => self.record_brute(rec, scene, gb, io),
+                Method::Tiled { tile } => self.record_tiled(rec, scene, gb, io, tile),
             }
         })?;
         let world = WorldPush {
@@ -593,8 +659,8 @@ impl GradKernels {
                     views: scene.views.whole(),
                     corner_world: gb.corner_world.whole(),
                     face_grads: gb.face_grads.whole(),
-                    position_grads: gb.position_grads.whole(),
-                    color_grads: gb.color_grads.whole(),
+                    position_grads: io.positions,
+                    color_grads: io.colors,
                 }
                 .for_kernel(&self.gather)?,
                 &gather,
@@ -609,6 +675,7 @@ impl GradKernels {
         rec: &mut Recorder<'_>,
         scene: &GpuScene,
         gb: &GradBuffers,
+        io: &GradIo<'_>,
     ) -> Result<()> {
         let limit = rec.context().info().shader_loop_limit();
         if let Some(limit) = limit {
@@ -656,14 +723,14 @@ impl GradKernels {
                     faces: scene.faces.whole(),
                     image: scene.image.whole(),
                     aux: scene.aux.whole(),
-                    d_image: gb.d_image.whole(),
+                    d_image: io.upstream,
                     partials: gb.partials.whole(),
                 }
                 .for_kernel(&kernel)?,
                 &push,
                 groups(end - begin, 64)?,
             )?;
-            self.record_reduce(rec, scene, gb, &group, begin, end, limit)?;
+            self.record_reduce(rec, scene, gb, io, &group, begin, end, limit)?;
             begin = end;
         }
         Ok(())
@@ -675,6 +742,7 @@ impl GradKernels {
         rec: &mut Recorder<'_>,
         scene: &GpuScene,
         gb: &GradBuffers,
+        io: &GradIo<'_>,
         tile: u32,
     ) -> Result<()> {
         let grid = scene.grid(tile)?;
@@ -732,7 +800,7 @@ impl GradKernels {
                     faces: scene.faces.whole(),
                     image: scene.image.whole(),
                     aux: scene.aux.whole(),
-                    d_image: gb.d_image.whole(),
+                    d_image: io.upstream,
                     partials: gb.partials.whole(),
                     pairs: bins.entries().whole(),
                     pair_items: bins.entry_items().whole(),
@@ -744,7 +812,7 @@ impl GradKernels {
                     &push,
                     groups(tiles * parts, 1)?,
                 )?;
-                self.record_reduce(rec, scene, gb, &units, begin, end, limit)?;
+                self.record_reduce(rec, scene, gb, io, &units, begin, end, limit)?;
                 begin = end;
             }
         }
@@ -772,6 +840,7 @@ impl GradKernels {
         rec: &mut Recorder<'_>,
         scene: &GpuScene,
         gb: &GradBuffers,
+        io: &GradIo<'_>,
         group: &UnitGroup<'_>,
         begin: u64,
         end: u64,
@@ -838,7 +907,7 @@ impl GradKernels {
                         views: scene.views.whole(),
                         offsets: group.offsets,
                         partials: gb.partials.whole(),
-                        texel_grads: gb.color_grads.whole(),
+                        texel_grads: io.colors,
                     }
                     .for_kernel(&self.reduce_texels)?,
                     &push,
@@ -859,20 +928,23 @@ impl GradKernels {
         ctx: &Context,
         scene: &GpuScene,
         gb: &GradBuffers,
+        io: &GradIo<'_>,
         cameras: bool,
     ) -> Result<Gradients> {
         let nv = scene.vertex_count as usize;
         let nf = scene.face_count as usize;
         let batch = scene.meshes.len();
         let widen = |v: [f32; 3]| v.map(f64::from);
-        let positions: Vec<[f32; 3]> = ctx.read_buffer(&gb.position_grads, 0, nv * batch)?;
+        let positions: Vec<[f32; 3]> =
+            ctx.read_buffer(io.positions.buffer, io.positions.offset, nv * batch)?;
         let mode = scene.settings.color_mode;
         let slots = reference_grad::color_slots(mode, scene.texture_res);
         let per_mesh_colors = match mode {
             ColorMode::Surface => nf * slots,
             ColorMode::Vertex => nv,
         };
-        let lit: Vec<[f32; 3]> = ctx.read_buffer(&gb.color_grads, 0, per_mesh_colors * batch)?;
+        let lit: Vec<[f32; 3]> =
+            ctx.read_buffer(io.colors.buffer, io.colors.offset, per_mesh_colors * batch)?;
         let adjacency = VertexFaces::new(&scene.meshes[0].faces, nv);
         let mut out = Gradients {
             positions: Vec::with_capacity(nv * batch),

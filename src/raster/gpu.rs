@@ -20,19 +20,26 @@
 //! once; a [`GpuScene`] keeps a scene's buffers so it can be rendered again (benchmarks record
 //! it once and resubmit).
 //!
-//! Fitting loops, which must not wait for the count, bin *guarded* instead
-//! ([`Renderer::reserve_guarded`], [`Renderer::record_setup_and_count`],
-//! [`Renderer::record_rest_guarded`]): every view in one group, entry buffers reserved with
-//! headroom, the sort over the whole capacity with sentinel keys; the caller gates the stages after
-//! the count on the count fitting (`fit::gate`).
+//! Loops that must not wait for the count (fitting, a host engine's frames) bin *guarded*
+//! instead: [`Renderer::reserve_guarded`] sizes every view as one group with a capacity of
+//! entries, and [`Renderer::record_forward_guarded`] records the forward into any command
+//! buffer with the sort over the whole capacity (sentinel keys) and everything after the count
+//! gated on the GPU by an [`IterationGate`]: no read-back, no submission.
+//!
+//! Every forward returns a [`Binned`]: the scene and how its faces were binned, which its
+//! backward ([`GradKernels::record`], [`Renderer::backward`]) takes. It borrows the scene, so
+//! nothing re-bins it in between.
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
+use crate::gpu::gate::IterationGate;
 use crate::gpu::{Buffer, Context, MemoryKind, Recorder};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::primitives::binning::{self, BinJob, Binner, Bins, ItemLayout, TileGrid};
 use crate::raster::backward::{GradBuffers, GradKernels};
+#[cfg(doc)]
+use crate::raster::backward::GradIo;
 use crate::raster::brute::{BruteBindings, BruteRaster};
 use crate::raster::fine::{PixelAux, TiledBindings, TiledRaster, check_tile_size};
 use crate::raster::reference::{ColorMode, FaceColors, MeshF64, RasterSettings};
@@ -136,6 +143,37 @@ pub struct GpuScene {
     pub(crate) meshes: Vec<MeshF64>,
     pub(crate) lighting: Lighting,
     pub(crate) views_host: Vec<(usize, Camera)>,
+}
+
+/// What a forward leaves for its backward: the scene it rendered and how (with tiles, the scene's
+/// bins and view groups hold the binning). Every forward returns one; the backward takes it.
+/// It borrows the scene, so the scene cannot be re-binned, re-sized or re-rendered while it
+/// lives.
+#[derive(Clone, Copy)]
+pub struct Binned<'s> {
+    scene: &'s GpuScene,
+    method: Method,
+}
+
+impl std::fmt::Debug for Binned<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Binned")
+            .field("method", &self.method)
+            .field("groups", &self.scene.groups)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<'s> Binned<'s> {
+    /// The scene rendered.
+    pub fn scene(&self) -> &'s GpuScene {
+        self.scene
+    }
+
+    /// How faces met pixels.
+    pub fn method(&self) -> Method {
+        self.method
+    }
 }
 
 /// Views binned together: `first .. first + views`, with their (face, tile) entry count.
@@ -466,10 +504,95 @@ impl GpuScene {
         Ok(counts)
     }
 
-    /// The output image buffer (RGBA per output pixel, view-major): the 2×2 average with
-    /// anti-aliasing, else the rendered image.
-    pub(crate) fn output(&self) -> &Buffer {
+    /// The output image buffer (RGBA per output pixel, view-major, row 0 at the top): the 2×2
+    /// average with anti-aliasing, else the rendered image. What a loss recorded after the
+    /// forward reads.
+    pub fn output(&self) -> &Buffer {
         self.small.as_ref().unwrap_or(&self.image)
+    }
+
+    /// The world positions the face setup reads (3 floats per vertex, mesh after mesh): a
+    /// deformation recorded before the forward writes them, a host may copy into them.
+    pub fn positions(&self) -> &Buffer {
+        &self.positions
+    }
+
+    /// The lit colours the fine passes read (RGB per texel slot or per vertex, mesh after mesh).
+    pub fn colors(&self) -> &Buffer {
+        &self.colors
+    }
+
+    /// The settings the scene renders with.
+    pub fn settings(&self) -> &RasterSettings {
+        &self.settings
+    }
+
+    /// Changes σ and γ (SoftRas's blur and the softmax's temperature) for the next forward; an
+    /// error, with nothing changed, when the settings would not validate.
+    pub fn set_blur(&mut self, sigma: f64, gamma: f64) -> Result<()> {
+        let mut settings = self.settings;
+        settings.sigma = sigma;
+        settings.gamma = gamma;
+        settings.validate()?;
+        self.settings = settings;
+        Ok(())
+    }
+
+    /// The batch's meshes in f64, which the backward's host share (lighting, cameras) reads.
+    pub fn host_meshes(&self) -> &[MeshF64] {
+        &self.meshes
+    }
+
+    /// Moves mesh `mesh`'s vertices to `positions` on the host side and returns its colours lit
+    /// anew, packed as [`GpuScene::colors`] holds them: for callers that pose a mesh on the host
+    /// and copy positions and colours into the scene's buffers themselves (the pose fit), so
+    /// the backward's host share sees what the GPU renders.
+    pub fn relight(&mut self, mesh: usize, positions: &[[f32; 3]]) -> Result<Vec<f32>> {
+        let Some(m) = self.meshes.get_mut(mesh) else {
+            return Err(Error::Input(format!(
+                "mesh {mesh} of a batch of {}",
+                self.meshes.len()
+            )));
+        };
+        if positions.len() != m.positions.len() {
+            return Err(Error::Input(format!(
+                "{} positions for a mesh of {} vertices",
+                positions.len(),
+                m.positions.len()
+            )));
+        }
+        for (dst, src) in m.positions.iter_mut().zip(positions) {
+            *dst = glam::DVec3::from(src.map(f64::from));
+        }
+        Ok(
+            match FaceColors::of(m, &self.lighting, self.settings.color_mode) {
+                FaceColors::Surface { texels, .. } => texels,
+                FaceColors::Vertex { colors, .. } => colors,
+            }
+            .iter()
+            .flatten()
+            .map(|&c| c as f32)
+            .collect(),
+        )
+    }
+
+    /// The [`Binned`] the scene's last forward by `method` left, for a backward recorded apart
+    /// from its forward (a benchmark timing the backward alone over one render). Tiled:
+    /// [`Error::Misuse`] unless the last tiled forward used these tiles. The forward's own
+    /// return value says the same without asking; prefer it.
+    pub fn binned(&self, method: Method) -> Result<Binned<'_>> {
+        if let Method::Tiled { tile } = method {
+            if self.tile != Some(tile) || self.groups.is_empty() {
+                return Err(Error::Misuse(format!(
+                    "the scene was not last binned with {tile}-pixel tiles (it was with {:?})",
+                    self.tile
+                )));
+            }
+        }
+        Ok(Binned {
+            scene: self,
+            method,
+        })
     }
 
     /// The view groups of the last tiled run.
@@ -806,9 +929,16 @@ impl Renderer {
 
     /// Runs the whole forward of `scene` (face setup, fine pass by `method`, downsampling),
     /// leaving images and aux on the GPU. Tiled: two submissions per view group (the count's
-    /// total is read back in between to size the entries exactly).
-    pub fn run(&self, ctx: &Context, scene: &mut GpuScene, method: Method) -> Result<()> {
-        self.run_with_cull(ctx, scene, method, true)
+    /// total is read back in between to size the entries exactly). A convenience over the
+    /// recorded stages, which waits; loops record [`Renderer::record_forward_guarded`].
+    pub fn run<'s>(
+        &self,
+        ctx: &Context,
+        scene: &'s mut GpuScene,
+        method: Method,
+    ) -> Result<Binned<'s>> {
+        self.run_with_cull(ctx, scene, method, true)?;
+        Ok(Binned { scene, method })
     }
 
     fn run_with_cull(
@@ -908,42 +1038,85 @@ impl Renderer {
         Ok(())
     }
 
-    /// For loops that re-render one scene (fitting): records the face setup and the binning's
-    /// count for every view as one group, on the tiles of [`Renderer::reserve_guarded`] (the
-    /// total lands in [`Bins::total_buffer`] of `scene.bins[0]`). [`Renderer::record_rest_guarded`]
-    /// records the rest of the forward.
-    pub(crate) fn record_setup_and_count(
-        &self,
-        rec: &mut Recorder<'_>,
-        scene: &GpuScene,
-    ) -> Result<()> {
-        let tile = scene
-            .tile
-            .ok_or_else(|| Error::Misuse("record_setup_and_count before reserve_guarded".into()))?;
+    /// The most (face, tile) entries one binning may hold here: what one storage-buffer binding
+    /// holds, or the budget ([`Renderer::with_entry_budget`]) if smaller.
+    pub fn max_entries(&self, ctx: &Context) -> u64 {
+        binning::max_entries(ctx).min(self.entry_budget.unwrap_or(u64::MAX))
+    }
+
+    /// The (face, tile) entries of every view of `scene` binned as one group on `tile`-pixel
+    /// tiles, counted on the GPU and read back (one submission): what a guarded loop sizes its
+    /// capacity from ([`Renderer::reserve_guarded`]). Sizes the scene's bins as a guarded
+    /// binning of capacity 1 (reserve again before recording).
+    pub fn count_entries(&self, ctx: &Context, scene: &mut GpuScene, tile: u32) -> Result<u64> {
+        self.reserve_guarded(ctx, scene, tile, 1)?;
+        ctx.submit_and_wait(|rec| self.record_setup_and_count(rec, scene))?;
+        scene.bins[0].read_total(ctx)
+    }
+
+    /// Face setup and the count of every view as one group, on the tiles of
+    /// [`Renderer::reserve_guarded`] (the total lands in [`Bins::total_buffer`] of the first bins).
+    fn record_setup_and_count(&self, rec: &mut Recorder<'_>, scene: &GpuScene) -> Result<()> {
+        let (tile, bins) = match (scene.tile, scene.bins.first()) {
+            (Some(tile), Some(bins)) => (tile, bins),
+            _ => {
+                return Err(Error::Misuse(
+                    "a guarded forward needs Renderer::reserve_guarded first".into(),
+                ));
+            }
+        };
         let grid = scene.grid(tile)?;
-        let bins = scene
-            .bins
-            .first()
-            .ok_or_else(|| Error::Misuse("record_setup_and_count before reserve_guarded".into()))?;
         self.record_setup(rec, scene)?;
         self.record_count(rec, scene, bins, grid, 0, scene.view_count)
     }
 
-    /// The most (face, tile) entries one binning may hold here: what one storage-buffer binding
-    /// holds, or the budget ([`Renderer::with_entry_budget`]) if smaller.
-    pub(crate) fn max_entries(&self, ctx: &Context) -> u64 {
-        binning::max_entries(ctx).min(self.entry_budget.unwrap_or(u64::MAX))
+    /// Records the tiled forward of a scene sized by [`Renderer::reserve_guarded`] into any
+    /// command buffer, with no read-back: face setup, the count, `gate`'s check of the count
+    /// against the capacity for `iteration`, then — gated: they run only when the entries fit —
+    /// the sort (over the whole capacity, with sentinels), ranges, the fine pass, the
+    /// downsampling, and whatever `then` records with the returned [`Binned`] (a loss, the
+    /// backward, an optimizer step). When the entries do not fit, none of the gated work runs and
+    /// the gate's status says so ([`IterationGate::read`]): reserve more and record again.
+    pub fn record_forward_guarded<'s>(
+        &self,
+        rec: &mut Recorder<'_>,
+        scene: &'s GpuScene,
+        gate: &mut IterationGate,
+        iteration: u32,
+        then: impl FnOnce(&mut Recorder<'_>, Binned<'s>) -> Result<()>,
+    ) -> Result<()> {
+        self.record_setup_and_count(rec, scene)?;
+        let capacity = scene.groups.first().map_or(0, |g| g.entries);
+        gate.record_check(rec, scene.bins[0].total_buffer().whole(), iteration, capacity)?;
+        gate.record_gated(rec, |rec| {
+            let tile = scene.tile.expect("checked by record_setup_and_count");
+            let grid = scene.grid(tile)?;
+            let job = scene.job(grid, 0, scene.view_count);
+            let bins = &scene.bins[0];
+            rec.pass("bin sort", |rec| {
+                self.binner
+                    .record_sort_guarded(rec, bins, scene.setups.whole(), &job)
+            })?;
+            self.record_fine(rec, scene, bins, grid, 0, scene.view_count)?;
+            self.record_downsample(rec, scene)?;
+            then(
+                rec,
+                Binned {
+                    scene,
+                    method: Method::Tiled { tile },
+                },
+            )
+        })
     }
 
-    /// For loops that never wait for the count (fitting; see the guarded binning of
-    /// [`crate::primitives::binning`]): sizes `scene`'s bins for every view as one group on
-    /// `tile`-pixel tiles with exactly `capacity` entries, and checks the tiled passes against the
-    /// driver's loop cap for any count up to it (a tile holds each face at most once, so its run
-    /// is at most `min(capacity, faces)`). The scene's group then records `capacity` as its
-    /// entries (an upper bound: the count itself stays on the GPU). Record each iteration with
-    /// [`Renderer::record_setup_and_count`] and, gated on the count fitting,
-    /// [`Renderer::record_rest_guarded`].
-    pub(crate) fn reserve_guarded(
+    /// For loops that never wait for the count (fitting, a host's frames; see the guarded
+    /// binning of [`crate::primitives::binning`]): sizes `scene`'s bins for every view as one
+    /// group on `tile`-pixel tiles with exactly `capacity` entries, and checks the tiled passes
+    /// against the driver's loop cap for any count up to it (a tile holds each face at most once,
+    /// so its run is at most `min(capacity, faces)`). The scene's group then records `capacity`
+    /// as its entries (an upper bound: the count itself stays on the GPU). Record each forward
+    /// with [`Renderer::record_forward_guarded`].
+    pub fn reserve_guarded(
         &self,
         ctx: &Context,
         scene: &mut GpuScene,
@@ -997,40 +1170,18 @@ impl Renderer {
         Ok(())
     }
 
-    /// Sort (over the whole entry capacity, with sentinels), ranges, the tiled fine pass and the
-    /// downsampling of a scene sized by [`Renderer::reserve_guarded`], after
-    /// [`Renderer::record_setup_and_count`]. Right only when the count fits the capacity: the
-    /// caller gates these dispatches on it ([`Recorder::gated`]).
-    pub(crate) fn record_rest_guarded(
-        &self,
-        rec: &mut Recorder<'_>,
-        scene: &GpuScene,
-    ) -> Result<()> {
-        let tile = scene
-            .tile
-            .ok_or_else(|| Error::Misuse("record_rest_guarded before reserve_guarded".into()))?;
-        let grid = scene.grid(tile)?;
-        let job = scene.job(grid, 0, scene.view_count);
-        let bins = &scene.bins[0];
-        rec.pass("bin sort", |rec| {
-            self.binner
-                .record_sort_guarded(rec, bins, scene.setups.whole(), &job)
-        })?;
-        self.record_fine(rec, scene, bins, grid, 0, scene.view_count)?;
-        self.record_downsample(rec, scene)
-    }
-
-    /// Records the whole tiled forward of `scene` into one command buffer, for resubmission
+    /// Records the whole forward of `scene` into one command buffer, for resubmission
     /// (benchmarks): face setup, then per view group (or window) of the last run count,
-    /// scatter, sort, ranges and fine pass, then downsampling. Needs a previous
+    /// scatter, sort, ranges and fine pass, then downsampling. Tiled needs a previous
     /// [`Renderer::run`] with the same method (its entry counts size the buffers; resubmitting
-    /// the same scene reproduces them).
-    pub fn record_forward(
+    /// the same scene reproduces them); loops whose scene changes record
+    /// [`Renderer::record_forward_guarded`] instead.
+    pub fn record_forward<'s>(
         &self,
         rec: &mut Recorder<'_>,
-        scene: &GpuScene,
+        scene: &'s GpuScene,
         method: Method,
-    ) -> Result<()> {
+    ) -> Result<Binned<'s>> {
         self.record_setup(rec, scene)?;
         match method {
             Method::Brute => self.record_brute(rec, scene, true)?,
@@ -1048,7 +1199,8 @@ impl Renderer {
                 }
             }
         }
-        self.record_downsample(rec, scene)
+        self.record_downsample(rec, scene)?;
+        Ok(Binned { scene, method })
     }
 
     /// The backward's pipelines (for callers that record the backward themselves).
@@ -1056,22 +1208,22 @@ impl Renderer {
         &self.grad
     }
 
-    /// The backward of the last forward run of `scene`: dL/d(world positions, raw colours, and
-    /// with `cameras` the cameras) given `d_image` = dL/d(output RGBA), view-major. `method`
-    /// picks how faces meet pixels; tiled needs the forward to have run with the same tiles.
-    /// One submission; the host adds lighting's and the cameras' share in f64.
+    /// The backward of the forward that left `binned`: dL/d(world positions, raw colours, and
+    /// with `cameras` the cameras) given `d_image` = dL/d(output RGBA), view-major. A
+    /// convenience over [`GradKernels::record`]: uploads, one submission, read-back; the host
+    /// adds lighting's and the cameras' share in f64.
     pub fn backward(
         &self,
         ctx: &Context,
-        scene: &GpuScene,
+        binned: &Binned<'_>,
         d_image: &[[f32; 4]],
-        method: Method,
         cameras: bool,
     ) -> Result<Gradients> {
-        let gb = GradBuffers::new(ctx, scene, method)?;
+        let scene = binned.scene();
+        let gb = GradBuffers::new(ctx, scene, binned.method())?;
         gb.set_d_image(ctx, scene, d_image)?;
-        ctx.submit_and_wait(|rec| self.grad.record(rec, scene, &gb))?;
-        self.grad.finish(ctx, scene, &gb, cameras)
+        ctx.submit_and_wait(|rec| self.grad.record(rec, binned, &gb, &gb.io()))?;
+        self.grad.finish(ctx, scene, &gb, &gb.io(), cameras)
     }
 
     /// Reads back the images and aux of the last run.

@@ -1,27 +1,34 @@
-//! The gate of a guarded fitting iteration: lets a whole iteration (and many of them) be
-//! recorded into one command buffer although the binning's entry count, which its buffers must
-//! hold, is only known on the GPU.
+//! The gate of a guarded binning: lets a whole forward, backward and optimizer step (and many of
+//! them) be recorded into one command buffer although the binning's entry count, which its
+//! buffers must hold, is only known on the GPU.
 //!
 //! After the count, [`IterationGate::record_check`] records `iteration_gate.comp`: it compares
 //! the count's total with the entry capacity and writes the indirect grids of every later
-//! dispatch of the iteration, recorded inside [`Recorder::gated`] (scatter, sort, ranges, fine
-//! pass, loss, backward, regularizers, deformation backward, Adam): their own grids when the
-//! entries fit, `[0, 0, 0]` when they do not — then none of them runs, so nothing is written out
-//! of bounds and parameters and Adam's moments stay as they were. The stop is sticky: every later
-//! iteration of the submission is skipped too, and the first stop leaves its iteration and total
-//! in a status buffer that the host reads after the submission ([`IterationGate::read`]); it then
-//! grows the buffers to the total and re-runs from that iteration, which gives exactly the
-//! result of a run that never stopped.
+//! dispatch of the iteration, recorded inside [`IterationGate::record_gated`] (scatter, sort,
+//! ranges, fine pass, and whatever the caller records after them: loss, backward, regularizers,
+//! optimizer): their own grids when the entries fit, `[0, 0, 0]` when they do not — then none of
+//! them runs, so nothing is written out of bounds and parameters stay as they were. The stop is
+//! sticky: every later iteration of the submission is skipped too, and the first stop leaves its
+//! iteration and total in a status buffer that the host reads after the submission
+//! ([`IterationGate::read`]); it then grows the buffers to the total and re-runs from that
+//! iteration, which gives exactly the result of a run that never stopped.
+//!
+//! The grids the check copies are known once the gated region is recorded: the gate writes them
+//! then, through a host-visible mapping (no copy, no submission), so the command buffer can be
+//! submitted by anyone. Every region recorded between two [`IterationGate::record_reset`]s must
+//! record the same dispatches; they change only when the buffers are resized, which a host does
+//! after waiting for its submissions (to read the status), so no submission in flight reads them
+//! while they change.
 //!
 //! Only dispatches are gated; fills and copies recorded in a gated region always run and must be
 //! harmless when the rest does not (the binning's sentinel fill of its keys is).
 
 use bytemuck::{Pod, Zeroable};
 
-use crate::error::{Error, Result};
-use crate::gpu::{
+use super::{
     Buffer, BufferRange, Context, INDIRECT_ARGS_BYTES, Kernel, MemoryKind, Recorder, specs,
 };
+use crate::error::{Error, Result};
 
 /// Gated dispatches one iteration may record.
 pub const GATE_SLOTS: u64 = 512;
@@ -45,15 +52,18 @@ pub struct GateStatus {
     pub last_total: u64,
 }
 
-/// The gate's kernel and buffers: the status, the recorded grids and the grids the gated
-/// dispatches read.
+/// The gate's kernel and buffers: the status, the recorded grids (host-visible) and the grids
+/// the gated dispatches read.
 pub struct IterationGate {
     kernel: Kernel,
     status: Buffer,
     grids: Buffer,
     args: Buffer,
-    /// The grids last uploaded to `grids`.
+    /// The grids last written to `grids`.
     uploaded: Vec<[u32; 3]>,
+    /// Whether a gated region was recorded since the last [`IterationGate::record_reset`] (then
+    /// the next must record the same dispatches).
+    recorded: bool,
 }
 
 impl IterationGate {
@@ -63,15 +73,17 @@ impl IterationGate {
         Ok(Self {
             kernel: Kernel::new(ctx, &specs::ITERATION_GATE)?,
             status: ctx.create_buffer("gate status", 16, MemoryKind::Device)?,
-            grids: ctx.upload_buffer("gate grids", &vec![0u32; 3 * GATE_SLOTS as usize])?,
+            grids: ctx.create_buffer("gate grids", bytes, MemoryKind::Upload)?,
             args: ctx.create_buffer("gate indirect args", bytes, MemoryKind::Device)?,
             uploaded: Vec::new(),
+            recorded: false,
         })
     }
 
     /// Records clearing the status (at the start of a submission).
-    pub fn record_reset(&self, rec: &mut Recorder<'_>) {
+    pub fn record_reset(&mut self, rec: &mut Recorder<'_>) {
         rec.fill(self.status.whole(), 0);
+        self.recorded = false;
     }
 
     /// Records the check of iteration `iteration`: run the gated region that follows if `total`
@@ -112,27 +124,46 @@ impl IterationGate {
         Ok(())
     }
 
-    /// Records `f` as the gated region of the check just recorded; returns its grids, which
-    /// must be given to [`IterationGate::upload`] before the submission.
+    /// Records `f` as the gated region of the check just recorded, and writes its grids for the
+    /// check to copy. Every region between two resets must record the same dispatches
+    /// ([`Error::Misuse`] otherwise).
     pub fn record_gated(
-        &self,
+        &mut self,
         rec: &mut Recorder<'_>,
         f: impl FnOnce(&mut Recorder<'_>) -> Result<()>,
-    ) -> Result<Vec<[u32; 3]>> {
-        rec.gated(self.args.whole(), f)
+    ) -> Result<()> {
+        let grids = rec.gated(self.args.whole(), f)?;
+        if self.recorded && grids != self.uploaded {
+            return Err(Error::Misuse(
+                "gated regions between two gate resets recorded different dispatches".into(),
+            ));
+        }
+        self.upload(&grids)?;
+        self.recorded = true;
+        Ok(())
     }
 
-    /// Uploads the grids of the gated regions (every region of a submission records the same
-    /// dispatches; one list serves them all). Writes only when they changed.
-    pub fn upload(&mut self, ctx: &Context, grids: &[[u32; 3]]) -> Result<()> {
+    /// Writes the grids of the gated regions through the mapping, if they changed. No
+    /// submission in flight may read them (see the module docs).
+    pub fn upload(&mut self, grids: &[[u32; 3]]) -> Result<()> {
         if grids == self.uploaded.as_slice() {
             return Ok(());
+        }
+        if grids.len() as u64 > GATE_SLOTS {
+            return Err(Error::Misuse(format!(
+                "{} gated dispatches, over the gate's {GATE_SLOTS}",
+                grids.len()
+            )));
         }
         let mut words = vec![0u32; 3 * GATE_SLOTS as usize];
         for (w, g) in words.chunks_exact_mut(3).zip(grids) {
             w.copy_from_slice(g);
         }
-        ctx.write_buffer(&self.grids, 0, &words)?;
+        let bytes: &[u8] = bytemuck::cast_slice(&words);
+        self.grids
+            .mapped_mut()
+            .ok_or_else(|| Error::Limit("upload memory is not host-mapped".into()))?[..bytes.len()]
+            .copy_from_slice(bytes);
         self.uploaded = grids.to_vec();
         Ok(())
     }
