@@ -422,13 +422,23 @@ fn backward_input_errors() {
     let s = settings(8, 8);
     let scene = forward(&r, &gpu, &mesh, &cams, &s, Method::Tiled { tile: 8 });
     let err = r
-        .backward(&gpu, &scene.binned(Method::Tiled { tile: 8 }).unwrap(), &weights(10, 1), false)
+        .backward(
+            &gpu,
+            &scene.binned(Method::Tiled { tile: 8 }).unwrap(),
+            &weights(10, 1),
+            false,
+        )
         .unwrap_err();
     assert!(matches!(err, softvk::Error::Input(_)), "{err}");
     let mut w = weights(64, 1);
     w[3][1] = f32::NAN;
     let err = r
-        .backward(&gpu, &scene.binned(Method::Tiled { tile: 8 }).unwrap(), &w, false)
+        .backward(
+            &gpu,
+            &scene.binned(Method::Tiled { tile: 8 }).unwrap(),
+            &w,
+            false,
+        )
         .unwrap_err();
     assert!(err.to_string().contains("not finite"), "{err}");
     // A backward over tiles the scene was not binned with: misuse, caught before any work.
@@ -464,7 +474,9 @@ fn a_batch_differentiates_as_each_mesh_alone() {
             .prepare_batch(&gpu, &meshes, &views, &lighting(), &s)
             .unwrap();
         r.run(&gpu, &mut scene, method).unwrap();
-        let batch = r.backward(&gpu, &scene.binned(method).unwrap(), &w, true).unwrap();
+        let batch = r
+            .backward(&gpu, &scene.binned(method).unwrap(), &w, true)
+            .unwrap();
         let nv = meshes[0].vertex_count();
         let nc = batch.colors.len() / 2;
         for (m, mesh) in meshes.iter().enumerate() {
@@ -475,7 +487,9 @@ fn a_batch_differentiates_as_each_mesh_alone() {
                 .flat_map(|&v| w[v * px..(v + 1) * px].iter().copied())
                 .collect();
             let alone_scene = forward(&r, &gpu, mesh, &my_cams, &s, method);
-            let alone = r.backward(&gpu, &alone_scene.binned(method).unwrap(), &my_w, true).unwrap();
+            let alone = r
+                .backward(&gpu, &alone_scene.binned(method).unwrap(), &my_w, true)
+                .unwrap();
             let what = format!("{method:?} mesh {m}");
             assert!(
                 batch.positions[m * nv..(m + 1) * nv] == alone.positions[..],
@@ -554,7 +568,10 @@ fn backward_split(
     let binned = scene.binned(method).unwrap();
     gpu.submit_and_wait(|rec| r.grad_kernels().record(rec, &binned, &gb, &gb.io()))
         .unwrap();
-    let g = r.grad_kernels().finish(gpu, scene, &gb, &gb.io(), true).unwrap();
+    let g = r
+        .grad_kernels()
+        .finish(gpu, scene, &gb, &gb.io(), true)
+        .unwrap();
     (g, gb.chunk_units(), gb.bands())
 }
 

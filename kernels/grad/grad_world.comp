@@ -22,6 +22,8 @@ layout(push_constant) uniform Push {
     uint view_count;
     uint vertex_count;
     uint stride;       // floats per face gradient
+    uint position_offset;  // floats before vertex 0's x (`VertexLayout`)
+    uint position_stride;  // floats from one vertex's x to the next's
 } pc;
 
 // `matrix_projection_grad`: dL/d(world point) through P, the divide and the distortion.
@@ -69,7 +71,8 @@ void main() {
         // A zero gradient stays zero (and a vertex on the camera plane gives no 0 · ∞).
         if (g != vec3(0.0)) {
             uint v = view.mesh * pc.vertex_count + faces[3u * face + c];
-            vec3 p = vec3(positions[3u * v], positions[3u * v + 1u], positions[3u * v + 2u]);
+            uint at = pc.position_offset + pc.position_stride * v;
+            vec3 p = vec3(positions[at], positions[at + 1u], positions[at + 2u]);
             if (view.projection == PROJ_MATRIX) {
                 world = matrix_grad(view, p, g);
             } else {

@@ -24,13 +24,16 @@ layout(push_constant) uniform Push {
     float bary_margin;   // growth factor on the barycentric box's 3√T/s, for det rounding
     float pad_rel;       // box padding per unit of coordinate magnitude
     uint vertex_count;   // vertices per mesh of the batch
+    uint position_offset;  // floats before vertex 0's x (`VertexLayout`)
+    uint position_stride;  // floats from one vertex's x to the next's
 } pc;
 
 // `Camera::to_screen`: perspective p_c = R (p - eye), then (x / z / tan a, y / z / tan a, z);
 // orthographic (s x, s y, z); or the matrix projection.
 vec3 to_screen(View view, uint vertex) {
     uint v = view.mesh * pc.vertex_count + vertex;
-    vec3 p = vec3(positions[3u * v], positions[3u * v + 1u], positions[3u * v + 2u]);
+    uint at = pc.position_offset + pc.position_stride * v;
+    vec3 p = vec3(positions[at], positions[at + 1u], positions[at + 2u]);
     if (view.projection == PROJ_MATRIX) {
         return project_matrix(view, p);
     }

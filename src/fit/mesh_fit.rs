@@ -32,10 +32,10 @@ use super::checkpoint::{
     Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, read_log, read_optimizer,
     restore_optimizer, write_log, write_optimizer,
 };
-use crate::gpu::gate::IterationGate;
 use super::{Adam, AdamOptions, Deform, GradOut, Regularizers, SilhouetteLoss};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
+use crate::gpu::gate::IterationGate;
 use crate::gpu::{Buffer, Context, MemoryKind, Recorder, Timer};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
@@ -694,9 +694,9 @@ impl<'c> Fitter<'c> {
                 .record_forward(rec, self.params.whole(), self.scene.positions().whole())
         })?;
         let mut mesh = template.clone();
-        mesh.positions = self
-            .ctx
-            .read_buffer(self.scene.positions(), 0, template.vertex_count())?;
+        mesh.positions =
+            self.ctx
+                .read_buffer(self.scene.positions(), 0, template.vertex_count())?;
         Ok(mesh)
     }
 

@@ -105,6 +105,8 @@ struct WorldPush {
     view_count: u32,
     vertex_count: u32,
     stride: u32,
+    position_offset: u32,
+    position_stride: u32,
 }
 
 /// Push constants of `grad_gather.comp`.
@@ -232,9 +234,12 @@ impl GradIo<'_> {
     /// [`Error::BufferTooSmall`] when a range is smaller than the backward of `scene` needs.
     fn check(&self, scene: &GpuScene) -> Result<()> {
         let [upstream, positions, colors] = Self::sizes(scene);
-        self.upstream.require(upstream, "the backward's upstream gradient")?;
-        self.positions.require(positions, "the backward's position gradients")?;
-        self.colors.require(colors, "the backward's colour gradients")
+        self.upstream
+            .require(upstream, "the backward's upstream gradient")?;
+        self.positions
+            .require(positions, "the backward's position gradients")?;
+        self.colors
+            .require(colors, "the backward's colour gradients")
     }
 }
 
@@ -622,6 +627,8 @@ impl GradKernels {
             view_count: scene.view_count,
             vertex_count: scene.vertex_count,
             stride: gb.width,
+            position_offset: scene.position_layout.offset,
+            position_stride: scene.position_layout.stride,
         };
         rec.pass("grad world", |rec| {
             rec.dispatch(

@@ -37,14 +37,14 @@ use crate::gpu::{Buffer, Context, MemoryKind, Recorder};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::primitives::binning::{self, BinJob, Binner, Bins, ItemLayout, TileGrid};
-use crate::raster::backward::{GradBuffers, GradKernels};
 #[cfg(doc)]
 use crate::raster::backward::GradIo;
+use crate::raster::backward::{GradBuffers, GradKernels};
 use crate::raster::brute::{BruteBindings, BruteRaster};
 use crate::raster::fine::{PixelAux, TiledBindings, TiledRaster, check_tile_size};
 use crate::raster::reference::{ColorMode, FaceColors, MeshF64, RasterSettings};
 use crate::raster::reference_grad::Gradients;
-use crate::raster::setup::{FACE_FINITE, FaceSetupKernel, GpuFaceSetup, GpuView};
+use crate::raster::setup::{FACE_FINITE, FaceSetupKernel, GpuFaceSetup, GpuView, VertexLayout};
 
 /// Tile edge (pixels) of [`Method::default`]. Chosen by `softvk bench` on lavapipe; see
 /// BENCHMARKS.md.
@@ -123,6 +123,8 @@ pub struct GpuScene {
     pub(crate) width: u32,
     pub(crate) height: u32,
     pub(crate) positions: Buffer,
+    /// Where the vertices sit in `positions` ([`GpuScene::bind_positions`]).
+    pub(crate) position_layout: VertexLayout,
     pub(crate) faces: Buffer,
     pub(crate) colors: Buffer,
     pub(crate) views: Buffer,
@@ -517,6 +519,35 @@ impl GpuScene {
         &self.positions
     }
 
+    /// Where the vertices sit in [`GpuScene::positions`].
+    pub fn position_layout(&self) -> VertexLayout {
+        self.position_layout
+    }
+
+    /// Renders from `buffer`'s vertices from now on, laid out as `layout` says: a host's vertex
+    /// buffer ([`Context::import_buffer`]), interleaved or not, written by the host's own passes
+    /// before each forward. The scene's own position buffer is dropped. The vertex count (per
+    /// mesh of the batch, meshes one after another) stays the scene's; the faces, colours and
+    /// views too. The backward's host share (lighting, cameras) keeps reading the meshes given to
+    /// [`Renderer::prepare`]: for lit scenes whose vertices move, use an unlit or silhouette
+    /// render, or relight ([`GpuScene::relight`]).
+    pub fn bind_positions(&mut self, buffer: Buffer, layout: VertexLayout) -> Result<()> {
+        let vertices = u64::from(self.vertex_count) * self.meshes.len() as u64;
+        let need = layout.bytes(vertices)?;
+        buffer
+            .whole()
+            .require(need, "the scene's vertex positions")?;
+        let max = buffer.size().min(u64::from(u32::MAX) * 4);
+        if need > max {
+            return Err(Error::Limit(format!(
+                "vertex positions reach byte {need}, past what 32-bit float indices address"
+            )));
+        }
+        self.positions = buffer;
+        self.position_layout = layout;
+        Ok(())
+    }
+
     /// The lit colours the fine passes read (RGB per texel slot or per vertex, mesh after mesh).
     pub fn colors(&self) -> &Buffer {
         &self.colors
@@ -772,6 +803,7 @@ impl Renderer {
             width: w,
             height: h,
             positions: ctx.upload_buffer("mesh positions", &positions)?,
+            position_layout: VertexLayout::default(),
             faces: ctx.upload_buffer("mesh faces", &faces)?,
             colors: ctx.upload_buffer("lit colours", &colors)?,
             views: ctx.upload_buffer("views", &gpu_views)?,
@@ -805,7 +837,7 @@ impl Renderer {
         rec.pass("face setup", |rec| {
             self.setup.record(
                 rec,
-                scene.positions.whole(),
+                (scene.positions.whole(), scene.position_layout),
                 scene.faces.whole(),
                 scene.views.whole(),
                 scene.setups.whole(),
@@ -1087,7 +1119,12 @@ impl Renderer {
     ) -> Result<()> {
         self.record_setup_and_count(rec, scene)?;
         let capacity = scene.groups.first().map_or(0, |g| g.entries);
-        gate.record_check(rec, scene.bins[0].total_buffer().whole(), iteration, capacity)?;
+        gate.record_check(
+            rec,
+            scene.bins[0].total_buffer().whole(),
+            iteration,
+            capacity,
+        )?;
         gate.record_gated(rec, |rec| {
             let tile = scene.tile.expect("checked by record_setup_and_count");
             let grid = scene.grid(tile)?;
@@ -1341,7 +1378,7 @@ impl Renderer {
         ctx.submit_and_wait(|rec| {
             self.setup.record(
                 rec,
-                positions.whole(),
+                (positions.whole(), VertexLayout::default()),
                 faces.whole(),
                 view_buf.whole(),
                 setups.whole(),

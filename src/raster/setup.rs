@@ -157,6 +157,45 @@ struct SetupPush {
     bary_margin: f32,
     pad_rel: f32,
     vertex_count: u32,
+    position_offset: u32,
+    position_stride: u32,
+}
+
+/// Where vertex positions sit in a buffer: vertex `v`'s x, y, z are the floats at
+/// `offset + stride · v`, `+ 1`, `+ 2` (counted in 32-bit floats from the bound range's start).
+/// The default is packed xyz triples; a host's interleaved vertex buffer (position, normal,
+/// uv, …) binds with its own stride ([`crate::raster::gpu::GpuScene::bind_positions`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct VertexLayout {
+    /// Floats before vertex 0's x.
+    pub offset: u32,
+    /// Floats from one vertex's x to the next's (at least 3).
+    pub stride: u32,
+}
+
+impl Default for VertexLayout {
+    fn default() -> Self {
+        Self {
+            offset: 0,
+            stride: 3,
+        }
+    }
+}
+
+impl VertexLayout {
+    /// Bytes a range must hold for `vertices` vertices; [`Error::Input`] for a stride under 3.
+    pub fn bytes(&self, vertices: u64) -> Result<u64> {
+        if self.stride < 3 {
+            return Err(Error::Input(format!(
+                "a vertex stride of {} floats cannot hold x, y and z",
+                self.stride
+            )));
+        }
+        Ok(match vertices {
+            0 => 0,
+            n => 4 * (u64::from(self.offset) + u64::from(self.stride) * (n - 1) + 3),
+        })
+    }
 }
 
 /// `DIST_*` of `raster.glsl`.
@@ -192,7 +231,7 @@ impl FaceSetupKernel {
     pub fn record(
         &self,
         rec: &mut Recorder<'_>,
-        positions: BufferRange<'_>,
+        (positions, layout): (BufferRange<'_>, VertexLayout),
         faces: BufferRange<'_>,
         views: BufferRange<'_>,
         setups: BufferRange<'_>,
@@ -225,6 +264,8 @@ impl FaceSetupKernel {
             bary_margin: BARY_MARGIN,
             pad_rel: BBOX_PAD_REL,
             vertex_count,
+            position_offset: layout.offset,
+            position_stride: layout.stride,
         };
         let groups = n.div_ceil(u64::from(specs::FACE_SETUP.workgroup_size[0]));
         rec.dispatch(
