@@ -1242,7 +1242,7 @@ fn run_field_fit(
 /// Runs iterations `it .. it + k` of `fitter` in one submission (again from a stopped one, until
 /// all ran) and advances `it`; the wall time of the submission that ran them all, ms.
 fn fit_iterations(
-    fitter: &mut crate::fit::mesh_fit::Fitter<'_>,
+    fitter: &mut crate::fit::mesh_fit::MeshFitter<'_>,
     it: &mut u32,
     k: u32,
     mut timer: Option<&mut Timer>,
@@ -1262,7 +1262,7 @@ fn fit_iterations(
                 progress(&format!(
                     "{name}: iteration {again} outgrew the entry capacity; now {} (re-run, not \
                      timed)",
-                    fitter.capacity
+                    fitter.capacity()
                 ));
                 *it = again;
             }
@@ -1302,7 +1302,7 @@ pub fn run_fit(
     opts: &BenchOptions,
     mut progress: impl FnMut(&str),
 ) -> Result<Vec<BenchRecord>> {
-    use crate::fit::mesh_fit::{Fitter, MeshFitOptions, default_template, demo_target};
+    use crate::fit::mesh_fit::{MeshFitOptions, MeshFitter, default_template, demo_target};
     let names = opts.checked_fit_scenes()?;
     let mut records = Vec::new();
     for name in names {
@@ -1339,7 +1339,7 @@ pub fn run_fit(
             &hard,
             Method::default(),
         )?;
-        let mut fitter = Fitter::new(ctx, &template, &cameras, &targets, &fit_opts)?;
+        let mut fitter = MeshFitter::new(ctx, &template, &cameras, &targets, &fit_opts)?;
         let method = Method::Tiled {
             tile: fit_opts.tile,
         };
@@ -1353,13 +1353,13 @@ pub fn run_fit(
             s.sigma,
             s.rgb,
             fit_opts.tile,
-            fitter.capacity
+            fitter.capacity()
         ));
         let mut it = 1u32;
         fit_iterations(&mut fitter, &mut it, 1, None, &mut progress, name)?;
         progress(&format!(
             "{name}: warm-up done, {} entries; timing {} iterations",
-            fitter.last_entries, opts.repeat
+            fitter.last_entries(), opts.repeat
         ));
         let mut timer = if ctx.info().timestamp_valid_bits > 0 {
             Some(Timer::new(ctx, 32)?)
@@ -1406,7 +1406,7 @@ pub fn run_fit(
             "{name} fit-iteration: {}",
             summary(&timing, opts.repeat)
         ));
-        let counts = fitter.scene.pair_counts(ctx, method)?;
+        let counts = fitter.scene().pair_counts(ctx, method)?;
         progress(&format!(
             "{name} fit-iteration per pair:{}",
             per_pair_summary(&timing.passes, &counts)
@@ -1437,7 +1437,7 @@ pub fn run_fit(
             timing.wall_ms,
             timing.passes,
             opts.repeat,
-            fitter.last_entries,
+            fitter.last_entries(),
         ));
         // The loop: wall and GPU time per iteration, and their difference, the host's share
         // (recording, submission, fence, the gate's status read), which is what batching cuts;
@@ -1479,7 +1479,7 @@ pub fn run_fit(
                 host.map(|h| vec![("host overhead".to_string(), h)])
                     .unwrap_or_default(),
                 FIT_BATCH,
-                fitter.last_entries,
+                fitter.last_entries(),
             ));
         }
     }

@@ -239,7 +239,7 @@ pub struct MeshFitState {
 /// A logged iteration's view of the running fit, for a progress callback that wants its state
 /// ([`MeshFitSnapshot::state`], read from the GPU only when asked: checkpoints).
 pub struct MeshFitSnapshot<'a> {
-    fitter: &'a Fitter<'a>,
+    fitter: &'a MeshFitter<'a>,
     iteration: u32,
     log: &'a [FitLog],
     seconds: f64,
@@ -349,7 +349,7 @@ pub fn fit_mesh_resumable(
     resume: Option<&MeshFitState>,
     mut progress: impl FnMut(&FitLog, &[f32], Option<&[f32]>, &MeshFitSnapshot<'_>) -> Result<bool>,
 ) -> Result<MeshFitResult> {
-    let mut fitter = Fitter::new(ctx, template, cameras, targets, opts)?;
+    let mut fitter = MeshFitter::new(ctx, template, cameras, targets, opts)?;
     let start = Instant::now();
     let mut log = Vec::new();
     let mut it = 1;
@@ -397,8 +397,8 @@ pub fn fit_mesh_resumable(
         mesh: fitter.mesh(template)?,
         log,
         seconds,
-        regrowths: fitter.regrowths,
-        entry_capacity: fitter.capacity,
+        regrowths: fitter.regrowths(),
+        entry_capacity: fitter.capacity(),
         params: fitter.read_params()?,
     })
 }
@@ -418,12 +418,12 @@ struct FitParts<'a> {
 }
 
 /// A fit's GPU state: the scene, the losses, the optimizer, the parameters and the guarded
-/// bins, ready to run iterations ([`Fitter::run`]). Also what the fitting benchmark times.
-pub(crate) struct Fitter<'c> {
+/// bins, ready to run iterations ([`MeshFitter::run`]). Also what the fitting benchmark times.
+pub struct MeshFitter<'c> {
     ctx: &'c Context,
     opts: MeshFitOptions,
     renderer: Renderer,
-    pub(crate) scene: GpuScene,
+    scene: GpuScene,
     deform: Deform,
     regs: Regularizers,
     sil: SilhouetteLoss,
@@ -434,19 +434,19 @@ pub(crate) struct Fitter<'c> {
     grads: GradBuffers,
     gate: IterationGate,
     /// Entries the bins and the partials hold.
-    pub(crate) capacity: u64,
+    capacity: u64,
     /// The most they may hold (one binding, the u32 count).
     max_capacity: u64,
     /// Submissions stopped by the gate.
-    pub(crate) regrowths: u32,
+    regrowths: u32,
     /// The entry count of the last iteration that ran.
-    pub(crate) last_entries: u64,
+    last_entries: u64,
 }
 
-impl<'c> Fitter<'c> {
+impl<'c> MeshFitter<'c> {
     /// Checks the inputs, uploads everything, zeroes the parameters and Adam's moments, and
     /// reserves the entries (see [`MeshFitOptions::entry_capacity`]).
-    pub(crate) fn new(
+    pub fn new(
         ctx: &'c Context,
         template: &Mesh,
         cameras: &[Camera],
@@ -496,7 +496,7 @@ impl<'c> Fitter<'c> {
             adam.record_reset(rec);
             Ok(())
         })?;
-        let stride = grad_stride(s.color_mode, scene.texture_res);
+        let stride = grad_stride(s.color_mode, scene.texture_res());
         let max_capacity = renderer
             .max_entries(ctx)
             .min(u64::from(ctx.info().limits.max_storage_buffer_range) / (4 * u64::from(stride)))
@@ -601,7 +601,7 @@ impl<'c> Fitter<'c> {
     /// Runs iterations `first ..= last` in one submission (GPU timestamps into `timer`). `None`
     /// when all ran; `Some(i)` when iteration `i` outgrew the entry capacity: it and the later
     /// ones changed nothing, the capacity has grown to fit it, and they are to be run again.
-    pub(crate) fn run(
+    pub fn run(
         &mut self,
         first: u32,
         last: u32,
@@ -688,7 +688,7 @@ impl<'c> Fitter<'c> {
     }
 
     /// The template with the positions the parameters give now.
-    pub(crate) fn mesh(&self, template: &Mesh) -> Result<Mesh> {
+    pub fn mesh(&self, template: &Mesh) -> Result<Mesh> {
         self.ctx.submit_and_wait(|rec| {
             self.deform
                 .record_forward(rec, self.params.whole(), self.scene.positions().whole())
@@ -700,8 +700,28 @@ impl<'c> Fitter<'c> {
         Ok(mesh)
     }
 
+    /// The scene the fit renders (its last binning, for [`GpuScene::pair_counts`]).
+    pub fn scene(&self) -> &GpuScene {
+        &self.scene
+    }
+
+    /// Entries the bins and the backward's partials hold now.
+    pub fn capacity(&self) -> u64 {
+        self.capacity
+    }
+
+    /// Submissions the gate stopped (each grew the capacity and re-ran).
+    pub fn regrowths(&self) -> u32 {
+        self.regrowths
+    }
+
+    /// The entry count of the last iteration that ran.
+    pub fn last_entries(&self) -> u64 {
+        self.last_entries
+    }
+
     /// The parameters (`3 V` displacements, then the centre).
-    pub(crate) fn read_params(&self) -> Result<Vec<f32>> {
+    pub fn read_params(&self) -> Result<Vec<f32>> {
         self.ctx
             .read_buffer(&self.params, 0, self.deform.param_count() as usize)
     }

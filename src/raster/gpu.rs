@@ -387,6 +387,16 @@ impl GpuScene {
         self.face_count
     }
 
+    /// Vertices per mesh of the batch.
+    pub fn vertex_count(&self) -> u32 {
+        self.vertex_count
+    }
+
+    /// Texels per face edge (surface colours).
+    pub fn texture_res(&self) -> u32 {
+        self.texture_res
+    }
+
     /// Renders alpha only from now on (silhouettes, as fits from masks need): the fine passes
     /// leave out depth, colour and the softmax, the image's RGB is the background and the aux's
     /// colour fields keep their initial values, while alpha and its aux fields are the same
