@@ -1359,7 +1359,8 @@ pub fn run_fit(
         fit_iterations(&mut fitter, &mut it, 1, None, &mut progress, name)?;
         progress(&format!(
             "{name}: warm-up done, {} entries; timing {} iterations",
-            fitter.last_entries(), opts.repeat
+            fitter.last_entries(),
+            opts.repeat
         ));
         let mut timer = if ctx.info().timestamp_valid_bits > 0 {
             Some(Timer::new(ctx, 32)?)

@@ -13,7 +13,7 @@
 //! only known on the GPU. The buffers are reserved with headroom ([`ENTRY_HEADROOM`]) over the
 //! last count the host saw (the first from one counting submission before the loop), the sort
 //! runs over the whole capacity with sentinel keys ([`crate::primitives::binning`]), and
-//! [`super::gate`] stops an iteration whose count does not fit before any stage after the count
+//! [`crate::gpu::gate`] stops an iteration whose count does not fit before any stage after the count
 //! runs — and every later iteration of the submission. The host then sees the stop, grows the
 //! buffers to the count it recorded (with the headroom again) and re-runs from the stopped
 //! iteration. A stopped iteration changes nothing (parameters and Adam's moments are untouched),
@@ -601,12 +601,7 @@ impl<'c> MeshFitter<'c> {
     /// Runs iterations `first ..= last` in one submission (GPU timestamps into `timer`). `None`
     /// when all ran; `Some(i)` when iteration `i` outgrew the entry capacity: it and the later
     /// ones changed nothing, the capacity has grown to fit it, and they are to be run again.
-    pub fn run(
-        &mut self,
-        first: u32,
-        last: u32,
-        timer: Option<&mut Timer>,
-    ) -> Result<Option<u32>> {
+    pub fn run(&mut self, first: u32, last: u32, timer: Option<&mut Timer>) -> Result<Option<u32>> {
         let parts = FitParts {
             opts: &self.opts,
             deform: &self.deform,

@@ -12,7 +12,7 @@
 //!
 //! [`mesh_fit`] wires the renderer into that chain for silhouettes (unlit: the lighting's share
 //! of the position gradient, which the renderer's backward adds on the host, is zero there), and
-//! runs whole iterations on the GPU with no host round trip ([`gate`]).
+//! runs whole iterations on the GPU with no host round trip ([`crate::gpu::gate`]).
 //!
 //! - [`silhouette`]: SoftRas's `neg_iou_loss` on the alpha channel ([`SilhouetteLoss`]) and the
 //!   image MSE ([`ImageMse`]), with their dL/d(image) in the renderer's `d_image` layout.
@@ -20,7 +20,7 @@
 //!   GPU by [`Regularizers`].
 //! - [`deform`]: SoftRas's sigmoid/tanh parameterization of vertex positions ([`Deform`]).
 //! - [`adam`]: Adam with PyTorch's semantics ([`Adam`]).
-//! - [`gate`]: the check that lets whole fitting iterations run on the GPU without the host
+//! - [`crate::gpu::gate`]: the check that lets whole fitting iterations run on the GPU without the host
 //!   reading the binning's entry count ([`mesh_fit`] uses it).
 //! - [`io`]: the fitting commands' files (CPU): target silhouettes, the cameras CSV, the fitted
 //!   OBJ, all checked on load and written atomically.
