@@ -1,5 +1,6 @@
-//! The wgpu application's own buffers and passes: a WGSL compute pass "deform" before softvk,
-//! a WGSL render pass "draw" after it. Nothing here knows about softvk.
+//! The wgpu application's own buffers and passes: a WGSL compute pass "deform" before softvk
+//! (it writes the vertex buffer softvk renders), a WGSL compute pass "consume" after it (it
+//! reads softvk's silhouettes and gradients). Nothing here knows about softvk.
 
 use std::borrow::Cow;
 
@@ -7,13 +8,8 @@ use bytemuck::{Pod, Zeroable};
 
 use crate::HostError;
 
-/// Workgroup size of the deform kernel.
+/// Workgroup size of both kernels.
 const WORKGROUP: u32 = 64;
-/// Columns of the drawn image (`WIDTH` in `draw.wgsl`). 128 `u32` texels are 512 bytes, a
-/// multiple of wgpu's 256-byte row alignment for copies, so the readback rows are contiguous.
-pub const WIDTH: u32 = 128;
-/// The drawn image's format: one `u32` per pixel.
-const FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
 
 /// The uniform block of both WGSL modules.
 #[repr(C)]
@@ -21,26 +17,31 @@ const FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
 struct Params {
     n: u32,
     frame: u32,
-    rows: u32,
-    pad: u32,
+    pixels: u32,
+    grads: u32,
 }
 
-/// The application's buffers, image and pipelines, all wgpu's.
+/// The application's buffers and pipelines, all wgpu's.
 pub struct Scene {
     n: u32,
-    rows: u32,
+    pixels: u32,
     params: wgpu::Buffer,
-    /// Written by the deform pass; read by softvk, and by the draw pass as a vertex buffer.
-    pub deformed: wgpu::Buffer,
-    /// Written by softvk; read by the draw pass as a vertex buffer.
-    pub scanned: wgpu::Buffer,
-    image: wgpu::Texture,
-    image_view: wgpu::TextureView,
+    /// The rest mesh, x y z 1 per vertex (written at creation).
+    rest: wgpu::Buffer,
+    /// Written by the deform pass (x y z 1 per vertex); softvk renders it.
+    pub vertices: wgpu::Buffer,
+    /// dL/d(image), RGBA per pixel (written at creation); softvk's backward reads it.
+    pub upstream: wgpu::Buffer,
+    /// softvk's silhouettes (RGBA per pixel), written by softvk; read by the consume pass.
+    pub image: wgpu::Buffer,
+    /// softvk's dL/d(vertex positions) (x y z per vertex); read by the consume pass.
+    pub d_positions: wgpu::Buffer,
+    consumed: wgpu::Buffer,
     readback: wgpu::Buffer,
     deform: wgpu::ComputePipeline,
     deform_group: wgpu::BindGroup,
-    draw: wgpu::RenderPipeline,
-    draw_group: wgpu::BindGroup,
+    consume: wgpu::ComputePipeline,
+    consume_group: wgpu::BindGroup,
 }
 
 /// A shader module from WGSL, handed to wgpu as naga IR rather than as text.
@@ -60,114 +61,75 @@ fn shader(device: &wgpu::Device, label: &str, source: &str) -> wgpu::ShaderModul
 }
 
 impl Scene {
-    /// Buffers for `n` vertices (one `u32` each), the image, and the two pipelines.
+    /// Buffers for the rest mesh `rest` and `upstream` (RGBA per pixel of every view), and the
+    /// two pipelines.
     ///
-    /// Every buffer is mapped at creation and unmapped at once: that zero-fills it and marks it
-    /// initialized in wgpu's lazy-initialization tracking. Without it, wgpu would zero
-    /// `scanned` before its first read in the draw pass, after softvk wrote it (wgpu does not
-    /// see softvk's write), and the first frame would draw zeros.
-    pub fn new(device: &wgpu::Device, n: u32) -> Self {
-        let n = n.max(1);
-        let rows = n.div_ceil(WIDTH);
-        let bytes = 4 * u64::from(n);
-        let buffer = |label, size, usage| {
+    /// Every buffer is mapped at creation (with its data, or zeros) and unmapped at once: that
+    /// marks it initialized in wgpu's lazy-initialization tracking. Without it, wgpu would zero
+    /// `image` before its first read in the consume pass, after softvk wrote it (wgpu does not
+    /// see softvk's write).
+    pub fn new(device: &wgpu::Device, rest: &[[f32; 3]], upstream: &[[f32; 4]]) -> Self {
+        let n = rest.len() as u32;
+        let pixels = upstream.len() as u32;
+        let buffer = |label, data: &[u8], size: u64, usage| {
             let buffer = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
                 size,
                 usage,
                 mapped_at_creation: true,
             });
+            buffer.slice(..).get_mapped_range_mut()[..data.len()].copy_from_slice(data);
             buffer.unmap();
             buffer
         };
-        // softvk binds `deformed` and `scanned` as storage buffers; COPY_SRC/COPY_DST too, as
-        // softvk's import contract asks of buffers it may copy or fill.
+        // softvk binds these as storage buffers, and copies into `image`.
         let shared = wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::VERTEX
             | wgpu::BufferUsages::COPY_SRC
             | wgpu::BufferUsages::COPY_DST;
         let params = buffer(
             "params",
+            &[],
             std::mem::size_of::<Params>() as u64,
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         );
-        let deformed = buffer("deformed", bytes, shared);
-        let scanned = buffer("scanned", bytes, shared);
-        let extent = wgpu::Extent3d {
-            width: WIDTH,
-            height: rows,
-            depth_or_array_layers: 1,
-        };
-        let image = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("drawn"),
-            size: extent,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        });
-        let image_view = image.create_view(&Default::default());
+        let rest4: Vec<[f32; 4]> = rest.iter().map(|p| [p[0], p[1], p[2], 1.0]).collect();
+        let rest = buffer(
+            "rest",
+            bytemuck::cast_slice(&rest4),
+            16 * u64::from(n),
+            wgpu::BufferUsages::STORAGE,
+        );
+        let vertices = buffer("vertices", &[], 16 * u64::from(n), shared);
+        let upstream = buffer(
+            "upstream",
+            bytemuck::cast_slice(upstream),
+            16 * u64::from(pixels),
+            shared,
+        );
+        let image = buffer("image", &[], 16 * u64::from(pixels), shared);
+        let d_positions = buffer("d_positions", &[], 12 * u64::from(n), shared);
+        let consumed_bytes = 4 * (u64::from(pixels) + 3 * u64::from(n));
+        let consumed = buffer("consumed", &[], consumed_bytes, shared);
         let readback = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
-            size: 4 * u64::from(WIDTH) * u64::from(rows),
+            size: consumed_bytes,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-
-        let module = shader(device, "deform", include_str!("shaders/deform.wgsl"));
-        let deform = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("deform"),
-            layout: None,
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        let module = shader(device, "draw", include_str!("shaders/draw.wgsl"));
-        let attribute = |location| wgpu::VertexAttribute {
-            format: wgpu::VertexFormat::Uint32,
-            offset: 0,
-            shader_location: location,
-        };
-        let (deformed_attr, scanned_attr) = ([attribute(0)], [attribute(1)]);
-        let layout = |attributes| {
-            Some(wgpu::VertexBufferLayout {
-                array_stride: 4,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes,
+        let pipeline = |label, source| {
+            let module = shader(device, label, source);
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(label),
+                layout: None,
+                module: &module,
+                entry_point: Some("main"),
+                compilation_options: Default::default(),
+                cache: None,
             })
         };
-        let draw = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("draw"),
-            layout: None,
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs"),
-                compilation_options: Default::default(),
-                buffers: &[layout(&deformed_attr), layout(&scanned_attr)],
-            },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::PointList,
-                ..Default::default()
-            },
-            depth_stencil: None,
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
-        let group = |layout: &wgpu::BindGroupLayout, label, buffers: &[&wgpu::Buffer]| {
+        let deform = pipeline("deform", include_str!("shaders/deform.wgsl"));
+        let consume = pipeline("consume", include_str!("shaders/consume.wgsl"));
+        let group = |pipeline: &wgpu::ComputePipeline, label, buffers: &[&wgpu::Buffer]| {
             let entries: Vec<_> = buffers
                 .iter()
                 .enumerate()
@@ -178,45 +140,42 @@ impl Scene {
                 .collect();
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some(label),
-                layout,
+                layout: &pipeline.get_bind_group_layout(0),
                 entries: &entries,
             })
         };
-        let deform_group = group(
-            &deform.get_bind_group_layout(0),
-            "deform",
-            &[&params, &deformed],
+        let deform_group = group(&deform, "deform", &[&params, &rest, &vertices]);
+        let consume_group = group(
+            &consume,
+            "consume",
+            &[&params, &image, &d_positions, &consumed],
         );
-        let draw_group = group(&draw.get_bind_group_layout(0), "draw", &[&params]);
         Self {
             n,
-            rows,
+            pixels,
             params,
-            deformed,
-            scanned,
+            rest,
+            vertices,
+            upstream,
             image,
-            image_view,
+            d_positions,
+            consumed,
             readback,
             deform,
             deform_group,
-            draw,
-            draw_group,
+            consume,
+            consume_group,
         }
     }
 
-    /// The raw `VkBuffer` of `deformed`, for a host's own raw Vulkan commands.
-    pub fn raw_deformed(&self) -> Result<ash::vk::Buffer, HostError> {
+    /// The raw `VkBuffer` of `vertices`, for a host's own raw Vulkan commands.
+    pub fn raw_vertices(&self) -> Result<ash::vk::Buffer, HostError> {
         // SAFETY: the guard borrows the buffer for this call; the handle is used only while the
         // scene (which owns the buffer) is alive, and never destroyed by the caller.
-        unsafe {
-            self.deformed
-                .as_hal::<wgpu::hal::api::Vulkan>()
-                .map(|b| b.raw_handle())
-                .ok_or_else(|| HostError::Wgpu("the buffer is not on the Vulkan backend".into()))
-        }
+        unsafe { raw_buffer(&self.vertices) }
     }
 
-    /// Vertices (and drawn pixels) per frame.
+    /// Vertices per frame.
     pub fn len(&self) -> u32 {
         self.n
     }
@@ -232,8 +191,8 @@ impl Scene {
         let params = Params {
             n: self.n,
             frame,
-            rows: self.rows,
-            pad: 0,
+            pixels: self.pixels,
+            grads: 3 * self.n,
         };
         queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
     }
@@ -255,52 +214,27 @@ impl Scene {
         encoder.finish()
     }
 
-    /// The draw render pass and the copy of its image to the readback buffer.
-    pub fn encode_draw(&self, device: &wgpu::Device) -> wgpu::CommandBuffer {
+    /// The consume pass and the copy of what it wrote to the readback buffer.
+    pub fn encode_consume(&self, device: &wgpu::Device) -> wgpu::CommandBuffer {
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("draw"),
+            label: Some("consume"),
         });
         {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("draw"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &self.image_view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: None,
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("consume"),
                 timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
             });
-            pass.set_pipeline(&self.draw);
-            pass.set_bind_group(0, &self.draw_group, &[]);
-            pass.set_vertex_buffer(0, self.deformed.slice(..));
-            pass.set_vertex_buffer(1, self.scanned.slice(..));
-            pass.draw(0..self.n, 0..1);
+            pass.set_pipeline(&self.consume);
+            pass.set_bind_group(0, &self.consume_group, &[]);
+            pass.dispatch_workgroups((self.pixels + 3 * self.n).div_ceil(WORKGROUP), 1, 1);
         }
-        encoder.copy_texture_to_buffer(
-            self.image.as_image_copy(),
-            wgpu::TexelCopyBufferInfo {
-                buffer: &self.readback,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(4 * WIDTH),
-                    rows_per_image: None,
-                },
-            },
-            self.image.size(),
-        );
+        encoder.copy_buffer_to_buffer(&self.consumed, 0, &self.readback, 0, self.readback.size());
         encoder.finish()
     }
 
-    /// Waits for the last submission and reads the first `n` pixels of the drawn image
-    /// (row-major, so pixel `i` is vertex `i`'s value).
-    pub fn read_result(&self, device: &wgpu::Device) -> Result<Vec<u32>, HostError> {
+    /// Waits for the last submission and reads what the consume pass wrote: every pixel's
+    /// alpha, then dL/d(positions), as softvk wrote them (undoubled).
+    pub fn read_result(&self, device: &wgpu::Device) -> Result<(Vec<f32>, Vec<[f32; 3]>), HostError> {
         let (tx, rx) = std::sync::mpsc::channel();
         self.readback
             .map_async(wgpu::MapMode::Read, .., move |r| drop(tx.send(r)));
@@ -310,14 +244,36 @@ impl Scene {
         rx.recv()
             .map_err(|_| HostError::Wgpu("the map callback never ran".into()))?
             .map_err(|e| HostError::Wgpu(format!("mapping the readback: {e}")))?;
-        let out = {
+        let values: Vec<f32> = {
             let view = self
                 .readback
                 .get_mapped_range(..)
                 .map_err(|e| HostError::Wgpu(format!("reading the readback: {e}")))?;
-            bytemuck::pod_collect_to_vec(&view[..4 * self.n as usize])
+            bytemuck::pod_collect_to_vec(&view[..])
         };
         self.readback.unmap();
-        Ok(out)
+        let (alpha, grads) = values.split_at(self.pixels as usize);
+        Ok((
+            alpha.iter().map(|a| a / 2.0).collect(),
+            grads
+                .chunks_exact(3)
+                .map(|g| [g[0] / 2.0, g[1] / 2.0, g[2] / 2.0])
+                .collect(),
+        ))
+    }
+}
+
+/// The raw `VkBuffer` behind a wgpu buffer.
+///
+/// # Safety
+/// The handle is used only while `buffer` is alive, and never destroyed by the caller.
+pub unsafe fn raw_buffer(buffer: &wgpu::Buffer) -> Result<ash::vk::Buffer, HostError> {
+    // SAFETY: the guard borrows the buffer for this call; the caller keeps it alive for as long
+    // as it uses the handle.
+    unsafe {
+        buffer
+            .as_hal::<wgpu::hal::api::Vulkan>()
+            .map(|b| b.raw_handle())
+            .ok_or_else(|| HostError::Wgpu("the buffer is not on the Vulkan backend".into()))
     }
 }
