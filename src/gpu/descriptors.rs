@@ -202,14 +202,16 @@ impl State {
 
 impl Shared {
     /// The set that binds `ranges` to `kernel`'s bindings, in binding order: the cached one, or
-    /// a new one allocated and written now. Only in [`super::DescriptorMode::Sets`] (a context
-    /// that pushes its descriptors keeps no cache, and says so).
+    /// a new one allocated now and written with `writes` (those of `ranges`, with no set
+    /// named). Only in [`super::DescriptorMode::Sets`] (a context that pushes its descriptors
+    /// keeps no cache, and says so).
     ///
     /// The ranges were checked against the kernel's interface and the device's limits.
     pub(crate) fn descriptor_set(
         &self,
         kernel: &Kernel,
         ranges: &[BufferRange<'_>],
+        writes: &[vk::WriteDescriptorSet<'_>],
     ) -> Result<vk::DescriptorSet> {
         let Some(cache) = &self.descriptor_sets else {
             return Err(Error::Limit(
@@ -232,32 +234,10 @@ impl Shared {
         cache
             .allocated
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = key
-            .ranges
-            .iter()
-            .map(|&(buffer, offset, range)| {
-                [vk::DescriptorBufferInfo {
-                    buffer,
-                    offset,
-                    range,
-                }]
-            })
-            .collect();
-        let writes: Vec<_> = kernel
-            .spec
-            .bindings
-            .iter()
-            .zip(&infos)
-            .map(|(b, info)| {
-                vk::WriteDescriptorSet::default()
-                    .dst_set(raw)
-                    .dst_binding(b.binding)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                    .buffer_info(info)
-            })
-            .collect();
+        let writes: Vec<_> = writes.iter().map(|w| w.dst_set(raw)).collect();
         // SAFETY: a fresh set of this device, not yet bound anywhere (so no command buffer
-        // sees the update); the buffers are alive (borrowed by `ranges`) and the ranges valid.
+        // sees the update); the writes match its layout (the kernel's reflected bindings); the
+        // buffers are alive (borrowed by `ranges`) and the ranges valid.
         unsafe { self.device.update_descriptor_sets(&writes, &[]) };
         for buffer in key.buffers() {
             state.by_buffer.entry(buffer).or_default().push(key.clone());

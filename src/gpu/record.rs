@@ -250,12 +250,6 @@ impl<'a> Recorder<'a> {
                 "{groups} workgroups exceed the device's grid"
             )));
         }
-        // Without push descriptors: the context's cached set for these ranges (made now if they
-        // were never bound to this kernel), which outlives whatever the host does with `cmd`.
-        let set = match self.ctx.push_descriptor {
-            Some(_) => vk::DescriptorSet::null(),
-            None => self.ctx.shared.descriptor_set(kernel, bindings)?,
-        };
         let indirect = match self.gate.as_mut() {
             None => None,
             Some(gate) => {
@@ -271,6 +265,34 @@ impl<'a> Recorder<'a> {
             }
         };
 
+        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = bindings
+            .iter()
+            .map(|r| {
+                [vk::DescriptorBufferInfo {
+                    buffer: r.buffer.raw,
+                    offset: r.offset,
+                    range: r.size,
+                }]
+            })
+            .collect();
+        let writes: Vec<_> = spec
+            .bindings
+            .iter()
+            .zip(&infos)
+            .map(|(b, info)| {
+                vk::WriteDescriptorSet::default()
+                    .dst_binding(b.binding)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .buffer_info(info)
+            })
+            .collect();
+        // Without push descriptors: the context's cached set of these writes (made now if these
+        // ranges were never bound to this kernel), which outlives whatever the host does with
+        // `cmd`.
+        let set = match self.ctx.push_descriptor {
+            Some(_) => vk::DescriptorSet::null(),
+            None => self.ctx.shared.descriptor_set(kernel, bindings, &writes)?,
+        };
         let device = self.ctx.device();
         // SAFETY: the command buffer is recording (constructor contract); pipeline, layout and
         // buffers belong to this device; bindings and push size were checked against the
@@ -278,37 +300,14 @@ impl<'a> Recorder<'a> {
         unsafe {
             device.cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, kernel.pipeline);
             match &self.ctx.push_descriptor {
-                Some(push) => {
-                    let infos: Vec<[vk::DescriptorBufferInfo; 1]> = bindings
-                        .iter()
-                        .map(|r| {
-                            [vk::DescriptorBufferInfo {
-                                buffer: r.buffer.raw,
-                                offset: r.offset,
-                                range: r.size,
-                            }]
-                        })
-                        .collect();
-                    let writes: Vec<_> = spec
-                        .bindings
-                        .iter()
-                        .zip(&infos)
-                        .map(|(b, info)| {
-                            vk::WriteDescriptorSet::default()
-                                .dst_binding(b.binding)
-                                .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                                .buffer_info(info)
-                        })
-                        .collect();
-                    push.cmd_push_descriptor_set(
-                        self.cmd,
-                        vk::PipelineBindPoint::COMPUTE,
-                        kernel.layout,
-                        0,
-                        &writes,
-                    );
-                }
-                // The set was written for this kernel's layout and stays alive (unchanged) until
+                Some(push) => push.cmd_push_descriptor_set(
+                    self.cmd,
+                    vk::PipelineBindPoint::COMPUTE,
+                    kernel.layout,
+                    0,
+                    &writes,
+                ),
+                // The set was written for this kernel's layout and stays alive, unchanged, until
                 // a buffer it names or the kernel is dropped, which needs `cmd` done with.
                 None => device.cmd_bind_descriptor_sets(
                     self.cmd,
