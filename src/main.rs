@@ -8,7 +8,7 @@ use std::process::ExitCode;
 
 use clap::error::ErrorKind;
 use clap::{Parser, Subcommand};
-use softvk::gpu::{Context, ContextOptions};
+use softvk::gpu::{Context, ContextOptions, DescriptorMode};
 
 #[derive(Parser)]
 #[command(
@@ -115,6 +115,17 @@ fn info() -> softvk::Result<()> {
             "off (SOFTVK_VALIDATION=1 turns it on)"
         }
     );
+    let mode = ctx.descriptor_mode();
+    println!(
+        "descriptors        {} ({})",
+        mode.as_str(),
+        match mode {
+            DescriptorMode::Push => "VK_KHR_push_descriptor; SOFTVK_DESCRIPTORS=sets for sets",
+            DescriptorMode::Sets if info.push_descriptor =>
+                "cached sets, as SOFTVK_DESCRIPTORS says",
+            DescriptorMode::Sets => "cached sets: the device lacks VK_KHR_push_descriptor",
+        }
+    );
     println!("devices (SOFTVK_DEVICE takes an index or a name substring):");
     for (i, d) in softvk::gpu::list_devices(ctx.instance())?
         .iter()
@@ -169,7 +180,10 @@ fn info() -> softvk::Result<()> {
         info.timestamp_valid_bits
     );
     println!("features:");
-    println!("  VK_KHR_push_descriptor          yes (required)");
+    println!(
+        "  VK_KHR_push_descriptor          {} (not required: descriptor sets otherwise)",
+        yes(info.push_descriptor)
+    );
     println!(
         "  shaderInt64                     {} (not required)",
         yes(info.shader_int64)

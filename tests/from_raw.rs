@@ -9,7 +9,10 @@ use std::sync::{Arc, Mutex};
 
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
-use softvk::gpu::{Context, REQUIRED_DEVICE_EXTENSIONS, RawHandles, Recorder};
+use softvk::gpu::{
+    Context, DescriptorMode, PUSH_DESCRIPTOR_EXTENSION, REQUIRED_DEVICE_EXTENSIONS, RawHandles,
+    Recorder,
+};
 use softvk::primitives::{Scan, ScanScratch, scan};
 
 static HOST_MESSAGES: Mutex<Vec<String>> = Mutex::new(Vec::new());
@@ -83,8 +86,16 @@ fn host_device_and_command_buffer_run_a_softvk_kernel() {
         let queues = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(family)
             .queue_priorities(&priorities)];
+        // This host enables push descriptors where the device has them (tests/descriptor_sets.rs
+        // has one that never does).
+        let push_descriptor = instance
+            .enumerate_device_extension_properties(physical_device)
+            .unwrap()
+            .iter()
+            .any(|e| e.extension_name_as_c_str() == Ok(PUSH_DESCRIPTOR_EXTENSION));
         let device_extensions: Vec<_> = REQUIRED_DEVICE_EXTENSIONS
             .iter()
+            .chain(push_descriptor.then_some(&PUSH_DESCRIPTOR_EXTENSION))
             .map(|e| e.as_ptr())
             .collect();
         let device = instance
@@ -140,8 +151,17 @@ fn host_device_and_command_buffer_run_a_softvk_kernel() {
             queue_family_index: family,
             allocator: Some(Arc::clone(&allocator)),
             debug_utils: true,
+            push_descriptor,
         })
         .expect("adopt the host's device");
+        assert_eq!(
+            ctx.descriptor_mode(),
+            if push_descriptor {
+                DescriptorMode::Push
+            } else {
+                DescriptorMode::Sets
+            }
+        );
         let scan = Scan::new(&ctx).unwrap();
         let data: Vec<u32> = (0..5000u32).map(|i| i % 17).collect();
         let buffer = ctx.upload_buffer("host scan", &data).unwrap();

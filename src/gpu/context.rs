@@ -10,13 +10,47 @@ use std::sync::{Arc, Mutex};
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 
+use super::descriptors::DescriptorCache;
 use crate::error::{Error, Result, VkContext};
 
 const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
 
-/// Device extensions softvk needs. `VK_KHR_push_descriptor` lets a dispatch carry its buffer
-/// bindings inside the command buffer, so recording never allocates or frees descriptor sets.
-pub const REQUIRED_DEVICE_EXTENSIONS: &[&CStr] = &[ash::khr::push_descriptor::NAME];
+/// Device extensions softvk cannot run without: none. A device (or a host's device) without
+/// [`PUSH_DESCRIPTOR_EXTENSION`] binds buffers through cached descriptor sets instead
+/// ([`DescriptorMode::Sets`]).
+pub const REQUIRED_DEVICE_EXTENSIONS: &[&CStr] = &[];
+
+/// `VK_KHR_push_descriptor`, which softvk uses where the device has it: a dispatch then carries
+/// its buffer bindings inside the command buffer, so recording never allocates a descriptor set
+/// ([`DescriptorMode::Push`]). An owned context enables it when the device supports it (unless
+/// [`ContextOptions::descriptor_sets`] says otherwise); a host says whether it enabled it with
+/// [`RawHandles::push_descriptor`].
+pub const PUSH_DESCRIPTOR_EXTENSION: &CStr = ash::khr::push_descriptor::NAME;
+
+/// How a [`Context`] binds the storage buffers of a dispatch, decided once when it is made
+/// ([`Context::descriptor_mode`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum DescriptorMode {
+    /// `vkCmdPushDescriptorSetKHR` ([`PUSH_DESCRIPTOR_EXTENSION`]): the bindings live in the
+    /// command buffer, nothing outlives the recording.
+    Push,
+    /// Ordinary descriptor sets, for devices without the extension. A command buffer outlives
+    /// the recording by however long its host likes, so each set must outlive it too: the
+    /// context keeps one immutable set per kernel and list of bound ranges, made on first use
+    /// and freed when a buffer it names (or its kernel) is dropped. A loop that records the same
+    /// bindings every iteration reuses the same sets.
+    Sets,
+}
+
+impl DescriptorMode {
+    /// `push` or `sets`, as `SOFTVK_DESCRIPTORS` spells them.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            DescriptorMode::Push => "push",
+            DescriptorMode::Sets => "sets",
+        }
+    }
+}
 
 /// How to create an owned context.
 #[derive(Clone, Debug, Default)]
@@ -30,12 +64,18 @@ pub struct ContextOptions {
     /// the header) and written back, atomically, when the last object of the context is gone (a
     /// failure to write is ignored). `None`: an in-memory cache only.
     pub pipeline_cache: Option<PathBuf>,
+    /// Bind buffers through descriptor sets ([`DescriptorMode::Sets`]) even where the device has
+    /// [`PUSH_DESCRIPTOR_EXTENSION`] (which is then not enabled), as on a host device without
+    /// it: the way to exercise that path on any device. `false`: push descriptors where the
+    /// device has them, sets elsewhere.
+    pub descriptor_sets: bool,
 }
 
 impl ContextOptions {
-    /// Reads `SOFTVK_VALIDATION` (`1`/`true` turns validation on), `SOFTVK_DEVICE`, and
+    /// Reads `SOFTVK_VALIDATION` (`1`/`true` turns validation on), `SOFTVK_DEVICE`,
     /// `SOFTVK_PIPELINE_CACHE` (a file, or `off`; default `softvk/pipelines.bin` under
-    /// `$XDG_CACHE_HOME`, else `$HOME/.cache`).
+    /// `$XDG_CACHE_HOME`, else `$HOME/.cache`) and `SOFTVK_DESCRIPTORS` (`sets` sets
+    /// [`ContextOptions::descriptor_sets`]; anything else, `push` say, leaves the default).
     pub fn from_env() -> Self {
         let validation = std::env::var("SOFTVK_VALIDATION")
             .map(|v| matches!(v.trim(), "1" | "true" | "yes" | "on"))
@@ -56,10 +96,13 @@ impl ContextOptions {
                 })
                 .map(|dir| dir.join("softvk").join("pipelines.bin")),
         };
+        let descriptor_sets = std::env::var("SOFTVK_DESCRIPTORS")
+            .is_ok_and(|v| v.trim().eq_ignore_ascii_case(DescriptorMode::Sets.as_str()));
         Self {
             validation,
             device,
             pipeline_cache,
+            descriptor_sets,
         }
     }
 }
@@ -72,7 +115,8 @@ pub struct RawHandles {
     pub instance: ash::Instance,
     /// The physical device behind `device`.
     pub physical_device: vk::PhysicalDevice,
-    /// The host's device, created with [`REQUIRED_DEVICE_EXTENSIONS`].
+    /// The host's device, created with [`REQUIRED_DEVICE_EXTENSIONS`] (and, if the host likes,
+    /// [`PUSH_DESCRIPTOR_EXTENSION`]: see `push_descriptor`).
     pub device: ash::Device,
     /// A queue with compute support, used only by softvk's convenience submits.
     pub queue: vk::Queue,
@@ -82,6 +126,11 @@ pub struct RawHandles {
     pub allocator: Option<Arc<Mutex<Allocator>>>,
     /// Whether the host enabled `VK_EXT_debug_utils` on its instance (then softvk names objects).
     pub debug_utils: bool,
+    /// Whether the host enabled [`PUSH_DESCRIPTOR_EXTENSION`] on `device`. Vulkan cannot be asked
+    /// which extensions a device was created with, so the host says: `true` makes softvk push
+    /// its bindings ([`DescriptorMode::Push`]), `false` makes it use descriptor sets of its own
+    /// ([`DescriptorMode::Sets`]).
+    pub push_descriptor: bool,
 }
 
 /// What softvk learned about its device; printed by `softvk info`.
@@ -107,6 +156,9 @@ pub struct DeviceInfo {
     pub shader_int64: bool,
     /// Device supports `VK_EXT_shader_atomic_float` (softvk does not need it).
     pub atomic_float: bool,
+    /// Device supports [`PUSH_DESCRIPTOR_EXTENSION`] (whether softvk uses it is
+    /// [`Context::descriptor_mode`]).
+    pub push_descriptor: bool,
     /// `maxMemoryAllocationSize` (Vulkan 1.1): the largest single allocation, so the largest
     /// buffer (each buffer is one allocation).
     pub max_memory_allocation_size: u64,
@@ -162,6 +214,13 @@ pub(crate) struct Shared {
     /// drop.
     pub(crate) pipeline_cache: vk::PipelineCache,
     cache_path: Option<PathBuf>,
+    /// The descriptor sets dispatches bind in [`DescriptorMode::Sets`]; `None` in
+    /// [`DescriptorMode::Push`]. Here rather than in [`Context`] because a dropped [`Buffer`]
+    /// or [`Kernel`] (which hold only this state) must evict the sets that name it.
+    ///
+    /// [`Buffer`]: super::Buffer
+    /// [`Kernel`]: super::Kernel
+    pub(crate) descriptor_sets: Option<DescriptorCache>,
     _entry: ash::Entry,
 }
 
@@ -222,9 +281,14 @@ impl Shared {
 impl Drop for Shared {
     fn drop(&mut self) {
         // SAFETY: this runs when the last context, buffer or kernel is gone, so nothing of ours is
-        // still in use on the GPU (every submit path waits). The allocator is dropped before the
-        // device it allocates from; instance and device are destroyed only if we created them.
+        // still in use on the GPU (every submit path waits). The descriptor pools go first
+        // (every buffer and kernel has evicted its sets by now; destroying a pool frees whatever
+        // is left), then the allocator, before the device they belong to; instance and device
+        // are destroyed only if we created them.
         unsafe {
+            if let Some(cache) = &mut self.descriptor_sets {
+                cache.destroy(&self.device);
+            }
             if let Some(path) = &self.cache_path {
                 save_pipeline_cache(&self.device, self.pipeline_cache, path);
             }
@@ -249,7 +313,9 @@ pub struct Context {
     pub(crate) physical_device: vk::PhysicalDevice,
     pub(crate) queue: vk::Queue,
     pub(crate) queue_family_index: u32,
-    pub(crate) push_descriptor: ash::khr::push_descriptor::Device,
+    /// The extension's entry points in [`DescriptorMode::Push`]; `None` in
+    /// [`DescriptorMode::Sets`] (then `shared.descriptor_sets` is `Some`).
+    pub(crate) push_descriptor: Option<ash::khr::push_descriptor::Device>,
     pub(crate) command_pool: vk::CommandPool,
     /// Serializes use of `command_pool` and `queue` (both need external synchronization).
     pub(crate) pool_lock: Mutex<()>,
@@ -274,6 +340,9 @@ pub struct Counters {
     /// Staging copies between host and device memory ([`Context::write_buffer`],
     /// [`Context::read_buffer`], [`Context::upload_buffer`]).
     pub staging_copies: u64,
+    /// Descriptor sets allocated by recording ([`DescriptorMode::Sets`] only): a recording whose
+    /// kernel and buffer ranges were all recorded before reuses the cached sets and adds none.
+    pub descriptor_sets: u64,
 }
 
 unsafe extern "system" fn on_validation_message(
@@ -436,15 +505,20 @@ impl Context {
         let queue_info = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(queue_family_index)
             .queue_priorities(&priorities)];
+        // Push descriptors where the device has them, unless asked for descriptor sets: then
+        // the extension is not even enabled, as on a host device without it.
+        let push_descriptor = !options.descriptor_sets
+            && has_device_extension(&instance, physical_device, PUSH_DESCRIPTOR_EXTENSION);
         let ext_ptrs: Vec<_> = REQUIRED_DEVICE_EXTENSIONS
             .iter()
+            .chain(push_descriptor.then_some(&PUSH_DESCRIPTOR_EXTENSION))
             .map(|e| e.as_ptr())
             .collect();
         let device_info = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queue_info)
             .enabled_extension_names(&ext_ptrs);
         // SAFETY: the physical device was enumerated from this instance and supports the
-        // extensions (checked in `pick_device`).
+        // extensions (the required ones checked in `pick_device`, push descriptors just above).
         let device = match unsafe { instance.create_device(physical_device, &device_info, None) } {
             Ok(d) => d,
             Err(result) => {
@@ -467,8 +541,10 @@ impl Context {
             queue_family_index,
             allocator: None,
             debug_utils: has_debug_utils,
+            push_descriptor,
         };
-        // SAFETY: we just created all of these with the required extensions.
+        // SAFETY: we just created all of these with the required extensions (and push
+        // descriptors exactly when `push_descriptor` says).
         unsafe {
             Self::assemble(
                 raw,
@@ -490,7 +566,9 @@ impl Context {
     /// - `instance`, `physical_device`, `device` and `queue` are valid, belong together, and stay
     ///   valid until this context and everything created from it are dropped.
     /// - The instance was created for Vulkan 1.2 or newer, and the device with every extension in
-    ///   [`REQUIRED_DEVICE_EXTENSIONS`] enabled.
+    ///   [`REQUIRED_DEVICE_EXTENSIONS`] enabled, and with [`PUSH_DESCRIPTOR_EXTENSION`] enabled if
+    ///   `push_descriptor` is true. (A device that does not support the extension at all is
+    ///   caught: `push_descriptor: true` on it is an [`Error::NoDevice`].)
     /// - `queue_family_index` is `queue`'s family and supports compute. softvk submits to `queue`
     ///   only from [`Context::submit_and_wait`] and friends; the host must not use the queue from
     ///   another thread during those calls (Vulkan's external synchronization rule).
@@ -521,6 +599,7 @@ impl Context {
             queue_family_index,
             allocator,
             debug_utils,
+            push_descriptor,
         } = raw;
         let info = query_info(&instance, physical_device, queue_family_index);
         if info.api_version < (1, 2, 0) {
@@ -528,6 +607,13 @@ impl Context {
                 "{} supports Vulkan {} only; softvk needs 1.2",
                 info.name,
                 info.api_version_string()
+            )));
+        }
+        if push_descriptor && !info.push_descriptor {
+            return Err(Error::NoDevice(format!(
+                "{} does not support {}, which the host says it enabled",
+                info.name,
+                PUSH_DESCRIPTOR_EXTENSION.to_string_lossy()
             )));
         }
         let allocator = match allocator {
@@ -550,7 +636,9 @@ impl Context {
         };
         let debug_device =
             debug_utils.then(|| ash::ext::debug_utils::Device::new(&instance, &device));
-        let push_descriptor = ash::khr::push_descriptor::Device::new(&instance, &device);
+        let push_descriptor =
+            push_descriptor.then(|| ash::khr::push_descriptor::Device::new(&instance, &device));
+        let descriptor_sets = push_descriptor.is_none().then(DescriptorCache::default);
         let pipeline_cache = create_pipeline_cache(&device, cache_path.as_deref());
         let shared = Arc::new(Shared {
             instance,
@@ -562,6 +650,7 @@ impl Context {
             owns_device,
             pipeline_cache,
             cache_path,
+            descriptor_sets,
             _entry: entry,
         });
         let pool_info = vk::CommandPoolCreateInfo::default()
@@ -589,6 +678,29 @@ impl Context {
         &self.info
     }
 
+    /// How dispatches bind their buffers on this context: push descriptors, or descriptor sets
+    /// where the device (or the host's device) lacks [`PUSH_DESCRIPTOR_EXTENSION`] or
+    /// [`ContextOptions::descriptor_sets`] asked for them.
+    pub fn descriptor_mode(&self) -> DescriptorMode {
+        if self.push_descriptor.is_some() {
+            DescriptorMode::Push
+        } else {
+            DescriptorMode::Sets
+        }
+    }
+
+    /// How many descriptor sets the context holds right now ([`DescriptorMode::Sets`]; always 0
+    /// with push descriptors): one per kernel and list of bound ranges recorded since the
+    /// buffers they name were made. A loop that records the same work every iteration keeps this
+    /// constant; a count that grows with every iteration means buffers are made and bound anew
+    /// each time (and freed only on drop).
+    pub fn cached_descriptor_sets(&self) -> usize {
+        self.shared
+            .descriptor_sets
+            .as_ref()
+            .map_or(0, DescriptorCache::len)
+    }
+
     /// The raw `ash` device, for hosts that mix softvk's recording with their own.
     pub fn device(&self) -> &ash::Device {
         &self.shared.device
@@ -599,11 +711,16 @@ impl Context {
         &self.shared.instance
     }
 
-    /// Submissions and staging copies softvk has made so far ([`Counters`]).
+    /// Submissions, staging copies and descriptor sets softvk has made so far ([`Counters`]).
     pub fn counters(&self) -> Counters {
         Counters {
             submissions: self.counters.submissions.load(Ordering::Relaxed),
             staging_copies: self.counters.staging_copies.load(Ordering::Relaxed),
+            descriptor_sets: self
+                .shared
+                .descriptor_sets
+                .as_ref()
+                .map_or(0, DescriptorCache::allocated),
         }
     }
 
@@ -708,6 +825,15 @@ pub fn list_devices(instance: &ash::Instance) -> Result<Vec<PhysicalDeviceEntry>
             }
         })
         .collect())
+}
+
+/// Whether `pd` lists device extension `name`.
+fn has_device_extension(instance: &ash::Instance, pd: vk::PhysicalDevice, name: &CStr) -> bool {
+    // SAFETY: `pd` belongs to `instance`.
+    unsafe { instance.enumerate_device_extension_properties(pd) }
+        .unwrap_or_default()
+        .iter()
+        .any(|e| e.extension_name_as_c_str() == Ok(name))
 }
 
 /// The compute queue family softvk would use on `pd`, or why it cannot.
@@ -844,6 +970,9 @@ fn query_info(instance: &ash::Instance, pd: vk::PhysicalDevice, family: u32) -> 
         atomic_float: exts
             .iter()
             .any(|e| e.extension_name_as_c_str() == Ok(ash::ext::shader_atomic_float::NAME)),
+        push_descriptor: exts
+            .iter()
+            .any(|e| e.extension_name_as_c_str() == Ok(PUSH_DESCRIPTOR_EXTENSION)),
         max_memory_allocation_size: maintenance3.max_memory_allocation_size,
         memory,
     }

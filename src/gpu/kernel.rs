@@ -1,5 +1,5 @@
 //! Compute pipelines built from the kernels `build.rs` compiled. A [`Kernel`] is made once (shader
-//! module, push-descriptor set layout, pipeline layout, pipeline) and recorded many times.
+//! module, descriptor set layout, pipeline layout, pipeline) and recorded many times.
 //!
 //! A kernel whose modes are specialization constants (`layout(constant_id = i)`) gets one
 //! pipeline per combination of values it is recorded with: [`KernelVariants`] builds each on
@@ -11,7 +11,7 @@ use std::sync::{Arc, Mutex};
 
 use ash::vk;
 
-use super::context::{Context, Shared};
+use super::context::{Context, DescriptorMode, Shared};
 use crate::error::{Error, Result, VkContext};
 
 /// A storage-buffer binding of a kernel, reflected from its SPIR-V.
@@ -118,10 +118,16 @@ impl Kernel {
                     .stage_flags(vk::ShaderStageFlags::COMPUTE)
             })
             .collect();
+        // A push-descriptor layout where the context pushes its bindings; a plain one, for the
+        // context's cached descriptor sets, where the extension is not enabled.
+        let flags = match ctx.descriptor_mode() {
+            DescriptorMode::Push => vk::DescriptorSetLayoutCreateFlags::PUSH_DESCRIPTOR_KHR,
+            DescriptorMode::Sets => vk::DescriptorSetLayoutCreateFlags::empty(),
+        };
         let set_info = vk::DescriptorSetLayoutCreateInfo::default()
-            .flags(vk::DescriptorSetLayoutCreateFlags::PUSH_DESCRIPTOR_KHR)
+            .flags(flags)
             .bindings(&bindings);
-        // SAFETY: valid device; push descriptors are a required extension.
+        // SAFETY: valid device; the push flag only where the extension is enabled.
         kernel.set_layout = unsafe { device.create_descriptor_set_layout(&set_info, None) }
             .vk("vkCreateDescriptorSetLayout")?;
         ctx.name(kernel.set_layout, spec.name);
@@ -223,6 +229,9 @@ impl KernelVariants {
 
 impl Drop for Kernel {
     fn drop(&mut self) {
+        // The cached descriptor sets of this layout go first: a new kernel's layout may get the
+        // same handle value.
+        self.shared.evict_layout(self.set_layout);
         let device = &self.shared.device;
         // SAFETY: all handles were created on this device (null ones are ignored by Vulkan);
         // command buffers using the pipeline have completed (every submit path waits).

@@ -107,6 +107,9 @@ impl Buffer {
 
 impl Drop for Buffer {
     fn drop(&mut self) {
+        // Cached descriptor sets that name this buffer go first, owned or imported: a later
+        // buffer may get the same handle value, and must not find sets written for this one.
+        self.shared.evict_buffer(self.raw);
         if !self.owned {
             // The host's buffer: the host destroys it.
             return;

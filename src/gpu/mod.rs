@@ -1,14 +1,15 @@
 //! The Vulkan compute core: context, memory, kernels and recording.
 
 mod context;
+mod descriptors;
 pub mod gate;
 mod kernel;
 mod memory;
 mod record;
 
 pub use context::{
-    Context, ContextOptions, Counters, DeviceInfo, PhysicalDeviceEntry, REQUIRED_DEVICE_EXTENSIONS,
-    RawHandles, list_devices,
+    Context, ContextOptions, Counters, DescriptorMode, DeviceInfo, PUSH_DESCRIPTOR_EXTENSION,
+    PhysicalDeviceEntry, REQUIRED_DEVICE_EXTENSIONS, RawHandles, list_devices,
 };
 pub use kernel::{BindingSpec, Kernel, KernelSpec, KernelVariants, specs};
 pub use memory::{Buffer, BufferRange, MemoryKind, align_up};

@@ -286,19 +286,38 @@ impl<'a> Recorder<'a> {
                     .buffer_info(info)
             })
             .collect();
+        // Without push descriptors: the context's cached set of these writes (made now if these
+        // ranges were never bound to this kernel), which outlives whatever the host does with
+        // `cmd`.
+        let set = match self.ctx.push_descriptor {
+            Some(_) => vk::DescriptorSet::null(),
+            None => self.ctx.shared.descriptor_set(kernel, bindings, &writes)?,
+        };
         let device = self.ctx.device();
         // SAFETY: the command buffer is recording (constructor contract); pipeline, layout and
         // buffers belong to this device; bindings and push size were checked against the
         // kernel's reflected interface above.
         unsafe {
             device.cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, kernel.pipeline);
-            self.ctx.push_descriptor.cmd_push_descriptor_set(
-                self.cmd,
-                vk::PipelineBindPoint::COMPUTE,
-                kernel.layout,
-                0,
-                &writes,
-            );
+            match &self.ctx.push_descriptor {
+                Some(push) => push.cmd_push_descriptor_set(
+                    self.cmd,
+                    vk::PipelineBindPoint::COMPUTE,
+                    kernel.layout,
+                    0,
+                    &writes,
+                ),
+                // The set was written for this kernel's layout and stays alive, unchanged, until
+                // a buffer it names or the kernel is dropped, which needs `cmd` done with.
+                None => device.cmd_bind_descriptor_sets(
+                    self.cmd,
+                    vk::PipelineBindPoint::COMPUTE,
+                    kernel.layout,
+                    0,
+                    &[set],
+                    &[],
+                ),
+            }
             if !push_bytes.is_empty() {
                 device.cmd_push_constants(
                     self.cmd,

@@ -40,12 +40,24 @@ pub fn no_gpu() -> bool {
 /// The validated context, or `None` (after saying so) when `SOFTVK_NO_GPU=1`. Panics when no
 /// device can be created otherwise: a missing device fails GPU tests, it never skips them.
 pub fn gpu() -> Option<Gpu> {
+    gpu_with(|_| {})
+}
+
+/// As [`gpu`], with descriptor sets (`true`) or push descriptors where the device has them
+/// (`false`) whatever `SOFTVK_DESCRIPTORS` says.
+pub fn gpu_descriptors(sets: bool) -> Option<Gpu> {
+    gpu_with(|o| o.descriptor_sets = sets)
+}
+
+/// As [`gpu`], with the options from the environment changed by `tweak`.
+pub fn gpu_with(tweak: impl FnOnce(&mut ContextOptions)) -> Option<Gpu> {
     if no_gpu() {
         eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
         return None;
     }
     let mut options = ContextOptions::from_env();
     options.validation = validation_wanted();
+    tweak(&mut options);
     let ctx = Context::new(&options).unwrap_or_else(|e| {
         panic!(
             "cannot create a Vulkan context ({e}); set SOFTVK_NO_GPU=1 to skip GPU tests explicitly"

@@ -5,7 +5,7 @@
 use std::ffi::CStr;
 
 use ash::vk;
-use softvk::gpu::{Context, REQUIRED_DEVICE_EXTENSIONS, RawHandles};
+use softvk::gpu::{Context, PUSH_DESCRIPTOR_EXTENSION, REQUIRED_DEVICE_EXTENSIONS, RawHandles};
 use wgpu::hal::api::Vulkan;
 use wgpu::hal::vulkan as hal_vk;
 
@@ -68,6 +68,9 @@ pub struct Host {
     capture: Option<Capture>,
     /// Whether the layer was loaded with [`crate::LAYER_ENABLES`]'s submit-time switch.
     submit_time_sync_validation: bool,
+    /// Whether the device was opened with `VK_KHR_push_descriptor` (softvk's faster binding
+    /// path; without it softvk binds cached descriptor sets).
+    push_descriptor: bool,
     /// The adapter the device was opened on.
     pub adapter: wgpu::Adapter,
     /// wgpu's instance (it owns the `VkInstance`).
@@ -140,13 +143,14 @@ impl Host {
             None
         };
 
-        let (device, queue) = open_device(&adapter)?;
+        let (device, queue, push_descriptor) = open_device(&adapter)?;
         Ok(Self {
             device,
             queue,
             submit_time_sync_validation: capture.is_some()
                 && crate::submit_time_sync_validation_requested(),
             capture,
+            push_descriptor,
             adapter,
             instance,
         })
@@ -197,6 +201,7 @@ impl Host {
                 queue_family_index: device.queue_family_index(),
                 allocator: None,
                 debug_utils: shared.extensions().contains(&ash::ext::debug_utils::NAME),
+                push_descriptor: self.push_descriptor,
             };
             // Instance 1.3 (wgpu-hal asks for it when the loader has 1.1+), device created with
             // REQUIRED_DEVICE_EXTENSIONS by `open_device`, queue of a compute-capable family
@@ -267,7 +272,17 @@ fn check_layer() -> Result<(), HostError> {
 /// Opens the device through wgpu-hal so that it carries softvk's extensions
 /// (`VK_KHR_push_descriptor`), which wgpu's own `request_device` would not enable, then hands it
 /// to wgpu.
-fn open_device(adapter: &wgpu::Adapter) -> Result<(wgpu::Device, wgpu::Queue), HostError> {
+/// Whether the adapter's device offers `VK_KHR_push_descriptor`.
+fn push_descriptor_supported(adapter: &wgpu::Adapter) -> Result<bool, HostError> {
+    // SAFETY: the guard borrows the adapter for this call only.
+    let hal = unsafe { adapter.as_hal::<Vulkan>() }
+        .ok_or_else(|| HostError::Wgpu("the adapter is not on Vulkan".into()))?;
+    Ok(hal
+        .physical_device_capabilities()
+        .supports_extension(PUSH_DESCRIPTOR_EXTENSION))
+}
+
+fn open_device(adapter: &wgpu::Adapter) -> Result<(wgpu::Device, wgpu::Queue, bool), HostError> {
     let features = wgpu::Features::empty();
     let limits = adapter.limits();
     let memory_hints = wgpu::MemoryHints::Performance;
@@ -286,8 +301,13 @@ fn open_device(adapter: &wgpu::Adapter) -> Result<(wgpu::Device, wgpu::Queue), H
                 });
             }
         }
-        let add_softvk_extensions: Box<hal_vk::CreateDeviceCallback<'_>> = Box::new(|args| {
-            for &extension in REQUIRED_DEVICE_EXTENSIONS {
+        // Optional for softvk, and faster: enabled where the device has it.
+        let push = hal
+            .physical_device_capabilities()
+            .supports_extension(PUSH_DESCRIPTOR_EXTENSION);
+        let add_softvk_extensions: Box<hal_vk::CreateDeviceCallback<'_>> = Box::new(move |args| {
+            let optional = push.then_some(PUSH_DESCRIPTOR_EXTENSION);
+            for extension in REQUIRED_DEVICE_EXTENSIONS.iter().copied().chain(optional) {
                 if !args.extensions.contains(&extension) {
                     args.extensions.push(extension);
                 }
@@ -305,6 +325,7 @@ fn open_device(adapter: &wgpu::Adapter) -> Result<(wgpu::Device, wgpu::Queue), H
         }
         .map_err(|e| HostError::Wgpu(format!("opening the Vulkan device: {e}")))?
     };
+    let push = push_descriptor_supported(adapter)?;
     // SAFETY: `open` was opened on this adapter's hal adapter with these features and limits.
     unsafe {
         adapter.create_device_from_hal(
@@ -318,5 +339,6 @@ fn open_device(adapter: &wgpu::Adapter) -> Result<(wgpu::Device, wgpu::Queue), H
             },
         )
     }
+    .map(|(device, queue)| (device, queue, push))
     .map_err(|e| HostError::Wgpu(format!("adopting the Vulkan device: {e}")))
 }
