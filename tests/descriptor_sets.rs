@@ -128,9 +128,9 @@ fn render_and_differentiate(gpu: &Context) -> (Vec<Bits>, Vec<usize>) {
         let mut prepared = r.prepare(gpu, &mesh, &cams, &lighting(), &s).unwrap();
         let mut last = None;
         for _ in 0..3 {
-            r.run(gpu, &mut prepared, method).unwrap();
-            let frames = r.read_frames(gpu, &prepared).unwrap();
-            let grads = r.backward(gpu, &prepared, &w, method, true).unwrap();
+            let binned = r.run(gpu, &mut prepared, method).unwrap();
+            let frames = r.read_frames(gpu, binned.scene()).unwrap();
+            let grads = r.backward(gpu, &binned, &w, true).unwrap();
             let bits = (frame_bits(&frames), grad_bits(&grads));
             if let Some(previous) = &last {
                 assert!(previous == &bits, "{method:?}: iterations differ");

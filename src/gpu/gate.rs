@@ -64,6 +64,8 @@ pub struct IterationGate {
     /// Whether a gated region was recorded since the last [`IterationGate::record_reset`] (then
     /// the next must record the same dispatches).
     recorded: bool,
+    /// [`IterationGate::record_reset`] was called and the next check clears the status.
+    reset_pending: bool,
 }
 
 impl IterationGate {
@@ -77,12 +79,15 @@ impl IterationGate {
             args: ctx.create_buffer("gate indirect args", bytes, MemoryKind::Device)?,
             uploaded: Vec::new(),
             recorded: false,
+            reset_pending: false,
         })
     }
 
-    /// Records clearing the status (at the start of a submission).
-    pub fn record_reset(&mut self, rec: &mut Recorder<'_>) {
-        rec.fill(self.status.whole(), 0);
+    /// Starts a submission's status: the next check clears it first (recorded right before
+    /// that check, so that a host's command buffer meets softvk's first *dispatch*, not a fill,
+    /// and the status is touched only where the gate runs).
+    pub fn record_reset(&mut self, _rec: &mut Recorder<'_>) {
+        self.reset_pending = true;
         self.recorded = false;
     }
 
@@ -90,7 +95,7 @@ impl IterationGate {
     /// (the count's one `u32`) is at most `capacity` and no earlier iteration since the last
     /// reset was stopped.
     pub fn record_check(
-        &self,
+        &mut self,
         rec: &mut Recorder<'_>,
         total: BufferRange<'_>,
         iteration: u32,
@@ -104,6 +109,9 @@ impl IterationGate {
             words: 3 * GATE_SLOTS as u32,
             pad: 0,
         };
+        if std::mem::take(&mut self.reset_pending) {
+            rec.fill(self.status.whole(), 0);
+        }
         // Earlier gated dispatches have read their grids before the kernel rewrites them.
         rec.indirect_barrier();
         rec.pass("gate", |rec| {

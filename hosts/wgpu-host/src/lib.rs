@@ -162,7 +162,7 @@ impl App {
     pub fn new(validation: bool) -> Result<Self, HostError> {
         let host = Host::new(validation)?;
         let mesh = rest_mesh();
-        let scene = Scene::new(&host.device, &mesh.positions, &upstream());
+        let scene = Scene::new(&host.device, &mesh.positions, &upstream())?;
         // SAFETY: `App` drops the context (and the stage made from it) before the host (field
         // order), after waiting for the device (`Drop for App`); softvk's conveniences submit
         // only during `SoftvkStage::new` (its uploads), from this thread, before any frame.

@@ -26,8 +26,6 @@ pub struct Scene {
     n: u32,
     pixels: u32,
     params: wgpu::Buffer,
-    /// The rest mesh, x y z 1 per vertex (written at creation).
-    rest: wgpu::Buffer,
     /// Written by the deform pass (x y z 1 per vertex); softvk renders it.
     pub vertices: wgpu::Buffer,
     /// dL/d(image), RGBA per pixel (written at creation); softvk's backward reads it.
@@ -68,19 +66,29 @@ impl Scene {
     /// marks it initialized in wgpu's lazy-initialization tracking. Without it, wgpu would zero
     /// `image` before its first read in the consume pass, after softvk wrote it (wgpu does not
     /// see softvk's write).
-    pub fn new(device: &wgpu::Device, rest: &[[f32; 3]], upstream: &[[f32; 4]]) -> Self {
+    pub fn new(
+        device: &wgpu::Device,
+        rest: &[[f32; 3]],
+        upstream: &[[f32; 4]],
+    ) -> Result<Self, HostError> {
         let n = rest.len() as u32;
         let pixels = upstream.len() as u32;
-        let buffer = |label, data: &[u8], size: u64, usage| {
+        let buffer = |label, data: &[u8], size: u64, usage| -> Result<wgpu::Buffer, HostError> {
             let buffer = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
                 size,
                 usage,
                 mapped_at_creation: true,
             });
-            buffer.slice(..).get_mapped_range_mut()[..data.len()].copy_from_slice(data);
+            {
+                let mut view = buffer
+                    .slice(..)
+                    .get_mapped_range_mut()
+                    .map_err(|e| HostError::Wgpu(format!("writing {label} at creation: {e}")))?;
+                view.slice(..data.len()).copy_from_slice(data);
+            }
             buffer.unmap();
-            buffer
+            Ok(buffer)
         };
         // softvk binds these as storage buffers, and copies into `image`.
         let shared = wgpu::BufferUsages::STORAGE
@@ -91,25 +99,25 @@ impl Scene {
             &[],
             std::mem::size_of::<Params>() as u64,
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        );
+        )?;
         let rest4: Vec<[f32; 4]> = rest.iter().map(|p| [p[0], p[1], p[2], 1.0]).collect();
         let rest = buffer(
             "rest",
             bytemuck::cast_slice(&rest4),
             16 * u64::from(n),
             wgpu::BufferUsages::STORAGE,
-        );
-        let vertices = buffer("vertices", &[], 16 * u64::from(n), shared);
+        )?;
+        let vertices = buffer("vertices", &[], 16 * u64::from(n), shared)?;
         let upstream = buffer(
             "upstream",
             bytemuck::cast_slice(upstream),
             16 * u64::from(pixels),
             shared,
-        );
-        let image = buffer("image", &[], 16 * u64::from(pixels), shared);
-        let d_positions = buffer("d_positions", &[], 12 * u64::from(n), shared);
+        )?;
+        let image = buffer("image", &[], 16 * u64::from(pixels), shared)?;
+        let d_positions = buffer("d_positions", &[], 12 * u64::from(n), shared)?;
         let consumed_bytes = 4 * (u64::from(pixels) + 3 * u64::from(n));
-        let consumed = buffer("consumed", &[], consumed_bytes, shared);
+        let consumed = buffer("consumed", &[], consumed_bytes, shared)?;
         let readback = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
             size: consumed_bytes,
@@ -144,17 +152,17 @@ impl Scene {
                 entries: &entries,
             })
         };
+        // The rest mesh (x y z 1 per vertex) lives on in the bind group that reads it.
         let deform_group = group(&deform, "deform", &[&params, &rest, &vertices]);
         let consume_group = group(
             &consume,
             "consume",
             &[&params, &image, &d_positions, &consumed],
         );
-        Self {
+        Ok(Self {
             n,
             pixels,
             params,
-            rest,
             vertices,
             upstream,
             image,
@@ -165,7 +173,7 @@ impl Scene {
             deform_group,
             consume,
             consume_group,
-        }
+        })
     }
 
     /// The raw `VkBuffer` of `vertices`, for a host's own raw Vulkan commands.
@@ -234,7 +242,10 @@ impl Scene {
 
     /// Waits for the last submission and reads what the consume pass wrote: every pixel's
     /// alpha, then dL/d(positions), as softvk wrote them (undoubled).
-    pub fn read_result(&self, device: &wgpu::Device) -> Result<(Vec<f32>, Vec<[f32; 3]>), HostError> {
+    pub fn read_result(
+        &self,
+        device: &wgpu::Device,
+    ) -> Result<(Vec<f32>, Vec<[f32; 3]>), HostError> {
         let (tx, rx) = std::sync::mpsc::channel();
         self.readback
             .map_async(wgpu::MapMode::Read, .., move |r| drop(tx.send(r)));

@@ -72,7 +72,11 @@ impl SoftvkStage {
                     16 * u64::from(gpu.vertex_count()),
                     "vertices (wgpu)",
                 ),
-                ctx.import_buffer(raw_buffer(&scene.upstream)?, upstream_bytes, "upstream (wgpu)"),
+                ctx.import_buffer(
+                    raw_buffer(&scene.upstream)?,
+                    upstream_bytes,
+                    "upstream (wgpu)",
+                ),
                 ctx.import_buffer(
                     raw_buffer(&scene.d_positions)?,
                     position_bytes,

@@ -75,7 +75,10 @@ fn app(validation: bool) -> Option<App> {
 fn check(what: &str, got: &softvk_wgpu_host::FrameResult, want: &(Vec<f64>, Vec<[f64; 3]>)) {
     let (alpha, grads) = cpu::distance(got, want);
     assert!(alpha <= 1e-4, "{what}: alpha differs by {alpha:.2e}");
-    assert!(grads <= 1e-3, "{what}: gradients differ by {grads:.2e} of their scale");
+    assert!(
+        grads <= 1e-3,
+        "{what}: gradients differ by {grads:.2e} of their scale"
+    );
     eprintln!("{what}: alpha within {alpha:.1e}, gradients within {grads:.1e} of their scale");
 }
 
@@ -121,7 +124,10 @@ fn wgpu_frames_run_softvk_between_wgsl_passes_with_no_softvk_submission() {
     for frame in 0..4 {
         let got = app.frame(frame, Barriers::Both).unwrap();
         let want = cpu::frame(frame);
-        assert!(want.0.iter().any(|&a| a > 0.5), "frame {frame}: nothing drawn");
+        assert!(
+            want.0.iter().any(|&a| a > 0.5),
+            "frame {frame}: nothing drawn"
+        );
         check(&format!("frame {frame}"), &got, &want);
         frames.push(got);
     }
