@@ -4,9 +4,11 @@
 //! cargo run --release -p softvk-wgpu-host --example frames -- [FRAMES] [--negative-control]
 //! ```
 //!
-//! Each frame is one `queue.submit`: a WGSL compute pass writes data, softvk records its work
-//! into a wgpu encoder's raw Vulkan command buffer, a WGSL render pass draws softvk's output.
-//! Every frame is checked against the CPU; softvk's own submissions and staging copies are
+//! Each frame is one `queue.submit`: a WGSL compute pass deforms a mesh into the application's
+//! vertex buffer, softvk records the silhouettes of those vertices and their backward into a
+//! wgpu encoder's raw Vulkan command buffer, a WGSL compute pass reads softvk's silhouettes and
+//! gradients. Every frame is checked against softvk's f64 twins; softvk's own submissions and
+//! staging copies are
 //! counted, and the validation layer (with synchronization validation within and between
 //! command buffers; `SOFTVK_VALIDATION=0` turns it off) is listened to. `--negative-control`
 //! adds frames without one of softvk's barriers and prints what the layer says about each.

@@ -142,7 +142,7 @@ pub enum Barriers {
     Both,
     /// Negative control: the producer's writes are not made visible to softvk.
     OmitEntry,
-    /// Negative control: softvk's writes are not made visible to the draw pass.
+    /// Negative control: softvk's writes are not made visible to the consume pass.
     OmitExit,
 }
 

@@ -12,9 +12,6 @@ use softvk_wgpu_host::{
     submit_time_sync_validation_requested, validation_wanted,
 };
 
-/// Vertices per frame: three of the scan's 4096-element blocks, so softvk records a two-level
-/// scan; not a multiple of the deform kernel's workgroup nor of the drawn image's width.
-
 /// Marks the child process of [`run_here`].
 const CHILD: &str = "SOFTVK_WGPU_HOST_TEST_CHILD";
 
@@ -69,7 +66,6 @@ fn app(validation: bool) -> Option<App> {
     Some(app)
 }
 
-/// Fails with the first vertex whose drawn value differs from the CPU's.
 /// One frame against the twins: alpha within 1e-4, gradients within 1e-3 of their scale, and
 /// something to see (a silhouette, a gradient).
 fn check(what: &str, got: &softvk_wgpu_host::FrameResult, want: &(Vec<f64>, Vec<[f64; 3]>)) {
