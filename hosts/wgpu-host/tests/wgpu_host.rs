@@ -66,8 +66,7 @@ fn app(validation: bool) -> Option<App> {
     Some(app)
 }
 
-/// One frame against the twins: alpha within 1e-4, gradients within 1e-3 of their scale, and
-/// something to see (a silhouette, a gradient).
+/// One frame against the twins: alpha within 1e-4, gradients within 1e-3 of their scale.
 fn check(what: &str, got: &softvk_wgpu_host::FrameResult, want: &(Vec<f64>, Vec<[f64; 3]>)) {
     let (alpha, grads) = cpu::distance(got, want);
     assert!(alpha <= 1e-4, "{what}: alpha differs by {alpha:.2e}");
