@@ -387,17 +387,28 @@ fn a_capacity_too_small_stops_the_gated_work_and_says_so() {
     assert_eq!(status.stopped, Some((5, total)));
     let image: Vec<[f32; 4]> = ctx.read_buffer(scene.output(), 0, n).unwrap();
     assert!(image.iter().all(|p| *p == [7.0; 4]), "gated work ran");
-    // A scene never reserved is misuse, before anything is recorded.
+    // A scene never reserved, or last binned by an exact run (bins sized for its own view
+    // groups, not for one guarded group), is misuse, before anything is recorded.
     let mut fresh = renderer
         .prepare(ctx, &mesh, &cameras(), &Lighting::unlit(), &settings())
         .unwrap();
     fresh.set_silhouette_only(true);
-    let err = ctx
-        .submit_and_wait(|rec| {
-            renderer.record_forward_guarded(rec, &fresh, &mut gate, 1, |_, _| Ok(()))
+    let guarded = |scene: &GpuScene, gate: &mut IterationGate| {
+        ctx.submit_and_wait(|rec| {
+            renderer.record_forward_guarded(rec, scene, gate, 1, |_, _| Ok(()))
         })
-        .unwrap_err();
+    };
+    let err = guarded(&fresh, &mut gate).unwrap_err();
     assert!(matches!(err, softvk::Error::Misuse(_)), "{err}");
+    renderer
+        .run(ctx, &mut fresh, Method::Tiled { tile: TILE })
+        .unwrap();
+    let err = guarded(&fresh, &mut gate).unwrap_err();
+    assert!(matches!(err, softvk::Error::Misuse(_)), "{err}");
+    renderer
+        .reserve_guarded(ctx, &mut fresh, TILE, total + total / 4)
+        .unwrap();
+    guarded(&fresh, &mut gate).unwrap();
 }
 
 #[test]

@@ -139,6 +139,9 @@ pub struct GpuScene {
     pub(crate) groups: Vec<ViewGroup>,
     /// The tile size of the last tiled render.
     pub(crate) tile: Option<u32>,
+    /// The bins were sized by [`Renderer::reserve_guarded`] (one group of every view, a
+    /// capacity), not by an exact run: what a guarded forward needs.
+    guarded: bool,
     /// Render alpha only ([`GpuScene::set_silhouette_only`]).
     pub(crate) silhouette_only: bool,
     /// The batch's meshes in f64, the lighting and the views, for the backward's host share.
@@ -836,6 +839,7 @@ impl Renderer {
             bins: Vec::new(),
             groups: Vec::new(),
             tile: None,
+            guarded: false,
             silhouette_only: false,
             meshes: meshes.iter().map(MeshF64::from_mesh).collect(),
             lighting: lighting.clone(),
@@ -1016,6 +1020,7 @@ impl Renderer {
             .collect();
         scene.groups.clear();
         scene.tile = Some(tile);
+        scene.guarded = false;
         let mut setup_done = false;
         while let Some((first, views, tile_rows)) = todo.pop() {
             let grid = grid.window(tile_rows.0, tile_rows.1)?;
@@ -1100,7 +1105,7 @@ impl Renderer {
     /// [`Renderer::reserve_guarded`] (the total lands in [`Bins::total_buffer`] of the first bins).
     fn record_setup_and_count(&self, rec: &mut Recorder<'_>, scene: &GpuScene) -> Result<()> {
         let (tile, bins) = match (scene.tile, scene.bins.first()) {
-            (Some(tile), Some(bins)) => (tile, bins),
+            (Some(tile), Some(bins)) if scene.guarded => (tile, bins),
             _ => {
                 return Err(Error::Misuse(
                     "a guarded forward needs Renderer::reserve_guarded first".into(),
@@ -1207,6 +1212,7 @@ impl Renderer {
             }
         }
         scene.tile = Some(tile);
+        scene.guarded = true;
         scene.groups = vec![ViewGroup {
             first: 0,
             views: scene.view_count,
@@ -1236,6 +1242,13 @@ impl Renderer {
                 if scene.tile != Some(tile) || scene.groups.is_empty() {
                     return Err(Error::Misuse(
                         "record_forward needs a previous tiled run with the same tile size".into(),
+                    ));
+                }
+                if scene.guarded {
+                    return Err(Error::Misuse(
+                        "record_forward replays an exact run's binning; a scene sized by \
+                         reserve_guarded records record_forward_guarded"
+                            .into(),
                     ));
                 }
                 for (group, bins) in scene.groups.iter().zip(&scene.bins) {
