@@ -634,7 +634,7 @@ impl GradKernels {
             rec.dispatch(
                 &self.world,
                 &specs::GradWorldBindings {
-                    positions: scene.positions.whole(),
+                    positions: scene.position_range()?,
                     faces: scene.faces.whole(),
                     views: scene.views.whole(),
                     face_grads: gb.face_grads.whole(),

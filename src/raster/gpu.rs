@@ -33,7 +33,7 @@
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::gate::IterationGate;
-use crate::gpu::{Buffer, Context, MemoryKind, Recorder};
+use crate::gpu::{Buffer, BufferRange, Context, MemoryKind, Recorder};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::primitives::binning::{self, BinJob, Binner, Bins, ItemLayout, TileGrid};
@@ -537,6 +537,14 @@ impl GpuScene {
         self.position_layout
     }
 
+    /// The bytes of [`GpuScene::positions`] the kernels read (a host's vertex buffer may be
+    /// larger than one storage binding; only the vertices' span is bound).
+    pub(crate) fn position_range(&self) -> Result<BufferRange<'_>> {
+        let vertices = u64::from(self.vertex_count) * self.meshes.len() as u64;
+        let bytes = self.position_layout.bytes(vertices)?.max(4);
+        Ok(self.positions.range(0, bytes.min(self.positions.size())))
+    }
+
     /// Renders from `buffer`'s vertices from now on, laid out as `layout` says: a host's vertex
     /// buffer ([`Context::import_buffer`]), interleaved or not, written by the host's own passes
     /// before each forward. The scene's own position buffer is dropped. The vertex count (per
@@ -851,7 +859,7 @@ impl Renderer {
         rec.pass("face setup", |rec| {
             self.setup.record(
                 rec,
-                (scene.positions.whole(), scene.position_layout),
+                (scene.position_range()?, scene.position_layout),
                 scene.faces.whole(),
                 scene.views.whole(),
                 scene.setups.whole(),
