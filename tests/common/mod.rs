@@ -1,6 +1,8 @@
 //! Shared test support: a validated GPU context that fails the test on any validation message.
 #![allow(dead_code)] // each test binary uses a different subset
 
+pub mod host;
+
 use std::ops::Deref;
 
 use softvk::gpu::{Context, ContextOptions};
