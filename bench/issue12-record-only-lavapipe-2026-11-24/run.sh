@@ -1,7 +1,8 @@
 #!/bin/bash
 # Issue #12: the fitting iterations before (24e1d26, the commit before the record-only stages)
-# and after (the binary given as $1), alternating rounds on one quiet machine.
-B=/work/wt-old/target/release/softvk; A=${1:?after binary}
+# and after (the binary given as $1), alternating rounds on one quiet machine. The before binary:
+#   git worktree add --detach /work/wt-old 24e1d26 && (cd /work/wt-old && cargo build --release --bin softvk)
+B=${BEFORE:-/work/wt-old/target/release/softvk}; A=${1:?after binary}
 OUT=$(dirname "$0"); cd "$OUT" || exit 1
 for r in 1 2; do
   for w in before after; do

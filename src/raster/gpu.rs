@@ -558,8 +558,7 @@ impl GpuScene {
         buffer
             .whole()
             .require(need, "the scene's vertex positions")?;
-        let max = buffer.size().min(u64::from(u32::MAX) * 4);
-        if need > max {
+        if need > 4 * u64::from(u32::MAX) {
             return Err(Error::Limit(format!(
                 "vertex positions reach byte {need}, past what 32-bit float indices address"
             )));
