@@ -126,7 +126,7 @@ fn main() -> softvk::Result<()> {
         {
             // SAFETY: `cmd` is begun, of the context's queue family, recorded only here.
             let mut rec = unsafe { Recorder::new(&ctx, cmd) };
-            gate.record_reset(&mut rec);
+            gate.reset();
             for it in submission * K + 1..=(submission + 1) * K {
                 deform.record_forward(&mut rec, params.whole(), scene.positions().whole())?;
                 renderer.record_forward_guarded(

@@ -318,7 +318,7 @@ fn the_iteration_gate_matches_its_twin_and_its_stop_is_sticky() {
         gpu.write_buffer(&total, 0, &[t]).unwrap();
         gpu.submit_and_wait(|rec| {
             if reset {
-                gate.record_reset(rec);
+                gate.reset();
             }
             gate.record_check(rec, total.whole(), it, capacity)
         })

@@ -323,7 +323,7 @@ fn a_fit_iteration_records_into_the_callers_command_buffer_over_the_callers_buff
         // SAFETY: `commands.cmd` is a begun primary command buffer of the context's queue
         // family, recorded only here.
         let mut rec = unsafe { Recorder::new(ctx, commands.cmd) };
-        gate.record_reset(&mut rec);
+        gate.reset();
         renderer
             .record_forward_guarded(&mut rec, &scene, &mut gate, 1, |rec, binned| {
                 sil.record(
@@ -375,7 +375,7 @@ fn a_capacity_too_small_stops_the_gated_work_and_says_so() {
     ctx.write_buffer(image, 0, &vec![[7.0f32; 4]; n]).unwrap();
     let mut ran = false;
     ctx.submit_and_wait(|rec| {
-        gate.record_reset(rec);
+        gate.reset();
         renderer.record_forward_guarded(rec, &scene, &mut gate, 5, |_, _| {
             ran = true; // recorded (and gated), not run
             Ok(())

@@ -615,7 +615,7 @@ impl<'c> MeshFitter<'c> {
         };
         let (renderer, scene, gate) = (&self.renderer, &self.scene, &mut self.gate);
         self.ctx.submit_and_wait_timed(timer, |rec| {
-            gate.record_reset(rec);
+            gate.reset();
             for it in first..=last {
                 Self::record_iteration(renderer, scene, gate, &parts, rec, it)?;
             }

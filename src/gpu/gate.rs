@@ -15,7 +15,7 @@
 //!
 //! The grids the check copies are known once the gated region is recorded: the gate writes them
 //! then, through a host-visible mapping (no copy, no submission), so the command buffer can be
-//! submitted by anyone. Every region recorded between two [`IterationGate::record_reset`]s must
+//! submitted by anyone. Every region recorded between two [`IterationGate::reset`]s must
 //! record the same dispatches; they change only when the buffers are resized, which a host does
 //! after waiting for its submissions (to read the status), so no submission in flight reads them
 //! while they change.
@@ -61,10 +61,10 @@ pub struct IterationGate {
     args: Buffer,
     /// The grids last written to `grids`.
     uploaded: Vec<[u32; 3]>,
-    /// Whether a gated region was recorded since the last [`IterationGate::record_reset`] (then
+    /// Whether a gated region was recorded since the last [`IterationGate::reset`] (then
     /// the next must record the same dispatches).
     recorded: bool,
-    /// [`IterationGate::record_reset`] was called and the next check clears the status.
+    /// [`IterationGate::reset`] was called and the next check clears the status.
     reset_pending: bool,
 }
 
@@ -83,10 +83,10 @@ impl IterationGate {
         })
     }
 
-    /// Starts a submission's status: the next check clears it first (recorded right before
-    /// that check, so that a host's command buffer meets softvk's first *dispatch*, not a fill,
-    /// and the status is touched only where the gate runs).
-    pub fn record_reset(&mut self, _rec: &mut Recorder<'_>) {
+    /// Starts a submission's status: the next check clears it first (the fill is recorded
+    /// right before that check, so that a host's command buffer meets softvk's first
+    /// *dispatch*, not a fill, and the status is touched only where the gate runs).
+    pub fn reset(&mut self) {
         self.reset_pending = true;
         self.recorded = false;
     }

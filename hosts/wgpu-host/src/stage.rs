@@ -118,7 +118,7 @@ impl SoftvkStage {
     /// wgpu's passes itself.
     pub fn record(&self, rec: &mut Recorder<'_>, frame: u32) -> Result<(), HostError> {
         let mut gate = self.gate.borrow_mut();
-        gate.record_reset(rec);
+        gate.reset();
         let io = GradIo {
             upstream: self.upstream.whole(),
             positions: self.d_positions.whole(),
