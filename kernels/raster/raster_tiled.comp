@@ -47,9 +47,14 @@ void main() {
     uint in_view = block - view * blocks_per_view;
     uint by = in_view / blocks_x;
     uint bx = in_view - by * blocks_x;
-    uint lid = gl_LocalInvocationIndex;
-    uint col = bx * 8u + (lid & 7u);
-    uint row = row0 + by * 8u + (lid >> 3u);
+    // Invocation i of the block takes pixel `segment_pixel(i, 8, lanes)`: where the driver
+    // gives subgroups consecutive invocations (any does for a workgroup that is a whole
+    // number of subgroups), each subgroup covers one `segment_shape` block. Any other
+    // assignment is still one pixel per invocation, only less well pruned.
+    uint lanes = subgroup_lanes();
+    uvec2 at = segment_pixel(gl_LocalInvocationIndex, 8u, lanes);
+    uint col = bx * 8u + at.x;
+    uint row = row0 + by * 8u + at.y;
     bool valid = col < pc.width && row < pc.height;
 
     uint blocks_per_tile = pc.tile_size / 8u;
@@ -65,7 +70,6 @@ void main() {
     vec2 lo = subgroupMin(edge);
     vec2 hi = subgroupMax(edge);
 
-    uint lanes = subgroup_lanes();
     uint lane = gl_SubgroupInvocationID;
     PixelState s = pixel_init();
     for (uint start = range.x; start < range.y; start += lanes) {

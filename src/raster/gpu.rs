@@ -267,6 +267,30 @@ impl PixelCenters {
     }
 }
 
+/// `segment_shape` of `kernels/include/subgroup_face.glsl`: the block (width, height) of pixels
+/// that `lanes` lanes cover together, as square as a power of two allows; `None` (rows) when
+/// `lanes` is not a power of two up to 64.
+fn segment_shape(lanes: u32) -> Option<(u32, u32)> {
+    (lanes.is_power_of_two() && lanes <= 64).then(|| {
+        let w = 1 << lanes.ilog2().div_ceil(2);
+        (w, lanes / w)
+    })
+}
+
+/// `segment_pixel`: where pixel `i` of a `size`-wide square lies (x, y) when its pixels go to
+/// lanes `lanes` at a time, one [`segment_shape`] block per run.
+fn segment_pixel(i: u32, size: u32, lanes: u32) -> (u32, u32) {
+    let Some((w, h)) = segment_shape(lanes) else {
+        return (i % size, i / size);
+    };
+    let (segment, lane) = (i / lanes, i % lanes);
+    let per_row = size / w;
+    (
+        (segment % per_row) * w + lane % w,
+        (segment / per_row) * h + lane / w,
+    )
+}
+
 /// Whether face box `f` can hold a pixel centre of box `p` (the kernels' ballot test).
 fn boxes_touch(f: [f32; 4], p: [f32; 4]) -> bool {
     !(p[2] < f[0] || p[3] < f[1] || p[0] > f[2] || p[1] > f[3])
@@ -487,22 +511,30 @@ impl GpuScene {
                         .filter(|f| f.flags & FACE_FINITE != 0 && boxes_touch(f.bbox, b))
                         .count() as u64
                 };
-                // Forward: per 8×8 block of the tile, per subgroup of its 64 pixels (row-major, edge
-                // pixels clamped into the image), the faces whose box touches the subgroup's.
+                // Forward: per 8×8 block of the tile, per subgroup of its 64 pixels (one
+                // `segment_pixel` block each, edge pixels clamped into the image), the faces whose
+                // box touches the subgroup's.
                 for by in (y0..y0 + tile).step_by(8).filter(|&y| y < h) {
                     for bx in (x0..x0 + tile).step_by(8).filter(|&x| x < w) {
                         for first in (0..64).step_by(lanes as usize) {
                             let group: Vec<(u32, u32)> = (first..first + lanes.min(64))
-                                .map(|i| ((bx + i % 8).min(w - 1), (by + i / 8).min(h - 1)))
+                                .map(|i| {
+                                    let (x, y) = segment_pixel(i, 8, lanes);
+                                    ((bx + x).min(w - 1), (by + y).min(h - 1))
+                                })
                                 .collect();
                             counts.forward += u64::from(lanes) * touching(&run, &group);
                         }
                     }
                 }
                 // Backward: per batch of `lanes` faces, per segment of `lanes` pixels of the tile
-                // (row-major, those in the image), the batch's faces whose box touches the segment.
+                // (`segment_pixel` blocks, those in the image), the batch's faces whose box
+                // touches the segment.
                 let tile_pixels: Vec<(u32, u32)> = (0..tile * tile)
-                    .map(|i| (x0 + i % tile, y0 + i / tile))
+                    .map(|i| {
+                        let (x, y) = segment_pixel(i, tile, lanes);
+                        (x0 + x, y0 + y)
+                    })
                     .collect();
                 for batch in run.chunks(lanes as usize) {
                     for segment in tile_pixels.chunks(lanes as usize) {
@@ -1466,4 +1498,38 @@ fn checked_views(
         return Err(Error::Input("no camera to render from".into()));
     }
     cameras.iter().map(GpuView::new).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{segment_pixel, segment_shape};
+
+    /// Every pixel of a tile goes to exactly one lane of one segment, and a segment's pixels
+    /// fill one `segment_shape` block, for every subgroup size a device may have.
+    #[test]
+    fn segments_cover_each_pixel_once_in_square_blocks() {
+        for lanes in [1u32, 2, 4, 8, 16, 32, 64, 3, 48] {
+            for size in [8u32, 16, 32] {
+                let mut seen = vec![false; (size * size) as usize];
+                for i in 0..size * size {
+                    let (x, y) = segment_pixel(i, size, lanes);
+                    assert!(x < size && y < size, "lanes {lanes}, size {size}, i {i}");
+                    assert!(!std::mem::replace(&mut seen[(y * size + x) as usize], true));
+                }
+                let Some((w, h)) = segment_shape(lanes) else {
+                    assert!(!lanes.is_power_of_two());
+                    continue;
+                };
+                assert_eq!(w * h, lanes);
+                assert!(w == h || w == 2 * h, "lanes {lanes}: {w} × {h}");
+                for first in (0..size * size).step_by(lanes as usize) {
+                    let (x0, y0) = segment_pixel(first, size, lanes);
+                    for i in first..first + lanes {
+                        let (x, y) = segment_pixel(i, size, lanes);
+                        assert!((x0..x0 + w).contains(&x) && (y0..y0 + h).contains(&y));
+                    }
+                }
+            }
+        }
+    }
 }
