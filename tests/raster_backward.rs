@@ -585,7 +585,7 @@ fn bits(g: &Gradients) -> Vec<u64> {
         .collect()
 }
 
-/// Texel gradients (R = 4: 51 floats per partial) and vertex colours, with the partials in
+/// Texel gradients (R = 4: 76 floats per partial) and vertex colours, with the partials in
 /// chunks of 7 units: many chunks, whose boundaries split faces' runs of units. Every method
 /// matches the twin, is bit for bit the single-chunk result (the running sums add in unit order
 /// whatever the chunking), and repeats bit for bit.

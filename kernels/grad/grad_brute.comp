@@ -13,9 +13,10 @@
 
 layout(local_size_x = 64) in;
 
-// This chunk's partials: `grad_stride` floats per unit (9 screen, then colour slots × 3). The
-// texel slots arrive zeroed (the host fills them) and are summed into here.
-layout(std430, set = 0, binding = 6) buffer Partials { float partials[]; };
+// This chunk's partials: `grad_stride` floats per unit, as vec4 records (`PARTIAL_COLORS` in
+// raster_grad.glsl). The texel slots arrive zeroed (the host fills them) and are summed into
+// here.
+layout(std430, set = 0, binding = 6) buffer Partials { vec4 partials[]; };
 
 void main() {
     uint id = linear_group_id() * 64u + gl_LocalInvocationIndex;
@@ -30,7 +31,7 @@ void main() {
     uint gview = pc.first_view + view;
     Face f = face_of(setups[gview * pc.face_count + face]);
     bool vertex_colors = VERTEX_COLORS;
-    uint o = id * pc.grad_stride;
+    uint o = id * (pc.grad_stride / 4u);
     uint row_begin = band * pc.split;
     uint row_end = min(pc.height, row_begin + pc.split);
     vec3 acc[3] = vec3[3](vec3(0.0), vec3(0.0), vec3(0.0));
@@ -55,23 +56,16 @@ void main() {
                         cacc[1] += g.color[1];
                         cacc[2] += g.color[2];
                     } else {
-                        uint t = o + 9u + 3u * g.texel;
-                        partials[t] += g.color[0].x;
-                        partials[t + 1u] += g.color[0].y;
-                        partials[t + 2u] += g.color[0].z;
+                        partials[o + PARTIAL_COLORS + g.texel] += vec4(g.color[0], 0.0);
                     }
                 }
             }
         }
     }
     for (uint c = 0u; c < 3u; ++c) {
-        partials[o + 3u * c] = acc[c].x;
-        partials[o + 3u * c + 1u] = acc[c].y;
-        partials[o + 3u * c + 2u] = acc[c].z;
+        partials[o + c] = vec4(acc[c], 0.0);
         if (vertex_colors) {
-            partials[o + 9u + 3u * c] = cacc[c].x;
-            partials[o + 9u + 3u * c + 1u] = cacc[c].y;
-            partials[o + 9u + 3u * c + 2u] = cacc[c].z;
+            partials[o + PARTIAL_COLORS + c] = vec4(cacc[c], 0.0);
         }
     }
 }

@@ -13,7 +13,8 @@
 layout(local_size_x = 64) in;
 
 layout(std430, set = 0, binding = 0) readonly buffer Offsets { uint offsets[]; };
-layout(std430, set = 0, binding = 1) readonly buffer Partials { float partials[]; };
+// vec4 records: screen corners, then colour slots (see raster_grad.glsl).
+layout(std430, set = 0, binding = 1) readonly buffer Partials { vec4 partials[]; };
 layout(std430, set = 0, binding = 2) buffer FaceGrads { float face_grads[]; };
 
 layout(push_constant) uniform Push {
@@ -68,14 +69,14 @@ void main() {
     }
     // One loop (no inner one): its iterations are what the host bounds.
     for (uint u = begin; u < end; ++u) {
-        uint p = (u - pc.chunk_begin) * pc.stride;
-        s0 += vec3(partials[p], partials[p + 1u], partials[p + 2u]);
-        s1 += vec3(partials[p + 3u], partials[p + 4u], partials[p + 5u]);
-        s2 += vec3(partials[p + 6u], partials[p + 7u], partials[p + 8u]);
+        uint p = (u - pc.chunk_begin) * (pc.stride / 4u);
+        s0 += partials[p].xyz;
+        s1 += partials[p + 1u].xyz;
+        s2 += partials[p + 2u].xyz;
         if (colors) {
-            c0 += vec3(partials[p + 9u], partials[p + 10u], partials[p + 11u]);
-            c1 += vec3(partials[p + 12u], partials[p + 13u], partials[p + 14u]);
-            c2 += vec3(partials[p + 15u], partials[p + 16u], partials[p + 17u]);
+            c0 += partials[p + 3u].xyz;
+            c1 += partials[p + 4u].xyz;
+            c2 += partials[p + 5u].xyz;
         }
     }
     face_grads[o] = s0.x;

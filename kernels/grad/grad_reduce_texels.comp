@@ -15,7 +15,8 @@ layout(local_size_x = 64) in;
 
 layout(std430, set = 0, binding = 0) readonly buffer Views { View views[]; };
 layout(std430, set = 0, binding = 1) readonly buffer Offsets { uint offsets[]; };
-layout(std430, set = 0, binding = 2) readonly buffer Partials { float partials[]; };
+// vec4 records: screen corners, then texel slots (see raster_grad.glsl).
+layout(std430, set = 0, binding = 2) readonly buffer Partials { vec4 partials[]; };
 // 3 floats per (mesh, face, texel), accumulated.
 layout(std430, set = 0, binding = 3) buffer TexelGrads { float texel_grads[]; };
 
@@ -62,8 +63,8 @@ void main() {
         uint o = 3u * ((mesh * pc.face_count + face) * pc.texels + texel);
         vec3 acc = vec3(texel_grads[o], texel_grads[o + 1u], texel_grads[o + 2u]);
         for (uint u = begin; u < end; ++u) {
-            uint p = (u - pc.chunk_begin) * pc.stride + 9u + 3u * texel;
-            acc += vec3(partials[p], partials[p + 1u], partials[p + 2u]);
+            // Past the three screen corners, the texel slots.
+            acc += partials[(u - pc.chunk_begin) * (pc.stride / 4u) + 3u + texel].xyz;
         }
         texel_grads[o] = acc.x;
         texel_grads[o + 1u] = acc.y;

@@ -36,9 +36,10 @@
 
 layout(local_size_x = 64) in;
 
-// This chunk's partials: `grad_stride` floats per entry (9 screen, then colour slots × 3). The
-// texel slots arrive zeroed (the host fills them) and are summed into here.
-layout(std430, set = 0, binding = 6) buffer Partials { float partials[]; };
+// This chunk's partials: `grad_stride` floats per entry, as vec4 records (`PARTIAL_COLORS` in
+// raster_grad.glsl). The texel slots arrive zeroed (the host fills them) and are summed into
+// here.
+layout(std430, set = 0, binding = 6) buffer Partials { vec4 partials[]; };
 layout(std430, set = 0, binding = 7) readonly buffer Pairs { uint pairs[]; };
 layout(std430, set = 0, binding = 8) readonly buffer PairItems { uint pair_items[]; };
 layout(std430, set = 0, binding = 9) readonly buffer Ranges { uvec2 ranges[]; };
@@ -96,7 +97,7 @@ void main() {
             face = pair_items[slot];
             f = face_of(setups[gview * pc.face_count + face]);
         }
-        uint o = (slot - pc.chunk_begin) * pc.grad_stride;
+        uint o = (slot - pc.chunk_begin) * (pc.grad_stride / 4u);
         vec3 acc[3] = vec3[3](vec3(0.0), vec3(0.0), vec3(0.0));
         vec3 cacc[3] = vec3[3](vec3(0.0), vec3(0.0), vec3(0.0));
         for (uint base = 0u; base < pixels; base += lanes) {
@@ -159,10 +160,7 @@ void main() {
                         }
                         uint oq = subgroupShuffle(o, q);
                         if (leader) {
-                            uint t = oq + 9u + 3u * texel;
-                            partials[t] += sum.x;
-                            partials[t + 1u] += sum.y;
-                            partials[t + 2u] += sum.z;
+                            partials[oq + PARTIAL_COLORS + texel] += vec4(sum, 0.0);
                         }
                     }
                 }
@@ -170,13 +168,9 @@ void main() {
         }
         if (has) {
             for (uint c = 0u; c < 3u; ++c) {
-                partials[o + 3u * c] = acc[c].x;
-                partials[o + 3u * c + 1u] = acc[c].y;
-                partials[o + 3u * c + 2u] = acc[c].z;
+                partials[o + c] = vec4(acc[c], 0.0);
                 if (VERTEX_COLORS) {
-                    partials[o + 9u + 3u * c] = cacc[c].x;
-                    partials[o + 9u + 3u * c + 1u] = cacc[c].y;
-                    partials[o + 9u + 3u * c + 2u] = cacc[c].z;
+                    partials[o + PARTIAL_COLORS + c] = vec4(cacc[c], 0.0);
                 }
             }
         }

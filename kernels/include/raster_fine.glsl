@@ -79,7 +79,7 @@ layout(push_constant) uniform Push {
     uint out_width;        // backward: output size (the upstream gradient's; half with AA)
     uint out_height;
     uint entry_total;      // backward, tiled: (face, tile) entries of the view group
-    uint grad_stride;      // backward: floats per partial (9 screen + colour slots × 3)
+    uint grad_stride;      // backward: floats per partial (vec4 records: 3 corners + colour slots)
     uint first_row;        // tiled only: the window's first tile row (tiles_y rows from it)
 #ifdef FINE_BACKWARD
     uint chunk_begin;      // backward: the first unit (tiled: entry slot; brute: (item, band))

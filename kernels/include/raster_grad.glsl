@@ -10,6 +10,13 @@
 
 #include "raster_fine.glsl"
 
+// A partial gradient (one unit of the backward: a (face, tile) entry or a (face, band)) is a
+// record of vec4s: the three screen corners' (x_s, y_s, z), then one per colour slot (texel or
+// corner) RGB, each with an unused fourth float. Whole vec4s, because on llvmpipe every load or
+// store of a lane's own address is a scalar loop over the lanes whatever its width: a texel's
+// read-modify-write is then two such loops instead of six. Twin: `grad_stride`.
+const uint PARTIAL_COLORS = 3u;
+
 // dL/d(output RGBA), output resolution, view-major.
 layout(std430, set = 0, binding = 5) readonly buffer DImage { vec4 d_image[]; };
 

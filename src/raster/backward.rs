@@ -146,10 +146,11 @@ impl GradKernels {
     }
 }
 
-/// Floats per partial gradient: 9 screen coordinates, then the colour slots (R² texels or 3
-/// corners) × RGB.
+/// Floats per partial gradient: a vec4 per screen corner (x_s, y_s, z), then one per colour
+/// slot (R² texels or 3 corners) RGB, each with an unused fourth float (whole vec4s keep a
+/// kernel's read-modify-write of a slot one load and one store; see `raster_grad.glsl`).
 pub fn grad_stride(mode: ColorMode, texture_res: u32) -> u32 {
-    9 + 3 * reference_grad::color_slots(mode, texture_res) as u32
+    4 * (3 + reference_grad::color_slots(mode, texture_res) as u32)
 }
 
 /// Floats per (view, face) gradient after the reduction: 9 screen coordinates, and with vertex
@@ -1055,9 +1056,9 @@ mod tests {
 
     #[test]
     fn stride_counts_screen_and_colour_slots() {
-        assert_eq!(grad_stride(ColorMode::Surface, 1), 12);
-        assert_eq!(grad_stride(ColorMode::Surface, 3), 9 + 27);
-        assert_eq!(grad_stride(ColorMode::Vertex, 5), 18);
+        assert_eq!(grad_stride(ColorMode::Surface, 1), 16);
+        assert_eq!(grad_stride(ColorMode::Surface, 3), 4 * (3 + 9));
+        assert_eq!(grad_stride(ColorMode::Vertex, 5), 24);
         assert_eq!(face_grad_width(ColorMode::Surface), 9);
         assert_eq!(face_grad_width(ColorMode::Vertex), 18);
     }
