@@ -24,7 +24,9 @@ struct PixelAux {
 };
 
 layout(std430, set = 0, binding = 0) readonly buffer Setups { FaceSetup setups[]; };
-layout(std430, set = 0, binding = 1) readonly buffer Colors { float colors[]; };
+// RGB and an unused fourth float per colour: one vec4 load is one scalar loop over the lanes on
+// llvmpipe, where three float loads are three.
+layout(std430, set = 0, binding = 1) readonly buffer Colors { vec4 colors[]; };
 layout(std430, set = 0, binding = 2) readonly buffer Faces { uint faces[]; };
 #ifdef FINE_BACKWARD
 layout(std430, set = 0, binding = 3) readonly buffer Image { vec4 image[]; };
@@ -95,14 +97,14 @@ vec3 sample_color(uint mesh, uint face, vec3 wc) {
     if (VERTEX_COLORS) {
         uvec3 f = uvec3(faces[3u * face], faces[3u * face + 1u], faces[3u * face + 2u])
                 + mesh * pc.vertex_count;
-        vec3 c0 = vec3(colors[3u * f.x], colors[3u * f.x + 1u], colors[3u * f.x + 2u]);
-        vec3 c1 = vec3(colors[3u * f.y], colors[3u * f.y + 1u], colors[3u * f.y + 2u]);
-        vec3 c2 = vec3(colors[3u * f.z], colors[3u * f.z + 1u], colors[3u * f.z + 2u]);
+        vec3 c0 = colors[f.x].rgb;
+        vec3 c1 = colors[f.y].rgb;
+        vec3 c2 = colors[f.z].rgb;
         return wc.x * c0 + wc.y * c1 + wc.z * c2;
     }
     uint r2 = pc.texture_res * pc.texture_res;
     uint t = (mesh * pc.face_count + face) * r2 + surface_texel_index(wc, pc.texture_res);
-    return vec3(colors[3u * t], colors[3u * t + 1u], colors[3u * t + 2u]);
+    return colors[t].rgb;
 }
 
 // One pixel's running state over the faces it has seen.

@@ -172,7 +172,7 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
             uvec3 vi = uvec3(faces[3u * j], faces[3u * j + 1u], faces[3u * j + 2u])
                      + f.mesh * pc.vertex_count;
             for (uint k = 0u; k < 3u; ++k) {
-                vec3 ck = vec3(colors[3u * vi[k]], colors[3u * vi[k] + 1u], colors[3u * vi[k] + 2u]);
+                vec3 ck = colors[vi[k]].rgb;
                 d_wc[k] = g.colored ? d_wc[k] + dot(d_color, ck) : d_wc[k];
                 g.color[k] = g.colored ? d_color * wc[k] : vec3(0.0);
             }

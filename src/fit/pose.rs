@@ -374,7 +374,8 @@ impl PoseProblem {
             renderer.prepare(ctx, mesh, std::slice::from_ref(camera), lighting, settings)?;
         let rest = scene.host_meshes()[0].positions.clone();
         let position_bytes = 12 * rest.len() as u64;
-        let color_bytes = 12
+        // As `GpuScene::colors` holds them: 4 floats per colour.
+        let color_bytes = 16
             * match settings.color_mode {
                 ColorMode::Surface => mesh.textures.len() as u64,
                 ColorMode::Vertex => rest.len() as u64,

@@ -600,7 +600,8 @@ impl GpuScene {
         Ok(())
     }
 
-    /// The lit colours the fine passes read (RGB per texel slot or per vertex, mesh after mesh).
+    /// The lit colours the fine passes read (per texel slot or per vertex, mesh after mesh: 4
+    /// floats each, RGB and an unused fourth).
     pub fn colors(&self) -> &Buffer {
         &self.colors
     }
@@ -649,13 +650,9 @@ impl GpuScene {
         }
         Ok(
             match FaceColors::of(m, &self.lighting, self.settings.color_mode) {
-                FaceColors::Surface { texels, .. } => texels,
-                FaceColors::Vertex { colors, .. } => colors,
-            }
-            .iter()
-            .flatten()
-            .map(|&c| c as f32)
-            .collect(),
+                FaceColors::Surface { texels, .. } => rgb_padded(&texels),
+                FaceColors::Vertex { colors, .. } => rgb_padded(&colors),
+            },
         )
     }
 
@@ -704,13 +701,22 @@ impl GpuScene {
     }
 }
 
-/// Lights on the host in f64 and rounds to the packed f32 triples the kernels read.
+/// Lights on the host in f64 and rounds to the f32 colours the kernels read ([`rgb_padded`]).
 fn lit_colors(mesh: &Mesh, lighting: &Lighting, mode: ColorMode) -> Vec<f32> {
-    let colors = match FaceColors::new(mesh, lighting, mode) {
-        FaceColors::Surface { texels, .. } => texels,
-        FaceColors::Vertex { colors, .. } => colors,
-    };
-    colors.iter().flatten().map(|&c| c as f32).collect()
+    match FaceColors::new(mesh, lighting, mode) {
+        FaceColors::Surface { texels, .. } => rgb_padded(&texels),
+        FaceColors::Vertex { colors, .. } => rgb_padded(&colors),
+    }
+}
+
+/// Colours as [`GpuScene::colors`] holds them: RGB in f32 and an unused fourth float each (a
+/// kernel then reads a colour with one vec4 load: on llvmpipe every load of a lane's own
+/// address is a scalar loop over the lanes, one per load whatever its width).
+fn rgb_padded(colors: &[[f64; 3]]) -> Vec<f32> {
+    colors
+        .iter()
+        .flat_map(|c| [c[0] as f32, c[1] as f32, c[2] as f32, 0.0])
+        .collect()
 }
 
 /// Positions and faces as the packed triples the kernels read.
