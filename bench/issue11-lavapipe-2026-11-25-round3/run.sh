@@ -1,7 +1,7 @@
 #!/bin/bash
 # One quiet run: issue #11 round three (square subgroup blocks). Binaries:
 #   before = 24baecf (the commit before issue #11's work), head = dbdf04a (round two + #12),
-#   after = 9730d88; each built with `cargo build --release` in a worktree of that commit.
+#   after = f928936 (square blocks, vec4 partials, vec4 colours); each built with `cargo build --release` in a worktree of that commit.
 # spot-256 forward+backward alternately, three rounds; fit-120 once each.
 export SOFTVK_ASSETS=/work/shared/assets
 B=/work/bin-before; H=/work/bin-head; A=/work/bin-after
