@@ -419,11 +419,31 @@ impl Context {
         } else {
             vec![]
         };
-        let ext_ptrs = if has_debug_utils {
+        let mut ext_ptrs = if has_debug_utils {
             vec![ash::ext::debug_utils::NAME.as_ptr()]
         } else {
             vec![]
         };
+        // The layer's shader validation cache is one file per user
+        // (`~/.cache/shader_validation_cache-<uid>.bin`), loaded when a device is created and
+        // rewritten in place when it is destroyed, with no locking: devices created and
+        // destroyed at once in several threads or processes (a test suite) can read it half
+        // written, and layer 1.3.239 then crashes (SIGSEGV inside the layer, seen in this
+        // project's tests). It only saves re-validating SPIR-V, so it is turned off.
+        let validation_features = options.validation
+            // SAFETY: a plain enumeration call on a loaded entry.
+            && unsafe { entry.enumerate_instance_extension_properties(Some(VALIDATION_LAYER)) }
+                .is_ok_and(|exts| {
+                    exts.iter().any(|e| {
+                        e.extension_name_as_c_str() == Ok(ash::ext::validation_features::NAME)
+                    })
+                });
+        if validation_features {
+            ext_ptrs.push(ash::ext::validation_features::NAME.as_ptr());
+        }
+        let disabled = [vk::ValidationFeatureDisableEXT::SHADER_VALIDATION_CACHE];
+        let mut features =
+            vk::ValidationFeaturesEXT::default().disabled_validation_features(&disabled);
         let validation_log = options.validation.then(Box::<ValidationLog>::default);
         let user_data = validation_log.as_deref().map_or(std::ptr::null_mut(), |l| {
             l as *const ValidationLog as *mut c_void
@@ -447,6 +467,9 @@ impl Context {
         if options.validation {
             // Chained so messages from instance creation itself are caught too.
             create = create.push_next(&mut messenger_info);
+        }
+        if validation_features {
+            create = create.push_next(&mut features);
         }
         // SAFETY: the create info and everything it points to live until the call returns.
         let instance = unsafe { entry.create_instance(&create, None) }.map_err(|result| {

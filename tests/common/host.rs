@@ -63,12 +63,23 @@ impl HostDevice {
             let entry = ash::Entry::load().expect("Vulkan loader");
             let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_2);
             let layers = [c"VK_LAYER_KHRONOS_validation".as_ptr()];
-            let extensions = [ash::ext::debug_utils::NAME.as_ptr()];
+            let extensions = [
+                ash::ext::debug_utils::NAME.as_ptr(),
+                ash::ext::validation_features::NAME.as_ptr(),
+            ];
+            // The layer's shader validation cache off, as softvk's own contexts have it
+            // (src/gpu/context.rs: a file every device rewrites without locking).
+            let disabled = [vk::ValidationFeatureDisableEXT::SHADER_VALIDATION_CACHE];
+            let mut features =
+                vk::ValidationFeaturesEXT::default().disabled_validation_features(&disabled);
             let mut instance_info = vk::InstanceCreateInfo::default()
                 .application_info(&app)
-                .enabled_extension_names(&extensions);
+                .enabled_extension_names(&extensions[..1]);
             if validation {
-                instance_info = instance_info.enabled_layer_names(&layers);
+                instance_info = instance_info
+                    .enabled_layer_names(&layers)
+                    .enabled_extension_names(&extensions)
+                    .push_next(&mut features);
             }
             let instance = entry
                 .create_instance(&instance_info, None)

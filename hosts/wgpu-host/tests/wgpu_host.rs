@@ -35,6 +35,13 @@ fn run_here(name: &str) -> bool {
             "VK_LAYER_ENABLES",
             layer_enables_with_submit_time_sync_validation(),
         )
+        // As softvk's own contexts do (src/gpu/context.rs): the layer's on-disk shader
+        // validation cache is rewritten without locking by every device, and parallel tests
+        // can crash the layer on a half-written one.
+        .env(
+            "VK_LAYER_DISABLES",
+            "VK_VALIDATION_FEATURE_DISABLE_SHADER_VALIDATION_CACHE_EXT",
+        )
         .output()
         .expect("run this test binary again");
     let stdout = String::from_utf8_lossy(&output.stdout);
