@@ -225,20 +225,23 @@ fn bits(v: &[f32]) -> Vec<u32> {
     v.iter().map(|x| x.to_bits()).collect()
 }
 
-/// Runs a fit; returns (parameters, logged (iteration, total loss bits, entries), regrowths).
+/// Runs a fit; returns (parameters, logged (iteration, total loss bits, entries), regrowths,
+/// queue submissions softvk made).
 fn run_fit(
     gpu: &common::Gpu,
     cams: &[Camera],
     targets: &[f32],
     opts: &MeshFitOptions,
-) -> (Vec<u32>, Vec<(u32, u32, u64)>, u32) {
+) -> (Vec<u32>, Vec<(u32, u32, u64)>, u32, u64) {
     let mut logged = Vec::new();
+    let before = gpu.counters().submissions;
     let fit = fit_mesh(gpu, &template(), cams, targets, opts, |l, _, _| {
         logged.push((l.iteration, l.total.to_bits(), l.entries));
         true
     })
     .unwrap();
-    (bits(&fit.params), logged, fit.regrowths)
+    let submissions = gpu.counters().submissions - before;
+    (bits(&fit.params), logged, fit.regrowths, submissions)
 }
 
 #[test]
@@ -249,15 +252,19 @@ fn k_iterations_per_submission_give_the_bits_of_one_per_submission() {
         log_every: 1,
         ..opts.clone()
     };
-    let (params_1, log_1, regrowths_1) = run_fit(&gpu, &cams, &targets, &one);
+    let (params_1, log_1, regrowths_1, submissions_1) = run_fit(&gpu, &cams, &targets, &one);
     assert_eq!(log_1.len(), 12);
     assert_eq!(regrowths_1, 0, "the default capacity has headroom");
+    let mut submissions = vec![(1, submissions_1)];
     for k in [5, 12] {
         let batched = MeshFitOptions {
             log_every: k,
             ..opts.clone()
         };
-        let (params_k, log_k, _) = run_fit(&gpu, &cams, &targets, &batched);
+        let (params_k, log_k, regrowths_k, submissions_k) =
+            run_fit(&gpu, &cams, &targets, &batched);
+        assert_eq!(regrowths_k, 0);
+        submissions.push((k, submissions_k));
         assert_eq!(params_k, params_1, "k = {k}: parameters differ from k = 1");
         // Logged after iterations k, 2k, ... and the last: the same values as k = 1's there.
         let want: Vec<u32> = (1..=12).filter(|i| i % k == 0 || *i == 12).collect();
@@ -265,6 +272,27 @@ fn k_iterations_per_submission_give_the_bits_of_one_per_submission() {
         for l in &log_k {
             assert_eq!(*l, log_1[l.0 as usize - 1], "k = {k}, iteration {}", l.0);
         }
+    }
+    // Submissions grow with the chunks of k iterations (one submission for the chunk, then the
+    // gate's status and the logged losses read back), not with the iterations: one chunk of
+    // 12 iterations costs what a fit of 1 iteration costs, and 12, 3 and 1 chunks (k = 1, 5,
+    // 12) cost that plus a fixed amount per further chunk.
+    let single = MeshFitOptions {
+        iterations: 1,
+        log_every: 1,
+        ..opts.clone()
+    };
+    let (_, _, _, submissions_single) = run_fit(&gpu, &cams, &targets, &single);
+    assert_eq!(submissions[2].1, submissions_single, "{submissions:?}");
+    let chunks = |k: u64| 12u64.div_ceil(k);
+    let per_chunk = (submissions_1 - submissions[2].1) / (chunks(1) - chunks(12));
+    assert!(per_chunk > 0);
+    for &(k, n) in &submissions {
+        assert_eq!(
+            n,
+            submissions[2].1 + (chunks(u64::from(k)) - 1) * per_chunk,
+            "k = {k}: {submissions:?}"
+        );
     }
 }
 
@@ -276,7 +304,7 @@ fn a_fit_that_outgrows_its_entry_capacity_equals_one_that_never_did() {
         log_every: 1,
         ..opts.clone()
     };
-    let (params, log, regrowths) = run_fit(&gpu, &cams, &targets, &ample);
+    let (params, log, regrowths, _) = run_fit(&gpu, &cams, &targets, &ample);
     assert_eq!(regrowths, 0);
     let entries: Vec<u64> = log.iter().map(|l| l.2).collect();
     // (a) A capacity of 8 entries: the first iteration of the first submission stops.
@@ -293,7 +321,7 @@ fn a_fit_that_outgrows_its_entry_capacity_equals_one_that_never_did() {
             entry_capacity: Some(capacity),
             ..opts.clone()
         };
-        let (params_t, log_t, regrowths_t) = run_fit(&gpu, &cams, &targets, &tight);
+        let (params_t, log_t, regrowths_t, _) = run_fit(&gpu, &cams, &targets, &tight);
         let what = format!("capacity {capacity}, {log_every} iterations per submission");
         assert!(regrowths_t >= 1, "{what}: never outgrew its capacity");
         assert_eq!(params_t, params, "{what}: parameters differ");
