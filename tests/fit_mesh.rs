@@ -225,14 +225,12 @@ fn bits(v: &[f32]) -> Vec<u32> {
     v.iter().map(|x| x.to_bits()).collect()
 }
 
-/// Runs a fit; returns (parameters, logged (iteration, total loss bits, entries), regrowths,
-/// queue submissions softvk made).
-fn run_fit(
-    gpu: &common::Gpu,
-    cams: &[Camera],
-    targets: &[f32],
-    opts: &MeshFitOptions,
-) -> (Vec<u32>, Vec<(u32, u32, u64)>, u32, u64) {
+/// A fit's parameter bits, logged (iteration, total loss bits, entries), regrowths, and the
+/// queue submissions softvk made.
+type FitRun = (Vec<u32>, Vec<(u32, u32, u64)>, u32, u64);
+
+/// Runs a fit.
+fn run_fit(gpu: &common::Gpu, cams: &[Camera], targets: &[f32], opts: &MeshFitOptions) -> FitRun {
     let mut logged = Vec::new();
     let before = gpu.counters().submissions;
     let fit = fit_mesh(gpu, &template(), cams, targets, opts, |l, _, _| {
