@@ -6,8 +6,8 @@
 //! 1. **Per (pixel, face)** (`kernels/include/raster_grad.glsl`, the twin's `pixel_face_grad`):
 //!    from the pixel's upstream gradient and the forward's [`PixelAux`](super::fine::PixelAux),
 //!    one face's contribution, independently of the other faces.
-//! 2. **Per unit of work**, a partial gradient (9 screen floats, then the colour slots: 3 vertex
-//!    colours or R² texels, × RGB), either
+//! 2. **Per unit of work**, a partial gradient (vec4 records: the 3 screen corners, then the
+//!    colour slots, 3 vertex colours or R² texels, RGB each; [`grad_stride`]), either
 //!    - tiled (`grad_tiled.comp`): a unit is a (face, tile) entry of the forward's binning (no
 //!      second binning), summed over the tile's pixels; a tile crowded past the driver's loop
 //!      cap is split over several workgroups; or

@@ -25,8 +25,8 @@ struct DownsamplePush {
 
 /// The buffers one brute-force render reads and writes, by the kernel's block names (generated
 /// by `build.rs` from `raster_brute.comp`): setups (`view_count × face_count`
-/// [`crate::raster::setup::GpuFaceSetup`]s), lit colours (packed f32 triples, mesh after mesh:
-/// `F R²` texels or one per vertex), faces (packed u32 triples), image (RGBA f32 per rendered
+/// [`crate::raster::setup::GpuFaceSetup`]s), lit colours (RGB f32 and an unused fourth each,
+/// mesh after mesh: `F R²` texels or one per vertex), faces (packed u32 triples), image (RGBA f32 per rendered
 /// pixel, view-major, row 0 at the top) and aux (one [`crate::raster::fine::PixelAux`] per
 /// rendered pixel).
 pub use crate::gpu::specs::RasterBruteBindings as BruteBindings;
