@@ -11,6 +11,7 @@ it with the unmodified binary by `ab.sh`, then `git checkout kernels/`. Written 
   T3b texel read-modify-write compiled out    G0  forward: each lane reads its face's first texel
   P1  backward without nearest_edge           G1  forward: every lane reads one texel (a hit)
   P2  backward without the softmax exp        P3  backward depth/clip divisions as products
+  D   backward without the per-pair maths     E   backward without the image and aux loads
 """
 import pathlib, subprocess, sys
 
@@ -42,6 +43,16 @@ PROBES = {
            (RG, "g.screen[k].z - d_inv * wc[k] / (zk * zk)", "g.screen[k].z - d_inv * wc[k] * (zk * zk)"),
            (RG, "(d_wc[k] - renorm) / sum", "(d_wc[k] - renorm) * sum"),
            (RG, "float d_n = d_w[k] / det;", "float d_n = d_w[k] * det;")],
+    "D": [(GT, "bool hit = live && pixel_face_grad(face_shuffle(f, q), fq, u, g);", """Face fqq = face_shuffle(f, q);
+                    bool hit = live && fqq.v[0].x < u.p.x;
+                    g.screen[0] = fqq.v[0] * u.d_alpha; g.screen[1] = fqq.v[1] * u.d_alpha;
+                    g.screen[2] = fqq.v[2] * u.d_alpha; g.color[0] = fqq.v[2] * u.d_rgb;
+                    g.color[1] = g.color[0]; g.color[2] = g.color[0]; g.colored = hit;
+                    g.texel = fq & 7u;""")],
+    "E": [(RG, """    vec4 rgba = image[id];
+    PixelAux a = aux[id];""", """    vec4 rgba = g.abgr;
+    PixelAux a; a.softmax_sum = g.r + 1.0; a.softmax_ref_depth = g.g; a.alpha_acc = g.b;
+    a.alpha_zeros = uint(g.a); a.hard_face = 0u;""")],
 }
 
 if len(sys.argv) != 2 or sys.argv[1] not in PROBES:
