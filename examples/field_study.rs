@@ -254,29 +254,19 @@ fn run_fit(ctx: &Context, p: &Problem, keys: &Keys, label: &str) -> f64 {
     let last = r.log.last().copied();
     println!(
         "{} {label}: 3D IoU {iou:.4} (hull {hull_iou:.4}, ratio {:.3}) | {} its, fit {:.1} s \
-         (setup {:.1} s, sample {:.1} s, step {:.1} s), {:.0} ms/it | L_sil {:.5} L_geo {:.5} | \
+         (setup {:.1} s, logging {:.1} s, {} regrowths), {:.0} ms/it | L_sil {:.5} L_geo {:.5} | \
          load {load_before} → {}",
         p.name,
         iou / hull_iou,
         r.iterations,
         wall,
         r.timings.setup_s,
-        r.timings.sample_s,
-        r.timings.step_s,
+        r.timings.log_s,
+        r.timings.regrowths,
         1e3 * r.timings.iterations_s / f64::from(r.iterations.max(1)),
         last.map_or(f32::NAN, |l| l.silhouette),
         last.map_or(f32::NAN, |l| l.geo),
         load()
-    );
-    let passes: Vec<String> = r
-        .timings
-        .step_passes_ms
-        .iter()
-        .map(|p| format!("{} {:.1}", p.name, p.ms))
-        .collect();
-    println!(
-        "  GPU ms per step pass (logged iterations): {}",
-        passes.join(", ")
     );
     if let Some(dir) = keys.get("mc") {
         let dir = std::path::Path::new(dir);

@@ -1103,16 +1103,13 @@ pub fn run_backward(
 /// from 24 views (elevation 30°, azimuth every 15°, distance 2.732, viewing angle 15°: setup A
 /// of RESULTS.md), in the cube [`auto_cube`](crate::fit::field_fit::auto_cube) gives.
 ///
-/// After one untimed iteration, `opts.repeat` iterations run as the fit runs them (submission 1
-/// and its count read-back, then submission 2, both with GPU timestamps): `wall_ms` is the
-/// median wall time of a whole iteration, `gpu_ms` the median of the sum of both submissions'
-/// passes, and `passes` starts with `sample (wall)` (submission 1 and its read-back, wall) and
-/// its passes (`sample`, `probe count` of
-/// [`FieldFitter::sample_timed`](crate::fit::field_fit::FieldFitter::sample_timed), indented),
-/// then every pass of
-/// [`FieldFitter::step_timed`](crate::fit::field_fit::FieldFitter::step_timed) (parts of a pass
-/// indented, after it). `pairs` is 0
-/// (not counted for probing); `entries` is the binning's (anchor, tile) entry count.
+/// After one untimed iteration, `opts.repeat` iterations run as the fit runs them, each in one
+/// submission ([`FieldFitter::run`](crate::fit::field_fit::FieldFitter::run), with GPU
+/// timestamps; a fit runs `log_every` of them per submission): `wall_ms` is the median wall
+/// time of a whole iteration (recording, submission, the gate's status read), `gpu_ms` the
+/// median of the sum of its passes, and `passes` every pass (parts of a pass indented, after
+/// it). `pairs` is 0 (not counted for probing); `entries` is the binning's (anchor, tile)
+/// entry count of the last iteration.
 fn run_field_fit(
     ctx: &Context,
     opts: &BenchOptions,
@@ -1162,48 +1159,34 @@ fn run_field_fit(
         cube.center,
         cube.half
     ));
-    let mut entries = fitter.sample(ctx, 1)?;
-    fitter.step(ctx, 1)?;
+    let mut it = 1u32;
+    field_fit_iterations(ctx, &mut fitter, &mut it, None, progress, name)?;
     let mut timer = if ctx.info().timestamp_valid_bits > 0 {
-        Some(Timer::new(ctx, 16)?)
-    } else {
-        None
-    };
-    let mut sample_timer = if ctx.info().timestamp_valid_bits > 0 {
-        Some(Timer::new(ctx, 8)?)
+        Some(Timer::new(ctx, 24)?)
     } else {
         None
     };
     let (mut wall, mut gpu) = (Vec::new(), Vec::new());
-    let mut passes: Vec<(String, Vec<f64>)> = vec![("sample (wall)".into(), Vec::new())];
-    for it in 2..opts.repeat + 2 {
-        let start = Instant::now();
-        entries = fitter.sample_timed(ctx, it, sample_timer.as_mut())?;
-        let sampled = start.elapsed().as_secs_f64() * 1e3;
-        fitter.step_timed(ctx, it, timer.as_mut())?;
-        wall.push(start.elapsed().as_secs_f64() * 1e3);
-        passes[0].1.push(sampled);
-        if let (Some(timer), Some(sample_timer)) = (&timer, &sample_timer) {
-            let sample_times = sample_timer.results(ctx)?;
-            let step_times = timer.results(ctx)?;
+    let mut passes: Vec<(String, Vec<f64>)> = Vec::new();
+    for _ in 0..opts.repeat {
+        wall.push(field_fit_iterations(
+            ctx,
+            &mut fitter,
+            &mut it,
+            timer.as_mut(),
+            progress,
+            name,
+        )?);
+        if let Some(timer) = &timer {
+            let times = timer.results(ctx)?;
             // Parts of a pass (indented names) are inside it: not summed again.
             gpu.push(
-                sample_times
+                times
                     .iter()
-                    .chain(&step_times)
                     .filter(|t| !t.name.starts_with(' '))
                     .map(|t| t.ms)
                     .sum(),
             );
-            // Submission 1's passes are parts of `sample (wall)`.
-            let mut times: Vec<_> = sample_times
-                .into_iter()
-                .map(|mut t| {
-                    t.name = format!("  {}", t.name);
-                    t
-                })
-                .collect();
-            times.extend(step_times);
             for t in times {
                 match passes.iter_mut().find(|(n, _)| *n == t.name) {
                     Some((_, series)) => series.push(t.ms),
@@ -1212,6 +1195,7 @@ fn run_field_fit(
             }
         }
     }
+    let entries = fitter.last_entries();
     let timing = Timing::medians(&gpu, &wall, &passes);
     progress(&format!(
         "{name} fit-iteration: {entries} entries; {}",
@@ -1237,6 +1221,31 @@ fn run_field_fit(
         entries: Some(entries),
         identical_to_brute: None,
     })
+}
+
+/// Runs iteration `it` of a field fit in one submission (again when the gate stopped it, until
+/// it ran) and advances `it`; the wall time of the submission that ran it, ms.
+fn field_fit_iterations(
+    ctx: &Context,
+    fitter: &mut crate::fit::field_fit::FieldFitter,
+    it: &mut u32,
+    mut timer: Option<&mut Timer>,
+    progress: &mut impl FnMut(&str),
+    name: &str,
+) -> Result<f64> {
+    loop {
+        let start = Instant::now();
+        let stopped = fitter.run(ctx, *it, *it, timer.as_deref_mut())?;
+        let wall = start.elapsed().as_secs_f64() * 1e3;
+        if stopped.is_none() {
+            *it += 1;
+            return Ok(wall);
+        }
+        progress(&format!(
+            "{name}: iteration {it} outgrew the entry capacity; now {} (re-run, not timed)",
+            fitter.capacity()
+        ));
+    }
 }
 
 /// Runs iterations `it .. it + k` of `fitter` in one submission (again from a stopped one, until

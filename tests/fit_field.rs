@@ -110,7 +110,7 @@ fn one_gpu_iteration_equals_the_iteration_of_the_cpu_twins() {
             .map(|_| (4.0 * rng.unit() - 2.0) as f32)
             .collect();
         fitter.field().set_params(&ctx, &p0).unwrap();
-        fitter.iterate(&ctx, 1).unwrap();
+        assert_eq!(fitter.run(&ctx, 1, 1, None).unwrap(), None);
         let (l_sil, l_geo) = fitter.read_losses(&ctx).unwrap();
 
         // The samples: the GPU's, checked against the sampler's twin.
@@ -237,6 +237,104 @@ fn a_repeated_fit_gives_bit_identical_parameters() {
         // The fit moved the parameters.
         assert_ne!(bits(&a), bits(&field.initial_params(opts.probe.seed)));
     }
+}
+
+/// A fit's parameters (bits), its log (iteration and loss bits) and the submissions it made.
+fn fit_bits(
+    ctx: &common::Gpu,
+    targets: &Targets,
+    opts: &FieldFitOptions,
+) -> (Vec<u32>, Vec<(u32, u32, u32)>, u64) {
+    let before = ctx.counters().submissions;
+    let r = fit_field(ctx, targets, opts, |_| true).unwrap();
+    let submissions = ctx.counters().submissions - before;
+    let params = r.field.read_params(ctx).unwrap();
+    let log = r
+        .log
+        .iter()
+        .map(|l| (l.iteration, l.silhouette.to_bits(), l.geo.to_bits()))
+        .collect();
+    (
+        params.iter().map(|x| x.to_bits()).collect(),
+        log,
+        submissions,
+    )
+}
+
+#[test]
+fn k_field_iterations_per_submission_give_the_bits_of_one_per_submission() {
+    let Some(ctx) = common::gpu() else { return };
+    let targets = tiny_targets();
+    // Max (its backward by rays) and union (by the binned entries, whose count stays on the
+    // GPU), with the regularizer.
+    for aggregate in [Aggregate::Max, Aggregate::Union] {
+        let opts = |iterations, log_every| FieldFitOptions {
+            iterations,
+            log_every,
+            ..tiny_options(aggregate, 0.3)
+        };
+        let (params_1, log_1, submissions_1) = fit_bits(&ctx, &targets, &opts(6, 1));
+        assert_eq!(log_1.len(), 6);
+        let mut submissions = vec![(1u64, submissions_1)];
+        for k in [4, 6] {
+            let (params_k, log_k, submissions_k) = fit_bits(&ctx, &targets, &opts(6, k));
+            submissions.push((u64::from(k), submissions_k));
+            assert_eq!(params_k, params_1, "{aggregate:?}, k = {k}");
+            // Logged after iterations k, 2k, ... and the last: k = 1's values there.
+            let want: Vec<u32> = (1..=6).filter(|i| i % k == 0 || *i == 6).collect();
+            assert_eq!(log_k.iter().map(|l| l.0).collect::<Vec<_>>(), want);
+            for l in &log_k {
+                assert_eq!(*l, log_1[l.0 as usize - 1], "{aggregate:?}, k = {k}");
+            }
+        }
+        // Submissions grow with the chunks of k iterations, not with the iterations: a chunk
+        // of 6 costs what a fit of 1 iteration costs, and 6, 2 and 1 chunks (k = 1, 4, 6) that
+        // plus a fixed amount per further chunk.
+        let (_, _, submissions_single) = fit_bits(&ctx, &targets, &opts(1, 1));
+        assert_eq!(submissions[2].1, submissions_single, "{submissions:?}");
+        let chunks = |k: u64| 6u64.div_ceil(k);
+        let per_chunk = (submissions_1 - submissions_single) / (chunks(1) - 1);
+        assert!(per_chunk > 0);
+        for &(k, n) in &submissions {
+            assert_eq!(
+                n,
+                submissions_single + (chunks(k) - 1) * per_chunk,
+                "{aggregate:?}, k = {k}: {submissions:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_field_fit_that_outgrows_its_entry_capacity_equals_one_that_never_did() {
+    let Some(ctx) = common::gpu() else { return };
+    let targets = tiny_targets();
+    let opts = tiny_options(Aggregate::Union, 0.3);
+    let params = |f: &FieldFitter| {
+        let p = f.field().read_params(&ctx).unwrap();
+        p.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+    };
+    let mut ample = FieldFitter::new(&ctx, &targets, &opts).unwrap();
+    assert_eq!(ample.run(&ctx, 1, 3, None).unwrap(), None);
+    assert_eq!(ample.regrowths(), 0);
+    let entries = ample.last_entries();
+    assert!(entries > 1);
+
+    let mut tight = FieldFitter::new(&ctx, &targets, &opts).unwrap();
+    tight.reserve(&ctx, 1).unwrap();
+    assert_eq!(tight.capacity(), 1);
+    // Iteration 1 does not fit: it and the later ones change nothing, and the capacity grows.
+    let before = params(&tight);
+    assert_eq!(tight.run(&ctx, 1, 3, None).unwrap(), Some(1));
+    assert_eq!(params(&tight), before);
+    assert_eq!(tight.regrowths(), 1);
+    assert!(tight.capacity() > 1);
+    let mut it = 1;
+    while let Some(stopped) = tight.run(&ctx, it, 3, None).unwrap() {
+        it = stopped;
+    }
+    assert_eq!(params(&tight), params(&ample));
+    assert_eq!(tight.last_entries(), entries);
 }
 
 #[test]

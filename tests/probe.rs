@@ -7,6 +7,7 @@ mod common;
 use softvk::Error;
 use softvk::camera::{Camera, Projection};
 use softvk::fit::GradOut;
+use softvk::gpu::gate::{GateStatus, IterationGate};
 use softvk::gpu::{Buffer, Context, MemoryKind};
 use softvk::probe::prober::{NO_HIT, ProbeRun, RayOut, cpu as probe_cpu};
 use softvk::probe::sampler::{Ray, cpu as sampler_cpu};
@@ -622,4 +623,86 @@ fn loop_caps_and_bad_inputs_are_clear_errors() {
         matches!(e, Err(Error::Input(ref m)) if m.contains("view 1")),
         "{e:?}"
     );
+}
+
+/// Guarded probing (the field fit's: the count stays on the GPU) over a capacity: one
+/// submission, gated on the count.
+fn run_guarded(
+    p: &Probe,
+    s: &ProbeSettings,
+    capacity: u64,
+) -> (Vec<RayOut>, f32, Vec<f32>, GateStatus) {
+    let ctx = &p.ctx;
+    let mut prober = Prober::new(ctx, &p.gpu, s).unwrap();
+    prober.reserve_guarded(ctx, capacity).unwrap();
+    assert_eq!(prober.entry_capacity(), capacity);
+    let mut gate = IterationGate::new(ctx).unwrap();
+    let n = p.it.anchors.len();
+    // A sentinel that any gradient written would replace.
+    let d_phi = ctx.upload_buffer("test d_phi", &vec![7.0f32; n]).unwrap();
+    ctx.submit_and_wait(|rec| {
+        gate.reset();
+        prober.record_guarded(rec, &mut gate, 1, &p.gpu, p.anchors.whole(), |rec| {
+            prober.record_forward(
+                rec,
+                &p.gpu,
+                p.anchors.whole(),
+                p.phi.whole(),
+                p.rays.whole(),
+            )?;
+            prober.record_backward(
+                rec,
+                &p.gpu,
+                p.anchors.whole(),
+                p.phi.whole(),
+                p.rays.whole(),
+                GradOut::write(d_phi.whole()),
+            )
+        })
+    })
+    .unwrap();
+    let outs = if gate.read(ctx).unwrap().stopped.is_none() {
+        prober.read_outputs(ctx).unwrap()
+    } else {
+        Vec::new()
+    };
+    (
+        outs,
+        prober.read_loss(ctx).unwrap(),
+        ctx.read_buffer(&d_phi, 0, n).unwrap(),
+        gate.read(ctx).unwrap(),
+    )
+}
+
+#[test]
+fn guarded_probing_gives_the_exact_runs_bits_or_stops_untouched() {
+    let Some(p) = probe_setup() else { return };
+    for aggregate in [Aggregate::Max, Aggregate::LogSumExp, Aggregate::Union] {
+        let s = settings(aggregate);
+        let exact = run(&p, &s, false);
+        let entries = exact.entries;
+        assert!(entries > 1);
+        // A capacity that the count fills exactly, and one with room to spare (the kernels
+        // then read the count on the GPU): the exact run's outputs, loss and gradient.
+        for capacity in [entries, 3 * entries] {
+            let (outs, loss, d_phi, status) = run_guarded(&p, &s, capacity);
+            assert_eq!(status.stopped, None, "{aggregate:?}, capacity {capacity}");
+            assert_eq!(status.last_total, entries);
+            assert_eq!(
+                bits(&outs),
+                bits(&exact.outs),
+                "{aggregate:?}, capacity {capacity}"
+            );
+            assert_eq!(loss.to_bits(), exact.loss.to_bits());
+            assert_eq!(
+                bits(&d_phi),
+                bits(&exact.d_phi),
+                "{aggregate:?}, capacity {capacity}"
+            );
+        }
+        // One entry short: the gate stops the iteration, which writes nothing.
+        let (_, _, d_phi, status) = run_guarded(&p, &s, entries - 1);
+        assert_eq!(status.stopped, Some((1, entries)), "{aggregate:?}");
+        assert!(d_phi.iter().all(|&x| x == 7.0), "{aggregate:?}");
+    }
 }

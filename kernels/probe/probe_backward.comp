@@ -46,10 +46,13 @@ layout(std430, set = 0, binding = 7) readonly buffer Outs { RayOut outs[]; };
 layout(std430, set = 0, binding = 8) readonly buffer RayOrder { uint ray_order[]; };
 layout(std430, set = 0, binding = 9) readonly buffer RayRanges { uvec2 ray_ranges[]; };
 layout(std430, set = 0, binding = 10) writeonly buffer Partials { float partials[]; };
+// Each tile's first entry, then the entry count at `total_index` (`probe_mask_list.comp`'s
+// offsets): the entries that exist, which a guarded binning knows only here.
+layout(std430, set = 0, binding = 11) readonly buffer Offsets { uint offsets[]; };
 
 // Twin of `BackwardPush` (src/probe/prober.rs).
 layout(push_constant) uniform Push {
-    uint entries;        // binned (anchor, tile) entries
+    uint entries;        // entries the buffers hold (the count, or a guarded capacity)
     uint anchors;
     uint width;
     uint height;
@@ -60,7 +63,7 @@ layout(push_constant) uniform Push {
     float inv_s;
     float tau2;
     float inv_t;
-    float pad0;
+    uint total_index;    // where `offsets` holds the entry count (the tile count)
 } pc;
 
 layout(constant_id = 0) const uint MODE = AGG_MAX;
@@ -68,11 +71,14 @@ layout(constant_id = 1) const uint BOUNDARY_AWARE = 1u;
 
 void main() {
     uint e = linear_group_id() * 64u + gl_LocalInvocationIndex;
-    bool live = e < pc.entries;
-    // A lane past the end stands in for entry 0 (pc.entries > 0: the host dispatches nothing
-    // otherwise) and writes nothing.
+    bool live = e < min(pc.entries, offsets[pc.total_index]);
+    // A lane past the end stands in for tile 0 and anchor 0 and writes nothing (its load reads
+    // slot 0, which the buffers always have, and is then discarded: with no entries at all
+    // that slot holds whatever an earlier binning left).
     uint tile = list_tiles[live ? e : 0u];
     uint anchor = list[live ? e : 0u];
+    tile = live ? tile : 0u;
+    anchor = live ? anchor : 0u;
     uint view = tile / (pc.tiles_x * pc.tiles_y);
     bool anchor_inside = (items[view * pc.anchors + anchor].flags & FLAG_INSIDE) != 0u;
     vec3 p = anchors[anchor].xyz;

@@ -2,20 +2,26 @@
 //! [`crate::probe`] (sampling, probing, the losses and their dL/dφ), [`crate::field`] (φ and
 //! dL/dparams) and [`Adam`].
 //!
-//! **One iteration** is two submissions around one 4-byte read-back (the binning's entry
-//! count), as [`crate::probe`] spells out:
+//! **One iteration**, recorded into one command buffer with no read-back, as [`crate::probe`]
+//! spells out (the binning's entry count stays on the GPU: the prober's guarded mode):
 //!
 //! ```text
-//! submission 1   sampler(iteration) → rays, anchors, candidates
-//!                geo points (49 per candidate) · anchor items + binning count
+//! sample         sampler(iteration) → rays, anchors, candidates; geo points (49 per candidate)
 //!                copy anchors → points[0 .. N_a), geo points → points[A .. A + M)
-//! host           prober.finish_count
-//! submission 2   φ = field(points[0 .. A + M))                      one record_eval
-//!                ψ, L_sil, dL_sil/dφ → d_φ[0 .. N_a)                (prober)
+//! probe count    anchor items + binning count
+//! gate           count ≤ capacity? (else this and the later iterations run nothing)
+//! gated:         φ = field(points[0 .. A + M))                      one record_eval
+//!                ψ, L_sil, dL_sil/dφ → d_φ[0 .. N_a)                (prober, over the capacity)
 //!                L_geo, λ dL_geo/dφ → d_φ[A .. A + M)               (geometric regularizer)
 //!                dL/dparams = field backward(points, d_φ)           one record_backward
 //!                Adam step on the field's parameters
 //! ```
+//!
+//! A fit records `log_every` iterations per submission and reads the losses after it (the
+//! mesh fit's loop shape). The entry buffers are sized from iteration 1's count with the mesh
+//! fit's headroom; an iteration whose count outgrows them is stopped by the gate with every
+//! later one of its submission, the buffers grow, and they run again: the result is the one of
+//! a fit that never stopped.
 //!
 //! `A` is `N_a` rounded up so that the geo block's φ and d_φ sub-ranges start at an offset the
 //! device can bind; the points and d_φ between `N_a` and `A` are zero, so they add nothing to
@@ -24,9 +30,10 @@
 //! Everything is deterministic: the sampler draws from (seed, iteration), every kernel sums in a
 //! fixed order, so a fit repeated with the same options gives bit-identical parameters.
 //!
-//! [`FieldFitter`] exposes one iteration at a time (for tests and tools); [`fit_field`] runs the
-//! whole fit and logs the losses every `log_every` iterations.
+//! [`FieldFitter`] runs any span of iterations in one submission (for tests and tools);
+//! [`fit_field`] runs the whole fit and logs the losses every `log_every` iterations.
 
+use std::cell::RefCell;
 use std::time::Instant;
 
 use glam::DVec3;
@@ -35,11 +42,13 @@ use super::checkpoint::{
     Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, read_log, read_optimizer,
     restore_optimizer, write_log, write_optimizer,
 };
+use super::mesh_fit::ENTRY_HEADROOM;
 use super::{Adam, AdamOptions, GradOut};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::field::{Cube, Field, FieldKind};
-use crate::gpu::{Buffer, Context, MemoryKind, PassTime, Timer};
+use crate::gpu::gate::IterationGate;
+use crate::gpu::{Buffer, Context, MemoryKind, Recorder, Timer};
 use crate::probe::{GeoRegularizer, GpuTargets, ProbeSettings, Prober, Sampler, Targets};
 
 /// Everything settable about a field fit. The cube and the seed live in [`ProbeSettings`]
@@ -322,17 +331,12 @@ pub struct FieldFitLog {
 pub struct FieldFitTimings {
     /// Pipelines, buffers, the visual hull's boundary and the contour densities.
     pub setup_s: f64,
-    /// Submission 1 (sampling, geo points, binning count) and the count read-back, summed.
-    pub sample_s: f64,
-    /// Submission 2 (field, probing, losses, backward, Adam), summed.
-    pub step_s: f64,
     /// Loss read-backs and the progress callback, summed.
     pub log_s: f64,
-    /// All iterations, wall.
+    /// All iterations, wall (their submissions, one per logged iteration, and the logging).
     pub iterations_s: f64,
-    /// GPU time per pass of submission 2 ([`FieldFitter::step_timed`]), in milliseconds,
-    /// averaged over the logged iterations (empty when the device has no timestamps).
-    pub step_passes_ms: Vec<PassTime>,
+    /// Submissions the gate stopped (each grew the entry capacity and ran again).
+    pub regrowths: u32,
 }
 
 /// A finished fit.
@@ -364,6 +368,25 @@ pub struct FieldFitter {
     anchors: u32,
     geo_start: u32,
     geo_count: u32,
+    /// The gate of the prober's guarded binning (a cell: recording an iteration reads the
+    /// fitter and moves the gate on).
+    gate: RefCell<IterationGate>,
+    regrowths: u32,
+    last_entries: u64,
+}
+
+/// The entry capacity for a count of `total`: with the mesh fit's [`ENTRY_HEADROOM`], at most
+/// what one binning may hold; an error when even `total` is over it.
+fn with_headroom(ctx: &Context, total: u64) -> Result<u64> {
+    let max = crate::primitives::binning::max_entries(ctx);
+    if total > max {
+        return Err(Error::Limit(format!(
+            "field fit: {total} (anchor, tile) entries in one iteration, over the {max} one \
+             binning may hold; use fewer anchors or views, larger tiles or a smaller τ"
+        )));
+    }
+    let (num, den) = ENTRY_HEADROOM;
+    Ok((total * num / den).clamp(total.max(1), max))
 }
 
 /// `n` rounded up to a multiple of `align`.
@@ -407,6 +430,15 @@ impl FieldFitter {
         } else {
             None
         };
+        let mut prober = prober;
+        // One counting submission (iteration 1's anchors) sizes the guarded entry buffers,
+        // with headroom; an iteration that outgrows them grows them and runs again.
+        ctx.submit_and_wait(|rec| {
+            sampler.record(rec, &gpu, 1)?;
+            prober.record_count(rec, &gpu, sampler.anchors().whole())
+        })?;
+        let counted = u64::from(ctx.read_buffer::<u32>(prober.total_buffer().buffer, 0, 1)?[0]);
+        prober.reserve_guarded(ctx, with_headroom(ctx, counted)?)?;
         let anchors = s.anchors;
         // φ and d_φ of the geo block are bound at 4 · geo_start bytes: keep that aligned.
         let align_floats = (ctx.info().buffer_alignment() / 4).max(1);
@@ -452,123 +484,148 @@ impl FieldFitter {
             anchors,
             geo_start: geo_start as u32,
             geo_count: geo_count as u32,
+            gate: RefCell::new(IterationGate::new(ctx)?),
+            regrowths: 0,
+            last_entries: counted,
         })
     }
 
-    /// Submission 1 of `iteration` and the count read-back: the samples, the geo points, the
-    /// points buffer and the binning count.
-    pub fn sample(&mut self, ctx: &Context, iteration: u32) -> Result<u64> {
-        self.sample_timed(ctx, iteration, None)
-    }
-
-    /// [`FieldFitter::sample`] with GPU timestamps around its passes (`sample`: the sampler,
-    /// the geo points and the copies; `probe count`: the anchor items and their binning count).
-    pub fn sample_timed(
-        &mut self,
-        ctx: &Context,
-        iteration: u32,
-        timer: Option<&mut Timer>,
-    ) -> Result<u64> {
-        let na = u64::from(self.anchors);
-        ctx.submit_and_wait_timed(timer, |rec| {
-            rec.pass("sample", |rec| {
-                self.sampler.record(rec, &self.gpu, iteration)?;
-                rec.copy(self.sampler.anchors(), 0, &self.points, 0, 16 * na);
-                if let Some(geo) = &self.geo {
-                    geo.record_points(rec, self.sampler.candidates().whole())?;
-                    rec.copy(
-                        geo.points(),
-                        0,
-                        &self.points,
-                        16 * u64::from(self.geo_start),
-                        16 * u64::from(self.geo_count),
-                    );
-                }
-                Ok(())
-            })?;
-            rec.pass("probe count", |rec| {
-                self.prober
-                    .record_count(rec, &self.gpu, self.sampler.anchors().whole())
-            })
-        })?;
-        self.prober.finish_count(ctx)
-    }
-
-    /// Submission 2 of `iteration` (from 1, after [`FieldFitter::sample`] of the same
-    /// iteration): φ, the losses and their dL/dφ, dL/dparams, and the Adam step.
-    pub fn step(&self, ctx: &Context, iteration: u32) -> Result<()> {
-        self.step_timed(ctx, iteration, None)
-    }
-
-    /// [`FieldFitter::step`] with GPU timestamps around its passes (`field eval`, `probe
-    /// forward`, `probe backward`, `geo loss`, `field backward`, `adam`), and within the probe
-    /// passes their parts (names indented by two spaces: `  bin sort`, `  forward rays`, `  ray
-    /// sort`, `  backward entries`, `  reduce`); 11 passes.
-    pub fn step_timed(
+    /// Records iteration `iteration` (see the [module docs](self)): sampling and the geo
+    /// points, then the prober's guarded count and — gated on it — φ, probing, the losses,
+    /// the backward and the Adam step.
+    fn record_iteration(
         &self,
-        ctx: &Context,
+        rec: &mut Recorder<'_>,
+        gate: &mut IterationGate,
         iteration: u32,
-        timer: Option<&mut Timer>,
     ) -> Result<()> {
         let na = u64::from(self.anchors);
         let (gs, gc) = (u64::from(self.geo_start), u64::from(self.geo_count));
         let count = (gs + gc) as u32;
         let lambda = self.opts.probe.geo_lambda as f32;
-        ctx.submit_and_wait_timed(timer, |rec| {
-            rec.pass("field eval", |rec| {
-                self.field
-                    .record_eval(rec, self.points.whole(), count, self.phi.whole())
-            })?;
-            let anchors = self.sampler.anchors().whole();
-            let rays = self.sampler.rays().whole();
-            let phi_a = self.phi.range(0, 4 * na);
-            rec.pass("probe forward", |rec| {
-                self.prober
-                    .record_forward(rec, &self.gpu, anchors, phi_a, rays)
-            })?;
-            rec.pass("probe backward", |rec| {
-                self.prober.record_backward(
-                    rec,
-                    &self.gpu,
-                    anchors,
-                    phi_a,
-                    rays,
-                    GradOut::write(self.d_phi.range(0, 4 * na)),
-                )
-            })?;
-            rec.pass("geo loss", |rec| match &self.geo {
-                Some(geo) => geo.record_loss(
-                    rec,
-                    self.phi.range(4 * gs, 4 * gc),
-                    Some(GradOut::write(self.d_phi.range(4 * gs, 4 * gc)).weighted(lambda)),
-                ),
-                None => Ok(()),
-            })?;
-            rec.pass("field backward", |rec| {
-                self.field.record_backward(
-                    rec,
-                    self.points.whole(),
-                    count,
-                    self.d_phi.whole(),
-                    self.d_params.whole(),
-                )
-            })?;
-            let p = self.field.param_count() as u64;
-            rec.pass("adam", |rec| {
-                self.adam.record_step(
-                    rec,
-                    self.field.params().range(0, 4 * p.max(1)),
-                    self.d_params.whole(),
-                    iteration,
-                )
+        rec.pass("sample", |rec| {
+            self.sampler.record(rec, &self.gpu, iteration)?;
+            rec.copy(self.sampler.anchors(), 0, &self.points, 0, 16 * na);
+            if let Some(geo) = &self.geo {
+                geo.record_points(rec, self.sampler.candidates().whole())?;
+                rec.copy(geo.points(), 0, &self.points, 16 * gs, 16 * gc);
+            }
+            Ok(())
+        })?;
+        let anchors = self.sampler.anchors().whole();
+        self.prober
+            .record_guarded(rec, gate, iteration, &self.gpu, anchors, |rec| {
+                rec.pass("field eval", |rec| {
+                    self.field
+                        .record_eval(rec, self.points.whole(), count, self.phi.whole())
+                })?;
+                let rays = self.sampler.rays().whole();
+                let phi_a = self.phi.range(0, 4 * na);
+                rec.pass("probe forward", |rec| {
+                    self.prober
+                        .record_forward(rec, &self.gpu, anchors, phi_a, rays)
+                })?;
+                rec.pass("probe backward", |rec| {
+                    self.prober.record_backward(
+                        rec,
+                        &self.gpu,
+                        anchors,
+                        phi_a,
+                        rays,
+                        GradOut::write(self.d_phi.range(0, 4 * na)),
+                    )
+                })?;
+                rec.pass("geo loss", |rec| match &self.geo {
+                    Some(geo) => geo.record_loss(
+                        rec,
+                        self.phi.range(4 * gs, 4 * gc),
+                        Some(GradOut::write(self.d_phi.range(4 * gs, 4 * gc)).weighted(lambda)),
+                    ),
+                    None => Ok(()),
+                })?;
+                rec.pass("field backward", |rec| {
+                    self.field.record_backward(
+                        rec,
+                        self.points.whole(),
+                        count,
+                        self.d_phi.whole(),
+                        self.d_params.whole(),
+                    )
+                })?;
+                let p = self.field.param_count() as u64;
+                rec.pass("adam", |rec| {
+                    self.adam.record_step(
+                        rec,
+                        self.field.params().range(0, 4 * p.max(1)),
+                        self.d_params.whole(),
+                        iteration,
+                    )
+                })
             })
-        })
     }
 
-    /// One whole iteration: [`FieldFitter::sample`] then [`FieldFitter::step`].
-    pub fn iterate(&mut self, ctx: &Context, iteration: u32) -> Result<()> {
-        self.sample(ctx, iteration)?;
-        self.step(ctx, iteration)
+    /// Runs iterations `first ..= last` in one submission (GPU timestamps of every pass into
+    /// `timer`: `sample`, `probe count` (with its parts indented), `gate`, `field eval`, `probe
+    /// forward`, `probe backward`, `geo loss`, `field backward`, `adam`, per iteration). `None`
+    /// when all ran; `Some(i)` when iteration `i` outgrew the entry capacity: it and the later
+    /// ones changed nothing, the capacity has grown to fit it, and they are to be run again.
+    pub fn run(
+        &mut self,
+        ctx: &Context,
+        first: u32,
+        last: u32,
+        timer: Option<&mut Timer>,
+    ) -> Result<Option<u32>> {
+        {
+            // Recording reads the fitter while it moves the gate on.
+            let mut gate = self.gate.borrow_mut();
+            ctx.submit_and_wait_timed(timer, |rec| {
+                gate.reset();
+                for it in first..=last {
+                    self.record_iteration(rec, &mut gate, it)?;
+                }
+                Ok(())
+            })?;
+        }
+        let status = self.gate.get_mut().read(ctx)?;
+        if let Some((stopped, total)) = status.stopped {
+            let capacity = self.prober.entry_capacity();
+            if stopped < first || stopped > last || total <= capacity {
+                return Err(Error::Limit(format!(
+                    "field fit: the gate stopped iteration {stopped} of {first}..={last} with \
+                     {total} entries for a capacity of {capacity}"
+                )));
+            }
+            self.prober
+                .reserve_guarded(ctx, with_headroom(ctx, total)?)?;
+            self.regrowths += 1;
+            return Ok(Some(stopped));
+        }
+        self.last_entries = status.last_total;
+        Ok(None)
+    }
+
+    /// Sizes the prober's entry buffers for `capacity` (anchor, tile) entries per iteration
+    /// (at least 1). [`FieldFitter::new`] sizes them from the first iteration's count with
+    /// headroom; more spares the re-runs of a fit whose counts grow, less saves memory, and
+    /// an iteration that does not fit grows them and runs again either way.
+    pub fn reserve(&mut self, ctx: &Context, capacity: u64) -> Result<()> {
+        self.prober.reserve_guarded(ctx, capacity)
+    }
+
+    /// Entries the prober's buffers hold now.
+    pub fn capacity(&self) -> u64 {
+        self.prober.entry_capacity()
+    }
+
+    /// Submissions the gate stopped (each grew the capacity and re-ran).
+    pub fn regrowths(&self) -> u32 {
+        self.regrowths
+    }
+
+    /// The (anchor, tile) entry count of the last iteration that ran.
+    pub fn last_entries(&self) -> u64 {
+        self.last_entries
     }
 
     /// `(L_sil, L_geo)` of the last iteration (L_geo 0 when λ = 0).
@@ -785,60 +842,43 @@ pub fn fit_field_resumable(
         done = state.iteration;
         earlier = state.seconds;
     }
-    // Timestamps on the logged iterations only (a device without them is timed by wall only).
-    let mut timer = Timer::new(ctx, 16).ok();
-    let mut timed = 0u32;
-    for it in first..=opts.iterations {
-        let logged = it % opts.log_every == 0 || it == opts.iterations;
+    let every = opts.log_every;
+    let mut it = first;
+    while it <= opts.iterations {
+        // Up to the next logged iteration in one submission.
+        let last = ((it - 1) / every + 1)
+            .saturating_mul(every)
+            .min(opts.iterations);
+        if let Some(stopped) = fitter.run(ctx, it, last, None)? {
+            it = stopped;
+            continue;
+        }
+        done = last;
         let t = Instant::now();
-        fitter.sample(ctx, it)?;
-        let t1 = Instant::now();
-        match (&mut timer, logged) {
-            (Some(timer), true) => {
-                fitter.step_timed(ctx, it, Some(timer))?;
-                let passes = timer.results(ctx)?;
-                if timings.step_passes_ms.is_empty() {
-                    timings.step_passes_ms = passes;
-                } else {
-                    for (sum, p) in timings.step_passes_ms.iter_mut().zip(passes) {
-                        sum.ms += p.ms;
-                    }
-                }
-                timed += 1;
-            }
-            _ => fitter.step(ctx, it)?,
+        let (silhouette, geo) = fitter.read_losses(ctx)?;
+        let entry = FieldFitLog {
+            iteration: last,
+            silhouette,
+            geo,
+            total: opts.probe.total_loss(f64::from(silhouette), f64::from(geo)) as f32,
+            seconds: earlier + start.elapsed().as_secs_f64(),
+        };
+        log.push(entry);
+        let snapshot = FieldFitSnapshot {
+            ctx,
+            fitter: &fitter,
+            iteration: last,
+            log: &log,
+            seconds: entry.seconds,
+        };
+        let go_on = progress(&entry, &snapshot)?;
+        timings.log_s += t.elapsed().as_secs_f64();
+        if !go_on {
+            break;
         }
-        let t2 = Instant::now();
-        timings.sample_s += (t1 - t).as_secs_f64();
-        timings.step_s += (t2 - t1).as_secs_f64();
-        done = it;
-        if logged {
-            let (silhouette, geo) = fitter.read_losses(ctx)?;
-            let entry = FieldFitLog {
-                iteration: it,
-                silhouette,
-                geo,
-                total: opts.probe.total_loss(f64::from(silhouette), f64::from(geo)) as f32,
-                seconds: earlier + start.elapsed().as_secs_f64(),
-            };
-            log.push(entry);
-            let snapshot = FieldFitSnapshot {
-                ctx,
-                fitter: &fitter,
-                iteration: it,
-                log: &log,
-                seconds: entry.seconds,
-            };
-            let go_on = progress(&entry, &snapshot)?;
-            timings.log_s += t2.elapsed().as_secs_f64();
-            if !go_on {
-                break;
-            }
-        }
+        it = last + 1;
     }
-    for p in &mut timings.step_passes_ms {
-        p.ms /= f64::from(timed.max(1));
-    }
+    timings.regrowths = fitter.regrowths();
     timings.iterations_s = earlier + start.elapsed().as_secs_f64();
     Ok(FieldFitResult {
         field: fitter.into_field(),

@@ -22,24 +22,26 @@
 //! - [`dense`]: the dense-marching baseline (every ray sampled at voxel steps), for the
 //!   throughput comparison.
 //!
-//! **One iteration** of a field fit, as the glue (`fit-field`) records it. The binning's entry
-//! count is the one read-back, so an iteration is two submissions:
+//! **One iteration** of a field fit, as the glue (`fit-field`) records it: one command buffer,
+//! no read-back (the binning's entry count stays on the GPU, checked by an
+//! [`IterationGate`](crate::gpu::gate::IterationGate) against the capacity of
+//! [`Prober::reserve_guarded`]), `log_every` iterations per submission:
 //!
 //! ```text
-//! submission 1
-//!   sampler.record(rec, &gpu_targets, iteration)          → rays, anchors, candidates
-//!   geo.record_points(rec, sampler.candidates().whole())  → geo.points() (49 per candidate)
-//!   prober.record_count(rec, &gpu_targets, anchors)       → anchor items, binning count
-//! host
-//!   prober.finish_count(ctx)                              (reads the entry count, sizes buffers)
-//! submission 2
+//! sampler.record(rec, &gpu_targets, iteration)          → rays, anchors, candidates
+//! geo.record_points(rec, sampler.candidates().whole())  → geo.points() (49 per candidate)
+//! prober.record_guarded(rec, &mut gate, iteration, &gpu_targets, anchors, |rec| {
+//!                                                       (anchor items, count, gate; then gated:)
 //!   field: φ_a = φ(anchors), φ_g = φ(geo.points())
 //!   prober.record_forward(rec, &gpu_targets, anchors, φ_a, rays)     → ψ, L_sil
 //!   prober.record_backward(rec, &gpu_targets, anchors, φ_a, rays,
 //!                          GradOut::write(d_φ_a))                    → dL_sil/dφ_a
 //!   geo.record_loss(rec, φ_g, Some(GradOut::write(d_φ_g).weighted(λ))) → L_geo, λ dL_geo/dφ_g
 //!   field backward of (anchors, d_φ_a) and (geo points, d_φ_g); optimizer step
+//! })
 //! ```
+//!
+//! ([`Prober::run`] is the exact two-submission path, with the count read back: tests, tools.)
 //!
 //! `L = L_sil + λ L_geo` ([`ProbeSettings::total_loss`]); the losses stay on the GPU in one-float
 //! buffers ([`Prober::loss_buffer`], [`GeoRegularizer::loss_buffer`]) until read.

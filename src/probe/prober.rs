@@ -31,10 +31,15 @@
 //! rays broadcast with shuffles); one invocation per anchor adds its entries, view by view and
 //! tile by tile, finding them from the masks (`probe_reduce.comp`).
 //!
-//! **Recording.** The binning's entry count is read back between two submissions:
+//! **Recording.** Exact: the binning's entry count is read back between two submissions:
 //! [`Prober::record_count`] (submission 1), [`Prober::finish_count`] (host), then
 //! [`Prober::record_forward`] and [`Prober::record_backward`] (submission 2). The anchors, φ and
 //! rays must stay unchanged in between. [`Prober::run`] does all of it and reads the results back.
+//! Guarded, for loops that never wait (the field fit): [`Prober::reserve_guarded`] sizes the
+//! entry buffers for a capacity, and [`Prober::record_guarded`] records the count, an
+//! [`IterationGate`]'s check of it and, gated, the forward and backward (and the caller's
+//! rest of the iteration) into one command buffer; they work over the capacity and the kernels
+//! read the count themselves. The results are the exact path's, bit for bit.
 
 use bytemuck::{Pod, Zeroable};
 
@@ -45,6 +50,7 @@ use crate::fit::reduce::{Sum, SumPush};
 use crate::fit::{GradOut, check_binding, check_floats, groups};
 use std::sync::Arc;
 
+use crate::gpu::gate::IterationGate;
 use crate::gpu::{
     Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, specs,
 };
@@ -184,7 +190,8 @@ struct BackwardPush {
     inv_s: f32,
     tau2: f32,
     inv_t: f32,
-    pad: f32,
+    /// Where `offsets` holds the entry count (the tile count).
+    total_index: u32,
 }
 
 /// Push constants of `probe_reduce.comp`.
@@ -282,7 +289,11 @@ pub struct Prober {
     list_tiles: Buffer,
     partials: Buffer,
     entry_capacity: u64,
+    /// The entry count [`Prober::finish_count`] read, or for a guarded binning
+    /// ([`Prober::reserve_guarded`]) the capacity, an upper bound of it.
     entries: Option<u64>,
+    /// The entry buffers were sized by [`Prober::reserve_guarded`]: the count stays on the GPU.
+    guarded: bool,
     loss: Buffer,
 }
 
@@ -439,6 +450,7 @@ impl Prober {
             partials: ctx.create_buffer("probe partials", 4, MemoryKind::Device)?,
             entry_capacity: 1,
             entries: None,
+            guarded: false,
             loss: ctx.create_buffer("probe silhouette loss", 4, MemoryKind::Device)?,
         })
     }
@@ -585,7 +597,8 @@ impl Prober {
         )
     }
 
-    /// The entry count [`Prober::finish_count`] read, once it fits the entry buffers.
+    /// The entry count [`Prober::finish_count`] read, once it fits the entry buffers; guarded,
+    /// the capacity (the kernels read the count).
     fn entry_count(&self) -> Result<u64> {
         let total = self.entries.ok_or_else(|| {
             Error::Misuse("sphere probing: the entry count is not known yet (finish_count)".into())
@@ -602,6 +615,82 @@ impl Prober {
     /// the tiled loops against the driver's cap. Returns the entry count.
     pub fn finish_count(&mut self, ctx: &Context) -> Result<u64> {
         let total = u64::from(ctx.read_buffer::<u32>(self.scan_scratch.total(), 0, 1)?[0]);
+        self.size_entries(ctx, total)?;
+        if total > self.entry_capacity {
+            let cap = (total + total / 4)
+                .min(binning::max_entries(ctx))
+                .max(total);
+            self.allocate_entries(ctx, cap)?;
+        }
+        self.entries = Some(total);
+        self.guarded = false;
+        Ok(total)
+    }
+
+    /// For loops that never wait for the count (a field fit's iterations): sizes the entry
+    /// buffers for exactly `capacity` entries and checks the tiled loops against the driver's
+    /// cap for any count up to it. Record each iteration's probing with
+    /// [`Prober::record_guarded`]; the forward and backward then work over the capacity, each
+    /// kernel reading the count itself.
+    pub fn reserve_guarded(&mut self, ctx: &Context, capacity: u64) -> Result<()> {
+        let capacity = capacity.max(1);
+        if self.job.max_entries() > u64::from(u32::MAX) {
+            return Err(Error::Limit(format!(
+                "sphere probing: {} anchors over {} tiles in {} view(s) could count past 2^32 \
+                 entries; use fewer anchors or views, or larger tiles",
+                self.anchors(),
+                self.job.grid.tiles_per_view(),
+                self.job.views
+            )));
+        }
+        self.size_entries(ctx, capacity)?;
+        if capacity != self.entry_capacity {
+            self.allocate_entries(ctx, capacity)?;
+        }
+        self.entries = Some(capacity);
+        self.guarded = true;
+        Ok(())
+    }
+
+    /// Entries the entry buffers hold.
+    pub fn entry_capacity(&self) -> u64 {
+        self.entry_capacity
+    }
+
+    /// The count's total (one `u32`, after [`Prober::record_count`]): what a gate checks.
+    pub fn total_buffer(&self) -> BufferRange<'_> {
+        self.scan_scratch.total().range(0, 4)
+    }
+
+    /// Records a guarded iteration's probing into any command buffer, with no read-back: the
+    /// anchor items and the count ([`Prober::record_count`]), `gate`'s check of the count
+    /// against the capacity of [`Prober::reserve_guarded`] for `iteration`, then — gated: they
+    /// run only when the entries fit — whatever `then` records ([`Prober::record_forward`],
+    /// [`Prober::record_backward`], and the rest of the caller's iteration). When the entries
+    /// do not fit, none of the gated work runs and the gate's status says so
+    /// ([`IterationGate::read`]): reserve more and record again.
+    pub fn record_guarded(
+        &self,
+        rec: &mut Recorder<'_>,
+        gate: &mut IterationGate,
+        iteration: u32,
+        gpu: &GpuTargets,
+        anchors: BufferRange<'_>,
+        then: impl FnOnce(&mut Recorder<'_>) -> Result<()>,
+    ) -> Result<()> {
+        if !self.guarded {
+            return Err(Error::Misuse(
+                "sphere probing: a guarded iteration needs Prober::reserve_guarded first".into(),
+            ));
+        }
+        rec.pass("probe count", |rec| self.record_count(rec, gpu, anchors))?;
+        gate.record_check(rec, self.total_buffer(), iteration, self.entry_capacity)?;
+        gate.record_gated(rec, then)
+    }
+
+    /// Checks `total` entries (a count, or a guarded capacity) against the device: the
+    /// binning's limit and the tiled loops' cap.
+    fn size_entries(&self, ctx: &Context, total: u64) -> Result<()> {
         let max = binning::max_entries(ctx);
         if total > max {
             return Err(Error::Limit(format!(
@@ -629,18 +718,19 @@ impl Prober {
             ctx,
             &format!("an anchor binned to {per_anchor} tiles (gradient sum)"),
             views + 2 * per_anchor,
-        )?;
-        if total > self.entry_capacity {
-            let cap = (total + total / 4).min(max).max(total);
-            let bytes = 4 * cap;
-            check_binding(ctx, "sphere probing: entries", bytes)?;
-            self.list = ctx.create_buffer("probe entry anchors", bytes, MemoryKind::Device)?;
-            self.list_tiles = ctx.create_buffer("probe entry tiles", bytes, MemoryKind::Device)?;
-            self.partials = ctx.create_buffer("probe partials", bytes, MemoryKind::Device)?;
-            self.entry_capacity = cap;
-        }
-        self.entries = Some(total);
-        Ok(total)
+        )
+    }
+
+    /// Replaces the entry buffers with ones of `cap` entries.
+    fn allocate_entries(&mut self, ctx: &Context, cap: u64) -> Result<()> {
+        let bytes = 4 * cap;
+        check_binding(ctx, "sphere probing: entries", bytes)?;
+        // Drop the old buffers before making the new ones.
+        self.list = ctx.create_buffer("probe entry anchors", bytes, MemoryKind::Device)?;
+        self.list_tiles = ctx.create_buffer("probe entry tiles", bytes, MemoryKind::Device)?;
+        self.partials = ctx.create_buffer("probe partials", bytes, MemoryKind::Device)?;
+        self.entry_capacity = cap;
+        Ok(())
     }
 
     fn forward_push(&self) -> ForwardPush {
@@ -990,6 +1080,7 @@ impl Prober {
                     ray_order: self.ray_order.whole(),
                     ray_ranges: ranges,
                     partials: self.partials.whole(),
+                    offsets: self.offsets.whole(),
                 }
                 .for_kernel(&kernel)?,
                 &BackwardPush {
@@ -1004,7 +1095,7 @@ impl Prober {
                     inv_s: c.inv_s,
                     tau2: c.tau2,
                     inv_t: c.inv_t,
-                    pad: 0.0,
+                    total_index: self.job.tile_count() as u32,
                 },
                 groups(total, 64)?,
             )
