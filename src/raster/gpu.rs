@@ -583,7 +583,8 @@ impl GpuScene {
     /// mesh of the batch, meshes one after another) stays the scene's; the faces, colours and
     /// views too. The backward's host share (lighting, cameras) keeps reading the meshes given to
     /// [`Renderer::prepare`]: for lit scenes whose vertices move, use an unlit or silhouette
-    /// render, or relight ([`GpuScene::relight`]).
+    /// render, relight on the host ([`GpuScene::relight`]), or record the lighting and its
+    /// backward on the GPU ([`crate::raster::light::SceneLight`]).
     pub fn bind_positions(&mut self, buffer: Buffer, layout: VertexLayout) -> Result<()> {
         let vertices = u64::from(self.vertex_count) * self.meshes.len() as u64;
         let need = layout.bytes(vertices)?;

@@ -8,6 +8,7 @@ pub mod backward;
 pub mod brute;
 pub mod fine;
 pub mod gpu;
+pub mod light;
 pub mod reference;
 pub mod reference_grad;
 pub mod setup;
