@@ -484,6 +484,8 @@ fn a_pose_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_fi
             height: 24,
             ..RasterSettings::default()
         },
+        // Called back after every iteration, so that the fit can stop at 5.
+        log_every: 1,
         ..PoseFitOptions::default()
     };
     let target = Renderer::new(&gpu)
@@ -529,7 +531,7 @@ fn a_pose_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_fi
         None,
         |l, snapshot| {
             if l.iteration == 5 {
-                state = Some(snapshot.state());
+                state = Some(snapshot.state()?);
                 return Ok(false);
             }
             Ok(true)

@@ -13,7 +13,8 @@ use glam::DVec3;
 use rand::RngExt;
 use softvk::camera::Camera;
 use softvk::fit::pose::{
-    self, Pose, PoseFitOptions, PoseProblem, PoseTarget, Schedule, fit_pose, rotation_distance,
+    self, Pose, PoseFitOptions, PoseFitter, PoseProblem, PoseTarget, Schedule, fit_pose,
+    rotation_distance,
 };
 use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
@@ -207,6 +208,119 @@ fn gpu_pose_gradient_equals_the_twin_chain() {
             );
         }
     }
+}
+
+#[test]
+fn a_gpu_fit_iteration_equals_the_twin_chain() {
+    // The pose, its lighting, the loss and the chain to (ω, t) all on the GPU in f32
+    // (`PoseFitter`), against the f64 twin of the same iteration.
+    let Some(gpu) = common::gpu() else { return };
+    let (at, target_pose) = poses();
+    for (what, mesh, s) in cases() {
+        let m = MeshF64::from_mesh(&mesh);
+        let centre = pose::centroid(&m.positions);
+        let target = twin_target(&m, centre, &s, &target_pose);
+        let (loss, want) =
+            pose::cpu::loss_and_gradient(&m, centre, &camera(), &lighting(), &s, &target, &at)
+                .unwrap();
+        let target32: Vec<[f32; 4]> = target.iter().map(|p| p.map(|c| c as f32)).collect();
+        let opts = PoseFitOptions {
+            iterations: 1,
+            schedule: None,
+            settings: s,
+            ..PoseFitOptions::default()
+        };
+        let mut fitter =
+            PoseFitter::new(&gpu, &mesh, &camera(), &lighting(), &target32, &at, &opts).unwrap();
+        assert!(fitter.centre().abs_diff_eq(centre, 1e-6));
+        assert_eq!(fitter.run(1, 1, None).unwrap(), None);
+        let log = fitter.log(1, 1, 0.0).unwrap();
+        let got = fitter.gradient().unwrap();
+        let (err, scale) = rel_err(&got, &want);
+        eprintln!(
+            "{what}: loss {} vs {loss}, gradient error {err:.2e} of {scale:.3e}",
+            log[0].loss
+        );
+        assert!((log[0].loss - loss).abs() <= 1e-4 * loss, "{what}: loss");
+        assert!(err <= 1e-3, "{what}: {got:?} vs {want:?}");
+        // The log holds the pose the iteration evaluated (f32 parameters).
+        let p = log[0].pose.to_array();
+        for (k, a) in at.to_array().iter().enumerate() {
+            assert!(
+                (p[k] - a).abs() <= 1e-7 * (1.0 + a.abs()),
+                "{what}: pose {k}"
+            );
+        }
+    }
+}
+
+#[test]
+fn k_pose_iterations_per_submission_give_the_bits_of_one_per_submission() {
+    let Some(gpu) = common::gpu() else { return };
+    let (mesh, target_pose, init, opts) = small_fit();
+    let s = opts.settings;
+    let target = gpu_target(&gpu, &mesh, &s, &target_pose);
+    let fit = |iterations: u32, log_every: u32| {
+        let o = PoseFitOptions {
+            iterations,
+            log_every,
+            ..opts.clone()
+        };
+        let before = gpu.counters().submissions;
+        let r = fit_pose(
+            &gpu,
+            &mesh,
+            &camera(),
+            &lighting(),
+            PoseTarget::Fixed(&target),
+            &init,
+            &o,
+            |_| true,
+        )
+        .unwrap();
+        let submissions = gpu.counters().submissions - before;
+        let log: Vec<(u32, u64, [u64; 6])> = r
+            .log
+            .iter()
+            .map(|l| {
+                (
+                    l.iteration,
+                    l.loss.to_bits(),
+                    l.pose.to_array().map(f64::to_bits),
+                )
+            })
+            .collect();
+        (r.pose.to_array().map(f64::to_bits), log, submissions)
+    };
+    // 12 iterations in 3 σ/γ stages of 4: a submission ends at a stage's end or every k.
+    let o12 = PoseFitOptions {
+        iterations: 12,
+        ..opts.clone()
+    };
+    assert_eq!(o12.sigma_gamma(3), o12.sigma_gamma(0));
+    assert_ne!(o12.sigma_gamma(4), o12.sigma_gamma(3));
+    let (pose_1, log_1, submissions_1) = fit(12, 1);
+    assert_eq!(log_1.len(), 12);
+    let mut submissions = vec![(1u64, submissions_1)];
+    for k in [2, 4, 12] {
+        let (pose_k, log_k, submissions_k) = fit(12, k);
+        assert_eq!(pose_k, pose_1, "k = {k}: the pose differs from k = 1");
+        assert_eq!(log_k, log_1, "k = {k}: the log differs from k = 1");
+        submissions.push((u64::from(k), submissions_k));
+    }
+    // Submissions grow with the chunks, not with the iterations: chunks of at most k within
+    // each stage of 4 (k = 1: 12, 2: 6, 4 and 12: 3 chunks).
+    let chunks = |k: u64| 3 * 4u64.div_ceil(k.min(4));
+    let per_chunk = (submissions_1 - submissions[3].1) / (chunks(1) - chunks(12));
+    assert!(per_chunk > 0);
+    for &(k, n) in &submissions {
+        assert_eq!(
+            n,
+            submissions[3].1 + (chunks(k) - chunks(12)) * per_chunk,
+            "k = {k}: {submissions:?}"
+        );
+    }
+    assert_eq!(submissions[2].1, submissions[3].1, "{submissions:?}");
 }
 
 /// The target of the small fits: the box at `target`, rendered by the GPU at its sharp settings.

@@ -286,11 +286,6 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
             .expect("a valid template"),
         )
     };
-    // A resumed fit's first loss is in its checkpoint's log.
-    let mut initial_loss = resume
-        .as_ref()
-        .and_then(|s| s.log.first())
-        .map_or(f64::NAN, |l| l.loss);
     let result = fit_pose_resumable(
         &ctx,
         &mesh,
@@ -301,19 +296,16 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
         &opts,
         resume.as_ref(),
         |l, snapshot| {
-            if l.iteration == 1 {
-                initial_loss = l.loss;
-            }
             bar.set_position(u64::from(l.iteration));
             bar.set_message(format!("loss {:.5}  σ {:.0e}", l.loss, l.sigma));
             let go_on = super::interrupt::requested().is_none();
             if args
                 .checkpoints
-                .due(l.iteration, opts.iterations, 1, !go_on)
+                .due(l.iteration, opts.iterations, opts.log_every, !go_on)
             {
                 if let Some(dir) = &args.checkpoints.checkpoint {
                     snapshot
-                        .state()
+                        .state()?
                         .to_checkpoint(fingerprint)
                         .write(&dir.join(CHECKPOINT_FILE))?;
                 }
@@ -323,6 +315,8 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
     )?;
     bar.finish_and_clear();
     ctx.check_validation()?;
+    // The log holds every iteration (a resumed fit's first ones from its checkpoint).
+    let initial_loss = result.log.first().map_or(f64::NAN, |l| l.loss);
 
     let pose = &result.pose;
     let m = pose.matrix();

@@ -14,20 +14,20 @@
 //!
 //! # One iteration
 //!
-//! 1. **Host**: the posed positions p' in f64, rounded to f32 and uploaded; the mesh is lit
-//!    again in f64 (its normals turned with it) and the lit colours uploaded — as
-//!    [`Renderer::prepare`] lights, since SoftRas lights in world space before projection.
-//! 2. **GPU**, two submissions (the binning's entry count is read back in between to size the
-//!    bins exactly, as in [`super::mesh_fit`]): face setup and count; then sort, tiled fine pass,
-//!    [`ImageMse`] (loss and dL/d(image)) and the tiled backward on the same bins.
-//! 3. **Host, f64**: [`GradKernels::finish`](crate::raster::backward::GradKernels::finish) reads
-//!    dL/dp' (3·V floats) and adds the lighting's share through the normals; the chain to the six
-//!    pose parameters ([`pose_gradient`]) and Adam ([`super::adam::cpu::step`]) run here too.
+//! [`PoseFitter`] records every iteration into one command buffer with no read-back, and
+//! [`fit_pose`] runs [`PoseFitOptions::log_every`] of them per submission (ending one early
+//! where the σ/γ stage changes, to swap a per-stage target): the mesh and field fits' loop
+//! shape. On the GPU, in f32:
 //!
-//! The chain is a sum over the vertices of 6 numbers. Running it on the host after a 3·V-float
-//! read-back costs nothing next to the render, and the read-back is needed anyway: the
-//! lighting's backward, which turns the colours' gradient into the normals' and positions', runs
-//! on the host in f64 inside `finish`. The chain, with the rotation's left Jacobian, is in f64:
+//! 1. `pose_apply.comp`: the posed positions p' from the parameters (ω at one bindable range,
+//!    t at another); [`SceneLight`]: the mesh lit again with its turned normals (SoftRas
+//!    lights in world space before projection).
+//! 2. The guarded tiled forward (face setup, count, the gate's check against the capacity,
+//!    then gated: sort, fine pass), [`ImageMse`] (loss and dL/d(image)), the tiled backward.
+//! 3. The lighting's backward (dL/d(lit colour) to dL/dp' through the normals, added to the
+//!    geometric share), `pose_grad.comp` (the chain below, one workgroup in a fixed order; it
+//!    also logs the iteration's loss and pose), and two Adam steps (rotation and translation,
+//!    each with its learning rate of the iteration).
 //!
 //! ```text
 //! dL/dt = Σ_i g_i,     dL/dω = J_l(ω)ᵀ Σ_i (q_i × g_i),     q_i = R(ω)(p_i − c),  g_i = dL/dp'_i
@@ -35,6 +35,11 @@
 //! ```
 //!
 //! (`exp([ω + δ]×) ≈ exp([J_l δ]×) exp([ω]×)`, so a small change δ of ω turns q_i by J_l δ.)
+//!
+//! [`PoseProblem`] evaluates the loss and gradient at any pose with the chain on the host in
+//! f64 (two submissions and a read-back: landscapes and studies), and [`cpu`] is the f64 twin
+//! of both; tests check the GPU chain against it (5e-6 of the largest component on the test
+//! scenes) and k iterations per submission against one, bit for bit.
 //!
 //! # The σ/γ schedule
 //!
@@ -46,25 +51,31 @@
 //!
 //! The f64 twin of one iteration's loss and gradient is [`cpu::loss_and_gradient`] (render,
 //! MSE and backward of the reference rasterizer, then the same chain); tests check it against
-//! central finite differences, and the GPU's [`PoseProblem::evaluate`] against it.
+//! central finite differences, and [`PoseProblem::evaluate`] and [`PoseFitter`] against it.
 
 use std::time::Instant;
 
 use glam::{DMat3, DQuat, DVec3};
 
-use super::adam::{self, AdamOptions};
+use bytemuck::{Pod, Zeroable};
+
+use super::adam::{Adam, AdamOptions};
 use super::checkpoint::{
     Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, check_state, read_log,
     write_log,
 };
+use super::groups;
+use super::mesh_fit::ENTRY_HEADROOM;
 use super::{GradOut, ImageMse};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
-use crate::gpu::{Buffer, Context, MemoryKind};
+use crate::gpu::gate::IterationGate;
+use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, Timer, specs};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
-use crate::raster::backward::GradBuffers;
+use crate::raster::backward::{GradBuffers, grad_stride};
 use crate::raster::gpu::{GpuScene, Method, Renderer};
+use crate::raster::light::SceneLight;
 use crate::raster::reference::{ColorMode, RasterSettings};
 
 /// A rigid pose: `p' = R(rotation) (p − c) + c + translation` (see the [module docs](self)).
@@ -253,6 +264,9 @@ pub struct PoseFitOptions {
     pub settings: RasterSettings,
     /// Tile edge of the tiled passes.
     pub tile: u32,
+    /// Iterations per submission (the fit reads its log and calls back after each; also a
+    /// checkpoint's granularity). A submission also ends where the σ/γ stage changes.
+    pub log_every: u32,
 }
 
 impl Default for PoseFitOptions {
@@ -270,6 +284,7 @@ impl Default for PoseFitOptions {
                 ..RasterSettings::default()
             },
             tile: 8,
+            log_every: 10,
         }
     }
 }
@@ -278,8 +293,10 @@ impl PoseFitOptions {
     /// [`Error::Input`] for an out-of-domain option.
     pub fn validate(&self) -> Result<()> {
         let pos = |x: f64| x.is_finite() && x > 0.0;
-        if self.iterations == 0 {
-            return Err(Error::Input("a pose fit needs at least 1 iteration".into()));
+        if self.iterations == 0 || self.log_every == 0 {
+            return Err(Error::Input(
+                "a pose fit needs at least 1 iteration, and log_every at least 1".into(),
+            ));
         }
         if !(pos(self.lr_rotation) && pos(self.lr_translation) && pos(self.lr_final)) {
             return Err(Error::Input(format!(
@@ -505,6 +522,477 @@ impl PoseProblem {
     }
 }
 
+/// Push constants of `pose_apply.comp` and `pose_grad.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct PosePush {
+    centre: [f32; 3],
+    vertex_count: u32,
+    translation_at: u32,
+    log_index: u32,
+    pad: [u32; 2],
+}
+
+/// A pose fit's GPU state: the scene with its guarded bins, the lighting, the loss, the pose's
+/// parameters and their two Adam optimizers, ready to run iterations ([`PoseFitter::run`]):
+/// every iteration is recorded with no read-back (see the [module docs](self)), as many per
+/// submission as asked.
+pub struct PoseFitter<'c> {
+    ctx: &'c Context,
+    opts: PoseFitOptions,
+    renderer: Renderer,
+    scene: GpuScene,
+    light: SceneLight,
+    mse: ImageMse,
+    target: Buffer,
+    grads: GradBuffers,
+    gate: IterationGate,
+    apply: Kernel,
+    grad: Kernel,
+    /// The rest positions, packed xyz.
+    rest: Buffer,
+    /// ω at floats [0, 3), t at [`PosePush::translation_at`, + 3): two bindable ranges.
+    params: Buffer,
+    d_params: Buffer,
+    /// dL/d(unlit colour), which the pose does not need (the lighting's backward writes it).
+    d_base: Buffer,
+    adam_rotation: Adam,
+    adam_translation: Adam,
+    /// Two vec4 per iteration of the fit: the loss and ω, then t.
+    log: Buffer,
+    push: PosePush,
+    capacity: u64,
+    max_capacity: u64,
+    regrowths: u32,
+    last_entries: u64,
+}
+
+impl<'c> PoseFitter<'c> {
+    /// The fit of `mesh`'s pose seen from `camera` to `target` from `init` (see
+    /// [`fit_pose`]): uploads everything, counts the entries of the first pose once and sizes
+    /// the guarded bins with the mesh fit's headroom.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        ctx: &'c Context,
+        mesh: &Mesh,
+        camera: &Camera,
+        lighting: &Lighting,
+        target: &[[f32; 4]],
+        init: &Pose,
+        opts: &PoseFitOptions,
+    ) -> Result<Self> {
+        opts.validate()?;
+        mesh.validate()?;
+        check_target(target, &opts.settings)?;
+        if !init.is_finite() {
+            return Err(Error::Input(format!(
+                "the initial pose {init:?} is not finite"
+            )));
+        }
+        let renderer = Renderer::new(ctx)?;
+        let mut scene = renderer.prepare(
+            ctx,
+            mesh,
+            std::slice::from_ref(camera),
+            lighting,
+            &opts.settings,
+        )?;
+        // Sized for real once the first pose's entries are counted (below).
+        renderer.reserve_guarded(ctx, &mut scene, opts.tile, 1)?;
+        let light = SceneLight::new(ctx, &scene)?;
+        let rest_f64 = &scene.host_meshes()[0].positions;
+        let centre = centroid(rest_f64);
+        let rest: Vec<f32> = mesh.positions.as_flattened().to_vec();
+        let translation_at = (ctx.info().buffer_alignment() / 4).max(4);
+        let push = PosePush {
+            centre: centre.to_array().map(|c| c as f32),
+            vertex_count: mesh.vertex_count() as u32,
+            translation_at: translation_at as u32,
+            log_index: 0,
+            pad: [0; 2],
+        };
+        let param_floats = (translation_at + 3) as usize;
+        let mut p0 = vec![0f32; param_floats];
+        let a = init.to_array();
+        for k in 0..3 {
+            p0[k] = a[k] as f32;
+            p0[translation_at as usize + k] = a[3 + k] as f32;
+        }
+        let first = opts.adam(0);
+        let mut fitter = Self {
+            ctx,
+            mse: ImageMse::new(ctx, 1, opts.settings.width, opts.settings.height)?,
+            target: ctx.upload_buffer("pose target", target)?,
+            grads: GradBuffers::with_entry_capacity(
+                ctx,
+                &scene,
+                Method::Tiled { tile: opts.tile },
+                1,
+            )?,
+            gate: IterationGate::new(ctx)?,
+            apply: Kernel::new(ctx, &specs::POSE_APPLY)?,
+            grad: Kernel::new(ctx, &specs::POSE_GRAD)?,
+            rest: ctx.upload_buffer("pose rest positions", &rest)?,
+            params: ctx.upload_buffer("pose parameters", &p0)?,
+            d_params: ctx.upload_buffer("pose gradient", &vec![0f32; param_floats])?,
+            d_base: ctx.create_buffer(
+                "pose unlit colour gradients",
+                12 * light.color_count().max(1),
+                MemoryKind::Device,
+            )?,
+            adam_rotation: Adam::new(ctx, 3, first)?,
+            adam_translation: Adam::new(
+                ctx,
+                3,
+                AdamOptions {
+                    lr: opts.lr_translation * opts.lr_factor(0),
+                    ..first
+                },
+            )?,
+            log: ctx.create_buffer(
+                "pose log",
+                32 * u64::from(opts.iterations),
+                MemoryKind::Device,
+            )?,
+            push,
+            capacity: 1,
+            max_capacity: 1,
+            regrowths: 0,
+            last_entries: 0,
+            light,
+            opts: opts.clone(),
+            renderer,
+            scene: {
+                scene.set_blur(opts.sigma_gamma(0).0, opts.sigma_gamma(0).1)?;
+                scene
+            },
+        };
+        let stride = grad_stride(opts.settings.color_mode, fitter.scene.texture_res());
+        fitter.max_capacity = fitter
+            .renderer
+            .max_entries(ctx)
+            .min(u64::from(ctx.info().limits.max_storage_buffer_range) / (4 * u64::from(stride)))
+            .min(u64::from(u32::MAX));
+        // One counting submission at the initial pose.
+        ctx.submit_and_wait(|rec| fitter.record_pose(rec))?;
+        let total = fitter
+            .renderer
+            .count_entries(ctx, &mut fitter.scene, opts.tile)?;
+        fitter.grow(total)?;
+        fitter.regrowths = 0;
+        Ok(fitter)
+    }
+
+    /// Records the posed positions and their lit colours into the scene.
+    fn record_pose(&self, rec: &mut Recorder<'_>) -> Result<()> {
+        let nv = u64::from(self.push.vertex_count);
+        rec.pass("pose", |rec| {
+            rec.dispatch(
+                &self.apply,
+                &specs::PoseApplyBindings {
+                    params: self.params.whole(),
+                    rest: self.rest.whole(),
+                    posed: self.scene.positions().whole(),
+                }
+                .for_kernel(&self.apply)?,
+                &self.push,
+                groups(nv, 64)?,
+            )
+        })?;
+        rec.pass("lighting", |rec| {
+            self.light.record_forward(
+                rec,
+                self.scene.positions().whole(),
+                self.scene.position_layout(),
+                self.scene.colors().whole(),
+            )
+        })
+    }
+
+    /// Records iteration `it` (from 1): the pose and its lighting, then the guarded forward
+    /// with the rest gated on the count: the MSE, the backward, the lighting's backward, the
+    /// pose gradient (and the log row) and the two Adam steps.
+    fn record_iteration(&mut self, rec: &mut Recorder<'_>, it: u32) -> Result<()> {
+        let o = &self.opts;
+        let (sigma, gamma) = o.sigma_gamma(it - 1);
+        self.scene.set_blur(sigma, gamma)?;
+        let rot = o.adam(it - 1);
+        self.adam_rotation.set_options(rot)?;
+        self.adam_translation.set_options(AdamOptions {
+            lr: o.lr_translation * o.lr_factor(it - 1),
+            ..rot
+        })?;
+        self.record_pose(rec)?;
+        let ti = 4 * u64::from(self.push.translation_at);
+        let push = PosePush {
+            log_index: it - 1,
+            ..self.push
+        };
+        let Self {
+            scene,
+            gate,
+            renderer,
+            mse,
+            target,
+            grads,
+            light,
+            grad,
+            params,
+            d_params,
+            d_base,
+            rest,
+            log,
+            adam_rotation,
+            adam_translation,
+            ..
+        } = self;
+        renderer.record_forward_guarded(rec, scene, gate, it, |rec, binned| {
+            let scene = binned.scene();
+            let io = grads.io();
+            rec.pass("image loss", |rec| {
+                mse.record(
+                    rec,
+                    scene.output().whole(),
+                    target.whole(),
+                    Some(GradOut::write(io.upstream)),
+                )
+            })?;
+            renderer.grad_kernels().record(rec, &binned, grads, &io)?;
+            rec.pass("lighting backward", |rec| {
+                light.record_backward(
+                    rec,
+                    scene.positions().whole(),
+                    scene.position_layout(),
+                    io.colors,
+                    d_base.whole(),
+                    io.positions,
+                )
+            })?;
+            rec.pass("pose gradient", |rec| {
+                rec.dispatch(
+                    grad,
+                    &specs::PoseGradBindings {
+                        params: params.whole(),
+                        rest: rest.whole(),
+                        d_posed: io.positions,
+                        d_params: d_params.whole(),
+                        loss: mse.loss_buffer().whole(),
+                        log: log.whole(),
+                    }
+                    .for_kernel(grad)?,
+                    &push,
+                    1,
+                )
+            })?;
+            rec.pass("adam", |rec| {
+                adam_rotation.record_step(rec, params.range(0, 12), d_params.range(0, 12), it)?;
+                adam_translation.record_step(rec, params.range(ti, 12), d_params.range(ti, 12), it)
+            })
+        })
+    }
+
+    /// Runs iterations `first ..= last` (from 1) in one submission (GPU timestamps into
+    /// `timer`). `None` when all ran; `Some(i)` when iteration `i` outgrew the entry capacity:
+    /// it and the later ones changed nothing, the capacity has grown, and they are to be run
+    /// again.
+    pub fn run(&mut self, first: u32, last: u32, timer: Option<&mut Timer>) -> Result<Option<u32>> {
+        if first == 0 || last > self.opts.iterations {
+            return Err(Error::Misuse(format!(
+                "pose fit: iterations {first}..={last} of 1..={}",
+                self.opts.iterations
+            )));
+        }
+        let ctx = self.ctx;
+        ctx.submit_and_wait_timed(timer, |rec| {
+            self.gate.reset();
+            for it in first..=last {
+                self.record_iteration(rec, it)?;
+            }
+            Ok(())
+        })?;
+        let status = self.gate.read(ctx)?;
+        if let Some((stopped, total)) = status.stopped {
+            if stopped < first || stopped > last || total <= self.capacity {
+                return Err(Error::Limit(format!(
+                    "pose fit: the gate stopped iteration {stopped} of {first}..={last} with \
+                     {total} entries for a capacity of {}",
+                    self.capacity
+                )));
+            }
+            self.grow(total)?;
+            return Ok(Some(stopped));
+        }
+        self.last_entries = status.last_total;
+        Ok(None)
+    }
+
+    /// Grows the bins and the backward's buffers to `total` entries with the headroom.
+    fn grow(&mut self, total: u64) -> Result<()> {
+        if total > self.max_capacity {
+            return Err(Error::Limit(format!(
+                "pose fit: {total} (face, tile) entries, over the {} this device holds in one \
+                 binding (with the backward's partials); use larger tiles or a smaller σ",
+                self.max_capacity
+            )));
+        }
+        let (num, den) = ENTRY_HEADROOM;
+        let capacity = (total * num / den).clamp(total.max(1), self.max_capacity);
+        let method = Method::Tiled {
+            tile: self.opts.tile,
+        };
+        self.renderer
+            .reserve_guarded(self.ctx, &mut self.scene, self.opts.tile, capacity)?;
+        self.grads = GradBuffers::with_entry_capacity(self.ctx, &self.scene, method, capacity)?;
+        self.capacity = capacity;
+        self.regrowths += 1;
+        Ok(())
+    }
+
+    /// The log of iterations `first ..= last` (their losses and poses), read back.
+    fn read_log(&self, first: u32, last: u32, seconds: f64) -> Result<Vec<PoseLog>> {
+        let rows: Vec<[f32; 4]> = self.ctx.read_buffer(
+            &self.log,
+            32 * u64::from(first - 1),
+            2 * (last - first + 1) as usize,
+        )?;
+        Ok(rows
+            .chunks_exact(2)
+            .zip(first..=last)
+            .map(|(r, it)| {
+                let (sigma, gamma) = self.opts.sigma_gamma(it - 1);
+                PoseLog {
+                    iteration: it,
+                    loss: f64::from(r[0][0]),
+                    sigma,
+                    gamma,
+                    pose: Pose::from_array(
+                        [r[0][1], r[0][2], r[0][3], r[1][0], r[1][1], r[1][2]].map(f64::from),
+                    ),
+                    seconds,
+                }
+            })
+            .collect())
+    }
+
+    /// The parameters and Adam's moments now (each `[rotation; translation]`).
+    fn read_state(&self) -> Result<[[f64; 6]; 3]> {
+        let ti = 4 * u64::from(self.push.translation_at);
+        let read = |b: &Buffer, at: u64| -> Result<Vec<f32>> { self.ctx.read_buffer(b, at, 3) };
+        let (mr, vr) = self.adam_rotation.moments();
+        let (mt, vt) = self.adam_translation.moments();
+        let join = |a: Vec<f32>, b: Vec<f32>| -> [f64; 6] {
+            std::array::from_fn(|k| f64::from(if k < 3 { a[k] } else { b[k - 3] }))
+        };
+        Ok([
+            join(read(&self.params, 0)?, read(&self.params, ti)?),
+            join(read(mr, 0)?, read(mt, 0)?),
+            join(read(vr, 0)?, read(vt, 0)?),
+        ])
+    }
+
+    /// Sets the parameters and Adam's moments (each `[rotation; translation]`).
+    fn write_state(&self, state: [&[f64; 6]; 3]) -> Result<()> {
+        let ti = 4 * u64::from(self.push.translation_at);
+        let f = |a: &[f64; 6], k: usize| -> [f32; 3] { std::array::from_fn(|i| a[k + i] as f32) };
+        let (mr, vr) = self.adam_rotation.moments();
+        let (mt, vt) = self.adam_translation.moments();
+        self.ctx.write_buffer(&self.params, 0, &f(state[0], 0))?;
+        self.ctx.write_buffer(&self.params, ti, &f(state[0], 3))?;
+        self.ctx.write_buffer(mr, 0, &f(state[1], 0))?;
+        self.ctx.write_buffer(mt, 0, &f(state[1], 3))?;
+        self.ctx.write_buffer(vr, 0, &f(state[2], 0))?;
+        self.ctx.write_buffer(vt, 0, &f(state[2], 3))
+    }
+
+    /// Replaces the target (same size, finite).
+    pub fn set_target(&mut self, target: &[[f32; 4]]) -> Result<()> {
+        check_target(target, &self.opts.settings)?;
+        self.ctx.write_buffer(&self.target, 0, target)
+    }
+
+    /// The MSE and the render at the current pose with σ and γ (no step), re-run until the
+    /// entries fit.
+    pub fn evaluate(&mut self, sigma: f64, gamma: f64) -> Result<(f64, Vec<[f32; 4]>)> {
+        self.scene.set_blur(sigma, gamma)?;
+        loop {
+            let ctx = self.ctx;
+            ctx.submit_and_wait(|rec| {
+                self.gate.reset();
+                self.record_pose(rec)?;
+                let Self {
+                    scene,
+                    gate,
+                    renderer,
+                    mse,
+                    target,
+                    ..
+                } = self;
+                renderer.record_forward_guarded(rec, scene, gate, 0, |rec, binned| {
+                    let scene = binned.scene();
+                    mse.record(rec, scene.output().whole(), target.whole(), None)
+                })
+            })?;
+            match self.gate.read(ctx)?.stopped {
+                None => break,
+                Some((_, total)) => self.grow(total)?,
+            }
+        }
+        let s = &self.opts.settings;
+        Ok((
+            f64::from(self.mse.read_loss(self.ctx)?),
+            self.ctx
+                .read_buffer(self.scene.output(), 0, (s.width * s.height) as usize)?,
+        ))
+    }
+
+    /// dL/d(ω, t) of the last iteration that ran (the gradient its Adam steps took).
+    pub fn gradient(&self) -> Result<[f64; 6]> {
+        let ti = 4 * u64::from(self.push.translation_at);
+        let r: Vec<f32> = self.ctx.read_buffer(&self.d_params, 0, 3)?;
+        let t: Vec<f32> = self.ctx.read_buffer(&self.d_params, ti, 3)?;
+        Ok(std::array::from_fn(|k| {
+            f64::from(if k < 3 { r[k] } else { t[k - 3] })
+        }))
+    }
+
+    /// The log of iterations `first ..= last` that ran: each one's loss, σ, γ and the pose it
+    /// evaluated (`seconds` as given).
+    pub fn log(&self, first: u32, last: u32, seconds: f64) -> Result<Vec<PoseLog>> {
+        if first == 0 || first > last || last > self.opts.iterations {
+            return Err(Error::Misuse(format!(
+                "pose fit: the log of {first}..={last} of 1..={}",
+                self.opts.iterations
+            )));
+        }
+        self.read_log(first, last, seconds)
+    }
+
+    /// The pose now.
+    pub fn pose(&self) -> Result<Pose> {
+        Ok(Pose::from_array(self.read_state()?[0]))
+    }
+
+    /// Entries the bins and the backward's partials hold now.
+    pub fn capacity(&self) -> u64 {
+        self.capacity
+    }
+
+    /// Submissions the gate stopped (each grew the capacity and re-ran).
+    pub fn regrowths(&self) -> u32 {
+        self.regrowths
+    }
+
+    /// The entry count of the last iteration that ran.
+    pub fn last_entries(&self) -> u64 {
+        self.last_entries
+    }
+
+    /// The point rotations turn about.
+    pub fn centre(&self) -> DVec3 {
+        DVec3::from(self.push.centre.map(f64::from))
+    }
+}
+
 /// [`Error::Input`] unless `target` has one finite RGBA value per pixel of `settings`.
 fn check_target(target: &[[f32; 4]], settings: &RasterSettings) -> Result<()> {
     let px = settings.width as usize * settings.height as usize;
@@ -573,8 +1061,10 @@ pub struct PoseFitResult {
 }
 
 /// Fits the pose of `mesh` seen from `camera` to `target` (RGBA per pixel, row 0 at the top,
-/// the settings' size), from `init`. `progress` is called after every iteration and may
-/// return `false` to stop early. The result's loss is against the target of the sharp σ/γ.
+/// the settings' size), from `init`. `progress` is called after every submission of
+/// iterations (every [`PoseFitOptions::log_every`], and at the end of each σ/γ stage) with
+/// its last iteration, and may return `false` to stop early; the result's log holds every
+/// iteration. The result's loss is against the target of the sharp σ/γ.
 // The scene (mesh, camera, lighting), the target, the start and the options are each a
 // caller's choice; bundling them would only move the count into a struct.
 #[allow(clippy::too_many_arguments)]
@@ -622,25 +1112,24 @@ pub struct PoseFitState {
 
 /// An iteration's view of the running pose fit ([`PoseFitSnapshot::state`]: checkpoints).
 pub struct PoseFitSnapshot<'a> {
+    fitter: &'a PoseFitter<'a>,
     iteration: u32,
-    params: &'a [f64; 6],
-    m: &'a [f64; 6],
-    v: &'a [f64; 6],
     log: &'a [PoseLog],
     seconds: f64,
 }
 
 impl PoseFitSnapshot<'_> {
-    /// The fit's complete state now.
-    pub fn state(&self) -> PoseFitState {
-        PoseFitState {
+    /// The fit's complete state now (the parameters and moments read from the GPU).
+    pub fn state(&self) -> Result<PoseFitState> {
+        let [params, adam_m, adam_v] = self.fitter.read_state()?;
+        Ok(PoseFitState {
             iteration: self.iteration,
-            params: *self.params,
-            adam_m: *self.m,
-            adam_v: *self.v,
+            params,
+            adam_m,
+            adam_v,
             log: self.log.to_vec(),
             seconds: self.seconds,
-        }
+        })
     }
 }
 
@@ -754,91 +1243,70 @@ pub fn fit_pose_resumable(
         )));
     }
     let mut stage = opts.sigma_gamma(0);
-    let first = match &mut target {
+    let first_target = match &mut target {
         PoseTarget::Fixed(t) => t.to_vec(),
         PoseTarget::PerStage(f) => f(stage.0, stage.1)?,
     };
-    let mut problem = PoseProblem::new(
-        ctx,
-        mesh,
-        camera,
-        lighting,
-        &first,
-        &opts.settings,
-        opts.tile,
-    )?;
-    let mut params = init.to_array();
-    let (mut m, mut v) = ([0.0; 6], [0.0; 6]);
+    let mut fitter = PoseFitter::new(ctx, mesh, camera, lighting, &first_target, init, opts)?;
     let mut log = Vec::with_capacity(opts.iterations as usize);
     let start = Instant::now();
     let mut done = 0;
     let mut earlier = 0.0;
     if let Some(state) = resume {
         check_resume(state.iteration, opts.iterations)?;
-        params = state.params;
-        m = state.adam_m;
-        v = state.adam_v;
+        fitter.write_state([&state.params, &state.adam_m, &state.adam_v])?;
         log = state.log.clone();
         done = state.iteration;
         earlier = state.seconds;
     }
-    let first = done;
-    for it in first..opts.iterations {
-        let pose = Pose::from_array(params);
-        let (sigma, gamma) = opts.sigma_gamma(it);
-        if let PoseTarget::PerStage(f) = &mut target
-            && (sigma, gamma) != stage
-        {
-            problem.set_target(ctx, &f(sigma, gamma)?)?;
+    let every = opts.log_every;
+    let mut it = done + 1;
+    while it <= opts.iterations {
+        // Up to the next logged iteration, within one σ/γ stage, in one submission.
+        let mut last = ((it - 1) / every + 1)
+            .saturating_mul(every)
+            .min(opts.iterations);
+        let here = opts.sigma_gamma(it - 1);
+        if let Some(end) = (it..=last).find(|&i| opts.sigma_gamma(i - 1) != here) {
+            last = end - 1;
         }
-        stage = (sigma, gamma);
-        let e = problem.evaluate(ctx, &pose, sigma, gamma)?;
-        let rot = opts.adam(it);
-        let trans = AdamOptions {
-            lr: opts.lr_translation * opts.lr_factor(it),
-            ..rot
-        };
-        let (pr, pt) = params.split_at_mut(3);
-        let (mr, mt) = m.split_at_mut(3);
-        let (vr, vt) = v.split_at_mut(3);
-        adam::cpu::step(pr, &e.gradient[..3], mr, vr, it + 1, &rot);
-        adam::cpu::step(pt, &e.gradient[3..], mt, vt, it + 1, &trans);
-        done = it + 1;
-        let entry = PoseLog {
-            iteration: it + 1,
-            loss: e.loss,
-            sigma,
-            gamma,
-            pose,
-            seconds: earlier + start.elapsed().as_secs_f64(),
-        };
-        log.push(entry);
+        if let PoseTarget::PerStage(f) = &mut target
+            && here != stage
+        {
+            fitter.set_target(&f(here.0, here.1)?)?;
+        }
+        stage = here;
+        if let Some(stopped) = fitter.run(it, last, None)? {
+            it = stopped;
+            continue;
+        }
+        let seconds = earlier + start.elapsed().as_secs_f64();
+        log.extend(fitter.read_log(it, last, seconds)?);
+        done = last;
         let snapshot = PoseFitSnapshot {
+            fitter: &fitter,
             iteration: done,
-            params: &params,
-            m: &m,
-            v: &v,
             log: &log,
-            seconds: entry.seconds,
+            seconds,
         };
-        if !progress(&entry, &snapshot)? {
+        if !progress(&log[log.len() - 1], &snapshot)? {
             break;
         }
+        it = last + 1;
     }
     let seconds = earlier + start.elapsed().as_secs_f64();
-    let pose = Pose::from_array(params);
     let s = &opts.settings;
     if let PoseTarget::PerStage(f) = &mut target
         && (s.sigma, s.gamma) != stage
     {
-        problem.set_target(ctx, &f(s.sigma, s.gamma)?)?;
+        fitter.set_target(&f(s.sigma, s.gamma)?)?;
     }
-    let last = problem.evaluate(ctx, &pose, s.sigma, s.gamma)?;
+    let (loss, image) = fitter.evaluate(s.sigma, s.gamma)?;
     Ok(PoseFitResult {
-        pose,
-        loss: last.loss,
-        image: problem.read_image(ctx)?,
-        centre: problem.centre(),
+        pose: fitter.pose()?,
+        loss,
+        image,
+        centre: fitter.centre(),
         log,
         iterations: done,
         seconds,

@@ -1452,7 +1452,7 @@ mod tests {
         assert_eq!(std::mem::size_of::<RayOut>(), 16);
         assert_eq!(std::mem::size_of::<super::super::ProbeView>(), 160);
         assert_eq!(specs::PROBE_FORWARD.bindings.len(), 9);
-        assert_eq!(specs::PROBE_BACKWARD.bindings.len(), 11);
+        assert_eq!(specs::PROBE_BACKWARD.bindings.len(), 12);
     }
 
     #[test]
