@@ -40,7 +40,7 @@ pub const LARGE_SCENES: [&str; 2] = ["spot3-1024", "blurry-1024"];
 
 /// The fitting benchmark's scenes ([`run_fit`]); run only when named (`--scene fit-120`,
 /// `--scene fit-field`).
-pub const FIT_SCENES: [&str; 2] = ["fit-120", "fit-field"];
+pub const FIT_SCENES: [&str; 3] = ["fit-120", "fit-field", "fit-pose"];
 
 /// Iterations per submission that [`run_fit`]'s loop timing compares with one.
 pub const FIT_BATCH: u32 = 10;
@@ -1223,6 +1223,182 @@ fn run_field_fit(
     })
 }
 
+/// The pose-fitting benchmark (`softvk bench --scene fit-pose`): a `softvk fit-pose`
+/// iteration at its defaults ([`PoseFitOptions::default`](crate::fit::pose::PoseFitOptions):
+/// 48², σ/γ schedule, tile 8) fitting spot (`spot_triangulated.obj`, R = 5, SoftRas's default
+/// lighting) seen from distance 2.732, elevation 20°, azimuth 30° to its own render at the rest
+/// pose, from 20° off about an oblique axis.
+///
+/// After one untimed iteration, `opts.repeat` iterations run one per submission with GPU
+/// timestamps (`fit-iteration`: medians, every pass), then [`FIT_BATCH`] iterations in one
+/// submission (`fit-loop-k10`: wall and GPU time per iteration, and the host overhead).
+fn run_pose_fit(
+    ctx: &Context,
+    opts: &BenchOptions,
+    assets: &Path,
+    progress: &mut impl FnMut(&str),
+) -> Result<Vec<BenchRecord>> {
+    use crate::fit::pose::{Pose, PoseFitOptions, PoseFitter};
+    use crate::lighting::Lighting;
+    let name = "fit-pose";
+    let spot = load(assets, "spot_triangulated.obj", 5)?;
+    let camera = Camera::from_angles(DISTANCE, 20.0, 30.0);
+    let lighting = Lighting::default();
+    let iterations = opts.repeat + FIT_BATCH + 1;
+    let fit_opts = PoseFitOptions {
+        iterations,
+        ..PoseFitOptions::default()
+    };
+    let s = fit_opts.settings;
+    let target = Renderer::new(ctx)?
+        .render_views(ctx, &spot, &[camera], &lighting, &s, Method::default())?
+        .images;
+    let axis = glam::DVec3::new(1.0, 2.0, 0.5).normalize();
+    let init = Pose {
+        rotation: axis * 20f64.to_radians(),
+        translation: glam::DVec3::ZERO,
+    };
+    let mut fitter = PoseFitter::new(ctx, &spot, &camera, &lighting, &target, &init, &fit_opts)?;
+    progress(&format!(
+        "{name}: spot (R = 5, {} faces) at {}x{}, sigma/gamma schedule over {iterations} \
+         iterations, tile {}; entry capacity {}",
+        spot.face_count(),
+        s.width,
+        s.height,
+        fit_opts.tile,
+        fitter.capacity()
+    ));
+    let mut it = 1u32;
+    pose_fit_iterations(&mut fitter, &mut it, 1, None, progress)?;
+    let mut timer = if ctx.info().timestamp_valid_bits > 0 {
+        Some(Timer::new(ctx, 32)?)
+    } else {
+        None
+    };
+    let (mut wall, mut gpu) = (Vec::new(), Vec::new());
+    let mut passes: Vec<(String, Vec<f64>)> = Vec::new();
+    for _ in 0..opts.repeat {
+        wall.push(pose_fit_iterations(
+            &mut fitter,
+            &mut it,
+            1,
+            timer.as_mut(),
+            progress,
+        )?);
+        if let Some(timer) = &timer {
+            let times = timer.results(ctx)?;
+            gpu.push(times.iter().map(|t| t.ms).sum());
+            for t in times {
+                match passes.iter_mut().find(|(n, _)| *n == t.name) {
+                    Some((_, series)) => series.push(t.ms),
+                    None => passes.push((t.name.clone(), vec![t.ms])),
+                }
+            }
+        }
+    }
+    let timing = Timing::medians(&gpu, &wall, &passes);
+    progress(&format!(
+        "{name} fit-iteration: {} entries; {}",
+        fitter.last_entries(),
+        summary(&timing, opts.repeat)
+    ));
+    let record = |pass: &'static str, gpu_ms, wall_ms, passes, repeats, entries| BenchRecord {
+        scene: name.to_string(),
+        method: Method::Tiled {
+            tile: fit_opts.tile,
+        },
+        pass,
+        gpu_ms,
+        wall_ms,
+        pairs: 0,
+        counts: None,
+        device: ctx.info().name.clone(),
+        driver: ctx.info().driver.clone(),
+        repeats,
+        passes,
+        views: 1,
+        faces: spot.face_count() as u32,
+        width: s.width,
+        height: s.height,
+        rows: None,
+        entries: Some(entries),
+        identical_to_brute: None,
+    };
+    let mut records = vec![record(
+        "fit-iteration",
+        timing.gpu_ms,
+        timing.wall_ms,
+        timing.passes,
+        opts.repeat,
+        fitter.last_entries(),
+    )];
+    let mut loop_timer = if ctx.info().timestamp_valid_bits > 0 {
+        Some(Timer::new(ctx, 20 * FIT_BATCH)?)
+    } else {
+        None
+    };
+    let wall = pose_fit_iterations(
+        &mut fitter,
+        &mut it,
+        FIT_BATCH,
+        loop_timer.as_mut(),
+        progress,
+    )?;
+    let n = f64::from(FIT_BATCH);
+    let gpu_ms = match &loop_timer {
+        Some(t) => Some(t.results(ctx)?.iter().map(|t| t.ms).sum::<f64>() / n),
+        None => None,
+    };
+    let host = gpu_ms.map(|g| wall / n - g);
+    progress(&format!(
+        "{name} fit-loop-k10: {:.1} ms wall per iteration over {FIT_BATCH} iterations in one \
+         submission; gpu {}, host overhead {} per iteration",
+        wall / n,
+        gpu_ms.map_or("n/a".into(), |g| format!("{g:.1} ms")),
+        host.map_or("n/a".into(), |h| format!("{h:.2} ms")),
+    ));
+    records.push(record(
+        "fit-loop-k10",
+        gpu_ms,
+        wall / n,
+        host.map(|h| vec![("host overhead".to_string(), h)])
+            .unwrap_or_default(),
+        FIT_BATCH,
+        fitter.last_entries(),
+    ));
+    Ok(records)
+}
+
+/// Runs iterations `it .. it + k` of a pose fit in one submission (again from a stopped one,
+/// until all ran) and advances `it`; the wall time of the submission that ran them all, ms.
+fn pose_fit_iterations(
+    fitter: &mut crate::fit::pose::PoseFitter<'_>,
+    it: &mut u32,
+    k: u32,
+    mut timer: Option<&mut Timer>,
+    progress: &mut impl FnMut(&str),
+) -> Result<f64> {
+    loop {
+        let start = Instant::now();
+        let stopped = fitter.run(*it, *it + k - 1, timer.as_deref_mut())?;
+        let wall = start.elapsed().as_secs_f64() * 1e3;
+        match stopped {
+            None => {
+                *it += k;
+                return Ok(wall);
+            }
+            Some(again) => {
+                progress(&format!(
+                    "fit-pose: iteration {again} outgrew the entry capacity; now {} (re-run, \
+                     not timed)",
+                    fitter.capacity()
+                ));
+                *it = again;
+            }
+        }
+    }
+}
+
 /// Runs iteration `it` of a field fit in one submission (again when the gate stopped it, until
 /// it ran) and advances `it`; the wall time of the submission that ran it, ms.
 fn field_fit_iterations(
@@ -1318,6 +1494,11 @@ pub fn run_fit(
         if name == "fit-field" {
             let assets = opts.assets.clone().unwrap_or_else(crate::assets::dir);
             records.push(run_field_fit(ctx, opts, &assets, &mut progress)?);
+            continue;
+        }
+        if name == "fit-pose" {
+            let assets = opts.assets.clone().unwrap_or_else(crate::assets::dir);
+            records.extend(run_pose_fit(ctx, opts, &assets, &mut progress)?);
             continue;
         }
         // SoftRas's template, as `softvk fit-mesh` uses it by default.

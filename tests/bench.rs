@@ -99,3 +99,41 @@ fn bad_options_are_errors_with_a_clear_message() {
     };
     assert!(bench::run(&gpu, &opts, |_| {}).is_err());
 }
+
+#[test]
+fn the_pose_fitting_benchmark_times_its_iterations_and_its_loop() {
+    let Some(gpu) = common::gpu() else { return };
+    let opts = BenchOptions {
+        scenes: vec!["fit-pose".into()],
+        repeat: 2,
+        ..BenchOptions::default()
+    };
+    let mut lines = Vec::new();
+    let records = bench::run_fit(&gpu, &opts, |line| lines.push(line.to_string())).unwrap();
+    let log = lines.join("\n");
+    let passes: Vec<_> = records.iter().map(|r| r.pass).collect();
+    assert_eq!(passes, ["fit-iteration", "fit-loop-k10"], "{log}");
+    for r in &records {
+        assert_eq!(r.scene, "fit-pose");
+        assert_eq!((r.width, r.height, r.faces), (48, 48, 5856));
+        assert!(r.entries.is_some_and(|e| e > 0), "{log}");
+        assert!(
+            r.wall_ms > 0.0 && r.gpu_ms.is_some_and(|ms| ms > 0.0),
+            "{log}"
+        );
+    }
+    // Every pass of an iteration is timed, the GPU chain's own among them.
+    for pass in [
+        "pose",
+        "lighting",
+        "raster tiled",
+        "grad tiled",
+        "lighting backward",
+        "adam",
+    ] {
+        assert!(
+            records[0].passes.iter().any(|(name, _)| name == pass),
+            "{pass}: {log}"
+        );
+    }
+}

@@ -23,7 +23,8 @@ pub struct BenchArgs {
     /// `spot3-1024` renders spot subdivided three times (374 784 faces) at 1024², `blurry-1024`
     /// blurry-256 at 1024² (more entries than one binding holds); `fit-120`
     /// times a mesh-fitting iteration at SoftRas's demo setting, `fit-field` a `softvk
-    /// fit-field` iteration at its defaults on spot (each only when named).
+    /// fit-field` iteration at its defaults on spot, `fit-pose` a `softvk fit-pose` iteration
+    /// at its defaults on spot (each only when named).
     #[arg(long = "scene", value_name = "NAME")]
     pub scenes: Vec<String>,
     /// Timed submissions per (scene, method, pass); times are medians.
