@@ -673,14 +673,26 @@ impl<'c> PoseFitter<'c> {
             .max_entries(ctx)
             .min(u64::from(ctx.info().limits.max_storage_buffer_range) / (4 * u64::from(stride)))
             .min(u64::from(u32::MAX));
-        // One counting submission at the initial pose.
-        ctx.submit_and_wait(|rec| fitter.record_pose(rec))?;
-        let total = fitter
-            .renderer
-            .count_entries(ctx, &mut fitter.scene, opts.tile)?;
-        fitter.grow(total)?;
-        fitter.regrowths = 0;
+        let (sigma, gamma) = opts.sigma_gamma(0);
+        fitter.fit_capacity(sigma, gamma)?;
         Ok(fitter)
+    }
+
+    /// Sizes the guarded bins for the pose now at σ and γ: one counting submission, then the
+    /// count with the headroom. The fit does it at the start of every σ/γ stage (a blurry
+    /// stage bins several times the entries of a sharp one, and the backward's texel
+    /// partials, cleared over the whole capacity every iteration, are the larger cost at
+    /// these image sizes); it changes no result.
+    pub fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()> {
+        self.scene.set_blur(sigma, gamma)?;
+        self.ctx.submit_and_wait(|rec| self.record_pose(rec))?;
+        let total = self
+            .renderer
+            .count_entries(self.ctx, &mut self.scene, self.opts.tile)?;
+        let regrowths = self.regrowths;
+        self.grow(total)?;
+        self.regrowths = regrowths;
+        Ok(())
     }
 
     /// Records the posed positions and their lit colours into the scene.
@@ -1270,10 +1282,11 @@ pub fn fit_pose_resumable(
         if let Some(end) = (it..=last).find(|&i| opts.sigma_gamma(i - 1) != here) {
             last = end - 1;
         }
-        if let PoseTarget::PerStage(f) = &mut target
-            && here != stage
-        {
-            fitter.set_target(&f(here.0, here.1)?)?;
+        if here != stage {
+            if let PoseTarget::PerStage(f) = &mut target {
+                fitter.set_target(&f(here.0, here.1)?)?;
+            }
+            fitter.fit_capacity(here.0, here.1)?;
         }
         stage = here;
         if let Some(stopped) = fitter.run(it, last, None)? {
