@@ -68,8 +68,30 @@ pub enum Error {
         message: String,
     },
 
-    /// A request exceeds what the device (or softvk) can do, e.g. a buffer over
-    /// `maxStorageBufferRange`.
+    /// A request over one of the device's limits, refused before any work was recorded: which
+    /// limit, what needed how much of it, the most the device allows, and what to change.
+    #[error(
+        "{what} needs {need} {}, over the {max} that {device} allows{}",
+        kind.unit(),
+        if hint.is_empty() { String::new() } else { format!("; {hint}") }
+    )]
+    DeviceLimit {
+        /// Which limit.
+        kind: LimitKind,
+        /// What asked for it (names the inputs involved).
+        what: String,
+        /// How much it needed.
+        need: u64,
+        /// The most the device allows.
+        max: u64,
+        /// The device's name.
+        device: String,
+        /// What to change (may be empty).
+        hint: &'static str,
+    },
+
+    /// A request exceeds what softvk can do otherwise (32-bit indices and counts, a scratch
+    /// capacity, a memory kind the device lacks).
     #[error("{0}")]
     Limit(String),
 
@@ -141,6 +163,31 @@ pub enum Error {
     },
 }
 
+/// Which device limit an [`Error::DeviceLimit`] is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LimitKind {
+    /// Loop iterations one shader invocation may run
+    /// ([`crate::gpu::DeviceInfo::shader_loop_limit`]: llvmpipe stops a loop after 65 535 and
+    /// silently skips the rest, so softvk bounds every loop on the host).
+    LoopIterations,
+    /// Bytes one storage-buffer binding may span (`maxStorageBufferRange`).
+    StorageBinding,
+    /// (item, tile) entries one binning may hold (its sort keys and the backward's partials each
+    /// in one binding).
+    BinEntries,
+}
+
+impl LimitKind {
+    /// What the counts of an [`Error::DeviceLimit`] of this kind count.
+    pub fn unit(&self) -> &'static str {
+        match self {
+            LimitKind::LoopIterations => "loop iterations in one shader invocation",
+            LimitKind::StorageBinding => "bytes in one storage-buffer binding",
+            LimitKind::BinEntries => "(item, tile) entries in one binning",
+        }
+    }
+}
+
 /// softvk's result type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
@@ -187,6 +234,35 @@ pub(crate) fn human_bytes(bytes: u64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_device_limit_says_what_how_much_and_what_to_change_on_one_line() {
+        let e = Error::DeviceLimit {
+            kind: LimitKind::LoopIterations,
+            what: "the tiled forward of a tile of 9000 faces".into(),
+            need: 70_000,
+            max: 65_535,
+            device: "llvmpipe".into(),
+            hint: "use smaller tiles",
+        };
+        assert_eq!(
+            e.to_string(),
+            "the tiled forward of a tile of 9000 faces needs 70000 loop iterations in one shader \
+             invocation, over the 65535 that llvmpipe allows; use smaller tiles"
+        );
+        let e = Error::DeviceLimit {
+            kind: LimitKind::StorageBinding,
+            what: "points".into(),
+            need: 8,
+            max: 4,
+            device: "d".into(),
+            hint: "",
+        };
+        assert_eq!(
+            e.to_string(),
+            "points needs 8 bytes in one storage-buffer binding, over the 4 that d allows"
+        );
+    }
 
     #[test]
     fn one_line_escapes_control_characters_only() {

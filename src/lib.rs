@@ -42,4 +42,4 @@ pub mod primitives;
 pub mod probe;
 pub mod raster;
 
-pub use error::{Error, Result};
+pub use error::{Error, LimitKind, Result};

@@ -10,7 +10,6 @@
 
 mod common;
 
-use softvk::Error;
 use softvk::camera::Camera;
 use softvk::field::mcubes::{self, MarchingCubes};
 use softvk::field::preview::{PreviewOptions, pixel_ray, render_preview};
@@ -19,6 +18,7 @@ use softvk::field::{Cube, Field, FieldKind, Shape, cpu};
 use softvk::fit::{Adam, AdamOptions};
 use softvk::gpu::{Context, MemoryKind};
 use softvk::mesh::Mesh;
+use softvk::{Error, LimitKind};
 
 use rand::RngExt;
 
@@ -399,7 +399,17 @@ fn bad_inputs_are_errors() {
             frequencies: 8,
         };
         let r = Field::new(&ctx, big, cube(), 0);
-        assert!(matches!(r, Err(Error::Limit(_))), "{:?}", r.err());
+        assert!(
+            matches!(
+                r,
+                Err(Error::DeviceLimit {
+                    kind: LimitKind::LoopIterations,
+                    ..
+                })
+            ),
+            "{:?}",
+            r.err()
+        );
     }
 }
 

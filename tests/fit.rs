@@ -11,13 +11,13 @@
 
 mod common;
 
-use softvk::Error;
 use softvk::fit::{
     Adam, AdamOptions, Deform, GradOut, ImageMse, Regularizers, SilhouetteLoss, adam, deform,
     flatten, laplacian, silhouette,
 };
 use softvk::gpu::{Buffer, Context, MemoryKind};
 use softvk::mesh::Mesh;
+use softvk::{Error, LimitKind};
 
 use rand::RngExt;
 
@@ -537,7 +537,12 @@ fn mismatched_sizes_and_bad_inputs_are_errors_not_panics() {
     expect_input("no views", SilhouetteLoss::new(&gpu, 0, 4, 4).map(|_| ()));
     expect_input("empty image", ImageMse::new(&gpu, 1, 0, 4).map(|_| ()));
     match SilhouetteLoss::new(&gpu, 4, 1 << 14, 1 << 14) {
-        Err(Error::Limit(message)) => eprintln!("huge images: {message}"),
+        Err(
+            e @ Error::DeviceLimit {
+                kind: LimitKind::StorageBinding,
+                ..
+            },
+        ) => eprintln!("huge images: {e}"),
         Err(other) => panic!("huge images: expected a limit error, got {other}"),
         Ok(_) => panic!("huge images: expected a limit error"),
     }

@@ -536,7 +536,16 @@ fn the_drivers_loop_cap_is_an_error_not_a_silent_truncation() {
         let err = r
             .render_views(&gpu, &many, &cams, &lighting(), &small, method)
             .unwrap_err();
-        assert!(matches!(err, softvk::Error::Limit(_)), "{method:?}: {err}");
+        assert!(
+            matches!(
+                err,
+                softvk::Error::DeviceLimit {
+                    kind: softvk::LimitKind::LoopIterations,
+                    ..
+                }
+            ),
+            "{method:?}: {err}"
+        );
     }
     let spread = RasterSettings {
         sigma: 1e-6,

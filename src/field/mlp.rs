@@ -27,7 +27,7 @@
 use bytemuck::{Pod, Zeroable};
 
 use super::{Cube, FIELD_CHUNK, SumChunks, check_binding_bytes};
-use crate::error::{Error, Result};
+use crate::error::{Error, LimitKind, Result};
 use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
 
 /// β of the hidden layers' softplus.
@@ -195,10 +195,14 @@ impl MlpGpu {
         if let Some(limit) = ctx.info().shader_loop_limit() {
             let needed = layout.backward_iterations();
             if needed > limit {
-                return Err(Error::Limit(format!(
-                    "{what}: one point's backward runs ~{needed} loop iterations, over this \
-                     device's cap of {limit} per invocation; use fewer or narrower layers"
-                )));
+                return Err(Error::DeviceLimit {
+                    kind: LimitKind::LoopIterations,
+                    what: format!("{what}: one point's backward"),
+                    need: needed,
+                    max: limit,
+                    device: ctx.info().name.clone(),
+                    hint: "use fewer or narrower layers",
+                });
             }
         }
         let p = layout.param_count() as u64;

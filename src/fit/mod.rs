@@ -64,7 +64,7 @@ pub use deform::Deform;
 pub use regularizers::{RegularizerLosses, Regularizers};
 pub use silhouette::{ImageMse, SilhouetteLoss};
 
-use crate::error::{Error, Result};
+use crate::error::{Error, LimitKind, Result};
 use crate::gpu::{BufferRange, Context};
 
 /// Where a kernel writes a gradient, and how: `out = weight · g`, or with `accumulate`,
@@ -121,10 +121,14 @@ pub(crate) fn check_floats(what: &str, range: &BufferRange<'_>, floats: u64) -> 
 pub(crate) fn check_binding(ctx: &Context, what: &str, bytes: u64) -> Result<u64> {
     let max = u64::from(ctx.info().limits.max_storage_buffer_range);
     if bytes > max {
-        return Err(Error::Limit(format!(
-            "{what} needs {bytes} bytes in one binding, over this device's \
-             maxStorageBufferRange ({max})"
-        )));
+        return Err(Error::DeviceLimit {
+            kind: LimitKind::StorageBinding,
+            what: what.to_string(),
+            need: bytes,
+            max,
+            device: ctx.info().name.clone(),
+            hint: "",
+        });
     }
     Ok(bytes.max(4))
 }

@@ -21,7 +21,7 @@ use super::ProbeSettings;
 use super::prober::{self, Constants};
 use super::sampler::Ray;
 use super::targets::{GpuTargets, Targets};
-use crate::error::{Error, Result};
+use crate::error::{Error, LimitKind, Result};
 use crate::field::Cube;
 use crate::fit::{check_binding, groups};
 use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
@@ -91,9 +91,14 @@ impl DenseMarch {
         let most = counts.iter().copied().max().unwrap_or(0);
         if let Some(limit) = ctx.info().shader_loop_limit() {
             if u64::from(most) > limit {
-                return Err(Error::Limit(format!(
-                    "dense marching: {most} samples on one ray, over the loop cap ({limit})"
-                )));
+                return Err(Error::DeviceLimit {
+                    kind: LimitKind::LoopIterations,
+                    what: format!("dense marching: {most} samples on one ray"),
+                    need: u64::from(most),
+                    max: limit,
+                    device: ctx.info().name.clone(),
+                    hint: "use a larger step",
+                });
             }
         }
         let offsets = cpu::offsets(&counts);

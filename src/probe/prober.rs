@@ -45,7 +45,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::ProbeSettings;
 use super::targets::GpuTargets;
-use crate::error::{Error, Result};
+use crate::error::{Error, LimitKind, Result};
 use crate::fit::reduce::{Sum, SumPush};
 use crate::fit::{GradOut, check_binding, check_floats, groups};
 use std::sync::Arc;
@@ -301,11 +301,14 @@ pub struct Prober {
 fn check_loop(ctx: &Context, what: &str, iterations: u64) -> Result<()> {
     if let Some(limit) = ctx.info().shader_loop_limit() {
         if iterations > limit {
-            return Err(Error::Limit(format!(
-                "sphere probing: {what} would run {iterations} loop iterations in one shader \
-                 invocation, but {} runs at most {limit} (and would silently skip the rest)",
-                ctx.info().name
-            )));
+            return Err(Error::DeviceLimit {
+                kind: LimitKind::LoopIterations,
+                what: format!("sphere probing: {what}"),
+                need: iterations,
+                max: limit,
+                device: ctx.info().name.clone(),
+                hint: "use fewer anchors, rays or views per tile, or smaller tiles",
+            });
         }
     }
     Ok(())
@@ -693,10 +696,14 @@ impl Prober {
     fn size_entries(&self, ctx: &Context, total: u64) -> Result<()> {
         let max = binning::max_entries(ctx);
         if total > max {
-            return Err(Error::Limit(format!(
-                "sphere probing: {total} (anchor, tile) entries, over the {max} one binning may \
-                 hold; use fewer anchors or views, larger tiles or a smaller τ"
-            )));
+            return Err(Error::DeviceLimit {
+                kind: LimitKind::BinEntries,
+                what: "sphere probing".into(),
+                need: total,
+                max,
+                device: ctx.info().name.clone(),
+                hint: "use fewer anchors or views, larger tiles or a smaller τ",
+            });
         }
         // A tile belongs to one view and holds each anchor at most once.
         let run = total.min(self.anchors());

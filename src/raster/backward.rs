@@ -46,7 +46,7 @@ use super::reference::ColorMode;
 use super::reference_grad::{
     self, Gradients, VertexFaces, camera_grad, lighting_grad_surface, lighting_grad_vertex,
 };
-use crate::error::{Error, Result};
+use crate::error::{Error, LimitKind, Result};
 use crate::gpu::{
     Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, specs,
 };
@@ -257,7 +257,13 @@ fn checked(ctx: &Context, what: &str, bytes: u64) -> Result<u64> {
 
 /// Rows per band of the brute-force backward over a `width × height` image: the whole image, or
 /// fewer rows where `cap` or the driver's loop `limit` asks.
-fn band_rows(width: u32, height: u32, limit: Option<u64>, cap: Option<u32>) -> Result<u32> {
+fn band_rows(
+    width: u32,
+    height: u32,
+    limit: Option<u64>,
+    cap: Option<u32>,
+    device: &str,
+) -> Result<u32> {
     let mut rows = u64::from(height);
     if let Some(cap) = cap {
         rows = rows.min(u64::from(cap.max(1)));
@@ -266,11 +272,14 @@ fn band_rows(width: u32, height: u32, limit: Option<u64>, cap: Option<u32>) -> R
         let fit =
             limit.saturating_sub(brute_backward_iterations(0, width)) / (u64::from(width) + 1);
         if fit == 0 {
-            return Err(Error::Limit(format!(
-                "one row of {width} pixels is over the {limit} loop iterations the driver runs \
-                 per shader invocation; the brute-force backward cannot split it: use the tiled \
-                 method"
-            )));
+            return Err(Error::DeviceLimit {
+                kind: LimitKind::LoopIterations,
+                what: format!("the brute-force backward of one row of {width} pixels"),
+                need: brute_backward_iterations(1, width),
+                max: limit,
+                device: device.to_string(),
+                hint: "use the tiled method",
+            });
         }
         rows = rows.min(fit);
     }
@@ -430,14 +439,24 @@ impl GradBuffers {
             budget_units = budget_units.min(cap);
         }
         if budget_units == 0 {
-            return Err(Error::Limit(format!(
-                "one partial gradient of {stride} floats is over this device's \
-                 maxStorageBufferRange ({max_range}); use a smaller texture resolution"
-            )));
+            return Err(Error::DeviceLimit {
+                kind: LimitKind::StorageBinding,
+                what: format!("one partial gradient of {stride} floats"),
+                need: 4 * u64::from(stride),
+                max: max_range,
+                device: ctx.info().name.clone(),
+                hint: "use a smaller texture resolution",
+            });
         }
         let (band_rows, bands, units) = match method {
             Method::Brute => {
-                let rows = band_rows(scene.width, scene.height, limit, split.band_rows)?;
+                let rows = band_rows(
+                    scene.width,
+                    scene.height,
+                    limit,
+                    split.band_rows,
+                    &ctx.info().name,
+                )?;
                 let bands = scene.height.div_ceil(rows);
                 (rows, bands, items * u64::from(bands))
             }
@@ -689,13 +708,17 @@ impl GradKernels {
         if let Some(limit) = limit {
             let n = brute_backward_iterations(u64::from(gb.band_rows), scene.width);
             if n > limit {
-                return Err(Error::Limit(format!(
-                    "bands of {} rows of {} pixels need {n} loop iterations per invocation, over \
-                     the {limit} {} allows (make the GradBuffers on this device)",
-                    gb.band_rows,
-                    scene.width,
-                    rec.context().info().name
-                )));
+                return Err(Error::DeviceLimit {
+                    kind: LimitKind::LoopIterations,
+                    what: format!(
+                        "the brute-force backward over bands of {} rows of {} pixels",
+                        gb.band_rows, scene.width
+                    ),
+                    need: n,
+                    max: limit,
+                    device: rec.context().info().name.clone(),
+                    hint: "make the GradBuffers on this device",
+                });
             }
         }
         let items = u64::from(scene.face_count) * u64::from(scene.view_count);
@@ -1068,10 +1091,10 @@ mod tests {
     #[test]
     fn bands_are_the_most_rows_under_the_loop_cap() {
         // No cap: the whole image.
-        assert_eq!(band_rows(256, 256, None, None).unwrap(), 256);
-        assert_eq!(band_rows(256, 256, None, Some(7)).unwrap(), 7);
+        assert_eq!(band_rows(256, 256, None, None, "llvmpipe").unwrap(), 256);
+        assert_eq!(band_rows(256, 256, None, Some(7), "llvmpipe").unwrap(), 7);
         for (w, h) in [(256, 256), (1024, 1024), (64, 64), (65_532, 3)] {
-            let rows = u64::from(band_rows(w, h, Some(CAP), None).unwrap());
+            let rows = u64::from(band_rows(w, h, Some(CAP), None, "llvmpipe").unwrap());
             assert!(brute_backward_iterations(rows, w) <= CAP, "{w}x{h}");
             assert!(
                 rows == u64::from(h) || brute_backward_iterations(rows + 1, w) > CAP,
@@ -1079,10 +1102,17 @@ mod tests {
             );
         }
         // 256 wide: 254 rows fit, so 256² takes two bands.
-        assert_eq!(band_rows(256, 256, Some(CAP), None).unwrap(), 254);
+        assert_eq!(
+            band_rows(256, 256, Some(CAP), None, "llvmpipe").unwrap(),
+            254
+        );
         assert!(matches!(
-            band_rows(65_533, 1, Some(CAP), None),
-            Err(Error::Limit(_))
+            band_rows(65_533, 1, Some(CAP), None, "llvmpipe"),
+            Err(Error::DeviceLimit {
+                kind: LimitKind::LoopIterations,
+                max: CAP,
+                ..
+            })
         ));
     }
 

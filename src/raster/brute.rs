@@ -8,7 +8,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use crate::error::{Error, Result};
+use crate::error::{Error, LimitKind, Result};
 use crate::gpu::{BufferRange, Context, Kernel, KernelVariants, Recorder, specs};
 use crate::raster::fine::{FineModes, RasterPush};
 use crate::raster::reference::RasterSettings;
@@ -95,12 +95,14 @@ impl BruteRaster {
         if let Some(limit) = rec.context().info().shader_loop_limit()
             && u64::from(face_count) + 2 > limit
         {
-            return Err(Error::Limit(format!(
-                "the brute-force kernel loops over all {face_count} faces in one shader \
-                 invocation, over the {limit} iterations {} allows (it would silently skip the \
-                 rest); use the tiled method",
-                rec.context().info().name
-            )));
+            return Err(Error::DeviceLimit {
+                kind: LimitKind::LoopIterations,
+                what: format!("the brute-force kernel over all {face_count} faces"),
+                need: u64::from(face_count) + 2,
+                max: limit,
+                device: rec.context().info().name.clone(),
+                hint: "use the tiled method",
+            });
         }
         let push = RasterPush::new(
             settings,

@@ -31,7 +31,7 @@
 //! nothing re-bins it in between.
 
 use crate::camera::Camera;
-use crate::error::{Error, Result};
+use crate::error::{Error, LimitKind, Result};
 use crate::gpu::gate::IterationGate;
 use crate::gpu::{Buffer, BufferRange, Context, MemoryKind, Recorder};
 use crate::lighting::Lighting;
@@ -392,13 +392,16 @@ fn checked_tile_runs(
     } else {
         max_tile_run(ctx, bins, grid.tiles_per_view() * u64::from(views))?
     };
-    if tiled_forward_iterations(run, subgroup) > limit {
-        return Err(Error::Limit(format!(
-            "a tile holds {run} faces, but {} runs at most {limit} loop iterations per shader \
-             invocation (and would silently skip the rest); use smaller tiles, a smaller σ or \
-             fewer faces",
-            ctx.info().name
-        )));
+    let need = tiled_forward_iterations(run, subgroup);
+    if need > limit {
+        return Err(Error::DeviceLimit {
+            kind: LimitKind::LoopIterations,
+            what: format!("the tiled forward of a tile of {run} faces"),
+            need,
+            max: limit,
+            device: ctx.info().name.clone(),
+            hint: "use smaller tiles, a smaller σ or fewer faces",
+        });
     }
     Ok(run)
 }
@@ -1226,11 +1229,14 @@ impl Renderer {
         let job = scene.job(grid, 0, scene.view_count);
         let max = self.max_entries(ctx);
         if capacity > max {
-            return Err(Error::Limit(format!(
-                "{} views need {capacity} (face, tile) entries at once, over the {max} one \
-                 binning may hold; use fewer views, larger tiles or a smaller σ",
-                scene.view_count
-            )));
+            return Err(Error::DeviceLimit {
+                kind: LimitKind::BinEntries,
+                what: format!("a guarded binning of {} views", scene.view_count),
+                need: capacity,
+                max,
+                device: ctx.info().name.clone(),
+                hint: "use fewer views, larger tiles or a smaller σ",
+            });
         }
         if job.max_entries() > u64::from(u32::MAX) {
             return Err(Error::Limit(format!(
@@ -1248,13 +1254,16 @@ impl Renderer {
         scene.bins[0].reserve_entry_capacity(ctx, capacity.max(1))?;
         let max_run = capacity.min(u64::from(scene.face_count));
         if let Some(limit) = ctx.info().shader_loop_limit() {
-            if tiled_forward_iterations(max_run, ctx.info().subgroup_size) > limit {
-                return Err(Error::Limit(format!(
-                    "a tile may hold {max_run} faces, which could put more than {limit} loop \
-                     iterations in one shader invocation on {} (which would silently skip the \
-                     rest); use smaller tiles, fewer faces or a smaller σ",
-                    ctx.info().name
-                )));
+            let need = tiled_forward_iterations(max_run, ctx.info().subgroup_size);
+            if need > limit {
+                return Err(Error::DeviceLimit {
+                    kind: LimitKind::LoopIterations,
+                    what: format!("the tiled forward of a tile of up to {max_run} faces"),
+                    need,
+                    max: limit,
+                    device: ctx.info().name.clone(),
+                    hint: "use smaller tiles, fewer faces or a smaller σ",
+                });
             }
         }
         scene.tile = Some(tile);
