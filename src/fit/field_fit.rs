@@ -42,7 +42,6 @@ use super::checkpoint::{
     Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, read_log, read_optimizer,
     restore_optimizer, write_log, write_optimizer,
 };
-use super::mesh_fit::ENTRY_HEADROOM;
 use super::{Adam, AdamOptions, GradOut};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -375,20 +374,6 @@ pub struct FieldFitter {
     last_entries: u64,
 }
 
-/// The entry capacity for a count of `total`: with the mesh fit's [`ENTRY_HEADROOM`], at most
-/// what one binning may hold; an error when even `total` is over it.
-fn with_headroom(ctx: &Context, total: u64) -> Result<u64> {
-    let max = crate::primitives::binning::max_entries(ctx);
-    if total > max {
-        return Err(Error::Limit(format!(
-            "field fit: {total} (anchor, tile) entries in one iteration, over the {max} one \
-             binning may hold; use fewer anchors or views, larger tiles or a smaller τ"
-        )));
-    }
-    let (num, den) = ENTRY_HEADROOM;
-    Ok((total * num / den).clamp(total.max(1), max))
-}
-
 /// `n` rounded up to a multiple of `align`.
 fn round_up(n: u64, align: u64) -> u64 {
     n.div_ceil(align) * align
@@ -438,7 +423,7 @@ impl FieldFitter {
             prober.record_count(rec, &gpu, sampler.anchors().whole())
         })?;
         let counted = u64::from(ctx.read_buffer::<u32>(prober.total_buffer().buffer, 0, 1)?[0]);
-        prober.reserve_guarded(ctx, with_headroom(ctx, counted)?)?;
+        prober.reserve_guarded(ctx, field_capacity(ctx, counted)?)?;
         let anchors = s.anchors;
         // φ and d_φ of the geo block are bound at 4 · geo_start bytes: keep that aligned.
         let align_floats = (ctx.info().buffer_alignment() / 4).max(1);
@@ -597,7 +582,7 @@ impl FieldFitter {
                 )));
             }
             self.prober
-                .reserve_guarded(ctx, with_headroom(ctx, total)?)?;
+                .reserve_guarded(ctx, field_capacity(ctx, total)?)?;
             self.regrowths += 1;
             return Ok(Some(stopped));
         }
@@ -886,4 +871,15 @@ pub fn fit_field_resumable(
         iterations: done,
         timings,
     })
+}
+
+/// The prober's entry capacity for a count of `total` ([`super::with_headroom`]).
+fn field_capacity(ctx: &Context, total: u64) -> Result<u64> {
+    super::with_headroom(
+        ctx,
+        "a field fit's sphere probing",
+        total,
+        crate::primitives::binning::max_entries(ctx),
+        "use fewer anchors or views, larger tiles or a smaller τ",
+    )
 }

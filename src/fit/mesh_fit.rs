@@ -32,7 +32,7 @@ use super::checkpoint::{
     Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, read_log, read_optimizer,
     restore_optimizer, write_log, write_optimizer,
 };
-use super::{Adam, AdamOptions, Deform, GradOut, Regularizers, SilhouetteLoss};
+use super::{Adam, AdamOptions, Deform, GradOut, Regularizers, SilhouetteLoss, with_headroom};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::gate::IterationGate;
@@ -509,7 +509,7 @@ impl<'c> MeshFitter<'c> {
                     deform.record_forward(rec, params.whole(), scene.positions().whole())
                 })?;
                 let total = renderer.count_entries(ctx, &mut scene, opts.tile)?;
-                with_headroom(total, max_capacity, views)?
+                with_headroom(ctx, &mesh_entries(views), total, max_capacity, MESH_HINT)?
             }
         };
         renderer.reserve_guarded(ctx, &mut scene, opts.tile, capacity)?;
@@ -639,7 +639,14 @@ impl<'c> MeshFitter<'c> {
 
     /// Grows the bins and the partials to `total` entries with the headroom.
     fn grow(&mut self, total: u64) -> Result<()> {
-        let capacity = with_headroom(total, self.max_capacity, self.scene.view_count() as usize)?;
+        let views = self.scene.view_count() as usize;
+        let capacity = with_headroom(
+            self.ctx,
+            &mesh_entries(views),
+            total,
+            self.max_capacity,
+            MESH_HINT,
+        )?;
         self.renderer
             .reserve_guarded(self.ctx, &mut self.scene, self.opts.tile, capacity)?;
         self.grads = GradBuffers::with_entry_capacity(
@@ -722,16 +729,9 @@ impl<'c> MeshFitter<'c> {
     }
 }
 
-/// The capacity for `total` entries: with [`ENTRY_HEADROOM`], at most `max`; an error when even
-/// `total` is over it.
-fn with_headroom(total: u64, max: u64, views: usize) -> Result<u64> {
-    if total > max {
-        return Err(Error::Limit(format!(
-            "{views} views need {total} (face, tile) entries at once, over the {max} this device \
-             holds in one binding (with the backward's partials); use fewer views, larger tiles \
-             or a smaller σ"
-        )));
-    }
-    let (num, den) = ENTRY_HEADROOM;
-    Ok((total * num / den).clamp(total.max(1), max))
+/// What a mesh fit's binning is, for [`Error::DeviceLimit`].
+fn mesh_entries(views: usize) -> String {
+    format!("a mesh fit's binning of {views} views (with the backward's partials)")
 }
+
+const MESH_HINT: &str = "use fewer views, larger tiles or a smaller σ";

@@ -133,6 +133,30 @@ pub(crate) fn check_binding(ctx: &Context, what: &str, bytes: u64) -> Result<u64
     Ok(bytes.max(4))
 }
 
+/// The entry capacity of a fit's guarded binning for a count of `total`: with
+/// [`mesh_fit::ENTRY_HEADROOM`], at most `max` (what the device holds); [`Error::DeviceLimit`]
+/// naming `what` and `hint` when even `total` is over it. The mesh, field and pose fits share it.
+pub(crate) fn with_headroom(
+    ctx: &Context,
+    what: &str,
+    total: u64,
+    max: u64,
+    hint: &'static str,
+) -> Result<u64> {
+    if total > max {
+        return Err(Error::DeviceLimit {
+            kind: LimitKind::BinEntries,
+            what: what.to_string(),
+            need: total,
+            max,
+            device: ctx.info().name.clone(),
+            hint,
+        });
+    }
+    let (num, den) = mesh_fit::ENTRY_HEADROOM;
+    Ok((total * num / den).clamp(total.max(1), max))
+}
+
 /// Workgroups of `size` invocations covering `n` items, as the `u32` a dispatch takes.
 pub(crate) fn groups(n: u64, size: u32) -> Result<u32> {
     u32::try_from(n.div_ceil(u64::from(size)))

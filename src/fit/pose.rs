@@ -65,7 +65,6 @@ use super::checkpoint::{
     write_log,
 };
 use super::groups;
-use super::mesh_fit::ENTRY_HEADROOM;
 use super::{GradOut, ImageMse};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -840,15 +839,13 @@ impl<'c> PoseFitter<'c> {
 
     /// Grows the bins and the backward's buffers to `total` entries with the headroom.
     fn grow(&mut self, total: u64) -> Result<()> {
-        if total > self.max_capacity {
-            return Err(Error::Limit(format!(
-                "pose fit: {total} (face, tile) entries, over the {} this device holds in one \
-                 binding (with the backward's partials); use larger tiles or a smaller σ",
-                self.max_capacity
-            )));
-        }
-        let (num, den) = ENTRY_HEADROOM;
-        let capacity = (total * num / den).clamp(total.max(1), self.max_capacity);
+        let capacity = super::with_headroom(
+            self.ctx,
+            "a pose fit's binning (with the backward's partials)",
+            total,
+            self.max_capacity,
+            "use larger tiles or a smaller σ",
+        )?;
         let method = Method::Tiled {
             tile: self.opts.tile,
         };
