@@ -68,8 +68,10 @@ pub struct MeshFitOptions {
     /// pictures).
     pub snapshots: bool,
     /// The (face, tile) entries reserved at the start; `None` (the default): the template's
-    /// count, read back once, with [`ENTRY_HEADROOM`]. A test knob: a capacity too small makes
-    /// iterations stop and re-run (with the same result).
+    /// count, read back once, with [`ENTRY_HEADROOM`]. More spares the re-runs of a fit whose
+    /// shape grows; less saves memory (the bins and the backward's partials scale with it). An
+    /// iteration that does not fit grows the capacity and runs again either way, with the same
+    /// result (as [`FieldFitter::reserve`](super::field_fit::FieldFitter::reserve)).
     pub entry_capacity: Option<u64>,
 }
 
