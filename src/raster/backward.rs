@@ -295,6 +295,7 @@ fn tile_faces(
     (subgroup, color): (u32, ColorWork),
     limit: Option<u64>,
     cap: Option<u32>,
+    device: &str,
 ) -> Result<u64> {
     let mut faces = run.max(1).div_ceil(64) * 64;
     if let Some(cap) = cap {
@@ -307,11 +308,16 @@ fn tile_faces(
             - tiled_backward_iterations(run.max(64), tile, 0, subgroup, color);
         let batches = limit.saturating_sub(fixed) / per_batch;
         if batches == 0 {
-            return Err(Error::Limit(format!(
-                "one batch of 64 faces over a {tile}x{tile} tile is over the {limit} loop \
-                 iterations the driver runs per shader invocation; the tiled backward needs \
-                 smaller tiles there"
-            )));
+            return Err(Error::DeviceLimit {
+                kind: LimitKind::LoopIterations,
+                what: format!(
+                    "the tiled backward of one batch of 64 faces over a {tile}x{tile} tile"
+                ),
+                need: iterations(64),
+                max: limit,
+                device: device.to_string(),
+                hint: "use smaller tiles",
+            });
         }
         faces = faces.min(64 * batches);
         debug_assert!(iterations(faces) <= limit);
@@ -794,7 +800,8 @@ impl GradKernels {
             }
             let run = group.max_tile_entries;
             let work = (rec.context().info().subgroup_size, gb.color_work(scene));
-            let faces = tile_faces(run, tile, work, limit, gb.split.tile_faces)?;
+            let device = &rec.context().info().name;
+            let faces = tile_faces(run, tile, work, limit, gb.split.tile_faces, device)?;
             let tiles = grid.tiles_per_view() * u64::from(group.views);
             let units = UnitGroup {
                 first_view: group.first,
@@ -1123,7 +1130,7 @@ mod tests {
         let run = 5856;
         for sg in [4, 8, 16] {
             for color in [ColorWork::None, ColorWork::Vertex, ColorWork::Texels] {
-                let faces = tile_faces(run, 32, (sg, color), Some(CAP), None).unwrap();
+                let faces = tile_faces(run, 32, (sg, color), Some(CAP), None, "llvmpipe").unwrap();
                 assert_eq!(faces % 64, 0);
                 assert!(tiled_backward_iterations(run, 32, faces, sg, color) <= CAP);
                 assert!(tiled_backward_iterations(run, 32, faces + 64, sg, color) > CAP);
@@ -1132,11 +1139,20 @@ mod tests {
         }
         // Small runs: one part; a cap rounds up to whole batches.
         let llvmpipe = (8, ColorWork::Texels);
-        assert_eq!(tile_faces(100, 8, llvmpipe, Some(CAP), None).unwrap(), 128);
-        assert_eq!(tile_faces(100, 8, llvmpipe, None, Some(1)).unwrap(), 64);
-        assert_eq!(tile_faces(1000, 16, llvmpipe, None, None).unwrap(), 1024);
+        assert_eq!(
+            tile_faces(100, 8, llvmpipe, Some(CAP), None, "llvmpipe").unwrap(),
+            128
+        );
+        assert_eq!(
+            tile_faces(100, 8, llvmpipe, None, Some(1), "llvmpipe").unwrap(),
+            64
+        );
+        assert_eq!(
+            tile_faces(1000, 16, llvmpipe, None, None, "llvmpipe").unwrap(),
+            1024
+        );
         for tile in [8, 16, 32, 64] {
-            let f = tile_faces(1 << 20, tile, llvmpipe, Some(CAP), None).unwrap();
+            let f = tile_faces(1 << 20, tile, llvmpipe, Some(CAP), None, "llvmpipe").unwrap();
             assert!(
                 tiled_backward_iterations(1 << 20, tile, f, 8, ColorWork::Texels) <= CAP,
                 "{tile}"
@@ -1144,10 +1160,13 @@ mod tests {
         }
         // Past the cap even for one batch: an error, not a truncation.
         assert!(matches!(
-            tile_faces(100, 128, llvmpipe, Some(CAP), None),
-            Err(Error::Limit(_))
+            tile_faces(100, 128, llvmpipe, Some(CAP), None, "llvmpipe"),
+            Err(Error::DeviceLimit {
+                kind: LimitKind::LoopIterations,
+                ..
+            })
         ));
-        assert!(tile_faces(100, 112, (8, ColorWork::None), Some(CAP), None).is_ok());
+        assert!(tile_faces(100, 112, (8, ColorWork::None), Some(CAP), None, "llvmpipe").is_ok());
     }
 
     #[test]
