@@ -16,7 +16,8 @@
 //!
 //!    An item's (view, face) units are contiguous (item-major). The partials are written one
 //!    **chunk** of units at a time into one buffer of at most one storage binding (or a smaller
-//!    [`GradSplit::chunk_units`]), so memory stays bounded whatever the texture resolution.
+//!    `GradSplit::chunk_units`, a test knob), so memory stays bounded whatever the texture
+//!    resolution.
 //! 3. **Per face**, after each chunk: `grad_reduce.comp` adds each item's partials to its screen
 //!    (and vertex-colour) gradient, and `grad_reduce_texels.comp` adds the texel slots to the
 //!    face's dL/d(lit texel) of the view's mesh. Both keep running sums in unit order, so the
@@ -162,21 +163,33 @@ pub fn face_grad_width(mode: ColorMode) -> u32 {
     }
 }
 
-/// How the backward may split its work. The default (all `None`) splits only where it must: the
-/// partials take at most one storage binding, and on a driver that caps shader loops, bands,
-/// tile parts and reduction windows are as large as the cap allows. Smaller values give the same
-/// gradients (bit for bit for `chunk_units` and `tile_faces`; brute force's bands regroup its
-/// sums) and exist to exercise the split paths on small scenes.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct GradSplit {
-    /// At most this many units (tiled: (face, tile) entries; brute: (view, face, band)) per
-    /// chunk of partials.
-    pub chunk_units: Option<u64>,
-    /// Brute force: at most this many rows per band.
-    pub band_rows: Option<u32>,
-    /// Tiled: at most this many of a tile's faces per workgroup (rounded up to a multiple of 64).
-    pub tile_faces: Option<u32>,
+// `GradSplit` is public only with the `test-knobs` feature (softvk's own tests turn it on
+// through their dev-dependency on the crate): one definition, two visibilities.
+macro_rules! grad_split {
+    ($vis:vis) => {
+        /// How the backward may split its work. The default (all `None`) splits only where it
+        /// must: the partials take at most one storage binding, and on a driver that caps shader
+        /// loops, bands, tile parts and reduction windows are as large as the cap allows.
+        /// Smaller values give the same gradients (bit for bit for `chunk_units` and
+        /// `tile_faces`; brute force's bands regroup its sums) and exist to exercise the split
+        /// paths on small scenes: a test knob (the `test-knobs` feature).
+        #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+        $vis struct GradSplit {
+            /// At most this many units (tiled: (face, tile) entries; brute: (view, face, band))
+            /// per chunk of partials.
+            pub chunk_units: Option<u64>,
+            /// Brute force: at most this many rows per band.
+            pub band_rows: Option<u32>,
+            /// Tiled: at most this many of a tile's faces per workgroup (rounded up to a
+            /// multiple of 64).
+            pub tile_faces: Option<u32>,
+        }
+    };
 }
+#[cfg(feature = "test-knobs")]
+grad_split!(pub);
+#[cfg(not(feature = "test-knobs"))]
+grad_split!(pub(crate));
 
 /// The buffers of one scene's backward, reusable across backward passes of that scene.
 pub struct GradBuffers {
@@ -381,10 +394,12 @@ impl GradBuffers {
     /// Buffers for the backward of `scene` by `method`. Tiled needs the scene's last forward run
     /// to have been tiled with the same tile size (the backward reuses its binning).
     pub fn new(ctx: &Context, scene: &GpuScene, method: Method) -> Result<Self> {
-        Self::with_split(ctx, scene, method, GradSplit::default())
+        Self::build(ctx, scene, method, GradSplit::default(), None)
     }
 
-    /// As [`GradBuffers::new`], splitting the work at most as `split` says.
+    /// As [`GradBuffers::new`], splitting the work at most as `split` says (a test knob: the
+    /// `test-knobs` feature).
+    #[cfg(feature = "test-knobs")]
     pub fn with_split(
         ctx: &Context,
         scene: &GpuScene,

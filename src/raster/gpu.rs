@@ -1408,6 +1408,7 @@ impl Renderer {
 
     /// As [`Renderer::render_brute_views`], choosing whether the fine pass culls by the grown
     /// boxes (it must make no difference; tests check that it makes none, bit for bit).
+    #[cfg(feature = "test-knobs")]
     pub fn render_brute_views_with_cull(
         &self,
         ctx: &Context,
