@@ -1160,7 +1160,7 @@ fn run_field_fit(
         cube.half
     ));
     let mut it = 1u32;
-    field_fit_iterations(ctx, &mut fitter, &mut it, None, progress, name)?;
+    fit_iterations(ctx, &mut fitter, &mut it, 1, None, progress, name)?;
     let mut timer = if ctx.info().timestamp_valid_bits > 0 {
         Some(Timer::new(ctx, 24)?)
     } else {
@@ -1169,10 +1169,11 @@ fn run_field_fit(
     let (mut wall, mut gpu) = (Vec::new(), Vec::new());
     let mut passes: Vec<(String, Vec<f64>)> = Vec::new();
     for _ in 0..opts.repeat {
-        wall.push(field_fit_iterations(
+        wall.push(fit_iterations(
             ctx,
             &mut fitter,
             &mut it,
+            1,
             timer.as_mut(),
             progress,
             name,
@@ -1269,7 +1270,7 @@ fn run_pose_fit(
         fitter.capacity()
     ));
     let mut it = 1u32;
-    pose_fit_iterations(&mut fitter, &mut it, 1, None, progress)?;
+    fit_iterations(ctx, &mut fitter, &mut it, 1, None, progress, name)?;
     let mut timer = if ctx.info().timestamp_valid_bits > 0 {
         Some(Timer::new(ctx, 32)?)
     } else {
@@ -1278,12 +1279,14 @@ fn run_pose_fit(
     let (mut wall, mut gpu) = (Vec::new(), Vec::new());
     let mut passes: Vec<(String, Vec<f64>)> = Vec::new();
     for _ in 0..opts.repeat {
-        wall.push(pose_fit_iterations(
+        wall.push(fit_iterations(
+            ctx,
             &mut fitter,
             &mut it,
             1,
             timer.as_mut(),
             progress,
+            name,
         )?);
         if let Some(timer) = &timer {
             let times = timer.results(ctx)?;
@@ -1332,102 +1335,142 @@ fn run_pose_fit(
         opts.repeat,
         fitter.last_entries(),
     )];
-    let mut loop_timer = if ctx.info().timestamp_valid_bits > 0 {
-        Some(Timer::new(ctx, 20 * FIT_BATCH)?)
-    } else {
-        None
-    };
-    let wall = pose_fit_iterations(
+    let t = time_fit_loop(
+        ctx,
         &mut fitter,
         &mut it,
         FIT_BATCH,
-        loop_timer.as_mut(),
         progress,
+        name,
+        "fit-loop-k10",
     )?;
-    let n = f64::from(FIT_BATCH);
-    let gpu_ms = match &loop_timer {
-        Some(t) => Some(t.results(ctx)?.iter().map(|t| t.ms).sum::<f64>() / n),
-        None => None,
-    };
-    let host = gpu_ms.map(|g| wall / n - g);
-    progress(&format!(
-        "{name} fit-loop-k10: {:.1} ms wall per iteration over {FIT_BATCH} iterations in one \
-         submission; gpu {}, host overhead {} per iteration",
-        wall / n,
-        gpu_ms.map_or("n/a".into(), |g| format!("{g:.1} ms")),
-        host.map_or("n/a".into(), |h| format!("{h:.2} ms")),
-    ));
     records.push(record(
         "fit-loop-k10",
-        gpu_ms,
-        wall / n,
-        host.map(|h| vec![("host overhead".to_string(), h)])
-            .unwrap_or_default(),
+        t.gpu_ms,
+        t.wall_ms,
+        t.passes,
         FIT_BATCH,
         fitter.last_entries(),
     ));
     Ok(records)
 }
 
-/// Runs iterations `it .. it + k` of a pose fit in one submission (again from a stopped one,
-/// until all ran) and advances `it`; the wall time of the submission that ran them all, ms.
-fn pose_fit_iterations(
-    fitter: &mut crate::fit::pose::PoseFitter<'_>,
+/// The fit loop: [`FIT_BATCH`] iterations of `fitter`, `k` per submission, from `it`. Wall and
+/// GPU time per iteration (means), and as the one pass the `host overhead`, wall minus GPU
+/// (recording, submission, fence, the gate's status read), which is what batching cuts; on a
+/// shared CPU device the GPU time itself moves with the load. Says so through `progress`.
+fn time_fit_loop(
+    ctx: &Context,
+    fitter: &mut impl SpanFitter,
     it: &mut u32,
     k: u32,
-    mut timer: Option<&mut Timer>,
     progress: &mut impl FnMut(&str),
-) -> Result<f64> {
-    loop {
-        let start = Instant::now();
-        let stopped = fitter.run(*it, *it + k - 1, timer.as_deref_mut())?;
-        let wall = start.elapsed().as_secs_f64() * 1e3;
-        match stopped {
-            None => {
-                *it += k;
-                return Ok(wall);
-            }
-            Some(again) => {
-                progress(&format!(
-                    "fit-pose: iteration {again} outgrew the entry capacity; now {} (re-run, \
-                     not timed)",
-                    fitter.capacity()
-                ));
-                *it = again;
-            }
+    name: &str,
+    pass: &str,
+) -> Result<LoopTiming> {
+    let mut timer = if ctx.info().timestamp_valid_bits > 0 {
+        Some(Timer::new(ctx, 20 * FIT_BATCH)?)
+    } else {
+        None
+    };
+    let (mut wall, mut gpu) = (0.0, 0.0);
+    for _ in 0..FIT_BATCH / k {
+        wall += fit_iterations(ctx, fitter, it, k, timer.as_mut(), progress, name)?;
+        if let Some(timer) = &timer {
+            gpu += timer.results(ctx)?.iter().map(|t| t.ms).sum::<f64>();
         }
+    }
+    let n = f64::from(FIT_BATCH);
+    let gpu_ms = timer.is_some().then_some(gpu / n);
+    let host = gpu_ms.map(|g| wall / n - g);
+    progress(&format!(
+        "{name} {pass}: {:.1} ms wall per iteration over {FIT_BATCH} iterations, {k} per \
+         submission; gpu {}, host overhead {} per iteration",
+        wall / n,
+        gpu_ms.map_or("n/a".into(), |g| format!("{g:.1} ms")),
+        host.map_or("n/a".into(), |h| format!("{h:.2} ms")),
+    ));
+    let passes = host
+        .map(|h| vec![("host overhead".to_string(), h)])
+        .unwrap_or_default();
+    Ok(LoopTiming {
+        gpu_ms,
+        wall_ms: wall / n,
+        passes,
+    })
+}
+
+/// What [`time_fit_loop`] measured, per iteration.
+struct LoopTiming {
+    gpu_ms: Option<f64>,
+    wall_ms: f64,
+    /// The host overhead (wall minus GPU), where the GPU was timed.
+    passes: Vec<(String, f64)>,
+}
+
+/// A fitter that runs a span of iterations in one submission and says which one its gate
+/// stopped (the mesh, field and pose fitters), for [`fit_iterations`].
+trait SpanFitter {
+    fn run_span(
+        &mut self,
+        ctx: &Context,
+        first: u32,
+        last: u32,
+        timer: Option<&mut Timer>,
+    ) -> Result<Option<u32>>;
+    fn entry_capacity(&self) -> u64;
+}
+
+impl SpanFitter for crate::fit::mesh_fit::MeshFitter<'_> {
+    fn run_span(
+        &mut self,
+        _: &Context,
+        a: u32,
+        b: u32,
+        t: Option<&mut Timer>,
+    ) -> Result<Option<u32>> {
+        self.run(a, b, t)
+    }
+    fn entry_capacity(&self) -> u64 {
+        self.capacity()
     }
 }
 
-/// Runs iteration `it` of a field fit in one submission (again when the gate stopped it, until
-/// it ran) and advances `it`; the wall time of the submission that ran it, ms.
-fn field_fit_iterations(
-    ctx: &Context,
-    fitter: &mut crate::fit::field_fit::FieldFitter,
-    it: &mut u32,
-    mut timer: Option<&mut Timer>,
-    progress: &mut impl FnMut(&str),
-    name: &str,
-) -> Result<f64> {
-    loop {
-        let start = Instant::now();
-        let stopped = fitter.run(ctx, *it, *it, timer.as_deref_mut())?;
-        let wall = start.elapsed().as_secs_f64() * 1e3;
-        if stopped.is_none() {
-            *it += 1;
-            return Ok(wall);
-        }
-        progress(&format!(
-            "{name}: iteration {it} outgrew the entry capacity; now {} (re-run, not timed)",
-            fitter.capacity()
-        ));
+impl SpanFitter for crate::fit::field_fit::FieldFitter {
+    fn run_span(
+        &mut self,
+        ctx: &Context,
+        a: u32,
+        b: u32,
+        t: Option<&mut Timer>,
+    ) -> Result<Option<u32>> {
+        self.run(ctx, a, b, t)
+    }
+    fn entry_capacity(&self) -> u64 {
+        self.capacity()
+    }
+}
+
+impl SpanFitter for crate::fit::pose::PoseFitter<'_> {
+    fn run_span(
+        &mut self,
+        _: &Context,
+        a: u32,
+        b: u32,
+        t: Option<&mut Timer>,
+    ) -> Result<Option<u32>> {
+        self.run(a, b, t)
+    }
+    fn entry_capacity(&self) -> u64 {
+        self.capacity()
     }
 }
 
 /// Runs iterations `it .. it + k` of `fitter` in one submission (again from a stopped one, until
 /// all ran) and advances `it`; the wall time of the submission that ran them all, ms.
 fn fit_iterations(
-    fitter: &mut crate::fit::mesh_fit::MeshFitter<'_>,
+    ctx: &Context,
+    fitter: &mut impl SpanFitter,
     it: &mut u32,
     k: u32,
     mut timer: Option<&mut Timer>,
@@ -1436,7 +1479,7 @@ fn fit_iterations(
 ) -> Result<f64> {
     loop {
         let start = Instant::now();
-        let stopped = fitter.run(*it, *it + k - 1, timer.as_deref_mut())?;
+        let stopped = fitter.run_span(ctx, *it, *it + k - 1, timer.as_deref_mut())?;
         let wall = start.elapsed().as_secs_f64() * 1e3;
         match stopped {
             None => {
@@ -1447,7 +1490,7 @@ fn fit_iterations(
                 progress(&format!(
                     "{name}: iteration {again} outgrew the entry capacity; now {} (re-run, not \
                      timed)",
-                    fitter.capacity()
+                    fitter.entry_capacity()
                 ));
                 *it = again;
             }
@@ -1546,7 +1589,7 @@ pub fn run_fit(
             fitter.capacity()
         ));
         let mut it = 1u32;
-        fit_iterations(&mut fitter, &mut it, 1, None, &mut progress, name)?;
+        fit_iterations(ctx, &mut fitter, &mut it, 1, None, &mut progress, name)?;
         progress(&format!(
             "{name}: warm-up done, {} entries; timing {} iterations",
             fitter.last_entries(),
@@ -1562,6 +1605,7 @@ pub fn run_fit(
         let mut passes: Vec<(String, Vec<f64>)> = Vec::new();
         for _ in 0..opts.repeat {
             wall.push(fit_iterations(
+                ctx,
                 &mut fitter,
                 &mut it,
                 1,
@@ -1630,45 +1674,14 @@ pub fn run_fit(
             opts.repeat,
             fitter.last_entries(),
         ));
-        // The loop: wall and GPU time per iteration, and their difference, the host's share
-        // (recording, submission, fence, the gate's status read), which is what batching cuts;
-        // on a shared CPU device the GPU time itself moves with the load.
-        let mut loop_timer = if ctx.info().timestamp_valid_bits > 0 {
-            Some(Timer::new(ctx, 20 * FIT_BATCH)?)
-        } else {
-            None
-        };
+        // The loop, one and ten iterations per submission.
         for (pass, k) in [("fit-loop-k1", 1), ("fit-loop-k10", FIT_BATCH)] {
-            let (mut wall, mut gpu) = (0.0, 0.0);
-            for _ in 0..FIT_BATCH / k {
-                wall += fit_iterations(
-                    &mut fitter,
-                    &mut it,
-                    k,
-                    loop_timer.as_mut(),
-                    &mut progress,
-                    name,
-                )?;
-                if let Some(timer) = &loop_timer {
-                    gpu += timer.results(ctx)?.iter().map(|t| t.ms).sum::<f64>();
-                }
-            }
-            let n = f64::from(FIT_BATCH);
-            let gpu_ms = loop_timer.is_some().then_some(gpu / n);
-            let host = gpu_ms.map(|g| wall / n - g);
-            progress(&format!(
-                "{name} {pass}: {:.1} ms wall per iteration over {FIT_BATCH} iterations, {k} per \
-                 submission; gpu {}, host overhead {} per iteration",
-                wall / n,
-                gpu_ms.map_or("n/a".into(), |g| format!("{g:.1} ms")),
-                host.map_or("n/a".into(), |h| format!("{h:.2} ms")),
-            ));
+            let t = time_fit_loop(ctx, &mut fitter, &mut it, k, &mut progress, name, pass)?;
             records.push(record(
                 pass,
-                gpu_ms,
-                wall / n,
-                host.map(|h| vec![("host overhead".to_string(), h)])
-                    .unwrap_or_default(),
+                t.gpu_ms,
+                t.wall_ms,
+                t.passes,
                 FIT_BATCH,
                 fitter.last_entries(),
             ));

@@ -178,18 +178,29 @@ fn pose_gradient_of_the_twin_matches_central_differences_of_its_forward() {
     }
 }
 
+/// The f64 twin of one evaluation of `mesh` at `at` against its render at `target_pose`: the
+/// rotation centre, that target in f32, the loss and the gradient.
+fn twin_chain(
+    mesh: &Mesh,
+    s: &RasterSettings,
+    at: &Pose,
+    target_pose: &Pose,
+) -> (DVec3, Vec<[f32; 4]>, f64, [f64; 6]) {
+    let m = MeshF64::from_mesh(mesh);
+    let centre = pose::centroid(&m.positions);
+    let target = twin_target(&m, centre, s, target_pose);
+    let (loss, want) =
+        pose::cpu::loss_and_gradient(&m, centre, &camera(), &lighting(), s, &target, at).unwrap();
+    let target32 = target.iter().map(|p| p.map(|c| c as f32)).collect();
+    (centre, target32, loss, want)
+}
+
 #[test]
 fn gpu_pose_gradient_equals_the_twin_chain() {
     let Some(gpu) = common::gpu() else { return };
     let (at, target_pose) = poses();
     for (what, mesh, s) in cases() {
-        let m = MeshF64::from_mesh(&mesh);
-        let centre = pose::centroid(&m.positions);
-        let target = twin_target(&m, centre, &s, &target_pose);
-        let (loss, want) =
-            pose::cpu::loss_and_gradient(&m, centre, &camera(), &lighting(), &s, &target, &at)
-                .unwrap();
-        let target32: Vec<[f32; 4]> = target.iter().map(|p| p.map(|c| c as f32)).collect();
+        let (centre, target32, loss, want) = twin_chain(&mesh, &s, &at, &target_pose);
         for tile in [8, 16] {
             let mut problem =
                 PoseProblem::new(&gpu, &mesh, &camera(), &lighting(), &target32, &s, tile).unwrap();
@@ -217,13 +228,7 @@ fn a_gpu_fit_iteration_equals_the_twin_chain() {
     let Some(gpu) = common::gpu() else { return };
     let (at, target_pose) = poses();
     for (what, mesh, s) in cases() {
-        let m = MeshF64::from_mesh(&mesh);
-        let centre = pose::centroid(&m.positions);
-        let target = twin_target(&m, centre, &s, &target_pose);
-        let (loss, want) =
-            pose::cpu::loss_and_gradient(&m, centre, &camera(), &lighting(), &s, &target, &at)
-                .unwrap();
-        let target32: Vec<[f32; 4]> = target.iter().map(|p| p.map(|c| c as f32)).collect();
+        let (centre, target32, loss, want) = twin_chain(&mesh, &s, &at, &target_pose);
         let opts = PoseFitOptions {
             iterations: 1,
             schedule: None,

@@ -73,15 +73,9 @@ fn widen3(v: &[f32]) -> Vec<[f64; 3]> {
 
 /// Largest |a − b| over the largest |b|.
 fn rel_err(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
-    assert_eq!(a.len(), b.len());
-    let scale = b.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
-    let err = a
-        .iter()
-        .flatten()
-        .zip(b.iter().flatten())
-        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    let (err, scale) = common::rel_err3(a, b);
     assert!(scale > 0.0);
-    err / scale
+    err
 }
 
 /// One forward and one backward on the GPU at the moved positions: (lit colours, dL/d(unlit

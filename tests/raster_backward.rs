@@ -87,14 +87,7 @@ fn weights(n: usize, seed: u64) -> Vec<[f32; 4]> {
 
 /// Largest |a − b| relative to the largest |b| of a component family.
 fn rel_err(a: &[[f64; 3]], b: &[[f64; 3]]) -> (f64, f64) {
-    assert_eq!(a.len(), b.len());
-    let scale = b.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
-    let err = a
-        .iter()
-        .flatten()
-        .zip(b.iter().flatten())
-        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
-    (err / scale.max(1e-30), scale)
+    common::rel_err3(a, b)
 }
 
 fn camera_rows(g: &Gradients) -> Vec<[f64; 3]> {

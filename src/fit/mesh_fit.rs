@@ -39,7 +39,7 @@ use crate::gpu::gate::IterationGate;
 use crate::gpu::{Buffer, Context, MemoryKind, Recorder, Timer};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
-use crate::raster::backward::{GradBuffers, grad_stride};
+use crate::raster::backward::GradBuffers;
 use crate::raster::gpu::{GpuScene, Method, Renderer};
 use crate::raster::reference::{Alpha, RasterSettings, Rgb};
 
@@ -498,11 +498,7 @@ impl<'c> MeshFitter<'c> {
             adam.record_reset(rec);
             Ok(())
         })?;
-        let stride = grad_stride(s.color_mode, scene.texture_res());
-        let max_capacity = renderer
-            .max_entries(ctx)
-            .min(u64::from(ctx.info().limits.max_storage_buffer_range) / (4 * u64::from(stride)))
-            .min(u64::from(u32::MAX));
+        let max_capacity = super::max_entry_capacity(ctx, &renderer, &scene);
         let capacity = match opts.entry_capacity {
             Some(c) => c.min(max_capacity),
             None => {

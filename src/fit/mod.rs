@@ -157,6 +157,21 @@ pub(crate) fn with_headroom(
     Ok((total * num / den).clamp(total.max(1), max))
 }
 
+/// The most (face, tile) entries a fit's guarded binning of `scene` may reserve: what one
+/// binning holds, and what one binding of the backward's partials holds.
+pub(crate) fn max_entry_capacity(
+    ctx: &Context,
+    renderer: &crate::raster::gpu::Renderer,
+    scene: &crate::raster::gpu::GpuScene,
+) -> u64 {
+    let s = scene.settings();
+    let stride = crate::raster::backward::grad_stride(s.color_mode, scene.texture_res());
+    renderer
+        .max_entries(ctx)
+        .min(u64::from(ctx.info().limits.max_storage_buffer_range) / (4 * u64::from(stride)))
+        .min(u64::from(u32::MAX))
+}
+
 /// Workgroups of `size` invocations covering `n` items, as the `u32` a dispatch takes.
 pub(crate) fn groups(n: u64, size: u32) -> Result<u32> {
     u32::try_from(n.div_ceil(u64::from(size)))

@@ -64,15 +64,15 @@ use super::checkpoint::{
     Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, check_state, read_log,
     write_log,
 };
-use super::groups;
 use super::{GradOut, ImageMse};
+use super::{groups, max_entry_capacity};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::gate::IterationGate;
 use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, Timer, specs};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
-use crate::raster::backward::{GradBuffers, grad_stride};
+use crate::raster::backward::GradBuffers;
 use crate::raster::gpu::{GpuScene, Method, Renderer};
 use crate::raster::light::SceneLight;
 use crate::raster::reference::{ColorMode, RasterSettings};
@@ -618,6 +618,7 @@ impl<'c> PoseFitter<'c> {
             p0[translation_at as usize + k] = a[3 + k] as f32;
         }
         let first = opts.adam(0);
+        let max_capacity = max_entry_capacity(ctx, &renderer, &scene);
         let mut fitter = Self {
             ctx,
             mse: ImageMse::new(ctx, 1, opts.settings.width, opts.settings.height)?,
@@ -655,23 +656,14 @@ impl<'c> PoseFitter<'c> {
             )?,
             push,
             capacity: 1,
-            max_capacity: 1,
+            max_capacity,
             regrowths: 0,
             last_entries: 0,
             light,
             opts: opts.clone(),
             renderer,
-            scene: {
-                scene.set_blur(opts.sigma_gamma(0).0, opts.sigma_gamma(0).1)?;
-                scene
-            },
+            scene,
         };
-        let stride = grad_stride(opts.settings.color_mode, fitter.scene.texture_res());
-        fitter.max_capacity = fitter
-            .renderer
-            .max_entries(ctx)
-            .min(u64::from(ctx.info().limits.max_storage_buffer_range) / (4 * u64::from(stride)))
-            .min(u64::from(u32::MAX));
         let (sigma, gamma) = opts.sigma_gamma(0);
         fitter.fit_capacity(sigma, gamma)?;
         Ok(fitter)
@@ -688,10 +680,7 @@ impl<'c> PoseFitter<'c> {
         let total = self
             .renderer
             .count_entries(self.ctx, &mut self.scene, self.opts.tile)?;
-        let regrowths = self.regrowths;
-        self.grow(total)?;
-        self.regrowths = regrowths;
-        Ok(())
+        self.resize(total)
     }
 
     /// Records the posed positions and their lit colours into the scene.
@@ -837,8 +826,8 @@ impl<'c> PoseFitter<'c> {
         Ok(None)
     }
 
-    /// Grows the bins and the backward's buffers to `total` entries with the headroom.
-    fn grow(&mut self, total: u64) -> Result<()> {
+    /// Sizes the bins and the backward's buffers for `total` entries with the headroom.
+    fn resize(&mut self, total: u64) -> Result<()> {
         let capacity = super::with_headroom(
             self.ctx,
             "a pose fit's binning (with the backward's partials)",
@@ -853,8 +842,13 @@ impl<'c> PoseFitter<'c> {
             .reserve_guarded(self.ctx, &mut self.scene, self.opts.tile, capacity)?;
         self.grads = GradBuffers::with_entry_capacity(self.ctx, &self.scene, method, capacity)?;
         self.capacity = capacity;
-        self.regrowths += 1;
         Ok(())
+    }
+
+    /// [`PoseFitter::resize`] after the gate stopped an iteration (a regrowth).
+    fn grow(&mut self, total: u64) -> Result<()> {
+        self.regrowths += 1;
+        self.resize(total)
     }
 
     /// The log of iterations `first ..= last` (their losses and poses), read back.
@@ -1245,12 +1239,8 @@ pub fn fit_pose_resumable(
     resume: Option<&PoseFitState>,
     mut progress: impl FnMut(&PoseLog, &PoseFitSnapshot<'_>) -> Result<bool>,
 ) -> Result<PoseFitResult> {
+    // Before the schedule is read (PoseFitter::new checks the rest).
     opts.validate()?;
-    if !init.is_finite() {
-        return Err(Error::Input(format!(
-            "the initial pose {init:?} is not finite"
-        )));
-    }
     let mut stage = opts.sigma_gamma(0);
     let first_target = match &mut target {
         PoseTarget::Fixed(t) => t.to_vec(),

@@ -69,6 +69,18 @@ pub fn gpu_with(tweak: impl FnOnce(&mut ContextOptions)) -> Option<Gpu> {
     Some(Gpu(Some(ctx)))
 }
 
+/// Largest |a − b| relative to the largest |b| of a family of 3-vectors, and that largest |b|.
+pub fn rel_err3(a: &[[f64; 3]], b: &[[f64; 3]]) -> (f64, f64) {
+    assert_eq!(a.len(), b.len());
+    let scale = b.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+    let err = a
+        .iter()
+        .flatten()
+        .zip(b.iter().flatten())
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    (err / scale.max(1e-30), scale)
+}
+
 /// Tests validate unless `SOFTVK_VALIDATION=0` says otherwise.
 pub fn validation_wanted() -> bool {
     std::env::var("SOFTVK_VALIDATION").map_or(true, |v| v.trim() != "0")
