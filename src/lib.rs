@@ -38,8 +38,10 @@ pub mod fit;
 pub mod gpu;
 pub mod lighting;
 pub mod mesh;
+pub mod nn;
 pub mod primitives;
 pub mod probe;
 pub mod raster;
+pub mod recon;
 
 pub use error::{Error, LimitKind, Result};
