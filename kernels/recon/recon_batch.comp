@@ -1,0 +1,53 @@
+#version 460
+#extension GL_GOOGLE_include_directive : require
+// One training batch gathered on the GPU from the dataset's images (uint8 RGBA, NMR layout
+// [object][view][channel][row][column], four bytes per u32 word, little-endian) by the schedule
+// entry (object, view a, view b) of each batch slot at iteration `iteration`:
+//   input[b]              = images[object, view a] / 255            (4 × H × W floats)
+//   targets[2b + j]       = alpha of images[object, view j] / 255   (H × W floats)
+//   rotations[2b + j]     = view_rotations[view j]                  (the turn about y that
+//                           brings view j's camera to the scene's one camera)
+// One invocation per (slot, pixel). Twin: `crate::recon::batch::cpu::gather`.
+#include "common.glsl"
+
+layout(local_size_x = 64) in;
+
+layout(std430, set = 0, binding = 0) readonly buffer Images { uint images[]; };
+layout(std430, set = 0, binding = 1) readonly buffer Schedule { uvec4 schedule[]; };
+layout(std430, set = 0, binding = 2) readonly buffer ViewRotations { vec2 view_rotations[]; };
+layout(std430, set = 0, binding = 3) writeonly buffer Input { float input_images[]; };
+layout(std430, set = 0, binding = 4) writeonly buffer Targets { float targets[]; };
+layout(std430, set = 0, binding = 5) writeonly buffer Rotations { vec2 rotations[]; };
+
+layout(push_constant) uniform Push {
+    uint batch;
+    uint pixels;      // H × W
+    uint views;       // views per object in `images` (24)
+    uint iteration;   // row of `schedule` (batch entries each)
+} pc;
+
+float byte_at(uint index) {
+    uint word = images[index >> 2u];
+    return float((word >> (8u * (index & 3u))) & 255u) * (1.0 / 255.0);
+}
+
+void main() {
+    uint gid = linear_group_id() * 64u + gl_LocalInvocationIndex;
+    if (gid >= pc.batch * pc.pixels) {
+        return;
+    }
+    uint b = gid / pc.pixels;
+    uint p = gid - b * pc.pixels;
+    uvec4 e = schedule[pc.iteration * pc.batch + b];
+    uint view_a = (e.x * pc.views + e.y) * 4u * pc.pixels;
+    uint view_b = (e.x * pc.views + e.z) * 4u * pc.pixels;
+    for (uint ch = 0u; ch < 4u; ++ch) {
+        input_images[(4u * b + ch) * pc.pixels + p] = byte_at(view_a + ch * pc.pixels + p);
+    }
+    targets[(2u * b) * pc.pixels + p] = byte_at(view_a + 3u * pc.pixels + p);
+    targets[(2u * b + 1u) * pc.pixels + p] = byte_at(view_b + 3u * pc.pixels + p);
+    if (p == 0u) {
+        rotations[2u * b] = view_rotations[e.y];
+        rotations[2u * b + 1u] = view_rotations[e.z];
+    }
+}

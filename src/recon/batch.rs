@@ -1,0 +1,212 @@
+//! A training batch gathered on the GPU (`recon_batch.comp`): the dataset's images live on the
+//! device as uint8 RGBA (the NMR layout, four bytes per word), and a *schedule* of batch
+//! entries `(object, view a, view b)` per iteration, uploaded once, says what each iteration
+//! sees. So a command buffer of many iterations needs nothing from the host between them.
+//!
+//! Per batch slot b: the encoder's input is view a's RGBA / 255 (`4 × H × W`, NCHW); the
+//! silhouette targets are the alphas of views a and b (copies `2b` and `2b + 1`); the copies'
+//! rotations are the views' [`super::view_rotation`]s, from a table of one per view.
+
+use bytemuck::{Pod, Zeroable};
+
+use crate::error::{Error, Result};
+use crate::gpu::{BufferRange, Context, Kernel, Recorder, specs};
+
+/// Push constants of `recon_batch.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct BatchPush {
+    batch: u32,
+    pixels: u32,
+    views: u32,
+    iteration: u32,
+}
+
+/// The shape of a gather: batch slots, pixels per view, views per object.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BatchShape {
+    /// Objects per batch.
+    pub batch: u32,
+    /// `H × W` of every view.
+    pub pixels: u32,
+    /// Views per object in the images (24 in the NMR data).
+    pub views: u32,
+}
+
+/// The gather kernel.
+pub struct BatchGather {
+    kernel: Kernel,
+}
+
+/// The buffers of one gather.
+#[derive(Clone, Copy)]
+pub struct BatchBuffers<'a> {
+    /// uint8 RGBA images, `[object][view][channel][pixel]`, packed four per u32 (little-endian).
+    pub images: BufferRange<'a>,
+    /// `(object, view a, view b, unused)` per batch slot, iteration-major.
+    pub schedule: BufferRange<'a>,
+    /// `(cos φ, sin φ)` per view.
+    pub view_rotations: BufferRange<'a>,
+    /// Out: `batch × 4 × pixels` floats.
+    pub input: BufferRange<'a>,
+    /// Out: `2 batch × pixels` floats.
+    pub targets: BufferRange<'a>,
+    /// Out: `2 batch` `(cos φ, sin φ)`.
+    pub rotations: BufferRange<'a>,
+}
+
+impl BatchGather {
+    /// The pipeline.
+    pub fn new(ctx: &Context) -> Result<Self> {
+        Ok(Self {
+            kernel: Kernel::new(ctx, &specs::RECON_BATCH)?,
+        })
+    }
+
+    /// Records the gather of schedule row `iteration`. The schedule's object and view indices
+    /// are not checked on the GPU: the host checks them when it builds the schedule
+    /// ([`cpu::check_schedule`]).
+    pub fn record(
+        &self,
+        rec: &mut Recorder<'_>,
+        shape: BatchShape,
+        iteration: u32,
+        b: BatchBuffers<'_>,
+    ) -> Result<()> {
+        let (n, px) = (u64::from(shape.batch), u64::from(shape.pixels));
+        if n == 0 || px == 0 || shape.views == 0 {
+            return Err(Error::Input(format!("an empty batch shape {shape:?}")));
+        }
+        let check = crate::fit::check_floats;
+        check(
+            "batch: schedule",
+            &b.schedule,
+            4 * n * (u64::from(iteration) + 1),
+        )?;
+        check(
+            "batch: view rotations",
+            &b.view_rotations,
+            2 * u64::from(shape.views),
+        )?;
+        check("batch: input", &b.input, 4 * n * px)?;
+        check("batch: targets", &b.targets, 2 * n * px)?;
+        check("batch: rotations", &b.rotations, 4 * n)?;
+        if b.images.size < shape.views as u64 * 4 * px {
+            return Err(Error::Input(format!(
+                "batch: the images buffer `{}` holds less than one object",
+                b.images.buffer.name()
+            )));
+        }
+        rec.dispatch(
+            &self.kernel,
+            &specs::ReconBatchBindings {
+                images: b.images,
+                schedule: b.schedule,
+                view_rotations: b.view_rotations,
+                input: b.input,
+                targets: b.targets,
+                rotations: b.rotations,
+            }
+            .for_kernel(&self.kernel)?,
+            &BatchPush {
+                batch: shape.batch,
+                pixels: shape.pixels,
+                views: shape.views,
+                iteration,
+            },
+            crate::fit::groups(n * px, 64)?,
+        )
+    }
+}
+
+/// CPU twin.
+pub mod cpu {
+    use super::BatchShape;
+    use crate::error::{Error, Result};
+
+    /// `(input, targets, rotations)` of schedule row `iteration`, as the kernel computes them
+    /// (bytes as `f32` times the `f32` nearest 1/255).
+    pub fn gather(
+        images: &[u8],
+        schedule: &[[u32; 4]],
+        view_rotations: &[[f32; 2]],
+        shape: BatchShape,
+        iteration: u32,
+    ) -> (Vec<f32>, Vec<f32>, Vec<[f32; 2]>) {
+        let (n, px, views) = (
+            shape.batch as usize,
+            shape.pixels as usize,
+            shape.views as usize,
+        );
+        let scale = 1.0f32 / 255.0;
+        let mut input = vec![0.0; 4 * n * px];
+        let mut targets = vec![0.0; 2 * n * px];
+        let mut rotations = vec![[0.0; 2]; 2 * n];
+        for b in 0..n {
+            let [o, va, vb, _] = schedule[iteration as usize * n + b].map(|x| x as usize);
+            let view = |v: usize| &images[(o * views + v) * 4 * px..(o * views + v + 1) * 4 * px];
+            for (dst, &src) in input[4 * b * px..4 * (b + 1) * px].iter_mut().zip(view(va)) {
+                *dst = f32::from(src) * scale;
+            }
+            for (j, v) in [va, vb].into_iter().enumerate() {
+                for (dst, &src) in targets[(2 * b + j) * px..(2 * b + j + 1) * px]
+                    .iter_mut()
+                    .zip(&view(v)[3 * px..])
+                {
+                    *dst = f32::from(src) * scale;
+                }
+                rotations[2 * b + j] = view_rotations[v];
+            }
+        }
+        (input, targets, rotations)
+    }
+
+    /// [`Error::Input`] unless every entry names an object below `objects` and views below
+    /// `views`.
+    pub fn check_schedule(schedule: &[[u32; 4]], objects: u32, views: u32) -> Result<()> {
+        for (i, e) in schedule.iter().enumerate() {
+            if e[0] >= objects || e[1] >= views || e[2] >= views {
+                return Err(Error::Input(format!(
+                    "schedule entry {i} {e:?}: {objects} objects of {views} views"
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Packs bytes four to a little-endian u32 word, zero-padded: the images' GPU layout.
+    pub fn pack_bytes(bytes: &[u8]) -> Vec<u32> {
+        bytes
+            .chunks(4)
+            .map(|c| {
+                let mut w = [0u8; 4];
+                w[..c.len()].copy_from_slice(c);
+                u32::from_le_bytes(w)
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn push_constant_struct_matches_the_kernels_layout() {
+        assert_eq!(
+            std::mem::size_of::<BatchPush>() as u32,
+            specs::RECON_BATCH.push_constant_size
+        );
+    }
+
+    #[test]
+    fn schedule_out_of_range_is_an_input_error() {
+        assert!(cpu::check_schedule(&[[1, 23, 0, 0]], 2, 24).is_ok());
+        for bad in [[2, 0, 0, 0], [0, 24, 0, 0], [0, 0, 24, 0]] {
+            assert!(matches!(
+                cpu::check_schedule(&[[0, 0, 0, 0], bad], 2, 24),
+                Err(Error::Input(m)) if m.contains("entry 1")
+            ));
+        }
+    }
+}
