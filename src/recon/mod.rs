@@ -4,5 +4,6 @@
 
 pub mod batch;
 pub mod decode;
+pub mod eval;
 
 pub use decode::{MeshDecoder, view_rotation};
