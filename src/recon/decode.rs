@@ -237,7 +237,6 @@ impl MeshDecoder {
             &push,
             crate::fit::groups(u64::from(self.vertex_count) * u64::from(objects), 64)?,
         )?;
-        rec.barrier();
         rec.dispatch(
             &self.centroid,
             &specs::ReconCentroidGradBindings {

@@ -1,0 +1,562 @@
+//! Single-view reconstruction learned from silhouettes (issue #15):
+//!
+//! - `softvk train-recon --dataset DIR --out MODEL [--iters N]`: trains the network on the
+//!   dataset's train split ([`softvk::recon::train`]), k iterations per submission, with a
+//!   progress bar, a loss log and plot, the validation split's 3D IoU every `--val-every`
+//!   iterations, and checkpoints (`--resume` goes on from the last one, bit for bit).
+//! - `softvk recon --model MODEL --image IMG --out M.obj`: one image to a mesh, and a shaded
+//!   turntable GIF of it beside the input.
+//! - `softvk eval-recon --dataset DIR --model MODEL`: the table of 3D IoU per class on the
+//!   test split, beside the retrieval and mean-shape baselines ([`softvk::recon::eval`]).
+
+use std::path::{Path, PathBuf};
+
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use softvk::camera::Camera;
+use softvk::fit::AdamOptions;
+use softvk::fit::io::write_obj;
+use softvk::fit::report::{self, GifWriter, Series};
+use softvk::gpu::{Context, ContextOptions};
+use softvk::lighting::Lighting;
+use softvk::mesh::Mesh;
+use softvk::raster::gpu::{Method, Renderer};
+use softvk::raster::reference::RasterSettings;
+use softvk::recon::dataset::{self, ClassData, Dataset, Split};
+use softvk::recon::eval::{self, Mask, ScoreRow};
+use softvk::recon::model::{ReconModel, Reconstructor, TrainState};
+use softvk::recon::train::{self, NetShape, ReconTrainer, TrainImages, TrainOptions};
+use softvk::{Error, Result};
+
+use super::args::positive;
+use super::output::AtomicFile;
+use super::interrupt;
+
+/// `--channels`: three comma-separated positive widths.
+fn channels(s: &str) -> std::result::Result<[u32; 3], String> {
+    let v: Vec<u32> = s
+        .split(',')
+        .map(|p| p.trim().parse::<u32>().map_err(|e| format!("`{p}`: {e}")))
+        .collect::<std::result::Result<_, _>>()?;
+    match v[..] {
+        [a, b, c] if a > 0 && b > 0 && c > 0 => Ok([a, b, c]),
+        _ => Err(format!("expected three positive widths like 16,32,64, got `{s}`")),
+    }
+}
+
+/// The flags of `softvk train-recon`.
+#[derive(Args, Clone, Debug)]
+pub struct TrainReconArgs {
+    /// Dataset folder in the NMR layout (`<class>_<split>_images.npz`, `..._voxels.npz`), as
+    /// `softvk dataset` writes it.
+    #[arg(long, value_name = "DIR")]
+    pub dataset: PathBuf,
+
+    /// The trained model (.npz). Beside it, `<MODEL stem>-train/`: the checkpoint, loss.csv,
+    /// loss.png and val.csv.
+    #[arg(long, value_name = "MODEL")]
+    pub out: PathBuf,
+
+    /// Training iterations.
+    #[arg(long, value_name = "N", default_value_t = 2000, value_parser = clap::value_parser!(u32).range(1..))]
+    pub iters: u32,
+
+    /// Objects per batch (two views each).
+    #[arg(long, value_name = "B", default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..))]
+    pub batch: u32,
+
+    /// Adam's learning rate (SoftRas: 1e-4).
+    #[arg(long, default_value_t = 1e-4, value_parser = positive)]
+    pub lr: f64,
+
+    /// Seeds the parameters and the batches.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+
+    /// The encoder's convolution widths.
+    #[arg(long, default_value = "16,32,64", value_parser = channels)]
+    pub channels: [u32; 3],
+
+    /// The latent code's width.
+    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..))]
+    pub latent: u32,
+
+    /// The decoder's hidden width.
+    #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u32).range(1..))]
+    pub hidden: u32,
+
+    /// The renderer's σ (SoftRas: 1e-4).
+    #[arg(long, default_value_t = 1e-4, value_parser = positive)]
+    pub sigma: f64,
+
+    /// Iterations per GPU submission (the losses are read once per submission).
+    #[arg(long, value_name = "K", default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..))]
+    pub log_every: u32,
+
+    /// Iterations between validations (3D IoU on the val split) and checkpoints (both
+    /// rounded to a submission's end).
+    #[arg(long, value_name = "N", default_value_t = 200, value_parser = clap::value_parser!(u32).range(1..))]
+    pub val_every: u32,
+
+    /// Validation inputs per val object (views spread evenly over the 24).
+    #[arg(long, value_name = "V", default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..))]
+    pub val_views: u32,
+
+    /// Go on from the checkpoint in `<MODEL stem>-train/` (same dataset and options).
+    #[arg(long)]
+    pub resume: bool,
+}
+
+/// The flags of `softvk recon`.
+#[derive(Args, Clone, Debug)]
+pub struct ReconArgs {
+    /// A model written by `softvk train-recon`.
+    #[arg(long, value_name = "MODEL")]
+    pub model: PathBuf,
+
+    /// The input: an RGBA PNG of the model's image size (64×64), the object on a transparent
+    /// background as in the dataset.
+    #[arg(long, value_name = "IMG")]
+    pub image: PathBuf,
+
+    /// The reconstructed mesh (OBJ). Beside it, `<stem>-turntable.gif`.
+    #[arg(long, value_name = "M.obj")]
+    pub out: PathBuf,
+}
+
+/// The flags of `softvk eval-recon`.
+#[derive(Args, Clone, Debug)]
+pub struct EvalReconArgs {
+    /// Dataset folder (train split for the baselines, test split for the scores).
+    #[arg(long, value_name = "DIR")]
+    pub dataset: PathBuf,
+
+    /// A model written by `softvk train-recon`.
+    #[arg(long, value_name = "MODEL")]
+    pub model: PathBuf,
+
+    /// Inputs per test object: views spread evenly over the 24 (24: every view, as SoftRas).
+    #[arg(long, value_name = "V", default_value_t = 24, value_parser = clap::value_parser!(u32).range(1..))]
+    pub views: u32,
+
+    /// Also write the table (text) and a picture of inputs beside reconstructions here.
+    #[arg(long, value_name = "DIR")]
+    pub report: Option<PathBuf>,
+}
+
+/// `n` views spread evenly over the 24.
+fn spread_views(n: u32) -> Vec<usize> {
+    let n = n.min(dataset::VIEWS as u32) as usize;
+    (0..n).map(|i| i * dataset::VIEWS / n).collect()
+}
+
+/// The train split as the trainer takes it.
+fn train_images(data: &Dataset) -> TrainImages {
+    let mut images = Vec::new();
+    let mut classes = Vec::new();
+    let mut start = 0u32;
+    for c in &data.classes {
+        images.extend_from_slice(&c.images);
+        let end = start + c.count as u32;
+        classes.push((c.class_id.clone(), start..end));
+        start = end;
+    }
+    TrainImages {
+        images,
+        classes,
+        size: dataset::IMAGE_SIZE as u32,
+    }
+}
+
+fn report_dir(out: &Path) -> PathBuf {
+    let stem = out
+        .file_stem()
+        .map_or_else(|| "model".into(), |s| s.to_string_lossy().into_owned());
+    out.with_file_name(format!("{stem}-train"))
+}
+
+/// The mean validation IoU of `params` over `views` of every val object.
+fn validate(
+    ctx: &Context,
+    net: NetShape,
+    params: Vec<f32>,
+    val: &Dataset,
+    views: &[usize],
+) -> Result<f64> {
+    let model = ReconModel {
+        net,
+        params,
+        iteration: 0,
+        train: None,
+    };
+    let recon = Reconstructor::new(ctx, &model, 32)?;
+    let mut all = Vec::new();
+    for c in &val.classes {
+        let inputs: Vec<(usize, usize)> = (0..c.count)
+            .flat_map(|n| views.iter().map(move |&v| (n, v)))
+            .collect();
+        all.extend(eval::reconstruction_ious(ctx, &recon, c, &inputs)?);
+    }
+    Ok(all.iter().sum::<f64>() / all.len().max(1) as f64)
+}
+
+/// `softvk train-recon`.
+pub fn train(args: &TrainReconArgs) -> Result<()> {
+    let data = Dataset::open(&args.dataset, Split::Train)?;
+    let val = match Dataset::open(&args.dataset, Split::Val) {
+        Ok(v) if !v.classes.is_empty() => Some(v),
+        _ => None,
+    };
+    let opts = TrainOptions {
+        net: NetShape {
+            image: dataset::IMAGE_SIZE as u32,
+            channels: args.channels,
+            latent: args.latent,
+            hidden: args.hidden,
+        },
+        batch: args.batch,
+        adam: AdamOptions {
+            lr: args.lr,
+            ..AdamOptions::default()
+        },
+        sigma: args.sigma,
+        seed: args.seed,
+        ..TrainOptions::default()
+    };
+    let settings = [
+        opts.seed as f64,
+        f64::from(opts.batch),
+        opts.adam.lr,
+        opts.adam.betas.0,
+        opts.adam.betas.1,
+        f64::from(opts.laplacian),
+        f64::from(opts.flatten),
+    ];
+    let dir = report_dir(&args.out);
+    let ckpt_path = dir.join("checkpoint.npz");
+    let resumed = if args.resume {
+        let m = ReconModel::load(&ckpt_path)?;
+        let Some(t) = &m.train else {
+            return Err(Error::Input(format!(
+                "{}: a final model, not a checkpoint",
+                ckpt_path.display()
+            )));
+        };
+        if m.net != opts.net || t.settings != settings {
+            return Err(Error::Input(format!(
+                "{}: written by a run with other options (network {:?}, settings {:?})",
+                ckpt_path.display(),
+                m.net,
+                t.settings
+            )));
+        }
+        Some(m)
+    } else {
+        None
+    };
+    let ctx = Context::new(&ContextOptions::from_env())?;
+    let images = train_images(&data);
+    let mut trainer = ReconTrainer::new(
+        &ctx,
+        &images,
+        &opts,
+        resumed.as_ref().map(|m| &m.params[..]),
+    )?;
+    let (mut log, mut vals, start) = match &resumed {
+        Some(m) => {
+            let t = m.train.as_ref().expect("checked above");
+            trainer.write_moments(&t.adam_m, &t.adam_v)?;
+            (t.log.clone(), t.val.clone(), m.iteration)
+        }
+        None => (Vec::new(), Vec::new(), 0),
+    };
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| Error::Input(format!("cannot create {}: {e}", dir.display())))?;
+    let val_views = spread_views(args.val_views);
+    let bar = ProgressBar::new(u64::from(args.iters));
+    bar.set_style(
+        ProgressStyle::with_template("{bar:30} {pos}/{len} it {elapsed} eta {eta} {msg}")
+            .expect("a valid template"),
+    );
+    bar.set_position(u64::from(start));
+    let save = |trainer: &ReconTrainer, it: u32, log: &[[f64; 5]], vals: &[[f64; 2]]| {
+        let (adam_m, adam_v) = trainer.read_moments()?;
+        ReconModel {
+            net: opts.net,
+            params: trainer.read_params()?,
+            iteration: it,
+            train: Some(TrainState {
+                adam_m,
+                adam_v,
+                settings,
+                log: log.to_vec(),
+                val: vals.to_vec(),
+            }),
+        }
+        .save(&ckpt_path)
+    };
+    let mut it = start + 1;
+    let mut done = start;
+    while it <= args.iters {
+        let boundary = (it - 1) / args.val_every * args.val_every + args.val_every;
+        let last = (it + args.log_every - 1).min(args.iters).min(boundary);
+        if let Some(stopped) = trainer.run(it, last)? {
+            it = stopped;
+            continue;
+        }
+        let l = trainer.read_log(last)?;
+        if !l.total.is_finite() {
+            return Err(Error::Input(format!(
+                "training diverged at iteration {last} (loss {}); try a smaller --lr",
+                l.total
+            )));
+        }
+        log.push([
+            f64::from(last),
+            f64::from(l.silhouette),
+            f64::from(l.laplacian),
+            f64::from(l.flatten),
+            f64::from(l.total),
+        ]);
+        done = last;
+        bar.set_position(u64::from(last));
+        bar.set_message(format!("L_sil {:.4}", l.silhouette));
+        let interrupted = interrupt::requested().is_some();
+        if last == boundary || last == args.iters {
+            if let Some(val) = &val {
+                let iou = validate(&ctx, opts.net, trainer.read_params()?, val, &val_views)?;
+                vals.push([f64::from(last), iou]);
+                bar.println(format!("iteration {last}: validation 3D IoU {iou:.4}"));
+            }
+        }
+        if last == boundary || last == args.iters || interrupted {
+            save(&trainer, last, &log, &vals)?;
+        }
+        if interrupted {
+            break;
+        }
+        it = last + 1;
+    }
+    bar.finish_and_clear();
+    write_train_report(&dir, &log, &vals)?;
+    if done < args.iters {
+        eprintln!(
+            "softvk: stopped after iteration {done} of {}; `--resume` goes on from {}",
+            args.iters,
+            ckpt_path.display()
+        );
+        return Ok(());
+    }
+    ReconModel {
+        net: opts.net,
+        params: trainer.read_params()?,
+        iteration: done,
+        train: None,
+    }
+    .save(&args.out)?;
+    let last = log.last().copied().unwrap_or([0.0; 5]);
+    println!(
+        "trained {done} iterations: L_sil {:.4}{}; model {}",
+        last[1],
+        vals.last()
+            .map(|v| format!(", validation 3D IoU {:.4}", v[1]))
+            .unwrap_or_default(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn write_train_report(dir: &Path, log: &[[f64; 5]], vals: &[[f64; 2]]) -> Result<()> {
+    let mut csv = String::from("iteration,silhouette,laplacian,flatten,total\n");
+    for r in log {
+        csv.push_str(&format!("{},{},{},{},{}\n", r[0], r[1], r[2], r[3], r[4]));
+    }
+    AtomicFile::create(&dir.join("loss.csv"))?.commit(csv.as_bytes())?;
+    let mut csv = String::from("iteration,val_iou\n");
+    for r in vals {
+        csv.push_str(&format!("{},{}\n", r[0], r[1]));
+    }
+    AtomicFile::create(&dir.join("val.csv"))?.commit(csv.as_bytes())?;
+    let series = [
+        Series {
+            name: "L_sil".into(),
+            points: log.iter().map(|r| (r[0], r[1])).collect(),
+            color: [200, 40, 40],
+        },
+        Series {
+            name: "total".into(),
+            points: log.iter().map(|r| (r[0], r[4])).collect(),
+            color: [40, 40, 200],
+        },
+        Series {
+            name: "1 - val IoU".into(),
+            points: vals.iter().map(|r| (r[0], 1.0 - r[1])).collect(),
+            color: [30, 150, 60],
+        },
+    ];
+    report::write_png(&dir.join("loss.png"), &report::loss_plot(&series, 640, 400, false))
+}
+
+/// An RGBA PNG as the network's input bytes (planes R, G, B, A).
+fn read_input(path: &Path, size: u32) -> Result<Vec<u8>> {
+    let img = image::open(path)
+        .map_err(|e| Error::Input(format!("{}: {e}", path.display())))?
+        .to_rgba8();
+    if img.width() != size || img.height() != size {
+        return Err(Error::Input(format!(
+            "{}: {}×{} pixels; the model takes {size}×{size}",
+            path.display(),
+            img.width(),
+            img.height()
+        )));
+    }
+    let px = (size * size) as usize;
+    let mut planes = vec![0u8; 4 * px];
+    for (i, p) in img.pixels().enumerate() {
+        for c in 0..4 {
+            planes[c * px + i] = p[c];
+        }
+    }
+    Ok(planes)
+}
+
+/// `softvk recon`.
+pub fn recon(args: &ReconArgs) -> Result<()> {
+    let model = ReconModel::load(&args.model)?;
+    let input = read_input(&args.image, model.net.image)?;
+    let ctx = Context::new(&ContextOptions::from_env())?;
+    let recon = Reconstructor::new(&ctx, &model, 1)?;
+    let positions = recon.reconstruct(&ctx, &input)?.remove(0);
+    let mut mesh = train::template();
+    mesh.positions = positions;
+    let stem = args
+        .out
+        .file_stem()
+        .map_or_else(|| "recon".into(), |s| s.to_string_lossy().into_owned());
+    let gif = args.out.with_file_name(format!("{stem}-turntable.gif"));
+    write_turntable(&ctx, &gif, &mesh, &input, model.net.image)?;
+    write_obj(&args.out, &mesh.positions, &mesh.faces)?;
+    println!("wrote {} and {}", args.out.display(), gif.display());
+    Ok(())
+}
+
+/// The reconstruction shaded, turning (24 frames at the dataset's elevation and distance),
+/// beside the input.
+fn write_turntable(ctx: &Context, path: &Path, mesh: &Mesh, input: &[u8], size: u32) -> Result<()> {
+    const SIZE: u32 = 128;
+    let settings = RasterSettings {
+        width: SIZE,
+        height: SIZE,
+        sigma: 1e-5,
+        gamma: 1e-4,
+        ..RasterSettings::default()
+    };
+    let cams: Vec<Camera> = (0..dataset::VIEWS).map(dataset::view_camera).collect();
+    let frames = Renderer::new(ctx)?.render_views(
+        ctx,
+        mesh,
+        &cams,
+        &Lighting::default(),
+        &settings,
+        Method::default(),
+    )?;
+    let px = (size * size) as usize;
+    // The input, scaled up to the frame size (nearest).
+    let scale = SIZE / size.max(1);
+    let big: Vec<[f32; 4]> = (0..SIZE * SIZE)
+        .map(|i| {
+            let (x, y) = ((i % SIZE) / scale.max(1), (i / SIZE) / scale.max(1));
+            let j = (y.min(size - 1) * size + x.min(size - 1)) as usize;
+            [0, 1, 2, 3].map(|c| f32::from(input[c * px + j]) / 255.0)
+        })
+        .collect();
+    let n = (SIZE * SIZE) as usize;
+    let frame = |v: usize| {
+        report::side_by_side(
+            &[("input", &big[..]), ("reconstruction", &frames.images[v * n..(v + 1) * n])],
+            SIZE,
+            SIZE,
+        )
+    };
+    let first = frame(0);
+    let mut gif = GifWriter::create(path, first.width(), first.height(), 120)?;
+    gif.push(&first)?;
+    for v in 1..dataset::VIEWS {
+        gif.push(&frame(v))?;
+    }
+    gif.finish()
+}
+
+/// `softvk eval-recon`.
+pub fn evaluate(args: &EvalReconArgs) -> Result<()> {
+    let model = ReconModel::load(&args.model)?;
+    let train = Dataset::open(&args.dataset, Split::Train)?;
+    let test = Dataset::open(&args.dataset, Split::Test)?;
+    if test.classes.is_empty() {
+        return Err(Error::Input(format!(
+            "{}: no test split (`<class>_test_images.npz`)",
+            args.dataset.display()
+        )));
+    }
+    let ctx = Context::new(&ContextOptions::from_env())?;
+    let recon = Reconstructor::new(&ctx, &model, 32)?;
+    let views = spread_views(args.views);
+    // Retrieval: every training object's silhouette per view.
+    let train_objects: Vec<(&ClassData, usize)> = train
+        .classes
+        .iter()
+        .flat_map(|c| (0..c.count).map(move |n| (c, n)))
+        .collect();
+    let alpha = |c: &ClassData, n: usize, v: usize| {
+        let px = dataset::IMAGE_SIZE * dataset::IMAGE_SIZE;
+        Mask::from_alpha(&c.image(n, v)[3 * px..])
+    };
+    let masks: Vec<Vec<Mask>> = (0..dataset::VIEWS)
+        .map(|v| train_objects.iter().map(|&(c, n)| alpha(c, n, v)).collect())
+        .collect();
+    let mut rows = Vec::new();
+    for class in &test.classes {
+        let inputs: Vec<(usize, usize)> = (0..class.count)
+            .flat_map(|n| views.iter().map(move |&v| (n, v)))
+            .collect();
+        let ours = eval::reconstruction_ious(&ctx, &recon, class, &inputs)?;
+        let mut retrieval = Vec::with_capacity(inputs.len());
+        for &(n, v) in &inputs {
+            let best = eval::retrieve(&alpha(class, n, v), &masks[v])
+                .ok_or_else(|| Error::Input("no training objects to retrieve from".into()))?;
+            let (c, m) = train_objects[best];
+            retrieval.push(eval::voxel_iou(c.voxels_of(m), class.voxels_of(n))?);
+        }
+        let same: Vec<&[bool]> = train
+            .classes
+            .iter()
+            .filter(|c| c.class_id == class.class_id)
+            .flat_map(|c| (0..c.count).map(move |n| c.voxels_of(n)))
+            .collect();
+        let mean = eval::mean_shape(&same).map_err(|_| {
+            Error::Input(format!(
+                "class {} has no training objects for its mean shape",
+                class.class_id
+            ))
+        })?;
+        let mean_iou = (0..class.count)
+            .map(|n| eval::voxel_iou(&mean, class.voxels_of(n)))
+            .collect::<Result<Vec<f64>>>()?;
+        let avg = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        rows.push(ScoreRow {
+            class: class.class_id.clone(),
+            inputs: inputs.len(),
+            reconstruction: avg(&ours),
+            retrieval: avg(&retrieval),
+            mean_shape: avg(&mean_iou),
+        });
+    }
+    let table = eval::format_table(&rows);
+    print!("{table}");
+    if let Some(dir) = &args.report {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| Error::Input(format!("cannot create {}: {e}", dir.display())))?;
+        AtomicFile::create(&dir.join("table.txt"))?.commit(table.as_bytes())?;
+    }
+    Ok(())
+}

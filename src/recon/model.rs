@@ -1,0 +1,299 @@
+//! A trained reconstruction model on disk, and reconstruction with it on the GPU.
+//!
+//! **The file** is an `.npz` (numpy can open it: `np.load("model.npz")`), written atomically:
+//!
+//! | array | dtype | what |
+//! |---|---|---|
+//! | `format` | int32 (1) | [`FORMAT`] |
+//! | `net` | int32 (6) | [`NetShape`]: image, channels ×3, latent, hidden |
+//! | `params` | float32 (P) | the network's parameters, [`crate::nn::Sequential`]'s layout |
+//! | `iteration` | int32 (1) | iterations trained |
+//! | `adam_m`, `adam_v` | float32 (P) | Adam's moments (a checkpoint; absent from a final model) |
+//! | `train` | float64 (7) | seed, batch, lr, β1, β2, λ_lap, λ_flat (a checkpoint) |
+//! | `log` | float64 (R, 5) | iteration, L_sil, L_lap, L_flat, total (a checkpoint) |
+//! | `val` | float64 (S, 2) | iteration, validation 3D IoU (a checkpoint) |
+//!
+//! A checkpoint is a model that also carries what resuming needs; [`ReconModel::load`] reads
+//! either and checks every shape.
+
+use std::path::Path;
+
+use super::decode::MeshDecoder;
+use super::npz::{Npz, NpyArray, NpyData, npz_bytes};
+use super::train::NetShape;
+use crate::atomic_file::AtomicFile;
+use crate::error::{Error, Result};
+use crate::gpu::{Buffer, Context, MemoryKind};
+use crate::nn::Sequential;
+
+/// The file format's version.
+pub const FORMAT: i32 = 1;
+
+/// What resuming a run needs besides the parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainState {
+    /// Adam's first moments.
+    pub adam_m: Vec<f32>,
+    /// Adam's second moments.
+    pub adam_v: Vec<f32>,
+    /// `[seed, batch, lr, β1, β2, λ_lap, λ_flat]` of the run, checked on resume.
+    pub settings: [f64; 7],
+    /// The loss log so far: `[iteration, L_sil, L_lap, L_flat, total]` per row.
+    pub log: Vec<[f64; 5]>,
+    /// The validation IoUs so far: `[iteration, mean 3D IoU]` per row.
+    pub val: Vec<[f64; 2]>,
+}
+
+/// A reconstruction network: its shape, its parameters, how long it trained.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReconModel {
+    /// The network's shape.
+    pub net: NetShape,
+    /// Its parameters.
+    pub params: Vec<f32>,
+    /// Iterations trained.
+    pub iteration: u32,
+    /// Present in a checkpoint.
+    pub train: Option<TrainState>,
+}
+
+impl ReconModel {
+    /// Writes the model atomically (nothing half-written if interrupted).
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let n = self.net;
+        let i32s = |v: Vec<i32>| NpyArray::new(vec![v.len()], NpyData::I32(v));
+        let f32s = |v: &[f32]| NpyArray::new(vec![v.len()], NpyData::F32(v.to_vec()));
+        let format = i32s(vec![FORMAT])?;
+        let net = i32s(
+            [n.image, n.channels[0], n.channels[1], n.channels[2], n.latent, n.hidden]
+                .iter()
+                .map(|&x| x as i32)
+                .collect(),
+        )?;
+        let params = f32s(&self.params)?;
+        let iteration = i32s(vec![self.iteration as i32])?;
+        let mut arrays: Vec<(&str, NpyArray)> = vec![
+            ("format", format),
+            ("net", net),
+            ("params", params),
+            ("iteration", iteration),
+        ];
+        if let Some(t) = &self.train {
+            arrays.push(("adam_m", f32s(&t.adam_m)?));
+            arrays.push(("adam_v", f32s(&t.adam_v)?));
+            arrays.push((
+                "train",
+                NpyArray::new(vec![7], NpyData::F64(t.settings.to_vec()))?,
+            ));
+            arrays.push((
+                "log",
+                NpyArray::new(
+                    vec![t.log.len(), 5],
+                    NpyData::F64(t.log.iter().flatten().copied().collect()),
+                )?,
+            ));
+            arrays.push((
+                "val",
+                NpyArray::new(
+                    vec![t.val.len(), 2],
+                    NpyData::F64(t.val.iter().flatten().copied().collect()),
+                )?,
+            ));
+        }
+        let refs: Vec<(&str, &NpyArray)> = arrays.iter().map(|(k, a)| (*k, a)).collect();
+        let bytes = npz_bytes(&refs, false)?;
+        AtomicFile::create(path)?.commit(&bytes)
+    }
+
+    /// Reads a model or a checkpoint, checking the format, the shapes and the parameter count.
+    pub fn load(path: &Path) -> Result<ReconModel> {
+        let bad = |what: String| Error::Input(format!("{}: {what}", path.display()));
+        let mut npz = Npz::open(path)?;
+        let ints = |a: NpyArray, name: &str| match a.data {
+            NpyData::I32(v) => Ok(v),
+            _ => Err(bad(format!("`{name}` is not int32"))),
+        };
+        let floats = |a: NpyArray, name: &str| match a.data {
+            NpyData::F32(v) => Ok(v),
+            _ => Err(bad(format!("`{name}` is not float32"))),
+        };
+        let format = ints(npz.array("format")?, "format")?;
+        if format != [FORMAT] {
+            return Err(bad(format!(
+                "model format {format:?}; this softvk reads format {FORMAT}"
+            )));
+        }
+        let net = ints(npz.array("net")?, "net")?;
+        let Ok::<[i32; 6], _>([image, c0, c1, c2, latent, hidden]) = net.clone().try_into() else {
+            return Err(bad(format!("`net` holds {} values, not 6", net.len())));
+        };
+        let positive = |x: i32| u32::try_from(x).ok().filter(|&x| x > 0);
+        let shape = match [image, c0, c1, c2, latent, hidden].map(positive) {
+            [Some(image), Some(a), Some(b), Some(c), Some(latent), Some(hidden)] => NetShape {
+                image,
+                channels: [a, b, c],
+                latent,
+                hidden,
+            },
+            _ => return Err(bad(format!("network shape {net:?}"))),
+        };
+        let params = floats(npz.array("params")?, "params")?;
+        let expected = super::train::param_count(&shape)?;
+        if params.len() as u64 != expected {
+            return Err(bad(format!(
+                "{} parameters for a network {shape:?} of {expected}",
+                params.len()
+            )));
+        }
+        if let Some(i) = params.iter().position(|p| !p.is_finite()) {
+            return Err(bad(format!("parameter {i} is not finite")));
+        }
+        let iteration = ints(npz.array("iteration")?, "iteration")?;
+        let iteration = match iteration.as_slice() {
+            [i] if *i >= 0 => *i as u32,
+            _ => return Err(bad(format!("iteration {iteration:?}"))),
+        };
+        let train = if npz.names().contains(&"adam_m") {
+            let adam_m = floats(npz.array("adam_m")?, "adam_m")?;
+            let adam_v = floats(npz.array("adam_v")?, "adam_v")?;
+            let settings = match npz.array("train")?.data {
+                NpyData::F64(v) if v.len() == 7 => [v[0], v[1], v[2], v[3], v[4], v[5], v[6]],
+                _ => return Err(bad("`train` is not 7 float64".into())),
+            };
+            if adam_m.len() != params.len() || adam_v.len() != params.len() {
+                return Err(bad("Adam's moments do not match the parameters".into()));
+            }
+            let rows = |a: NpyArray, name: &str, width: usize| -> Result<Vec<Vec<f64>>> {
+                match (&a.shape[..], a.data) {
+                    ([_, w], NpyData::F64(v)) if *w == width => {
+                        Ok(v.chunks(width).map(<[f64]>::to_vec).collect())
+                    }
+                    _ => Err(bad(format!("`{name}` is not float64 rows of {width}"))),
+                }
+            };
+            let log = rows(npz.array("log")?, "log", 5)?
+                .into_iter()
+                .map(|r| [r[0], r[1], r[2], r[3], r[4]])
+                .collect();
+            let val = rows(npz.array("val")?, "val", 2)?
+                .into_iter()
+                .map(|r| [r[0], r[1]])
+                .collect();
+            Some(TrainState {
+                adam_m,
+                adam_v,
+                settings,
+                log,
+                val,
+            })
+        } else {
+            None
+        };
+        Ok(ReconModel {
+            net: shape,
+            params,
+            iteration,
+            train,
+        })
+    }
+}
+
+/// Reconstruction on the GPU: the network and the decoder's mesh head, forward only, for
+/// batches of up to a capacity of images.
+pub struct Reconstructor {
+    net: Sequential,
+    decoder: MeshDecoder,
+    params: Buffer,
+    input: Buffer,
+    identity: Buffer,
+    meshes: Buffer,
+    copies: Buffer,
+    capacity: u32,
+    image: u32,
+}
+
+impl Reconstructor {
+    /// Uploads `model` for batches of up to `capacity` images.
+    pub fn new(ctx: &Context, model: &ReconModel, capacity: u32) -> Result<Self> {
+        if capacity == 0 {
+            return Err(Error::Input("a reconstruction batch of 0 images".into()));
+        }
+        let t = super::train::template();
+        let decoder = MeshDecoder::new(ctx, &t.positions)?;
+        let net = Sequential::new(
+            ctx,
+            &model.net.layers(decoder.outputs_per_object())?,
+            capacity,
+        )?;
+        if model.params.len() as u64 != net.param_count() {
+            return Err(Error::Input(format!(
+                "{} parameters for a network of {}",
+                model.params.len(),
+                net.param_count()
+            )));
+        }
+        let (b, v) = (u64::from(capacity), t.vertex_count() as u64);
+        let px = u64::from(model.net.image) * u64::from(model.net.image);
+        let device = |name: &str, floats: u64| {
+            ctx.create_buffer(name, 4 * floats, MemoryKind::Device)
+        };
+        Ok(Self {
+            params: ctx.upload_buffer("recon params", &model.params)?,
+            input: device("recon input", 4 * b * px)?,
+            identity: ctx.upload_buffer("recon identity rotations", &vec![[1.0f32, 0.0]; capacity as usize])?,
+            meshes: device("recon meshes", 3 * b * v)?,
+            copies: device("recon copies", 3 * b * v)?,
+            net,
+            decoder,
+            capacity,
+            image: model.net.image,
+        })
+    }
+
+    /// The meshes (vertex positions of [`super::train::template`], one list per image) that
+    /// the network predicts from `images`: uint8 RGBA planes (`4 × H × W` per image, the NMR
+    /// layout), at most the capacity.
+    pub fn reconstruct(&self, ctx: &Context, images: &[u8]) -> Result<Vec<Vec<[f32; 3]>>> {
+        let per = 4 * (self.image as usize).pow(2);
+        if images.is_empty() || images.len() % per != 0 {
+            return Err(Error::Input(format!(
+                "{} image bytes: a whole number of {}×{} RGBA images, at least one",
+                images.len(),
+                self.image,
+                self.image
+            )));
+        }
+        let n = images.len() / per;
+        if n > self.capacity as usize {
+            return Err(Error::Input(format!(
+                "{n} images for a reconstructor of {}",
+                self.capacity
+            )));
+        }
+        // As the batch gather converts them: the byte times the f32 nearest 1/255.
+        let scale = 1.0f32 / 255.0;
+        let input: Vec<f32> = images.iter().map(|&b| f32::from(b) * scale).collect();
+        ctx.write_buffer(&self.input, 0, &input)?;
+        ctx.submit_and_wait(|rec| {
+            self.net
+                .record_forward(rec, self.params.whole(), self.input.whole(), n as u32)?;
+            self.decoder.record_forward(
+                rec,
+                n as u32,
+                1,
+                self.net.output().whole(),
+                self.identity.whole(),
+                self.meshes.whole(),
+                self.copies.whole(),
+            )
+        })?;
+        let v = self.decoder.vertex_count() as usize;
+        let flat: Vec<[f32; 3]> = ctx.read_buffer(&self.meshes, 0, n * v)?;
+        Ok(flat.chunks(v).map(<[_]>::to_vec).collect())
+    }
+
+    /// Images per batch at most.
+    pub fn capacity(&self) -> u32 {
+        self.capacity
+    }
+}

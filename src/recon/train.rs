@@ -1,0 +1,679 @@
+//! Training the reconstruction network through the soft rasterizer, SoftRas's recipe
+//! (`examples/recon/train.py`, `models.py`), every iteration on the GPU:
+//!
+//! ```text
+//! schedule row ─[BatchGather]→ input (view a), targets (alphas of views a, b), rotations
+//! input ─[Sequential]→ outputs ─[MeshDecoder]→ meshes, 2 copies per object (turned per view)
+//! copies ─(guarded soft rasterizer, one camera)→ alphas ─[SilhouetteLoss]→ L_sil, d_alpha
+//! d_alpha ─(render backward)→ d_copies;  meshes ─[Regularizers]→ L_lap, L_flat, d_meshes
+//! d_copies, d_meshes ─[MeshDecoder backward]→ d_outputs ─[Sequential backward]→ d_params ─[Adam]
+//! ```
+//!
+//! **Loss**, as SoftRas's: `L = L_iou(a) + L_iou(b) + λ_lap mean_b L_lap + λ_flat mean_b L_flat`
+//! with `L_iou` SoftRas's `neg_iou_loss` over the batch. [`SilhouetteLoss`] averages over all
+//! `2B` copies, which is half of SoftRas's sum of two, so its gradient is taken with weight 2;
+//! the regularizers sum over the batch's meshes (one block-diagonal mesh of `B` templates), so
+//! theirs are taken with weight `λ / B`.
+//!
+//! **Batches** come from a schedule computed from the seed and the iteration number alone
+//! ([`schedule_entry`]): SoftRas's sampler (a class uniformly, an object of it uniformly, two
+//! views uniformly), so a run resumed at iteration `i` sees what an uninterrupted one saw.
+//!
+//! **k iterations per submission**: [`ReconTrainer::run`] records iterations `first ..= last`
+//! into one command buffer (the schedule rows uploaded before it, nothing read back between
+//! iterations); the binning is guarded ([`crate::gpu::gate`]), and an iteration that outgrows
+//! the entry capacity stops the rest, which grow the capacity and run again.
+
+use std::cell::RefCell;
+use std::ops::Range;
+
+use crate::camera::{Camera, Projection};
+use crate::error::{Error, Result};
+use crate::fit::{Adam, AdamOptions, GradOut, Regularizers, SilhouetteLoss};
+use crate::gpu::gate::IterationGate;
+use crate::gpu::{Buffer, Context, MemoryKind, Recorder};
+use crate::mesh::Mesh;
+use crate::nn::{Activation, Conv2d, Layer, Linear, Sequential};
+use crate::raster::backward::GradBuffers;
+use crate::raster::gpu::{GpuScene, Method, Renderer};
+use crate::raster::reference::RasterSettings;
+use crate::lighting::Lighting;
+
+use super::batch::{BatchBuffers, BatchGather, BatchShape};
+use super::decode::{MeshDecoder, view_rotation};
+
+/// Views per object in the NMR data.
+pub const VIEWS: u32 = 24;
+/// The NMR data's camera distance.
+pub const DISTANCE: f64 = 2.732;
+/// The NMR data's camera elevation, degrees.
+pub const ELEVATION: f64 = 30.0;
+/// Degrees of azimuth between consecutive views.
+pub const AZIMUTH_STEP: f64 = 15.0;
+/// SoftRas's viewing angle for the reconstruction (`SoftRenderer(viewing_angle=15)`).
+pub const VIEWING_ANGLE: f64 = 15.0;
+
+/// View `v`'s azimuth in degrees: SoftRas's loader passes `-v · 15` to
+/// `get_points_from_angles`.
+pub fn view_azimuth(view: u32) -> f64 {
+    -AZIMUTH_STEP * f64::from(view)
+}
+
+/// View `v`'s camera (look-at the origin, perspective with SoftRas's 15° viewing angle).
+pub fn view_camera(view: u32) -> Camera {
+    let mut c = Camera::from_angles(DISTANCE, ELEVATION, view_azimuth(view));
+    c.projection = Projection::Perspective {
+        viewing_angle_deg: VIEWING_ANGLE,
+    };
+    c
+}
+
+/// The network's shape: SoftRas's encoder (three strided 5×5 convolutions, two fully connected
+/// layers) and decoder (two fully connected layers to the mesh head), narrower by default so
+/// that it trains on a CPU. SoftRas's batch norm is left out: with the small batches a CPU can
+/// afford its statistics are noise, and it would make the forward depend on the batch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct NetShape {
+    /// Square input images, a multiple of 8 (SoftRas: 64).
+    pub image: u32,
+    /// The three convolutions' output channels (SoftRas: 64, 128, 256).
+    pub channels: [u32; 3],
+    /// The latent code's width (SoftRas: 512, after a 1024-wide layer).
+    pub latent: u32,
+    /// The decoder's hidden width (SoftRas: 1024 then 2048).
+    pub hidden: u32,
+}
+
+impl Default for NetShape {
+    fn default() -> Self {
+        Self {
+            image: 64,
+            channels: [16, 32, 64],
+            latent: 256,
+            hidden: 512,
+        }
+    }
+}
+
+impl NetShape {
+    /// The layers, for a mesh head of `outputs` values per object: conv 4→c0, c0→c1, c1→c2
+    /// (5×5, stride 2, padding 2, ReLU), then fully connected to the latent (ReLU), latent
+    /// (ReLU), hidden (ReLU) and the head (identity).
+    pub fn layers(&self, outputs: u64) -> Result<Vec<Layer>> {
+        if self.image == 0 || self.image % 8 != 0 || self.channels.contains(&0) {
+            return Err(Error::Input(format!(
+                "network {self:?}: the image side must be a positive multiple of 8 and every \
+                 width positive"
+            )));
+        }
+        let outputs = u32::try_from(outputs)
+            .map_err(|_| Error::Input(format!("a mesh head of {outputs} outputs")))?;
+        let mut layers = Vec::new();
+        let (mut c, mut side) = (4, self.image);
+        for &out in &self.channels {
+            layers.push(Layer::Conv2d(Conv2d {
+                in_channels: c,
+                out_channels: out,
+                kernel: 5,
+                stride: 2,
+                padding: 2,
+                in_h: side,
+                in_w: side,
+                activation: Activation::Relu,
+            }));
+            c = out;
+            side /= 2;
+        }
+        let fc = |i: u32, o: u32, activation| {
+            Layer::Linear(Linear {
+                in_features: i,
+                out_features: o,
+                activation,
+            })
+        };
+        layers.push(fc(c * side * side, self.latent, Activation::Relu));
+        layers.push(fc(self.latent, self.latent, Activation::Relu));
+        layers.push(fc(self.latent, self.hidden, Activation::Relu));
+        layers.push(fc(self.hidden, outputs, Activation::Identity));
+        for l in &layers {
+            l.validate()?;
+        }
+        Ok(layers)
+    }
+}
+
+/// Parameters of a network of `net`'s shape with the reconstruction's mesh head.
+pub fn param_count(net: &NetShape) -> Result<u64> {
+    let outputs = 3 * template().vertex_count() as u64 + 3;
+    Ok(crate::nn::param_offsets(&net.layers(outputs)?).1)
+}
+
+/// What training needs besides the data.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainOptions {
+    /// The network.
+    pub net: NetShape,
+    /// Objects per batch (SoftRas: 64).
+    pub batch: u32,
+    /// Adam (SoftRas: lr 1e-4, β = (0.9, 0.999)).
+    pub adam: AdamOptions,
+    /// λ of the Laplacian regularizer (SoftRas: 5e-3).
+    pub laplacian: f32,
+    /// λ of the flatten regularizer (SoftRas: 5e-4).
+    pub flatten: f32,
+    /// The renderer's σ (SoftRas: 1e-4).
+    pub sigma: f64,
+    /// Tile side of the guarded binning.
+    pub tile: u32,
+    /// Seeds the parameters and the schedule.
+    pub seed: u64,
+}
+
+impl Default for TrainOptions {
+    fn default() -> Self {
+        Self {
+            net: NetShape::default(),
+            batch: 16,
+            adam: AdamOptions {
+                lr: 1e-4,
+                ..AdamOptions::default()
+            },
+            laplacian: 5e-3,
+            flatten: 5e-4,
+            sigma: 1e-4,
+            tile: 16,
+            seed: 1,
+        }
+    }
+}
+
+impl TrainOptions {
+    /// The renderer's settings: silhouettes at the image size with the options' σ.
+    pub fn raster_settings(&self) -> RasterSettings {
+        RasterSettings {
+            width: self.net.image,
+            height: self.net.image,
+            sigma: self.sigma,
+            ..RasterSettings::default()
+        }
+    }
+}
+
+/// Training images in the NMR layout: uint8 RGBA `[object][view][channel][row][column]`, the
+/// objects grouped by class.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainImages {
+    /// The bytes.
+    pub images: Vec<u8>,
+    /// Each class's name and its objects' range.
+    pub classes: Vec<(String, Range<u32>)>,
+    /// Square image side.
+    pub size: u32,
+}
+
+impl TrainImages {
+    /// Objects in all classes.
+    pub fn objects(&self) -> u32 {
+        self.classes.iter().map(|c| c.1.end).max().unwrap_or(0)
+    }
+
+    /// [`Error::Input`] unless the bytes hold every class's objects' views and no class is
+    /// empty.
+    pub fn validate(&self) -> Result<()> {
+        let per = u64::from(VIEWS) * 4 * u64::from(self.size) * u64::from(self.size);
+        if self.classes.is_empty() || self.classes.iter().any(|c| c.1.is_empty()) {
+            return Err(Error::Input("training data with an empty class".into()));
+        }
+        if self.images.len() as u64 != per * u64::from(self.objects()) {
+            return Err(Error::Input(format!(
+                "{} image bytes for {} objects of {VIEWS} views of {}²",
+                self.images.len(),
+                self.objects(),
+                self.size
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// SplitMix64's output function: a stateless mix of a 64-bit counter. Hand-written (five
+/// lines) because the schedule must be the same bits on every platform and crate version.
+fn mix(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE5_E9B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Uniform in `0..n` from a 64-bit word (Lemire's multiply-shift; the bias is below 2^-32).
+fn below(word: u64, n: u32) -> u32 {
+    ((word >> 32) * u64::from(n) >> 32) as u32
+}
+
+/// Batch slot `slot` of iteration `iteration`: `(object, view a, view b, 0)`, SoftRas's
+/// sampler (a class uniformly, an object of it uniformly, two views uniformly), from the seed
+/// and the position alone.
+pub fn schedule_entry(
+    seed: u64,
+    iteration: u32,
+    slot: u32,
+    classes: &[(String, Range<u32>)],
+) -> [u32; 4] {
+    let key = mix(seed ^ mix((u64::from(iteration) << 32) | u64::from(slot)));
+    let class = &classes[below(mix(key ^ 1), classes.len() as u32) as usize].1;
+    let object = class.start + below(mix(key ^ 2), class.end - class.start);
+    [
+        object,
+        below(mix(key ^ 3), VIEWS),
+        below(mix(key ^ 4), VIEWS),
+        0,
+    ]
+}
+
+/// The losses of the last iteration a submission ran.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrainLog {
+    /// The iteration (from 1).
+    pub iteration: u32,
+    /// `L_iou(a) + L_iou(b)`.
+    pub silhouette: f32,
+    /// Mean Laplacian loss over the batch.
+    pub laplacian: f32,
+    /// Mean flatten loss over the batch.
+    pub flatten: f32,
+    /// The weighted total.
+    pub total: f32,
+}
+
+/// The reconstruction's template: a 642-vertex icosphere of radius 0.5 turned off the axes
+/// ([`crate::fit::mesh_fit::icosphere_template`]): the topology of SoftRas's
+/// `sphere_642.obj`, whose coordinates that are exactly 0 would stay 0 forever under the
+/// sigmoid parameterization (SoftRas's template then keeps them at the centroid).
+pub fn template() -> Mesh {
+    crate::fit::mesh_fit::icosphere_template()
+}
+
+/// Training on the GPU: the network, its optimizer, the decoder, the batch scene and the
+/// losses ([`ReconTrainer::run`]).
+pub struct ReconTrainer<'c> {
+    ctx: &'c Context,
+    opts: TrainOptions,
+    classes: Vec<(String, Range<u32>)>,
+    net: Sequential,
+    params: Buffer,
+    d_params: Buffer,
+    adam: Adam,
+    decoder: MeshDecoder,
+    d_outputs: Buffer,
+    partials: Buffer,
+    gather: BatchGather,
+    images: Buffer,
+    view_table: Buffer,
+    schedule: Buffer,
+    /// Schedule rows the schedule buffer holds.
+    rows: u32,
+    input: Buffer,
+    targets: Buffer,
+    rotations: Buffer,
+    meshes: Buffer,
+    d_meshes: Buffer,
+    renderer: Renderer,
+    scene: GpuScene,
+    grads: GradBuffers,
+    /// In a cell: recording borrows the trainer, the gate is the one thing it changes.
+    gate: RefCell<IterationGate>,
+    sil: SilhouetteLoss,
+    regs: Regularizers,
+    capacity: u64,
+    max_capacity: u64,
+    regrowths: u32,
+}
+
+/// Copies of each object the renderer sees (views a and b).
+const COPIES: u32 = 2;
+
+impl<'c> ReconTrainer<'c> {
+    /// Uploads the training images, builds the network with `params` (or an initialization
+    /// from the seed), zeroes Adam's moments, and sizes the binning on the template.
+    pub fn new(
+        ctx: &'c Context,
+        data: &TrainImages,
+        opts: &TrainOptions,
+        params: Option<&[f32]>,
+    ) -> Result<Self> {
+        data.validate()?;
+        if data.size != opts.net.image {
+            return Err(Error::Input(format!(
+                "the data's images are {}² but the network takes {}²",
+                data.size, opts.net.image
+            )));
+        }
+        if opts.batch == 0 {
+            return Err(Error::Input("a batch of 0 objects".into()));
+        }
+        let t = template();
+        let decoder = MeshDecoder::new(ctx, &t.positions)?;
+        let layers = opts.net.layers(decoder.outputs_per_object())?;
+        let net = Sequential::new(ctx, &layers, opts.batch)?;
+        let init;
+        let params = match params {
+            Some(p) => {
+                if p.len() as u64 != net.param_count() {
+                    return Err(Error::Input(format!(
+                        "{} parameters for a network of {}",
+                        p.len(),
+                        net.param_count()
+                    )));
+                }
+                p
+            }
+            None => {
+                init = net.init(opts.seed);
+                &init[..]
+            }
+        };
+        let n = net.param_count();
+        let b = u64::from(opts.batch);
+        let px = u64::from(opts.net.image) * u64::from(opts.net.image);
+        let v = u64::from(decoder.vertex_count());
+        let device = |name: &str, floats: u64| {
+            ctx.create_buffer(name, 4 * floats.max(1), MemoryKind::Device)
+        };
+        let params_buf = ctx.upload_buffer("recon params", params)?;
+        let adam = Adam::new(ctx, n, opts.adam)?;
+        let renderer = Renderer::new(ctx)?;
+        let copies = vec![t.clone(); (b * u64::from(COPIES)) as usize];
+        let views: Vec<(usize, Camera)> =
+            (0..copies.len()).map(|c| (c, view_camera(0))).collect();
+        let settings = opts.raster_settings();
+        let mut scene =
+            renderer.prepare_batch(ctx, &copies, &views, &Lighting::unlit(), &settings)?;
+        scene.set_silhouette_only(true);
+        // The batch's meshes as one mesh of B disjoint templates, for the regularizers.
+        let vc = t.vertex_count() as u32;
+        let faces: Vec<[u32; 3]> = (0..opts.batch)
+            .flat_map(|o| t.faces.iter().map(move |f| f.map(|i| i + o * vc)))
+            .collect();
+        let regs = Regularizers::new(ctx, &faces, (b * v) as usize)?;
+        let max_capacity = crate::fit::max_entry_capacity(ctx, &renderer, &scene);
+        let total = renderer.count_entries(ctx, &mut scene, opts.tile)?;
+        // Predicted shapes wander from the sphere: room for 4× its entries to start with.
+        let capacity = crate::fit::with_headroom(
+            ctx,
+            "the reconstruction batch's binning",
+            4 * total,
+            max_capacity,
+            HINT,
+        )?;
+        renderer.reserve_guarded(ctx, &mut scene, opts.tile, capacity)?;
+        let mut grads =
+            GradBuffers::with_entry_capacity(ctx, &scene, Method::Tiled { tile: opts.tile }, capacity)?;
+        grads.set_alpha_only(true);
+        let table: Vec<[f32; 2]> = (0..VIEWS).map(|v| view_rotation(view_azimuth(v))).collect();
+        let trainer = Self {
+            ctx,
+            opts: opts.clone(),
+            classes: data.classes.clone(),
+            params: params_buf,
+            d_params: device("recon d_params", n)?,
+            adam,
+            d_outputs: device("recon d_outputs", b * decoder.outputs_per_object())?,
+            partials: decoder.create_partials(ctx, opts.batch)?,
+            gather: BatchGather::new(ctx)?,
+            images: ctx.upload_buffer(
+                "recon training images",
+                &super::batch::cpu::pack_bytes(&data.images),
+            )?,
+            view_table: ctx.upload_buffer("recon view rotations", &table)?,
+            schedule: device("recon schedule", 4 * b)?,
+            rows: 1,
+            input: device("recon input", 4 * b * px)?,
+            targets: device("recon targets", u64::from(COPIES) * b * px)?,
+            rotations: device("recon rotations", 2 * u64::from(COPIES) * b)?,
+            meshes: device("recon meshes", 3 * b * v)?,
+            d_meshes: device("recon d_meshes", 3 * b * v)?,
+            sil: SilhouetteLoss::new(ctx, COPIES * opts.batch, opts.net.image, opts.net.image)?,
+            regs,
+            renderer,
+            scene,
+            grads,
+            gate: RefCell::new(IterationGate::new(ctx)?),
+            decoder,
+            net,
+            capacity,
+            max_capacity,
+            regrowths: 0,
+        };
+        ctx.submit_and_wait(|rec| {
+            trainer.adam.record_reset(rec);
+            Ok(())
+        })?;
+        Ok(trainer)
+    }
+
+    /// Records iteration `it` (from 1) at schedule row `row`.
+    fn record_iteration(&self, rec: &mut Recorder<'_>, gate: &mut IterationGate, it: u32, row: u32) -> Result<()> {
+        let o = &self.opts;
+        let shape = BatchShape {
+            batch: o.batch,
+            pixels: o.net.image * o.net.image,
+            views: VIEWS,
+        };
+        rec.pass("recon batch", |rec| {
+            self.gather.record(
+                rec,
+                shape,
+                row,
+                BatchBuffers {
+                    images: self.images.whole(),
+                    schedule: self.schedule.whole(),
+                    view_rotations: self.view_table.whole(),
+                    input: self.input.whole(),
+                    targets: self.targets.whole(),
+                    rotations: self.rotations.whole(),
+                },
+            )
+        })?;
+        rec.pass("recon network", |rec| {
+            self.net
+                .record_forward(rec, self.params.whole(), self.input.whole(), o.batch)
+        })?;
+        rec.pass("recon decoder", |rec| {
+            self.decoder.record_forward(
+                rec,
+                o.batch,
+                COPIES,
+                self.net.output().whole(),
+                self.rotations.whole(),
+                self.meshes.whole(),
+                self.scene.positions().whole(),
+            )
+        })?;
+        let scene = &self.scene;
+        let g = &self.grads;
+        self.renderer
+            .record_forward_guarded(rec, scene, gate, it, |rec, binned| {
+                let io = g.io();
+                rec.pass("silhouette loss", |rec| {
+                    self.sil.record(
+                        rec,
+                        scene.output().whole(),
+                        self.targets.whole(),
+                        Some(GradOut::write(io.upstream).weighted(COPIES as f32)),
+                    )
+                })?;
+                self.renderer.grad_kernels().record(rec, &binned, g, &io)?;
+                let per_object = 1.0 / o.batch as f32;
+                rec.pass("regularizers", |rec| {
+                    self.regs.record_laplacian(
+                        rec,
+                        self.meshes.whole(),
+                        Some(GradOut::write(self.d_meshes.whole()).weighted(o.laplacian * per_object)),
+                    )?;
+                    self.regs.record_flatten(
+                        rec,
+                        self.meshes.whole(),
+                        Some(GradOut::accumulate(self.d_meshes.whole(), o.flatten * per_object)),
+                    )
+                })?;
+                        rec.pass("recon decoder backward", |rec| {
+                    self.decoder.record_backward(
+                        rec,
+                        o.batch,
+                        COPIES,
+                        self.net.output().whole(),
+                        self.rotations.whole(),
+                        self.d_meshes.whole(),
+                        io.positions,
+                        self.d_outputs.whole(),
+                        self.partials.whole(),
+                    )
+                })?;
+                        rec.pass("recon network backward", |rec| {
+                    self.net.record_backward(
+                        rec,
+                        self.params.whole(),
+                        self.input.whole(),
+                        self.d_outputs.whole(),
+                        self.d_params.whole(),
+                        None,
+                        o.batch,
+                    )
+                })?;
+                        rec.pass("adam", |rec| {
+                    self.adam
+                        .record_step(rec, self.params.whole(), self.d_params.whole(), it)
+                })
+            })
+    }
+
+    /// Runs iterations `first ..= last` (from 1) in one submission. `None` when all ran;
+    /// `Some(i)` when iteration `i` outgrew the entry capacity: it and the later ones changed
+    /// nothing, the capacity has grown, and they are to be run again.
+    pub fn run(&mut self, first: u32, last: u32) -> Result<Option<u32>> {
+        if first == 0 || last < first {
+            return Err(Error::Input(format!(
+                "iterations {first}..={last}: they count from 1"
+            )));
+        }
+        let rows = last - first + 1;
+        let entries: Vec<[u32; 4]> = (first..=last)
+            .flat_map(|it| (0..self.opts.batch).map(move |s| (it, s)))
+            .map(|(it, s)| schedule_entry(self.opts.seed, it, s, &self.classes))
+            .collect();
+        if rows > self.rows {
+            self.schedule = self.ctx.create_buffer(
+                "recon schedule",
+                16 * u64::from(rows) * u64::from(self.opts.batch),
+                MemoryKind::Device,
+            )?;
+            self.rows = rows;
+        }
+        self.ctx.write_buffer(&self.schedule, 0, &entries)?;
+        self.ctx.submit_and_wait(|rec| {
+            let mut gate = self.gate.borrow_mut();
+            gate.reset();
+            for it in first..=last {
+                self.record_iteration(rec, &mut gate, it, it - first)?;
+            }
+            Ok(())
+        })?;
+        let status = self.gate.borrow().read(self.ctx)?;
+        if let Some((stopped, total)) = status.stopped {
+            if stopped < first || stopped > last || total <= self.capacity {
+                return Err(Error::Limit(format!(
+                    "training: the gate stopped iteration {stopped} of {first}..={last} with \
+                     {total} entries for a capacity of {}",
+                    self.capacity
+                )));
+            }
+            self.grow(total)?;
+            return Ok(Some(stopped));
+        }
+        Ok(None)
+    }
+
+    fn grow(&mut self, total: u64) -> Result<()> {
+        let capacity = crate::fit::with_headroom(
+            self.ctx,
+            "the reconstruction batch's binning",
+            total,
+            self.max_capacity,
+            HINT,
+        )?;
+        self.renderer
+            .reserve_guarded(self.ctx, &mut self.scene, self.opts.tile, capacity)?;
+        self.grads = GradBuffers::with_entry_capacity(
+            self.ctx,
+            &self.scene,
+            Method::Tiled {
+                tile: self.opts.tile,
+            },
+            capacity,
+        )?;
+        self.grads.set_alpha_only(true);
+        self.capacity = capacity;
+        self.regrowths += 1;
+        Ok(())
+    }
+
+    /// The losses of the last iteration run (`iteration` names it in the log).
+    pub fn read_log(&self, iteration: u32) -> Result<TrainLog> {
+        let silhouette = COPIES as f32 * self.sil.read_loss(self.ctx)?;
+        let r = self.regs.read_losses(self.ctx)?;
+        let per_object = 1.0 / self.opts.batch as f32;
+        let (laplacian, flatten) = (r.laplacian * per_object, r.flatten * per_object);
+        Ok(TrainLog {
+            iteration,
+            silhouette,
+            laplacian,
+            flatten,
+            total: silhouette + self.opts.laplacian * laplacian + self.opts.flatten * flatten,
+        })
+    }
+
+    /// The network's parameters now.
+    pub fn read_params(&self) -> Result<Vec<f32>> {
+        self.ctx
+            .read_buffer(&self.params, 0, self.net.param_count() as usize)
+    }
+
+    /// Adam's moments now (first, second).
+    pub fn read_moments(&self) -> Result<(Vec<f32>, Vec<f32>)> {
+        let n = self.net.param_count() as usize;
+        let (m, v) = self.adam.moments();
+        Ok((self.ctx.read_buffer(m, 0, n)?, self.ctx.read_buffer(v, 0, n)?))
+    }
+
+    /// Sets Adam's moments (a resumed run).
+    pub fn write_moments(&self, m: &[f32], v: &[f32]) -> Result<()> {
+        let n = self.net.param_count() as usize;
+        if m.len() != n || v.len() != n {
+            return Err(Error::Input(format!(
+                "Adam moments of {} and {} values for {n} parameters",
+                m.len(),
+                v.len()
+            )));
+        }
+        let (mb, vb) = self.adam.moments();
+        self.ctx.write_buffer(mb, 0, m)?;
+        self.ctx.write_buffer(vb, 0, v)
+    }
+
+    /// The network.
+    pub fn net(&self) -> &Sequential {
+        &self.net
+    }
+
+    /// Entries the binning holds now.
+    pub fn capacity(&self) -> u64 {
+        self.capacity
+    }
+
+    /// Submissions the gate stopped.
+    pub fn regrowths(&self) -> u32 {
+        self.regrowths
+    }
+}
+
+const HINT: &str = "use a smaller batch, larger tiles or a smaller σ";
