@@ -43,5 +43,6 @@ pub mod primitives;
 pub mod probe;
 pub mod raster;
 pub mod recon;
+mod rng;
 
 pub use error::{Error, LimitKind, Result};

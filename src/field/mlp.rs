@@ -29,6 +29,7 @@ use bytemuck::{Pod, Zeroable};
 use super::{Cube, FIELD_CHUNK, SumChunks, check_binding_bytes};
 use crate::error::{Error, LimitKind, Result};
 use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::rng::SplitMix64;
 
 /// β of the hidden layers' softplus.
 pub const SOFTPLUS_BETA: f64 = 100.0;
@@ -134,24 +135,6 @@ impl MlpLayout {
             total += 1 + out_next + w * (1 + dot(out_next));
         }
         total
-    }
-}
-
-/// SplitMix64 (Steele, Lea, Flood 2014): a tiny, platform-independent stream for the seeded init.
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
     }
 }
 

@@ -1,0 +1,536 @@
+//! The layers' kernels (`kernels/nn/`) and [`Sequential`], which records a network's forward and
+//! backward.
+
+use std::sync::Arc;
+
+use bytemuck::{Pod, Zeroable};
+
+use super::{Activation, Layer, param_offsets, validate_chain};
+use crate::error::{Error, LimitKind, Result};
+use crate::fit::{check_binding, groups};
+use crate::gpu::{
+    Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, specs,
+};
+
+/// Push constants of the conv kernels (`NN_CONV_PUSH` in `nn.glsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(crate) struct ConvPush {
+    batch: u32,
+    in_c: u32,
+    in_h: u32,
+    in_w: u32,
+    out_c: u32,
+    out_h: u32,
+    out_w: u32,
+    kernel: u32,
+    stride: u32,
+    padding: u32,
+    param_offset: u32,
+    total: u32,
+}
+
+/// Push constants of the linear kernels (`NN_LINEAR_PUSH` in `nn.glsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(crate) struct LinearPush {
+    batch: u32,
+    in_f: u32,
+    out_f: u32,
+    param_offset: u32,
+    total: u32,
+    pad: [u32; 3],
+}
+
+/// Push constants of `nn_act_backward.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ActPush {
+    n: u32,
+}
+
+/// Push constants of `nn_sum_rows.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct SumPush {
+    rows: u32,
+    cols: u32,
+    dst_offset: u32,
+    pad: u32,
+}
+
+/// Where a gradient of the backward lives: the caller's d_output, or one of the two scratch
+/// buffers (ping-pong).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Slot {
+    Caller,
+    Scratch(usize),
+}
+
+impl Slot {
+    fn other(self) -> Slot {
+        match self {
+            Slot::Caller | Slot::Scratch(1) => Slot::Scratch(0),
+            Slot::Scratch(_) => Slot::Scratch(1),
+        }
+    }
+}
+
+/// A network of [`Layer`]s whose sizes chain, recorded on the GPU for batches of up to a fixed
+/// capacity.
+///
+/// It owns each layer's output buffer (`capacity × output_len` floats, batch-major; the first
+/// `batch × output_len` hold the last recorded forward) and the backward's scratch; the caller
+/// owns the parameters, inputs and gradients and passes them as [`BufferRange`]s. The parameters
+/// are one flat vector ([`Sequential::param_offsets`]; [`Sequential::init`] makes PyTorch's
+/// default initial values), so one [`crate::fit::Adam`] of [`Sequential::param_count`] serves the
+/// whole network.
+pub struct Sequential {
+    layers: Vec<Layer>,
+    offsets: Vec<u64>,
+    param_count: u64,
+    capacity: u32,
+    /// Per layer: its forward pipeline and, unless its activation is the identity, the
+    /// activation's backward.
+    forward: Vec<Arc<Kernel>>,
+    act_backward: Vec<Option<Arc<Kernel>>>,
+    conv_dinput: Kernel,
+    conv_wgrad: Kernel,
+    sum_rows: Kernel,
+    linear_dinput: Kernel,
+    linear_wgrad: Kernel,
+    outputs: Vec<Buffer>,
+    /// The backward's ping-pong gradients (dL/d(pre-activation), dL/d(a layer's input)).
+    scratch: [Buffer; 2],
+    /// The convs' per-sample parameter gradients, `capacity × P` of the largest conv.
+    partial: Buffer,
+}
+
+impl Sequential {
+    /// The network of `layers` for batches of at most `capacity` samples: its pipelines (one
+    /// per activation used) and buffers.
+    ///
+    /// [`Error::Input`] for an empty chain, an invalid layer or sizes that do not chain, or a
+    /// zero capacity; [`Error::DeviceLimit`] when a layer's loops at this capacity pass the
+    /// device's loop cap ([`Layer::loop_iterations`]) or a buffer does not fit one binding.
+    pub fn new(ctx: &Context, layers: &[Layer], capacity: u32) -> Result<Self> {
+        validate_chain(layers)?;
+        if capacity == 0 {
+            return Err(Error::Input(
+                "a network's batch capacity must be ≥ 1".into(),
+            ));
+        }
+        if let Some(limit) = ctx.info().shader_loop_limit() {
+            for (i, layer) in layers.iter().enumerate() {
+                let need = layer.loop_iterations(capacity);
+                if need > limit {
+                    return Err(Error::DeviceLimit {
+                        kind: LimitKind::LoopIterations,
+                        what: format!("layer {i} ({layer:?}) at a batch capacity of {capacity}"),
+                        need,
+                        max: limit,
+                        device: ctx.info().name.clone(),
+                        hint: "use smaller layers or a smaller batch capacity",
+                    });
+                }
+            }
+        }
+        let (offsets, param_count) = param_offsets(layers);
+        check_binding(ctx, "the network's parameters", 4 * param_count)?;
+        let cap = u64::from(capacity);
+        let widest = layers
+            .iter()
+            .map(|l| l.output_len().max(l.input_len()))
+            .max()
+            .unwrap_or(1);
+        let conv_params = layers
+            .iter()
+            .filter(|l| matches!(l, Layer::Conv2d(_)))
+            .map(Layer::param_count)
+            .max()
+            .unwrap_or(0);
+        let scratch_bytes = check_binding(ctx, "the network's gradient scratch", 4 * cap * widest)?;
+        let partial_bytes = check_binding(
+            ctx,
+            "the convs' per-sample parameter gradients",
+            4 * cap * conv_params,
+        )?;
+
+        let conv_forward = KernelVariants::new(&specs::NN_CONV_FORWARD);
+        let linear_forward = KernelVariants::new(&specs::NN_LINEAR_FORWARD);
+        let act = KernelVariants::new(&specs::NN_ACT_BACKWARD);
+        let mut forward = Vec::with_capacity(layers.len());
+        let mut act_backward = Vec::with_capacity(layers.len());
+        let mut outputs = Vec::with_capacity(layers.len());
+        for (i, layer) in layers.iter().enumerate() {
+            let constants = layer.activation().constants();
+            forward.push(match layer {
+                Layer::Conv2d(_) => conv_forward.get(ctx, &constants)?,
+                Layer::Linear(_) => linear_forward.get(ctx, &constants)?,
+            });
+            act_backward.push(match layer.activation() {
+                Activation::Identity => None,
+                _ => Some(act.get(ctx, &constants)?),
+            });
+            let what = format!("layer {i}'s outputs");
+            let bytes = check_binding(ctx, &what, 4 * cap * layer.output_len())?;
+            outputs.push(ctx.create_buffer(
+                &format!("nn layer {i} output"),
+                bytes,
+                MemoryKind::Device,
+            )?);
+        }
+        Ok(Self {
+            layers: layers.to_vec(),
+            offsets,
+            param_count,
+            capacity,
+            forward,
+            act_backward,
+            conv_dinput: Kernel::new(ctx, &specs::NN_CONV_DINPUT)?,
+            conv_wgrad: Kernel::new(ctx, &specs::NN_CONV_WGRAD)?,
+            sum_rows: Kernel::new(ctx, &specs::NN_SUM_ROWS)?,
+            linear_dinput: Kernel::new(ctx, &specs::NN_LINEAR_DINPUT)?,
+            linear_wgrad: Kernel::new(ctx, &specs::NN_LINEAR_WGRAD)?,
+            outputs,
+            scratch: [
+                ctx.create_buffer("nn gradient scratch 0", scratch_bytes, MemoryKind::Device)?,
+                ctx.create_buffer("nn gradient scratch 1", scratch_bytes, MemoryKind::Device)?,
+            ],
+            partial: ctx.create_buffer(
+                "nn conv per-sample parameter gradients",
+                partial_bytes,
+                MemoryKind::Device,
+            )?,
+        })
+    }
+
+    /// The layers.
+    pub fn layers(&self) -> &[Layer] {
+        &self.layers
+    }
+
+    /// Each layer's first parameter (in floats) in the flat parameter vector.
+    pub fn param_offsets(&self) -> &[u64] {
+        &self.offsets
+    }
+
+    /// Parameters of the whole network.
+    pub fn param_count(&self) -> u64 {
+        self.param_count
+    }
+
+    /// The largest batch the buffers hold.
+    pub fn capacity(&self) -> u32 {
+        self.capacity
+    }
+
+    /// Floats of one sample's input.
+    pub fn input_len(&self) -> u64 {
+        self.layers[0].input_len()
+    }
+
+    /// Floats of one sample's final output.
+    pub fn output_len(&self) -> u64 {
+        self.layers[self.layers.len() - 1].output_len()
+    }
+
+    /// PyTorch's default initial parameters from `seed` ([`super::init`]).
+    pub fn init(&self, seed: u64) -> Vec<f32> {
+        super::init(&self.layers, seed)
+    }
+
+    /// The final output (`capacity × output_len` floats; the first `batch × output_len` are the
+    /// last recorded forward's).
+    pub fn output(&self) -> &Buffer {
+        &self.outputs[self.outputs.len() - 1]
+    }
+
+    /// Layer `l`'s output, laid out as [`Sequential::output`]; `None` past the last layer.
+    pub fn layer_output(&self, l: usize) -> Option<&Buffer> {
+        self.outputs.get(l)
+    }
+
+    fn check_batch(&self, batch: u32) -> Result<()> {
+        if batch > self.capacity {
+            return Err(Error::Input(format!(
+                "a batch of {batch} is over the network's capacity of {}",
+                self.capacity
+            )));
+        }
+        Ok(())
+    }
+
+    /// Records the forward of `batch` samples of `input` (`batch × input_len` floats) with
+    /// `params` ([`Sequential::param_count`] floats): every layer's output into its buffer.
+    ///
+    /// [`Error::Input`] for a batch over the capacity; [`Error::BufferTooSmall`] for a range
+    /// too small.
+    pub fn record_forward(
+        &self,
+        rec: &mut Recorder<'_>,
+        params: BufferRange<'_>,
+        input: BufferRange<'_>,
+        batch: u32,
+    ) -> Result<()> {
+        self.check_batch(batch)?;
+        let n = u64::from(batch);
+        params.require(4 * self.param_count, "the network's parameters")?;
+        input.require(4 * n * self.input_len(), "the network's input batch")?;
+        if batch == 0 {
+            return Ok(());
+        }
+        for (l, layer) in self.layers.iter().enumerate() {
+            let x = match l {
+                0 => input.sub(0, 4 * n * layer.input_len()),
+                _ => self.outputs[l - 1].range(0, 4 * n * layer.input_len()),
+            };
+            let y = self.outputs[l].range(0, 4 * n * layer.output_len());
+            let kernel = &self.forward[l];
+            let total = n * layer.output_len();
+            match layer {
+                Layer::Conv2d(_) => rec.dispatch(
+                    kernel,
+                    &specs::NnConvForwardBindings {
+                        params,
+                        input: x,
+                        output: y,
+                    }
+                    .for_kernel(kernel)?,
+                    &self.conv_push(l, batch, total),
+                    groups(total, 64)?,
+                )?,
+                Layer::Linear(_) => rec.dispatch(
+                    kernel,
+                    &specs::NnLinearForwardBindings {
+                        params,
+                        input: x,
+                        output: y,
+                    }
+                    .for_kernel(kernel)?,
+                    &self.linear_push(l, batch, total),
+                    groups(total, 64)?,
+                )?,
+            }
+        }
+        Ok(())
+    }
+
+    /// Records the backward of the last recorded forward (same `params`, `input` and `batch`;
+    /// it reads the layers' outputs): from `d_output` = dL/d(final output)
+    /// (`batch × output_len` floats), writes dL/d(params) into `d_params`
+    /// ([`Sequential::param_count`] floats, overwritten) and, when given, dL/d(input) into
+    /// `d_input` (`batch × input_len` floats; the first layer's input gradient is skipped
+    /// without it).
+    ///
+    /// [`Error::Input`] for a batch over the capacity; [`Error::BufferTooSmall`] for a range
+    /// too small.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_backward(
+        &self,
+        rec: &mut Recorder<'_>,
+        params: BufferRange<'_>,
+        input: BufferRange<'_>,
+        d_output: BufferRange<'_>,
+        d_params: BufferRange<'_>,
+        d_input: Option<BufferRange<'_>>,
+        batch: u32,
+    ) -> Result<()> {
+        self.check_batch(batch)?;
+        let n = u64::from(batch);
+        params.require(4 * self.param_count, "the network's parameters")?;
+        input.require(4 * n * self.input_len(), "the network's input batch")?;
+        d_output.require(4 * n * self.output_len(), "the network's output gradient")?;
+        d_params.require(4 * self.param_count, "the network's parameter gradient")?;
+        if let Some(d_input) = &d_input {
+            d_input.require(4 * n * self.input_len(), "the network's input gradient")?;
+        }
+        if batch == 0 {
+            return Ok(());
+        }
+        let mut d_out = Slot::Caller;
+        for (l, layer) in self.layers.iter().enumerate().rev() {
+            let range = |slot: Slot, floats: u64| match slot {
+                Slot::Caller => d_output.sub(0, 4 * floats),
+                Slot::Scratch(i) => self.scratch[i].range(0, 4 * floats),
+            };
+            let out_floats = n * layer.output_len();
+            let in_floats = n * layer.input_len();
+            let x = match l {
+                0 => input.sub(0, 4 * in_floats),
+                _ => self.outputs[l - 1].range(0, 4 * in_floats),
+            };
+            // dL/d(pre-activation): the identity's is dL/d(output) itself.
+            let d_pre_slot = match &self.act_backward[l] {
+                None => d_out,
+                Some(kernel) => {
+                    let slot = d_out.other();
+                    rec.dispatch(
+                        kernel,
+                        &specs::NnActBackwardBindings {
+                            output: self.outputs[l].range(0, 4 * out_floats),
+                            d_out: range(d_out, out_floats),
+                            d_pre: range(slot, out_floats),
+                        }
+                        .for_kernel(kernel)?,
+                        &ActPush {
+                            n: out_floats as u32,
+                        },
+                        groups(out_floats, 64)?,
+                    )?;
+                    slot
+                }
+            };
+            let d_pre = range(d_pre_slot, out_floats);
+            let d_in_slot = d_pre_slot.other();
+            let d_in = match (l, &d_input) {
+                (0, None) => None,
+                (0, Some(d)) => Some(d.sub(0, 4 * in_floats)),
+                _ => Some(range(d_in_slot, in_floats)),
+            };
+            let p = layer.param_count();
+            match layer {
+                Layer::Conv2d(_) => {
+                    let partial = self.partial.range(0, 4 * n * p);
+                    rec.dispatch(
+                        &self.conv_wgrad,
+                        &specs::NnConvWgradBindings {
+                            input: x,
+                            d_pre,
+                            partial,
+                        }
+                        .for_kernel(&self.conv_wgrad)?,
+                        &self.conv_push(l, batch, n * p),
+                        groups(n * p, 64)?,
+                    )?;
+                    rec.dispatch(
+                        &self.sum_rows,
+                        &specs::NnSumRowsBindings {
+                            rows: partial,
+                            sums: d_params,
+                        }
+                        .for_kernel(&self.sum_rows)?,
+                        &SumPush {
+                            rows: batch,
+                            cols: p as u32,
+                            dst_offset: self.offsets[l] as u32,
+                            pad: 0,
+                        },
+                        groups(p, 64)?,
+                    )?;
+                    if let Some(d_in) = d_in {
+                        rec.dispatch(
+                            &self.conv_dinput,
+                            &specs::NnConvDinputBindings {
+                                params,
+                                d_pre,
+                                d_input: d_in,
+                            }
+                            .for_kernel(&self.conv_dinput)?,
+                            &self.conv_push(l, batch, in_floats),
+                            groups(in_floats, 64)?,
+                        )?;
+                    }
+                }
+                Layer::Linear(_) => {
+                    rec.dispatch(
+                        &self.linear_wgrad,
+                        &specs::NnLinearWgradBindings {
+                            input: x,
+                            d_pre,
+                            d_params,
+                        }
+                        .for_kernel(&self.linear_wgrad)?,
+                        &self.linear_push(l, batch, p),
+                        groups(p, 64)?,
+                    )?;
+                    if let Some(d_in) = d_in {
+                        rec.dispatch(
+                            &self.linear_dinput,
+                            &specs::NnLinearDinputBindings {
+                                params,
+                                d_pre,
+                                d_input: d_in,
+                            }
+                            .for_kernel(&self.linear_dinput)?,
+                            &self.linear_push(l, batch, in_floats),
+                            groups(in_floats, 64)?,
+                        )?;
+                    }
+                }
+            }
+            d_out = d_in_slot;
+        }
+        Ok(())
+    }
+
+    fn conv_push(&self, l: usize, batch: u32, total: u64) -> ConvPush {
+        let Layer::Conv2d(c) = &self.layers[l] else {
+            unreachable!("conv_push of a conv layer");
+        };
+        ConvPush {
+            batch,
+            in_c: c.in_channels,
+            in_h: c.in_h,
+            in_w: c.in_w,
+            out_c: c.out_channels,
+            out_h: c.out_h(),
+            out_w: c.out_w(),
+            kernel: c.kernel,
+            stride: c.stride,
+            padding: c.padding,
+            // Both fit: every buffer was checked against one binding (< 2^32 bytes).
+            param_offset: self.offsets[l] as u32,
+            total: total as u32,
+        }
+    }
+
+    fn linear_push(&self, l: usize, batch: u32, total: u64) -> LinearPush {
+        let Layer::Linear(f) = &self.layers[l] else {
+            unreachable!("linear_push of a linear layer");
+        };
+        LinearPush {
+            batch,
+            in_f: f.in_features,
+            out_f: f.out_features,
+            param_offset: self.offsets[l] as u32,
+            total: total as u32,
+            pad: [0; 3],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn push_constant_structs_match_the_kernels_layouts() {
+        let conv = std::mem::size_of::<ConvPush>() as u32;
+        for spec in [
+            &specs::NN_CONV_FORWARD,
+            &specs::NN_CONV_DINPUT,
+            &specs::NN_CONV_WGRAD,
+        ] {
+            assert_eq!(conv, spec.push_constant_size, "{}", spec.name);
+            assert_eq!(spec.bindings.len(), 3, "{}", spec.name);
+        }
+        let linear = std::mem::size_of::<LinearPush>() as u32;
+        for spec in [
+            &specs::NN_LINEAR_FORWARD,
+            &specs::NN_LINEAR_DINPUT,
+            &specs::NN_LINEAR_WGRAD,
+        ] {
+            assert_eq!(linear, spec.push_constant_size, "{}", spec.name);
+            assert_eq!(spec.bindings.len(), 3, "{}", spec.name);
+        }
+        assert_eq!(
+            std::mem::size_of::<ActPush>() as u32,
+            specs::NN_ACT_BACKWARD.push_constant_size
+        );
+        assert_eq!(
+            std::mem::size_of::<SumPush>() as u32,
+            specs::NN_SUM_ROWS.push_constant_size
+        );
+    }
+}
