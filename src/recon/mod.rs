@@ -5,5 +5,6 @@
 pub mod batch;
 pub mod decode;
 pub mod eval;
+pub mod train;
 
 pub use decode::{MeshDecoder, view_rotation};

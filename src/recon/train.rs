@@ -32,12 +32,12 @@ use crate::error::{Error, Result};
 use crate::fit::{Adam, AdamOptions, GradOut, Regularizers, SilhouetteLoss};
 use crate::gpu::gate::IterationGate;
 use crate::gpu::{Buffer, Context, MemoryKind, Recorder};
+use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::nn::{Activation, Conv2d, Layer, Linear, Sequential};
 use crate::raster::backward::GradBuffers;
 use crate::raster::gpu::{GpuScene, Method, Renderer};
 use crate::raster::reference::RasterSettings;
-use crate::lighting::Lighting;
 
 use super::batch::{BatchBuffers, BatchGather, BatchShape};
 use super::decode::{MeshDecoder, view_rotation};
@@ -247,7 +247,7 @@ fn mix(mut z: u64) -> u64 {
 
 /// Uniform in `0..n` from a 64-bit word (Lemire's multiply-shift; the bias is below 2^-32).
 fn below(word: u64, n: u32) -> u32 {
-    ((word >> 32) * u64::from(n) >> 32) as u32
+    (((word >> 32) * u64::from(n)) >> 32) as u32
 }
 
 /// Batch slot `slot` of iteration `iteration`: `(object, view a, view b, 0)`, SoftRas's
@@ -383,8 +383,7 @@ impl<'c> ReconTrainer<'c> {
         let adam = Adam::new(ctx, n, opts.adam)?;
         let renderer = Renderer::new(ctx)?;
         let copies = vec![t.clone(); (b * u64::from(COPIES)) as usize];
-        let views: Vec<(usize, Camera)> =
-            (0..copies.len()).map(|c| (c, view_camera(0))).collect();
+        let views: Vec<(usize, Camera)> = (0..copies.len()).map(|c| (c, view_camera(0))).collect();
         let settings = opts.raster_settings();
         let mut scene =
             renderer.prepare_batch(ctx, &copies, &views, &Lighting::unlit(), &settings)?;
@@ -406,8 +405,12 @@ impl<'c> ReconTrainer<'c> {
             HINT,
         )?;
         renderer.reserve_guarded(ctx, &mut scene, opts.tile, capacity)?;
-        let mut grads =
-            GradBuffers::with_entry_capacity(ctx, &scene, Method::Tiled { tile: opts.tile }, capacity)?;
+        let mut grads = GradBuffers::with_entry_capacity(
+            ctx,
+            &scene,
+            Method::Tiled { tile: opts.tile },
+            capacity,
+        )?;
         grads.set_alpha_only(true);
         let table: Vec<[f32; 2]> = (0..VIEWS).map(|v| view_rotation(view_azimuth(v))).collect();
         let trainer = Self {
@@ -452,7 +455,13 @@ impl<'c> ReconTrainer<'c> {
     }
 
     /// Records iteration `it` (from 1) at schedule row `row`.
-    fn record_iteration(&self, rec: &mut Recorder<'_>, gate: &mut IterationGate, it: u32, row: u32) -> Result<()> {
+    fn record_iteration(
+        &self,
+        rec: &mut Recorder<'_>,
+        gate: &mut IterationGate,
+        it: u32,
+        row: u32,
+    ) -> Result<()> {
         let o = &self.opts;
         let shape = BatchShape {
             batch: o.batch,
@@ -508,15 +517,21 @@ impl<'c> ReconTrainer<'c> {
                     self.regs.record_laplacian(
                         rec,
                         self.meshes.whole(),
-                        Some(GradOut::write(self.d_meshes.whole()).weighted(o.laplacian * per_object)),
+                        Some(
+                            GradOut::write(self.d_meshes.whole())
+                                .weighted(o.laplacian * per_object),
+                        ),
                     )?;
                     self.regs.record_flatten(
                         rec,
                         self.meshes.whole(),
-                        Some(GradOut::accumulate(self.d_meshes.whole(), o.flatten * per_object)),
+                        Some(GradOut::accumulate(
+                            self.d_meshes.whole(),
+                            o.flatten * per_object,
+                        )),
                     )
                 })?;
-                        rec.pass("recon decoder backward", |rec| {
+                rec.pass("recon decoder backward", |rec| {
                     self.decoder.record_backward(
                         rec,
                         o.batch,
@@ -529,7 +544,7 @@ impl<'c> ReconTrainer<'c> {
                         self.partials.whole(),
                     )
                 })?;
-                        rec.pass("recon network backward", |rec| {
+                rec.pass("recon network backward", |rec| {
                     self.net.record_backward(
                         rec,
                         self.params.whole(),
@@ -540,7 +555,7 @@ impl<'c> ReconTrainer<'c> {
                         o.batch,
                     )
                 })?;
-                        rec.pass("adam", |rec| {
+                rec.pass("adam", |rec| {
                     self.adam
                         .record_step(rec, self.params.whole(), self.d_params.whole(), it)
                 })
@@ -638,11 +653,20 @@ impl<'c> ReconTrainer<'c> {
             .read_buffer(&self.params, 0, self.net.param_count() as usize)
     }
 
+    /// dL/d(params) of the last iteration run.
+    pub fn read_gradient(&self) -> Result<Vec<f32>> {
+        self.ctx
+            .read_buffer(&self.d_params, 0, self.net.param_count() as usize)
+    }
+
     /// Adam's moments now (first, second).
     pub fn read_moments(&self) -> Result<(Vec<f32>, Vec<f32>)> {
         let n = self.net.param_count() as usize;
         let (m, v) = self.adam.moments();
-        Ok((self.ctx.read_buffer(m, 0, n)?, self.ctx.read_buffer(v, 0, n)?))
+        Ok((
+            self.ctx.read_buffer(m, 0, n)?,
+            self.ctx.read_buffer(v, 0, n)?,
+        ))
     }
 
     /// Sets Adam's moments (a resumed run).

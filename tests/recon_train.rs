@@ -1,0 +1,238 @@
+//! Training the reconstruction network on the GPU (`recon::train`): one iteration equals the
+//! chain of twins (gather, network, decoder, renderer, losses, regularizers), training lowers
+//! the loss, and a run is the same bits whatever the iterations per submission.
+
+mod common;
+
+use softvk::camera::Camera;
+use softvk::fit::flatten::{self, FlattenEdges};
+use softvk::fit::laplacian::{self, Adjacency};
+use softvk::fit::{AdamOptions, silhouette};
+use softvk::lighting::Lighting;
+use softvk::mesh::Mesh;
+use softvk::nn::cpu as nn_cpu;
+use softvk::raster::gpu::{Method, Renderer};
+use softvk::raster::reference::{self, RasterSettings};
+use softvk::raster::reference_grad;
+use softvk::recon::batch::{self, BatchShape};
+use softvk::recon::decode;
+use softvk::recon::train::{
+    self, NetShape, ReconTrainer, TrainImages, TrainOptions, VIEWS, schedule_entry, view_azimuth,
+    view_camera,
+};
+use softvk::recon::view_rotation;
+
+const SIZE: u32 = 16;
+
+/// Two classes of one object each, every view rendered by softvk at 16²: a box and a flat
+/// slab, so that the two differ from every side.
+fn data(ctx: &softvk::gpu::Context) -> TrainImages {
+    let renderer = Renderer::new(ctx).unwrap();
+    let settings = RasterSettings {
+        width: SIZE,
+        height: SIZE,
+        sigma: 1e-5,
+        ..RasterSettings::default()
+    };
+    let cams: Vec<Camera> = (0..VIEWS).map(view_camera).collect();
+    let mut images = Vec::new();
+    for mesh in [
+        Mesh::cuboid([0.3, 0.2, 0.25]),
+        Mesh::cuboid([0.4, 0.08, 0.3]),
+    ] {
+        let frames = renderer
+            .render_views(
+                ctx,
+                &mesh,
+                &cams,
+                &Lighting::default(),
+                &settings,
+                Method::default(),
+            )
+            .unwrap();
+        let px = (SIZE * SIZE) as usize;
+        for v in 0..VIEWS as usize {
+            let img = frames.image(v);
+            for c in 0..4 {
+                images.extend(
+                    img[..px]
+                        .iter()
+                        .map(|p| (p[c].clamp(0.0, 1.0) * 255.0).round() as u8),
+                );
+            }
+        }
+    }
+    TrainImages {
+        images,
+        classes: vec![("box".into(), 0..1), ("slab".into(), 1..2)],
+        size: SIZE,
+    }
+}
+
+fn options() -> TrainOptions {
+    TrainOptions {
+        net: NetShape {
+            image: SIZE,
+            channels: [2, 3, 4],
+            latent: 8,
+            hidden: 8,
+        },
+        batch: 2,
+        adam: AdamOptions {
+            lr: 1e-2,
+            ..AdamOptions::default()
+        },
+        sigma: 1e-3,
+        tile: 8,
+        seed: 3,
+        ..TrainOptions::default()
+    }
+}
+
+#[test]
+fn one_training_iteration_equals_the_chain_of_twins() {
+    let Some(gpu) = common::gpu() else { return };
+    let data = data(&gpu);
+    let opts = options();
+    let mut trainer = ReconTrainer::new(&gpu, &data, &opts, None).unwrap();
+    let params: Vec<f64> = trainer
+        .read_params()
+        .unwrap()
+        .iter()
+        .map(|&p| f64::from(p))
+        .collect();
+    assert_eq!(trainer.run(1, 1).unwrap(), None);
+    let log = trainer.read_log(1).unwrap();
+    let got = trainer.read_gradient().unwrap();
+
+    // The twins.
+    let b = opts.batch as usize;
+    let px = (SIZE * SIZE) as usize;
+    let schedule: Vec<[u32; 4]> = (0..opts.batch)
+        .map(|s| schedule_entry(opts.seed, 1, s, &data.classes))
+        .collect();
+    let table: Vec<[f32; 2]> = (0..VIEWS).map(|v| view_rotation(view_azimuth(v))).collect();
+    let shape = BatchShape {
+        batch: opts.batch,
+        pixels: px as u32,
+        views: VIEWS,
+    };
+    let (input, targets, rotations) = batch::cpu::gather(&data.images, &schedule, &table, shape, 0);
+    let t = train::template();
+    let layers = opts.net.layers(3 * t.vertex_count() as u64 + 3).unwrap();
+    let f64s = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect::<Vec<f64>>();
+    let input = f64s(&input);
+    let outs = nn_cpu::sequential_forward(&layers, &params, &input, b);
+    let (base, signs) = softvk::fit::deform::cpu::template_terms(&t.positions).unwrap();
+    let rot64: Vec<[f64; 2]> = rotations.iter().map(|r| r.map(f64::from)).collect();
+    let head = outs.last().unwrap();
+    let (meshes, copies) = decode::cpu::forward(&base, &signs, head, &rot64, 2);
+    let n = 3 * t.vertex_count();
+    let s = opts.raster_settings();
+    let cam = view_camera(0);
+    let mut images = Vec::new();
+    let mut copy_meshes = Vec::new();
+    for c in 0..2 * b {
+        let mut m = t.clone();
+        for (p, q) in m
+            .positions
+            .iter_mut()
+            .zip(copies[c * n..(c + 1) * n].chunks(3))
+        {
+            *p = [q[0] as f32, q[1] as f32, q[2] as f32];
+        }
+        images.extend(reference::render(&m, &cam, &Lighting::unlit(), &s).unwrap());
+        copy_meshes.push(m);
+    }
+    let iou = silhouette::cpu::neg_iou(&images, &f64s(&targets), 2 * b);
+    let mut d_copies = Vec::with_capacity(2 * b * n);
+    for (c, m) in copy_meshes.iter().enumerate() {
+        let d_image: Vec<[f64; 4]> = iou.d_image[c * px..(c + 1) * px]
+            .iter()
+            .map(|g| g.map(|x| 2.0 * x))
+            .collect();
+        let g = reference_grad::grad(m, &[cam], &Lighting::unlit(), &s, &d_image).unwrap();
+        d_copies.extend(g.positions.iter().flatten());
+    }
+    let adjacency = Adjacency::from_faces(&t.faces, t.vertex_count()).unwrap();
+    let edges = FlattenEdges::from_faces(&t.faces, t.vertex_count()).unwrap();
+    let mut d_meshes = vec![0.0; b * n];
+    let (mut lap_sum, mut flat_sum) = (0.0, 0.0);
+    for o in 0..b {
+        let x = &meshes[o * n..(o + 1) * n];
+        let (lap, d_lap) = laplacian::cpu::loss_and_grad(&adjacency, x);
+        let (flat, d_flat) = flatten::cpu::loss_and_grad(&edges, x);
+        lap_sum += lap;
+        flat_sum += flat;
+        for i in 0..n {
+            d_meshes[o * n + i] = (f64::from(opts.laplacian) * d_lap[i]
+                + f64::from(opts.flatten) * d_flat[i])
+                / b as f64;
+        }
+    }
+    let loss = 2.0 * iou.loss
+        + (f64::from(opts.laplacian) * lap_sum + f64::from(opts.flatten) * flat_sum) / b as f64;
+    let d_head = decode::cpu::backward(&base, &signs, head, &rot64, 2, &d_meshes, &d_copies);
+    let want = nn_cpu::sequential_backward(&layers, &params, &input, &outs, &d_head, b).d_params;
+
+    eprintln!("loss GPU {} vs twins {loss}", log.total);
+    assert!((f64::from(log.total) - loss).abs() <= 1e-4 * loss.abs().max(1e-3));
+    assert!((f64::from(log.silhouette) - 2.0 * iou.loss).abs() <= 1e-4);
+    let scale = want.iter().fold(0.0f64, |m, g| m.max(g.abs()));
+    let err = got
+        .iter()
+        .zip(&want)
+        .map(|(&a, b)| (f64::from(a) - b).abs())
+        .fold(0.0, f64::max);
+    eprintln!("gradient error {err:.3e} of {scale:.3e}");
+    assert!(scale > 0.0, "a zero gradient checks nothing");
+    assert!(err <= 1e-3 * scale, "gradient error {err:e} of {scale:e}");
+}
+
+/// Trains `iterations` with `k` per submission; the parameters and the logs.
+fn train_run(
+    gpu: &softvk::gpu::Context,
+    data: &TrainImages,
+    iterations: u32,
+    k: u32,
+) -> (Vec<u32>, Vec<f32>) {
+    let mut trainer = ReconTrainer::new(gpu, data, &options(), None).unwrap();
+    let mut losses = Vec::new();
+    let mut it = 1;
+    while it <= iterations {
+        let last = (it + k - 1).min(iterations);
+        match trainer.run(it, last).unwrap() {
+            Some(stopped) => it = stopped,
+            None => {
+                losses.push(trainer.read_log(last).unwrap().silhouette);
+                it = last + 1;
+            }
+        }
+    }
+    let bits = trainer
+        .read_params()
+        .unwrap()
+        .iter()
+        .map(|p| p.to_bits())
+        .collect();
+    (bits, losses)
+}
+
+#[test]
+fn training_lowers_the_loss_and_is_the_same_bits_at_any_k() {
+    let Some(gpu) = common::gpu() else { return };
+    let data = data(&gpu);
+    let iterations = 40;
+    let (params1, losses) = train_run(&gpu, &data, iterations, 1);
+    let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
+    let (early, late) = (mean(&losses[..8]), mean(&losses[losses.len() - 8..]));
+    eprintln!("silhouette loss: first 8 iterations {early:.4}, last 8 {late:.4}");
+    assert!(late < 0.8 * early, "the loss did not fall: {losses:?}");
+    for k in [7, 40] {
+        let (params_k, _) = train_run(&gpu, &data, iterations, k);
+        assert!(
+            params_k == params1,
+            "{k} iterations per submission changed the bits"
+        );
+    }
+}
