@@ -137,11 +137,12 @@ impl MlpLayout {
     }
 }
 
-/// SplitMix64 (Steele, Lea, Flood 2014): a tiny, platform-independent stream for the seeded init.
-struct SplitMix64(u64);
+/// SplitMix64 (Steele, Lea, Flood 2014): a tiny, platform-independent stream for the seeded init
+/// (and for the procedural shapes of [`crate::recon::shapes`]).
+pub(crate) struct SplitMix64(pub(crate) u64);
 
 impl SplitMix64 {
-    fn next(&mut self) -> u64 {
+    pub(crate) fn next(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
@@ -150,7 +151,7 @@ impl SplitMix64 {
     }
 
     /// Uniform in [0, 1).
-    fn unit(&mut self) -> f64 {
+    pub(crate) fn unit(&mut self) -> f64 {
         (self.next() >> 11) as f64 / (1u64 << 53) as f64
     }
 }
