@@ -1212,3 +1212,80 @@ fn demo_writes_a_labelled_contact_sheet_and_a_turntable() {
     let (w, h) = frames[0].buffer().dimensions();
     assert!(w >= 2 * 192 && h >= 192, "fitted beside target: {w}x{h}");
 }
+
+#[test]
+fn dataset_writes_the_nmr_files_and_a_contact_sheet_and_refuses_bad_flags_writing_nothing() {
+    use softvk::recon::dataset::{Dataset, Split};
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    let dir = TempDir::new("dataset-cli");
+    let out = dir.path("data");
+    let run = softvk()
+        .args(["dataset", "--out", out.to_str().unwrap()])
+        .args([
+            "--categories",
+            "chair,04379243",
+            "--train",
+            "2",
+            "--val",
+            "0",
+        ])
+        .args(["--test", "1", "--seed", "5"])
+        .env("SOFTVK_VALIDATION", "1")
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "softvk dataset failed: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let mut names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    names.sort();
+    assert_eq!(
+        names,
+        [
+            "03001627_test_images.npz",
+            "03001627_test_voxels.npz",
+            "03001627_train_images.npz",
+            "03001627_train_voxels.npz",
+            "04379243_test_images.npz",
+            "04379243_test_voxels.npz",
+            "04379243_train_images.npz",
+            "04379243_train_voxels.npz",
+            "contact_sheet.png",
+        ]
+    );
+    let train = Dataset::open(&out, Split::Train).unwrap();
+    assert_eq!(train.classes.len(), 2);
+    assert!(train.classes.iter().all(|c| c.count == 2));
+    // Two classes × two objects, eight 64² views each.
+    let sheet = image::open(out.join("contact_sheet.png")).unwrap();
+    assert_eq!((sheet.width(), sheet.height()), (8 * 64, 4 * 64));
+
+    for (flags, says) in [
+        (vec!["--categories", "chair,spaceship"], "spaceship"),
+        (
+            vec!["--train", "0", "--val", "0", "--test", "0"],
+            "at least one object",
+        ),
+        (vec!["--sigma=-1"], "sigma"),
+    ] {
+        let bad = dir.path("bad");
+        let run = softvk()
+            .args(["dataset", "--out", bad.to_str().unwrap()])
+            .args(&flags)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success(), "{flags:?} succeeded");
+        assert_eq!(stderr.lines().count(), 1, "{flags:?}: {stderr}");
+        assert!(stderr.contains(says), "{flags:?}: {stderr}");
+        let left = std::fs::read_dir(&bad).map_or(0, |d| d.count());
+        assert_eq!(left, 0, "{flags:?} left files in {}", bad.display());
+    }
+}

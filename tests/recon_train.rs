@@ -18,8 +18,8 @@ use softvk::recon::batch::{self, BatchShape};
 use softvk::recon::decode;
 use softvk::recon::train::{
     self, NetShape, ReconTrainer, TrainImages, TrainOptions, VIEWS, schedule_entry, view_azimuth,
-    view_camera,
 };
+use softvk::recon::view_camera;
 use softvk::recon::view_rotation;
 
 const SIZE: u32 = 16;
@@ -34,7 +34,7 @@ fn data(ctx: &softvk::gpu::Context) -> TrainImages {
         sigma: 1e-5,
         ..RasterSettings::default()
     };
-    let cams: Vec<Camera> = (0..VIEWS).map(view_camera).collect();
+    let cams: Vec<Camera> = (0..VIEWS as usize).map(view_camera).collect();
     let mut images = Vec::new();
     for mesh in [
         Mesh::cuboid([0.3, 0.2, 0.25]),

@@ -16,12 +16,14 @@
 
 pub mod args;
 pub mod bench;
+pub mod dataset;
 pub mod fit_field;
 pub mod fit_mesh;
 pub mod fit_pose;
 pub mod grad;
 pub mod interrupt;
 pub mod output;
+pub mod recon;
 pub mod render;
 
 /// Turns a clap error into the single line `main` prints after `softvk: error: `.

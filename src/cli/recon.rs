@@ -29,8 +29,8 @@ use softvk::recon::train::{self, NetShape, ReconTrainer, TrainImages, TrainOptio
 use softvk::{Error, Result};
 
 use super::args::positive;
-use super::output::AtomicFile;
 use super::interrupt;
+use super::output::AtomicFile;
 
 /// `--channels`: three comma-separated positive widths.
 fn channels(s: &str) -> std::result::Result<[u32; 3], String> {
@@ -40,7 +40,9 @@ fn channels(s: &str) -> std::result::Result<[u32; 3], String> {
         .collect::<std::result::Result<_, _>>()?;
     match v[..] {
         [a, b, c] if a > 0 && b > 0 && c > 0 => Ok([a, b, c]),
-        _ => Err(format!("expected three positive widths like 16,32,64, got `{s}`")),
+        _ => Err(format!(
+            "expected three positive widths like 16,32,64, got `{s}`"
+        )),
     }
 }
 
@@ -394,7 +396,10 @@ fn write_train_report(dir: &Path, log: &[[f64; 5]], vals: &[[f64; 2]]) -> Result
             color: [30, 150, 60],
         },
     ];
-    report::write_png(&dir.join("loss.png"), &report::loss_plot(&series, 640, 400, false))
+    report::write_png(
+        &dir.join("loss.png"),
+        &report::loss_plot(&series, 640, 400, false),
+    )
 }
 
 /// An RGBA PNG as the network's input bytes (planes R, G, B, A).
@@ -473,7 +478,10 @@ fn write_turntable(ctx: &Context, path: &Path, mesh: &Mesh, input: &[u8], size: 
     let n = (SIZE * SIZE) as usize;
     let frame = |v: usize| {
         report::side_by_side(
-            &[("input", &big[..]), ("reconstruction", &frames.images[v * n..(v + 1) * n])],
+            &[
+                ("input", &big[..]),
+                ("reconstruction", &frames.images[v * n..(v + 1) * n]),
+            ],
             SIZE,
             SIZE,
         )

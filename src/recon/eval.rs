@@ -140,6 +140,37 @@ pub fn format_table(rows: &[ScoreRow]) -> String {
     s
 }
 
+/// The 3D IoU of the reconstruction from each input `(object, view)` of `class` against the
+/// object's voxels: batches of the reconstructor's capacity, each predicted mesh voxelized at
+/// 32³ on the dataset's lattice ([`super::dataset::voxel_cube`],
+/// [`super::dataset::occupancy_to_nmr`]).
+pub fn reconstruction_ious(
+    ctx: &crate::gpu::Context,
+    recon: &super::model::Reconstructor,
+    class: &super::dataset::ClassData,
+    inputs: &[(usize, usize)],
+) -> Result<Vec<f64>> {
+    use super::dataset::{VOXEL_RES, occupancy_to_nmr, voxel_cube};
+    let faces = super::train::template().faces;
+    let mut ious = Vec::with_capacity(inputs.len());
+    for chunk in inputs.chunks(recon.capacity() as usize) {
+        let images: Vec<u8> = chunk
+            .iter()
+            .flat_map(|&(n, v)| class.image(n, v).iter().copied())
+            .collect();
+        let meshes = recon.reconstruct(ctx, &images)?;
+        for (mesh, &(n, _)) in meshes.iter().zip(chunk) {
+            let vox =
+                crate::field::voxel::voxelize_mesh(mesh, &faces, &voxel_cube(), VOXEL_RES as u32)?;
+            ious.push(voxel_iou(
+                &occupancy_to_nmr(&vox.occupancy)?,
+                class.voxels_of(n),
+            )?);
+        }
+    }
+    Ok(ious)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -19,7 +19,7 @@
 use std::path::Path;
 
 use super::decode::MeshDecoder;
-use super::npz::{Npz, NpyArray, NpyData, npz_bytes};
+use super::npz::{NpyArray, NpyData, Npz, npz_bytes};
 use super::train::NetShape;
 use crate::atomic_file::AtomicFile;
 use crate::error::{Error, Result};
@@ -65,10 +65,17 @@ impl ReconModel {
         let f32s = |v: &[f32]| NpyArray::new(vec![v.len()], NpyData::F32(v.to_vec()));
         let format = i32s(vec![FORMAT])?;
         let net = i32s(
-            [n.image, n.channels[0], n.channels[1], n.channels[2], n.latent, n.hidden]
-                .iter()
-                .map(|&x| x as i32)
-                .collect(),
+            [
+                n.image,
+                n.channels[0],
+                n.channels[1],
+                n.channels[2],
+                n.latent,
+                n.hidden,
+            ]
+            .iter()
+            .map(|&x| x as i32)
+            .collect(),
         )?;
         let params = f32s(&self.params)?;
         let iteration = i32s(vec![self.iteration as i32])?;
@@ -129,7 +136,14 @@ impl ReconModel {
         };
         let positive = |x: i32| u32::try_from(x).ok().filter(|&x| x > 0);
         let shape = match [image, c0, c1, c2, latent, hidden].map(positive) {
-            [Some(image), Some(a), Some(b), Some(c), Some(latent), Some(hidden)] => NetShape {
+            [
+                Some(image),
+                Some(a),
+                Some(b),
+                Some(c),
+                Some(latent),
+                Some(hidden),
+            ] => NetShape {
                 image,
                 channels: [a, b, c],
                 latent,
@@ -234,13 +248,15 @@ impl Reconstructor {
         }
         let (b, v) = (u64::from(capacity), t.vertex_count() as u64);
         let px = u64::from(model.net.image) * u64::from(model.net.image);
-        let device = |name: &str, floats: u64| {
-            ctx.create_buffer(name, 4 * floats, MemoryKind::Device)
-        };
+        let device =
+            |name: &str, floats: u64| ctx.create_buffer(name, 4 * floats, MemoryKind::Device);
         Ok(Self {
             params: ctx.upload_buffer("recon params", &model.params)?,
             input: device("recon input", 4 * b * px)?,
-            identity: ctx.upload_buffer("recon identity rotations", &vec![[1.0f32, 0.0]; capacity as usize])?,
+            identity: ctx.upload_buffer(
+                "recon identity rotations",
+                &vec![[1.0f32, 0.0]; capacity as usize],
+            )?,
             meshes: device("recon meshes", 3 * b * v)?,
             copies: device("recon copies", 3 * b * v)?,
             net,

@@ -27,7 +27,7 @@
 use std::cell::RefCell;
 use std::ops::Range;
 
-use crate::camera::{Camera, Projection};
+use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::fit::{Adam, AdamOptions, GradOut, Regularizers, SilhouetteLoss};
 use crate::gpu::gate::IterationGate;
@@ -38,34 +38,20 @@ use crate::nn::{Activation, Conv2d, Layer, Linear, Sequential};
 use crate::raster::backward::GradBuffers;
 use crate::raster::gpu::{GpuScene, Method, Renderer};
 use crate::raster::reference::RasterSettings;
+use crate::rng::SplitMix64;
 
 use super::batch::{BatchBuffers, BatchGather, BatchShape};
 use super::decode::{MeshDecoder, view_rotation};
 
+use super::dataset::view_camera;
+
 /// Views per object in the NMR data.
-pub const VIEWS: u32 = 24;
-/// The NMR data's camera distance.
-pub const DISTANCE: f64 = 2.732;
-/// The NMR data's camera elevation, degrees.
-pub const ELEVATION: f64 = 30.0;
-/// Degrees of azimuth between consecutive views.
-pub const AZIMUTH_STEP: f64 = 15.0;
-/// SoftRas's viewing angle for the reconstruction (`SoftRenderer(viewing_angle=15)`).
-pub const VIEWING_ANGLE: f64 = 15.0;
+pub const VIEWS: u32 = super::dataset::VIEWS as u32;
 
 /// View `v`'s azimuth in degrees: SoftRas's loader passes `-v · 15` to
-/// `get_points_from_angles`.
+/// `get_points_from_angles` ([`view_camera`]).
 pub fn view_azimuth(view: u32) -> f64 {
-    -AZIMUTH_STEP * f64::from(view)
-}
-
-/// View `v`'s camera (look-at the origin, perspective with SoftRas's 15° viewing angle).
-pub fn view_camera(view: u32) -> Camera {
-    let mut c = Camera::from_angles(DISTANCE, ELEVATION, view_azimuth(view));
-    c.projection = Projection::Perspective {
-        viewing_angle_deg: VIEWING_ANGLE,
-    };
-    c
+    -super::dataset::AZIMUTH_STEP * f64::from(view)
 }
 
 /// The network's shape: SoftRas's encoder (three strided 5×5 convolutions, two fully connected
@@ -236,13 +222,10 @@ impl TrainImages {
     }
 }
 
-/// SplitMix64's output function: a stateless mix of a 64-bit counter. Hand-written (five
-/// lines) because the schedule must be the same bits on every platform and crate version.
-fn mix(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE5_E9B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
+/// SplitMix64's output for one counter value: the schedule is a stateless function of the
+/// seed and the position, so a resumed run needs no generator state.
+fn mix(z: u64) -> u64 {
+    SplitMix64(z).next()
 }
 
 /// Uniform in `0..n` from a 64-bit word (Lemire's multiply-shift; the bias is below 2^-32).
