@@ -439,6 +439,10 @@ pub fn recon(args: &ReconArgs) -> Result<()> {
         .file_stem()
         .map_or_else(|| "recon".into(), |s| s.to_string_lossy().into_owned());
     let gif = args.out.with_file_name(format!("{stem}-turntable.gif"));
+    if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)
+            .map_err(|e| Error::Input(format!("cannot create {}: {e}", parent.display())))?;
+    }
     write_turntable(&ctx, &gif, &mesh, &input, model.net.image)?;
     write_obj(&args.out, &mesh.positions, &mesh.faces)?;
     println!("wrote {} and {}", args.out.display(), gif.display());
@@ -465,16 +469,7 @@ fn write_turntable(ctx: &Context, path: &Path, mesh: &Mesh, input: &[u8], size: 
         &settings,
         Method::default(),
     )?;
-    let px = (size * size) as usize;
-    // The input, scaled up to the frame size (nearest).
-    let scale = SIZE / size.max(1);
-    let big: Vec<[f32; 4]> = (0..SIZE * SIZE)
-        .map(|i| {
-            let (x, y) = ((i % SIZE) / scale.max(1), (i / SIZE) / scale.max(1));
-            let j = (y.min(size - 1) * size + x.min(size - 1)) as usize;
-            [0, 1, 2, 3].map(|c| f32::from(input[c * px + j]) / 255.0)
-        })
-        .collect();
+    let big = upscale(input, size, SIZE);
     let n = (SIZE * SIZE) as usize;
     let frame = |v: usize| {
         report::side_by_side(
@@ -552,7 +547,7 @@ pub fn evaluate(args: &EvalReconArgs) -> Result<()> {
             .collect::<Result<Vec<f64>>>()?;
         let avg = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
         rows.push(ScoreRow {
-            class: class.class_id.clone(),
+            class: class_label(class),
             inputs: inputs.len(),
             reconstruction: avg(&ours),
             retrieval: avg(&retrieval),
@@ -565,6 +560,86 @@ pub fn evaluate(args: &EvalReconArgs) -> Result<()> {
         std::fs::create_dir_all(dir)
             .map_err(|e| Error::Input(format!("cannot create {}: {e}", dir.display())))?;
         AtomicFile::create(&dir.join("table.txt"))?.commit(table.as_bytes())?;
+        write_examples(&ctx, &recon, &test, dir)?;
     }
     Ok(())
+}
+
+/// `02691156 (airplane)` for a class softvk generates, else the class id.
+fn class_label(class: &ClassData) -> String {
+    match class.category {
+        Some(c) => format!("{} ({})", class.class_id, c.name()),
+        None => class.class_id.clone(),
+    }
+}
+
+/// `examples.png`: per class, the first test object's views 0 and 9 as inputs beside the
+/// reconstructions, shaded and seen from the input's camera; and each input as
+/// `input-<class>-<view>.png` (what `softvk recon --image` takes).
+fn write_examples(ctx: &Context, recon: &Reconstructor, test: &Dataset, dir: &Path) -> Result<()> {
+    const SIZE: u32 = 128;
+    let size = dataset::IMAGE_SIZE as u32;
+    let px = (size * size) as usize;
+    let settings = RasterSettings {
+        width: SIZE,
+        height: SIZE,
+        sigma: 1e-5,
+        gamma: 1e-4,
+        ..RasterSettings::default()
+    };
+    let renderer = Renderer::new(ctx)?;
+    let mut rows: Vec<image::RgbaImage> = Vec::new();
+    for class in &test.classes {
+        let mut cells: Vec<(String, Vec<[f32; 4]>)> = Vec::new();
+        for v in [0usize, 9] {
+            let input = class.image(0, v);
+            let mut mesh = train::template();
+            mesh.positions = recon.reconstruct(ctx, input)?.remove(0);
+            let shaded = renderer.render_views(
+                ctx,
+                &mesh,
+                &[dataset::view_camera(v)],
+                &Lighting::default(),
+                &settings,
+                Method::default(),
+            )?;
+            let name = format!("input-{}-{v}.png", class.class_id);
+            let rgba: Vec<u8> = (0..px)
+                .flat_map(|p| [0, 1, 2, 3].map(|c| input[c * px + p]))
+                .collect();
+            let img = image::RgbaImage::from_raw(size, size, rgba).expect("64² RGBA");
+            report::write_png(&dir.join(&name), &img)?;
+            cells.push((
+                format!("{} view {v}", class_label(class)),
+                upscale(input, size, SIZE),
+            ));
+            cells.push(("reconstruction".into(), shaded.images));
+        }
+        let refs: Vec<(&str, &[[f32; 4]])> =
+            cells.iter().map(|(n, i)| (n.as_str(), &i[..])).collect();
+        rows.push(report::side_by_side(&refs, SIZE, SIZE));
+    }
+    let (w, h) = (
+        rows.iter().map(|r| r.width()).max().unwrap_or(1),
+        rows.iter().map(|r| r.height()).sum::<u32>().max(1),
+    );
+    let mut sheet = image::RgbaImage::from_pixel(w, h, image::Rgba([0, 0, 0, 255]));
+    let mut y = 0;
+    for r in &rows {
+        image::imageops::overlay(&mut sheet, r, 0, i64::from(y));
+        y += r.height();
+    }
+    report::write_png(&dir.join("examples.png"), &sheet)
+}
+
+/// NMR-layout RGBA planes (`size²` each) as `big × big` pixels (nearest), values in [0, 1].
+fn upscale(planes: &[u8], size: u32, big: u32) -> Vec<[f32; 4]> {
+    let px = (size * size) as usize;
+    (0..big * big)
+        .map(|i| {
+            let (x, y) = ((i % big) * size / big, (i / big) * size / big);
+            let j = (y * size + x) as usize;
+            [0, 1, 2, 3].map(|c| f32::from(planes[c * px + j]) / 255.0)
+        })
+        .collect()
 }

@@ -114,13 +114,13 @@ pub fn format_table(rows: &[ScoreRow]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{:<12} {:>7} {:>14} {:>10} {:>11}",
+        "{:<22} {:>7} {:>14} {:>10} {:>11}",
         "class", "inputs", "reconstruction", "retrieval", "mean shape"
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "{:<12} {:>7} {:>14.4} {:>10.4} {:>11.4}",
+            "{:<22} {:>7} {:>14.4} {:>10.4} {:>11.4}",
             r.class, r.inputs, r.reconstruction, r.retrieval, r.mean_shape
         );
     }
@@ -129,7 +129,7 @@ pub fn format_table(rows: &[ScoreRow]) -> String {
         let mean = |f: fn(&ScoreRow) -> f64| rows.iter().map(f).sum::<f64>() / n;
         let _ = writeln!(
             s,
-            "{:<12} {:>7} {:>14.4} {:>10.4} {:>11.4}",
+            "{:<22} {:>7} {:>14.4} {:>10.4} {:>11.4}",
             "mean",
             rows.iter().map(|r| r.inputs).sum::<usize>(),
             mean(|r| r.reconstruction),
