@@ -1,0 +1,224 @@
+//! The reconstruction commands end to end on a tiny configuration (two classes, a few objects,
+//! a narrow network, a few iterations): `softvk dataset`, `train-recon` (twice: the same
+//! bytes; and stopped then resumed: the same bytes again), `eval-recon` and `recon`; and the
+//! model file's round trip and refusals.
+
+mod common;
+
+use std::path::Path;
+use std::process::Output;
+
+use common::{TempDir, softvk};
+use softvk::recon::model::{ReconModel, Reconstructor};
+use softvk::recon::train::NetShape;
+
+fn ok(run: Output, what: &str) -> String {
+    assert!(
+        run.status.success(),
+        "{what} failed: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    String::from_utf8_lossy(&run.stdout).into_owned()
+}
+
+fn dataset(dir: &TempDir) -> std::path::PathBuf {
+    let out = dir.path("data");
+    ok(
+        softvk()
+            .args(["dataset", "--out", out.to_str().unwrap()])
+            .args(["--categories", "chair,car", "--train", "3", "--val", "1"])
+            .args(["--test", "1", "--seed", "2"])
+            .env("SOFTVK_VALIDATION", "1")
+            .output()
+            .unwrap(),
+        "softvk dataset",
+    );
+    out
+}
+
+/// `train-recon` with a tiny network; `extra` flags appended.
+fn train(data: &Path, model: &Path, iters: u32, extra: &[&str]) -> String {
+    ok(
+        softvk()
+            .args(["train-recon", "--dataset", data.to_str().unwrap()])
+            .args(["--out", model.to_str().unwrap()])
+            .args(["--iters", &iters.to_string(), "--batch", "2"])
+            .args(["--channels", "2,3,4", "--latent", "8", "--hidden", "8"])
+            .args(["--lr", "1e-3", "--log-every", "2", "--val-every", "2"])
+            .args(["--val-views", "1"])
+            .args(extra)
+            .env("SOFTVK_VALIDATION", "1")
+            .output()
+            .unwrap(),
+        "softvk train-recon",
+    )
+}
+
+#[test]
+fn train_twice_resume_evaluate_and_reconstruct() {
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    let dir = TempDir::new("recon-cli");
+    let data = dataset(&dir);
+    let (a, b, c) = (dir.path("a.npz"), dir.path("b.npz"), dir.path("c.npz"));
+    let said = train(&data, &a, 4, &[]);
+    assert!(said.contains("trained 4 iterations"), "{said}");
+    train(&data, &b, 4, &[]);
+    let bytes = |p: &Path| std::fs::read(p).unwrap();
+    assert!(bytes(&a) == bytes(&b), "a second run wrote other bytes");
+    // Stopped after 2 (a finished run of 2), then resumed to 4: the same model.
+    train(&data, &c, 2, &[]);
+    train(&data, &c, 4, &["--resume"]);
+    assert!(bytes(&a) == bytes(&c), "a resumed run differs");
+    let report = dir.path("a-train");
+    let log = std::fs::read_to_string(report.join("loss.csv")).unwrap();
+    assert_eq!(
+        log.lines().count(),
+        3,
+        "a header and two submissions:\n{log}"
+    );
+    let val = std::fs::read_to_string(report.join("val.csv")).unwrap();
+    assert_eq!(val.lines().count(), 3, "validations at 2 and 4:\n{val}");
+    assert!(report.join("loss.png").exists() && report.join("checkpoint.npz").exists());
+    // A resume with other options is refused in one line.
+    let refused = softvk()
+        .args(["train-recon", "--dataset", data.to_str().unwrap()])
+        .args(["--out", c.to_str().unwrap(), "--iters", "6", "--batch", "3"])
+        .args([
+            "--channels",
+            "2,3,4",
+            "--latent",
+            "8",
+            "--hidden",
+            "8",
+            "--resume",
+        ])
+        .output()
+        .unwrap();
+    assert!(!refused.status.success());
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        err.contains("other options") && err.lines().count() == 1,
+        "{err}"
+    );
+
+    let eval_dir = dir.path("eval");
+    let table = ok(
+        softvk()
+            .args(["eval-recon", "--dataset", data.to_str().unwrap()])
+            .args(["--model", a.to_str().unwrap(), "--views", "2"])
+            .args(["--report", eval_dir.to_str().unwrap()])
+            .env("SOFTVK_VALIDATION", "1")
+            .output()
+            .unwrap(),
+        "softvk eval-recon",
+    );
+    let rows: Vec<&str> = table.lines().collect();
+    assert_eq!(rows.len(), 4, "header, two classes, mean:\n{table}");
+    assert!(
+        rows[1].contains("chair") || rows[2].contains("chair"),
+        "{table}"
+    );
+    assert!(rows[3].starts_with("mean"), "{table}");
+    for r in &rows[1..] {
+        let cols: Vec<f64> = r
+            .split_whitespace()
+            .rev()
+            .take(3)
+            .map(|c| c.parse().unwrap())
+            .collect();
+        assert!(cols.iter().all(|v| (0.0..=1.0).contains(v)), "{r}");
+    }
+    assert!(eval_dir.join("examples.png").exists());
+    let input = eval_dir.join("input-03001627-0.png");
+    let obj = dir.path("out/chair.obj");
+    ok(
+        softvk()
+            .args(["recon", "--model", a.to_str().unwrap()])
+            .args(["--image", input.to_str().unwrap()])
+            .args(["--out", obj.to_str().unwrap()])
+            .env("SOFTVK_VALIDATION", "1")
+            .output()
+            .unwrap(),
+        "softvk recon",
+    );
+    let text = std::fs::read_to_string(&obj).unwrap();
+    assert_eq!(text.lines().filter(|l| l.starts_with("v ")).count(), 642);
+    assert!(dir.path("out/chair-turntable.gif").exists());
+    // An image of the wrong size is one clear error.
+    let wrong = softvk()
+        .args(["recon", "--model", a.to_str().unwrap()])
+        .args(["--image", eval_dir.join("examples.png").to_str().unwrap()])
+        .args(["--out", dir.path("out/x.obj").to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(!wrong.status.success());
+    let err = String::from_utf8_lossy(&wrong.stderr);
+    assert!(
+        err.contains("the model takes 64×64") && err.lines().count() == 1,
+        "{err}"
+    );
+    assert!(!dir.path("out/x.obj").exists());
+}
+
+#[test]
+fn a_model_round_trips_through_its_file_and_bad_files_are_refused() {
+    let Some(gpu) = common::gpu() else { return };
+    let dir = TempDir::new("recon-model");
+    let net = NetShape {
+        image: 16,
+        channels: [2, 2, 2],
+        latent: 4,
+        hidden: 4,
+    };
+    let n = softvk::recon::train::param_count(&net).unwrap() as usize;
+    let mut r = common::rng(1);
+    use rand::RngExt;
+    let params: Vec<f32> = (0..n).map(|_| r.random_range(-0.3f32..0.3)).collect();
+    let model = ReconModel {
+        net,
+        params,
+        iteration: 7,
+        train: None,
+    };
+    let path = dir.path("m.npz");
+    model.save(&path).unwrap();
+    let back = ReconModel::load(&path).unwrap();
+    assert_eq!(back, model);
+    // The loaded model reconstructs what the saved one does.
+    let image: Vec<u8> = (0..4 * 16 * 16).map(|i| (i * 37 % 251) as u8).collect();
+    let a = Reconstructor::new(&gpu, &model, 1)
+        .unwrap()
+        .reconstruct(&gpu, &image)
+        .unwrap();
+    let b = Reconstructor::new(&gpu, &back, 1)
+        .unwrap()
+        .reconstruct(&gpu, &image)
+        .unwrap();
+    assert_eq!(a, b);
+    assert_eq!(a[0].len(), 642);
+    // Refusals: a parameter count that does not fit the shape, a non-finite parameter, a file
+    // that is not a model.
+    let short = ReconModel {
+        params: model.params[1..].to_vec(),
+        ..model.clone()
+    };
+    short.save(&dir.path("short.npz")).unwrap();
+    let e = ReconModel::load(&dir.path("short.npz")).unwrap_err();
+    assert!(
+        matches!(e, softvk::Error::Input(ref m) if m.contains("parameters")),
+        "{e}"
+    );
+    let mut nan = model.clone();
+    nan.params[3] = f32::NAN;
+    nan.save(&dir.path("nan.npz")).unwrap();
+    let e = ReconModel::load(&dir.path("nan.npz")).unwrap_err();
+    assert!(
+        matches!(e, softvk::Error::Input(ref m) if m.contains("parameter 3")),
+        "{e}"
+    );
+    std::fs::write(dir.path("junk.npz"), b"not a zip").unwrap();
+    assert!(ReconModel::load(&dir.path("junk.npz")).is_err());
+}
