@@ -59,6 +59,16 @@ struct SumPush {
     pad: u32,
 }
 
+/// The caller's ranges of one backward.
+#[derive(Clone, Copy)]
+struct BackwardBuffers<'a> {
+    params: BufferRange<'a>,
+    input: BufferRange<'a>,
+    d_output: BufferRange<'a>,
+    d_params: BufferRange<'a>,
+    d_input: Option<BufferRange<'a>>,
+}
+
 /// Where a gradient of the backward lives: the caller's d_output, or one of the two scratch
 /// buffers (ping-pong).
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -288,7 +298,7 @@ impl Sequential {
             let y = self.outputs[l].range(0, 4 * n * layer.output_len());
             let kernel = &self.forward[l];
             let total = n * layer.output_len();
-            match layer {
+            rec.pass(&format!("nn forward layer {l}"), |rec| match layer {
                 Layer::Conv2d(_) => rec.dispatch(
                     kernel,
                     &specs::NnConvForwardBindings {
@@ -299,7 +309,7 @@ impl Sequential {
                     .for_kernel(kernel)?,
                     &self.conv_push(l, batch, total),
                     groups(total, 64)?,
-                )?,
+                ),
                 Layer::Linear(_) => rec.dispatch(
                     kernel,
                     &specs::NnLinearForwardBindings {
@@ -310,8 +320,8 @@ impl Sequential {
                     .for_kernel(kernel)?,
                     &self.linear_push(l, batch, total),
                     groups(total, 64)?,
-                )?,
-            }
+                ),
+            })?;
         }
         Ok(())
     }
@@ -348,23 +358,56 @@ impl Sequential {
         if batch == 0 {
             return Ok(());
         }
+        let buffers = BackwardBuffers {
+            params,
+            input,
+            d_output,
+            d_params,
+            d_input,
+        };
         let mut d_out = Slot::Caller;
-        for (l, layer) in self.layers.iter().enumerate().rev() {
-            let range = |slot: Slot, floats: u64| match slot {
-                Slot::Caller => d_output.sub(0, 4 * floats),
-                Slot::Scratch(i) => self.scratch[i].range(0, 4 * floats),
-            };
-            let out_floats = n * layer.output_len();
-            let in_floats = n * layer.input_len();
-            let x = match l {
-                0 => input.sub(0, 4 * in_floats),
-                _ => self.outputs[l - 1].range(0, 4 * in_floats),
-            };
-            // dL/d(pre-activation): the identity's is dL/d(output) itself.
-            let d_pre_slot = match &self.act_backward[l] {
-                None => d_out,
-                Some(kernel) => {
-                    let slot = d_out.other();
+        for l in (0..self.layers.len()).rev() {
+            d_out = rec.pass(&format!("nn backward layer {l}"), |rec| {
+                self.record_layer_backward(rec, &buffers, l, d_out, batch)
+            })?;
+        }
+        Ok(())
+    }
+
+    /// Layer `l`'s backward from dL/d(its output) in `d_out`; returns where dL/d(its input) went.
+    fn record_layer_backward(
+        &self,
+        rec: &mut Recorder<'_>,
+        buffers: &BackwardBuffers<'_>,
+        l: usize,
+        d_out: Slot,
+        batch: u32,
+    ) -> Result<Slot> {
+        let BackwardBuffers {
+            params,
+            input,
+            d_output,
+            d_params,
+            d_input,
+        } = *buffers;
+        let n = u64::from(batch);
+        let layer = &self.layers[l];
+        let range = |slot: Slot, floats: u64| match slot {
+            Slot::Caller => d_output.sub(0, 4 * floats),
+            Slot::Scratch(i) => self.scratch[i].range(0, 4 * floats),
+        };
+        let out_floats = n * layer.output_len();
+        let in_floats = n * layer.input_len();
+        let x = match l {
+            0 => input.sub(0, 4 * in_floats),
+            _ => self.outputs[l - 1].range(0, 4 * in_floats),
+        };
+        // dL/d(pre-activation): the identity's is dL/d(output) itself.
+        let d_pre_slot = match &self.act_backward[l] {
+            None => d_out,
+            Some(kernel) => {
+                let slot = d_out.other();
+                rec.pass(&format!("nn layer {l} act"), |rec| {
                     rec.dispatch(
                         kernel,
                         &specs::NnActBackwardBindings {
@@ -377,21 +420,23 @@ impl Sequential {
                             n: out_floats as u32,
                         },
                         groups(out_floats, 64)?,
-                    )?;
-                    slot
-                }
-            };
-            let d_pre = range(d_pre_slot, out_floats);
-            let d_in_slot = d_pre_slot.other();
-            let d_in = match (l, &d_input) {
-                (0, None) => None,
-                (0, Some(d)) => Some(d.sub(0, 4 * in_floats)),
-                _ => Some(range(d_in_slot, in_floats)),
-            };
-            let p = layer.param_count();
-            match layer {
-                Layer::Conv2d(_) => {
-                    let partial = self.partial.range(0, 4 * n * p);
+                    )
+                })?;
+                slot
+            }
+        };
+        let d_pre = range(d_pre_slot, out_floats);
+        let d_in_slot = d_pre_slot.other();
+        let d_in = match (l, &d_input) {
+            (0, None) => None,
+            (0, Some(d)) => Some(d.sub(0, 4 * in_floats)),
+            _ => Some(range(d_in_slot, in_floats)),
+        };
+        let p = layer.param_count();
+        match layer {
+            Layer::Conv2d(_) => {
+                let partial = self.partial.range(0, 4 * n * p);
+                rec.pass(&format!("nn layer {l} weight gradient"), |rec| {
                     rec.dispatch(
                         &self.conv_wgrad,
                         &specs::NnConvWgradBindings {
@@ -402,7 +447,9 @@ impl Sequential {
                         .for_kernel(&self.conv_wgrad)?,
                         &self.conv_push(l, batch, n * p),
                         groups(n * p, 64)?,
-                    )?;
+                    )
+                })?;
+                rec.pass(&format!("nn layer {l} batch sum"), |rec| {
                     rec.dispatch(
                         &self.sum_rows,
                         &specs::NnSumRowsBindings {
@@ -417,8 +464,10 @@ impl Sequential {
                             pad: 0,
                         },
                         groups(p, 64)?,
-                    )?;
-                    if let Some(d_in) = d_in {
+                    )
+                })?;
+                if let Some(d_in) = d_in {
+                    rec.pass(&format!("nn layer {l} input gradient"), |rec| {
                         rec.dispatch(
                             &self.conv_dinput,
                             &specs::NnConvDinputBindings {
@@ -429,10 +478,12 @@ impl Sequential {
                             .for_kernel(&self.conv_dinput)?,
                             &self.conv_push(l, batch, in_floats),
                             groups(in_floats, 64)?,
-                        )?;
-                    }
+                        )
+                    })?;
                 }
-                Layer::Linear(_) => {
+            }
+            Layer::Linear(_) => {
+                rec.pass(&format!("nn layer {l} weight gradient"), |rec| {
                     rec.dispatch(
                         &self.linear_wgrad,
                         &specs::NnLinearWgradBindings {
@@ -443,8 +494,10 @@ impl Sequential {
                         .for_kernel(&self.linear_wgrad)?,
                         &self.linear_push(l, batch, p),
                         groups(p, 64)?,
-                    )?;
-                    if let Some(d_in) = d_in {
+                    )
+                })?;
+                if let Some(d_in) = d_in {
+                    rec.pass(&format!("nn layer {l} input gradient"), |rec| {
                         rec.dispatch(
                             &self.linear_dinput,
                             &specs::NnLinearDinputBindings {
@@ -455,13 +508,12 @@ impl Sequential {
                             .for_kernel(&self.linear_dinput)?,
                             &self.linear_push(l, batch, in_floats),
                             groups(in_floats, 64)?,
-                        )?;
-                    }
+                        )
+                    })?;
                 }
             }
-            d_out = d_in_slot;
         }
-        Ok(())
+        Ok(d_in_slot)
     }
 
     fn conv_push(&self, l: usize, batch: u32, total: u64) -> ConvPush {

@@ -22,7 +22,7 @@
 //! **Loop bounds.** On llvmpipe ([`crate::gpu::DeviceInfo::shader_loop_limit`]) the loops of one
 //! invocation grow with the layer's size (a conv's `in_channels · kernel²`, a linear's inputs
 //! and outputs, the batch, a conv's `out_h · out_w`): a network or batch capacity over the cap is
-//! refused up front with [`Error::DeviceLimit`] of kind [`LimitKind::LoopIterations`].
+//! refused up front with [`Error::DeviceLimit`] of kind [`LoopIterations`](crate::LimitKind::LoopIterations).
 
 pub mod cpu;
 mod gpu;
