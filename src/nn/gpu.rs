@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use bytemuck::{Pod, Zeroable};
 
-use super::{Activation, Layer, param_offsets, validate_chain};
+use super::{Activation, Conv2d, Layer, param_offsets, validate_chain};
 use crate::error::{Error, LimitKind, Result};
 use crate::fit::{check_binding, groups};
 use crate::gpu::{
@@ -57,6 +57,57 @@ struct SumPush {
     cols: u32,
     dst_offset: u32,
     pad: u32,
+}
+
+/// Invocations per sample of the conv kernels, which each compute a block of 4 channels × 4
+/// columns (see the kernels' headers).
+pub(crate) struct ConvBlocks {
+    /// `nn_conv_forward`: 4 output channels × 4 adjacent columns of one output row.
+    pub forward: u64,
+    /// `nn_conv_dinput`: 4 input channels × 4 columns of one input row sharing a residue mod s.
+    pub input_gradient: u64,
+    /// `nn_conv_wgrad`: 4 output × 4 input channels per tap, then one per bias.
+    pub weight_gradient: u64,
+}
+
+impl ConvBlocks {
+    pub fn of(c: &Conv2d) -> Self {
+        let by4 = |n: u32| u64::from(n.div_ceil(4));
+        let (k, s) = (u64::from(c.kernel), u64::from(c.stride));
+        Self {
+            forward: by4(c.out_channels) * u64::from(c.out_h()) * by4(c.out_w()),
+            input_gradient: by4(c.in_channels)
+                * u64::from(c.in_h)
+                * s
+                * u64::from(c.in_w.div_ceil(c.stride)).div_ceil(4),
+            weight_gradient: by4(c.out_channels) * by4(c.in_channels) * k * k
+                + u64::from(c.out_channels),
+        }
+    }
+}
+
+/// Invocations of the linear kernels for a batch, which each compute a block of 4 × 4 (see the
+/// kernels' headers).
+struct LinearBlocks {
+    /// `nn_linear_forward`: 4 outputs × 4 samples.
+    forward: u64,
+    /// `nn_linear_dinput`: 4 inputs × 4 samples.
+    input_gradient: u64,
+    /// `nn_linear_wgrad`: 4 outputs × 4 inputs, then one per bias.
+    weight_gradient: u64,
+}
+
+impl LinearBlocks {
+    fn of(layer: &Layer, batch: u32) -> Self {
+        let by4 = |n: u64| n.div_ceil(4);
+        let (i, o) = (layer.input_len(), layer.output_len());
+        let b = by4(u64::from(batch));
+        Self {
+            forward: by4(o) * b,
+            input_gradient: by4(i) * b,
+            weight_gradient: by4(o) * by4(i) + o,
+        }
+    }
 }
 
 /// The caller's ranges of one backward.
@@ -297,19 +348,21 @@ impl Sequential {
             };
             let y = self.outputs[l].range(0, 4 * n * layer.output_len());
             let kernel = &self.forward[l];
-            let total = n * layer.output_len();
             rec.pass(&format!("nn forward layer {l}"), |rec| match layer {
-                Layer::Conv2d(_) => rec.dispatch(
-                    kernel,
-                    &specs::NnConvForwardBindings {
-                        params,
-                        input: x,
-                        output: y,
-                    }
-                    .for_kernel(kernel)?,
-                    &self.conv_push(l, batch, total),
-                    groups(total, 64)?,
-                ),
+                Layer::Conv2d(c) => {
+                    let blocks = n * ConvBlocks::of(c).forward;
+                    rec.dispatch(
+                        kernel,
+                        &specs::NnConvForwardBindings {
+                            params,
+                            input: x,
+                            output: y,
+                        }
+                        .for_kernel(kernel)?,
+                        &self.conv_push(l, batch, blocks),
+                        groups(blocks, 64)?,
+                    )
+                }
                 Layer::Linear(_) => rec.dispatch(
                     kernel,
                     &specs::NnLinearForwardBindings {
@@ -318,8 +371,8 @@ impl Sequential {
                         output: y,
                     }
                     .for_kernel(kernel)?,
-                    &self.linear_push(l, batch, total),
-                    groups(total, 64)?,
+                    &self.linear_push(l, batch, LinearBlocks::of(layer, batch).forward),
+                    groups(LinearBlocks::of(layer, batch).forward, 64)?,
                 ),
             })?;
         }
@@ -434,7 +487,8 @@ impl Sequential {
         };
         let p = layer.param_count();
         match layer {
-            Layer::Conv2d(_) => {
+            Layer::Conv2d(c) => {
+                let blocks = ConvBlocks::of(c);
                 let partial = self.partial.range(0, 4 * n * p);
                 rec.pass(&format!("nn layer {l} weight gradient"), |rec| {
                     rec.dispatch(
@@ -445,8 +499,8 @@ impl Sequential {
                             partial,
                         }
                         .for_kernel(&self.conv_wgrad)?,
-                        &self.conv_push(l, batch, n * p),
-                        groups(n * p, 64)?,
+                        &self.conv_push(l, batch, n * blocks.weight_gradient),
+                        groups(n * blocks.weight_gradient, 64)?,
                     )
                 })?;
                 rec.pass(&format!("nn layer {l} batch sum"), |rec| {
@@ -476,13 +530,14 @@ impl Sequential {
                                 d_input: d_in,
                             }
                             .for_kernel(&self.conv_dinput)?,
-                            &self.conv_push(l, batch, in_floats),
-                            groups(in_floats, 64)?,
+                            &self.conv_push(l, batch, n * blocks.input_gradient),
+                            groups(n * blocks.input_gradient, 64)?,
                         )
                     })?;
                 }
             }
             Layer::Linear(_) => {
+                let blocks = LinearBlocks::of(layer, batch);
                 rec.pass(&format!("nn layer {l} weight gradient"), |rec| {
                     rec.dispatch(
                         &self.linear_wgrad,
@@ -492,8 +547,8 @@ impl Sequential {
                             d_params,
                         }
                         .for_kernel(&self.linear_wgrad)?,
-                        &self.linear_push(l, batch, p),
-                        groups(p, 64)?,
+                        &self.linear_push(l, batch, blocks.weight_gradient),
+                        groups(blocks.weight_gradient, 64)?,
                     )
                 })?;
                 if let Some(d_in) = d_in {
@@ -506,8 +561,8 @@ impl Sequential {
                                 d_input: d_in,
                             }
                             .for_kernel(&self.linear_dinput)?,
-                            &self.linear_push(l, batch, in_floats),
-                            groups(in_floats, 64)?,
+                            &self.linear_push(l, batch, blocks.input_gradient),
+                            groups(blocks.input_gradient, 64)?,
                         )
                     })?;
                 }
