@@ -21,6 +21,10 @@
 //!   encoding, analytic shapes) with a deterministic GPU backward, marching cubes, occupancy / visual
 //!   hull / IoU tools and a ray-marched preview: the field side of implicit-field sphere probing.
 //!
+//! - [`nn`]: neural-network layers (Conv2d, Linear, fused activations) as kernels with a
+//!   deterministic backward and f64 twins, chained by [`nn::Sequential`]: what the
+//!   reconstruction network is built from.
+//!
 //! - [`mod@bench`]: the forward benchmark behind `softvk bench` (scenes, timing, JSON records).
 //!
 //! Every kernel has a CPU twin that tests compare it with.

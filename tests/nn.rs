@@ -35,13 +35,16 @@ const ACTIVATIONS: [Activation; 5] = [
 ];
 
 /// (in_h, in_w, kernel, stride, padding): kernels 3, 4, 5; strides 1, 2; paddings 0, 1, 2; odd
-/// sizes whose output is floored ((7 + 0 − 4) / 2 = 1.5, (9 + 2 − 5) / 2 = 3, (6 + 4 − 5) / 2 = 2.5).
-const CONV_SHAPES: [(u32, u32, u32, u32, u32); 5] = [
+/// sizes whose output is floored ((7 + 0 − 4) / 2 = 1.5, (9 + 2 − 5) / 2 = 3, (6 + 4 − 5) / 2 = 2.5);
+/// rows wide enough for several of the kernels' 4-column blocks, with a partial last one.
+const CONV_SHAPES: [(u32, u32, u32, u32, u32); 7] = [
     (5, 6, 3, 1, 0),
     (7, 6, 4, 2, 0),
     (6, 7, 4, 2, 1),
     (9, 7, 5, 2, 1),
     (6, 5, 5, 2, 2),
+    (4, 13, 3, 1, 1),
+    (5, 19, 5, 2, 2),
 ];
 
 fn conv(shape: (u32, u32, u32, u32, u32), in_c: u32, out_c: u32, act: Activation) -> Conv2d {
@@ -274,7 +277,8 @@ fn gpu_conv_forward_and_backward_match_the_twin_for_every_activation_and_shape()
             if (a + s) % 2 == 1 && a != 0 {
                 continue;
             }
-            let layer = Layer::Conv2d(conv(shape, 3, 4, act));
+            // 3 and 5 channels: the kernels' 4-channel blocks, one partial.
+            let layer = Layer::Conv2d(conv(shape, 3, 5, act));
             check_network(&ctx, &[layer], 2, (10 * a + s) as u64, true);
         }
     }

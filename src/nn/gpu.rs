@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use bytemuck::{Pod, Zeroable};
 
-use super::{Activation, Layer, param_offsets, validate_chain};
+use super::{Activation, Conv2d, Layer, param_offsets, validate_chain};
 use crate::error::{Error, LimitKind, Result};
 use crate::fit::{check_binding, groups};
 use crate::gpu::{
@@ -57,6 +57,67 @@ struct SumPush {
     cols: u32,
     dst_offset: u32,
     pad: u32,
+}
+
+/// Invocations per sample of the conv kernels, which each compute a block of 4 channels × 4
+/// columns (see the kernels' headers).
+pub(crate) struct ConvBlocks {
+    /// `nn_conv_forward`: 4 output channels × 4 adjacent columns of one output row.
+    pub forward: u64,
+    /// `nn_conv_dinput`: 4 input channels × 4 columns of one input row sharing a residue mod s.
+    pub input_gradient: u64,
+    /// `nn_conv_wgrad`: 4 output × 4 input channels per tap, then one per bias.
+    pub weight_gradient: u64,
+}
+
+impl ConvBlocks {
+    pub fn of(c: &Conv2d) -> Self {
+        let by4 = |n: u32| u64::from(n.div_ceil(4));
+        let (k, s) = (u64::from(c.kernel), u64::from(c.stride));
+        Self {
+            forward: by4(c.out_channels) * u64::from(c.out_h()) * by4(c.out_w()),
+            input_gradient: by4(c.in_channels)
+                * u64::from(c.in_h)
+                * s
+                * u64::from(c.in_w.div_ceil(c.stride)).div_ceil(4),
+            weight_gradient: by4(c.out_channels) * by4(c.in_channels) * k * k
+                + u64::from(c.out_channels),
+        }
+    }
+}
+
+/// Invocations of the linear kernels for a batch, which each compute a block of 4 × 4 (see the
+/// kernels' headers).
+struct LinearBlocks {
+    /// `nn_linear_forward`: 4 outputs × 4 samples.
+    forward: u64,
+    /// `nn_linear_dinput`: 4 inputs × 4 samples.
+    input_gradient: u64,
+    /// `nn_linear_wgrad`: 4 outputs × 4 inputs, then one per bias.
+    weight_gradient: u64,
+}
+
+impl LinearBlocks {
+    fn of(layer: &Layer, batch: u32) -> Self {
+        let by4 = |n: u64| n.div_ceil(4);
+        let (i, o) = (layer.input_len(), layer.output_len());
+        let b = by4(u64::from(batch));
+        Self {
+            forward: by4(o) * b,
+            input_gradient: by4(i) * b,
+            weight_gradient: by4(o) * by4(i) + o,
+        }
+    }
+}
+
+/// The caller's ranges of one backward.
+#[derive(Clone, Copy)]
+struct BackwardBuffers<'a> {
+    params: BufferRange<'a>,
+    input: BufferRange<'a>,
+    d_output: BufferRange<'a>,
+    d_params: BufferRange<'a>,
+    d_input: Option<BufferRange<'a>>,
 }
 
 /// Where a gradient of the backward lives: the caller's d_output, or one of the two scratch
@@ -287,19 +348,21 @@ impl Sequential {
             };
             let y = self.outputs[l].range(0, 4 * n * layer.output_len());
             let kernel = &self.forward[l];
-            let total = n * layer.output_len();
-            match layer {
-                Layer::Conv2d(_) => rec.dispatch(
-                    kernel,
-                    &specs::NnConvForwardBindings {
-                        params,
-                        input: x,
-                        output: y,
-                    }
-                    .for_kernel(kernel)?,
-                    &self.conv_push(l, batch, total),
-                    groups(total, 64)?,
-                )?,
+            rec.pass(&format!("nn forward layer {l}"), |rec| match layer {
+                Layer::Conv2d(c) => {
+                    let blocks = n * ConvBlocks::of(c).forward;
+                    rec.dispatch(
+                        kernel,
+                        &specs::NnConvForwardBindings {
+                            params,
+                            input: x,
+                            output: y,
+                        }
+                        .for_kernel(kernel)?,
+                        &self.conv_push(l, batch, blocks),
+                        groups(blocks, 64)?,
+                    )
+                }
                 Layer::Linear(_) => rec.dispatch(
                     kernel,
                     &specs::NnLinearForwardBindings {
@@ -308,10 +371,10 @@ impl Sequential {
                         output: y,
                     }
                     .for_kernel(kernel)?,
-                    &self.linear_push(l, batch, total),
-                    groups(total, 64)?,
-                )?,
-            }
+                    &self.linear_push(l, batch, LinearBlocks::of(layer, batch).forward),
+                    groups(LinearBlocks::of(layer, batch).forward, 64)?,
+                ),
+            })?;
         }
         Ok(())
     }
@@ -348,23 +411,56 @@ impl Sequential {
         if batch == 0 {
             return Ok(());
         }
+        let buffers = BackwardBuffers {
+            params,
+            input,
+            d_output,
+            d_params,
+            d_input,
+        };
         let mut d_out = Slot::Caller;
-        for (l, layer) in self.layers.iter().enumerate().rev() {
-            let range = |slot: Slot, floats: u64| match slot {
-                Slot::Caller => d_output.sub(0, 4 * floats),
-                Slot::Scratch(i) => self.scratch[i].range(0, 4 * floats),
-            };
-            let out_floats = n * layer.output_len();
-            let in_floats = n * layer.input_len();
-            let x = match l {
-                0 => input.sub(0, 4 * in_floats),
-                _ => self.outputs[l - 1].range(0, 4 * in_floats),
-            };
-            // dL/d(pre-activation): the identity's is dL/d(output) itself.
-            let d_pre_slot = match &self.act_backward[l] {
-                None => d_out,
-                Some(kernel) => {
-                    let slot = d_out.other();
+        for l in (0..self.layers.len()).rev() {
+            d_out = rec.pass(&format!("nn backward layer {l}"), |rec| {
+                self.record_layer_backward(rec, &buffers, l, d_out, batch)
+            })?;
+        }
+        Ok(())
+    }
+
+    /// Layer `l`'s backward from dL/d(its output) in `d_out`; returns where dL/d(its input) went.
+    fn record_layer_backward(
+        &self,
+        rec: &mut Recorder<'_>,
+        buffers: &BackwardBuffers<'_>,
+        l: usize,
+        d_out: Slot,
+        batch: u32,
+    ) -> Result<Slot> {
+        let BackwardBuffers {
+            params,
+            input,
+            d_output,
+            d_params,
+            d_input,
+        } = *buffers;
+        let n = u64::from(batch);
+        let layer = &self.layers[l];
+        let range = |slot: Slot, floats: u64| match slot {
+            Slot::Caller => d_output.sub(0, 4 * floats),
+            Slot::Scratch(i) => self.scratch[i].range(0, 4 * floats),
+        };
+        let out_floats = n * layer.output_len();
+        let in_floats = n * layer.input_len();
+        let x = match l {
+            0 => input.sub(0, 4 * in_floats),
+            _ => self.outputs[l - 1].range(0, 4 * in_floats),
+        };
+        // dL/d(pre-activation): the identity's is dL/d(output) itself.
+        let d_pre_slot = match &self.act_backward[l] {
+            None => d_out,
+            Some(kernel) => {
+                let slot = d_out.other();
+                rec.pass(&format!("nn layer {l} act"), |rec| {
                     rec.dispatch(
                         kernel,
                         &specs::NnActBackwardBindings {
@@ -377,21 +473,24 @@ impl Sequential {
                             n: out_floats as u32,
                         },
                         groups(out_floats, 64)?,
-                    )?;
-                    slot
-                }
-            };
-            let d_pre = range(d_pre_slot, out_floats);
-            let d_in_slot = d_pre_slot.other();
-            let d_in = match (l, &d_input) {
-                (0, None) => None,
-                (0, Some(d)) => Some(d.sub(0, 4 * in_floats)),
-                _ => Some(range(d_in_slot, in_floats)),
-            };
-            let p = layer.param_count();
-            match layer {
-                Layer::Conv2d(_) => {
-                    let partial = self.partial.range(0, 4 * n * p);
+                    )
+                })?;
+                slot
+            }
+        };
+        let d_pre = range(d_pre_slot, out_floats);
+        let d_in_slot = d_pre_slot.other();
+        let d_in = match (l, &d_input) {
+            (0, None) => None,
+            (0, Some(d)) => Some(d.sub(0, 4 * in_floats)),
+            _ => Some(range(d_in_slot, in_floats)),
+        };
+        let p = layer.param_count();
+        match layer {
+            Layer::Conv2d(c) => {
+                let blocks = ConvBlocks::of(c);
+                let partial = self.partial.range(0, 4 * n * p);
+                rec.pass(&format!("nn layer {l} weight gradient"), |rec| {
                     rec.dispatch(
                         &self.conv_wgrad,
                         &specs::NnConvWgradBindings {
@@ -400,9 +499,11 @@ impl Sequential {
                             partial,
                         }
                         .for_kernel(&self.conv_wgrad)?,
-                        &self.conv_push(l, batch, n * p),
-                        groups(n * p, 64)?,
-                    )?;
+                        &self.conv_push(l, batch, n * blocks.weight_gradient),
+                        groups(n * blocks.weight_gradient, 64)?,
+                    )
+                })?;
+                rec.pass(&format!("nn layer {l} batch sum"), |rec| {
                     rec.dispatch(
                         &self.sum_rows,
                         &specs::NnSumRowsBindings {
@@ -417,8 +518,10 @@ impl Sequential {
                             pad: 0,
                         },
                         groups(p, 64)?,
-                    )?;
-                    if let Some(d_in) = d_in {
+                    )
+                })?;
+                if let Some(d_in) = d_in {
+                    rec.pass(&format!("nn layer {l} input gradient"), |rec| {
                         rec.dispatch(
                             &self.conv_dinput,
                             &specs::NnConvDinputBindings {
@@ -427,12 +530,15 @@ impl Sequential {
                                 d_input: d_in,
                             }
                             .for_kernel(&self.conv_dinput)?,
-                            &self.conv_push(l, batch, in_floats),
-                            groups(in_floats, 64)?,
-                        )?;
-                    }
+                            &self.conv_push(l, batch, n * blocks.input_gradient),
+                            groups(n * blocks.input_gradient, 64)?,
+                        )
+                    })?;
                 }
-                Layer::Linear(_) => {
+            }
+            Layer::Linear(_) => {
+                let blocks = LinearBlocks::of(layer, batch);
+                rec.pass(&format!("nn layer {l} weight gradient"), |rec| {
                     rec.dispatch(
                         &self.linear_wgrad,
                         &specs::NnLinearWgradBindings {
@@ -441,10 +547,12 @@ impl Sequential {
                             d_params,
                         }
                         .for_kernel(&self.linear_wgrad)?,
-                        &self.linear_push(l, batch, p),
-                        groups(p, 64)?,
-                    )?;
-                    if let Some(d_in) = d_in {
+                        &self.linear_push(l, batch, blocks.weight_gradient),
+                        groups(blocks.weight_gradient, 64)?,
+                    )
+                })?;
+                if let Some(d_in) = d_in {
+                    rec.pass(&format!("nn layer {l} input gradient"), |rec| {
                         rec.dispatch(
                             &self.linear_dinput,
                             &specs::NnLinearDinputBindings {
@@ -453,15 +561,14 @@ impl Sequential {
                                 d_input: d_in,
                             }
                             .for_kernel(&self.linear_dinput)?,
-                            &self.linear_push(l, batch, in_floats),
-                            groups(in_floats, 64)?,
-                        )?;
-                    }
+                            &self.linear_push(l, batch, blocks.input_gradient),
+                            groups(blocks.input_gradient, 64)?,
+                        )
+                    })?;
                 }
             }
-            d_out = d_in_slot;
         }
-        Ok(())
+        Ok(d_in_slot)
     }
 
     fn conv_push(&self, l: usize, batch: u32, total: u64) -> ConvPush {

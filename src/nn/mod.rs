@@ -22,7 +22,7 @@
 //! **Loop bounds.** On llvmpipe ([`crate::gpu::DeviceInfo::shader_loop_limit`]) the loops of one
 //! invocation grow with the layer's size (a conv's `in_channels · kernel²`, a linear's inputs
 //! and outputs, the batch, a conv's `out_h · out_w`): a network or batch capacity over the cap is
-//! refused up front with [`Error::DeviceLimit`] of kind [`LimitKind::LoopIterations`].
+//! refused up front with [`Error::DeviceLimit`] of kind [`LoopIterations`](crate::LimitKind::LoopIterations).
 
 pub mod cpu;
 mod gpu;
@@ -244,6 +244,8 @@ impl Layer {
     /// loops and one exit per loop entered): what [`Sequential::new`] checks against the
     /// device's [`shader_loop_limit`](crate::gpu::DeviceInfo::shader_loop_limit).
     pub fn loop_iterations(&self, batch: u32) -> u64 {
+        // Each kernel's 4 × 4 block store loops up to 4 + 16 more times.
+        const STORES: u64 = 32;
         let batch = u64::from(batch);
         match self {
             Layer::Conv2d(c) => {
@@ -254,17 +256,17 @@ impl Layer {
                 );
                 let m = k.div_ceil(u64::from(c.stride));
                 let (oh, ow) = (u64::from(c.out_h()), u64::from(c.out_w()));
-                let forward = ci * (k * k + 2 * k + 2) + 1;
-                let d_input = co * (m * m + 2 * m + 2) + 1;
+                let forward = ci * (k * k + 2 * k + 2) + 1 + STORES;
+                let d_input = co * (m * m + 2 * m + 2) + 1 + STORES;
                 // Both branches (bias, weight) count: llvmpipe may run both.
-                let w_grad = (oh * ow + 1) + (oh * (ow + 2) + 1);
+                let w_grad = (oh * ow + 1) + (oh * (ow + 2) + 1) + STORES;
                 let reduce = batch + 1;
                 forward.max(d_input).max(w_grad).max(reduce)
             }
             Layer::Linear(l) => {
-                let forward = u64::from(l.in_features) + 1;
-                let d_input = u64::from(l.out_features) + 1;
-                let w_grad = 2 * (batch + 1);
+                let forward = u64::from(l.in_features) + 1 + STORES;
+                let d_input = u64::from(l.out_features) + 1 + STORES;
+                let w_grad = 2 * (batch + 1) + STORES;
                 forward.max(d_input).max(w_grad)
             }
         }
