@@ -328,11 +328,20 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
             if let Some(val) = &val {
                 let iou = validate(&ctx, opts.net, trainer.read_params()?, val, &val_views)?;
                 vals.push([f64::from(last), iou]);
-                bar.println(format!("iteration {last}: validation 3D IoU {iou:.4}"));
+                let line = format!(
+                    "iteration {last}: L_sil {:.4}, validation 3D IoU {iou:.4}",
+                    l.silhouette
+                );
+                if bar.is_hidden() {
+                    eprintln!("{line}");
+                } else {
+                    bar.println(line);
+                }
             }
         }
         if last == boundary || last == args.iters || interrupted {
             save(&trainer, last, &log, &vals)?;
+            write_train_report(&dir, &log, &vals)?;
         }
         if interrupted {
             break;
@@ -340,7 +349,6 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
         it = last + 1;
     }
     bar.finish_and_clear();
-    write_train_report(&dir, &log, &vals)?;
     if done < args.iters {
         eprintln!(
             "softvk: stopped after iteration {done} of {}; `--resume` goes on from {}",
