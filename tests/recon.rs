@@ -63,7 +63,12 @@ fn decoder_forward_and_backward_match_the_twin_and_rerun_bit_for_bit() {
     let pos = mk("positions", (objects * copies) as usize * 3 * v);
     let d_out = mk("d outputs", objects as usize * per);
     let partials = dec.create_partials(&ctx, objects).unwrap();
-    let run = || -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+    let colors = mk("colours", (objects * copies) as usize * 4 * v);
+    let d_colors: Vec<f32> = (0..(objects * copies) as usize * 3 * v)
+        .map(|_| r.random_range(-1.0f32..1.0))
+        .collect();
+    let dcol_b = up("d colours", &d_colors);
+    let run = || -> (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>) {
         ctx.submit_and_wait(|rec| {
             dec.record_forward(
                 rec,
@@ -84,6 +89,15 @@ fn decoder_forward_and_backward_match_the_twin_and_rerun_bit_for_bit() {
                 dp_b.whole(),
                 d_out.whole(),
                 partials.whole(),
+            )?;
+            dec.record_colors(rec, objects, copies, out_b.whole(), colors.whole())?;
+            dec.record_colors_backward(
+                rec,
+                objects,
+                copies,
+                out_b.whole(),
+                dcol_b.whole(),
+                d_out.whole(),
             )
         })
         .unwrap();
@@ -93,6 +107,8 @@ fn decoder_forward_and_backward_match_the_twin_and_rerun_bit_for_bit() {
             ctx.read_buffer(&pos, 0, (objects * copies) as usize * 3 * v)
                 .unwrap(),
             ctx.read_buffer(&d_out, 0, objects as usize * per).unwrap(),
+            ctx.read_buffer(&colors, 0, (objects * copies) as usize * 4 * v)
+                .unwrap(),
         )
     };
     let first = run();
@@ -100,7 +116,7 @@ fn decoder_forward_and_backward_match_the_twin_and_rerun_bit_for_bit() {
     let f64s = |x: &[f32]| x.iter().map(|&a| f64::from(a)).collect::<Vec<f64>>();
     let rot64: Vec<[f64; 2]> = rotations.iter().map(|r| r.map(f64::from)).collect();
     let (c, p) = decode::cpu::forward(&base, &signs, &f64s(&outputs), &rot64, copies as usize);
-    let d = decode::cpu::backward(
+    let mut d = decode::cpu::backward(
         &base,
         &signs,
         &f64s(&outputs),
@@ -119,9 +135,25 @@ fn decoder_forward_and_backward_match_the_twin_and_rerun_bit_for_bit() {
         "copies {}",
         max_rel(&first.1, &p)
     );
-    // The displacements' and the centroids' gradients, each against its own scale.
-    let (disp, cent): (Vec<usize>, Vec<usize>) = (0..d.len()).partition(|i| i % per < 3 * v);
-    for (what, idx) in [("displacement", disp), ("centroid", cent)] {
+    let d_col64: Vec<[f64; 3]> = d_colors
+        .chunks(3)
+        .map(|c| [c[0], c[1], c[2]].map(f64::from))
+        .collect();
+    decode::cpu::colors_backward(&f64s(&outputs), v, copies as usize, &d_col64, &mut d);
+    let col = decode::cpu::colors(&f64s(&outputs), v, copies as usize);
+    let got_col: Vec<f32> = first.3.chunks(4).flat_map(|c| [c[0], c[1], c[2]]).collect();
+    let want_col: Vec<f64> = col.iter().flatten().copied().collect();
+    assert!(max_rel(&got_col, &want_col) < 1e-6, "colours");
+    assert!(first.3.chunks(4).all(|c| c[3] == 0.0));
+    // The displacements', the centroids' and the colours' gradients, each against its own
+    // scale.
+    let group = |i: &usize| match i % per {
+        x if x < 3 * v => 0,
+        x if x < 3 * v + 3 => 1,
+        _ => 2,
+    };
+    for (g_id, what) in ["displacement", "centroid", "colour"].iter().enumerate() {
+        let idx: Vec<usize> = (0..d.len()).filter(|i| group(i) == g_id).collect();
         let g: Vec<f32> = idx.iter().map(|&i| first.2[i]).collect();
         let tw: Vec<f64> = idx.iter().map(|&i| d[i]).collect();
         assert!(
@@ -177,6 +209,7 @@ fn batch_gather_equals_its_twin_bit_for_bit() {
         mk("targets", 2 * n * px),
         mk("rot", 4 * n),
     );
+    let target_images = mk("target images", 8 * n * px);
     let gather = BatchGather::new(&ctx).unwrap();
     for it in [2u32, 0] {
         ctx.submit_and_wait(|rec| {
@@ -191,18 +224,27 @@ fn batch_gather_equals_its_twin_bit_for_bit() {
                     input: input.whole(),
                     targets: targets.whole(),
                     rotations: rotations.whole(),
+                    target_images: target_images.whole(),
                 },
             )
         })
         .unwrap();
-        let (i, t, rot) = batch::cpu::gather(&bytes, &schedule, &table, shape, it);
+        let want = batch::cpu::gather(&bytes, &schedule, &table, shape, it);
+        let (i, t, rot) = (&want.input, &want.targets, &want.rotations);
         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         let got_i: Vec<f32> = ctx.read_buffer(&input, 0, 4 * n * px).unwrap();
         let got_t: Vec<f32> = ctx.read_buffer(&targets, 0, 2 * n * px).unwrap();
         let got_r: Vec<[f32; 2]> = ctx.read_buffer(&rotations, 0, 2 * n).unwrap();
-        assert_eq!(bits(&got_i), bits(&i), "input, iteration {it}");
-        assert_eq!(bits(&got_t), bits(&t), "targets, iteration {it}");
-        assert_eq!(got_r, rot, "rotations, iteration {it}");
+        assert_eq!(bits(&got_i), bits(i), "input, iteration {it}");
+        assert_eq!(bits(&got_t), bits(t), "targets, iteration {it}");
+        assert_eq!(&got_r, rot, "rotations, iteration {it}");
+        let got_rgba: Vec<[f32; 4]> = ctx.read_buffer(&target_images, 0, 2 * n * px).unwrap();
+        let flat = |v: &[[f32; 4]]| bits(&v.iter().flatten().copied().collect::<Vec<_>>());
+        assert_eq!(
+            flat(&got_rgba),
+            flat(&want.target_images),
+            "target images, iteration {it}"
+        );
     }
 }
 

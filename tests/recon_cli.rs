@@ -198,7 +198,8 @@ fn a_model_round_trips_through_its_file_and_bad_files_are_refused() {
         .reconstruct(&gpu, &image)
         .unwrap();
     assert_eq!(a, b);
-    assert_eq!(a[0].len(), 642);
+    assert_eq!(a[0].positions.len(), 642);
+    assert_eq!(a[0].colors.len(), 642);
     // Refusals: a parameter count that does not fit the shape, a non-finite parameter, a file
     // that is not a model.
     let short = ReconModel {

@@ -104,6 +104,7 @@ fn one_training_iteration_equals_the_chain_of_twins() {
     assert_eq!(trainer.run(1, 1).unwrap(), None);
     let log = trainer.read_log(1).unwrap();
     let got = trainer.read_gradient().unwrap();
+    assert!(log.color > 0.0, "the colour loss is on");
 
     // The twins.
     let b = opts.batch as usize;
@@ -117,16 +118,19 @@ fn one_training_iteration_equals_the_chain_of_twins() {
         pixels: px as u32,
         views: VIEWS,
     };
-    let (input, targets, rotations) = batch::cpu::gather(&data.images, &schedule, &table, shape, 0);
+    let batch = batch::cpu::gather(&data.images, &schedule, &table, shape, 0);
+    let (input, targets, rotations) = (&batch.input, &batch.targets, &batch.rotations);
     let t = train::template();
-    let layers = opts.net.layers(3 * t.vertex_count() as u64 + 3).unwrap();
+    let vc = t.vertex_count();
+    let layers = opts.net.layers(6 * vc as u64 + 3).unwrap();
     let f64s = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect::<Vec<f64>>();
-    let input = f64s(&input);
+    let input = f64s(input);
     let outs = nn_cpu::sequential_forward(&layers, &params, &input, b);
     let (base, signs) = softvk::fit::deform::cpu::template_terms(&t.positions).unwrap();
     let rot64: Vec<[f64; 2]> = rotations.iter().map(|r| r.map(f64::from)).collect();
     let head = outs.last().unwrap();
     let (meshes, copies) = decode::cpu::forward(&base, &signs, head, &rot64, 2);
+    let colors = decode::cpu::colors(head, vc, 2);
     let n = 3 * t.vertex_count();
     let s = opts.raster_settings();
     let cam = view_camera(0);
@@ -141,18 +145,32 @@ fn one_training_iteration_equals_the_chain_of_twins() {
         {
             *p = [q[0] as f32, q[1] as f32, q[2] as f32];
         }
+        m.vertex_colors = Some(
+            colors[c * vc..(c + 1) * vc]
+                .iter()
+                .map(|k| k.map(|x| x as f32))
+                .collect(),
+        );
         images.extend(reference::render(&m, &cam, &Lighting::unlit(), &s).unwrap());
         copy_meshes.push(m);
     }
-    let iou = silhouette::cpu::neg_iou(&images, &f64s(&targets), 2 * b);
+    let iou = silhouette::cpu::neg_iou(&images, &f64s(targets), 2 * b);
+    let rgba: Vec<[f64; 4]> = batch
+        .target_images
+        .iter()
+        .map(|p| p.map(f64::from))
+        .collect();
+    let (mse, d_mse) = silhouette::cpu::mse(&images, &rgba);
+    let lambda = f64::from(opts.color);
     let mut d_copies = Vec::with_capacity(2 * b * n);
+    let mut d_colors = Vec::with_capacity(2 * b * vc);
     for (c, m) in copy_meshes.iter().enumerate() {
-        let d_image: Vec<[f64; 4]> = iou.d_image[c * px..(c + 1) * px]
-            .iter()
-            .map(|g| g.map(|x| 2.0 * x))
+        let d_image: Vec<[f64; 4]> = (c * px..(c + 1) * px)
+            .map(|p| [0, 1, 2, 3].map(|k| 2.0 * iou.d_image[p][k] + lambda * d_mse[p][k]))
             .collect();
         let g = reference_grad::grad(m, &[cam], &Lighting::unlit(), &s, &d_image).unwrap();
         d_copies.extend(g.positions.iter().flatten());
+        d_colors.extend(g.colors);
     }
     let adjacency = Adjacency::from_faces(&t.faces, t.vertex_count()).unwrap();
     let edges = FlattenEdges::from_faces(&t.faces, t.vertex_count()).unwrap();
@@ -171,8 +189,10 @@ fn one_training_iteration_equals_the_chain_of_twins() {
         }
     }
     let loss = 2.0 * iou.loss
+        + lambda * mse
         + (f64::from(opts.laplacian) * lap_sum + f64::from(opts.flatten) * flat_sum) / b as f64;
-    let d_head = decode::cpu::backward(&base, &signs, head, &rot64, 2, &d_meshes, &d_copies);
+    let mut d_head = decode::cpu::backward(&base, &signs, head, &rot64, 2, &d_meshes, &d_copies);
+    decode::cpu::colors_backward(head, vc, 2, &d_colors, &mut d_head);
     let want = nn_cpu::sequential_backward(&layers, &params, &input, &outs, &d_head, b).d_params;
 
     eprintln!("loss GPU {} vs twins {loss}", log.total);

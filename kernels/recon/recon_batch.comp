@@ -5,6 +5,8 @@
 // entry (object, view a, view b) of each batch slot at iteration `iteration`:
 //   input[b]              = images[object, view a] / 255            (4 × H × W floats)
 //   targets[2b + j]       = alpha of images[object, view j] / 255   (H × W floats)
+//   target_images[2b + j] = images[object, view j] / 255 as RGBA per pixel (the renderer's
+//                           output layout, for the colour loss)
 //   rotations[2b + j]     = view_rotations[view j]                  (the turn about y that
 //                           brings view j's camera to the scene's one camera)
 // One invocation per (slot, pixel). Twin: `crate::recon::batch::cpu::gather`.
@@ -18,6 +20,7 @@ layout(std430, set = 0, binding = 2) readonly buffer ViewRotations { vec2 view_r
 layout(std430, set = 0, binding = 3) writeonly buffer Input { float input_images[]; };
 layout(std430, set = 0, binding = 4) writeonly buffer Targets { float targets[]; };
 layout(std430, set = 0, binding = 5) writeonly buffer Rotations { vec2 rotations[]; };
+layout(std430, set = 0, binding = 6) writeonly buffer TargetImages { vec4 target_images[]; };
 
 layout(push_constant) uniform Push {
     uint batch;
@@ -44,8 +47,13 @@ void main() {
     for (uint ch = 0u; ch < 4u; ++ch) {
         input_images[(4u * b + ch) * pc.pixels + p] = byte_at(view_a + ch * pc.pixels + p);
     }
-    targets[(2u * b) * pc.pixels + p] = byte_at(view_a + 3u * pc.pixels + p);
-    targets[(2u * b + 1u) * pc.pixels + p] = byte_at(view_b + 3u * pc.pixels + p);
+    for (uint j = 0u; j < 2u; ++j) {
+        uint view = j == 0u ? view_a : view_b;
+        vec4 rgba = vec4(byte_at(view + p), byte_at(view + pc.pixels + p),
+                         byte_at(view + 2u * pc.pixels + p), byte_at(view + 3u * pc.pixels + p));
+        targets[(2u * b + j) * pc.pixels + p] = rgba.a;
+        target_images[(2u * b + j) * pc.pixels + p] = rgba;
+    }
     if (p == 0u) {
         rotations[2u * b] = view_rotations[e.y];
         rotations[2u * b + 1u] = view_rotations[e.z];

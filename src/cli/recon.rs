@@ -15,16 +15,16 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use softvk::camera::Camera;
 use softvk::fit::AdamOptions;
-use softvk::fit::io::write_obj;
+use softvk::fit::io::write_obj_colored;
 use softvk::fit::report::{self, GifWriter, Series};
 use softvk::gpu::{Context, ContextOptions};
 use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
 use softvk::raster::gpu::{Method, Renderer};
-use softvk::raster::reference::RasterSettings;
+use softvk::raster::reference::{ColorMode, RasterSettings};
 use softvk::recon::dataset::{self, ClassData, Dataset, Split};
 use softvk::recon::eval::{self, Mask, ScoreRow};
-use softvk::recon::model::{ReconModel, Reconstructor, TrainState};
+use softvk::recon::model::{ReconModel, Reconstruction, Reconstructor, TrainState};
 use softvk::recon::train::{self, NetShape, ReconTrainer, TrainImages, TrainOptions};
 use softvk::{Error, Result};
 
@@ -439,9 +439,8 @@ pub fn recon(args: &ReconArgs) -> Result<()> {
     let input = read_input(&args.image, model.net.image)?;
     let ctx = Context::new(&ContextOptions::from_env())?;
     let recon = Reconstructor::new(&ctx, &model, 1)?;
-    let positions = recon.reconstruct(&ctx, &input)?.remove(0);
-    let mut mesh = train::template();
-    mesh.positions = positions;
+    let r = recon.reconstruct(&ctx, &input)?.remove(0);
+    let mesh = colored_mesh(r);
     let stem = args
         .out
         .file_stem()
@@ -452,22 +451,42 @@ pub fn recon(args: &ReconArgs) -> Result<()> {
             .map_err(|e| Error::Input(format!("cannot create {}: {e}", parent.display())))?;
     }
     write_turntable(&ctx, &gif, &mesh, &input, model.net.image)?;
-    write_obj(&args.out, &mesh.positions, &mesh.faces)?;
+    write_obj_colored(
+        &args.out,
+        &mesh.positions,
+        mesh.vertex_colors.as_deref(),
+        &mesh.faces,
+    )?;
     println!("wrote {} and {}", args.out.display(), gif.display());
     Ok(())
+}
+
+/// The template with a reconstruction's positions and vertex colours.
+fn colored_mesh(r: Reconstruction) -> Mesh {
+    let mut mesh = train::template();
+    mesh.positions = r.positions;
+    mesh.vertex_colors = Some(r.colors);
+    mesh
+}
+
+/// Renders of reconstructions: their vertex colours under the default light (the colour head
+/// learned the views' shaded colours; the light shows the shape even where it did not), crisp.
+fn view_settings(size: u32) -> RasterSettings {
+    RasterSettings {
+        width: size,
+        height: size,
+        sigma: 1e-5,
+        gamma: 1e-4,
+        color_mode: ColorMode::Vertex,
+        ..RasterSettings::default()
+    }
 }
 
 /// The reconstruction shaded, turning (24 frames at the dataset's elevation and distance),
 /// beside the input.
 fn write_turntable(ctx: &Context, path: &Path, mesh: &Mesh, input: &[u8], size: u32) -> Result<()> {
     const SIZE: u32 = 128;
-    let settings = RasterSettings {
-        width: SIZE,
-        height: SIZE,
-        sigma: 1e-5,
-        gamma: 1e-4,
-        ..RasterSettings::default()
-    };
+    let settings = view_settings(SIZE);
     let cams: Vec<Camera> = (0..dataset::VIEWS).map(dataset::view_camera).collect();
     let frames = Renderer::new(ctx)?.render_views(
         ctx,
@@ -588,21 +607,14 @@ fn write_examples(ctx: &Context, recon: &Reconstructor, test: &Dataset, dir: &Pa
     const SIZE: u32 = 128;
     let size = dataset::IMAGE_SIZE as u32;
     let px = (size * size) as usize;
-    let settings = RasterSettings {
-        width: SIZE,
-        height: SIZE,
-        sigma: 1e-5,
-        gamma: 1e-4,
-        ..RasterSettings::default()
-    };
+    let settings = view_settings(SIZE);
     let renderer = Renderer::new(ctx)?;
     let mut rows: Vec<image::RgbaImage> = Vec::new();
     for class in &test.classes {
         let mut cells: Vec<(String, Vec<[f32; 4]>)> = Vec::new();
         for v in [0usize, 9] {
             let input = class.image(0, v);
-            let mut mesh = train::template();
-            mesh.positions = recon.reconstruct(ctx, input)?.remove(0);
+            let mesh = colored_mesh(recon.reconstruct(ctx, input)?.remove(0));
             let shaded = renderer.render_views(
                 ctx,
                 &mesh,

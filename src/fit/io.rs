@@ -418,6 +418,27 @@ pub fn write_cameras(path: &Path, rows: &[CameraRow]) -> Result<()> {
 ///
 /// [`Mesh::load_obj`]: crate::mesh::Mesh::load_obj
 pub fn write_obj(path: &Path, positions: &[[f32; 3]], faces: &[[u32; 3]]) -> Result<()> {
+    write_obj_colored(path, positions, None, faces)
+}
+
+/// [`write_obj`] with a colour per vertex, as the common `v x y z r g b` extension (read by
+/// MeshLab, Blender and tobj); `colors` must hold one per vertex, else [`Error::Input`].
+pub fn write_obj_colored(
+    path: &Path,
+    positions: &[[f32; 3]],
+    colors: Option<&[[f32; 3]]>,
+    faces: &[[u32; 3]],
+) -> Result<()> {
+    if let Some(c) = colors
+        && c.len() != positions.len()
+    {
+        return Err(Error::Input(format!(
+            "mesh for {}: {} colours for {} vertices",
+            path.display(),
+            c.len(),
+            positions.len()
+        )));
+    }
     if let Some(v) = positions
         .iter()
         .position(|p| !p.iter().all(|c| c.is_finite()))
@@ -446,9 +467,9 @@ pub fn write_obj(path: &Path, positions: &[[f32; 3]], faces: &[[u32; 3]]) -> Res
         positions.len(),
         faces.len()
     );
-    for p in positions {
+    for (i, p) in positions.iter().enumerate() {
         text.push('v');
-        for &c in p {
+        for &c in p.iter().chain(colors.map_or(&[][..], |c| &c[i][..])) {
             text.push(' ');
             push_f32(&mut text, c);
         }

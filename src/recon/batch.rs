@@ -53,6 +53,8 @@ pub struct BatchBuffers<'a> {
     pub targets: BufferRange<'a>,
     /// Out: `2 batch` `(cos φ, sin φ)`.
     pub rotations: BufferRange<'a>,
+    /// Out: `2 batch × pixels` RGBA (4 floats per pixel).
+    pub target_images: BufferRange<'a>,
 }
 
 impl BatchGather {
@@ -91,6 +93,7 @@ impl BatchGather {
         check("batch: input", &b.input, 4 * n * px)?;
         check("batch: targets", &b.targets, 2 * n * px)?;
         check("batch: rotations", &b.rotations, 4 * n)?;
+        check("batch: target images", &b.target_images, 8 * n * px)?;
         if b.images.size < shape.views as u64 * 4 * px {
             return Err(Error::Input(format!(
                 "batch: the images buffer `{}` holds less than one object",
@@ -106,6 +109,7 @@ impl BatchGather {
                 input: b.input,
                 targets: b.targets,
                 rotations: b.rotations,
+                target_images: b.target_images,
             }
             .for_kernel(&self.kernel)?,
             &BatchPush {
@@ -124,15 +128,27 @@ pub mod cpu {
     use super::BatchShape;
     use crate::error::{Error, Result};
 
-    /// `(input, targets, rotations)` of schedule row `iteration`, as the kernel computes them
-    /// (bytes as `f32` times the `f32` nearest 1/255).
+    /// What [`gather`] gives: the kernel's outputs.
+    pub struct Gathered {
+        /// The encoder's input, `batch × 4 × pixels`.
+        pub input: Vec<f32>,
+        /// The copies' alphas, `2 batch × pixels`.
+        pub targets: Vec<f32>,
+        /// The copies' rotations.
+        pub rotations: Vec<[f32; 2]>,
+        /// The copies' RGBA per pixel.
+        pub target_images: Vec<[f32; 4]>,
+    }
+
+    /// The batch of schedule row `iteration`, as the kernel computes it (bytes as `f32` times
+    /// the `f32` nearest 1/255).
     pub fn gather(
         images: &[u8],
         schedule: &[[u32; 4]],
         view_rotations: &[[f32; 2]],
         shape: BatchShape,
         iteration: u32,
-    ) -> (Vec<f32>, Vec<f32>, Vec<[f32; 2]>) {
+    ) -> Gathered {
         let (n, px, views) = (
             shape.batch as usize,
             shape.pixels as usize,
@@ -142,6 +158,7 @@ pub mod cpu {
         let mut input = vec![0.0; 4 * n * px];
         let mut targets = vec![0.0; 2 * n * px];
         let mut rotations = vec![[0.0; 2]; 2 * n];
+        let mut target_images = vec![[0.0; 4]; 2 * n * px];
         for b in 0..n {
             let [o, va, vb, _] = schedule[iteration as usize * n + b].map(|x| x as usize);
             let view = |v: usize| &images[(o * views + v) * 4 * px..(o * views + v + 1) * 4 * px];
@@ -156,9 +173,18 @@ pub mod cpu {
                     *dst = f32::from(src) * scale;
                 }
                 rotations[2 * b + j] = view_rotations[v];
+                for p in 0..px {
+                    target_images[(2 * b + j) * px + p] =
+                        [0, 1, 2, 3].map(|c| f32::from(view(v)[c * px + p]) * scale);
+                }
             }
         }
-        (input, targets, rotations)
+        Gathered {
+            input,
+            targets,
+            rotations,
+            target_images,
+        }
     }
 
     /// [`Error::Input`] unless every entry names an object below `objects` and views below

@@ -55,6 +55,8 @@ pub struct MeshDecoder {
     forward: Kernel,
     backward: Kernel,
     centroid: Kernel,
+    colors: Kernel,
+    colors_backward: Kernel,
     vertex_count: u32,
     base: Buffer,
     signs: Buffer,
@@ -87,6 +89,8 @@ impl MeshDecoder {
             forward: Kernel::new(ctx, &specs::RECON_DECODE)?,
             backward: Kernel::new(ctx, &specs::RECON_DECODE_BACKWARD)?,
             centroid: Kernel::new(ctx, &specs::RECON_CENTROID_GRAD)?,
+            colors: Kernel::new(ctx, &specs::RECON_COLORS)?,
+            colors_backward: Kernel::new(ctx, &specs::RECON_COLORS_BACKWARD)?,
             vertex_count,
             base: ctx.upload_buffer("decoder template base", &to_f32(&base))?,
             signs: ctx.upload_buffer("decoder template signs", &to_f32(&signs))?,
@@ -98,9 +102,10 @@ impl MeshDecoder {
         self.vertex_count
     }
 
-    /// Network outputs per object: `3 V` displacements, then the centroid's 3.
+    /// Network outputs per object: `3 V` displacements, the centroid's 3, then the colour
+    /// head's `3 V` (per vertex RGB logits).
     pub fn outputs_per_object(&self) -> u64 {
-        3 * u64::from(self.vertex_count) + 3
+        6 * u64::from(self.vertex_count) + 3
     }
 
     /// Bytes of the scratch [`Self::record_backward`] needs for `objects` objects.
@@ -251,13 +256,71 @@ impl MeshDecoder {
     }
 }
 
+impl MeshDecoder {
+    /// Records the colour head for `objects` objects of `copies` copies each: `outputs` →
+    /// `colors`, the renderer's vertex colours (RGB and an unused float per vertex, mesh after
+    /// mesh, copy `k` of object `b` as mesh `b · copies + k`).
+    pub fn record_colors(
+        &self,
+        rec: &mut Recorder<'_>,
+        objects: u32,
+        copies: u32,
+        outputs: BufferRange<'_>,
+        colors: BufferRange<'_>,
+    ) -> Result<()> {
+        let (b, v) = (u64::from(objects), u64::from(self.vertex_count));
+        crate::fit::check_floats("decoder: outputs", &outputs, b * self.outputs_per_object())?;
+        crate::fit::check_floats("decoder: colours", &colors, 4 * b * u64::from(copies) * v)?;
+        rec.dispatch(
+            &self.colors,
+            &specs::ReconColorsBindings { outputs, colors }.for_kernel(&self.colors)?,
+            &self.push(objects, copies),
+            crate::fit::groups(v * b, 64)?,
+        )
+    }
+
+    /// Records the colour head's backward: dL/d(colours) (3 floats per copy vertex, the
+    /// renderer's backward's layout; zeros for a loss without colour) → the colour head's
+    /// slots of dL/d(`outputs`) (overwritten; the mesh head's slots are left alone).
+    pub fn record_colors_backward(
+        &self,
+        rec: &mut Recorder<'_>,
+        objects: u32,
+        copies: u32,
+        outputs: BufferRange<'_>,
+        d_colors: BufferRange<'_>,
+        d_outputs: BufferRange<'_>,
+    ) -> Result<()> {
+        let (b, v) = (u64::from(objects), u64::from(self.vertex_count));
+        let n = b * self.outputs_per_object();
+        crate::fit::check_floats("decoder: outputs", &outputs, n)?;
+        crate::fit::check_floats(
+            "decoder: d_colours",
+            &d_colors,
+            3 * b * u64::from(copies) * v,
+        )?;
+        crate::fit::check_floats("decoder: d_outputs", &d_outputs, n)?;
+        rec.dispatch(
+            &self.colors_backward,
+            &specs::ReconColorsBackwardBindings {
+                outputs,
+                d_colors,
+                d_outputs,
+            }
+            .for_kernel(&self.colors_backward)?,
+            &self.push(objects, copies),
+            crate::fit::groups(v * b, 64)?,
+        )
+    }
+}
+
 /// CPU twin, in f64.
 pub mod cpu {
     fn sigmoid(x: f64) -> f64 {
         1.0 / (1.0 + (-x).exp())
     }
 
-    /// `(object meshes, copy positions)` from the outputs (`objects × (3 V + 3)`), the
+    /// `(object meshes, copy positions)` from the outputs (`objects × (6 V + 3)`), the
     /// template's terms ([`crate::fit::deform::cpu::template_terms`]) and the rotations
     /// (`(cos φ, sin φ)` per copy, object-major).
     pub fn forward(
@@ -268,7 +331,7 @@ pub mod cpu {
         copies: usize,
     ) -> (Vec<f64>, Vec<f64>) {
         let n = base.len();
-        let stride = n + 3;
+        let stride = 2 * n + 3;
         let objects = outputs.len() / stride;
         let mut canonical = vec![0.0; objects * n];
         let mut positions = vec![0.0; objects * copies * n];
@@ -294,7 +357,8 @@ pub mod cpu {
         (canonical, positions)
     }
 
-    /// dL/d(outputs) from dL/d(object meshes) and dL/d(copy positions).
+    /// dL/d(outputs) from dL/d(object meshes) and dL/d(copy positions) (the colour head's
+    /// slots 0: see [`colors_backward`]).
     pub fn backward(
         base: &[f64],
         signs: &[f64],
@@ -305,7 +369,7 @@ pub mod cpu {
         d_positions: &[f64],
     ) -> Vec<f64> {
         let n = base.len();
-        let stride = n + 3;
+        let stride = 2 * n + 3;
         let objects = outputs.len() / stride;
         let mut d = vec![0.0; outputs.len()];
         for b in 0..objects {
@@ -341,6 +405,48 @@ pub mod cpu {
         }
         d
     }
+
+    /// The copies' vertex colours (RGB per vertex, mesh after mesh) from the outputs'
+    /// colour heads (`vertices` per object).
+    pub fn colors(outputs: &[f64], vertices: usize, copies: usize) -> Vec<[f64; 3]> {
+        let stride = 6 * vertices + 3;
+        let mut out = Vec::new();
+        for r in outputs.chunks(stride) {
+            let c: Vec<[f64; 3]> = (0..vertices)
+                .map(|i| [0, 1, 2].map(|k| sigmoid(r[3 * vertices + 3 + 3 * i + k])))
+                .collect();
+            for _ in 0..copies {
+                out.extend_from_slice(&c);
+            }
+        }
+        out
+    }
+
+    /// Adds to `d_outputs` the colour heads' gradient from dL/d(copy colours).
+    pub fn colors_backward(
+        outputs: &[f64],
+        vertices: usize,
+        copies: usize,
+        d_colors: &[[f64; 3]],
+        d_outputs: &mut [f64],
+    ) {
+        let stride = 6 * vertices + 3;
+        for b in 0..outputs.len() / stride {
+            for i in 0..vertices {
+                let mut g = [0.0; 3];
+                for j in 0..copies {
+                    for (gk, d) in g.iter_mut().zip(d_colors[(b * copies + j) * vertices + i]) {
+                        *gk += d;
+                    }
+                }
+                for (k, g) in g.iter().enumerate() {
+                    let slot = b * stride + 3 * vertices + 3 + 3 * i + k;
+                    let s = sigmoid(outputs[slot]);
+                    d_outputs[slot] += g * s * (1.0 - s);
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -354,6 +460,8 @@ mod tests {
             &specs::RECON_DECODE,
             &specs::RECON_DECODE_BACKWARD,
             &specs::RECON_CENTROID_GRAD,
+            &specs::RECON_COLORS,
+            &specs::RECON_COLORS_BACKWARD,
         ] {
             assert_eq!(size, spec.push_constant_size, "{}", spec.name);
         }
@@ -376,7 +484,7 @@ mod tests {
         let (base, signs) = template_terms(&template).unwrap();
         let (objects, copies) = (2, 2);
         let mut rng = Lcg(11);
-        let outputs: Vec<f64> = (0..objects * (base.len() + 3))
+        let outputs: Vec<f64> = (0..objects * (2 * base.len() + 3))
             .map(|_| rng.range(-1.5, 1.5))
             .collect();
         let rotations: Vec<[f64; 2]> = (0..objects * copies)
@@ -401,7 +509,7 @@ mod tests {
             dot(&c, &w_canon) + dot(&p, &w_pos)
         });
         // Zero outputs give the template, halved (SoftRas's final 0.5), centred.
-        let zero = vec![0.0; base.len() + 3];
+        let zero = vec![0.0; 2 * base.len() + 3];
         let (c, _) = cpu::forward(&base, &signs, &zero, &[[1.0, 0.0]], 1);
         for (a, t) in c.iter().zip(template.iter().flatten()) {
             assert!((a - 0.5 * f64::from(*t)).abs() < 1e-12);

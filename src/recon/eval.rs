@@ -160,8 +160,12 @@ pub fn reconstruction_ious(
             .collect();
         let meshes = recon.reconstruct(ctx, &images)?;
         for (mesh, &(n, _)) in meshes.iter().zip(chunk) {
-            let vox =
-                crate::field::voxel::voxelize_mesh(mesh, &faces, &voxel_cube(), VOXEL_RES as u32)?;
+            let vox = crate::field::voxel::voxelize_mesh(
+                &mesh.positions,
+                &faces,
+                &voxel_cube(),
+                VOXEL_RES as u32,
+            )?;
             ious.push(voxel_iou(
                 &occupancy_to_nmr(&vox.occupancy)?,
                 class.voxels_of(n),

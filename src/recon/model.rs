@@ -212,6 +212,16 @@ impl ReconModel {
     }
 }
 
+/// One reconstructed mesh: positions of the template's vertices ([`super::train::template`]'s
+/// faces) and their colours.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Reconstruction {
+    /// Vertex positions.
+    pub positions: Vec<[f32; 3]>,
+    /// Vertex colours (RGB in [0, 1]).
+    pub colors: Vec<[f32; 3]>,
+}
+
 /// Reconstruction on the GPU: the network and the decoder's mesh head, forward only, for
 /// batches of up to a capacity of images.
 pub struct Reconstructor {
@@ -222,6 +232,7 @@ pub struct Reconstructor {
     identity: Buffer,
     meshes: Buffer,
     copies: Buffer,
+    colors: Buffer,
     capacity: u32,
     image: u32,
 }
@@ -259,6 +270,7 @@ impl Reconstructor {
             )?,
             meshes: device("recon meshes", 3 * b * v)?,
             copies: device("recon copies", 3 * b * v)?,
+            colors: device("recon colours", 4 * b * v)?,
             net,
             decoder,
             capacity,
@@ -266,10 +278,9 @@ impl Reconstructor {
         })
     }
 
-    /// The meshes (vertex positions of [`super::train::template`], one list per image) that
-    /// the network predicts from `images`: uint8 RGBA planes (`4 × H × W` per image, the NMR
-    /// layout), at most the capacity.
-    pub fn reconstruct(&self, ctx: &Context, images: &[u8]) -> Result<Vec<Vec<[f32; 3]>>> {
+    /// The meshes the network predicts from `images` (one per image): uint8 RGBA planes
+    /// (`4 × H × W` per image, the NMR layout), at most the capacity.
+    pub fn reconstruct(&self, ctx: &Context, images: &[u8]) -> Result<Vec<Reconstruction>> {
         let per = 4 * (self.image as usize).pow(2);
         if images.is_empty() || images.len() % per != 0 {
             return Err(Error::Input(format!(
@@ -301,11 +312,26 @@ impl Reconstructor {
                 self.identity.whole(),
                 self.meshes.whole(),
                 self.copies.whole(),
+            )?;
+            self.decoder.record_colors(
+                rec,
+                n as u32,
+                1,
+                self.net.output().whole(),
+                self.colors.whole(),
             )
         })?;
         let v = self.decoder.vertex_count() as usize;
         let flat: Vec<[f32; 3]> = ctx.read_buffer(&self.meshes, 0, n * v)?;
-        Ok(flat.chunks(v).map(<[_]>::to_vec).collect())
+        let colors: Vec<[f32; 4]> = ctx.read_buffer(&self.colors, 0, n * v)?;
+        Ok(flat
+            .chunks(v)
+            .zip(colors.chunks(v))
+            .map(|(p, c)| Reconstruction {
+                positions: p.to_vec(),
+                colors: c.iter().map(|c| [c[0], c[1], c[2]]).collect(),
+            })
+            .collect())
     }
 
     /// Images per batch at most.

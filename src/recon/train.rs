@@ -4,13 +4,18 @@
 //! ```text
 //! schedule row ─[BatchGather]→ input (view a), targets (alphas of views a, b), rotations
 //! input ─[Sequential]→ outputs ─[MeshDecoder]→ meshes, 2 copies per object (turned per view)
-//! copies ─(guarded soft rasterizer, one camera)→ alphas ─[SilhouetteLoss]→ L_sil, d_alpha
-//! d_alpha ─(render backward)→ d_copies;  meshes ─[Regularizers]→ L_lap, L_flat, d_meshes
-//! d_copies, d_meshes ─[MeshDecoder backward]→ d_outputs ─[Sequential backward]→ d_params ─[Adam]
+//! outputs ─[MeshDecoder colour head]→ vertex colours of the copies (with a colour loss)
+//! copies ─(guarded soft rasterizer, one camera)→ images ─[SilhouetteLoss, ImageMse]→ L, d_image
+//! d_image ─(render backward)→ d_copies, d_colours;  meshes ─[Regularizers]→ L_lap, L_flat
+//! d_copies, d_colours, d_meshes ─[MeshDecoder backward]→ d_outputs ─[Sequential backward]
+//!   → d_params ─[Adam]
 //! ```
 //!
-//! **Loss**, as SoftRas's: `L = L_iou(a) + L_iou(b) + λ_lap mean_b L_lap + λ_flat mean_b L_flat`
-//! with `L_iou` SoftRas's `neg_iou_loss` over the batch. [`SilhouetteLoss`] averages over all
+//! **Loss**, as SoftRas's: `L = L_iou(a) + L_iou(b) + λ_col L_col + λ_lap mean_b L_lap +
+//! λ_flat mean_b L_flat` with `L_iou` SoftRas's `neg_iou_loss` over the batch and `L_col` the
+//! mean squared error of the rendered RGBA against the views' (unlit vertex colours: the
+//! colour head learns the images' shaded colours; with `λ_col = 0` the copies render as
+//! silhouettes only, which is cheaper, and the colour head is not trained). [`SilhouetteLoss`] averages over all
 //! `2B` copies, which is half of SoftRas's sum of two, so its gradient is taken with weight 2;
 //! the regularizers sum over the batch's meshes (one block-diagonal mesh of `B` templates), so
 //! theirs are taken with weight `λ / B`.
@@ -29,7 +34,7 @@ use std::ops::Range;
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
-use crate::fit::{Adam, AdamOptions, GradOut, Regularizers, SilhouetteLoss};
+use crate::fit::{Adam, AdamOptions, GradOut, ImageMse, Regularizers, SilhouetteLoss};
 use crate::gpu::gate::IterationGate;
 use crate::gpu::{Buffer, Context, MemoryKind, Recorder};
 use crate::lighting::Lighting;
@@ -37,7 +42,7 @@ use crate::mesh::Mesh;
 use crate::nn::{Activation, Conv2d, Layer, Linear, Sequential};
 use crate::raster::backward::GradBuffers;
 use crate::raster::gpu::{GpuScene, Method, Renderer};
-use crate::raster::reference::RasterSettings;
+use crate::raster::reference::{ColorMode, RasterSettings};
 use crate::rng::SplitMix64;
 
 use super::batch::{BatchBuffers, BatchGather, BatchShape};
@@ -130,7 +135,7 @@ impl NetShape {
 
 /// Parameters of a network of `net`'s shape with the reconstruction's mesh head.
 pub fn param_count(net: &NetShape) -> Result<u64> {
-    let outputs = 3 * template().vertex_count() as u64 + 3;
+    let outputs = 6 * template().vertex_count() as u64 + 3;
     Ok(crate::nn::param_offsets(&net.layers(outputs)?).1)
 }
 
@@ -147,6 +152,8 @@ pub struct TrainOptions {
     pub laplacian: f32,
     /// λ of the flatten regularizer (SoftRas: 5e-4).
     pub flatten: f32,
+    /// λ of the colour loss (0: silhouettes only).
+    pub color: f32,
     /// The renderer's σ (SoftRas: 1e-4).
     pub sigma: f64,
     /// Tile side of the guarded binning.
@@ -166,6 +173,7 @@ impl Default for TrainOptions {
             },
             laplacian: 5e-3,
             flatten: 5e-4,
+            color: 1.0,
             sigma: 1e-4,
             tile: 16,
             seed: 1,
@@ -174,12 +182,13 @@ impl Default for TrainOptions {
 }
 
 impl TrainOptions {
-    /// The renderer's settings: silhouettes at the image size with the options' σ.
+    /// The renderer's settings: the image size, the options' σ, vertex colours.
     pub fn raster_settings(&self) -> RasterSettings {
         RasterSettings {
             width: self.net.image,
             height: self.net.image,
             sigma: self.sigma,
+            color_mode: ColorMode::Vertex,
             ..RasterSettings::default()
         }
     }
@@ -264,6 +273,8 @@ pub struct TrainLog {
     pub laplacian: f32,
     /// Mean flatten loss over the batch.
     pub flatten: f32,
+    /// The colour loss (0 when its λ is 0).
+    pub color: f32,
     /// The weighted total.
     pub total: f32,
 }
@@ -297,7 +308,10 @@ pub struct ReconTrainer<'c> {
     rows: u32,
     input: Buffer,
     targets: Buffer,
+    target_images: Buffer,
     rotations: Buffer,
+    /// Zeros standing for dL/d(colours) when the colour loss is off.
+    zero_colors: Buffer,
     meshes: Buffer,
     d_meshes: Buffer,
     renderer: Renderer,
@@ -306,6 +320,7 @@ pub struct ReconTrainer<'c> {
     /// In a cell: recording borrows the trainer, the gate is the one thing it changes.
     gate: RefCell<IterationGate>,
     sil: SilhouetteLoss,
+    mse: ImageMse,
     regs: Regularizers,
     capacity: u64,
     max_capacity: u64,
@@ -370,7 +385,7 @@ impl<'c> ReconTrainer<'c> {
         let settings = opts.raster_settings();
         let mut scene =
             renderer.prepare_batch(ctx, &copies, &views, &Lighting::unlit(), &settings)?;
-        scene.set_silhouette_only(true);
+        scene.set_silhouette_only(opts.color == 0.0);
         // The batch's meshes as one mesh of B disjoint templates, for the regularizers.
         let vc = t.vertex_count() as u32;
         let faces: Vec<[u32; 3]> = (0..opts.batch)
@@ -394,7 +409,7 @@ impl<'c> ReconTrainer<'c> {
             Method::Tiled { tile: opts.tile },
             capacity,
         )?;
-        grads.set_alpha_only(true);
+        grads.set_alpha_only(opts.color == 0.0);
         let table: Vec<[f32; 2]> = (0..VIEWS).map(|v| view_rotation(view_azimuth(v))).collect();
         let trainer = Self {
             ctx,
@@ -415,10 +430,20 @@ impl<'c> ReconTrainer<'c> {
             rows: 1,
             input: device("recon input", 4 * b * px)?,
             targets: device("recon targets", u64::from(COPIES) * b * px)?,
+            target_images: device("recon target images", 4 * u64::from(COPIES) * b * px)?,
+            zero_colors: {
+                let z = device("recon zero colour gradients", 3 * u64::from(COPIES) * b * v)?;
+                ctx.submit_and_wait(|rec| {
+                    rec.fill(z.whole(), 0);
+                    Ok(())
+                })?;
+                z
+            },
             rotations: device("recon rotations", 2 * u64::from(COPIES) * b)?,
             meshes: device("recon meshes", 3 * b * v)?,
             d_meshes: device("recon d_meshes", 3 * b * v)?,
             sil: SilhouetteLoss::new(ctx, COPIES * opts.batch, opts.net.image, opts.net.image)?,
+            mse: ImageMse::new(ctx, COPIES * opts.batch, opts.net.image, opts.net.image)?,
             regs,
             renderer,
             scene,
@@ -463,6 +488,7 @@ impl<'c> ReconTrainer<'c> {
                     input: self.input.whole(),
                     targets: self.targets.whole(),
                     rotations: self.rotations.whole(),
+                    target_images: self.target_images.whole(),
                 },
             )
         })?;
@@ -479,7 +505,17 @@ impl<'c> ReconTrainer<'c> {
                 self.rotations.whole(),
                 self.meshes.whole(),
                 self.scene.positions().whole(),
-            )
+            )?;
+            if o.color > 0.0 {
+                self.decoder.record_colors(
+                    rec,
+                    o.batch,
+                    COPIES,
+                    self.net.output().whole(),
+                    self.scene.colors().whole(),
+                )?;
+            }
+            Ok(())
         })?;
         let scene = &self.scene;
         let g = &self.grads;
@@ -492,7 +528,16 @@ impl<'c> ReconTrainer<'c> {
                         scene.output().whole(),
                         self.targets.whole(),
                         Some(GradOut::write(io.upstream).weighted(COPIES as f32)),
-                    )
+                    )?;
+                    if o.color > 0.0 {
+                        self.mse.record(
+                            rec,
+                            scene.output().whole(),
+                            self.target_images.whole(),
+                            Some(GradOut::accumulate(io.upstream, o.color)),
+                        )?;
+                    }
+                    Ok(())
                 })?;
                 self.renderer.grad_kernels().record(rec, &binned, g, &io)?;
                 let per_object = 1.0 / o.batch as f32;
@@ -525,6 +570,19 @@ impl<'c> ReconTrainer<'c> {
                         io.positions,
                         self.d_outputs.whole(),
                         self.partials.whole(),
+                    )?;
+                    let d_colors = if o.color > 0.0 {
+                        io.colors
+                    } else {
+                        self.zero_colors.whole()
+                    };
+                    self.decoder.record_colors_backward(
+                        rec,
+                        o.batch,
+                        COPIES,
+                        self.net.output().whole(),
+                        d_colors,
+                        self.d_outputs.whole(),
                     )
                 })?;
                 rec.pass("recon network backward", |rec| {
@@ -609,7 +667,7 @@ impl<'c> ReconTrainer<'c> {
             },
             capacity,
         )?;
-        self.grads.set_alpha_only(true);
+        self.grads.set_alpha_only(self.opts.color == 0.0);
         self.capacity = capacity;
         self.regrowths += 1;
         Ok(())
@@ -621,12 +679,21 @@ impl<'c> ReconTrainer<'c> {
         let r = self.regs.read_losses(self.ctx)?;
         let per_object = 1.0 / self.opts.batch as f32;
         let (laplacian, flatten) = (r.laplacian * per_object, r.flatten * per_object);
+        let color = if self.opts.color > 0.0 {
+            self.mse.read_loss(self.ctx)?
+        } else {
+            0.0
+        };
         Ok(TrainLog {
             iteration,
             silhouette,
             laplacian,
             flatten,
-            total: silhouette + self.opts.laplacian * laplacian + self.opts.flatten * flatten,
+            color,
+            total: silhouette
+                + self.opts.color * color
+                + self.opts.laplacian * laplacian
+                + self.opts.flatten * flatten,
         })
     }
 
