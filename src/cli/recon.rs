@@ -28,7 +28,7 @@ use softvk::recon::model::{ReconModel, Reconstruction, Reconstructor, TrainState
 use softvk::recon::train::{self, NetShape, ReconTrainer, TrainImages, TrainOptions};
 use softvk::{Error, Result};
 
-use super::args::positive;
+use super::args::{non_negative, positive};
 use super::interrupt;
 use super::output::AtomicFile;
 
@@ -90,6 +90,11 @@ pub struct TrainReconArgs {
     /// The renderer's σ (SoftRas: 1e-4).
     #[arg(long, default_value_t = 1e-4, value_parser = positive)]
     pub sigma: f64,
+
+    /// λ of the colour loss (the rendered RGBA against the views'); 0 trains silhouettes only
+    /// (cheaper: the copies render as silhouettes) and leaves the colour head untrained.
+    #[arg(long, default_value_t = 1.0, value_parser = non_negative)]
+    pub color: f64,
 
     /// Iterations per GPU submission (the losses are read once per submission).
     #[arg(long, value_name = "K", default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..))]
@@ -222,6 +227,7 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
             ..AdamOptions::default()
         },
         sigma: args.sigma,
+        color: args.color as f32,
         seed: args.seed,
         ..TrainOptions::default()
     };
@@ -233,6 +239,8 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
         opts.adam.betas.1,
         f64::from(opts.laplacian),
         f64::from(opts.flatten),
+        f64::from(opts.color),
+        opts.sigma,
     ];
     let dir = report_dir(&args.out);
     let ckpt_path = dir.join("checkpoint.npz");

@@ -9,7 +9,7 @@
 //! | `params` | float32 (P) | the network's parameters, [`crate::nn::Sequential`]'s layout |
 //! | `iteration` | int32 (1) | iterations trained |
 //! | `adam_m`, `adam_v` | float32 (P) | Adam's moments (a checkpoint; absent from a final model) |
-//! | `train` | float64 (7) | seed, batch, lr, β1, β2, λ_lap, λ_flat (a checkpoint) |
+//! | `train` | float64 (9) | seed, batch, lr, β1, β2, λ_lap, λ_flat, λ_col, σ (a checkpoint) |
 //! | `log` | float64 (R, 5) | iteration, L_sil, L_lap, L_flat, total (a checkpoint) |
 //! | `val` | float64 (S, 2) | iteration, validation 3D IoU (a checkpoint) |
 //!
@@ -36,8 +36,8 @@ pub struct TrainState {
     pub adam_m: Vec<f32>,
     /// Adam's second moments.
     pub adam_v: Vec<f32>,
-    /// `[seed, batch, lr, β1, β2, λ_lap, λ_flat]` of the run, checked on resume.
-    pub settings: [f64; 7],
+    /// `[seed, batch, lr, β1, β2, λ_lap, λ_flat, λ_col, σ]` of the run, checked on resume.
+    pub settings: [f64; 9],
     /// The loss log so far: `[iteration, L_sil, L_lap, L_flat, total]` per row.
     pub log: Vec<[f64; 5]>,
     /// The validation IoUs so far: `[iteration, mean 3D IoU]` per row.
@@ -90,7 +90,7 @@ impl ReconModel {
             arrays.push(("adam_v", f32s(&t.adam_v)?));
             arrays.push((
                 "train",
-                NpyArray::new(vec![7], NpyData::F64(t.settings.to_vec()))?,
+                NpyArray::new(vec![9], NpyData::F64(t.settings.to_vec()))?,
             ));
             arrays.push((
                 "log",
@@ -171,8 +171,12 @@ impl ReconModel {
             let adam_m = floats(npz.array("adam_m")?, "adam_m")?;
             let adam_v = floats(npz.array("adam_v")?, "adam_v")?;
             let settings = match npz.array("train")?.data {
-                NpyData::F64(v) if v.len() == 7 => [v[0], v[1], v[2], v[3], v[4], v[5], v[6]],
-                _ => return Err(bad("`train` is not 7 float64".into())),
+                NpyData::F64(v) if v.len() == 9 => {
+                    let mut a = [0.0; 9];
+                    a.copy_from_slice(&v);
+                    a
+                }
+                _ => return Err(bad("`train` is not 9 float64".into())),
             };
             if adam_m.len() != params.len() || adam_v.len() != params.len() {
                 return Err(bad("Adam's moments do not match the parameters".into()));
