@@ -1,12 +1,14 @@
 //! Times the forward and the backward of the reconstruction network's size (SoftRas §4.2's
 //! encoder and decoder) at batch 16: conv 4→16, 16→32, 32→64 (kernel 5, stride 2, padding 2,
-//! 64² → 8²), linear 4096→256→256, then 256→512→(3·642 + 3). Each is recorded once and only
+//! 64² → 8²), linear 4096→256→256, then 256→512→(6·642 + 3): `NetShape::default()`, the
+//! mesh head and the colour head. Each is recorded once and only
 //! submit + wait is timed (wall clock), with GPU timestamps per layer beside it.
 //!
 //! Run: `cargo run --release --example nn_speed [-- REPEATS]`.
 
 use softvk::gpu::{Context, ContextOptions, MemoryKind, Timer};
-use softvk::nn::{Activation, Conv2d, Layer, Linear, Sequential};
+use softvk::nn::Sequential;
+use softvk::recon::NetShape;
 
 const BATCH: u32 = 16;
 
@@ -16,35 +18,9 @@ fn main() -> softvk::Result<()> {
         .and_then(|a| a.parse().ok())
         .unwrap_or(5);
     let ctx = Context::new(&ContextOptions::from_env())?;
-    let relu = Activation::Relu;
-    let conv = |in_channels, out_channels, side| {
-        Layer::Conv2d(Conv2d {
-            in_channels,
-            out_channels,
-            kernel: 5,
-            stride: 2,
-            padding: 2,
-            in_h: side,
-            in_w: side,
-            activation: relu,
-        })
-    };
-    let linear = |in_features, out_features, activation| {
-        Layer::Linear(Linear {
-            in_features,
-            out_features,
-            activation,
-        })
-    };
-    let layers = [
-        conv(4, 16, 64),
-        conv(16, 32, 32),
-        conv(32, 64, 16),
-        linear(4096, 256, relu),
-        linear(256, 256, relu),
-        linear(256, 512, relu),
-        linear(512, 3 * 642 + 3, Activation::Identity),
-    ];
+    // The network `softvk train-recon` trains by default, with its mesh and colour heads.
+    let outputs = 6 * softvk::recon::train::template().vertex_count() as u64 + 3;
+    let layers = NetShape::default().layers(outputs)?;
     let net = Sequential::new(&ctx, &layers, BATCH)?;
     let params = ctx.upload_buffer("params", &net.init(1))?;
     let n_in = (u64::from(BATCH) * net.input_len()) as usize;

@@ -1,4 +1,4 @@
-//! The reconstruction network's mesh head: SoftRas's `Decoder` turns each object's network
+//! The reconstruction network's heads: SoftRas's `Decoder` turns each object's network
 //! outputs into vertex positions of the sphere template, and the renderer sees each object
 //! through several *copies*, each turned about y so that one camera shows every view.
 //!
@@ -23,6 +23,12 @@
 //! The backward (`recon_decode_backward.comp`, then `recon_centroid_grad.comp` for r_c, a sum
 //! over the vertices in a fixed order) takes dL/d(copy positions) and dL/d(object mesh) (the
 //! regularizers' gradient) and writes dL/dr. Deterministic; each output has one writer.
+//!
+//! **The colour head** (`recon_colors.comp`, `recon_colors_backward.comp`): the next `3 V`
+//! outputs of each object are per-vertex RGB logits, `colour = sigmoid(r_col)`, written to
+//! every copy in the renderer's vertex-colour layout; its backward sums the copies' colour
+//! gradients and writes the colour slots of dL/dr. An object's outputs are thus
+//! `[r_d (3 V), r_c (3), r_col (3 V)]`, `6 V + 3` floats ([`MeshDecoder::outputs_per_object`]).
 
 use bytemuck::{Pod, Zeroable};
 
