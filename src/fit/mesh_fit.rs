@@ -40,7 +40,7 @@ use crate::gpu::{Buffer, Context, MemoryKind, Recorder, Timer};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::raster::backward::GradBuffers;
-use crate::raster::gpu::{GpuScene, Method, Renderer};
+use crate::raster::gpu::{GpuScene, Renderer};
 use crate::raster::reference::{Alpha, RasterSettings, Rgb};
 
 /// Entry capacity reserved over a count seen: `count × 3 / 2`.
@@ -510,15 +510,8 @@ impl<'c> MeshFitter<'c> {
                 with_headroom(ctx, &mesh_entries(views), total, max_capacity, MESH_HINT)?
             }
         };
-        renderer.reserve_guarded(ctx, &mut scene, opts.tile, capacity)?;
-        let mut grads = GradBuffers::with_entry_capacity(
-            ctx,
-            &scene,
-            Method::Tiled { tile: opts.tile },
-            capacity,
-        )?;
         // The silhouette loss differentiates alpha only (as the scene renders it).
-        grads.set_alpha_only(true);
+        let grads = super::reserve_guarded(ctx, &renderer, &mut scene, opts.tile, capacity, true)?;
         Ok(Self {
             ctx,
             opts: opts.clone(),
@@ -645,17 +638,14 @@ impl<'c> MeshFitter<'c> {
             self.max_capacity,
             MESH_HINT,
         )?;
-        self.renderer
-            .reserve_guarded(self.ctx, &mut self.scene, self.opts.tile, capacity)?;
-        self.grads = GradBuffers::with_entry_capacity(
+        self.grads = super::reserve_guarded(
             self.ctx,
-            &self.scene,
-            Method::Tiled {
-                tile: self.opts.tile,
-            },
+            &self.renderer,
+            &mut self.scene,
+            self.opts.tile,
             capacity,
+            true,
         )?;
-        self.grads.set_alpha_only(true);
         self.capacity = capacity;
         self.regrowths += 1;
         Ok(())

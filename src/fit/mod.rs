@@ -173,6 +173,31 @@ pub(crate) fn max_entry_capacity(
 }
 
 /// Workgroups of `size` invocations covering `n` items, as the `u32` a dispatch takes.
+/// The guarded fits' sizing step: `scene`'s bins reserved for `capacity` entries on
+/// `tile`-pixel tiles ([`Renderer::reserve_guarded`]) and the backward's buffers for them,
+/// differentiating alpha only when `alpha_only` ([`GradBuffers::set_alpha_only`]).
+///
+/// [`Renderer::reserve_guarded`]: crate::raster::gpu::Renderer::reserve_guarded
+/// [`GradBuffers::set_alpha_only`]: crate::raster::backward::GradBuffers::set_alpha_only
+pub(crate) fn reserve_guarded(
+    ctx: &Context,
+    renderer: &crate::raster::gpu::Renderer,
+    scene: &mut crate::raster::gpu::GpuScene,
+    tile: u32,
+    capacity: u64,
+    alpha_only: bool,
+) -> Result<crate::raster::backward::GradBuffers> {
+    renderer.reserve_guarded(ctx, scene, tile, capacity)?;
+    let mut grads = crate::raster::backward::GradBuffers::with_entry_capacity(
+        ctx,
+        scene,
+        crate::raster::gpu::Method::Tiled { tile },
+        capacity,
+    )?;
+    grads.set_alpha_only(alpha_only);
+    Ok(grads)
+}
+
 pub(crate) fn groups(n: u64, size: u32) -> Result<u32> {
     u32::try_from(n.div_ceil(u64::from(size)))
         .map_err(|_| Error::Limit(format!("{n} items need more than 2^32 workgroups")))

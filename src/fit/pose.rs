@@ -835,12 +835,14 @@ impl<'c> PoseFitter<'c> {
             self.max_capacity,
             "use larger tiles or a smaller σ",
         )?;
-        let method = Method::Tiled {
-            tile: self.opts.tile,
-        };
-        self.renderer
-            .reserve_guarded(self.ctx, &mut self.scene, self.opts.tile, capacity)?;
-        self.grads = GradBuffers::with_entry_capacity(self.ctx, &self.scene, method, capacity)?;
+        self.grads = super::reserve_guarded(
+            self.ctx,
+            &self.renderer,
+            &mut self.scene,
+            self.opts.tile,
+            capacity,
+            false,
+        )?;
         self.capacity = capacity;
         Ok(())
     }

@@ -41,7 +41,7 @@ use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::nn::{Activation, Conv2d, Layer, Linear, Sequential};
 use crate::raster::backward::GradBuffers;
-use crate::raster::gpu::{GpuScene, Method, Renderer};
+use crate::raster::gpu::{GpuScene, Renderer};
 use crate::raster::reference::{ColorMode, RasterSettings};
 use crate::rng::SplitMix64;
 
@@ -402,14 +402,10 @@ impl<'c> ReconTrainer<'c> {
             max_capacity,
             HINT,
         )?;
-        renderer.reserve_guarded(ctx, &mut scene, opts.tile, capacity)?;
-        let mut grads = GradBuffers::with_entry_capacity(
-            ctx,
-            &scene,
-            Method::Tiled { tile: opts.tile },
-            capacity,
+        let alpha_only = opts.color == 0.0;
+        let grads = crate::fit::reserve_guarded(
+            ctx, &renderer, &mut scene, opts.tile, capacity, alpha_only,
         )?;
-        grads.set_alpha_only(opts.color == 0.0);
         let table: Vec<[f32; 2]> = (0..VIEWS).map(|v| view_rotation(view_azimuth(v))).collect();
         let trainer = Self {
             ctx,
@@ -657,17 +653,14 @@ impl<'c> ReconTrainer<'c> {
             self.max_capacity,
             HINT,
         )?;
-        self.renderer
-            .reserve_guarded(self.ctx, &mut self.scene, self.opts.tile, capacity)?;
-        self.grads = GradBuffers::with_entry_capacity(
+        self.grads = crate::fit::reserve_guarded(
             self.ctx,
-            &self.scene,
-            Method::Tiled {
-                tile: self.opts.tile,
-            },
+            &self.renderer,
+            &mut self.scene,
+            self.opts.tile,
             capacity,
+            self.opts.color == 0.0,
         )?;
-        self.grads.set_alpha_only(self.opts.color == 0.0);
         self.capacity = capacity;
         self.regrowths += 1;
         Ok(())
