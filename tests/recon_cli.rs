@@ -187,6 +187,22 @@ fn a_model_round_trips_through_its_file_and_bad_files_are_refused() {
     model.save(&path).unwrap();
     let back = ReconModel::load(&path).unwrap();
     assert_eq!(back, model);
+    // A checkpoint carries Adam's moments, the settings and the logs, and gives them back.
+    let ckpt = ReconModel {
+        train: Some(softvk::recon::model::TrainState {
+            adam_m: model.params.iter().map(|p| p * 0.5).collect(),
+            adam_v: model.params.iter().map(|p| p * p).collect(),
+            settings: [1.0, 2.0, 1e-3, 0.9, 0.999, 5e-3, 5e-4, 1.0, 1e-4],
+            log: vec![
+                [10.0, 0.5, 0.01, 0.2, 3.0, 0.6],
+                [20.0, 0.4, 0.01, 0.2, 3.0, 0.5],
+            ],
+            val: vec![[20.0, 0.3]],
+        }),
+        ..model.clone()
+    };
+    ckpt.save(&dir.path("ckpt.npz")).unwrap();
+    assert_eq!(ReconModel::load(&dir.path("ckpt.npz")).unwrap(), ckpt);
     // The loaded model reconstructs what the saved one does.
     let image: Vec<u8> = (0..4 * 16 * 16).map(|i| (i * 37 % 251) as u8).collect();
     let a = Reconstructor::new(&gpu, &model, 1)

@@ -289,7 +289,7 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
             .expect("a valid template"),
     );
     bar.set_position(u64::from(start));
-    let save = |trainer: &ReconTrainer, it: u32, log: &[[f64; 5]], vals: &[[f64; 2]]| {
+    let save = |trainer: &ReconTrainer, it: u32, log: &[[f64; 6]], vals: &[[f64; 2]]| {
         let (adam_m, adam_v) = trainer.read_moments()?;
         ReconModel {
             net: opts.net,
@@ -324,6 +324,7 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
         log.push([
             f64::from(last),
             f64::from(l.silhouette),
+            f64::from(l.color),
             f64::from(l.laplacian),
             f64::from(l.flatten),
             f64::from(l.total),
@@ -372,7 +373,7 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
         train: None,
     }
     .save(&args.out)?;
-    let last = log.last().copied().unwrap_or([0.0; 5]);
+    let last = log.last().copied().unwrap_or([0.0; 6]);
     println!(
         "trained {done} iterations: L_sil {:.4}{}; model {}",
         last[1],
@@ -384,10 +385,13 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
     Ok(())
 }
 
-fn write_train_report(dir: &Path, log: &[[f64; 5]], vals: &[[f64; 2]]) -> Result<()> {
-    let mut csv = String::from("iteration,silhouette,laplacian,flatten,total\n");
+fn write_train_report(dir: &Path, log: &[[f64; 6]], vals: &[[f64; 2]]) -> Result<()> {
+    let mut csv = String::from("iteration,silhouette,color,laplacian,flatten,total\n");
     for r in log {
-        csv.push_str(&format!("{},{},{},{},{}\n", r[0], r[1], r[2], r[3], r[4]));
+        csv.push_str(&format!(
+            "{},{},{},{},{},{}\n",
+            r[0], r[1], r[2], r[3], r[4], r[5]
+        ));
     }
     AtomicFile::create(&dir.join("loss.csv"))?.commit(csv.as_bytes())?;
     let mut csv = String::from("iteration,val_iou\n");
@@ -402,8 +406,13 @@ fn write_train_report(dir: &Path, log: &[[f64; 5]], vals: &[[f64; 2]]) -> Result
             color: [200, 40, 40],
         },
         Series {
+            name: "L_col".into(),
+            points: log.iter().map(|r| (r[0], r[2])).collect(),
+            color: [200, 140, 20],
+        },
+        Series {
             name: "total".into(),
-            points: log.iter().map(|r| (r[0], r[4])).collect(),
+            points: log.iter().map(|r| (r[0], r[5])).collect(),
             color: [40, 40, 200],
         },
         Series {

@@ -10,7 +10,7 @@
 //! | `iteration` | int32 (1) | iterations trained |
 //! | `adam_m`, `adam_v` | float32 (P) | Adam's moments (a checkpoint; absent from a final model) |
 //! | `train` | float64 (9) | seed, batch, lr, β1, β2, λ_lap, λ_flat, λ_col, σ (a checkpoint) |
-//! | `log` | float64 (R, 5) | iteration, L_sil, L_lap, L_flat, total (a checkpoint) |
+//! | `log` | float64 (R, 6) | iteration, L_sil, L_col, L_lap, L_flat, total (a checkpoint) |
 //! | `val` | float64 (S, 2) | iteration, validation 3D IoU (a checkpoint) |
 //!
 //! A checkpoint is a model that also carries what resuming needs; [`ReconModel::load`] reads
@@ -38,8 +38,8 @@ pub struct TrainState {
     pub adam_v: Vec<f32>,
     /// `[seed, batch, lr, β1, β2, λ_lap, λ_flat, λ_col, σ]` of the run, checked on resume.
     pub settings: [f64; 9],
-    /// The loss log so far: `[iteration, L_sil, L_lap, L_flat, total]` per row.
-    pub log: Vec<[f64; 5]>,
+    /// The loss log so far: `[iteration, L_sil, L_col, L_lap, L_flat, total]` per row.
+    pub log: Vec<[f64; 6]>,
     /// The validation IoUs so far: `[iteration, mean 3D IoU]` per row.
     pub val: Vec<[f64; 2]>,
 }
@@ -95,7 +95,7 @@ impl ReconModel {
             arrays.push((
                 "log",
                 NpyArray::new(
-                    vec![t.log.len(), 5],
+                    vec![t.log.len(), 6],
                     NpyData::F64(t.log.iter().flatten().copied().collect()),
                 )?,
             ));
@@ -189,9 +189,9 @@ impl ReconModel {
                     _ => Err(bad(format!("`{name}` is not float64 rows of {width}"))),
                 }
             };
-            let log = rows(npz.array("log")?, "log", 5)?
+            let log = rows(npz.array("log")?, "log", 6)?
                 .into_iter()
-                .map(|r| [r[0], r[1], r[2], r[3], r[4]])
+                .map(|r| [r[0], r[1], r[2], r[3], r[4], r[5]])
                 .collect();
             let val = rows(npz.array("val")?, "val", 2)?
                 .into_iter()
