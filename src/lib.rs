@@ -24,6 +24,10 @@
 //! - [`nn`]: neural-network layers (Conv2d, Linear, fused activations) as kernels with a
 //!   deterministic backward and f64 twins, chained by [`nn::Sequential`]: what the
 //!   reconstruction network is built from.
+//! - [`recon`]: single-view mesh reconstruction learned from silhouettes (SoftRas's
+//!   unsupervised 3D learning): the NMR dataset format and a procedural dataset in it, the
+//!   encoder–decoder trained on the GPU through the soft rasterizer, evaluation by 3D IoU
+//!   beside retrieval and mean-shape baselines.
 //!
 //! - [`mod@bench`]: the forward benchmark behind `softvk bench` (scenes, timing, JSON records).
 //!
