@@ -647,7 +647,10 @@ fn write_examples(ctx: &Context, recon: &Reconstructor, test: &Dataset, dir: &Pa
             let img = image::RgbaImage::from_raw(size, size, rgba).expect("64² RGBA");
             report::write_png(&dir.join(&name), &img)?;
             cells.push((
-                format!("{} view {v}", class_label(class)),
+                format!(
+                    "{}, view {v}",
+                    class.category.map_or(&class.class_id[..], |c| c.name())
+                ),
                 upscale(input, size, SIZE),
             ));
             cells.push(("reconstruction".into(), shaded.images));
