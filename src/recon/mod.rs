@@ -8,7 +8,8 @@
 //! - [`dataset`]: the NMR/SoftRas dataset layout (`<class>_<split>_images.npz`,
 //!   `<class>_<split>_voxels.npz`, 24 views per object), written from [`shapes`] and read back.
 //! - [`batch`]: a training batch gathered on the GPU from the images and a schedule.
-//! - [`decode`]: the decoder's mesh head (SoftRas's sphere deformation), per view copies.
+//! - [`decode`]: the decoder's heads: SoftRas's sphere deformation (per view copies) and the
+//!   per-vertex colours.
 //! - [`train`]: the network, SoftRas's losses and the training loop on the GPU.
 //! - [`model`]: the model file and reconstruction with it.
 //! - [`eval`]: 3D IoU against the voxels, and the retrieval and mean-shape baselines.
