@@ -161,7 +161,7 @@ impl MeshDecoder {
     }
 
     /// Records the forward for `objects` objects of `copies` copies each: `outputs`
-    /// (`objects × (3 V + 3)` floats) and `rotations` (`(cos φ, sin φ)` per copy, object-major)
+    /// ([`Self::outputs_per_object`] floats per object; the mesh head reads its first `3 V + 3`) and `rotations` (`(cos φ, sin φ)` per copy, object-major)
     /// → `canonical` (`objects × V` packed positions) and `positions` (`objects × copies × V`,
     /// copy `k` of object `b` as mesh `b · copies + k`).
     #[allow(clippy::too_many_arguments)]

@@ -304,8 +304,9 @@ pub struct ReconTrainer<'c> {
     images: Buffer,
     view_table: Buffer,
     schedule: Buffer,
-    /// Schedule rows the schedule buffer holds.
-    rows: u32,
+    /// Host-visible: a submission's rows are written here and copied to `schedule` at its
+    /// start (no submission of their own).
+    schedule_upload: Buffer,
     input: Buffer,
     targets: Buffer,
     target_images: Buffer,
@@ -423,7 +424,11 @@ impl<'c> ReconTrainer<'c> {
             )?,
             view_table: ctx.upload_buffer("recon view rotations", &table)?,
             schedule: device("recon schedule", 4 * b)?,
-            rows: 1,
+            schedule_upload: ctx.create_buffer(
+                "recon schedule (upload)",
+                16 * b,
+                MemoryKind::Upload,
+            )?,
             input: device("recon input", 4 * b * px)?,
             targets: device("recon targets", u64::from(COPIES) * b * px)?,
             target_images: device("recon target images", 4 * u64::from(COPIES) * b * px)?,
@@ -608,21 +613,26 @@ impl<'c> ReconTrainer<'c> {
                 "iterations {first}..={last}: they count from 1"
             )));
         }
-        let rows = last - first + 1;
         let entries: Vec<[u32; 4]> = (first..=last)
             .flat_map(|it| (0..self.opts.batch).map(move |s| (it, s)))
             .map(|(it, s)| schedule_entry(self.opts.seed, it, s, &self.classes))
             .collect();
-        if rows > self.rows {
-            self.schedule = self.ctx.create_buffer(
-                "recon schedule",
-                16 * u64::from(rows) * u64::from(self.opts.batch),
-                MemoryKind::Device,
-            )?;
-            self.rows = rows;
+        let bytes: &[u8] = bytemuck::cast_slice(&entries);
+        let size = bytes.len() as u64;
+        if size > self.schedule.size() {
+            self.schedule = self
+                .ctx
+                .create_buffer("recon schedule", size, MemoryKind::Device)?;
+            self.schedule_upload =
+                self.ctx
+                    .create_buffer("recon schedule (upload)", size, MemoryKind::Upload)?;
         }
-        self.ctx.write_buffer(&self.schedule, 0, &entries)?;
+        self.schedule_upload
+            .mapped_mut()
+            .ok_or_else(|| Error::Limit("upload memory is not host-mapped".into()))?[..bytes.len()]
+            .copy_from_slice(bytes);
         self.ctx.submit_and_wait(|rec| {
+            rec.copy(&self.schedule_upload, 0, &self.schedule, 0, size);
             let mut gate = self.gate.borrow_mut();
             gate.reset();
             for it in first..=last {
