@@ -103,6 +103,19 @@ fn train_twice_resume_evaluate_and_reconstruct() {
         err.contains("other options") && err.lines().count() == 1,
         "{err}"
     );
+    // The learning rate's step may be added on resume where it changes no iteration already
+    // run (c's checkpoint is at 4: a step at 5 is fine), not where it would have (at 3).
+    train(&data, &c, 6, &["--resume", "--lr-step", "5"]);
+    let refused = softvk()
+        .args(["train-recon", "--dataset", data.to_str().unwrap()])
+        .args(["--out", c.to_str().unwrap(), "--iters", "8", "--batch", "2"])
+        .args(["--channels", "2,3,4", "--latent", "8", "--hidden", "8"])
+        .args(["--lr", "1e-3", "--lr-step", "3", "--resume"])
+        .output()
+        .unwrap();
+    assert!(!refused.status.success());
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(err.contains("other options"), "{err}");
 
     let eval_dir = dir.path("eval");
     let table = ok(
@@ -116,7 +129,16 @@ fn train_twice_resume_evaluate_and_reconstruct() {
         "softvk eval-recon",
     );
     let rows: Vec<&str> = table.lines().collect();
-    assert_eq!(rows.len(), 4, "header, two classes, mean:\n{table}");
+    assert_eq!(
+        rows.len(),
+        5,
+        "header, two classes, mean, protocol:\n{table}"
+    );
+    assert!(
+        rows[4].starts_with("predictions voxelized by parity"),
+        "{table}"
+    );
+    let rows = &rows[..4];
     assert!(
         rows[1].contains("chair") || rows[2].contains("chair"),
         "{table}"
@@ -126,7 +148,7 @@ fn train_twice_resume_evaluate_and_reconstruct() {
         let cols: Vec<f64> = r
             .split_whitespace()
             .rev()
-            .take(3)
+            .take(4)
             .map(|c| c.parse().unwrap())
             .collect();
         assert!(cols.iter().all(|v| (0.0..=1.0).contains(v)), "{r}");
@@ -192,7 +214,9 @@ fn a_model_round_trips_through_its_file_and_bad_files_are_refused() {
         train: Some(softvk::recon::model::TrainState {
             adam_m: model.params.iter().map(|p| p * 0.5).collect(),
             adam_v: model.params.iter().map(|p| p * p).collect(),
-            settings: [1.0, 2.0, 1e-3, 0.9, 0.999, 5e-3, 5e-4, 1.0, 1e-4],
+            settings: [
+                1.0, 2.0, 1e-3, 0.9, 0.999, 5e-3, 5e-4, 1.0, 1e-4, 300.0, 0.3,
+            ],
             log: vec![
                 [10.0, 0.5, 0.01, 0.2, 3.0, 0.6],
                 [20.0, 0.4, 0.01, 0.2, 3.0, 0.5],
@@ -203,6 +227,30 @@ fn a_model_round_trips_through_its_file_and_bad_files_are_refused() {
     };
     ckpt.save(&dir.path("ckpt.npz")).unwrap();
     assert_eq!(ReconModel::load(&dir.path("ckpt.npz")).unwrap(), ckpt);
+    // A checkpoint from before the learning-rate step (nine settings) reads as one without.
+    {
+        use softvk::recon::npz::{self, NpyArray, NpyData, Npz};
+        let mut file = Npz::open(&dir.path("ckpt.npz")).unwrap();
+        let names: Vec<String> = file.names().iter().map(|n| n.to_string()).collect();
+        let mut arrays: Vec<(String, NpyArray)> = names
+            .iter()
+            .map(|n| (n.clone(), file.array(n).unwrap()))
+            .collect();
+        for (name, a) in &mut arrays {
+            if name == "train" {
+                let NpyData::F64(v) = &a.data else {
+                    panic!("settings are float64")
+                };
+                *a = NpyArray::new(vec![9], NpyData::F64(v[..9].to_vec())).unwrap();
+            }
+        }
+        let refs: Vec<(&str, &NpyArray)> = arrays.iter().map(|(n, a)| (n.as_str(), a)).collect();
+        npz::write_npz(&dir.path("old.npz"), &refs, false).unwrap();
+        let old = ReconModel::load(&dir.path("old.npz")).unwrap();
+        let settings = old.train.unwrap().settings;
+        assert_eq!(settings[..9], ckpt.train.as_ref().unwrap().settings[..9]);
+        assert_eq!(settings[9..], [0.0, 1.0]);
+    }
     // The loaded model reconstructs what the saved one does.
     let image: Vec<u8> = (0..4 * 16 * 16).map(|i| (i * 37 % 251) as u8).collect();
     let a = Reconstructor::new(&gpu, &model, 1)

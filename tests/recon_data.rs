@@ -14,6 +14,7 @@ use softvk::raster::gpu::Renderer;
 use softvk::recon::dataset::{
     self, Dataset, DatasetOptions, IMAGE_SIZE, Split, VIEWS, VOXEL_RES, voxel_center,
 };
+use softvk::recon::eval;
 use softvk::recon::npz::{self, NpyArray, NpyData, Npz};
 use softvk::recon::shapes::{Category, generate};
 
@@ -506,6 +507,17 @@ fn dataset_round_trips_and_the_same_seed_writes_the_same_bytes() {
         assert!(class.voxels_of(1).iter().any(|&x| x));
         assert_eq!(class.image(1, 5).len(), 4 * IMAGE_SIZE * IMAGE_SIZE);
     }
+    // The visual hull of an object's own 24 silhouettes: a car's is close (only the hollow
+    // under its body between the wheels is left uncarved), a table's is not (every view looks
+    // down on its top). Wrong cameras or a wrong voxel order would carve the objects away.
+    let hull = |c: usize| -> Vec<f64> {
+        (0..2)
+            .map(|n| eval::visual_hull_iou(&train.classes[c], n).unwrap())
+            .collect()
+    };
+    let (car, table) = (hull(0), hull(1));
+    assert!(car.iter().all(|&h| h > 0.6), "car hulls {car:?}");
+    assert!(table.iter().all(|&h| h < 0.55), "table hulls {table:?}");
     assert_eq!(Dataset::open(&a, Split::Val).unwrap().classes[0].count, 1);
     let m = input_error(Dataset::open(&a, Split::Test));
     assert!(m.contains("no *_test_images.npz"), "{m}");

@@ -17,7 +17,8 @@ use softvk::raster::reference_grad;
 use softvk::recon::batch::{self, BatchShape};
 use softvk::recon::decode;
 use softvk::recon::train::{
-    self, NetShape, ReconTrainer, TrainImages, TrainOptions, VIEWS, schedule_entry, view_azimuth,
+    self, LrStep, NetShape, ReconTrainer, TrainImages, TrainOptions, VIEWS, schedule_entry,
+    view_azimuth,
 };
 use softvk::recon::view_camera;
 use softvk::recon::view_rotation;
@@ -255,4 +256,37 @@ fn training_lowers_the_loss_and_is_the_same_bits_at_any_k() {
             "{k} iterations per submission changed the bits"
         );
     }
+}
+
+#[test]
+fn the_learning_rate_step_applies_from_its_iteration_on() {
+    let Some(gpu) = common::gpu() else { return };
+    let data = data(&gpu);
+    let params = |opts: &TrainOptions, iterations: u32| {
+        let mut trainer = ReconTrainer::new(&gpu, &data, opts, None).unwrap();
+        assert_eq!(trainer.run(1, iterations).unwrap(), None);
+        trainer.read_params().unwrap()
+    };
+    // A factor of 0 from iteration 3 on: iterations 3 and 4 change nothing.
+    let frozen = TrainOptions {
+        lr_step: Some(LrStep { at: 3, factor: 0.0 }),
+        ..options()
+    };
+    assert_eq!(frozen.lr_at(2), options().adam.lr);
+    assert_eq!(frozen.lr_at(3), 0.0);
+    let two = params(&options(), 2);
+    assert!(params(&frozen, 4) == two, "iterations after the step moved");
+    assert!(params(&options(), 4) != two, "without the step they move");
+    assert!(matches!(
+        ReconTrainer::new(
+            &gpu,
+            &data,
+            &TrainOptions {
+                lr_step: Some(LrStep { at: 0, factor: 0.3 }),
+                ..options()
+            },
+            None
+        ),
+        Err(softvk::Error::Input(_))
+    ));
 }

@@ -24,8 +24,8 @@ use softvk::raster::gpu::{Method, Renderer};
 use softvk::raster::reference::{ColorMode, RasterSettings};
 use softvk::recon::dataset::{self, ClassData, Dataset, Split};
 use softvk::recon::eval::{self, Mask, ScoreRow};
-use softvk::recon::model::{ReconModel, Reconstruction, Reconstructor, TrainState};
-use softvk::recon::train::{self, NetShape, ReconTrainer, TrainImages, TrainOptions};
+use softvk::recon::model::{ReconModel, Reconstruction, Reconstructor, SETTINGS, TrainState};
+use softvk::recon::train::{self, LrStep, NetShape, ReconTrainer, TrainImages, TrainOptions};
 use softvk::{Error, Result};
 
 use super::args::{non_negative, positive};
@@ -70,6 +70,16 @@ pub struct TrainReconArgs {
     /// Adam's learning rate (SoftRas: 1e-4).
     #[arg(long, default_value_t = 1e-4, value_parser = positive)]
     pub lr: f64,
+
+    /// From this iteration on, train at `--lr-decay` × `--lr` (SoftRas's `step` schedule:
+    /// × 0.3 from 150 000). A resumed run may add or move the step if the iterations already
+    /// run are not affected.
+    #[arg(long, value_name = "IT", value_parser = clap::value_parser!(u32).range(1..))]
+    pub lr_step: Option<u32>,
+
+    /// The learning rate's factor from `--lr-step` on.
+    #[arg(long, value_name = "F", default_value_t = 0.3, value_parser = non_negative)]
+    pub lr_decay: f64,
 
     /// Seeds the parameters and the batches.
     #[arg(long, default_value_t = 1)]
@@ -149,6 +159,30 @@ pub struct EvalReconArgs {
     /// Also write the table (text) and a picture of inputs beside reconstructions here.
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
+
+    /// How a predicted mesh becomes voxels: `parity` (voxel centres inside, the ground truth's
+    /// convention) or `softras` (SoftRas's evaluation: the voxels the surface passes through
+    /// and what they enclose).
+    #[arg(long, value_enum, default_value_t = VoxelizeArg::Parity)]
+    pub voxelize: VoxelizeArg,
+}
+
+/// `--voxelize` of `softvk eval-recon` ([`eval::Voxelizer`]).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VoxelizeArg {
+    /// [`eval::Voxelizer::SoftRas`].
+    Softras,
+    /// [`eval::Voxelizer::Parity`].
+    Parity,
+}
+
+impl From<VoxelizeArg> for eval::Voxelizer {
+    fn from(v: VoxelizeArg) -> Self {
+        match v {
+            VoxelizeArg::Softras => eval::Voxelizer::SoftRas,
+            VoxelizeArg::Parity => eval::Voxelizer::Parity,
+        }
+    }
 }
 
 /// `n` views spread evenly over the 24.
@@ -202,7 +236,13 @@ fn validate(
         let inputs: Vec<(usize, usize)> = (0..c.count)
             .flat_map(|n| views.iter().map(move |&v| (n, v)))
             .collect();
-        all.extend(eval::reconstruction_ious(ctx, &recon, c, &inputs)?);
+        all.extend(eval::reconstruction_ious(
+            ctx,
+            &recon,
+            c,
+            &inputs,
+            eval::Voxelizer::default(),
+        )?);
     }
     Ok(all.iter().sum::<f64>() / all.len().max(1) as f64)
 }
@@ -226,6 +266,10 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
             lr: args.lr,
             ..AdamOptions::default()
         },
+        lr_step: args.lr_step.map(|at| LrStep {
+            at,
+            factor: args.lr_decay,
+        }),
         sigma: args.sigma,
         color: args.color as f32,
         seed: args.seed,
@@ -241,6 +285,8 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
         f64::from(opts.flatten),
         f64::from(opts.color),
         opts.sigma,
+        opts.lr_step.map_or(0.0, |s| f64::from(s.at)),
+        opts.lr_step.map_or(1.0, |s| s.factor),
     ];
     let dir = report_dir(&args.out);
     let ckpt_path = dir.join("checkpoint.npz");
@@ -252,7 +298,7 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
                 ckpt_path.display()
             )));
         };
-        if m.net != opts.net || t.settings != settings {
+        if m.net != opts.net || !same_past(&t.settings, &settings, m.iteration) {
             return Err(Error::Input(format!(
                 "{}: written by a run with other options (network {:?}, settings {:?})",
                 ckpt_path.display(),
@@ -383,6 +429,14 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
         args.out.display()
     );
     Ok(())
+}
+
+/// Whether a run with `now`'s settings would have run a checkpoint's first `done` iterations
+/// as `then`'s did: the same settings, except that the learning rate's step may differ where it
+/// has not acted yet (both steps later than `done`, or none).
+fn same_past(then: &[f64; SETTINGS], now: &[f64; SETTINGS], done: u32) -> bool {
+    let unacted = |s: &[f64; SETTINGS]| s[9] == 0.0 || s[9] > f64::from(done);
+    then[..9] == now[..9] && (then[9..] == now[9..] || (unacted(then) && unacted(now)))
 }
 
 fn write_train_report(dir: &Path, log: &[[f64; 6]], vals: &[[f64; 2]]) -> Result<()> {
@@ -566,7 +620,7 @@ pub fn evaluate(args: &EvalReconArgs) -> Result<()> {
         let inputs: Vec<(usize, usize)> = (0..class.count)
             .flat_map(|n| views.iter().map(move |&v| (n, v)))
             .collect();
-        let ours = eval::reconstruction_ious(&ctx, &recon, class, &inputs)?;
+        let ours = eval::reconstruction_ious(&ctx, &recon, class, &inputs, args.voxelize.into())?;
         let mut retrieval = Vec::with_capacity(inputs.len());
         for &(n, v) in &inputs {
             let best = eval::retrieve(&alpha(class, n, v), &masks[v])
@@ -589,6 +643,9 @@ pub fn evaluate(args: &EvalReconArgs) -> Result<()> {
         let mean_iou = (0..class.count)
             .map(|n| eval::voxel_iou(&mean, class.voxels_of(n)))
             .collect::<Result<Vec<f64>>>()?;
+        let hull = (0..class.count)
+            .map(|n| eval::visual_hull_iou(class, n))
+            .collect::<Result<Vec<f64>>>()?;
         let avg = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
         rows.push(ScoreRow {
             class: class_label(class),
@@ -596,9 +653,17 @@ pub fn evaluate(args: &EvalReconArgs) -> Result<()> {
             reconstruction: avg(&ours),
             retrieval: avg(&retrieval),
             mean_shape: avg(&mean_iou),
+            visual_hull: avg(&hull),
         });
     }
-    let table = eval::format_table(&rows);
+    let table = format!(
+        "{}predictions voxelized by {}\n",
+        eval::format_table(&rows),
+        match args.voxelize {
+            VoxelizeArg::Softras => "SoftRas's evaluation (surface voxels and what they enclose)",
+            VoxelizeArg::Parity => "parity (voxel centres inside)",
+        }
+    );
     print!("{table}");
     if let Some(dir) = &args.report {
         std::fs::create_dir_all(dir)

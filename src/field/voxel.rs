@@ -253,6 +253,136 @@ pub fn voxelize_mesh(
     })
 }
 
+/// Voxelizes a triangle mesh as SoftRas's evaluation does (`srf.voxelization`, after Neural
+/// Mesh Renderer): the voxels the surface passes through, plus every voxel the outside cannot
+/// reach through 6-connected free voxels. Unlike [`voxelize_mesh`]'s parity it needs no closed or
+/// non-self-intersecting mesh: a crumpled prediction whose folds overlap stays solid, and a sheet
+/// thinner than a voxel still marks its voxels.
+///
+/// In voxel units (voxel `i` spans `[i, i + 1)` on each axis), the surface voxels are
+/// - for each axis and each lattice line parallel to it through integer coordinates `(a, b)`
+///   (`0 ..= res`), where the line crosses a triangle (barycentrics ≥ 0, inclusive) at `t`:
+///   the four voxels `(a − 1 | a, b − 1 | b, ⌊t⌋)` around the line;
+/// - the voxels holding a vertex.
+///
+/// The free voxels on the grid's faces are outside; outside spreads to free neighbours.
+/// (SoftRas's kernels cover lines `0 .. res`; the line at `res` marks voxels only on the grid's
+/// last layer, so the two agree inside the grid.)
+pub fn voxelize_mesh_conservative(
+    positions: &[[f32; 3]],
+    faces: &[[u32; 3]],
+    cube: &Cube,
+    res: u32,
+) -> Result<Occupancy> {
+    check_res(res)?;
+    cube.validate()?;
+    if let Some(f) = faces
+        .iter()
+        .position(|f| f.iter().any(|&i| i as usize >= positions.len()))
+    {
+        return Err(Error::Input(format!(
+            "voxelize: face {f} indexes past the {} vertices",
+            positions.len()
+        )));
+    }
+    if positions.iter().any(|p| !p.iter().all(|c| c.is_finite())) {
+        return Err(Error::Input("voxelize: a vertex is not finite".into()));
+    }
+    let r = res as i64;
+    let step = 2.0 * cube.half / f64::from(res);
+    let origin = cube.min();
+    let to_grid = |p: &[f32; 3]| -> [f64; 3] {
+        std::array::from_fn(|k| (f64::from(p[k]) - origin[k]) / step)
+    };
+    let index = |v: [i64; 3]| -> Option<usize> {
+        v.iter()
+            .all(|&c| (0..r).contains(&c))
+            .then(|| (v[0] + r * (v[1] + r * v[2])) as usize)
+    };
+    let mut solid = vec![false; (r * r * r) as usize];
+    for f in faces {
+        let v = f.map(|i| to_grid(&positions[i as usize]));
+        for p in &v {
+            if let Some(i) = index(p.map(|c| c.floor() as i64)) {
+                solid[i] = true;
+            }
+        }
+        // The lines along axis `z`, over the lattice of the other two (`x`, `y`).
+        for (x, y, z) in [(1, 2, 0), (0, 2, 1), (0, 1, 2)] {
+            let d1 = [v[1][x] - v[0][x], v[1][y] - v[0][y], v[1][z] - v[0][z]];
+            let d2 = [v[2][x] - v[0][x], v[2][y] - v[0][y], v[2][z] - v[0][z]];
+            let det = d1[0] * d2[1] - d2[0] * d1[1];
+            if det == 0.0 {
+                continue;
+            }
+            let lo = |k: usize| v.iter().map(|p| p[k]).fold(f64::INFINITY, f64::min);
+            let hi = |k: usize| v.iter().map(|p| p[k]).fold(f64::NEG_INFINITY, f64::max);
+            let (a0, a1) = (
+                lo(x).ceil().max(0.0) as i64,
+                hi(x).floor().min(r as f64) as i64,
+            );
+            let (b0, b1) = (
+                lo(y).ceil().max(0.0) as i64,
+                hi(y).floor().min(r as f64) as i64,
+            );
+            for b in b0..=b1 {
+                for a in a0..=a1 {
+                    let (pa, pb) = (a as f64 - v[0][x], b as f64 - v[0][y]);
+                    let t1 = (d2[1] * pa - d2[0] * pb) / det;
+                    let t2 = (-d1[1] * pa + d1[0] * pb) / det;
+                    if t1 < 0.0 || t2 < 0.0 || t1 + t2 > 1.0 {
+                        continue;
+                    }
+                    let c = (v[0][z] + t1 * d1[2] + t2 * d2[2]).floor() as i64;
+                    for (da, db) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                        let mut cell = [0i64; 3];
+                        cell[x] = a - da;
+                        cell[y] = b - db;
+                        cell[z] = c;
+                        if let Some(i) = index(cell) {
+                            solid[i] = true;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    // Outside: free voxels connected to the grid's faces.
+    let mut outside = vec![false; solid.len()];
+    let mut stack: Vec<[i64; 3]> = Vec::new();
+    for k in 0..r {
+        for j in 0..r {
+            for i in 0..r {
+                let on_face = [i, j, k].iter().any(|&c| c == 0 || c == r - 1);
+                let n = index([i, j, k]).expect("in the grid");
+                if on_face && !solid[n] {
+                    outside[n] = true;
+                    stack.push([i, j, k]);
+                }
+            }
+        }
+    }
+    while let Some(c) = stack.pop() {
+        for axis in 0..3 {
+            for d in [-1, 1] {
+                let mut nb = c;
+                nb[axis] += d;
+                if let Some(n) = index(nb) {
+                    if !solid[n] && !outside[n] {
+                        outside[n] = true;
+                        stack.push(nb);
+                    }
+                }
+            }
+        }
+    }
+    let mut occ = Occupancy::empty(*cube, res);
+    for (o, out) in occ.inside.iter_mut().zip(&outside) {
+        *o = !out;
+    }
+    Ok(occ)
+}
+
 /// The pixel `(col, row)` whose centre is nearest to screen point `(x_s, y_s)` (the inverse of
 /// [`crate::camera::pixel_center`]), or `None` outside the image.
 pub fn screen_to_pixel(x_s: f64, y_s: f64, width: u32, height: u32) -> Option<(u32, u32)> {
@@ -384,5 +514,96 @@ mod tests {
         // Centres at 0 and ±4/3: only the centre voxel is inside the octahedron.
         assert_eq!(v.occupancy.count(), 1);
         assert!(v.occupancy.get([1, 1, 1]));
+    }
+
+    fn shifted(m: &crate::mesh::Mesh, d: [f32; 3]) -> Vec<[f32; 3]> {
+        m.positions
+            .iter()
+            .map(|p| [p[0] + d[0], p[1] + d[1], p[2] + d[2]])
+            .collect()
+    }
+
+    #[test]
+    fn conservative_voxelization_keeps_surface_voxels_and_fills_inside() {
+        // A box over [−0.25, 0.25]³ on 10 voxels over [−1, 1]³: grid coordinates
+        // [3.75, 6.25], so voxels 3..=6 on each axis are touched (4³ = 64) where parity
+        // keeps the 2³ whose centres (±0.1) are inside.
+        let m = crate::mesh::Mesh::cuboid([0.25; 3]);
+        let cube = Cube {
+            center: [0.0; 3],
+            half: 1.0,
+        };
+        let c = voxelize_mesh_conservative(&m.positions, &m.faces, &cube, 10).unwrap();
+        let p = voxelize_mesh(&m.positions, &m.faces, &cube, 10).unwrap();
+        assert_eq!(p.occupancy.count(), 8);
+        assert_eq!(c.count(), 64);
+        for i in 0..10 {
+            for j in 0..10 {
+                for k in 0..10 {
+                    let want = [i, j, k].iter().all(|c| (3..=6).contains(c));
+                    assert_eq!(c.get([i, j, k]), want, "voxel {i} {j} {k}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn conservative_voxelization_fills_where_a_mesh_overlaps_itself() {
+        // Two boxes in one mesh, overlapping over x ∈ [−0.1, 0.1]: parity counts four crossings
+        // through the overlap and leaves it empty; the flood fill keeps it.
+        let m = crate::mesh::Mesh::cuboid([0.3; 3]);
+        let mut positions = shifted(&m, [-0.2, 0.0, 0.0]);
+        positions.extend(shifted(&m, [0.2, 0.0, 0.0]));
+        let n = m.positions.len() as u32;
+        let mut faces = m.faces.clone();
+        faces.extend(m.faces.iter().map(|f| f.map(|i| i + n)));
+        let cube = Cube {
+            center: [0.0; 3],
+            half: 1.0,
+        };
+        // res 20: voxel 10's centre is at x = 0.05, inside both boxes.
+        let p = voxelize_mesh(&positions, &faces, &cube, 20).unwrap();
+        let c = voxelize_mesh_conservative(&positions, &faces, &cube, 20).unwrap();
+        assert!(!p.occupancy.get([10, 10, 10]));
+        assert!(c.get([10, 10, 10]));
+        assert!(c.get([6, 10, 10]) && c.get([13, 10, 10]));
+        assert!(!c.get([2, 10, 10]) && !c.get([17, 10, 10]));
+    }
+
+    #[test]
+    fn conservative_voxelization_keeps_a_sheet_thinner_than_a_voxel() {
+        // One square at z = 0.05 (inside voxel layer 10 of 20 over [−1, 1]), spanning
+        // x, y ∈ [−0.45, 0.45]: grid [5.5, 14.5], voxels 5..=14, one layer of 100; nothing is
+        // enclosed. Parity sees an open surface and keeps nothing.
+        let positions = [
+            [-0.45, -0.45, 0.05],
+            [0.45, -0.45, 0.05],
+            [0.45, 0.45, 0.05],
+            [-0.45, 0.45, 0.05],
+        ];
+        let faces = [[0, 1, 2], [0, 2, 3]];
+        let cube = Cube {
+            center: [0.0; 3],
+            half: 1.0,
+        };
+        let c = voxelize_mesh_conservative(&positions, &faces, &cube, 20).unwrap();
+        assert_eq!(c.count(), 100);
+        assert!(c.get([5, 5, 10]) && c.get([14, 14, 10]) && !c.get([4, 10, 10]));
+        assert_eq!(
+            voxelize_mesh(&positions, &faces, &cube, 20)
+                .unwrap()
+                .occupancy
+                .count(),
+            0
+        );
+        let bad = [[f32::NAN, 0.0, 0.0], [0.0; 3], [1.0; 3]];
+        assert!(matches!(
+            voxelize_mesh_conservative(&bad, &[[0, 1, 2]], &cube, 20),
+            Err(Error::Input(_))
+        ));
+        assert!(matches!(
+            voxelize_mesh_conservative(&positions, &[[0, 1, 7]], &cube, 20),
+            Err(Error::Input(_))
+        ));
     }
 }

@@ -141,6 +141,21 @@ impl Adam {
         grads: BufferRange<'_>,
         step: u32,
     ) -> Result<()> {
+        self.record_step_lr(rec, params, grads, step, self.options.lr)
+    }
+
+    /// [`Adam::record_step`] at learning rate `lr` instead of the options' (a schedule's
+    /// value for this step).
+    pub fn record_step_lr(
+        &self,
+        rec: &mut Recorder<'_>,
+        params: BufferRange<'_>,
+        grads: BufferRange<'_>,
+        step: u32,
+        lr: f64,
+    ) -> Result<()> {
+        let options = AdamOptions { lr, ..self.options };
+        options.validate()?;
         if step == 0 {
             return Err(Error::Input(
                 "Adam steps count from 1 (the bias corrections divide by 1 − β^t)".into(),
@@ -161,7 +176,7 @@ impl Adam {
                 second_moment: self.v.whole(),
             }
             .for_kernel(&self.kernel)?,
-            &AdamPush::new(self.n, &self.options, step),
+            &AdamPush::new(self.n, &options, step),
             groups(n, 64)?,
         )
     }

@@ -29,6 +29,9 @@ use crate::nn::Sequential;
 /// The file format's version.
 pub const FORMAT: i32 = 1;
 
+/// The length of [`TrainState::settings`].
+pub const SETTINGS: usize = 11;
+
 /// What resuming a run needs besides the parameters.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TrainState {
@@ -36,8 +39,10 @@ pub struct TrainState {
     pub adam_m: Vec<f32>,
     /// Adam's second moments.
     pub adam_v: Vec<f32>,
-    /// `[seed, batch, lr, β1, β2, λ_lap, λ_flat, λ_col, σ]` of the run, checked on resume.
-    pub settings: [f64; 9],
+    /// `[seed, batch, lr, β1, β2, λ_lap, λ_flat, λ_col, σ, lr step's iteration (0: none),
+    /// lr step's factor]` of the run, checked on resume. (Files written before the step
+    /// existed hold the first nine; they read as no step.)
+    pub settings: [f64; SETTINGS],
     /// The loss log so far: `[iteration, L_sil, L_col, L_lap, L_flat, total]` per row.
     pub log: Vec<[f64; 6]>,
     /// The validation IoUs so far: `[iteration, mean 3D IoU]` per row.
@@ -90,7 +95,7 @@ impl ReconModel {
             arrays.push(("adam_v", f32s(&t.adam_v)?));
             arrays.push((
                 "train",
-                NpyArray::new(vec![9], NpyData::F64(t.settings.to_vec()))?,
+                NpyArray::new(vec![SETTINGS], NpyData::F64(t.settings.to_vec()))?,
             ));
             arrays.push((
                 "log",
@@ -171,12 +176,15 @@ impl ReconModel {
             let adam_m = floats(npz.array("adam_m")?, "adam_m")?;
             let adam_v = floats(npz.array("adam_v")?, "adam_v")?;
             let settings = match npz.array("train")?.data {
-                NpyData::F64(v) if v.len() == 9 => {
-                    let mut a = [0.0; 9];
-                    a.copy_from_slice(&v);
+                NpyData::F64(v) if v.len() == SETTINGS || v.len() == 9 => {
+                    let mut a = [0.0; SETTINGS];
+                    a[..v.len()].copy_from_slice(&v);
+                    if v.len() == 9 {
+                        a[10] = 1.0; // no step
+                    }
                     a
                 }
-                _ => return Err(bad("`train` is not 9 float64".into())),
+                _ => return Err(bad(format!("`train` is not {SETTINGS} float64"))),
             };
             if adam_m.len() != params.len() || adam_v.len() != params.len() {
                 return Err(bad("Adam's moments do not match the parameters".into()));

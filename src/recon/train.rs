@@ -148,6 +148,9 @@ pub struct TrainOptions {
     pub batch: u32,
     /// Adam (SoftRas: lr 1e-4, β = (0.9, 0.999)).
     pub adam: AdamOptions,
+    /// The learning rate's step, if any (SoftRas's `step` method: × 0.3 from iteration
+    /// 150 000 on).
+    pub lr_step: Option<LrStep>,
     /// λ of the Laplacian regularizer (SoftRas: 5e-3).
     pub laplacian: f32,
     /// λ of the flatten regularizer (SoftRas: 5e-4).
@@ -171,6 +174,7 @@ impl Default for TrainOptions {
                 lr: 1e-4,
                 ..AdamOptions::default()
             },
+            lr_step: None,
             laplacian: 5e-3,
             flatten: 5e-4,
             color: 1.0,
@@ -181,7 +185,24 @@ impl Default for TrainOptions {
     }
 }
 
+/// A step in the learning rate: iterations `at` and later run at `factor` × the base rate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LrStep {
+    /// The first iteration at the lower rate (from 1).
+    pub at: u32,
+    /// The rate's multiplier from then on.
+    pub factor: f64,
+}
+
 impl TrainOptions {
+    /// The learning rate of iteration `it` (from 1).
+    pub fn lr_at(&self, it: u32) -> f64 {
+        match self.lr_step {
+            Some(s) if it >= s.at => self.adam.lr * s.factor,
+            _ => self.adam.lr,
+        }
+    }
+
     /// The renderer's settings: the image size, the options' σ, vertex colours.
     pub fn raster_settings(&self) -> RasterSettings {
         RasterSettings {
@@ -349,6 +370,13 @@ impl<'c> ReconTrainer<'c> {
         }
         if opts.batch == 0 {
             return Err(Error::Input("a batch of 0 objects".into()));
+        }
+        if let Some(s) = opts.lr_step {
+            if s.at == 0 || !(s.factor.is_finite() && s.factor >= 0.0) {
+                return Err(Error::Input(format!(
+                    "learning-rate step {s:?}: need an iteration from 1 and a factor >= 0"
+                )));
+            }
         }
         let t = template();
         let decoder = MeshDecoder::new(ctx, &t.positions)?;
@@ -598,8 +626,13 @@ impl<'c> ReconTrainer<'c> {
                     )
                 })?;
                 rec.pass("adam", |rec| {
-                    self.adam
-                        .record_step(rec, self.params.whole(), self.d_params.whole(), it)
+                    self.adam.record_step_lr(
+                        rec,
+                        self.params.whole(),
+                        self.d_params.whole(),
+                        it,
+                        o.lr_at(it),
+                    )
                 })
             })
     }
