@@ -223,12 +223,13 @@ fn rust_written_npz_reads_back_the_same_and_the_same_arrays_give_the_same_bytes(
 
 #[test]
 fn every_category_gives_closed_outward_non_degenerate_meshes_in_the_unit_cube() {
+    // 24 seeds: every style of every category (at most four per category) several times.
     for category in Category::ALL {
-        for seed in 0..6u64 {
+        for seed in 0..24u64 {
             let shape = generate(category, seed);
             let what = format!("{category} seed {seed}");
             let faces = shape.face_count();
-            assert!((24..=2000).contains(&faces), "{what}: {faces} faces");
+            assert!((12..=2000).contains(&faces), "{what}: {faces} faces"); // an ottoman may be one box
             let (lo, hi) = shape.bounds();
             let mut longest = 0.0f64;
             for k in 0..3 {

@@ -36,23 +36,28 @@ const SEGMENTS: u32 = 12;
 /// An object category, with its ShapeNet synset id (the class id of the NMR/SoftRas files).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Category {
-    /// Airplane (`02691156`): fuselage, swept wings, tail, optional engines.
+    /// Airplane (`02691156`): airliner (swept wings, tail, optional engines), fighter (delta
+    /// wings, one or two fins) or propeller plane (straight high or low wings).
     Airplane,
-    /// Bench (`02828884`): long seat, slab or post legs, optional slatted back.
+    /// Bench (`02828884`): long seat on slab or post legs with an optional slatted back, a
+    /// picnic bench on A-frames, or an ottoman block.
     Bench,
     /// Cabinet (`02933112`): a body with doors or drawers and handles, optional feet.
     Cabinet,
-    /// Car (`02958343`): body, cabin, four wheels.
+    /// Car (`02958343`): sedan, van, pickup or sports car: body, cabin, four wheels.
     Car,
-    /// Chair (`03001627`): seat, four legs (posts, round, splayed), tilted back, optional arms.
+    /// Chair (`03001627`): four-legged (posts, round, splayed; tilted back, optional arms),
+    /// office chair (column and five spokes), stool, or armchair with solid sides.
     Chair,
     /// Display (`03211117`): thin screen on a neck and a foot.
     Display,
-    /// Lamp (`03636649`): base, pole (straight or bent), conical shade.
+    /// Lamp (`03636649`): desk lamp (straight or bent pole, conical shade), floor lamp, arc
+    /// lamp, or table lamp on a vase.
     Lamp,
     /// Sofa (`04256520`): base, back, arms, cushions.
     Sofa,
-    /// Table (`04379243`): rectangular or round top, four legs or a pedestal, optional shelf.
+    /// Table (`04379243`): rectangular or round top on four legs or a pedestal (optional
+    /// shelf), coffee table, desk on side panels, or trestle table.
     Table,
 }
 
@@ -408,11 +413,668 @@ fn sheared_box(lo: DVec3, hi: DVec3, shift: DVec3, taper: [f64; 2]) -> [DVec3; 8
     c
 }
 
+/// One of `n` styles, uniformly.
+fn style(b: &mut Builder, n: u32) -> u32 {
+    ((b.rng.unit() * f64::from(n)) as u32).min(n - 1)
+}
+
+// Each category draws one of several styles (ShapeNet's categories hold many kinds of object:
+// stools and office chairs are chairs, pickups and vans are cars), so that a test object rarely
+// has a near twin among a few dozen training objects.
+
+fn chair(b: &mut Builder) {
+    match style(b, 4) {
+        0 => four_leg_chair(b),
+        1 => office_chair(b),
+        2 => stool(b),
+        _ => armchair(b),
+    }
+}
+
+fn table(b: &mut Builder) {
+    match style(b, 4) {
+        0 => leg_table(b),
+        1 => coffee_table(b),
+        2 => desk(b),
+        _ => trestle_table(b),
+    }
+}
+
+fn airplane(b: &mut Builder) {
+    match style(b, 3) {
+        0 => airliner(b),
+        1 => fighter(b),
+        _ => propeller_plane(b),
+    }
+}
+
+fn car(b: &mut Builder) {
+    match style(b, 4) {
+        0 => sedan(b),
+        1 => van(b),
+        2 => pickup(b),
+        _ => sports_car(b),
+    }
+}
+
+fn lamp(b: &mut Builder) {
+    match style(b, 4) {
+        0 => desk_lamp(b),
+        1 => floor_lamp(b),
+        2 => arc_lamp(b),
+        _ => vase_lamp(b),
+    }
+}
+
+fn bench(b: &mut Builder) {
+    match style(b, 3) {
+        0 => leg_bench(b),
+        1 => picnic_bench(b),
+        _ => ottoman_bench(b),
+    }
+}
+
+/// Office chair: seat and back on a column, five spokes with casters.
+fn office_chair(b: &mut Builder) {
+    let shell = b.color();
+    let metal = b.dark();
+    let w = b.u(0.4, 0.55) / 2.0;
+    let d = b.u(0.38, 0.5) / 2.0;
+    let h = b.u(0.4, 0.55);
+    let t = b.u(0.06, 0.1);
+    b.cuboid(v(-w, h, -d), v(w, h + t, d), shell);
+    let cr = b.u(0.025, 0.04);
+    b.frustum(v(0.0, 0.06, 0.0), v(0.0, h + 0.01, 0.0), cr, cr, metal);
+    let spoke = b.u(0.22, 0.3);
+    let sr = MIN_THICKNESS / 2.0 * b.u(1.0, 1.4);
+    let turn = b.u(0.0, 1.0);
+    for k in 0..5 {
+        let a = std::f64::consts::TAU * (f64::from(k) + turn) / 5.0;
+        let end = v(spoke * a.cos(), 0.06, spoke * a.sin());
+        b.frustum(v(0.0, 0.06, 0.0), end, sr, sr, metal);
+        b.frustum(end - v(0.0, 0.06, 0.0), end, sr * 1.2, sr * 1.2, metal);
+    }
+    let bh = b.u(0.3, 0.55);
+    let bt = b.u(0.05, 0.09);
+    let back = sheared_box(
+        v(-w * 0.9, h + t, d - bt),
+        v(w * 0.9, h + t + bh, d),
+        v(0.0, 0.0, b.u(0.02, 0.1)),
+        [b.u(0.75, 1.0), 1.0],
+    );
+    b.push(hexahedron(back), shell);
+    if b.chance(0.5) {
+        let ah = b.u(0.15, 0.22);
+        let aw = MIN_THICKNESS * 1.2;
+        for sx in [-1.0, 1.0] {
+            let x = sx * (w - aw / 2.0);
+            b.cuboid(
+                v(x - aw / 2.0, h + t, -aw / 2.0),
+                v(x + aw / 2.0, h + t + ah, aw / 2.0),
+                metal,
+            );
+            b.cuboid(
+                v(x - aw, h + t + ah - aw, -d * 0.7),
+                v(x + aw, h + t + ah, d * 0.5),
+                metal,
+            );
+        }
+    }
+}
+
+/// Stool: a round (or square) seat on three or four splayed legs, no back.
+fn stool(b: &mut Builder) {
+    let seat = b.color();
+    let wood = if b.chance(0.5) { seat } else { b.color() };
+    let r = b.u(0.14, 0.22);
+    let h = b.u(0.45, 0.8);
+    let t = b.u(MIN_THICKNESS, 0.08);
+    if b.chance(0.6) {
+        b.frustum(v(0.0, h, 0.0), v(0.0, h + t, 0.0), r, r, seat);
+    } else {
+        b.cuboid(v(-r, h, -r), v(r, h + t, r), seat);
+    }
+    let n = 3 + style(b, 2);
+    let s = b.u(MIN_THICKNESS, 0.06) / 2.0;
+    let splay = b.u(0.02, 0.12);
+    let turn = b.u(0.0, 1.0);
+    let ring = b.chance(0.5);
+    let ry = h * b.u(0.25, 0.4);
+    for k in 0..n {
+        let a = std::f64::consts::TAU * (f64::from(k) + turn) / f64::from(n);
+        let (c, sn) = (a.cos(), a.sin());
+        let top = v(c * r * 0.65, h + t / 2.0, sn * r * 0.65);
+        let foot = v(c * (r * 0.65 + splay), 0.0, sn * (r * 0.65 + splay));
+        b.frustum(foot, top, s, s, wood);
+        if ring {
+            let f = ry / (h + t / 2.0);
+            let p = foot + (top - foot) * f;
+            let a2 = std::f64::consts::TAU * (f64::from(k) + 1.0 + turn) / f64::from(n);
+            let q_foot = v(
+                a2.cos() * (r * 0.65 + splay),
+                0.0,
+                a2.sin() * (r * 0.65 + splay),
+            );
+            let q_top = v(a2.cos() * r * 0.65, h + t / 2.0, a2.sin() * r * 0.65);
+            let q = q_foot + (q_top - q_foot) * f;
+            b.frustum(p, q, s * 0.8, s * 0.8, wood);
+        }
+    }
+}
+
+/// Armchair: a low, wide seat between solid sides that reach the floor, a solid back.
+fn armchair(b: &mut Builder) {
+    let cloth = b.color();
+    let w = b.u(0.6, 0.85) / 2.0;
+    let d = b.u(0.55, 0.75) / 2.0;
+    let h = b.u(0.25, 0.38);
+    let at = b.u(0.08, 0.14);
+    let ah = h + b.u(0.12, 0.22);
+    b.cuboid(v(-w + at, 0.05, -d), v(w - at, h, d), cloth);
+    for sx in [-1.0, 1.0] {
+        let x0 = sx * w;
+        let x1 = x0 - sx * at;
+        b.cuboid(v(x0.min(x1), 0.0, -d), v(x0.max(x1), ah, d), cloth);
+    }
+    let bt = b.u(0.1, 0.16);
+    let bh = b.u(0.55, 0.8);
+    let back = sheared_box(
+        v(-w, 0.0, d - bt),
+        v(w, bh, d),
+        v(0.0, 0.0, b.u(0.0, 0.08)),
+        [1.0, 1.0],
+    );
+    b.push(hexahedron(back), cloth);
+    if b.chance(0.6) {
+        let cushion = b.color();
+        let ch = b.u(0.05, 0.1);
+        b.cuboid(
+            v(-w + at + 0.01, h - 0.01, -d - 0.01),
+            v(w - at - 0.01, h + ch, d - bt),
+            cushion,
+        );
+    }
+}
+
+/// Coffee table: low and wide, on four short legs or two slab ends, often a shelf.
+fn coffee_table(b: &mut Builder) {
+    let top_color = b.color();
+    let leg_color = if b.chance(0.5) { top_color } else { b.color() };
+    let w = b.u(0.75, 1.0) / 2.0;
+    let d = b.u(0.4, 0.75) / 2.0;
+    let h = b.u(0.22, 0.38);
+    let t = b.u(MIN_THICKNESS, 0.09);
+    b.cuboid(v(-w, h, -d), v(w, h + t, d), top_color);
+    let s = b.u(MIN_THICKNESS, 0.09) / 2.0;
+    let inset = b.u(0.0, 0.08) + s;
+    if b.chance(0.5) {
+        for (sx, sz) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
+            let c = v(sx * (w - inset), 0.0, sz * (d - inset));
+            b.cuboid(c - v(s, 0.0, s), c + v(s, h + t / 2.0, s), leg_color);
+        }
+    } else {
+        for sx in [-1.0, 1.0] {
+            let x = sx * (w - inset);
+            b.cuboid(v(x - s, 0.0, -d), v(x + s, h + t / 2.0, d), leg_color);
+        }
+    }
+    if b.chance(0.5) {
+        let sh = b.u(0.04, h * 0.5);
+        b.cuboid(
+            v(-w + inset, sh, -d + inset * 0.5),
+            v(w - inset, sh + MIN_THICKNESS, d - inset * 0.5),
+            leg_color,
+        );
+    }
+}
+
+/// Desk: a top on two side panels, often a drawer pedestal and a modesty panel at the back.
+fn desk(b: &mut Builder) {
+    let top_color = b.color();
+    let body = if b.chance(0.5) { top_color } else { b.color() };
+    let w = b.u(0.8, 1.0) / 2.0;
+    let d = b.u(0.4, 0.6) / 2.0;
+    let h = b.u(0.55, 0.75);
+    let t = b.u(MIN_THICKNESS, 0.06);
+    b.cuboid(v(-w, h, -d), v(w, h + t, d), top_color);
+    let pt = b.u(MIN_THICKNESS, 0.07);
+    let side = if b.chance(0.5) { -1.0 } else { 1.0 };
+    let pedestal = b.chance(0.6);
+    let pw = b.u(0.25, 0.4);
+    for sx in [-1.0, 1.0] {
+        let x0 = sx * w;
+        let x1 = if pedestal && sx == side {
+            x0 - sx * pw
+        } else {
+            x0 - sx * pt
+        };
+        b.cuboid(v(x0.min(x1), 0.0, -d), v(x0.max(x1), h + t / 2.0, d), body);
+    }
+    if b.chance(0.6) {
+        let mh = h * b.u(0.3, 0.7);
+        b.cuboid(
+            v(-w + pt, h - mh, d - pt),
+            v(w - pt, h + t / 2.0, d - 0.005),
+            body,
+        );
+    }
+}
+
+/// Trestle table: a long top on two I-shaped ends (foot, post, cleat) joined by a stretcher.
+fn trestle_table(b: &mut Builder) {
+    let top_color = b.color();
+    let wood = if b.chance(0.5) { top_color } else { b.color() };
+    let w = b.u(0.8, 1.0) / 2.0;
+    let d = b.u(0.35, 0.6) / 2.0;
+    let h = b.u(0.5, 0.75);
+    let t = b.u(MIN_THICKNESS, 0.08);
+    b.cuboid(v(-w, h, -d), v(w, h + t, d), top_color);
+    let s = b.u(0.05, 0.1) / 2.0;
+    let ft = b.u(MIN_THICKNESS, 0.07);
+    let inset = b.u(0.08, 0.2);
+    for sx in [-1.0, 1.0] {
+        let x = sx * (w - inset);
+        b.cuboid(v(x - s, 0.0, -d * 0.9), v(x + s, ft, d * 0.9), wood);
+        b.cuboid(v(x - s, ft - 0.01, -s), v(x + s, h - ft + 0.01, s), wood);
+        b.cuboid(
+            v(x - s, h - ft, -d * 0.85),
+            v(x + s, h + 0.005, d * 0.85),
+            wood,
+        );
+    }
+    let sy = h * b.u(0.3, 0.6);
+    let st = MIN_THICKNESS / 2.0 * 1.2;
+    b.cuboid(v(-w + inset, sy - st, -st), v(w - inset, sy + st, st), wood);
+}
+
+/// Fighter: a short, thick fuselage, delta wings, one or two fins.
+fn fighter(b: &mut Builder) {
+    let body = b.color();
+    let wing_color = if b.chance(0.6) { body } else { b.color() };
+    let len = b.u(0.8, 1.0);
+    let r = b.u(0.06, 0.09);
+    let z0 = -len / 2.0;
+    let nose = b.u(0.15, 0.25);
+    b.frustum(v(0.0, 0.0, z0 + nose), v(0.0, 0.0, -z0), r, r * 0.8, body);
+    b.frustum(v(0.0, 0.0, z0 + nose), v(0.0, 0.0, z0), r, r * 0.15, body);
+    let span = b.u(0.22, 0.34);
+    let chord = b.u(0.35, 0.5);
+    let wz = -z0 - chord - b.u(0.02, 0.1);
+    let taper = b.u(0.08, 0.25);
+    let sweep = chord * (1.0 - taper) * b.u(0.8, 1.0);
+    for sx in [-1.0f64, 1.0] {
+        b.push(
+            hexahedron(wing(
+                sx,
+                wz,
+                0.0,
+                span,
+                chord,
+                taper,
+                sweep,
+                0.0,
+                MIN_THICKNESS,
+            )),
+            wing_color,
+        );
+    }
+    let fin_h = b.u(0.12, 0.2);
+    let fc = b.u(0.12, 0.2);
+    let twin = b.chance(0.5);
+    let xs: &[f64] = if twin { &[-1.0, 1.0] } else { &[0.0] };
+    for &sx in xs {
+        let x = sx * r * 0.7;
+        let fin = sheared_box(
+            v(x - MIN_THICKNESS / 2.0, 0.0, -z0 - fc),
+            v(x + MIN_THICKNESS / 2.0, r + fin_h, -z0),
+            v(sx * 0.03, 0.0, fc * 0.4),
+            [1.0, 0.5],
+        );
+        b.push(hexahedron(fin), wing_color);
+    }
+}
+
+/// Propeller plane: straight, untapered wings on top of the fuselage, a propeller disc.
+fn propeller_plane(b: &mut Builder) {
+    let body = b.color();
+    let wing_color = if b.chance(0.5) { body } else { b.color() };
+    let len = b.u(0.6, 0.8);
+    let r = b.u(0.05, 0.08);
+    let z0 = -len / 2.0;
+    b.frustum(
+        v(0.0, 0.0, z0 + 0.05),
+        v(0.0, r * 0.4, -z0),
+        r,
+        r * 0.35,
+        body,
+    );
+    b.frustum(v(0.0, 0.0, z0 + 0.05), v(0.0, 0.0, z0), r, r * 0.6, body);
+    let prop = b.u(0.1, 0.16);
+    let prop_color = b.dark().map(|c| c * 2.0);
+    b.frustum(
+        v(0.0, 0.0, z0 - 0.005),
+        v(0.0, 0.0, z0 - 0.005 - MIN_THICKNESS),
+        prop,
+        prop,
+        prop_color,
+    );
+    let span = b.u(0.45, 0.55);
+    let chord = b.u(0.1, 0.16);
+    let wz = z0 + len * b.u(0.2, 0.35);
+    let high = b.chance(0.6);
+    let wy = if high { r * 0.9 } else { -r * 0.5 };
+    let taper = b.u(0.75, 1.0);
+    let dihedral = b.u(0.0, 0.03);
+    for sx in [-1.0f64, 1.0] {
+        b.push(
+            hexahedron(wing(
+                sx,
+                wz,
+                wy,
+                span,
+                chord,
+                taper,
+                0.0,
+                dihedral,
+                MIN_THICKNESS,
+            )),
+            wing_color,
+        );
+    }
+    let tspan = span * b.u(0.3, 0.4);
+    let tchord = chord * b.u(0.7, 1.0);
+    let tz = -z0 - tchord;
+    for sx in [-1.0f64, 1.0] {
+        b.push(
+            hexahedron(wing(
+                sx,
+                tz,
+                r * 0.4,
+                tspan,
+                tchord,
+                0.8,
+                0.02,
+                0.0,
+                MIN_THICKNESS,
+            )),
+            wing_color,
+        );
+    }
+    let fin_h = b.u(0.1, 0.16);
+    let fin = sheared_box(
+        v(-MIN_THICKNESS / 2.0, r * 0.3, tz),
+        v(MIN_THICKNESS / 2.0, r + fin_h, -z0),
+        v(0.0, 0.0, tchord * 0.4),
+        [1.0, 0.6],
+    );
+    b.push(hexahedron(fin), wing_color);
+}
+
+/// The four wheels of a car: `wr` radius, `ww` wide, at `±wz` along its length.
+fn wheels(b: &mut Builder, w: f64, wr: f64, ww: f64, wz: [f64; 2], tyre: [f32; 3]) {
+    for sx in [-1.0, 1.0] {
+        for z in wz {
+            let x = sx * (w - ww * 0.3);
+            b.frustum(v(x - ww / 2.0, wr, z), v(x + ww / 2.0, wr, z), wr, wr, tyre);
+        }
+    }
+}
+
+/// Van or SUV: a tall body and a long, tall cabin.
+fn van(b: &mut Builder) {
+    let paint = b.color();
+    let glass = if b.chance(0.5) { b.dark() } else { paint };
+    let tyre = b.dark();
+    let l = b.u(0.8, 1.0) / 2.0;
+    let w = b.u(0.4, 0.5) / 2.0;
+    let wr = b.u(0.07, 0.11);
+    let body_h = b.u(0.16, 0.26);
+    let y0 = wr * 0.7;
+    b.cuboid(v(-w, y0, -l), v(w, y0 + body_h, l), paint);
+    let front = b.u(0.05, 0.35) * l;
+    let cab_h = b.u(0.14, 0.26);
+    let cabin = sheared_box(
+        v(-w * 0.95, y0 + body_h - 0.01, -l + front),
+        v(w * 0.95, y0 + body_h + cab_h, l - 0.01),
+        v(0.0, 0.0, b.u(0.0, 0.04)),
+        [b.u(0.9, 1.0), b.u(0.85, 0.98)],
+    );
+    b.push(hexahedron(cabin), glass);
+    let ww = b.u(MIN_THICKNESS, 0.08);
+    let wz = l * b.u(0.6, 0.75);
+    wheels(b, w, wr, ww, [-wz, wz], tyre);
+}
+
+/// Pickup: a cabin at the front, an open bed behind it.
+fn pickup(b: &mut Builder) {
+    let paint = b.color();
+    let glass = if b.chance(0.5) { b.dark() } else { paint };
+    let tyre = b.dark();
+    let l = b.u(0.9, 1.0) / 2.0;
+    let w = b.u(0.4, 0.48) / 2.0;
+    let wr = b.u(0.08, 0.11);
+    let body_h = b.u(0.14, 0.2);
+    let y0 = wr * 0.75;
+    b.cuboid(v(-w, y0, -l), v(w, y0 + body_h, l), paint);
+    let cab_front = -l + b.u(0.25, 0.4) * l;
+    let cab_back = cab_front + b.u(0.45, 0.65) * l;
+    let cab_h = b.u(0.14, 0.2);
+    let cabin = sheared_box(
+        v(-w * 0.95, y0 + body_h - 0.01, cab_front),
+        v(w * 0.95, y0 + body_h + cab_h, cab_back),
+        v(0.0, 0.0, 0.01),
+        [0.95, b.u(0.7, 0.9)],
+    );
+    b.push(hexahedron(cabin), glass);
+    let bed_h = b.u(0.05, 0.1);
+    let t = MIN_THICKNESS;
+    let y1 = y0 + body_h - 0.01;
+    for sx in [-1.0, 1.0] {
+        let x0 = sx * w;
+        let x1 = x0 - sx * t;
+        b.cuboid(
+            v(x0.min(x1), y1, cab_back),
+            v(x0.max(x1), y1 + bed_h, l),
+            paint,
+        );
+    }
+    b.cuboid(v(-w, y1, l - t), v(w, y1 + bed_h, l), paint);
+    let ww = b.u(MIN_THICKNESS, 0.08);
+    let wz = [-l * b.u(0.6, 0.72), l * b.u(0.55, 0.7)];
+    wheels(b, w, wr, ww, wz, tyre);
+}
+
+/// Sports car: low and wide, a low swept cabin, big wheels.
+fn sports_car(b: &mut Builder) {
+    let paint = b.color();
+    let glass = b.dark();
+    let tyre = b.dark();
+    let l = b.u(0.85, 1.0) / 2.0;
+    let w = b.u(0.44, 0.52) / 2.0;
+    let wr = b.u(0.08, 0.1);
+    let body_h = b.u(0.07, 0.11);
+    let y0 = wr * 0.6;
+    let nose = sheared_box(
+        v(-w, y0, -l),
+        v(w, y0 + body_h, l),
+        v(0.0, 0.0, 0.0),
+        [1.0, b.u(0.9, 1.0)],
+    );
+    b.push(hexahedron(nose), paint);
+    let cab_l = b.u(0.3, 0.45) * l;
+    let cab_h = b.u(0.06, 0.1);
+    let cab_z = b.u(0.0, 0.2) * l;
+    let cabin = sheared_box(
+        v(-w * 0.85, y0 + body_h - 0.01, cab_z - cab_l),
+        v(w * 0.85, y0 + body_h + cab_h, cab_z + cab_l),
+        v(0.0, 0.0, b.u(0.02, 0.06)),
+        [b.u(0.8, 0.9), b.u(0.4, 0.6)],
+    );
+    b.push(hexahedron(cabin), glass);
+    if b.chance(0.4) {
+        let sp = MIN_THICKNESS;
+        b.cuboid(
+            v(-w * 0.9, y0 + body_h + 0.04, l - 0.08),
+            v(w * 0.9, y0 + body_h + 0.04 + sp, l - 0.01),
+            paint,
+        );
+        for sx in [-1.0, 1.0] {
+            let x = sx * w * 0.6;
+            b.cuboid(
+                v(x - sp / 2.0, y0 + body_h - 0.01, l - 0.06),
+                v(x + sp / 2.0, y0 + body_h + 0.045, l - 0.03),
+                paint,
+            );
+        }
+    }
+    let ww = b.u(0.05, 0.09);
+    let wz = l * b.u(0.6, 0.72);
+    wheels(b, w, wr, ww, [-wz, wz], tyre);
+}
+
+/// Floor lamp: a round base, a tall pole, a wide drum shade.
+fn floor_lamp(b: &mut Builder) {
+    let metal = b.color();
+    let shade_color = b.color();
+    let base_r = b.u(0.12, 0.2);
+    let base_t = b.u(MIN_THICKNESS, 0.05);
+    b.frustum(
+        v(0.0, 0.0, 0.0),
+        v(0.0, base_t, 0.0),
+        base_r,
+        base_r * 0.9,
+        metal,
+    );
+    let pr = MIN_THICKNESS / 2.0 * b.u(1.0, 1.3);
+    let h = b.u(0.75, 0.9);
+    b.frustum(v(0.0, 0.0, 0.0), v(0.0, h, 0.0), pr, pr, metal);
+    let sh = b.u(0.14, 0.22);
+    let r = b.u(0.14, 0.22);
+    let r_top = r * b.u(0.75, 1.0);
+    b.frustum(
+        v(0.0, h - sh * 0.6, 0.0),
+        v(0.0, h + sh * 0.4, 0.0),
+        r,
+        r_top,
+        shade_color,
+    );
+}
+
+/// Arc lamp: a heavy block base, a pole, an arm out over the floor, a shade hanging open-down.
+fn arc_lamp(b: &mut Builder) {
+    let metal = b.color();
+    let shade_color = b.color();
+    let bs = b.u(0.08, 0.14);
+    let bt = b.u(0.04, 0.08);
+    b.cuboid(v(-bs, 0.0, -bs), v(bs, bt, bs), metal);
+    let pr = MIN_THICKNESS / 2.0 * b.u(1.0, 1.3);
+    let h = b.u(0.6, 0.85);
+    let reach = b.u(0.3, 0.5);
+    let rise = b.u(0.0, 0.12);
+    b.frustum(v(0.0, 0.0, 0.0), v(0.0, h, 0.0), pr, pr, metal);
+    let knee = v(0.0, h, 0.0);
+    let mid = knee + v(0.0, rise, -reach * 0.5);
+    let end = v(0.0, h + rise * 0.5, -reach);
+    b.frustum(knee, mid, pr, pr, metal);
+    b.frustum(mid, end, pr, pr, metal);
+    let sh = b.u(0.1, 0.18);
+    let r_low = b.u(0.1, 0.18);
+    let r_top = r_low * b.u(0.2, 0.45);
+    b.frustum(
+        end - v(0.0, sh, 0.0),
+        end + v(0.0, 0.01, 0.0),
+        r_low,
+        r_top,
+        shade_color,
+    );
+}
+
+/// Table lamp: a vase-shaped body, a short neck, a drum shade.
+fn vase_lamp(b: &mut Builder) {
+    let body = b.color();
+    let shade_color = b.color();
+    let r = b.u(0.09, 0.16);
+    let bh = b.u(0.2, 0.35);
+    let belly = bh * b.u(0.3, 0.6);
+    let foot = r * b.u(0.5, 0.8);
+    let shoulder = r * b.u(0.3, 0.6);
+    b.frustum(v(0.0, 0.0, 0.0), v(0.0, belly, 0.0), foot, r, body);
+    b.frustum(v(0.0, belly, 0.0), v(0.0, bh, 0.0), r, shoulder, body);
+    let pr = MIN_THICKNESS / 2.0 * 1.2;
+    let neck = b.u(0.05, 0.15);
+    b.frustum(v(0.0, bh - 0.01, 0.0), v(0.0, bh + neck, 0.0), pr, pr, body);
+    let sh = b.u(0.15, 0.28);
+    let sr = b.u(0.14, 0.24);
+    let sr_top = sr * b.u(0.6, 1.0);
+    b.frustum(
+        v(0.0, bh + neck - sh * 0.3, 0.0),
+        v(0.0, bh + neck + sh * 0.7, 0.0),
+        sr,
+        sr_top,
+        shade_color,
+    );
+}
+
+/// Picnic bench: a seat on two A-frames of crossed legs, a stretcher between them.
+fn picnic_bench(b: &mut Builder) {
+    let wood = b.color();
+    let l = b.u(0.85, 1.0) / 2.0;
+    let d = b.u(0.22, 0.34) / 2.0;
+    let h = b.u(0.35, 0.45);
+    let t = b.u(MIN_THICKNESS, 0.07);
+    b.cuboid(v(-l, h, -d), v(l, h + t, d), wood);
+    let s = b.u(MIN_THICKNESS, 0.06) / 2.0;
+    let inset = b.u(0.08, 0.2);
+    let spread = b.u(0.1, 0.2);
+    for sx in [-1.0, 1.0] {
+        let x = sx * (l - inset);
+        for sz in [-1.0, 1.0] {
+            b.frustum(
+                v(x, 0.0, sz * (d + spread)),
+                v(x, h + t / 2.0, -sz * d * 0.3),
+                s,
+                s,
+                wood,
+            );
+        }
+    }
+    let sy = h * 0.4;
+    b.cuboid(v(-l + inset, sy - s, -s), v(l - inset, sy + s, s), wood);
+}
+
+/// Ottoman bench: a padded block, on the floor or on short feet.
+fn ottoman_bench(b: &mut Builder) {
+    let cloth = b.color();
+    let l = b.u(0.75, 1.0) / 2.0;
+    let d = b.u(0.3, 0.45) / 2.0;
+    let h = b.u(0.3, 0.42);
+    let feet = b.chance(0.5);
+    let y0 = if feet { b.u(0.05, 0.12) } else { 0.0 };
+    b.cuboid(v(-l, y0, -d), v(l, h, d), cloth);
+    if feet {
+        let wood = b.color();
+        let f = b.u(MIN_THICKNESS, 0.06) / 2.0;
+        for (sx, sz) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
+            let c = v(sx * (l - f - 0.03), 0.0, sz * (d - f - 0.03));
+            b.cuboid(c - v(f, 0.0, f), c + v(f, y0 + 0.01, f), wood);
+        }
+    }
+    if b.chance(0.5) {
+        let top = b.color();
+        let th = b.u(0.04, 0.08);
+        b.cuboid(
+            v(-l + 0.01, h - 0.01, -d + 0.01),
+            v(l - 0.01, h + th, d - 0.01),
+            top,
+        );
+    }
+}
+
 fn v(x: f64, y: f64, z: f64) -> DVec3 {
     DVec3::new(x, y, z)
 }
 
-fn chair(b: &mut Builder) {
+fn four_leg_chair(b: &mut Builder) {
     let seat_color = b.color();
     let back_color = if b.chance(0.6) { seat_color } else { b.color() };
     let leg_color = b.color();
@@ -471,7 +1133,7 @@ fn chair(b: &mut Builder) {
     }
 }
 
-fn table(b: &mut Builder) {
+fn leg_table(b: &mut Builder) {
     let top_color = b.color();
     let leg_color = if b.chance(0.5) { top_color } else { b.color() };
     let h = b.u(0.5, 0.75);
@@ -527,7 +1189,7 @@ fn table(b: &mut Builder) {
     }
 }
 
-fn airplane(b: &mut Builder) {
+fn airliner(b: &mut Builder) {
     let body = b.color();
     let wing_color = if b.chance(0.5) { body } else { b.color() };
     let len = b.u(0.8, 1.0);
@@ -628,7 +1290,7 @@ fn wing(
     })
 }
 
-fn car(b: &mut Builder) {
+fn sedan(b: &mut Builder) {
     let paint = b.color();
     let glass = if b.chance(0.5) { b.dark() } else { paint };
     let tyre = b.dark();
@@ -664,7 +1326,7 @@ fn car(b: &mut Builder) {
     }
 }
 
-fn lamp(b: &mut Builder) {
+fn desk_lamp(b: &mut Builder) {
     let metal = b.color();
     let shade_color = b.color();
     let base_r = b.u(0.1, 0.18);
@@ -709,7 +1371,7 @@ fn lamp(b: &mut Builder) {
     );
 }
 
-fn bench(b: &mut Builder) {
+fn leg_bench(b: &mut Builder) {
     let wood = b.color();
     let frame = if b.chance(0.5) { wood } else { b.color() };
     let l = b.u(0.85, 1.0) / 2.0;
