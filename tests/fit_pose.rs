@@ -481,6 +481,171 @@ fn a_scheduled_fit_with_targets_rendered_per_stage_ends_within_2_degrees() {
 }
 
 #[test]
+fn spread_rotations_start_at_the_identity_and_cover_the_rotations() {
+    let k = 32;
+    let q = pose::spread_rotations(k);
+    assert_eq!(q.len(), k as usize);
+    assert!(q[0].angle_between(glam::DQuat::IDENTITY) < 1e-12);
+    assert!(q.iter().all(|p| (p.length() - 1.0).abs() < 1e-12));
+    // Every rotation lies within reach of a point: the farthest of 2 000 random rotations from
+    // its nearest point, against the same for 32 random points (the negative control, the
+    // best of 5 draws).
+    let mut rng = common::rng(4);
+    let mut random = || loop {
+        // Uniform in the 4-ball, then onto the sphere: uniform rotations.
+        let v: [f64; 4] = std::array::from_fn(|_| rng.random_range(-1.0..1.0));
+        let n = v.iter().map(|x| x * x).sum::<f64>();
+        if n > 1e-6 && n <= 1.0 {
+            break glam::DQuat::from_array(v).normalize();
+        }
+    };
+    let samples: Vec<glam::DQuat> = (0..2000).map(|_| random()).collect();
+    let gap = |points: &[glam::DQuat]| {
+        samples
+            .iter()
+            .map(|r| {
+                points
+                    .iter()
+                    .map(|p| p.angle_between(*r))
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .fold(0.0f64, f64::max)
+    };
+    let spread = gap(&q);
+    let best_random = (0..5)
+        .map(|_| gap(&(0..k).map(|_| random()).collect::<Vec<_>>()))
+        .fold(f64::INFINITY, f64::min);
+    eprintln!(
+        "32 rotations: every sample within {:.1}° of the spread, {:.1}° of random ones",
+        spread.to_degrees(),
+        best_random.to_degrees()
+    );
+    assert!(
+        spread.to_degrees() < 80.0,
+        "a gap of {:.1}°",
+        spread.to_degrees()
+    );
+    assert!(spread < best_random, "no better spread than random points");
+    // Starts: the first is the init itself; the others are the spread turned by it.
+    let init = Pose {
+        rotation: DVec3::new(0.2, -0.4, 0.1),
+        translation: DVec3::new(0.01, 0.02, 0.03),
+    };
+    let starts = pose::spread_starts(&init, 4);
+    assert_eq!(starts[0], init);
+    for (s, p) in starts.iter().zip(pose::spread_rotations(4)) {
+        assert_eq!(s.translation, init.translation);
+        let want = init.quaternion() * p;
+        assert!(s.quaternion().dot(want).abs() > 1.0 - 1e-12);
+    }
+}
+
+#[test]
+fn screened_starts_recover_a_pose_a_single_far_start_misses() {
+    let Some(gpu) = common::gpu() else { return };
+    let (mesh, target, _, mut opts) = small_fit();
+    opts.schedule = None;
+    let image = gpu_target(&gpu, &mesh, &opts.settings, &target);
+    // 150° away about an oblique axis.
+    let off =
+        glam::DQuat::from_axis_angle(DVec3::new(0.2, 1.0, -0.5).normalize(), 150f64.to_radians());
+    let init = Pose {
+        rotation: (glam::DQuat::from_scaled_axis(target.rotation) * off).to_scaled_axis(),
+        translation: DVec3::ZERO,
+    };
+    let (single, ..) = run_small_fit(
+        &gpu,
+        &mesh,
+        &target,
+        &init,
+        &opts,
+        PoseTarget::Fixed(&image),
+    );
+    assert!(
+        single > 20.0,
+        "one start from 150° already succeeds ({single}°)"
+    );
+    let starts = pose::screened_starts(
+        &gpu,
+        &mesh,
+        &camera(),
+        &lighting(),
+        &image,
+        &init,
+        4,
+        96,
+        30f64.to_radians(),
+        &opts,
+    )
+    .unwrap();
+    assert_eq!(starts.len(), 4);
+    for (i, a) in starts.iter().enumerate() {
+        for b in &starts[..i] {
+            assert!(rotation_distance(a.rotation, b.rotation) >= 30f64.to_radians() - 1e-9);
+        }
+    }
+    let mut calls = vec![0; 4];
+    let multi = pose::fit_pose_multistart(
+        &gpu,
+        &mesh,
+        &camera(),
+        &lighting(),
+        PoseTarget::Fixed(&image),
+        &starts,
+        &opts,
+        |k, _| {
+            calls[k] += 1;
+            true
+        },
+    )
+    .unwrap();
+    assert_eq!(multi.starts.len(), 4);
+    assert!(
+        calls.iter().all(|&c| c == 6),
+        "{calls:?}: one call per submission of 10"
+    );
+    let best = multi
+        .starts
+        .iter()
+        .map(|s| s.loss)
+        .fold(f64::INFINITY, f64::min);
+    assert_eq!(multi.best.loss, best);
+    assert_eq!(multi.starts[multi.best_start].loss, best);
+    let err = rotation_distance(multi.best.pose.rotation, target.rotation).to_degrees();
+    eprintln!(
+        "multi-start: best start {} ends {err:.3}° off",
+        multi.best_start
+    );
+    assert!(err < 2.0, "the best of 4 screened starts ends {err}° off");
+    // A stop from the callback ends the start it is in and skips the rest.
+    let stopped = pose::fit_pose_multistart(
+        &gpu,
+        &mesh,
+        &camera(),
+        &lighting(),
+        PoseTarget::Fixed(&image),
+        &starts,
+        &opts,
+        |k, _| k < 1,
+    )
+    .unwrap();
+    assert_eq!(stopped.starts.len(), 2);
+    assert!(matches!(
+        pose::fit_pose_multistart(
+            &gpu,
+            &mesh,
+            &camera(),
+            &lighting(),
+            PoseTarget::Fixed(&image),
+            &[],
+            &opts,
+            |_, _| true
+        ),
+        Err(softvk::Error::Input(_))
+    ));
+}
+
+#[test]
 fn repeated_fits_are_bit_identical() {
     let Some(gpu) = common::gpu() else { return };
     let mesh = colored_box();
@@ -756,6 +921,37 @@ fn fit_pose_writes_the_pose_json_and_both_images() {
     assert_eq!(json["schedule"]["gamma_start"].as_f64(), Some(2e-3));
     assert!(r.is_file() && e.is_file());
     assert!(!dir.path("scheduled-render.png").exists());
+
+    // Several starts: every start is listed, and the pose is the one with the lowest loss.
+    let out3 = dir.path("multi.json");
+    let o = fit_cmd(
+        &mesh,
+        &target,
+        &out3,
+        &[
+            "--iters",
+            "10",
+            "--starts",
+            "3",
+            "--candidates",
+            "12",
+            "--init-rotation",
+            "0,150,0",
+            "--no-schedule",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let json = read_json(&out3);
+    let starts = json["starts"].as_array().unwrap();
+    assert_eq!(starts.len(), 3);
+    let losses: Vec<f64> = starts.iter().map(|s| s["loss"].as_f64().unwrap()).collect();
+    let best = json["best_start"].as_u64().unwrap() as usize;
+    assert_eq!(json["loss"].as_f64().unwrap(), losses[best]);
+    assert!(losses.iter().all(|&l| l >= losses[best]), "{losses:?}");
+    assert_eq!(
+        json_v3(&json, "rotation_axis_angle"),
+        json_v3(&starts[best], "rotation_axis_angle")
+    );
 }
 
 fn read_json(path: &Path) -> serde_json::Value {
@@ -810,6 +1006,20 @@ fn fit_pose_errors_are_one_line_and_write_nothing() {
         ("NaN vertex", &nan, &target, vec![], "nan.obj"),
         ("no faces", &empty, &target, vec![], "empty.obj"),
         ("bad tile", &mesh, &target, vec!["--tile", "12"], "12"),
+        (
+            "candidates without starts",
+            &mesh,
+            &target,
+            vec!["--candidates", "8"],
+            "--starts",
+        ),
+        (
+            "starts with a checkpoint",
+            &mesh,
+            &target,
+            vec!["--starts", "2", "--checkpoint", "ck"],
+            "one fit",
+        ),
         (
             "zero iterations",
             &mesh,

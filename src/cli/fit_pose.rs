@@ -12,6 +12,9 @@
 //! - `--init-rotation x,y,z` is an axis-angle vector **in degrees**: its direction is the axis,
 //!   its length the angle (`0,90,0` is a quarter turn about +y). Rotations turn about the mesh's
 //!   vertex centroid: `p' = R (p − c) + c + t`.
+//! - `--starts K`: K fits from the K lowest-loss of `--candidates` rotations spread over all
+//!   rotations, the lowest final loss kept ([`softvk::fit::pose::fit_pose_multistart`]);
+//!   `pose.json` lists every start and the winner.
 //!
 //! Writes `pose.json` (rotation as axis-angle, 3×3 matrix and quaternion, translation, centre,
 //! final loss, iterations, angle to the initial rotation), the final render (`--render`,
@@ -28,7 +31,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::{Value, json};
 use softvk::fit::checkpoint::{Checkpoint, FitKind};
 use softvk::fit::pose::{
-    Pose, PoseFitOptions, PoseFitState, PoseTarget, Schedule, fit_pose_resumable, rotation_distance,
+    Pose, PoseFitOptions, PoseFitState, PoseTarget, Schedule, fit_pose_multistart,
+    fit_pose_resumable, rotation_distance, screened_starts,
 };
 use softvk::fit::report;
 use softvk::gpu::{Context, ContextOptions};
@@ -38,6 +42,9 @@ use softvk::{Error, Result};
 
 use super::args::{CheckpointArgs, RasterArgs, ViewArgs, positive, triple};
 use super::output::{AtomicFile, ImageFormat};
+
+/// The least angle between two of `--starts`' screened starts.
+const MIN_START_SEPARATION_DEG: f64 = 30.0;
 
 /// The defaults of the pose fit (chosen by `examples/pose_study.rs`; RESULTS.md).
 fn defaults() -> PoseFitOptions {
@@ -87,6 +94,19 @@ pub struct FitPoseArgs {
     /// Render every iteration at the sharp --sigma/--gamma (no blurry-to-sharp schedule).
     #[arg(long)]
     pub no_schedule: bool,
+
+    /// Fit from K starts and keep the one that ends with the lowest loss: the K best of
+    /// --candidates rotations spread over all rotations (the first is --init-rotation),
+    /// rendered once each and at least 30° apart. Far starts land in wrong basins; one of K
+    /// screened starts usually begins in the right one.
+    #[arg(long, value_name = "K", default_value_t = 1,
+          value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub starts: u32,
+
+    /// Rotations screened for --starts [default: 32 × K; K or fewer: the K spread evenly,
+    /// unscreened].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=65536))]
+    pub candidates: Option<u32>,
 
     /// σ of the schedule's first (blurry) stage [default: 1e-2].
     #[arg(long, value_name = "S", value_parser = positive, conflicts_with = "no_schedule")]
@@ -260,6 +280,18 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
             "--out, --render, --error and --compare must be four different files".into(),
         ));
     }
+    if args.candidates.is_some() && args.starts == 1 {
+        return Err(Error::Input(
+            "--candidates chooses the starts of --starts K (K > 1)".into(),
+        ));
+    }
+    if args.starts > 1
+        && (args.checkpoints.checkpoint.is_some() || args.checkpoints.resume.is_some())
+    {
+        return Err(Error::Input(
+            "--starts with --checkpoint/--resume: a checkpoint holds one fit".into(),
+        ));
+    }
     // The checkpoint is checked before anything is written.
     let fingerprint = PoseFitState::fingerprint(&mesh, &camera, &lighting, &target, &init, &opts);
     let resume = match &args.checkpoints.resume {
@@ -286,33 +318,75 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
             .expect("a valid template"),
         )
     };
-    let result = fit_pose_resumable(
-        &ctx,
-        &mesh,
-        &camera,
-        &lighting,
-        PoseTarget::Fixed(&target),
-        &init,
-        &opts,
-        resume.as_ref(),
-        |l, snapshot| {
-            bar.set_position(u64::from(l.iteration));
-            bar.set_message(format!("loss {:.5}  σ {:.0e}", l.loss, l.sigma));
-            let go_on = super::interrupt::requested().is_none();
-            if args
-                .checkpoints
-                .due(l.iteration, opts.iterations, opts.log_every, !go_on)
-            {
-                if let Some(dir) = &args.checkpoints.checkpoint {
-                    snapshot
-                        .state()?
-                        .to_checkpoint(fingerprint)
-                        .write(&dir.join(CHECKPOINT_FILE))?;
+    let mut multi = None;
+    let result = if args.starts > 1 {
+        let candidates = args.candidates.unwrap_or(32 * args.starts);
+        bar.set_message(format!("screening {candidates} rotations"));
+        let starts = screened_starts(
+            &ctx,
+            &mesh,
+            &camera,
+            &lighting,
+            &target,
+            &init,
+            args.starts,
+            candidates,
+            MIN_START_SEPARATION_DEG.to_radians(),
+            &opts,
+        )?;
+        bar.set_length(u64::from(opts.iterations) * u64::from(args.starts));
+        let m = fit_pose_multistart(
+            &ctx,
+            &mesh,
+            &camera,
+            &lighting,
+            PoseTarget::Fixed(&target),
+            &starts,
+            &opts,
+            |k, l| {
+                bar.set_position(k as u64 * u64::from(opts.iterations) + u64::from(l.iteration));
+                bar.set_message(format!(
+                    "start {}/{}  loss {:.5}  σ {:.0e}",
+                    k + 1,
+                    args.starts,
+                    l.loss,
+                    l.sigma
+                ));
+                super::interrupt::requested().is_none()
+            },
+        )?;
+        let best = m.best.clone();
+        multi = Some(m);
+        best
+    } else {
+        fit_pose_resumable(
+            &ctx,
+            &mesh,
+            &camera,
+            &lighting,
+            PoseTarget::Fixed(&target),
+            &init,
+            &opts,
+            resume.as_ref(),
+            |l, snapshot| {
+                bar.set_position(u64::from(l.iteration));
+                bar.set_message(format!("loss {:.5}  σ {:.0e}", l.loss, l.sigma));
+                let go_on = super::interrupt::requested().is_none();
+                if args
+                    .checkpoints
+                    .due(l.iteration, opts.iterations, opts.log_every, !go_on)
+                {
+                    if let Some(dir) = &args.checkpoints.checkpoint {
+                        snapshot
+                            .state()?
+                            .to_checkpoint(fingerprint)
+                            .write(&dir.join(CHECKPOINT_FILE))?;
+                    }
                 }
-            }
-            Ok(go_on)
-        },
-    )?;
+                Ok(go_on)
+            },
+        )?
+    };
     bar.finish_and_clear();
     ctx.check_validation()?;
     // The log holds every iteration (a resumed fit's first ones from its checkpoint).
@@ -355,6 +429,26 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
             )),
         );
     }
+    if let Some(m) = &multi {
+        fields.insert("best_start".into(), json!(m.best_start));
+        fields.insert(
+            "starts".into(),
+            Value::Array(
+                m.starts
+                    .iter()
+                    .map(|s| {
+                        json!({
+                            "init_rotation_axis_angle": s.init.rotation.to_array(),
+                            "rotation_axis_angle": s.pose.rotation.to_array(),
+                            "translation": s.pose.translation.to_array(),
+                            "loss": s.loss,
+                            "seconds": s.seconds,
+                        })
+                    })
+                    .collect(),
+            ),
+        );
+    }
     fields.insert("sigma".into(), json!(opts.settings.sigma));
     fields.insert("gamma".into(), json!(opts.settings.gamma));
     fields.insert(
@@ -377,9 +471,11 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
     };
     let render_png = png(&result.image, &render_path)?;
     let error_png = png(&error_map(&result.image, &target), &error_path)?;
-    // The start, posed about the same centre and rendered as the result was.
+    // The start (the winning one of several), posed about the same centre and rendered as the
+    // result was.
+    let start_pose = multi.as_ref().map_or(init, |m| m.starts[m.best_start].init);
     let start_mesh = Mesh {
-        positions: init
+        positions: start_pose
             .apply(
                 &mesh
                     .positions
