@@ -122,6 +122,26 @@ pub struct Voxelization {
     pub odd_rays: usize,
 }
 
+/// [`Error::Input`] unless `res`, `cube` and the mesh can be voxelized: every face indexes a
+/// vertex, every vertex is finite.
+fn check_mesh(positions: &[[f32; 3]], faces: &[[u32; 3]], cube: &Cube, res: u32) -> Result<()> {
+    check_res(res)?;
+    cube.validate()?;
+    if let Some(f) = faces
+        .iter()
+        .position(|f| f.iter().any(|&i| i as usize >= positions.len()))
+    {
+        return Err(Error::Input(format!(
+            "voxelize: face {f} indexes past the {} vertices",
+            positions.len()
+        )));
+    }
+    if positions.iter().any(|p| !p.iter().all(|c| c.is_finite())) {
+        return Err(Error::Input("voxelize: a vertex is not finite".into()));
+    }
+    Ok(())
+}
+
 /// Orientation of `p` against the segment `lo → hi` (`lo < hi` lexicographically), never 0:
 /// an exact zero is resolved by the symbolic perturbation `p + (ε, ε²)`, so a point on an edge
 /// or a vertex is inside exactly one of the triangles around it.
@@ -157,20 +177,7 @@ pub fn voxelize_mesh(
     cube: &Cube,
     res: u32,
 ) -> Result<Voxelization> {
-    check_res(res)?;
-    cube.validate()?;
-    if let Some(f) = faces
-        .iter()
-        .position(|f| f.iter().any(|&i| i as usize >= positions.len()))
-    {
-        return Err(Error::Input(format!(
-            "voxelize: face {f} indexes past the {} vertices",
-            positions.len()
-        )));
-    }
-    if positions.iter().any(|p| !p.iter().all(|c| c.is_finite())) {
-        return Err(Error::Input("voxelize: a vertex is not finite".into()));
-    }
+    check_mesh(positions, faces, cube, res)?;
     let r = res as usize;
     let step = 2.0 * cube.half / f64::from(res);
     let origin = cube.min();
@@ -274,20 +281,7 @@ pub fn voxelize_mesh_conservative(
     cube: &Cube,
     res: u32,
 ) -> Result<Occupancy> {
-    check_res(res)?;
-    cube.validate()?;
-    if let Some(f) = faces
-        .iter()
-        .position(|f| f.iter().any(|&i| i as usize >= positions.len()))
-    {
-        return Err(Error::Input(format!(
-            "voxelize: face {f} indexes past the {} vertices",
-            positions.len()
-        )));
-    }
-    if positions.iter().any(|p| !p.iter().all(|c| c.is_finite())) {
-        return Err(Error::Input("voxelize: a vertex is not finite".into()));
-    }
+    check_mesh(positions, faces, cube, res)?;
     let r = res as i64;
     let step = 2.0 * cube.half / f64::from(res);
     let origin = cube.min();
