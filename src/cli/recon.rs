@@ -615,6 +615,8 @@ pub fn evaluate(args: &EvalReconArgs) -> Result<()> {
     let masks: Vec<Vec<Mask>> = (0..dataset::VIEWS)
         .map(|v| train_objects.iter().map(|&(c, n)| alpha(c, n, v)).collect())
         .collect();
+    // The retrieved objects' visual hulls, made when first retrieved.
+    let mut train_hulls: Vec<Option<Vec<bool>>> = vec![None; train_objects.len()];
     let mut rows = Vec::new();
     for class in &test.classes {
         let inputs: Vec<(usize, usize)> = (0..class.count)
@@ -622,11 +624,17 @@ pub fn evaluate(args: &EvalReconArgs) -> Result<()> {
             .collect();
         let ours = eval::reconstruction_ious(&ctx, &recon, class, &inputs, args.voxelize.into())?;
         let mut retrieval = Vec::with_capacity(inputs.len());
+        let mut retrieval_hull = Vec::with_capacity(inputs.len());
         for &(n, v) in &inputs {
             let best = eval::retrieve(&alpha(class, n, v), &masks[v])
                 .ok_or_else(|| Error::Input("no training objects to retrieve from".into()))?;
             let (c, m) = train_objects[best];
             retrieval.push(eval::voxel_iou(c.voxels_of(m), class.voxels_of(n))?);
+            if train_hulls[best].is_none() {
+                train_hulls[best] = Some(eval::visual_hull_voxels(c, m)?);
+            }
+            let hull = train_hulls[best].as_deref().expect("made above");
+            retrieval_hull.push(eval::voxel_iou(hull, class.voxels_of(n))?);
         }
         let same: Vec<&[bool]> = train
             .classes
@@ -652,6 +660,7 @@ pub fn evaluate(args: &EvalReconArgs) -> Result<()> {
             inputs: inputs.len(),
             reconstruction: avg(&ours),
             retrieval: avg(&retrieval),
+            retrieval_hull: avg(&retrieval_hull),
             mean_shape: avg(&mean_iou),
             visual_hull: avg(&hull),
         });

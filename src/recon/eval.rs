@@ -6,6 +6,8 @@
 //!   matches the input's silhouette (2D IoU of the alpha masks at 0.5), its voxels as the
 //!   answer. It searches every training object of every class: it knows no more than the
 //!   network (one image).
+//!   Beside it, the same retrieval answering with the retrieved object's visual hull (what its
+//!   silhouettes show), which is all a silhouette-trained network could have learned of it.
 //! - **mean shape**: the class's mean training occupancy, thresholded at 0.5 (it knows the
 //!   class, which the network does not: an upper-ish bar for "no image needed").
 
@@ -105,6 +107,9 @@ pub struct ScoreRow {
     pub reconstruction: f64,
     /// The retrieval baseline.
     pub retrieval: f64,
+    /// Retrieval answering with the retrieved object's visual hull instead of its voxels: what
+    /// retrieval could know from silhouettes alone, as the network does.
+    pub retrieval_hull: f64,
     /// The class's mean shape.
     pub mean_shape: f64,
     /// The visual hull of each test object's own 24 silhouettes ([`visual_hull_iou`]): what
@@ -118,14 +123,26 @@ pub fn format_table(rows: &[ScoreRow]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{:<22} {:>7} {:>14} {:>10} {:>11} {:>12}",
-        "class", "inputs", "reconstruction", "retrieval", "mean shape", "visual hull"
+        "{:<22} {:>7} {:>14} {:>10} {:>15} {:>11} {:>12}",
+        "class",
+        "inputs",
+        "reconstruction",
+        "retrieval",
+        "retrieval hull",
+        "mean shape",
+        "visual hull"
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "{:<22} {:>7} {:>14.4} {:>10.4} {:>11.4} {:>12.4}",
-            r.class, r.inputs, r.reconstruction, r.retrieval, r.mean_shape, r.visual_hull
+            "{:<22} {:>7} {:>14.4} {:>10.4} {:>15.4} {:>11.4} {:>12.4}",
+            r.class,
+            r.inputs,
+            r.reconstruction,
+            r.retrieval,
+            r.retrieval_hull,
+            r.mean_shape,
+            r.visual_hull
         );
     }
     if !rows.is_empty() {
@@ -133,11 +150,12 @@ pub fn format_table(rows: &[ScoreRow]) -> String {
         let mean = |f: fn(&ScoreRow) -> f64| rows.iter().map(f).sum::<f64>() / n;
         let _ = writeln!(
             s,
-            "{:<22} {:>7} {:>14.4} {:>10.4} {:>11.4} {:>12.4}",
+            "{:<22} {:>7} {:>14.4} {:>10.4} {:>15.4} {:>11.4} {:>12.4}",
             "mean",
             rows.iter().map(|r| r.inputs).sum::<usize>(),
             mean(|r| r.reconstruction),
             mean(|r| r.retrieval),
+            mean(|r| r.retrieval_hull),
             mean(|r| r.mean_shape),
             mean(|r| r.visual_hull)
         );
@@ -145,15 +163,10 @@ pub fn format_table(rows: &[ScoreRow]) -> String {
     s
 }
 
-/// The 3D IoU of object `n`'s visual hull against its voxels: the 32³ voxels whose centres
-/// fall inside its silhouette (alpha ≥ 128) in all [`super::dataset::VIEWS`] views, as their
-/// cameras ([`super::dataset::view_camera`]) project them.
-///
-/// Training sees only these silhouettes, so what they cannot carve (the space under a table's
-/// top or a car's body, which every view at 30° elevation looks down on) is out of its reach:
-/// the hull is about the best a silhouette-supervised reconstruction can expect, where
-/// retrieval returns a training object's true voxels, hollows included.
-pub fn visual_hull_iou(class: &super::dataset::ClassData, n: usize) -> Result<f64> {
+/// Object `n`'s visual hull in NMR order: the 32³ voxels whose centres fall inside its
+/// silhouette (alpha ≥ 128) in all [`super::dataset::VIEWS`] views, as their cameras
+/// ([`super::dataset::view_camera`]) project them.
+pub fn visual_hull_voxels(class: &super::dataset::ClassData, n: usize) -> Result<Vec<bool>> {
     use super::dataset::{IMAGE_SIZE, VIEWS, VOXEL_RES, occupancy_to_nmr, view_camera, voxel_cube};
     let px = IMAGE_SIZE * IMAGE_SIZE;
     let masks = (0..VIEWS)
@@ -169,7 +182,17 @@ pub fn visual_hull_iou(class: &super::dataset::ClassData, n: usize) -> Result<f6
     let cameras: Vec<_> = (0..VIEWS).map(view_camera).collect();
     let hull =
         crate::field::voxel::visual_hull(&silhouettes, &cameras, &voxel_cube(), VOXEL_RES as u32)?;
-    voxel_iou(&occupancy_to_nmr(&hull)?, class.voxels_of(n))
+    occupancy_to_nmr(&hull)
+}
+
+/// The 3D IoU of object `n`'s visual hull ([`visual_hull_voxels`]) against its voxels.
+///
+/// Training sees only these silhouettes, so what they cannot carve (the space under a table's
+/// top or a car's body, which every view at 30° elevation looks down on) is out of its reach:
+/// the hull is about the best a silhouette-supervised reconstruction can expect, where
+/// retrieval returns a training object's true voxels, hollows included.
+pub fn visual_hull_iou(class: &super::dataset::ClassData, n: usize) -> Result<f64> {
+    voxel_iou(&visual_hull_voxels(class, n)?, class.voxels_of(n))
 }
 
 /// How a predicted mesh becomes 32³ voxels.
