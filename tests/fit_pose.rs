@@ -584,20 +584,23 @@ fn screened_starts_recover_a_pose_a_single_far_start_misses() {
             assert!(rotation_distance(a.rotation, b.rotation) >= 30f64.to_radians() - 1e-9);
         }
     }
+    let fit = |starts: &[Pose], progress: &mut dyn FnMut(usize, &pose::PoseLog) -> bool| {
+        pose::fit_pose_multistart(
+            &gpu,
+            &mesh,
+            &camera(),
+            &lighting(),
+            PoseTarget::Fixed(&image),
+            starts,
+            &opts,
+            progress,
+        )
+    };
     let mut calls = vec![0; 4];
-    let multi = pose::fit_pose_multistart(
-        &gpu,
-        &mesh,
-        &camera(),
-        &lighting(),
-        PoseTarget::Fixed(&image),
-        &starts,
-        &opts,
-        |k, _| {
-            calls[k] += 1;
-            true
-        },
-    )
+    let multi = fit(&starts, &mut |k, _| {
+        calls[k] += 1;
+        true
+    })
     .unwrap();
     assert_eq!(multi.starts.len(), 4);
     assert!(
@@ -618,29 +621,10 @@ fn screened_starts_recover_a_pose_a_single_far_start_misses() {
     );
     assert!(err < 2.0, "the best of 4 screened starts ends {err}° off");
     // A stop from the callback ends the start it is in and skips the rest.
-    let stopped = pose::fit_pose_multistart(
-        &gpu,
-        &mesh,
-        &camera(),
-        &lighting(),
-        PoseTarget::Fixed(&image),
-        &starts,
-        &opts,
-        |k, _| k < 1,
-    )
-    .unwrap();
+    let stopped = fit(&starts, &mut |k, _| k < 1).unwrap();
     assert_eq!(stopped.starts.len(), 2);
     assert!(matches!(
-        pose::fit_pose_multistart(
-            &gpu,
-            &mesh,
-            &camera(),
-            &lighting(),
-            PoseTarget::Fixed(&image),
-            &[],
-            &opts,
-            |_, _| true
-        ),
+        fit(&[], &mut |_, _| true),
         Err(softvk::Error::Input(_))
     ));
 }
