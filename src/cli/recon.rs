@@ -167,12 +167,12 @@ pub struct EvalReconArgs {
     pub voxelize: VoxelizeArg,
 }
 
-/// `--voxelize` of `softvk eval-recon` ([`eval::Voxelizer`]).
+/// `--voxelize` of `softvk eval-recon`: [`eval::Voxelizer`]'s two ways.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum VoxelizeArg {
-    /// [`eval::Voxelizer::SoftRas`].
+    /// SoftRas's evaluation: the voxels the surface passes through and what they enclose.
     Softras,
-    /// [`eval::Voxelizer::Parity`].
+    /// Voxel centres inside by parity (the ground truth's convention).
     Parity,
 }
 
