@@ -108,11 +108,11 @@ pub struct FitPoseArgs {
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=65536))]
     pub candidates: Option<u32>,
 
-    /// σ of the schedule's first (blurry) stage [default: 1e-2].
+    /// σ of the schedule's first (blurry) stage [default: 1e-3].
     #[arg(long, value_name = "S", value_parser = positive, conflicts_with = "no_schedule")]
     pub sigma_start: Option<f64>,
 
-    /// γ of the schedule's first stage [default: 1e-1].
+    /// γ of the schedule's first stage [default: 1e-3].
     #[arg(long, value_name = "G", value_parser = positive, conflicts_with = "no_schedule")]
     pub gamma_start: Option<f64>,
 
