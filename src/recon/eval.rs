@@ -1,6 +1,8 @@
 //! Scoring reconstructions as SoftRas's table does (3D IoU of 32³ voxel grids on the test
-//! split, every view of every object as an input, the prediction voxelized as SoftRas's
-//! evaluation does: [`Voxelizer`]), and the two baselines computed beside it:
+//! split, every view of every object as an input; the prediction voxelized by a [`Voxelizer`]:
+//! by voxel centres as the ground truth is, or as SoftRas's evaluation does), the two baselines
+//! computed beside it, and the visual hull ([`visual_hull_iou`]), the bound of what silhouettes
+//! can decide:
 //!
 //! - **retrieval**: the training object whose silhouette, seen from the input's view, best
 //!   matches the input's silhouette (2D IoU of the alpha masks at 0.5), its voxels as the
