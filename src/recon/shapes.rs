@@ -557,7 +557,7 @@ fn stool(b: &mut Builder) {
             );
             let q_top = v(a2.cos() * r * 0.65, h + t / 2.0, a2.sin() * r * 0.65);
             let q = q_foot + (q_top - q_foot) * f;
-            b.frustum(p, q, s * 0.8, s * 0.8, wood);
+            b.frustum(p, q, s, s, wood);
         }
     }
 }
@@ -654,7 +654,7 @@ fn desk(b: &mut Builder) {
         let mh = h * b.u(0.3, 0.7);
         b.cuboid(
             v(-w + pt, h - mh, d - pt),
-            v(w - pt, h + t / 2.0, d - 0.005),
+            v(w - pt, h + t / 2.0, d),
             body,
         );
     }
@@ -921,7 +921,7 @@ fn sports_car(b: &mut Builder) {
         for sx in [-1.0, 1.0] {
             let x = sx * w * 0.6;
             b.cuboid(
-                v(x - sp / 2.0, y0 + body_h - 0.01, l - 0.06),
+                v(x - sp / 2.0, y0 + body_h - 0.01, l - 0.03 - sp),
                 v(x + sp / 2.0, y0 + body_h + 0.045, l - 0.03),
                 paint,
             );
