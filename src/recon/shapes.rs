@@ -652,11 +652,7 @@ fn desk(b: &mut Builder) {
     }
     if b.chance(0.6) {
         let mh = h * b.u(0.3, 0.7);
-        b.cuboid(
-            v(-w + pt, h - mh, d - pt),
-            v(w - pt, h + t / 2.0, d),
-            body,
-        );
+        b.cuboid(v(-w + pt, h - mh, d - pt), v(w - pt, h + t / 2.0, d), body);
     }
 }
 
