@@ -34,6 +34,9 @@ enum Command {
     /// Fit the rigid pose (rotation + translation) of a textured mesh to a target RGBA image,
     /// with a σ/γ schedule from blurry to sharp.
     FitPose(Box<cli::fit_pose::FitPoseArgs>),
+    /// Fit the joint angles of the built-in skinned figure to a target RGBA image (non-rigid
+    /// pose), with σ/γ and blur schedules from soft to sharp.
+    FitArticulated(Box<cli::fit_articulated::FitArticulatedArgs>),
     /// Fit an implicit field to silhouettes from known cameras by sphere probing, and write its
     /// surface by marching cubes.
     FitField(Box<cli::fit_field::FitFieldArgs>),
@@ -76,6 +79,7 @@ fn main() -> ExitCode {
         cli.command,
         Command::FitMesh(_)
             | Command::FitPose(_)
+            | Command::FitArticulated(_)
             | Command::FitField(_)
             | Command::Demo(_)
             | Command::Dataset(_)
@@ -91,6 +95,7 @@ fn main() -> ExitCode {
         Command::Grad(args) => cli::grad::run(args),
         Command::FitMesh(args) => cli::fit_mesh::run(args),
         Command::FitPose(args) => cli::fit_pose::run(args),
+        Command::FitArticulated(args) => cli::fit_articulated::run(args),
         Command::FitField(args) => cli::fit_field::run(args),
         Command::Demo(args) => cli::fit_mesh::demo(args),
         Command::Bench(args) => cli::bench::run(args),

@@ -12,7 +12,7 @@
 mod common;
 
 use softvk::fit::{
-    Adam, AdamOptions, Deform, GradOut, ImageMse, Regularizers, SilhouetteLoss, adam, deform,
+    Adam, AdamOptions, Deform, GradOut, ImageMse, Regularizers, SilhouetteLoss, adam, blur, deform,
     flatten, laplacian, silhouette,
 };
 use softvk::gpu::{Buffer, Context, MemoryKind};
@@ -167,6 +167,49 @@ fn image_mse_matches_its_twin() {
     assert_close("MSE", &[mse.read_loss(&gpu).unwrap()], &[loss], REL);
     let twin: Vec<f64> = grad.iter().flatten().map(|g| 2.0 * g).collect();
     assert_close("2 × dMSE/dP", &read_f32(&gpu, &d_image, 4 * n), &twin, REL);
+}
+
+#[test]
+fn blurred_image_mse_matches_its_twin() {
+    // Two views of a non-square image, a blur whose taps (radius 6) reach past every border.
+    let Some(gpu) = common::gpu() else { return };
+    let mut rng = common::rng(3);
+    let (views, w, h) = (2u32, 23u32, 17u32);
+    let n = (views * w * h) as usize;
+    let images = random_rgba(&mut rng, n);
+    let targets = random_rgba(&mut rng, n);
+    let mse = blur::BlurredMse::new(&gpu, views, w, h).unwrap();
+    let images_buf = gpu.upload_buffer("images", &images).unwrap();
+    let targets_buf = gpu.upload_buffer("targets", &targets).unwrap();
+    let d_image = gpu
+        .create_buffer("d_image", 16 * n as u64, MemoryKind::Device)
+        .unwrap();
+    for std in [0.0, 1.7] {
+        gpu.submit_and_wait(|rec| {
+            mse.record(
+                rec,
+                images_buf.whole(),
+                targets_buf.whole(),
+                Some(d_image.whole()),
+                std,
+            )
+        })
+        .unwrap();
+        let (loss, grad) = blur::cpu::blurred_mse(&widen4(&images), &widen4(&targets), w, h, std);
+        assert_close("blurred MSE", &[mse.read_loss(&gpu).unwrap()], &[loss], REL);
+        let twin: Vec<f64> = grad.iter().flatten().copied().collect();
+        assert_close(
+            "d blurred MSE/dP",
+            &read_f32(&gpu, &d_image, 4 * n),
+            &twin,
+            REL,
+        );
+    }
+    // A blur wider than MAX_BLUR_STD is refused.
+    let err = gpu.submit_and_wait(|rec| {
+        mse.record(rec, images_buf.whole(), targets_buf.whole(), None, 40.0)
+    });
+    assert!(matches!(err, Err(Error::Input(_))), "{err:?}");
 }
 
 #[test]

@@ -45,6 +45,8 @@
 //!   leading values are used), so whole, alignment-rounded buffers can be passed.
 
 pub mod adam;
+pub mod articulated;
+pub mod blur;
 pub mod checkpoint;
 pub mod deform;
 pub mod field_fit;
@@ -57,6 +59,7 @@ pub(crate) mod reduce;
 mod regularizers;
 #[cfg(feature = "plots")]
 pub mod report;
+pub mod rig;
 pub mod silhouette;
 
 pub use adam::{Adam, AdamOptions};

@@ -1001,7 +1001,7 @@ impl<'c> PoseFitter<'c> {
 }
 
 /// [`Error::Input`] unless `target` has one finite RGBA value per pixel of `settings`.
-fn check_target(target: &[[f32; 4]], settings: &RasterSettings) -> Result<()> {
+pub(crate) fn check_target(target: &[[f32; 4]], settings: &RasterSettings) -> Result<()> {
     let px = settings.width as usize * settings.height as usize;
     if target.len() != px {
         return Err(Error::Input(format!(

@@ -1,0 +1,450 @@
+//! `softvk fit-articulated --out angles.json (--target T.png | --target-angles A,B,...)`: the
+//! joint angles of the built-in skinned figure ([`softvk::fit::rig::Rig::figure`]) that make its
+//! render match a target RGBA image ([`softvk::fit::articulated`], issue #16), with the σ/γ
+//! schedule and a blurred image loss from wide to sharp.
+//!
+//! - `--target T.png`: a PNG with an alpha channel (as `softvk render` writes), the image size
+//!   unless `--size`/`--width --height` say otherwise (they must agree). The loss compares R, G,
+//!   B and A.
+//! - `--target-angles`: the figure itself posed at these angles (degrees, one per joint, in the
+//!   order `angles.json` lists them) is the target, rendered again at every σ/γ stage (both
+//!   images equally soft: the loss landscape of the talk); `angles.json` then gives each
+//!   joint's error.
+//! - `--init-angles` (degrees) is the start [default: the rest pose, all 0].
+//!
+//! Writes `angles.json` (per joint: name, fitted angle, start, and with `--target-angles` the
+//! target and the error; the losses, iterations, options), the final render (`--render`,
+//! default `<out stem>-render.png`), the target, the start and the result side by side
+//! (`--compare`, default `<out stem>-compare.png`) and the posed mesh with its colours
+//! (`--mesh-out`, default `<out stem>-posed.obj`). Everything is written after the fit; any
+//! error is one line and leaves no file.
+
+use std::path::{Path, PathBuf};
+
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde_json::{Value, json};
+use softvk::fit::articulated::{ArticulatedFitOptions, BlurSchedule, fit_articulated};
+use softvk::fit::pose::{PoseTarget, Schedule};
+use softvk::fit::rig::Rig;
+use softvk::fit::{io, report};
+use softvk::gpu::{Context, ContextOptions};
+use softvk::raster::gpu::{Method, Renderer};
+use softvk::raster::reference::RasterSettings;
+use softvk::{Error, Result};
+
+use super::args::{RasterArgs, ViewArgs, non_negative, positive};
+use super::fit_pose::load_target;
+use super::output::{AtomicFile, ImageFormat};
+
+/// The flags of `softvk fit-articulated`.
+#[derive(Args, Clone, Debug)]
+pub struct FitArticulatedArgs {
+    /// The fitted angles to write (JSON).
+    #[arg(long, value_name = "angles.json")]
+    pub out: PathBuf,
+
+    /// The target image: a PNG with an alpha channel (as `softvk render` writes).
+    #[arg(
+        long,
+        value_name = "T.png",
+        required_unless_present = "target_angles",
+        conflicts_with = "target_angles"
+    )]
+    pub target: Option<PathBuf>,
+
+    /// The target as the figure posed at these joint angles, degrees (one per joint).
+    #[arg(long, value_name = "A,B,...", allow_hyphen_values = true, value_parser = angle_list)]
+    pub target_angles: Option<AngleList>,
+
+    /// The start, degrees (one per joint) [default: all 0, the rest pose].
+    #[arg(long, value_name = "A,B,...", allow_hyphen_values = true, value_parser = angle_list)]
+    pub init_angles: Option<AngleList>,
+
+    /// The final render (PNG) [default: <out stem>-render.png beside --out].
+    #[arg(long, value_name = "R.png")]
+    pub render: Option<PathBuf>,
+
+    /// Target, start and result side by side (PNG) [default: <out stem>-compare.png].
+    #[arg(long, value_name = "C.png")]
+    pub compare: Option<PathBuf>,
+
+    /// The posed mesh with its colours (OBJ) [default: <out stem>-posed.obj].
+    #[arg(long, value_name = "M.obj")]
+    pub mesh_out: Option<PathBuf>,
+
+    /// Iterations [default: 240].
+    #[arg(long = "iters", value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    pub iterations: Option<u32>,
+
+    /// Adam learning rate of the angles (radians) [default: 0.05].
+    #[arg(long, value_name = "LR", value_parser = positive)]
+    pub lr: Option<f64>,
+
+    /// The learning rate decays geometrically to this factor at the last iteration
+    /// [default: 0.1].
+    #[arg(long, value_name = "F", value_parser = positive)]
+    pub lr_final: Option<f64>,
+
+    /// Render every iteration at the sharp --sigma/--gamma (no σ/γ schedule).
+    #[arg(long)]
+    pub no_schedule: bool,
+
+    /// σ of the schedule's first stage [default: 1e-4].
+    #[arg(long, value_name = "S", value_parser = positive, conflicts_with = "no_schedule")]
+    pub sigma_start: Option<f64>,
+
+    /// γ of the schedule's first stage [default: 1e-4].
+    #[arg(long, value_name = "G", value_parser = positive, conflicts_with = "no_schedule")]
+    pub gamma_start: Option<f64>,
+
+    /// Standard deviation in pixels of the blur of render and target in the loss's first stage,
+    /// falling linearly to none at the last (0: the plain MSE throughout) [default: 2].
+    #[arg(long, value_name = "PX", value_parser = non_negative)]
+    pub blur: Option<f64>,
+
+    /// Stages of the σ/γ and blur schedules [default: 4].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    pub stages: Option<u32>,
+
+    /// Tile edge in pixels (a multiple of 8) [default: 8].
+    #[arg(long, value_name = "N")]
+    pub tile: Option<u32>,
+
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+
+    #[command(flatten)]
+    pub view: ViewArgs,
+
+    #[command(flatten)]
+    pub raster: RasterArgs,
+}
+
+/// Angles in degrees, one per joint (a type of its own: clap would take a `Vec` for a
+/// repeated flag).
+#[derive(Clone, Debug, PartialEq)]
+pub struct AngleList(pub Vec<f64>);
+
+/// Comma-separated finite numbers.
+fn angle_list(s: &str) -> std::result::Result<AngleList, String> {
+    s.split(',')
+        .map(|p| {
+            p.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| format!("`{p}` is not a finite number (in `{s}`)"))
+        })
+        .collect::<std::result::Result<_, _>>()
+        .map(AngleList)
+}
+
+/// `<out stem><suffix>` beside `out`.
+fn beside(out: &Path, suffix: &str) -> PathBuf {
+    let stem = out
+        .file_stem()
+        .map_or("angles".into(), |s| s.to_string_lossy().into_owned());
+    out.with_file_name(format!("{stem}{suffix}"))
+}
+
+/// Degrees to radians, one per joint of `rig` ([`Error::Input`] naming `flag` otherwise).
+fn joint_angles(rig: &Rig, flag: &str, degrees: &[f64]) -> Result<Vec<f64>> {
+    if degrees.len() != rig.joint_count() {
+        let names: Vec<&str> = rig.joints.iter().map(|j| j.name.as_str()).collect();
+        return Err(Error::Input(format!(
+            "{flag}: the figure has {} joints ({}); got {} angles",
+            rig.joint_count(),
+            names.join(", "),
+            degrees.len()
+        )));
+    }
+    Ok(degrees.iter().map(|d| d.to_radians()).collect())
+}
+
+/// Runs `softvk fit-articulated`.
+pub fn run(args: &FitArticulatedArgs) -> Result<()> {
+    let d = ArticulatedFitOptions::default();
+    let tile = args.tile.unwrap_or(d.tile);
+    softvk::raster::fine::check_tile_size(tile)?;
+    let rig = Rig::figure();
+    let init = match &args.init_angles {
+        Some(a) => joint_angles(&rig, "--init-angles", &a.0)?,
+        None => vec![0.0; rig.joint_count()],
+    };
+    let target_angles = args
+        .target_angles
+        .as_ref()
+        .map(|a| joint_angles(&rig, "--target-angles", &a.0))
+        .transpose()?;
+    let explicit = args.view.size.is_some() || args.view.width.is_some();
+    let (size, image_target) = match &args.target {
+        Some(path) => {
+            let (tw, th, pixels) = load_target(path)?;
+            let size = if explicit { args.view.size() } else { (tw, th) };
+            if size != (tw, th) {
+                return Err(Error::Input(format!(
+                    "the target {} is {tw}x{th} but the image is {}x{}",
+                    path.display(),
+                    size.0,
+                    size.1
+                )));
+            }
+            (size, Some(pixels))
+        }
+        None if explicit => (args.view.size(), None),
+        None => ((d.settings.width, d.settings.height), None),
+    };
+    let camera = args.view.camera()?;
+    let settings = args.raster.settings(size)?;
+    let lighting = args.raster.lighting();
+    let stages = args.stages;
+    let schedule = (!args.no_schedule).then(|| {
+        let s = d.schedule.unwrap_or_default();
+        Schedule {
+            sigma_start: args.sigma_start.unwrap_or(s.sigma_start),
+            gamma_start: args.gamma_start.unwrap_or(s.gamma_start),
+            stages: stages.unwrap_or(s.stages),
+        }
+    });
+    let blur_default = d.blur.unwrap_or_default();
+    let blur = Some(BlurSchedule {
+        start: args.blur.unwrap_or(blur_default.start),
+        stages: stages.unwrap_or(blur_default.stages),
+    })
+    .filter(|b| b.start > 0.0);
+    let opts = ArticulatedFitOptions {
+        iterations: args.iterations.unwrap_or(d.iterations),
+        lr: args.lr.unwrap_or(d.lr),
+        lr_final: args.lr_final.unwrap_or(d.lr_final),
+        schedule,
+        blur,
+        settings,
+        tile,
+        ..d
+    };
+    opts.validate()?;
+    let render_path = args
+        .render
+        .clone()
+        .unwrap_or_else(|| beside(&args.out, "-render.png"));
+    let compare_path = args
+        .compare
+        .clone()
+        .unwrap_or_else(|| beside(&args.out, "-compare.png"));
+    let mesh_path = args
+        .mesh_out
+        .clone()
+        .unwrap_or_else(|| beside(&args.out, "-posed.obj"));
+    for p in [&render_path, &compare_path] {
+        if ImageFormat::from_path(p)? != ImageFormat::Png {
+            return Err(Error::Input(format!("{}: must be a .png", p.display())));
+        }
+    }
+    let paths = [&args.out, &render_path, &compare_path, &mesh_path];
+    if (1..paths.len()).any(|i| paths[..i].contains(&paths[i])) {
+        return Err(Error::Input(
+            "--out, --render, --compare and --mesh-out must be four different files".into(),
+        ));
+    }
+    let out = AtomicFile::create(&args.out)?;
+    let render_file = AtomicFile::create(&render_path)?;
+    let compare_file = AtomicFile::create(&compare_path)?;
+
+    let ctx = Context::new(&ContextOptions::from_env())?;
+    let renderer = Renderer::new(&ctx)?;
+    let render_at = |angles: &[f64], s: &RasterSettings| -> Result<Vec<[f32; 4]>> {
+        Ok(renderer
+            .render_views(
+                &ctx,
+                &rig.posed_mesh(angles),
+                &[camera],
+                &lighting,
+                s,
+                Method::Tiled { tile },
+            )?
+            .images)
+    };
+    // The sharp target (for the picture and the final loss).
+    let target = match (&image_target, &target_angles) {
+        (Some(t), _) => t.clone(),
+        (None, Some(a)) => render_at(a, &settings)?,
+        (None, None) => unreachable!("clap requires --target or --target-angles"),
+    };
+    let bar = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(u64::from(opts.iterations)).with_style(
+            ProgressStyle::with_template(
+                "{bar:40} {pos}/{len} iterations  {msg}  [{elapsed} < {eta}]",
+            )
+            .expect("a valid template"),
+        )
+    };
+    let mut per_stage = |sigma: f64, gamma: f64| -> Result<Vec<[f32; 4]>> {
+        let a = target_angles.as_ref().expect("only with --target-angles");
+        render_at(
+            a,
+            &RasterSettings {
+                sigma,
+                gamma,
+                ..settings
+            },
+        )
+    };
+    let fit_target = if target_angles.is_some() {
+        PoseTarget::PerStage(&mut per_stage)
+    } else {
+        PoseTarget::Fixed(&target)
+    };
+    let result = fit_articulated(
+        &ctx,
+        &rig,
+        &camera,
+        &lighting,
+        fit_target,
+        &init,
+        &opts,
+        |l| {
+            bar.set_position(u64::from(l.iteration));
+            bar.set_message(format!(
+                "loss {:.5}  σ {:.0e}  blur {:.1} px",
+                l.loss, l.sigma, l.blur
+            ));
+            super::interrupt::requested().is_none()
+        },
+    )?;
+    bar.finish_and_clear();
+    let start_image = render_at(&init, &settings)?;
+    ctx.check_validation()?;
+
+    let initial_loss = result.log.first().map_or(f64::NAN, |l| l.loss);
+    let joints: Vec<Value> = rig
+        .joints
+        .iter()
+        .enumerate()
+        .map(|(j, joint)| {
+            let mut o = json!({
+                "name": joint.name,
+                "angle_degrees": result.angles[j].to_degrees(),
+                "init_degrees": init[j].to_degrees(),
+            });
+            if let Some(t) = &target_angles {
+                let fields = o.as_object_mut().expect("an object");
+                fields.insert("target_degrees".into(), json!(t[j].to_degrees()));
+                fields.insert(
+                    "error_degrees".into(),
+                    json!((result.angles[j] - t[j]).to_degrees()),
+                );
+            }
+            o
+        })
+        .collect();
+    let worst_error = target_angles.as_ref().map(|t| {
+        result
+            .angles
+            .iter()
+            .zip(t)
+            .map(|(a, b)| (a - b).abs().to_degrees())
+            .fold(0.0, f64::max)
+    });
+    let mut json = json!({
+        "rig": "figure",
+        "convention": "each joint turns its bones by its angle about its axis through its pivot \
+                       (right-handed, degrees); 0 is the rest pose",
+        "joints": joints,
+        "initial_loss": initial_loss,
+        "loss": result.loss,
+        "iterations": result.iterations,
+        "target": if target_angles.is_some() { "rendered per stage from --target-angles" }
+                  else { "image" },
+        "sigma": opts.settings.sigma,
+        "gamma": opts.settings.gamma,
+        "schedule": opts.schedule.as_ref().map_or(Value::Null, |s| {
+            json!({"sigma_start": s.sigma_start, "gamma_start": s.gamma_start, "stages": s.stages})
+        }),
+        "blur": opts.blur.as_ref().map_or(Value::Null, |b| {
+            json!({"start_pixels": b.start, "stages": b.stages})
+        }),
+        "seconds": result.seconds,
+    });
+    let fields = json.as_object_mut().expect("an object");
+    if let Some(w) = worst_error {
+        fields.insert("worst_error_degrees".into(), json!(w));
+    }
+    if let Some(signal) = super::interrupt::requested() {
+        fields.insert(
+            "interrupted".into(),
+            json!(format!(
+                "{}: stopped after iteration {} of {}",
+                super::interrupt::name(signal),
+                result.iterations,
+                opts.iterations
+            )),
+        );
+    }
+    let json = format!(
+        "{}\n",
+        serde_json::to_string_pretty(&json).expect("JSON of numbers")
+    );
+    let (w, h) = size;
+    let render_png = ImageFormat::Png
+        .encode(&result.image, w, h)
+        .map_err(|e| Error::Input(format!("{}: {e}", render_path.display())))?;
+    let sheet = report::side_by_side(
+        &[
+            ("target", &target),
+            ("start", &start_image),
+            ("result", &result.image),
+        ],
+        w,
+        h,
+    );
+    let sheet_pixels: Vec<[f32; 4]> = sheet
+        .pixels()
+        .map(|p| p.0.map(|c| f32::from(c) / 255.0))
+        .collect();
+    let compare_png = ImageFormat::Png
+        .encode(&sheet_pixels, sheet.width(), sheet.height())
+        .map_err(|e| Error::Input(format!("{}: {e}", compare_path.display())))?;
+    let posed = rig.posed_mesh(&result.angles);
+    // The OBJ first (it commits its own atomic file): if it fails, nothing has been written.
+    io::write_obj_colored(
+        &mesh_path,
+        &posed.positions,
+        posed.vertex_colors.as_deref(),
+        &posed.faces,
+    )?;
+    out.commit(json.as_bytes())?;
+    render_file.commit(&render_png)?;
+    compare_file.commit(&compare_png)?;
+    println!(
+        "{} iterations in {:.1} s ({:.1} ms per iteration); loss {:.3e} → {:.3e}{}; wrote {}, \
+         {}, {} and {}",
+        result.iterations,
+        result.seconds,
+        1e3 * result.seconds / f64::from(result.iterations.max(1)),
+        initial_loss,
+        result.loss,
+        worst_error.map_or(String::new(), |w| format!("; worst joint error {w:.2}°")),
+        args.out.display(),
+        render_path.display(),
+        compare_path.display(),
+        mesh_path.display()
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn angle_lists_are_finite_numbers() {
+        assert_eq!(angle_list("1, -2.5,3").unwrap().0, vec![1.0, -2.5, 3.0]);
+        assert!(angle_list("1,,2").is_err());
+        assert!(angle_list("1,nan").is_err());
+        assert!(angle_list("x").is_err());
+    }
+}
