@@ -9,10 +9,12 @@
 //! defaults, stand for a photograph: a fit at a softer σ then compares unlike images). The figure is
 //! seen from SoftRas's default camera (all its hinges turn in the image plane).
 //!
-//! Modes (`--modes a,b`): `schedule` (`fit-articulated`'s default σ/γ schedule against the one
-//! sharp target), `sharp` (every iteration sharp, `--no-schedule`) and `rendered` (the
-//! schedule, with the target rendered again at every stage's σ/γ from the known target angles:
-//! possible only in a synthetic study).
+//! Modes (`--modes a,b`): `schedule` (`fit-articulated --target`'s defaults: the σ/γ schedule
+//! against the one sharp target), `sharp` (every iteration sharp, `--no-schedule`) and
+//! `rendered` (`fit-articulated --target-angles`' defaults: the target rendered again at every
+//! stage's σ/γ from the known target angles, the schedule from σ = γ = 1e-2; possible only
+//! when the target is the figure itself). `--sigma-start`/`--gamma-start` set both modes'
+//! start.
 //!
 //! Run: `cargo run --release --example articulated_study -- --trials 20 --ranges 10-20,20-30`
 //! (`--help` lists the knobs; `--png DIR` writes each mode's first trial: target, start,
@@ -40,6 +42,7 @@ struct Args {
     png: Option<PathBuf>,
     verbose: bool,
     target_blur: Option<(f64, f64)>,
+    rendered_schedule: Option<softvk::fit::pose::Schedule>,
     opts: ArticulatedFitOptions,
 }
 
@@ -59,10 +62,12 @@ fn parse() -> Args {
         png: None,
         verbose: false,
         target_blur: None,
+        rendered_schedule: None,
         opts: ArticulatedFitOptions::default(),
     };
     let mut schedule = a.opts.schedule.unwrap_or_default();
     let mut blur = a.opts.blur.unwrap_or_default();
+    let mut given_start = false;
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
         let mut value = || it.next().unwrap_or_else(|| panic!("{flag} needs a value"));
@@ -92,8 +97,14 @@ fn parse() -> Args {
             "--lr-final" => a.opts.lr_final = num(&value()),
             "--sigma" => a.opts.settings.sigma = num(&value()),
             "--gamma" => a.opts.settings.gamma = num(&value()),
-            "--sigma-start" => schedule.sigma_start = num(&value()),
-            "--gamma-start" => schedule.gamma_start = num(&value()),
+            "--sigma-start" => {
+                schedule.sigma_start = num(&value());
+                given_start = true;
+            }
+            "--gamma-start" => {
+                schedule.gamma_start = num(&value());
+                given_start = true;
+            }
             "--stages" => schedule.stages = num(&value()) as u32,
             "--png" => a.png = Some(PathBuf::from(value())),
             "--verbose" => a.verbose = true,
@@ -118,6 +129,12 @@ fn parse() -> Args {
         );
     }
     a.opts.schedule = Some(schedule);
+    // `rendered` starts from its own defaults unless the start is given.
+    if !given_start {
+        a.rendered_schedule = ArticulatedFitOptions::for_rendered_target().schedule;
+    } else {
+        a.rendered_schedule = Some(schedule);
+    }
     a.opts.blur = (blur.start > 0.0).then_some(blur);
     a
 }
@@ -180,7 +197,7 @@ fn main() {
         std::fs::create_dir_all(dir).unwrap();
     }
     println!(
-        "figure: {} joints, {} faces, {}x{}, {} iterations, lr {}, blur {:?}, σ/γ {:?}, success ≤ {}°, targets ±{}°, seed {}",
+        "figure: {} joints, {} faces, {}x{}, {} iterations, lr {}, blur {:?}, σ/γ {:?} (rendered: {:?}), success ≤ {}°, targets ±{}°, seed {}",
         n,
         rig.mesh.face_count(),
         s.width,
@@ -189,6 +206,7 @@ fn main() {
         args.opts.lr,
         args.opts.blur,
         args.opts.schedule,
+        args.rendered_schedule,
         args.success,
         args.target_range,
         args.seed
@@ -218,10 +236,10 @@ fn main() {
             .collect();
         for mode in &args.modes {
             let opts = ArticulatedFitOptions {
-                schedule: if mode == "sharp" {
-                    None
-                } else {
-                    args.opts.schedule
+                schedule: match mode.as_str() {
+                    "sharp" => None,
+                    "rendered" => args.rendered_schedule,
+                    _ => args.opts.schedule,
                 },
                 ..args.opts.clone()
             };

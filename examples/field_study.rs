@@ -44,6 +44,7 @@ use softvk::mesh::Mesh;
 use softvk::probe::{Aggregate, ProbeSettings, Targets};
 use softvk::raster::gpu::{Method, Renderer};
 use softvk::raster::reference::{Alpha, Dist, RasterSettings};
+use softvk::recon::shapes::{self, Category};
 
 type Keys = BTreeMap<String, String>;
 
@@ -150,7 +151,7 @@ fn render_masks(ctx: &Context, mesh: &Mesh, cams: &[Camera], size: u32) -> Vec<f
 
 /// The problem: targets and the object's occupancy at `eval_res` in the cube.
 struct Problem {
-    name: &'static str,
+    name: String,
     targets: Targets,
     cube: Cube,
     object: Occupancy,
@@ -171,6 +172,7 @@ fn problem(ctx: &Context, which: &str, keys: &Keys) -> Problem {
     let eval_res = get(keys, "eval_res", 64u32);
     let margin = get(keys, "margin", softvk::fit::field_fit::DEFAULT_CUBE_MARGIN);
     let cams = spot_cameras(get(keys, "va", 15.0));
+    let mut shape = None;
     let (name, targets, mesh) = match which {
         "spot" => {
             let spot =
@@ -200,23 +202,40 @@ fn problem(ctx: &Context, which: &str, keys: &Keys) -> Problem {
             softvk::probe::targets::sphere_silhouettes(&cams, size, size, 0.5).unwrap(),
             None,
         ),
-        other => panic!("{other}: spot or sphere"),
+        thin if thin.starts_with("thin:") => {
+            // A procedural object of the reconstruction dataset (`thin:CATEGORY:SEED`): legs,
+            // rods, plates, wings and frames; a union of closed parts.
+            let mut it = thin.split(':').skip(1);
+            let category = Category::parse(it.next().expect("thin:CATEGORY:SEED")).unwrap();
+            let seed: u64 = it.next().map_or(0, |s| s.parse().expect("a seed"));
+            let object = shapes::generate(category, seed);
+            let mesh = object.mesh().unwrap();
+            let masks = render_masks(ctx, &mesh, &cams, size);
+            shape = Some(object);
+            (
+                thin,
+                Targets::new(&cams, size, size, masks).unwrap(),
+                Some(mesh),
+            )
+        }
+        other => panic!("{other}: spot, sphere or thin:CATEGORY:SEED"),
     };
     let cube = auto_cube(&targets, margin).unwrap();
-    let object = match &mesh {
-        Some(m) => {
+    let object = match (&shape, &mesh) {
+        (Some(shape), _) => shape.voxelize(&cube, eval_res).unwrap(),
+        (None, Some(m)) => {
             let v = voxel::voxelize_mesh(&m.positions, &m.faces, &cube, eval_res).unwrap();
             assert_eq!(v.odd_rays, 0, "the mesh voxelizes watertight");
             v.occupancy
         }
-        None => voxel::occupancy_from_fn(&cube, eval_res, |p| {
+        (None, None) => voxel::occupancy_from_fn(&cube, eval_res, |p| {
             (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() < 0.5
         }),
     };
     let hull =
         voxel::visual_hull(&silhouettes(&targets), &targets.cameras, &cube, eval_res).unwrap();
     Problem {
-        name,
+        name: name.to_string(),
         targets,
         cube,
         object,
@@ -326,9 +345,24 @@ fn main() {
         load()
     );
     match mode.as_str() {
-        "spot" | "sphere" => {
+        "thinset" => {
+            // Every shape of `thin_set()` and spot, one fit each with the same options.
             let keys = parse_keys(&args[1..]);
-            let p = problem(&ctx, mode, &keys);
+            let mut ratios = Vec::new();
+            for which in thin_set() {
+                let p = problem(&ctx, which, &keys);
+                let mut k = keys.clone();
+                k.entry("verbose".into()).or_insert_with(|| "0".into());
+                let iou = run_fit(&ctx, &p, &k, &args[1..].join(" "));
+                ratios.push((which, iou / voxel::iou(&p.hull, &p.object).unwrap()));
+            }
+            let min = ratios.iter().map(|r| r.1).fold(f64::INFINITY, f64::min);
+            let mean = ratios.iter().map(|r| r.1).sum::<f64>() / ratios.len() as f64;
+            println!("ratios {ratios:?}: min {min:.3}, mean {mean:.3}");
+        }
+        which if which == "spot" || which == "sphere" || which.starts_with("thin:") => {
+            let keys = parse_keys(&args[1..]);
+            let p = problem(&ctx, which, &keys);
             println!(
                 "{}: cube centre {:?} half {:.4}; object {} voxels, hull {} voxels at {}³",
                 p.name,
@@ -411,6 +445,20 @@ fn main() {
         }
         other => panic!("{other}: spot, sphere, sweep or throughput"),
     }
+}
+
+/// The thin-structure set of issue #16: one procedural object per thin-parted category (seed 0
+/// each, not chosen), then spot, fitted with the same options.
+fn thin_set() -> [&'static str; 7] {
+    [
+        "thin:chair:0",
+        "thin:table:0",
+        "thin:airplane:0",
+        "thin:lamp:0",
+        "thin:bench:0",
+        "thin:display:0",
+        "spot",
+    ]
 }
 
 /// Median of `v`.

@@ -201,12 +201,12 @@ fn gpu_render(gpu: &common::Gpu, rig: &Rig, s: &RasterSettings, angles: &[f64]) 
 
 #[test]
 fn a_fit_from_20_degrees_off_on_every_joint_recovers_every_angle_within_2_degrees() {
-    // The defaults, the target rendered from known angles at each stage's σ/γ (as
+    // The target rendered from known angles at each stage's σ/γ with that case's defaults (as
     // `fit-articulated --target-angles` does): every joint starts 20–28° off, alternating signs.
     let Some(gpu) = common::gpu() else { return };
     let rig = Rig::figure();
     let (target_angles, start) = poses();
-    let opts = ArticulatedFitOptions::default();
+    let opts = ArticulatedFitOptions::for_rendered_target();
     let mut per_stage = |sigma, gamma| {
         let s = RasterSettings {
             sigma,

@@ -90,11 +90,12 @@ pub struct FitArticulatedArgs {
     #[arg(long)]
     pub no_schedule: bool,
 
-    /// σ of the schedule's first stage [default: 1e-4].
+    /// σ of the schedule's first stage [default: 1e-4 with --target, 1e-2 with
+    /// --target-angles].
     #[arg(long, value_name = "S", value_parser = positive, conflicts_with = "no_schedule")]
     pub sigma_start: Option<f64>,
 
-    /// γ of the schedule's first stage [default: 1e-4].
+    /// γ of the schedule's first stage [default: as σ's].
     #[arg(long, value_name = "G", value_parser = positive, conflicts_with = "no_schedule")]
     pub gamma_start: Option<f64>,
 
@@ -165,7 +166,12 @@ fn joint_angles(rig: &Rig, flag: &str, degrees: &[f64]) -> Result<Vec<f64>> {
 
 /// Runs `softvk fit-articulated`.
 pub fn run(args: &FitArticulatedArgs) -> Result<()> {
-    let d = ArticulatedFitOptions::default();
+    // A target re-rendered per stage can start softer than a fixed image.
+    let d = if args.target_angles.is_some() {
+        ArticulatedFitOptions::for_rendered_target()
+    } else {
+        ArticulatedFitOptions::default()
+    };
     let tile = args.tile.unwrap_or(d.tile);
     softvk::raster::fine::check_tile_size(tile)?;
     let rig = Rig::figure();

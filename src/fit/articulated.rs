@@ -12,7 +12,8 @@
 //! 1. `skin_fk.comp`: every bone's transform from the angles (one invocation walking the joint
 //!    tree); `skin_apply.comp`: the skinned positions (linear blend skinning, one invocation
 //!    per vertex); [`SceneLight`]: the mesh lit again with its posed normals.
-//! 2. The guarded tiled forward, [`ImageMse`] (loss and dL/d(image)), the tiled backward.
+//! 2. The guarded tiled forward, [`BlurredMse`] (loss and dL/d(image) of
+//!    render and target blurred alike), the tiled backward.
 //! 3. The lighting's backward (dL/dp' through the normals, added to the geometric share),
 //!    `skin_grad.comp` (dL/dθ, one workgroup per joint in a fixed order, which also logs the
 //!    iteration's loss and angles) and one Adam step.
@@ -114,8 +115,9 @@ impl BlurSchedule {
 }
 
 impl Default for ArticulatedFitOptions {
-    /// The defaults chosen by `examples/articulated_study.rs` on [`Rig::figure`] (RESULTS.md,
-    /// "Non-rigid pose").
+    /// The defaults for a fixed target image ([`PoseTarget::Fixed`]), chosen by
+    /// `examples/articulated_study.rs` on [`Rig::figure`] (RESULTS.md, "Non-rigid pose"); see
+    /// [`ArticulatedFitOptions::for_rendered_target`] for a target rendered per stage.
     fn default() -> Self {
         Self {
             iterations: 240,
@@ -140,6 +142,23 @@ impl Default for ArticulatedFitOptions {
 }
 
 impl ArticulatedFitOptions {
+    /// The defaults for a target rendered again at every stage's σ/γ
+    /// ([`PoseTarget::PerStage`]: the figure at known angles, as `fit-articulated
+    /// --target-angles` does): the schedule starts at σ = γ = 1e-2, a hundred times softer than
+    /// [`Default`]'s, which is chosen for a fixed image (a photograph cannot be softened alike,
+    /// and against a sharp target a soft start does harm). Chosen by
+    /// `examples/articulated_study.rs` (RESULTS.md, "Non-rigid pose").
+    pub fn for_rendered_target() -> Self {
+        Self {
+            schedule: Some(Schedule {
+                sigma_start: 1e-2,
+                gamma_start: 1e-2,
+                stages: 4,
+            }),
+            ..Self::default()
+        }
+    }
+
     /// [`Error::Input`] for an out-of-domain option.
     pub fn validate(&self) -> Result<()> {
         let pos = |x: f64| x.is_finite() && x > 0.0;

@@ -20,6 +20,10 @@
 //!   GPU by [`Regularizers`].
 //! - [`deform`]: SoftRas's sigmoid/tanh parameterization of vertex positions ([`Deform`]).
 //! - [`adam`]: Adam with PyTorch's semantics ([`Adam`]).
+//! - [`blur`]: a Gaussian blur of RGBA images and the MSE of blurred images ([`blur::BlurredMse`]).
+//! - [`pose`], [`rig`] and [`articulated`]: rigid pose, and the joint angles of a skinned
+//!   articulated mesh (forward kinematics, linear blend skinning and the chain to the angles on
+//!   the GPU), each fitted to one image.
 //! - [`crate::gpu::gate`]: the check that lets whole fitting iterations run on the GPU without the host
 //!   reading the binning's entry count ([`mesh_fit`] uses it).
 //! - [`io`]: the fitting commands' files (CPU): target silhouettes, the cameras CSV, the fitted

@@ -645,7 +645,7 @@ mod tests {
                 still += 1;
             }
         }
-        assert!(moved > 20 && still > 20, "{moved} {still}");
+        assert!(moved > 20 && still > 10, "{moved} {still}");
         // Shoulder and elbow together: the forearm turns by the sum about the carried pivot.
         angles[shoulder] = -0.3;
         let k = rig.kinematics(&angles);
