@@ -73,10 +73,12 @@ pub struct FieldFitOptions {
 
 impl Default for FieldFitOptions {
     /// The defaults of `softvk fit-field`, for the cube [-1, 1]³ (lengths scale with the cube:
-    /// [`scaled_to_cube`]), chosen by measurement on spot (`RESULTS.md`, "Sphere probing"): a
-    /// 32³ grid, 512 rays per view, 4096 anchors of radius τ = 0.045, tiles of 8 pixels, no
-    /// geometric regularizer (λ = 0: every λ tried lowered the 3D IoU), Adam lr 0.05 with betas
-    /// (0.9, 0.99), 150 iterations; the other probe settings are [`ProbeSettings::default`]'s.
+    /// [`scaled_to_cube`]), chosen by measurement on spot and on thin-parted objects
+    /// (`RESULTS.md`, "Sphere probing" and "Thin structures"): a 48³ grid, 512 rays per view,
+    /// 4096 anchors of radius τ = 0.045, tiles of 8 pixels, no geometric regularizer (λ = 0:
+    /// every λ tried lowered the 3D IoU), Adam lr 0.05 with betas (0.9, 0.99), 1 000
+    /// iterations; the other probe settings are [`ProbeSettings::default`]'s. (Until issue #16
+    /// the grid was 32³ and the fit 150 iterations: enough for spot, not for legs and wings.)
     fn default() -> Self {
         Self {
             field: FieldKind::Grid {
@@ -103,11 +105,11 @@ impl Default for FieldFitOptions {
 }
 
 /// Default grid resolution of `fit-field`.
-pub const DEFAULT_GRID_RES: u32 = 32;
+pub const DEFAULT_GRID_RES: u32 = 48;
 /// Default Adam learning rate of `fit-field`.
 pub const DEFAULT_LR: f64 = 0.05;
 /// Default iterations of `fit-field`.
-pub const DEFAULT_ITERATIONS: u32 = 150;
+pub const DEFAULT_ITERATIONS: u32 = 1000;
 /// Default initial logit offset of `fit-field`.
 pub const DEFAULT_INIT_LOGIT: f64 = 0.0;
 
