@@ -56,7 +56,7 @@ pub struct Joint {
 }
 
 /// Up to four joints that move a vertex, and their weights (≥ 0, summing to 1). An unused slot
-/// has weight 0; [`ROOT`] names the unmoved root.
+/// has weight 0 (and still a valid joint, usually [`ROOT`]); [`ROOT`] names the unmoved root.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SkinWeights {
     /// Joint indices, or [`ROOT`].
@@ -170,11 +170,8 @@ impl Rig {
         for (v, s) in self.skin.iter().enumerate() {
             let sum: f32 = s.weights.iter().sum();
             let bad_weight = s.weights.iter().any(|w| !w.is_finite() || *w < 0.0);
-            let bad_joint = s
-                .joints
-                .iter()
-                .zip(s.weights)
-                .any(|(&j, w)| w != 0.0 && j != ROOT && j as usize >= n);
+            // Unused slots too: the GPU reads every slot's bone (times its weight).
+            let bad_joint = s.joints.iter().any(|&j| j != ROOT && j as usize >= n);
             if bad_weight || bad_joint || (sum - 1.0).abs() > 1e-4 {
                 return Err(Error::Input(format!(
                     "vertex {v}: skinning weights {:?} of joints {:?} must be ≥ 0, sum to 1 and \
@@ -714,6 +711,9 @@ mod tests {
         assert!(r.validate().is_err());
         let mut r = good.clone();
         r.skin[3].joints[0] = 9;
+        assert!(r.validate().is_err());
+        let mut r = good.clone();
+        r.skin[3].joints[3] = 9; // an unused slot (weight 0) must name a joint too
         assert!(r.validate().is_err());
         let mut r = good.clone();
         r.skin.pop();
