@@ -35,7 +35,7 @@ use softvk::{Error, Result};
 
 use super::args::{RasterArgs, ViewArgs, non_negative, positive};
 use super::fit_pose::load_target;
-use super::output::{AtomicFile, ImageFormat};
+use super::output::{AtomicFile, ImageFormat, encode_sheet_png};
 
 /// The flags of `softvk fit-articulated`.
 #[derive(Args, Clone, Debug)]
@@ -407,13 +407,7 @@ pub fn run(args: &FitArticulatedArgs) -> Result<()> {
         w,
         h,
     );
-    let sheet_pixels: Vec<[f32; 4]> = sheet
-        .pixels()
-        .map(|p| p.0.map(|c| f32::from(c) / 255.0))
-        .collect();
-    let compare_png = ImageFormat::Png
-        .encode(&sheet_pixels, sheet.width(), sheet.height())
-        .map_err(|e| Error::Input(format!("{}: {e}", compare_path.display())))?;
+    let compare_png = encode_sheet_png(&sheet, &compare_path)?;
     let posed = rig.posed_mesh(&result.angles);
     // The OBJ first (it commits its own atomic file): if it fails, nothing has been written.
     io::write_obj_colored(

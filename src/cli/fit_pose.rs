@@ -41,7 +41,7 @@ use softvk::raster::gpu::{Method, Renderer};
 use softvk::{Error, Result};
 
 use super::args::{CheckpointArgs, RasterArgs, ViewArgs, positive, triple};
-use super::output::{AtomicFile, ImageFormat};
+use super::output::{AtomicFile, ImageFormat, encode_sheet_png};
 
 /// The least angle between two of `--starts`' screened starts.
 const MIN_START_SEPARATION_DEG: f64 = 30.0;
@@ -509,13 +509,7 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
         w,
         h,
     );
-    let sheet_pixels: Vec<[f32; 4]> = sheet
-        .pixels()
-        .map(|p| p.0.map(|c| f32::from(c) / 255.0))
-        .collect();
-    let compare_png = ImageFormat::Png
-        .encode(&sheet_pixels, sheet.width(), sheet.height())
-        .map_err(|e| Error::Input(format!("{}: {e}", compare_path.display())))?;
+    let compare_png = encode_sheet_png(&sheet, &compare_path)?;
     out.commit(json.as_bytes())?;
     render_file.commit(&render_png)?;
     error_file.commit(&error_png)?;

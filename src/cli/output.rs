@@ -59,6 +59,22 @@ pub fn to_u8(v: f32) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0).round() as u8
 }
 
+/// The PNG bytes of an 8-bit RGBA picture (a labelled sheet of `report`), the error naming
+/// `path`, where they will go.
+pub fn encode_sheet_png(sheet: &image::RgbaImage, path: &Path) -> Result<Vec<u8>> {
+    use image::ImageEncoder;
+    let mut out = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut out)
+        .write_image(
+            sheet.as_raw(),
+            sheet.width(),
+            sheet.height(),
+            image::ExtendedColorType::Rgba8,
+        )
+        .map_err(|e| Error::Input(format!("{}: cannot encode PNG: {e}", path.display())))?;
+    Ok(out)
+}
+
 fn encode_png(
     pixels: &[[f32; 4]],
     width: u32,
