@@ -208,16 +208,25 @@ fn emit_kernel(out: &mut String, name: &str, path: &Path, spirv: &[u32]) {
             path.display()
         );
         for (binding, info) in set_bindings {
-            assert_eq!(
-                info.ty,
-                rspirv_reflect::DescriptorType::STORAGE_BUFFER,
-                "{}: binding {binding} `{}` is not a storage buffer",
-                path.display(),
-                info.name
-            );
-            let block = block_of(&reflection.0, *binding).unwrap_or_else(|| {
-                panic!("{}: binding {binding} has no named block", path.display())
-            });
+            let block = match info.ty {
+                rspirv_reflect::DescriptorType::STORAGE_BUFFER => block_of(&reflection.0, *binding)
+                    .unwrap_or_else(|| {
+                        panic!("{}: binding {binding} has no named block", path.display())
+                    }),
+                // `uniform readonly uimageBuffer d_image;`: read-only, named as a block
+                // would be (`DImage`), so a binding's name does not depend on its kind.
+                rspirv_reflect::DescriptorType::STORAGE_TEXEL_BUFFER => Block {
+                    name: camel(&info.name),
+                    writable: false,
+                    texels: true,
+                },
+                _ => panic!(
+                    "{}: binding {binding} `{}` is neither a storage buffer nor a storage texel \
+                     buffer",
+                    path.display(),
+                    info.name
+                ),
+            };
             bindings.push((*binding, block));
         }
     }
@@ -236,8 +245,10 @@ fn emit_kernel(out: &mut String, name: &str, path: &Path, spirv: &[u32]) {
     for (binding, block) in &bindings {
         let _ = write!(
             out,
-            "BindingSpec {{ binding: {binding}, name: {:?}, writable: {} }}, ",
-            block.name, block.writable
+            "BindingSpec {{ binding: {binding}, name: {:?}, writable: {}, kind: BindingKind::{} }}, ",
+            block.name,
+            block.writable,
+            if block.texels { "Texels" } else { "Storage" }
         );
     }
     let _ = writeln!(out, "],");
@@ -259,6 +270,8 @@ struct Block {
     name: String,
     /// False when every member is `readonly` (or the variable is).
     writable: bool,
+    /// A texel buffer (`readonly uimageBuffer`, named by its variable) rather than a block.
+    texels: bool,
 }
 
 /// The block bound at set 0, `binding`: its type name and whether the kernel may write it.
@@ -311,7 +324,11 @@ fn block_of(module: &rspirv_reflect::rspirv::dr::Module, binding: u32) -> Option
         .count();
     let writable =
         !(decorated(var_id, Decoration::NonWritable, None) || readonly_members >= members.max(1));
-    Some(Block { name, writable })
+    Some(Block {
+        name,
+        writable,
+        texels: false,
+    })
 }
 
 /// `PairItems` → `pair_items`, `DImage` → `d_image`.
@@ -361,7 +378,9 @@ fn emit_bindings_struct(out: &mut String, name: &str, bindings: &[(u32, Block)])
     let _ = writeln!(out, "#[derive(Clone, Copy)]");
     let _ = writeln!(out, "pub struct {ty}<'a> {{");
     for (binding, block) in bindings {
-        let access = if block.writable {
+        let access = if block.texels {
+            "read-only, as `uvec4` texels"
+        } else if block.writable {
             "read-write"
         } else {
             "read-only"

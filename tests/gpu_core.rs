@@ -190,6 +190,82 @@ fn dispatch_rejects_arguments_that_do_not_fit_the_kernel() {
     }
 }
 
+/// The tiled fine passes read their per-lane inputs as texel buffers (branch-free gathers on
+/// llvmpipe): the kinds are reflected from the kernels, and a range that is not whole texels at
+/// an aligned offset is refused before anything is recorded.
+#[test]
+fn texel_bindings_are_reflected_and_checked() {
+    use softvk::gpu::{BindingKind, TEXEL_BYTES};
+    let kinds = |spec: &softvk::gpu::KernelSpec| -> Vec<(&str, BindingKind)> {
+        spec.bindings.iter().map(|b| (b.name, b.kind)).collect()
+    };
+    let grad = kinds(&specs::GRAD_TILED);
+    for name in ["Setups", "Colors", "Image", "Aux"] {
+        assert!(
+            grad.contains(&(name, BindingKind::Texels)),
+            "{name}: {grad:?}"
+        );
+    }
+    // The upstream may be a host's buffer: storage, which needs no texel usage.
+    for name in ["DImage", "Partials", "Pairs"] {
+        assert!(
+            grad.contains(&(name, BindingKind::Storage)),
+            "{name}: {grad:?}"
+        );
+    }
+    let tiled = kinds(&specs::RASTER_TILED);
+    assert!(
+        tiled.contains(&("Setups", BindingKind::Texels)),
+        "{tiled:?}"
+    );
+    assert!(
+        tiled.contains(&("Image", BindingKind::Storage)),
+        "{tiled:?}"
+    );
+    assert!(
+        specs::RASTER_BRUTE
+            .bindings
+            .iter()
+            .all(|b| b.kind == BindingKind::Storage)
+    );
+
+    let Some(gpu) = common::gpu() else { return };
+    let kernel = Kernel::new(&gpu, &specs::RASTER_TILED).unwrap();
+    let buffer = gpu
+        .create_buffer("texels", 4096, MemoryKind::Device)
+        .unwrap();
+    const PUSH_WORDS: usize = specs::RASTER_TILED.push_constant_size as usize / 4;
+    let push = [0u32; PUSH_WORDS];
+    let dispatch = |setups: softvk::gpu::BufferRange<'_>| {
+        let b = specs::RasterTiledBindings {
+            setups,
+            colors: buffer.range(0, 256),
+            faces: buffer.whole(),
+            image: buffer.whole(),
+            aux: buffer.whole(),
+            pairs: buffer.whole(),
+            pair_items: buffer.whole(),
+            ranges: buffer.whole(),
+        };
+        gpu.submit_and_wait(|rec| rec.dispatch(&kernel, &b.for_kernel(&kernel)?, &push, 0))
+    };
+    assert!(dispatch(buffer.range(0, 8 * TEXEL_BYTES)).is_ok());
+    let result = dispatch(buffer.range(0, 8 * TEXEL_BYTES + 4));
+    assert!(
+        matches!(&result, Err(Error::Kernel { kernel: "raster_tiled", message })
+            if message.contains("Setups") && message.contains("texels")),
+        "{result:?}"
+    );
+    let align = gpu.info().limits.min_texel_buffer_offset_alignment;
+    if align > 4 {
+        let result = dispatch(buffer.range(align / 2, 8 * TEXEL_BYTES));
+        assert!(
+            matches!(&result, Err(Error::Kernel { message, .. }) if message.contains("aligned")),
+            "{result:?}"
+        );
+    }
+}
+
 #[test]
 fn scan_scratch_capacity_is_enforced() {
     let Some(gpu) = common::gpu() else { return };

@@ -195,9 +195,12 @@ fn gpu_gradients_match_the_twin_in_every_differentiable_mode() {
     let mut i = 0;
     for dist in [Dist::Euclidean, Dist::Barycentric] {
         for alpha in [Alpha::Prod, Alpha::Sum] {
+            // R ≤ 5: partials with masks of the texel slots they wrote; R = 7 (49 slots):
+            // partials zeroed by a fill first.
+            let wide = if alpha == Alpha::Prod { 2 } else { 7 };
             for (color_mode, res) in [
                 (ColorMode::Surface, 1),
-                (ColorMode::Surface, 2),
+                (ColorMode::Surface, wide),
                 (ColorMode::Vertex, 1),
             ] {
                 let mesh = scene(res, 10 + i);
@@ -587,8 +590,8 @@ fn bits(g: &Gradients) -> Vec<u64> {
         .collect()
 }
 
-/// Texel gradients (R = 4: 76 floats per partial) and vertex colours, with the partials in
-/// chunks of 7 units: many chunks, whose boundaries split faces' runs of units. Every method
+/// Texel gradients (R = 4: 76 floats per partial, with a mask of the slots written; R = 6: 156
+/// floats, zeroed first) and vertex colours, with the partials in chunks of 7 units: many chunks, whose boundaries split faces' runs of units. Every method
 /// matches the twin, is bit for bit the single-chunk result (the running sums add in unit order
 /// whatever the chunking), and repeats bit for bit.
 #[test]
@@ -603,7 +606,11 @@ fn partials_in_many_chunks_match_the_twin_and_one_chunk_bit_for_bit() {
         chunk_units: Some(7),
         ..GradSplit::default()
     };
-    for (color_mode, res) in [(ColorMode::Surface, 4), (ColorMode::Vertex, 1)] {
+    for (color_mode, res) in [
+        (ColorMode::Surface, 4),
+        (ColorMode::Surface, 6),
+        (ColorMode::Vertex, 1),
+    ] {
         let mesh = scene(res, 31);
         let s = RasterSettings {
             color_mode,

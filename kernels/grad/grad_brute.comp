@@ -15,7 +15,7 @@ layout(local_size_x = 64) in;
 
 // This chunk's partials: `grad_stride` floats per unit, as vec4 records (`PARTIAL_COLORS` in
 // raster_grad.glsl). The texel slots arrive zeroed (the host fills them) and are summed into
-// here.
+// here; with `TEXEL_MASKS` they arrive unwritten, and the mask says which were written.
 layout(std430, set = 0, binding = 6) buffer Partials { vec4 partials[]; };
 
 void main() {
@@ -36,6 +36,7 @@ void main() {
     uint row_end = min(pc.height, row_begin + pc.split);
     vec3 acc[3] = vec3[3](vec3(0.0), vec3(0.0), vec3(0.0));
     vec3 cacc[3] = vec3[3](vec3(0.0), vec3(0.0), vec3(0.0));
+    uint written = 0u; // TEXEL_MASKS: the texel slots written so far
     if ((f.flags & FACE_FINITE) != 0u) {
         for (uint row = row_begin; row < row_end; ++row) {
             for (uint col = 0u; col < pc.width; ++col) {
@@ -55,6 +56,14 @@ void main() {
                         cacc[0] += g.color[0];
                         cacc[1] += g.color[1];
                         cacc[2] += g.color[2];
+                    } else if (TEXEL_MASKS) {
+                        uint bit = 1u << g.texel;
+                        vec4 old = vec4(0.0);
+                        if ((written & bit) != 0u) {
+                            old = partials[o + PARTIAL_COLORS + g.texel];
+                        }
+                        partials[o + PARTIAL_COLORS + g.texel] = old + vec4(g.color[0], 0.0);
+                        written |= bit;
                     } else {
                         partials[o + PARTIAL_COLORS + g.texel] += vec4(g.color[0], 0.0);
                     }
@@ -63,7 +72,8 @@ void main() {
         }
     }
     for (uint c = 0u; c < 3u; ++c) {
-        partials[o + c] = vec4(acc[c], 0.0);
+        float w = TEXEL_MASKS && c == TEXEL_MASK_SLOT ? uintBitsToFloat(written) : 0.0;
+        partials[o + c] = vec4(acc[c], w);
         if (vertex_colors) {
             partials[o + PARTIAL_COLORS + c] = vec4(cacc[c], 0.0);
         }

@@ -33,6 +33,7 @@ layout(push_constant) uniform Push {
     uint group_views;  // views of the group
     uint view_begin;   // views (of the group) added by this dispatch
     uint view_end;
+    uint masked;       // 1: a partial's slots are valid where its mask says (TEXEL_MASKS)
 } pc;
 
 void main() {
@@ -63,8 +64,12 @@ void main() {
         uint o = 3u * ((mesh * pc.face_count + face) * pc.texels + texel);
         vec3 acc = vec3(texel_grads[o], texel_grads[o + 1u], texel_grads[o + 2u]);
         for (uint u = begin; u < end; ++u) {
-            // Past the three screen corners, the texel slots.
-            acc += partials[(u - pc.chunk_begin) * (pc.stride / 4u) + 3u + texel].xyz;
+            // Past the three screen corners, the texel slots; with masks, only those written
+            // (the mask is the first corner's fourth float; see raster_grad.glsl).
+            uint p = (u - pc.chunk_begin) * (pc.stride / 4u);
+            if (pc.masked == 0u || ((floatBitsToUint(partials[p].w) >> texel) & 1u) != 0u) {
+                acc += partials[p + 3u + texel].xyz;
+            }
         }
         texel_grads[o] = acc.x;
         texel_grads[o + 1u] = acc.y;

@@ -30,6 +30,8 @@
 // lowest of them (same order on every run).
 // 64 invocations: the forward's block, and a multiple of any subgroup size up to 64.
 #define FINE_BACKWARD
+// The per-lane inputs as texel buffers: branch-free gathers on llvmpipe (raster_fine.glsl).
+#define TEXEL_INPUTS
 #include "common.glsl"
 #include "raster_grad.glsl"
 #include "subgroup_face.glsl"
@@ -38,7 +40,7 @@ layout(local_size_x = 64) in;
 
 // This chunk's partials: `grad_stride` floats per entry, as vec4 records (`PARTIAL_COLORS` in
 // raster_grad.glsl). The texel slots arrive zeroed (the host fills them) and are summed into
-// here.
+// here; with `TEXEL_MASKS` they arrive unwritten, and the mask says which were written.
 layout(std430, set = 0, binding = 6) buffer Partials { vec4 partials[]; };
 layout(std430, set = 0, binding = 7) readonly buffer Pairs { uint pairs[]; };
 layout(std430, set = 0, binding = 8) readonly buffer PairItems { uint pair_items[]; };
@@ -95,11 +97,12 @@ void main() {
         if (has) {
             slot = pairs[k];
             face = pair_items[slot];
-            f = face_of(setups[gview * pc.face_count + face]);
+            f = load_face(gview * pc.face_count + face);
         }
         uint o = (slot - pc.chunk_begin) * (pc.grad_stride / 4u);
         vec3 acc[3] = vec3[3](vec3(0.0), vec3(0.0), vec3(0.0));
         vec3 cacc[3] = vec3[3](vec3(0.0), vec3(0.0), vec3(0.0));
+        uint written = 0u; // TEXEL_MASKS: the texel slots of this lane's partial written so far
         for (uint base = 0u; base < pixels; base += lanes) {
             uint i = base + lane;
             uvec2 at = segment_pixel(i, pc.tile_size, lanes);
@@ -159,7 +162,22 @@ void main() {
                             leader = leader && !(same && k < lane);
                         }
                         uint oq = subgroupShuffle(o, q);
-                        if (leader) {
+                        if (TEXEL_MASKS) {
+                            // A slot face q's partial has not written yet is written, not
+                            // read (the read was a cache miss); then face q's lane notes the
+                            // slots its leaders wrote.
+                            uint seen = subgroupShuffle(written, q);
+                            uint bit = leader ? 1u << texel : 0u;
+                            if (leader) {
+                                vec4 old = vec4(0.0);
+                                if ((seen & bit) != 0u) {
+                                    old = partials[oq + PARTIAL_COLORS + texel];
+                                }
+                                partials[oq + PARTIAL_COLORS + texel] = old + vec4(sum, 0.0);
+                            }
+                            uint bits = lane_or(bit);
+                            written |= mine ? bits : 0u;
+                        } else if (leader) {
                             partials[oq + PARTIAL_COLORS + texel] += vec4(sum, 0.0);
                         }
                     }
@@ -168,7 +186,8 @@ void main() {
         }
         if (has) {
             for (uint c = 0u; c < 3u; ++c) {
-                partials[o + c] = vec4(acc[c], 0.0);
+                float w = TEXEL_MASKS && c == TEXEL_MASK_SLOT ? uintBitsToFloat(written) : 0.0;
+                partials[o + c] = vec4(acc[c], w);
                 if (VERTEX_COLORS) {
                     partials[o + PARTIAL_COLORS + c] = vec4(cacc[c], 0.0);
                 }

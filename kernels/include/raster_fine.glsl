@@ -23,14 +23,87 @@ struct PixelAux {
     uint pad2;
 };
 
+#ifdef TEXEL_INPUTS
+// The face setups and colours as uniform texel buffers of uvec4 texels (the same bytes; the host
+// binds the same ranges either way): eight texels per `FaceSetup`, one per colour. The tiled
+// kernels read both per lane inside their loops, where on llvmpipe a storage-buffer load is a
+// scalar loop over the lanes with a bounds-check branch per component (nine such loops per face
+// record), while a texel fetch is one branch-free gather of whole texels whose cache misses
+// overlap. Bits are reinterpreted, never converted.
+layout(set = 0, binding = 0, rgba32ui) uniform readonly restrict uimageBuffer setups;
+layout(set = 0, binding = 1, rgba32ui) uniform readonly restrict uimageBuffer colors;
+
+// `face_of(setups[index])`, fetched as texels.
+Face load_face(uint index) {
+    int t = int(index * 8u);
+    Face f;
+    for (int k = 0; k < 3; ++k) {
+        f.v[k] = uintBitsToFloat(imageLoad(setups, t + k).xyz);
+        f.inv[k] = uintBitsToFloat(imageLoad(setups, t + 3 + k).xy);
+    }
+    f.bbox = uintBitsToFloat(imageLoad(setups, t + 6));
+    uvec4 last = imageLoad(setups, t + 7);
+    f.flags = last.x;
+    f.mesh = last.y;
+    return f;
+}
+
+// Colour `i` (RGB).
+vec3 color_at(uint i) {
+    return uintBitsToFloat(imageLoad(colors, int(i)).rgb);
+}
+#else
 layout(std430, set = 0, binding = 0) readonly buffer Setups { FaceSetup setups[]; };
 // RGB and an unused fourth float per colour: one vec4 load is one scalar loop over the lanes on
 // llvmpipe, where three float loads are three.
 layout(std430, set = 0, binding = 1) readonly buffer Colors { vec4 colors[]; };
+
+// The face record of setup `index`.
+Face load_face(uint index) {
+    return face_of(setups[index]);
+}
+
+// Colour `i` (RGB).
+vec3 color_at(uint i) {
+    return colors[i].rgb;
+}
+#endif
 layout(std430, set = 0, binding = 2) readonly buffer Faces { uint faces[]; };
-#ifdef FINE_BACKWARD
+#if defined(FINE_BACKWARD) && defined(TEXEL_INPUTS)
+// The forward's image and aux as texels (one per pixel, two per `PixelAux`): the backward reads
+// them per lane inside its loops (see `setups`).
+layout(set = 0, binding = 3, rgba32ui) uniform readonly restrict uimageBuffer image;
+layout(set = 0, binding = 4, rgba32ui) uniform readonly restrict uimageBuffer aux;
+
+vec4 image_at(uint id) {
+    return uintBitsToFloat(imageLoad(image, int(id)));
+}
+
+PixelAux aux_at(uint id) {
+    uvec4 a = imageLoad(aux, int(2u * id));
+    uvec4 b = imageLoad(aux, int(2u * id + 1u));
+    PixelAux p;
+    p.softmax_ref_depth = uintBitsToFloat(a.x);
+    p.softmax_sum = uintBitsToFloat(a.y);
+    p.alpha_acc = uintBitsToFloat(a.z);
+    p.alpha_zeros = a.w;
+    p.hard_face = b.x;
+    p.pad0 = b.y;
+    p.pad1 = b.z;
+    p.pad2 = b.w;
+    return p;
+}
+#elif defined(FINE_BACKWARD)
 layout(std430, set = 0, binding = 3) readonly buffer Image { vec4 image[]; };
 layout(std430, set = 0, binding = 4) readonly buffer Aux { PixelAux aux[]; };
+
+vec4 image_at(uint id) {
+    return image[id];
+}
+
+PixelAux aux_at(uint id) {
+    return aux[id];
+}
 #else
 layout(std430, set = 0, binding = 3) writeonly buffer Image { vec4 image[]; };
 layout(std430, set = 0, binding = 4) writeonly buffer Aux { PixelAux aux[]; };
@@ -41,6 +114,7 @@ layout(std430, set = 0, binding = 4) writeonly buffer Aux { PixelAux aux[]; };
 #define FLAG_CULL 4u
 #define FLAG_ANTIALIAS 8u
 #define FLAG_ALPHA_ONLY 16u
+#define FLAG_TEXEL_MASKS 32u
 
 // The modes, as specialization constants (twin: `FineModes`, src/raster/fine.rs): the host builds
 // one pipeline per combination it renders with. On llvmpipe a branch never skips work (it only
@@ -58,6 +132,10 @@ const bool ANTIALIAS = (MODE_FLAGS & FLAG_ANTIALIAS) != 0u;
 // gradient has no RGB part (a silhouette loss), so the colour terms, which would add exact
 // zeros, are left out: the same gradients, bit for bit.
 const bool ALPHA_ONLY = (MODE_FLAGS & FLAG_ALPHA_ONLY) != 0u;
+// Backward, surface colours with at most 32 texels a face: each partial's texel slots arrive
+// unwritten, and the partial says which it wrote (`TEXEL_MASK_SLOT`), instead of every slot
+// arriving zeroed by a fill of the whole chunk (see `raster_grad.glsl`).
+const bool TEXEL_MASKS = (MODE_FLAGS & FLAG_TEXEL_MASKS) != 0u;
 
 // Twin of `RasterPush` (src/raster/fine.rs).
 layout(push_constant) uniform Push {
@@ -97,14 +175,14 @@ vec3 sample_color(uint mesh, uint face, vec3 wc) {
     if (VERTEX_COLORS) {
         uvec3 f = uvec3(faces[3u * face], faces[3u * face + 1u], faces[3u * face + 2u])
                 + mesh * pc.vertex_count;
-        vec3 c0 = colors[f.x].rgb;
-        vec3 c1 = colors[f.y].rgb;
-        vec3 c2 = colors[f.z].rgb;
+        vec3 c0 = color_at(f.x);
+        vec3 c1 = color_at(f.y);
+        vec3 c2 = color_at(f.z);
         return wc.x * c0 + wc.y * c1 + wc.z * c2;
     }
     uint r2 = pc.texture_res * pc.texture_res;
     uint t = (mesh * pc.face_count + face) * r2 + surface_texel_index(wc, pc.texture_res);
-    return colors[t].rgb;
+    return color_at(t);
 }
 
 // One pixel's running state over the faces it has seen.

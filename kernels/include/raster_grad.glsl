@@ -17,8 +17,21 @@
 // read-modify-write is then two such loops instead of six. Twin: `grad_stride`.
 const uint PARTIAL_COLORS = 3u;
 
-// dL/d(output RGBA), output resolution, view-major.
+// With `TEXEL_MASKS`, the partial's first vec4's fourth float holds the bits of a 32-bit mask:
+// bit t set where texel slot t was written. A slot is then written, not read, the first time
+// (0 + s, as onto a zeroed slot: the same bits), so no fill of the chunk has to come first (on
+// llvmpipe those 16 bytes a slot were a cache miss at the first read-modify-write), and the
+// texel reduction adds only the slots the mask names.
+const uint TEXEL_MASK_SLOT = 0u;
+
+// dL/d(output RGBA), output resolution, view-major. A storage buffer even where the other inputs
+// are texels: it is the host's range in an engine's backward (`GradIo::upstream`), which needs
+// no usage beyond storage.
 layout(std430, set = 0, binding = 5) readonly buffer DImage { vec4 d_image[]; };
+
+vec4 d_image_at(uint id) {
+    return d_image[id];
+}
 
 // `reference_grad::PixelUpstream`.
 struct Upstream {
@@ -57,13 +70,13 @@ Upstream load_upstream(uint view, uint col, uint row) {
     uint id = view * pc.width * pc.height + row * pc.width + col;
     vec4 g;
     if (ANTIALIAS) {
-        g = d_image[view * pc.out_width * pc.out_height + (row / 2u) * pc.out_width + col / 2u]
-          / 4.0;
+        g = d_image_at(view * pc.out_width * pc.out_height + (row / 2u) * pc.out_width
+                       + col / 2u) / 4.0;
     } else {
-        g = d_image[id];
+        g = d_image_at(id);
     }
-    vec4 rgba = image[id];
-    PixelAux a = aux[id];
+    vec4 rgba = image_at(id);
+    PixelAux a = aux_at(id);
     Upstream u;
     u.p = pixel_center(col, row, pc.width, pc.height);
     u.d_rgb = g.rgb;
@@ -172,7 +185,7 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
             uvec3 vi = uvec3(faces[3u * j], faces[3u * j + 1u], faces[3u * j + 2u])
                      + f.mesh * pc.vertex_count;
             for (uint k = 0u; k < 3u; ++k) {
-                vec3 ck = colors[vi[k]].rgb;
+                vec3 ck = color_at(vi[k]);
                 d_wc[k] = g.colored ? d_wc[k] + dot(d_color, ck) : d_wc[k];
                 g.color[k] = g.colored ? d_color * wc[k] : vec3(0.0);
             }

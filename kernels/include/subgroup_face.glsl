@@ -90,6 +90,21 @@ uint ballot_words() {
 SOFTVK_LANE_SUM(vec2)
 SOFTVK_LANE_SUM(vec3)
 
+// The bitwise or of `v` over the subgroup, the same in every lane (see `lane_sum`).
+uint lane_or(uint v) {
+    if (SUBGROUP_SIZE == 0u) {
+        return subgroupOr(v);
+    }
+    uint lane = gl_SubgroupInvocationID;
+    if (SUBGROUP_SIZE > 1u) v |= subgroupShuffle(v, lane ^ 1u);
+    if (SUBGROUP_SIZE > 2u) v |= subgroupShuffle(v, lane ^ 2u);
+    if (SUBGROUP_SIZE > 4u) v |= subgroupShuffle(v, lane ^ 4u);
+    if (SUBGROUP_SIZE > 8u) v |= subgroupShuffle(v, lane ^ 8u);
+    if (SUBGROUP_SIZE > 16u) v |= subgroupShuffle(v, lane ^ 16u);
+    if (SUBGROUP_SIZE > 32u) v |= subgroupShuffle(v, lane ^ 32u);
+    return v;
+}
+
 // The minimum and maximum of `v` over the subgroup, by the same butterfly (min and max are
 // exact in any order): on llvmpipe `subgroupMin`/`subgroupMax` are scalar loops over the lanes.
 // Every lane must be active.

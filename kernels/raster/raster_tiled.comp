@@ -18,6 +18,8 @@
 // ballot's bits, lowest first (index order), broadcasts each kept face with shuffles and folds it
 // into every lane's pixel. The loop ends when the mask is empty, which on llvmpipe is the only
 // construct that skips work (an `if` only narrows the lane mask).
+// The per-lane inputs as texel buffers: branch-free gathers on llvmpipe (raster_fine.glsl).
+#define TEXEL_INPUTS
 #include "common.glsl"
 #include "raster_fine.glsl"
 #include "subgroup_face.glsl"
@@ -78,7 +80,7 @@ void main() {
         uint face = 0u;
         if (k < range.y && lane < lanes) {
             face = pair_items[pairs[k]];
-            f = face_of(setups[setup_base + face]);
+            f = load_face(setup_base + face);
         }
         bool touches = (f.flags & FACE_FINITE) != 0u
                     && !(hi.x < f.bbox.x || hi.y < f.bbox.y || lo.x > f.bbox.z || lo.y > f.bbox.w);

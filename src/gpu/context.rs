@@ -11,6 +11,7 @@ use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 
 use super::descriptors::DescriptorCache;
+use super::texel_views::TexelViews;
 use crate::error::{Error, Result, VkContext};
 
 const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
@@ -221,6 +222,9 @@ pub(crate) struct Shared {
     /// [`Buffer`]: super::Buffer
     /// [`Kernel`]: super::Kernel
     pub(crate) descriptor_sets: Option<DescriptorCache>,
+    /// The buffer views of texel bindings, made on first use and kept until their buffer
+    /// drops (here for the same reason as `descriptor_sets`).
+    pub(crate) texel_views: TexelViews,
     _entry: ash::Entry,
 }
 
@@ -289,6 +293,7 @@ impl Drop for Shared {
             if let Some(cache) = &mut self.descriptor_sets {
                 cache.destroy(&self.device);
             }
+            self.texel_views.destroy(&self.device);
             if let Some(path) = &self.cache_path {
                 save_pipeline_cache(&self.device, self.pipeline_cache, path);
             }
@@ -675,6 +680,7 @@ impl Context {
             pipeline_cache,
             cache_path,
             descriptor_sets,
+            texel_views: TexelViews::default(),
             _entry: entry,
         });
         let pool_info = vk::CommandPoolCreateInfo::default()

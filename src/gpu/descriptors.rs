@@ -174,10 +174,18 @@ impl State {
             }
         }
         let capacity = BUFFERS_PER_POOL.max(buffers);
-        let sizes = [vk::DescriptorPoolSize {
-            ty: vk::DescriptorType::STORAGE_BUFFER,
-            descriptor_count: capacity,
-        }];
+        // Room for `capacity` of either kind: a set's descriptors of both kinds are counted
+        // together against `buffers_left`, so neither kind can run past its own size.
+        let sizes = [
+            vk::DescriptorPoolSize {
+                ty: vk::DescriptorType::STORAGE_BUFFER,
+                descriptor_count: capacity,
+            },
+            vk::DescriptorPoolSize {
+                ty: vk::DescriptorType::STORAGE_TEXEL_BUFFER,
+                descriptor_count: capacity,
+            },
+        ];
         let info = vk::DescriptorPoolCreateInfo::default()
             .flags(vk::DescriptorPoolCreateFlags::FREE_DESCRIPTOR_SET)
             .max_sets(SETS_PER_POOL)
@@ -249,6 +257,12 @@ impl Shared {
     /// Frees the cached sets that name `buffer`, which is being dropped (its handle value may
     /// come back with a new buffer, which must not find them).
     pub(crate) fn evict_buffer(&self, buffer: vk::Buffer) {
+        // The sets first: they may name the buffer's texel views.
+        self.evict_buffer_sets(buffer);
+        self.texel_views.evict_buffer(&self.device, buffer);
+    }
+
+    fn evict_buffer_sets(&self, buffer: vk::Buffer) {
         let Some(cache) = &self.descriptor_sets else {
             return;
         };

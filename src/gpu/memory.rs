@@ -200,6 +200,7 @@ impl Context {
             .size(size)
             .usage(
                 vk::BufferUsageFlags::STORAGE_BUFFER
+                    | vk::BufferUsageFlags::STORAGE_TEXEL_BUFFER
                     | vk::BufferUsageFlags::INDIRECT_BUFFER
                     | vk::BufferUsageFlags::TRANSFER_SRC
                     | vk::BufferUsageFlags::TRANSFER_DST,
@@ -262,7 +263,10 @@ impl Context {
     /// # Safety
     /// `raw` is a buffer of this context's device with at least `size` bytes bound to memory,
     /// created with `STORAGE_BUFFER` usage (and `TRANSFER_SRC`/`TRANSFER_DST` where softvk
-    /// copies or fills it), and it outlives the returned `Buffer` and every command buffer that
+    /// copies or fills it, `STORAGE_TEXEL_BUFFER` where it is bound to a
+    /// [`BindingKind::Texels`](super::BindingKind::Texels) binding: the tiled fine passes' face
+    /// setups and colours, and the image and aux their backward reads; never an upstream
+    /// gradient or a result), and it outlives the returned `Buffer` and every command buffer that
     /// uses it.
     pub unsafe fn import_buffer(&self, raw: vk::Buffer, size: u64, name: &str) -> Buffer {
         self.name(raw, name);

@@ -6,11 +6,14 @@ pub mod gate;
 mod kernel;
 mod memory;
 mod record;
+mod texel_views;
 
 pub use context::{
     Context, ContextOptions, Counters, DescriptorMode, DeviceInfo, PUSH_DESCRIPTOR_EXTENSION,
     PhysicalDeviceEntry, REQUIRED_DEVICE_EXTENSIONS, RawHandles, list_devices,
 };
-pub use kernel::{BindingSpec, Kernel, KernelSpec, KernelVariants, specs};
+pub use kernel::{
+    BindingKind, BindingSpec, Kernel, KernelSpec, KernelVariants, TEXEL_BYTES, TEXEL_FORMAT, specs,
+};
 pub use memory::{Buffer, BufferRange, MemoryKind, align_up};
 pub use record::{INDIRECT_ARGS_BYTES, PassTime, Recorded, Recorder, Timer};

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use ash::vk;
 
 use super::context::{Context, Shared};
-use super::kernel::Kernel;
+use super::kernel::{BindingKind, Kernel, TEXEL_BYTES};
 use super::memory::{Buffer, BufferRange};
 use crate::error::{Error, Result, VkContext};
 
@@ -226,17 +226,39 @@ impl<'a> Recorder<'a> {
                     range.buffer.size()
                 )));
             }
-            if range.offset % limits.min_storage_buffer_offset_alignment != 0 {
-                return Err(fail(format!(
-                    "{what}: offset {} is misaligned",
-                    range.offset
-                )));
-            }
-            if range.size > u64::from(limits.max_storage_buffer_range) {
-                return Err(fail(format!(
-                    "{what}: {} bytes exceed maxStorageBufferRange ({})",
-                    range.size, limits.max_storage_buffer_range
-                )));
+            match b.kind {
+                BindingKind::Storage => {
+                    if range.offset % limits.min_storage_buffer_offset_alignment != 0 {
+                        return Err(fail(format!(
+                            "{what}: offset {} is misaligned",
+                            range.offset
+                        )));
+                    }
+                    if range.size > u64::from(limits.max_storage_buffer_range) {
+                        return Err(fail(format!(
+                            "{what}: {} bytes exceed maxStorageBufferRange ({})",
+                            range.size, limits.max_storage_buffer_range
+                        )));
+                    }
+                }
+                BindingKind::Texels => {
+                    if range.offset % limits.min_texel_buffer_offset_alignment != 0
+                        || range.size % TEXEL_BYTES != 0
+                    {
+                        return Err(fail(format!(
+                            "{what}: range {}+{} is not whole {TEXEL_BYTES}-byte texels at an \
+                             offset aligned to {}",
+                            range.offset, range.size, limits.min_texel_buffer_offset_alignment
+                        )));
+                    }
+                    if range.size / TEXEL_BYTES > u64::from(limits.max_texel_buffer_elements) {
+                        return Err(fail(format!(
+                            "{what}: {} texels exceed maxTexelBufferElements ({})",
+                            range.size / TEXEL_BYTES,
+                            limits.max_texel_buffer_elements
+                        )));
+                    }
+                }
             }
         }
         if groups == 0 {
@@ -275,15 +297,31 @@ impl<'a> Recorder<'a> {
                 }]
             })
             .collect();
+        let views = bindings
+            .iter()
+            .zip(spec.bindings)
+            .map(|(r, b)| match b.kind {
+                BindingKind::Storage => Ok([vk::BufferView::null()]),
+                BindingKind::Texels => self
+                    .ctx
+                    .shared
+                    .texel_views
+                    .view(self.ctx.device(), r.buffer.raw, r.offset, r.size)
+                    .map(|v| [v]),
+            })
+            .collect::<Result<Vec<_>>>()?;
         let writes: Vec<_> = spec
             .bindings
             .iter()
-            .zip(&infos)
-            .map(|(b, info)| {
-                vk::WriteDescriptorSet::default()
+            .zip(infos.iter().zip(&views))
+            .map(|(b, (info, view))| {
+                let write = vk::WriteDescriptorSet::default()
                     .dst_binding(b.binding)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                    .buffer_info(info)
+                    .descriptor_type(b.kind.descriptor_type());
+                match b.kind {
+                    BindingKind::Storage => write.buffer_info(info),
+                    BindingKind::Texels => write.texel_buffer_view(view),
+                }
             })
             .collect();
         // Without push descriptors: the context's cached set of these writes (made now if these

@@ -38,7 +38,7 @@
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 
-use super::fine::{FineModes, RasterPush};
+use super::fine::{FineModes, MAX_MASKED_TEXELS, RasterPush};
 use super::gpu::{
     Binned, ColorWork, GpuScene, Method, brute_backward_iterations, reduce_iterations,
     texel_reduce_iterations, tiled_backward_iterations,
@@ -96,6 +96,7 @@ struct TexelReducePush {
     group_views: u32,
     view_begin: u32,
     view_end: u32,
+    masked: u32,
 }
 
 /// Push constants of `grad_world.comp`.
@@ -545,7 +546,17 @@ impl GradBuffers {
 
     /// The fine kernels' modes for this backward of `scene`.
     fn modes(&self, scene: &GpuScene) -> FineModes {
-        FineModes::new(&scene.settings, true).alpha_only_if(self.alpha_only(scene))
+        FineModes::new(&scene.settings, true)
+            .alpha_only_if(self.alpha_only(scene))
+            .texel_masks_if(self.texel_masks(scene))
+    }
+
+    /// Whether the partials of `scene`'s backward carry masks of the texel slots they wrote
+    /// (then no fill zeroes the slots first): surface colours, with colour terms, and few
+    /// enough texels a face for one 32-bit mask.
+    fn texel_masks(&self, scene: &GpuScene) -> bool {
+        self.color_work(scene) == ColorWork::Texels
+            && scene.texture_res * scene.texture_res <= MAX_MASKED_TEXELS
     }
 
     /// What the tiled kernel does per face besides the screen sums.
@@ -880,7 +891,7 @@ impl GradKernels {
         gb: &GradBuffers,
         units: u64,
     ) {
-        if scene.settings.color_mode == ColorMode::Surface {
+        if scene.settings.color_mode == ColorMode::Surface && !gb.texel_masks(scene) {
             rec.fill(gb.partials.range(0, 4 * units * u64::from(gb.stride)), 0);
         }
     }
@@ -953,6 +964,7 @@ impl GradKernels {
                     group_views: group.views,
                     view_begin: v,
                     view_end: v_end,
+                    masked: u32::from(gb.texel_masks(scene)),
                 };
                 rec.dispatch(
                     &self.reduce_texels,

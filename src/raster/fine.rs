@@ -75,6 +75,11 @@ const FLAG_VERTEX_COLORS: u32 = 2;
 const FLAG_CULL: u32 = 4;
 const FLAG_ANTIALIAS: u32 = 8;
 const FLAG_ALPHA_ONLY: u32 = 16;
+const FLAG_TEXEL_MASKS: u32 = 32;
+
+/// The most texels a face may have for the backward's partials to carry a mask of the texel
+/// slots they wrote (one 32-bit word) instead of arriving zeroed.
+pub(crate) const MAX_MASKED_TEXELS: u32 = 32;
 
 /// The fine kernels' modes: their specialization constants (`MODE_*` in `raster_fine.glsl`), one
 /// pipeline per combination ([`crate::gpu::KernelVariants`]). Only the modes a render uses are
@@ -128,6 +133,16 @@ impl FineModes {
     pub fn alpha_only_if(mut self, alpha_only: bool) -> Self {
         if alpha_only {
             self.flags |= FLAG_ALPHA_ONLY;
+        }
+        self
+    }
+
+    /// Backward only, if `masks`: each partial carries a mask of the texel slots it wrote, and
+    /// its slots need no zeroing first (surface colours with at most [`MAX_MASKED_TEXELS`]
+    /// texels a face; `TEXEL_MASKS` in `raster_fine.glsl`).
+    pub(crate) fn texel_masks_if(mut self, masks: bool) -> Self {
+        if masks {
+            self.flags |= FLAG_TEXEL_MASKS;
         }
         self
     }
