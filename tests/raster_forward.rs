@@ -1034,6 +1034,37 @@ fn all_faces_in_one_tile() {
     );
 }
 
+/// 12 000 faces over one tile: on llvmpipe the tiled forward's workgroup must widen past one
+/// subgroup (at one subgroup a block, its invocation's loops would pass the driver's cap of
+/// 65 535 iterations and quietly drop faces; `tiled_forward_workgroup`). Tiled equals brute
+/// force bit for bit at every tile size, in a mode with colours and one without.
+#[test]
+fn a_crowded_tile_renders_every_face() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let mesh = cluster(12_000, (-0.315, 0.0), 0.3, 23);
+    for rgb in [Rgb::Softmax, Rgb::Hard] {
+        let s = RasterSettings {
+            width: 48,
+            height: 40,
+            sigma: 1e-5,
+            rgb,
+            ..RasterSettings::default()
+        };
+        let frames = render_all(
+            &r,
+            &gpu,
+            &format!("12 000 faces in one tile, {rgb:?}"),
+            &mesh,
+            &[Camera::default()],
+            &lighting(),
+            &s,
+        );
+        let covered = frames.images.iter().filter(|p| p[3] > 0.5).count();
+        assert!(covered >= 4, "{rgb:?}: the cluster covers {covered} pixels");
+    }
+}
+
 /// σ so large that every face covers every tile of a non-square image.
 #[test]
 fn huge_sigma_puts_every_face_in_every_tile() {

@@ -1,13 +1,21 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
-// Surface colours: the texel share of the backward's partials, one window of one chunk and one
-// range of a view group's views at a time. Invocation (face, texel) adds, view after view, the
-// texel's slots of the face's units in [window_begin, window_end) to the running dL/d(lit
-// texel) of the view's mesh. Units are item-major (view-major), and windows, chunks, view ranges
-// and groups are recorded in unit order, so every texel gradient adds its partials in unit
-// order whatever the chunking: results do not depend on it, bit for bit. One writer per
-// (mesh, face, texel), fixed order: deterministic. Twin: the per-texel sums of
-// `reference_grad::backward_view` over the mesh's views.
+// Surface colours: the texel share of the backward's partials, one window of one chunk, one
+// range of a view group's views and one range of texels at a time. Invocation `face` adds, view
+// after view and texel after texel, the texel's slots of the face's units in
+// [window_begin, window_end) to the running dL/d(lit texel) of the view's mesh. Units are
+// item-major (view-major), and windows, chunks, view ranges and groups are recorded in unit
+// order, so every texel gradient adds its partials in unit order whatever the chunking: results
+// do not depend on it, bit for bit. One writer per (mesh, face, texel), fixed order:
+// deterministic. Twin: the per-texel sums of `reference_grad::backward_view` over the mesh's
+// views.
+//
+// One invocation per face, not per (face, texel): on llvmpipe every subgroup of a workgroup is
+// a coroutine with a set-up cost of its own (an empty kernel over spot-256's 1 024 blocks of 64
+// invocations takes 1.6 ms), and per (face, texel) there were R² times as many; the loads and
+// stores per texel are the same. On spot-256 (R = 5) this reduction took 4.3 of the backward's
+// 24.5 ms per (face, texel) with storage reads, 3.4 with texel reads, 2.2 per face
+// (BENCHMARKS.md, issue #11).
 #include "common.glsl"
 #include "view.glsl"
 
@@ -15,14 +23,19 @@ layout(local_size_x = 64) in;
 
 layout(std430, set = 0, binding = 0) readonly buffer Views { View views[]; };
 layout(std430, set = 0, binding = 1) readonly buffer Offsets { uint offsets[]; };
-// vec4 records: screen corners, then texel slots (see raster_grad.glsl).
-layout(std430, set = 0, binding = 2) readonly buffer Partials { vec4 partials[]; };
+// vec4 records: screen corners, then texel slots (see raster_grad.glsl), as texels of four
+// words: each read below is one branch-free gather on llvmpipe, where a storage-buffer load in
+// this loop is a scalar loop over the lanes with a branch per lane (under the ragged mask of
+// the written-slot test, too).
+layout(set = 0, binding = 2, rgba32ui) uniform readonly restrict uimageBuffer partials;
 // 3 floats per (mesh, face, texel), accumulated.
 layout(std430, set = 0, binding = 3) buffer TexelGrads { float texel_grads[]; };
 
 layout(push_constant) uniform Push {
     uint face_count;
     uint texels;       // R² per face
+    uint texel_begin;  // texels added by this dispatch: [texel_begin, texel_end)
+    uint texel_end;
     uint stride;       // floats per partial
     uint unit_total;   // units of the view group
     uint chunk_begin;  // the first unit of the chunk in `partials`
@@ -37,12 +50,10 @@ layout(push_constant) uniform Push {
 } pc;
 
 void main() {
-    uint id = linear_group_id() * 64u + gl_LocalInvocationIndex;
-    if (id >= pc.face_count * pc.texels) {
+    uint face = linear_group_id() * 64u + gl_LocalInvocationIndex;
+    if (face >= pc.face_count) {
         return;
     }
-    uint face = id / pc.texels;
-    uint texel = id - face * pc.texels;
     for (uint v = pc.view_begin; v < pc.view_end; ++v) {
         uint item = v * pc.face_count + face;
         uint begin;
@@ -61,18 +72,22 @@ void main() {
             continue;
         }
         uint mesh = views[pc.first_view + v].mesh;
-        uint o = 3u * ((mesh * pc.face_count + face) * pc.texels + texel);
-        vec3 acc = vec3(texel_grads[o], texel_grads[o + 1u], texel_grads[o + 2u]);
-        for (uint u = begin; u < end; ++u) {
-            // Past the three screen corners, the texel slots; with masks, only those written
-            // (the mask is the first corner's fourth float; see raster_grad.glsl).
-            uint p = (u - pc.chunk_begin) * (pc.stride / 4u);
-            if (pc.masked == 0u || ((floatBitsToUint(partials[p].w) >> texel) & 1u) != 0u) {
-                acc += partials[p + 3u + texel].xyz;
+        uint face_texels = (mesh * pc.face_count + face) * pc.texels;
+        for (uint texel = pc.texel_begin; texel < pc.texel_end; ++texel) {
+            uint o = 3u * (face_texels + texel);
+            vec3 acc = vec3(texel_grads[o], texel_grads[o + 1u], texel_grads[o + 2u]);
+            for (uint u = begin; u < end; ++u) {
+                // Past the three screen corners, the texel slots; with masks, only those
+                // written (the mask is the first corner's fourth float; see raster_grad.glsl).
+                // An unwritten slot is read and dropped by a select (no branch).
+                int p = int((u - pc.chunk_begin) * (pc.stride / 4u));
+                bool written = pc.masked == 0u || ((imageLoad(partials, p).w >> texel) & 1u) != 0u;
+                vec3 slot = uintBitsToFloat(imageLoad(partials, p + 3 + int(texel)).xyz);
+                acc = written ? acc + slot : acc;
             }
+            texel_grads[o] = acc.x;
+            texel_grads[o + 1u] = acc.y;
+            texel_grads[o + 2u] = acc.z;
         }
-        texel_grads[o] = acc.x;
-        texel_grads[o + 1u] = acc.y;
-        texel_grads[o + 2u] = acc.z;
     }
 }

@@ -28,7 +28,9 @@
 // bit-identical; against brute force it differs by float reassociation). A texel slot gets,
 // segment by segment, the sum in lane order of the segment's pixels on that texel, added by the
 // lowest of them (same order on every run).
-// 64 invocations: the forward's block, and a multiple of any subgroup size up to 64.
+// 64 invocations (a multiple of any subgroup size up to 64), or one subgroup on a CPU device:
+// `tiled_backward_workgroup` (src/raster/fine.rs) says why. Nothing here depends on how many
+// subgroups a workgroup has: its faces go to them round robin.
 #define FINE_BACKWARD
 // The per-lane inputs as texel buffers: branch-free gathers on llvmpipe (raster_fine.glsl).
 #define TEXEL_INPUTS
@@ -36,7 +38,7 @@
 #include "raster_grad.glsl"
 #include "subgroup_face.glsl"
 
-layout(local_size_x = 64) in;
+layout(local_size_x = 64, local_size_x_id = 5) in;
 
 // This chunk's partials: `grad_stride` floats per entry, as vec4 records (`PARTIAL_COLORS` in
 // raster_grad.glsl). The texel slots arrive zeroed (the host fills them) and are summed into
@@ -47,8 +49,15 @@ layout(std430, set = 0, binding = 8) readonly buffer PairItems { uint pair_items
 layout(std430, set = 0, binding = 9) readonly buffer Ranges { uvec2 ranges[]; };
 
 // The first position of the sorted run [lo, hi) whose slot is at least `s` (at most
-// bit_length(hi - lo) iterations).
+// bit_length(hi - lo) iterations). A run that lies wholly at or past `s`, or wholly before it
+// (a tile inside one chunk: the common case), takes one load and no search: on llvmpipe each
+// load here is a scalar loop over the lanes with a bounds check per lane.
 uint first_slot_from(uint lo, uint hi, uint s) {
+    if (lo < hi && pairs[lo] >= s) {
+        hi = lo;
+    } else if (lo < hi && pairs[hi - 1u] < s) {
+        lo = hi;
+    }
     while (lo < hi) {
         uint mid = lo + (hi - lo) / 2u;
         if (pairs[mid] < s) {
@@ -74,6 +83,14 @@ void main() {
     uint tx = in_view - ty * pc.tiles_x;
     uint gview = pc.first_view + view;
     uvec2 range = ranges[tile];
+    uint lanes = subgroup_lanes();
+    // A subgroup whose first face would lie past the tile's run, in any chunk, has nothing to
+    // do: it leaves before the searches (uniform across the subgroup, and no barrier follows).
+    // On llvmpipe a workgroup's subgroups run one after another, each paying its way to here;
+    // most tiles have fewer faces than the workgroup has invocations.
+    if (range.x + part * pc.split + gl_SubgroupID * lanes >= range.y) {
+        return;
+    }
     uint lo = first_slot_from(range.x, range.y, pc.chunk_begin);
     uint hi = first_slot_from(lo, range.y, pc.chunk_end);
     if (hi - lo <= part * pc.split) {
@@ -83,7 +100,6 @@ void main() {
     uint last = first + min(pc.split, hi - first);
     uint pixels = pc.tile_size * pc.tile_size;
 
-    uint lanes = subgroup_lanes();
     uint lane = gl_SubgroupInvocationID;
     float inf = uintBitsToFloat(0x7f800000u);
     // The workgroup's faces go to its subgroups `lanes` at a time, round robin.

@@ -5,7 +5,12 @@
 // Where f32 needs a different arrangement of the same formula than the f64 twin, it is said here:
 // - barycentrics are evaluated relative to a vertex of the opposite edge (`barycentric`);
 // - the face determinant is taken in its translated form (`face_setup.comp`);
-// - the softmax exponents are taken from depth differences, not from z̄ (`softmax_add_if`).
+// - the softmax exponents are taken from depth differences, not from z̄ (`softmax_add_if`);
+// - a division by a per-face constant (1 / z_k, 1 / |edge|², 1 / det) is a multiplication by its
+//   reciprocal, taken once per face (`face_reciprocals`), and a division by σ or by the clip's
+//   sum a multiplication by 1 / σ or 1 / sum: a pair's steps divide 3 times (forward) or 5
+//   (backward) instead of 12 or 29. On llvmpipe a vector division is an 8-lane `vdivps`
+//   (throughput 5 cycles, latency 11) on the per-pair critical path.
 #ifndef SOFTVK_RASTER_GLSL
 #define SOFTVK_RASTER_GLSL
 
@@ -41,16 +46,38 @@ struct FaceSetup {
     uint pad1;
 };
 
-// What the per-pixel steps read of a `FaceSetup`: 21 of its 32 words. The tiled kernels hold one
-// face per lane and broadcast it across the subgroup one word per shuffle, so the fewer the
-// better; brute force reads it straight from the setup (`face_of`), with the same arithmetic.
+// What the per-pixel steps read of a `FaceSetup` (21 of its 32 words) and the reciprocals they
+// multiply by (`face_reciprocals`). The tiled kernels hold one face per lane and broadcast it
+// across the subgroup one word per shuffle (a shuffle is one permute on llvmpipe, a division
+// an 8-lane `vdivps`; a word no step reads is never shuffled: the compiler drops it); brute
+// force builds it from the setup per pair (`face_of`), with the same arithmetic.
 struct Face {
-    vec3 v[3];    // screen-space vertices (x_s, y_s, z)
-    vec2 inv[3];  // (a, b) of the rows of M_j
-    vec4 bbox;    // grown screen box
-    uint flags;   // FACE_*
-    uint mesh;    // the batch's mesh
+    vec3 v[3];      // screen-space vertices (x_s, y_s, z)
+    vec2 inv[3];    // (a, b) of the rows of M_j
+    vec4 bbox;      // grown screen box
+    uint flags;     // FACE_*
+    uint mesh;      // the batch's mesh
+    vec3 inv_z;     // 1 / z_k
+    vec3 inv_len2;  // 1 / |v_{k+1} - v_k|² of edge k (0 for a zero-length edge)
+    float inv_det;  // 1 / the clamped determinant
 };
+
+// Fills the reciprocals of a face whose vertices are set. One function for every kernel, so
+// brute force and tiled get the same bits.
+void face_reciprocals(inout Face f) {
+    for (uint k = 0u; k < 3u; ++k) {
+        uint j = k == 2u ? 0u : k + 1u;
+        vec2 e = f.v[j].xy - f.v[k].xy;
+        float len2 = e.x * e.x + e.y * e.y;
+        f.inv_z[k] = 1.0 / f.v[k].z;
+        f.inv_len2[k] = len2 > 0.0 ? 1.0 / len2 : 0.0;
+    }
+    // The determinant as the face setup takes it (translated form, no fused products).
+    precise float ta = (f.v[1].x - f.v[0].x) * (f.v[2].y - f.v[0].y);
+    precise float tb = (f.v[2].x - f.v[0].x) * (f.v[1].y - f.v[0].y);
+    precise float det_raw = ta - tb;
+    f.inv_det = 1.0 / (det_raw > 0.0 ? max(det_raw, MIN_DET) : min(det_raw, -MIN_DET));
+}
 
 Face face_of(FaceSetup s) {
     Face f;
@@ -63,6 +90,7 @@ Face face_of(FaceSetup s) {
     f.bbox = s.bbox;
     f.flags = s.flags;
     f.mesh = s.mesh;
+    face_reciprocals(f);
     return f;
 }
 
@@ -78,6 +106,9 @@ Face face_none() {
     f.bbox = vec4(0.0);
     f.flags = 0u;
     f.mesh = 0u;
+    f.inv_z = vec3(0.0);
+    f.inv_len2 = vec3(0.0);
+    f.inv_det = 0.0;
     return f;
 }
 
@@ -115,15 +146,12 @@ bool inside_closed(vec3 w) {
     return w.x >= 0.0 && w.x <= 1.0 && w.y >= 0.0 && w.y <= 1.0 && w.z >= 0.0 && w.z <= 1.0;
 }
 
-// `reference::dist2_point_segment`.
-float dist2_point_segment(vec2 p, vec2 a, vec2 b) {
+// `reference::dist2_point_segment`, given 1 / |b - a|² (0 for a zero-length segment, whose
+// parameter is then 0: its dot product is 0 too).
+float dist2_point_segment(vec2 p, vec2 a, vec2 b, float inv_len2) {
     float ex = b.x - a.x;
     float ey = b.y - a.y;
-    float len2 = ex * ex + ey * ey;
-    float t = 0.0;
-    if (len2 > 0.0) {
-        t = clamp(((p.x - a.x) * ex + (p.y - a.y) * ey) / len2, 0.0, 1.0);
-    }
+    float t = clamp(((p.x - a.x) * ex + (p.y - a.y) * ey) * inv_len2, 0.0, 1.0);
     float dx = a.x + t * ex - p.x;
     float dy = a.y + t * ey - p.y;
     return dx * dx + dy * dy;
@@ -131,9 +159,9 @@ float dist2_point_segment(vec2 p, vec2 a, vec2 b) {
 
 // `reference::euclidean_dist2`: the nearest of the three edges, as segments.
 float euclidean_dist2(Face f, vec2 p) {
-    return min(min(dist2_point_segment(p, f.v[0].xy, f.v[1].xy),
-                   dist2_point_segment(p, f.v[1].xy, f.v[2].xy)),
-               dist2_point_segment(p, f.v[2].xy, f.v[0].xy));
+    return min(min(dist2_point_segment(p, f.v[0].xy, f.v[1].xy, f.inv_len2[0]),
+                   dist2_point_segment(p, f.v[1].xy, f.v[2].xy, f.inv_len2[1])),
+               dist2_point_segment(p, f.v[2].xy, f.v[0].xy, f.inv_len2[2]));
 }
 
 float sigmoid(float x) {
@@ -157,11 +185,7 @@ float nearest_edge(Face f, vec2 p, out vec2 a, out vec2 e, out uint ea, out uint
         uint j = i == 2u ? 0u : i + 1u;
         vec2 va = f.v[i].xy;
         vec2 ve = f.v[j].xy - va;
-        float len2 = ve.x * ve.x + ve.y * ve.y;
-        float ti = 0.0;
-        if (len2 > 0.0) {
-            ti = clamp(((p.x - va.x) * ve.x + (p.y - va.y) * ve.y) / len2, 0.0, 1.0);
-        }
+        float ti = clamp(((p.x - va.x) * ve.x + (p.y - va.y) * ve.y) * f.inv_len2[i], 0.0, 1.0);
         float dx = va.x + ti * ve.x - p.x;
         float dy = va.y + ti * ve.y - p.y;
         float d2 = dx * dx + dy * dy;
@@ -176,10 +200,10 @@ float nearest_edge(Face f, vec2 p, out vec2 a, out vec2 e, out uint ea, out uint
     return best;
 }
 
-// `reference::coverage` given the squared edge distance `d2` (Euclidean mode only): false when
-// the face is ignored at this pixel (outside and beyond the cut-off `t`); otherwise `d` is the
-// coverage D.
-bool coverage_from(float d2, vec3 w, uint dist, float sigma, float t, out float d) {
+// `reference::coverage` given the squared edge distance `d2` (Euclidean mode only) and 1 / σ:
+// false when the face is ignored at this pixel (outside and beyond the cut-off `t`); otherwise
+// `d` is the coverage D.
+bool coverage_from(float d2, vec3 w, uint dist, float inv_sigma, float t, out float d) {
     if (dist == DIST_HARD) {
         d = 1.0;
         return inside_closed(w);
@@ -187,33 +211,37 @@ bool coverage_from(float d2, vec3 w, uint dist, float sigma, float t, out float 
     if (dist == DIST_BARYCENTRIC) {
         float m = min(min(w.x, w.y), w.z);
         float s = m * abs(m);
-        d = sigmoid(s / sigma);
+        d = sigmoid(s * inv_sigma);
         return -s < t;
     }
     // Selects rather than branches: on llvmpipe every branch costs masked stores.
     bool inside = strictly_inside(w);
-    d = sigmoid((inside ? d2 : -d2) / sigma);
+    d = sigmoid((inside ? d2 : -d2) * inv_sigma);
     return inside || d2 < t;
 }
 
-// `reference::coverage`.
-bool coverage(Face f, vec3 w, vec2 p, uint dist, float sigma, float t, out float d) {
+// `reference::coverage`, given 1 / σ.
+bool coverage(Face f, vec3 w, vec2 p, uint dist, float inv_sigma, float t, out float d) {
     float d2 = dist == DIST_EUCLIDEAN ? euclidean_dist2(f, p) : 0.0;
-    return coverage_from(d2, w, dist, sigma, t, d);
+    return coverage_from(d2, w, dist, inv_sigma, t, d);
+}
+
+// 1 / the clip's sum: `clip_barycentric(w)` is `clamp(w, 0, 1)` times it.
+float clip_inverse_sum(vec3 w) {
+    vec3 c = clamp(w, 0.0, 1.0);
+    return 1.0 / max(c.x + c.y + c.z, CLIP_SUM_FLOOR);
 }
 
 // `reference::clip_barycentric`.
 vec3 clip_barycentric(vec3 w) {
-    vec3 c = clamp(w, 0.0, 1.0);
-    float s = max(c.x + c.y + c.z, CLIP_SUM_FLOOR);
-    return vec3(c.x / s, c.y / s, c.z / s);
+    return clamp(w, 0.0, 1.0) * clip_inverse_sum(w);
 }
 
 // `reference::depth` and the near/far test together: false when the depth
 // z = 1 / Σ_k (w̃_k / z_k) is outside [near, far] (a non-positive sum, whose z would be negative
 // or infinite, is outside too; so is NaN).
 bool depth_in_range(Face f, vec3 wc, float near, float far, out float z) {
-    float inv_z = wc.x / f.v[0].z + wc.y / f.v[1].z + wc.z / f.v[2].z;
+    float inv_z = wc.x * f.inv_z.x + wc.y * f.inv_z.y + wc.z * f.inv_z.z;
     if (!(inv_z > 0.0)) {
         z = 0.0;
         return false;

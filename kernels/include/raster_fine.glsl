@@ -45,6 +45,7 @@ Face load_face(uint index) {
     uvec4 last = imageLoad(setups, t + 7);
     f.flags = last.x;
     f.mesh = last.y;
+    face_reciprocals(f);
     return f;
 }
 
@@ -215,7 +216,7 @@ void shade_face(inout PixelState s, Face f, uint j, vec2 p) {
     bool live = (f.flags & FACE_FINITE) != 0u && !(CULL && outside_bbox(f.bbox, p));
     vec3 w = barycentric(f, p);
     float d;
-    bool covered = coverage(f, w, p, MODE_DIST, pc.sigma, pc.cutoff, d);
+    bool covered = coverage(f, w, p, MODE_DIST, 1.0 / pc.sigma, pc.cutoff, d);
     covered = covered && live;
     // Alpha counts every non-ignored face, whatever its depth or facing.
     alpha_add_if(s.alpha, MODE_ALPHA, d, covered);

@@ -145,8 +145,10 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
     float t = 0.0;
     float d2 = MODE_DIST == DIST_EUCLIDEAN ? nearest_edge(f, p, ea_pos, edge, ea, eb, t) : 0.0;
     float d;
-    bool hit = coverage_from(d2, w, MODE_DIST, pc.sigma, pc.cutoff, d) && live;
-    vec3 wc = clip_barycentric(w);
+    float inv_sigma = 1.0 / pc.sigma;
+    bool hit = coverage_from(d2, w, MODE_DIST, inv_sigma, pc.cutoff, d) && live;
+    float inv_clip_sum = clip_inverse_sum(w);
+    vec3 wc = clamp(w, 0.0, 1.0) * inv_clip_sum; // clip_barycentric(w)
     float z = 0.0;
     bool in_range = !ALPHA_ONLY && depth_in_range(f, wc, pc.near, pc.far, z);
     g.colored = hit && in_range && (DOUBLE_SIDED || (f.flags & FACE_FRONT) != 0u);
@@ -177,9 +179,9 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
         bool depth = d_z != 0.0;
         float d_inv = -z * z * d_z;
         for (uint k = 0u; k < 3u; ++k) {
-            float zk = f.v[k].z;
-            d_wc[k] = depth ? d_wc[k] + d_inv / zk : d_wc[k];
-            g.screen[k].z = depth ? g.screen[k].z - d_inv * wc[k] / (zk * zk) : g.screen[k].z;
+            float izk = f.inv_z[k];
+            d_wc[k] = depth ? d_wc[k] + d_inv * izk : d_wc[k];
+            g.screen[k].z = depth ? g.screen[k].z - d_inv * wc[k] * (izk * izk) : g.screen[k].z;
         }
         if (VERTEX_COLORS) {
             uvec3 vi = uvec3(faces[3u * j], faces[3u * j + 1u], faces[3u * j + 2u])
@@ -197,10 +199,9 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
         // Clip: c = clamp(w, 0, 1), w̃ = c / max(Σc, floor).
         vec3 cl = clamp(w, 0.0, 1.0);
         float raw_sum = cl.x + cl.y + cl.z;
-        float sum = max(raw_sum, CLIP_SUM_FLOOR);
         float renorm = raw_sum >= CLIP_SUM_FLOOR ? dot(d_wc, wc) : 0.0;
         for (uint k = 0u; k < 3u; ++k) {
-            d_w[k] = (w[k] > 0.0 && w[k] < 1.0) ? (d_wc[k] - renorm) / sum : 0.0;
+            d_w[k] = (w[k] > 0.0 && w[k] < 1.0) ? (d_wc[k] - renorm) * inv_clip_sum : 0.0;
         }
     }
 
@@ -213,8 +214,8 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
             if (w[1] < w[k]) k = 1u;
             if (w[2] < w[k]) k = 2u;
             float m = w[k];
-            float x = m * abs(m) / pc.sigma;
-            float add = d_cov * sigmoid_grad(x) * 2.0 * abs(m) / pc.sigma;
+            float x = m * abs(m) * inv_sigma;
+            float add = d_cov * sigmoid_grad(x) * 2.0 * abs(m) * inv_sigma;
             for (uint c = 0u; c < 3u; ++c) {
                 d_w[c] = cov && c == k ? d_w[c] + add : d_w[c];
             }
@@ -222,7 +223,7 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
             // Through the nearest edge (a, b) as `euclidean_dist2` picks it, to its two
             // vertices (selects, not a per-lane index; 0 + x = x).
             float sgn = strictly_inside(w) ? 1.0 : -1.0;
-            float d_d2 = d_cov * sigmoid_grad(sgn * d2 / pc.sigma) * sgn / pc.sigma;
+            float d_d2 = d_cov * sigmoid_grad(sgn * d2 * inv_sigma) * sgn * inv_sigma;
             vec2 r = vec2(ea_pos.x + t * edge.x - p.x, ea_pos.y + t * edge.y - p.y);
             vec2 to_a = d_d2 * 2.0 * (1.0 - t) * r;
             vec2 to_b = d_d2 * 2.0 * t * r;
@@ -243,14 +244,14 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
         precise float ta = (v1.x - v0.x) * (v2.y - v0.y);
         precise float tb = (v2.x - v0.x) * (v1.y - v0.y);
         precise float det_raw = ta - tb;
-        float det = det_raw > 0.0 ? max(det_raw, MIN_DET) : min(det_raw, -MIN_DET);
-        float d_det = det != det_raw ? 0.0 : -dot(d_w, w) / det;
+        bool clamped = det_raw > 0.0 ? det_raw < MIN_DET : det_raw > -MIN_DET;
+        float d_det = clamped ? 0.0 : -dot(d_w, w) * f.inv_det;
         for (uint k = 0u; k < 3u; ++k) {
             uint ia = k == 2u ? 0u : k + 1u;
             uint ib = k == 0u ? 2u : k - 1u;
             vec2 va = f.v[ia].xy;
             vec2 vb = f.v[ib].xy;
-            float d_n = d_w[k] / det;
+            float d_n = d_w[k] * f.inv_det;
             d_xy[ia] += d_n * vec2(vb.y - p.y, p.x - vb.x);
             d_xy[ib] += d_n * vec2(p.y - va.y, va.x - p.x);
             d_xy[k] += d_det * vec2(va.y - vb.y, vb.x - va.x);

@@ -4,8 +4,10 @@
 #extension GL_KHR_shader_subgroup_ballot : require
 #extension GL_KHR_shader_subgroup_shuffle : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
-// Tiled soft rasterization: one workgroup per 8×8 block of pixels (64 invocations, one per
-// pixel: a block is the unit a tile size must be a multiple of), visiting only the faces binned
+// Tiled soft rasterization: one workgroup per 8×8 block of pixels (a block is the unit a tile
+// size must be a multiple of; 64 invocations, one per pixel, or fewer, each shading a pixel of
+// several of the block's segments in turn: `tiled_forward_workgroup` in src/raster/fine.rs says
+// when and why), visiting only the faces binned
 // to the block's tile (`kernels/binning/`), in index order. Binning keeps every face that can
 // touch a pixel of the tile (a superset is harmless: the step ignores a face beyond its cut-off
 // exactly as brute force does), so the pixels are bit for bit those of `raster_brute.comp`,
@@ -24,7 +26,9 @@
 #include "raster_fine.glsl"
 #include "subgroup_face.glsl"
 
-layout(local_size_x = 64) in;
+// The workgroup size is the host's (constant 5): 64, or as few whole subgroups as the loop cap
+// allows on a CPU device.
+layout(local_size_x = 64, local_size_x_id = 5) in;
 
 // Bin entries sorted by tile: each holds its item-major slot.
 layout(std430, set = 0, binding = 5) readonly buffer Pairs { uint pairs[]; };
@@ -49,52 +53,56 @@ void main() {
     uint in_view = block - view * blocks_per_view;
     uint by = in_view / blocks_x;
     uint bx = in_view - by * blocks_x;
-    // Invocation i of the block takes pixel `segment_pixel(i, 8, lanes)`: where the driver
-    // gives subgroups consecutive invocations (any does for a workgroup that is a whole
-    // number of subgroups), each subgroup covers one `segment_shape` block. Any other
-    // assignment is still one pixel per invocation, only less well pruned.
-    uint lanes = subgroup_lanes();
-    uvec2 at = segment_pixel(gl_LocalInvocationIndex, 8u, lanes);
-    uint col = bx * 8u + at.x;
-    uint row = row0 + by * 8u + at.y;
-    bool valid = col < pc.width && row < pc.height;
-
     uint blocks_per_tile = pc.tile_size / 8u;
     uint tile = view * pc.tiles_x * pc.tiles_y + (by / blocks_per_tile) * pc.tiles_x
               + bx / blocks_per_tile;
     uvec2 range = ranges[tile];
     uint setup_base = (pc.first_view + view) * pc.face_count;
-
-    vec2 p = pixel_center(col, row, pc.width, pc.height);
-    // The box of this subgroup's pixel centres (lanes past the image's edge count as the edge).
-    vec2 edge = pixel_center(min(col, pc.width - 1u), min(row, pc.height - 1u), pc.width,
-                             pc.height);
-    vec2 lo = subgroupMin(edge);
-    vec2 hi = subgroupMax(edge);
-
+    uint lanes = subgroup_lanes();
     uint lane = gl_SubgroupInvocationID;
-    PixelState s = pixel_init();
-    for (uint start = range.x; start < range.y; start += lanes) {
-        uint k = start + lane;
-        Face f = face_none();
-        uint face = 0u;
-        if (k < range.y && lane < lanes) {
-            face = pair_items[pairs[k]];
-            f = load_face(setup_base + face);
-        }
-        bool touches = (f.flags & FACE_FINITE) != 0u
-                    && !(hi.x < f.bbox.x || hi.y < f.bbox.y || lo.x > f.bbox.z || lo.y > f.bbox.w);
-        uvec4 kept = subgroupBallot(touches);
-        for (uint word = 0u; word < ballot_words(); ++word) {
-            uint mask = kept[word];
-            while (mask != 0u) {
-                uint i = 32u * word + uint(findLSB(mask));
-                mask &= mask - 1u;
-                shade_face(s, face_shuffle(f, i), subgroupShuffle(face, i), p);
+
+    // Pixel b of the block, for b = this invocation's index, then one workgroup further, and so
+    // on: `segment_pixel(b, 8, lanes)`. Where the driver gives subgroups consecutive invocations
+    // (any does for a workgroup that is a whole number of subgroups), each subgroup covers one
+    // `segment_shape` block per round. Any other assignment is still one pixel per invocation
+    // and round, only less well pruned.
+    for (uint b = gl_LocalInvocationIndex; b < 64u; b += gl_WorkGroupSize.x) {
+        uvec2 at = segment_pixel(b, 8u, lanes);
+        uint col = bx * 8u + at.x;
+        uint row = row0 + by * 8u + at.y;
+        bool valid = col < pc.width && row < pc.height;
+        vec2 p = pixel_center(col, row, pc.width, pc.height);
+        // The box of this subgroup's pixel centres (lanes past the image's edge count as the
+        // edge).
+        vec2 edge = pixel_center(min(col, pc.width - 1u), min(row, pc.height - 1u), pc.width,
+                                 pc.height);
+        vec2 lo = lane_min(edge);
+        vec2 hi = lane_max(edge);
+
+        PixelState s = pixel_init();
+        for (uint start = range.x; start < range.y; start += lanes) {
+            uint k = start + lane;
+            Face f = face_none();
+            uint face = 0u;
+            if (k < range.y && lane < lanes) {
+                face = pair_items[pairs[k]];
+                f = load_face(setup_base + face);
+            }
+            bool touches = (f.flags & FACE_FINITE) != 0u
+                        && !(hi.x < f.bbox.x || hi.y < f.bbox.y || lo.x > f.bbox.z
+                             || lo.y > f.bbox.w);
+            uvec4 kept = subgroupBallot(touches);
+            for (uint word = 0u; word < ballot_words(); ++word) {
+                uint mask = kept[word];
+                while (mask != 0u) {
+                    uint i = 32u * word + uint(findLSB(mask));
+                    mask &= mask - 1u;
+                    shade_face(s, face_shuffle(f, i), subgroupShuffle(face, i), p);
+                }
             }
         }
-    }
-    if (valid) {
-        pixel_finish(s, (pc.first_view + view) * pc.width * pc.height + row * pc.width + col);
+        if (valid) {
+            pixel_finish(s, (pc.first_view + view) * pc.width * pc.height + row * pc.width + col);
+        }
     }
 }

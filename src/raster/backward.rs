@@ -38,7 +38,7 @@
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 
-use super::fine::{FineModes, MAX_MASKED_TEXELS, RasterPush};
+use super::fine::{FineModes, MAX_MASKED_TEXELS, RasterPush, tiled_backward_workgroup};
 use super::gpu::{
     Binned, ColorWork, GpuScene, Method, brute_backward_iterations, reduce_iterations,
     texel_reduce_iterations, tiled_backward_iterations,
@@ -49,7 +49,7 @@ use super::reference_grad::{
 };
 use crate::error::{Error, LimitKind, Result};
 use crate::gpu::{
-    Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, specs,
+    Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, TEXEL_BYTES, specs,
 };
 
 /// Push constants of `grad_tiled.comp` and `grad_brute.comp`: the fine pass's, then the chunk.
@@ -86,6 +86,8 @@ struct ReducePush {
 struct TexelReducePush {
     face_count: u32,
     texels: u32,
+    texel_begin: u32,
+    texel_end: u32,
     stride: u32,
     unit_total: u32,
     chunk_begin: u32,
@@ -301,50 +303,65 @@ fn band_rows(
     Ok(rows as u32)
 }
 
-/// Faces of one tile per workgroup of `grad_tiled.comp` (a multiple of 64), for tiles of at most
-/// `run` entries: all of them, or fewer where `cap` or the driver's loop `limit` asks.
+/// Faces of one tile per workgroup of `grad_tiled.comp` (a multiple of its `workgroup`
+/// invocations), for tiles of at most `run` entries: all of them, or fewer where `cap` or the
+/// driver's loop `limit` asks.
 fn tile_faces(
     run: u64,
     tile: u32,
-    (subgroup, color): (u32, ColorWork),
+    work: (u32, u32, ColorWork),
     limit: Option<u64>,
     cap: Option<u32>,
     device: &str,
 ) -> Result<u64> {
-    let mut faces = run.max(1).div_ceil(64) * 64;
+    let wg = u64::from(work.1.max(1));
+    let mut faces = run.max(1).div_ceil(wg) * wg;
     if let Some(cap) = cap {
-        faces = faces.min(u64::from(cap.max(1)).div_ceil(64) * 64);
+        faces = faces.min(u64::from(cap.max(1)).div_ceil(wg) * wg);
     }
     if let Some(limit) = limit {
-        let iterations = |faces| tiled_backward_iterations(run, tile, faces, subgroup, color);
+        let iterations = |faces| tiled_backward_iterations(run, tile, faces, work);
         let fixed = iterations(0);
-        let per_batch = tiled_backward_iterations(run.max(64), tile, 64, subgroup, color)
-            - tiled_backward_iterations(run.max(64), tile, 0, subgroup, color);
+        let per_batch = tiled_backward_iterations(run.max(wg), tile, wg, work)
+            - tiled_backward_iterations(run.max(wg), tile, 0, work);
         let batches = limit.saturating_sub(fixed) / per_batch;
         if batches == 0 {
             return Err(Error::DeviceLimit {
                 kind: LimitKind::LoopIterations,
                 what: format!(
-                    "the tiled backward of one batch of 64 faces over a {tile}x{tile} tile"
+                    "the tiled backward of one batch of {wg} faces over a {tile}x{tile} tile"
                 ),
-                need: iterations(64),
+                need: iterations(wg),
                 max: limit,
                 device: device.to_string(),
                 hint: "use smaller tiles",
             });
         }
-        faces = faces.min(64 * batches);
+        faces = faces.min(wg * batches);
         debug_assert!(iterations(faces) <= limit);
     }
     Ok(faces)
 }
 
 /// How one chunk's partials are added up: units per `grad_reduce.comp` dispatch (its window),
-/// and views and units per `grad_reduce_texels.comp` dispatch, for a chunk of `chunk` units
-/// where an item holds at most `per_item` units and the group has `views` views.
-fn reduce_plan(chunk: u64, per_item: u64, views: u64, limit: Option<u64>) -> (u64, u64, u64) {
+/// and views, units and texels per `grad_reduce_texels.comp` dispatch, for a chunk of `chunk`
+/// units where an item holds at most `per_item` units, the group has `views` views and a face
+/// `texels` texels. Under a loop cap of at least 8 iterations, every step is at least 1.
+fn reduce_plan(
+    chunk: u64,
+    per_item: u64,
+    views: u64,
+    texels: u64,
+    limit: Option<u64>,
+) -> ReducePlan {
+    let texels = texels.max(1);
     let Some(limit) = limit else {
-        return (chunk, views, chunk);
+        return ReducePlan {
+            window: chunk,
+            view_step: views,
+            texel_window: chunk,
+            texel_step: texels,
+        };
     };
     let budget = limit - 2;
     let window = if reduce_iterations(per_item) <= limit {
@@ -352,22 +369,50 @@ fn reduce_plan(chunk: u64, per_item: u64, views: u64, limit: Option<u64>) -> (u6
     } else {
         budget
     };
-    let (view_step, texel_window) =
-        if texel_reduce_iterations(views, (views * per_item).min(chunk)) <= limit {
-            (views, chunk)
+    let fits = |views: u64, units: u64, texels: u64| {
+        texel_reduce_iterations(views, units, texels) <= limit
+    };
+    let (view_step, texel_window, texel_step) =
+        if fits(views, (views * per_item).min(chunk), texels) {
+            (views, chunk, texels)
         } else {
-            let step = (budget / (1 + per_item)).clamp(1, views);
-            if step * (1 + per_item) <= budget {
-                (step, chunk)
+            // Views per dispatch with every texel and whole items; else one view, fewer texels
+            // and a window of units.
+            let per_view = 1 + texels * (1 + per_item);
+            let step = (budget / per_view).min(views);
+            if step >= 1 {
+                (step, chunk, texels)
             } else {
-                (1, budget - 1)
+                let texel_step = texels.min((budget - 1) / 2);
+                let units = (budget - 1 - texel_step) / texel_step;
+                (1, units, texel_step)
             }
         };
     debug_assert!(reduce_iterations(per_item.min(window)) <= limit);
-    debug_assert!(
-        texel_reduce_iterations(view_step, (view_step * per_item).min(texel_window)) <= limit
-    );
-    (window.max(1), view_step.max(1), texel_window.max(1))
+    debug_assert!(fits(
+        view_step,
+        (view_step * per_item).min(texel_window),
+        texel_step
+    ));
+    ReducePlan {
+        window: window.max(1),
+        view_step: view_step.max(1),
+        texel_window: texel_window.max(1),
+        texel_step: texel_step.max(1),
+    }
+}
+
+/// [`reduce_plan`]'s answer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct ReducePlan {
+    /// Units per `grad_reduce.comp` dispatch.
+    window: u64,
+    /// Views per `grad_reduce_texels.comp` dispatch.
+    view_step: u64,
+    /// Units per `grad_reduce_texels.comp` dispatch.
+    texel_window: u64,
+    /// Texels per `grad_reduce_texels.comp` dispatch.
+    texel_step: u64,
 }
 
 /// Workgroups of `size` invocations for `n` invocations, as the u32 a dispatch takes.
@@ -455,7 +500,11 @@ impl GradBuffers {
         };
         let adjacency = VertexFaces::new(&scene.meshes[0].faces, scene.vertex_count as usize);
         let limit = ctx.info().shader_loop_limit();
-        let max_range = u64::from(ctx.info().limits.max_storage_buffer_range);
+        // The partials are bound as a storage buffer (the fine kernels) and as texels (the
+        // texel reduction): a chunk fits both limits.
+        let limits = &ctx.info().limits;
+        let max_range = u64::from(limits.max_storage_buffer_range)
+            .min(u64::from(limits.max_texel_buffer_elements) * TEXEL_BYTES);
         let mut budget_units = max_range / (4 * u64::from(stride));
         if let Some(cap) = split.chunk_units {
             budget_units = budget_units.min(cap);
@@ -766,7 +815,7 @@ impl GradKernels {
         };
         let kernel = self
             .brute
-            .get(rec.context(), &gb.modes(scene).constants(rec.context()))?;
+            .get(rec.context(), &gb.modes(scene).constants(rec.context(), 64))?;
         let mut begin = 0;
         while begin < units {
             let end = units.min(begin + gb.chunk_units);
@@ -815,9 +864,11 @@ impl GradKernels {
             )));
         }
         let limit = rec.context().info().shader_loop_limit();
-        let kernel = self
-            .tiled
-            .get(rec.context(), &gb.modes(scene).constants(rec.context()))?;
+        let kernel = self.tiled.get(
+            rec.context(),
+            &gb.modes(scene)
+                .constants(rec.context(), tiled_backward_workgroup(rec.context())),
+        )?;
         for (group, bins) in scene.groups.iter().zip(&scene.bins) {
             let grid = grid.window(group.tile_rows.0, group.tile_rows.1)?;
             if group.entries == 0 {
@@ -825,7 +876,11 @@ impl GradKernels {
                 continue;
             }
             let run = group.max_tile_entries;
-            let work = (rec.context().info().subgroup_size, gb.color_work(scene));
+            let work = (
+                rec.context().info().subgroup_size,
+                tiled_backward_workgroup(rec.context()),
+                gb.color_work(scene),
+            );
             let device = &rec.context().info().name;
             let faces = tile_faces(run, tile, work, limit, gb.split.tile_faces, device)?;
             let tiles = grid.tiles_per_view() * u64::from(group.views);
@@ -911,8 +966,19 @@ impl GradKernels {
         limit: Option<u64>,
     ) -> Result<()> {
         let item_count = group.views * scene.face_count;
-        let (window, view_step, texel_window) =
-            reduce_plan(end - begin, group.per_item, u64::from(group.views), limit);
+        let texels = scene.texture_res * scene.texture_res;
+        let ReducePlan {
+            window,
+            view_step,
+            texel_window,
+            texel_step,
+        } = reduce_plan(
+            end - begin,
+            group.per_item,
+            u64::from(group.views),
+            u64::from(texels),
+            limit,
+        );
         let mut w = begin;
         while w < end {
             let w_end = end.min(w + window);
@@ -944,7 +1010,44 @@ impl GradKernels {
         if scene.settings.color_mode != ColorMode::Surface {
             return Ok(());
         }
-        let texels = scene.texture_res * scene.texture_res;
+        // Texel ranges are independent; within one, windows and views go in unit order.
+        let mut t = 0;
+        while t < texels {
+            let t_end = texels.min(t + texel_step as u32);
+            self.record_reduce_texels(
+                rec,
+                scene,
+                gb,
+                io,
+                group,
+                begin,
+                end,
+                texel_window,
+                view_step,
+                t,
+                t_end,
+            )?;
+            t = t_end;
+        }
+        Ok(())
+    }
+
+    /// `grad_reduce_texels.comp` over texels `t .. t_end` of units `begin .. end` of `group`.
+    #[allow(clippy::too_many_arguments)]
+    fn record_reduce_texels(
+        &self,
+        rec: &mut Recorder<'_>,
+        scene: &GpuScene,
+        gb: &GradBuffers,
+        io: &GradIo<'_>,
+        group: &UnitGroup<'_>,
+        begin: u64,
+        end: u64,
+        texel_window: u64,
+        view_step: u64,
+        t: u32,
+        t_end: u32,
+    ) -> Result<()> {
         let mut w = begin;
         while w < end {
             let w_end = end.min(w + texel_window);
@@ -953,7 +1056,9 @@ impl GradKernels {
                 let v_end = group.views.min(v + view_step as u32);
                 let push = TexelReducePush {
                     face_count: scene.face_count,
-                    texels,
+                    texels: scene.texture_res * scene.texture_res,
+                    texel_begin: t,
+                    texel_end: t_end,
                     stride: gb.stride,
                     unit_total: group.units as u32,
                     chunk_begin: begin as u32,
@@ -976,7 +1081,7 @@ impl GradKernels {
                     }
                     .for_kernel(&self.reduce_texels)?,
                     &push,
-                    groups(u64::from(scene.face_count) * u64::from(texels), 64)?,
+                    groups(u64::from(scene.face_count), 64)?,
                 )?;
                 v = v_end;
             }
@@ -1155,17 +1260,26 @@ mod tests {
         // blurry-256 at tile 32: all 5 856 faces in one tile. The cap is llvmpipe's alone, whose
         // subgroups have 4, 8 or 16 lanes (SSE, AVX2, AVX-512).
         let run = 5856;
+        // Workgroups of 64 invocations, or of one subgroup (`tiled_backward_workgroup`).
         for sg in [4, 8, 16] {
-            for color in [ColorWork::None, ColorWork::Vertex, ColorWork::Texels] {
-                let faces = tile_faces(run, 32, (sg, color), Some(CAP), None, "llvmpipe").unwrap();
-                assert_eq!(faces % 64, 0);
-                assert!(tiled_backward_iterations(run, 32, faces, sg, color) <= CAP);
-                assert!(tiled_backward_iterations(run, 32, faces + 64, sg, color) > CAP);
-                assert!(run.div_ceil(faces) > 1, "{sg} {color:?}");
+            for wg in [64, sg] {
+                for color in [ColorWork::None, ColorWork::Vertex, ColorWork::Texels] {
+                    let work = (sg, wg, color);
+                    let step = u64::from(wg);
+                    let faces = tile_faces(run, 32, work, Some(CAP), None, "llvmpipe").unwrap();
+                    assert_eq!(faces % step, 0);
+                    assert!(tiled_backward_iterations(run, 32, faces, work) <= CAP);
+                    assert!(tiled_backward_iterations(run, 32, faces + step, work) > CAP);
+                    assert!(run.div_ceil(faces) > 1, "{sg} {wg} {color:?}");
+                }
             }
         }
+        // One subgroup a workgroup: a part takes 8 times fewer faces than 64 invocations do.
+        let one = tile_faces(run, 32, (8, 8, ColorWork::Texels), Some(CAP), None, "").unwrap();
+        let all = tile_faces(run, 32, (8, 64, ColorWork::Texels), Some(CAP), None, "").unwrap();
+        assert!(one * 8 <= all + 64 && one * 8 + 64 >= all, "{one} {all}");
         // Small runs: one part; a cap rounds up to whole batches.
-        let llvmpipe = (8, ColorWork::Texels);
+        let llvmpipe = (8, 64, ColorWork::Texels);
         assert_eq!(
             tile_faces(100, 8, llvmpipe, Some(CAP), None, "llvmpipe").unwrap(),
             128
@@ -1181,7 +1295,7 @@ mod tests {
         for tile in [8, 16, 32, 64] {
             let f = tile_faces(1 << 20, tile, llvmpipe, Some(CAP), None, "llvmpipe").unwrap();
             assert!(
-                tiled_backward_iterations(1 << 20, tile, f, 8, ColorWork::Texels) <= CAP,
+                tiled_backward_iterations(1 << 20, tile, f, llvmpipe) <= CAP,
                 "{tile}"
             );
         }
@@ -1193,31 +1307,54 @@ mod tests {
                 ..
             })
         ));
-        assert!(tile_faces(100, 112, (8, ColorWork::None), Some(CAP), None, "llvmpipe").is_ok());
+        assert!(
+            tile_faces(
+                100,
+                112,
+                (8, 64, ColorWork::None),
+                Some(CAP),
+                None,
+                "llvmpipe"
+            )
+            .is_ok()
+        );
     }
 
     #[test]
     fn reduce_plans_stay_under_the_loop_cap() {
-        assert_eq!(reduce_plan(1000, 30, 5, None), (1000, 5, 1000));
+        let plan = |window, view_step, texel_window, texel_step| ReducePlan {
+            window,
+            view_step,
+            texel_window,
+            texel_step,
+        };
+        assert_eq!(reduce_plan(1000, 30, 5, 25, None), plan(1000, 5, 1000, 25));
         // Everything fits: one dispatch each.
         assert_eq!(
-            reduce_plan(400_000, 1024, 1, Some(CAP)),
-            (400_000, 1, 400_000)
+            reduce_plan(400_000, 1024, 1, 25, Some(CAP)),
+            plan(400_000, 1, 400_000, 25)
         );
-        for (chunk, per_item, views) in [
-            (400_000, 1024, 120),
-            (400_000, 65_536, 1),
-            (400_000, 100_000, 7),
-            (10, 65_536, 3),
-            (3_000_000, 16_384, 64),
+        for (chunk, per_item, views, texels) in [
+            (400_000, 1024, 120, 25),
+            (400_000, 65_536, 1, 1),
+            (400_000, 100_000, 7, 49),
+            (10, 65_536, 3, 4),
+            (3_000_000, 16_384, 64, 25),
+            (3_000_000, 4, 64, 65_536),
+            (1_000, 2, 1, 40_000),
         ] {
-            let (window, view_step, texel_window) = reduce_plan(chunk, per_item, views, Some(CAP));
-            assert!(reduce_iterations(per_item.min(window)) <= CAP);
+            let p = reduce_plan(chunk, per_item, views, texels, Some(CAP));
+            assert!(reduce_iterations(per_item.min(p.window)) <= CAP);
             assert!(
-                texel_reduce_iterations(view_step, (view_step * per_item).min(texel_window)) <= CAP,
-                "{chunk} {per_item} {views}"
+                texel_reduce_iterations(
+                    p.view_step,
+                    (p.view_step * per_item).min(p.texel_window),
+                    p.texel_step
+                ) <= CAP,
+                "{chunk} {per_item} {views} {texels}: {p:?}"
             );
-            assert!(window >= 1 && view_step >= 1 && texel_window >= 1);
+            assert!(p.window >= 1 && p.view_step >= 1 && p.texel_window >= 1);
+            assert!(p.texel_step >= 1 && p.texel_step <= texels);
         }
     }
 }

@@ -117,7 +117,7 @@ impl BruteRaster {
             rec.context(),
             &FineModes::new(settings, cull)
                 .alpha_only_if(silhouette_only)
-                .constants(rec.context()),
+                .constants(rec.context(), 64),
         )?;
         let groups = pixels.div_ceil(u64::from(specs::RASTER_BRUTE.workgroup_size[0]));
         rec.dispatch(&kernel, &b.for_kernel(&kernel)?, &push, groups as u32)

@@ -4,11 +4,13 @@
 //! tile ([`crate::primitives::binning`]) and is bit for bit the brute-force pass
 //! ([`crate::raster::brute`]).
 
+use ash::vk;
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
 use crate::gpu::{Context, KernelVariants, Recorder, specs};
 use crate::primitives::TileGrid;
+use crate::raster::gpu::tiled_forward_iterations;
 use crate::raster::reference::{self, Alpha, ColorMode, RasterSettings, Rgb};
 use crate::raster::setup::dist_code;
 
@@ -147,17 +149,70 @@ impl FineModes {
         self
     }
 
-    /// The specialization constants, by `constant_id`: the modes, then the subgroup size the
-    /// tiled kernels may rely on ([`known_subgroup_size`]).
-    pub fn constants(&self, ctx: &Context) -> [u32; 5] {
+    /// The specialization constants, by `constant_id`: the modes, the subgroup size the tiled
+    /// kernels may rely on ([`known_subgroup_size`]), then the tiled kernels' `workgroup` size
+    /// ([`tiled_forward_workgroup`], [`tiled_backward_workgroup`]; the brute-force kernels have
+    /// no constant 5, and any value does for them).
+    pub fn constants(&self, ctx: &Context, workgroup: u32) -> [u32; 6] {
         [
             self.dist,
             self.rgb,
             self.alpha,
             self.flags,
             known_subgroup_size(ctx),
+            workgroup,
         ]
     }
+}
+
+/// Invocations per workgroup of `raster_tiled.comp` for tiles of at most `run` faces: 64 (one
+/// per pixel of the 8×8 block), or on a CPU device as few whole subgroups as llvmpipe's loop
+/// cap allows for `run` (each invocation then shades a pixel of `64 / workgroup` segments, one
+/// after another). llvmpipe runs every subgroup of a workgroup as a coroutine with a set-up
+/// cost of its own: an empty kernel over spot-256's 1 024 blocks took 1.6 ms with 64
+/// invocations a block and 0.6 ms with 8 (the latter in a phase where every pass ran 1.7×
+/// slower), and spot-256's tiled forward 6.5 % less time (BENCHMARKS.md, issue #11). A GPU runs
+/// the subgroups side by side: one pixel each.
+pub(crate) fn tiled_forward_workgroup(ctx: &Context, run: u64) -> u32 {
+    forward_workgroup(
+        is_cpu(ctx),
+        known_subgroup_size(ctx),
+        ctx.info().shader_loop_limit(),
+        run,
+    )
+}
+
+/// [`tiled_forward_workgroup`] for a device that is a CPU or not, with subgroups of `lanes`
+/// (0: unknown) and a loop cap of `limit`.
+fn forward_workgroup(cpu: bool, lanes: u32, limit: Option<u64>, run: u64) -> u32 {
+    if !cpu || lanes == 0 {
+        return 64;
+    }
+    let mut workgroup = lanes;
+    while workgroup < 64
+        && limit.is_some_and(|l| tiled_forward_iterations(run, lanes, workgroup) > l)
+    {
+        workgroup *= 2;
+    }
+    workgroup
+}
+
+/// Invocations per workgroup of `grad_tiled.comp` (its `local_size_x_id = 5`): one subgroup on
+/// a CPU device, 64 elsewhere. A workgroup takes one tile's faces, a subgroup `lanes` of them at
+/// a time; most tiles hold fewer faces than 64 (spot-256: 24 on average). A GPU runs a
+/// workgroup's subgroups side by side, and the spare ones leave at once. llvmpipe runs them one
+/// after another as coroutines with a set-up cost each (an empty kernel over spot-256's 1 024
+/// blocks of 64 invocations takes 1.6 ms): with one subgroup a workgroup, a tile's faces go
+/// through that subgroup batch after batch, and spot-256's backward took 5.6 % less time
+/// (BENCHMARKS.md, issue #11). Needs the subgroup size known ([`known_subgroup_size`]); 64
+/// otherwise.
+pub(crate) fn tiled_backward_workgroup(ctx: &Context) -> u32 {
+    let lanes = known_subgroup_size(ctx);
+    if is_cpu(ctx) && lanes != 0 { lanes } else { 64 }
+}
+
+fn is_cpu(ctx: &Context) -> bool {
+    ctx.info().device_type == vk::PhysicalDeviceType::CPU
 }
 
 /// The subgroup size the 64-invocation tiled kernels are specialized for (`SUBGROUP_SIZE` in
@@ -269,7 +324,11 @@ impl TiledRaster {
 
     /// Records the tiled fine pass over views `first_view .. first_view + view_count`, binned on
     /// `grid` (the rendered size) by one binning whose tiles are numbered from the group's first
-    /// view.
+    /// view, where no tile holds more than `max_run` entries (the binning's
+    /// [`crate::raster::gpu::ViewGroup::max_tile_entries`]). On a CPU device it sizes the
+    /// workgroups: one subgroup shades a whole 8×8 block where the driver's loop cap allows
+    /// for `max_run` faces, more where it does not. An overstated `max_run` costs only speed; an
+    /// understated one lets llvmpipe's loop cap drop faces of the crowded tiles.
     #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
@@ -283,6 +342,7 @@ impl TiledRaster {
         vertex_count: u32,
         texture_res: u32,
         silhouette_only: bool,
+        max_run: u64,
     ) -> Result<()> {
         check_tile_size(grid.tile_size)?;
         let last = u64::from(first_view) + u64::from(view_count);
@@ -316,7 +376,10 @@ impl TiledRaster {
             rec.context(),
             &FineModes::new(settings, true)
                 .alpha_only_if(silhouette_only)
-                .constants(rec.context()),
+                .constants(
+                    rec.context(),
+                    tiled_forward_workgroup(rec.context(), max_run),
+                ),
         )?;
         push.first_view = first_view;
         push.tile_size = grid.tile_size;
@@ -335,6 +398,34 @@ impl TiledRaster {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn forward_workgroups_widen_only_where_the_loop_cap_asks() {
+        const CAP: u64 = 65_535;
+        // A GPU, or an unknown subgroup size: one invocation a pixel.
+        assert_eq!(forward_workgroup(false, 32, None, 100), 64);
+        assert_eq!(forward_workgroup(true, 0, Some(CAP), 100), 64);
+        // llvmpipe: one subgroup a block while its 8 rounds fit, then wider.
+        assert_eq!(forward_workgroup(true, 8, Some(CAP), 100), 8);
+        assert_eq!(forward_workgroup(true, 8, None, 1 << 30), 8);
+        for run in [100, 6_000, 8_000, 20_000, 40_000, 52_000] {
+            let wg = forward_workgroup(true, 8, Some(CAP), run);
+            assert!(
+                wg.is_power_of_two() && (8..=64).contains(&wg),
+                "{run}: {wg}"
+            );
+            assert!(tiled_forward_iterations(run, 8, wg) <= CAP, "{run}: {wg}");
+            if wg > 8 {
+                assert!(
+                    tiled_forward_iterations(run, 8, wg / 2) > CAP,
+                    "{run}: {wg}"
+                );
+            }
+        }
+        assert_eq!(forward_workgroup(true, 8, Some(CAP), 8_000), 16);
+        // Past what even 64 invocations take: 64, and the binning's check refuses the scene.
+        assert_eq!(forward_workgroup(true, 8, Some(CAP), 60_000), 64);
+    }
 
     #[test]
     fn shared_structs_match_the_kernels_layout() {

@@ -297,11 +297,13 @@ fn boxes_touch(f: [f32; 4], p: [f32; 4]) -> bool {
 }
 
 /// Loop iterations one invocation of `raster_tiled.comp` runs for a tile of `run` faces with
-/// subgroups of `subgroup` lanes: per batch of one face per lane, one iteration and one per
-/// ballot word, and at most one per face of the run.
-pub(crate) fn tiled_forward_iterations(run: u64, subgroup: u32) -> u64 {
+/// subgroups of `subgroup` lanes and workgroups of `workgroup` invocations: per round (one of
+/// the `64 / workgroup` pixels it shades) one iteration, per batch of one face per lane one
+/// iteration and one per ballot word, and at most one per face of the run.
+pub(crate) fn tiled_forward_iterations(run: u64, subgroup: u32, workgroup: u32) -> u64 {
     let (lanes, words) = subgroup_lanes(subgroup);
-    run + run.div_ceil(lanes) * (1 + words) + 2
+    let rounds = 64u64.div_ceil(u64::from(workgroup.clamp(1, 64)));
+    rounds * (1 + run + run.div_ceil(lanes) * (1 + words)) + 2
 }
 
 /// What `grad_tiled.comp` does per kept face besides the screen sums, for its loop count.
@@ -316,17 +318,16 @@ pub(crate) enum ColorWork {
 }
 
 /// Loop iterations one invocation of `grad_tiled.comp` runs for a tile of `run` entries when a
-/// workgroup takes at most `faces` of them, with subgroups of `subgroup` lanes: two binary
-/// searches over the run (for the chunk's sub-run), then per batch (a subgroup's lanes' faces,
-/// every 64 faces of the workgroup's) one iteration, the final writes (3) and per segment of
+/// workgroup of `workgroup` invocations takes at most `faces` of them, with subgroups of
+/// `subgroup` lanes: two binary searches over the run (for the chunk's sub-run), then per batch
+/// (a subgroup's lanes' faces, every `workgroup` faces of the workgroup's) one iteration, the final writes (3) and per segment of
 /// `lanes` pixels one iteration, one per ballot word, and per kept face (at most `lanes`) one
 /// iteration, the three screen sums and the colour work.
 pub(crate) fn tiled_backward_iterations(
     run: u64,
     tile: u32,
     faces: u64,
-    subgroup: u32,
-    color: ColorWork,
+    (subgroup, workgroup, color): (u32, u32, ColorWork),
 ) -> u64 {
     let (lanes, words) = subgroup_lanes(subgroup);
     let segments = (u64::from(tile) * u64::from(tile)).div_ceil(lanes);
@@ -339,7 +340,7 @@ pub(crate) fn tiled_backward_iterations(
         };
     let search = u64::from(u64::BITS - run.leading_zeros());
     let batch = 1 + 3 + segments * (1 + words + lanes * per_face);
-    2 * search + faces.min(run).div_ceil(64) * batch + 2
+    2 * search + faces.min(run).div_ceil(u64::from(workgroup.max(1))) * batch + 2
 }
 
 /// Loop iterations one invocation of `grad_brute.comp` runs for a band of `rows` rows of
@@ -353,10 +354,10 @@ pub(crate) fn reduce_iterations(units: u64) -> u64 {
     units + 2
 }
 
-/// Loop iterations one invocation of `grad_reduce_texels.comp` runs over `views` views adding
-/// at most `units` partials in all.
-pub(crate) fn texel_reduce_iterations(views: u64, units: u64) -> u64 {
-    views + units + 2
+/// Loop iterations one invocation (one face) of `grad_reduce_texels.comp` runs over `views`
+/// views and `texels` texels, adding at most `units` partials in all per texel.
+pub(crate) fn texel_reduce_iterations(views: u64, units: u64, texels: u64) -> u64 {
+    views * (1 + texels) + texels * units + 2
 }
 
 /// The most entries any tile of a group holds, read back from its ranges.
@@ -387,12 +388,12 @@ fn checked_tile_runs(
         return Ok(total);
     };
     let subgroup = ctx.info().subgroup_size;
-    let run = if tiled_forward_iterations(total, subgroup) <= limit {
+    let run = if tiled_forward_iterations(total, subgroup, 64) <= limit {
         total
     } else {
         max_tile_run(ctx, bins, grid.tiles_per_view() * u64::from(views))?
     };
-    let need = tiled_forward_iterations(run, subgroup);
+    let need = tiled_forward_iterations(run, subgroup, 64);
     if need > limit {
         return Err(Error::DeviceLimit {
             kind: LimitKind::LoopIterations,
@@ -965,6 +966,15 @@ impl Renderer {
         first_view: u32,
         views: u32,
     ) -> Result<()> {
+        // The most entries a tile of these views holds: their group's (windows of one group
+        // share it).
+        let max_run = scene
+            .groups
+            .iter()
+            .filter(|g| g.first < first_view + views && first_view < g.first + g.views)
+            .map(|g| g.max_tile_entries)
+            .max()
+            .unwrap_or(u64::from(scene.face_count));
         rec.pass("raster tiled", |rec| {
             self.tiled.record(
                 rec,
@@ -986,6 +996,7 @@ impl Renderer {
                 scene.vertex_count,
                 scene.texture_res,
                 scene.silhouette_only,
+                max_run,
             )
         })
     }
@@ -1254,7 +1265,7 @@ impl Renderer {
         scene.bins[0].reserve_entry_capacity(ctx, capacity.max(1))?;
         let max_run = capacity.min(u64::from(scene.face_count));
         if let Some(limit) = ctx.info().shader_loop_limit() {
-            let need = tiled_forward_iterations(max_run, ctx.info().subgroup_size);
+            let need = tiled_forward_iterations(max_run, ctx.info().subgroup_size, 64);
             if need > limit {
                 return Err(Error::DeviceLimit {
                     kind: LimitKind::LoopIterations,
