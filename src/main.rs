@@ -158,6 +158,16 @@ fn info() -> softvk::Result<()> {
             DescriptorMode::Sets => "cached sets: the device lacks VK_KHR_push_descriptor",
         }
     );
+    println!(
+        "workgroups         {}",
+        if ctx.cpu_workgroups() {
+            "shaped for a CPU driver (SOFTVK_WORKGROUPS=gpu for a GPU's)"
+        } else if info.device_type == ash::vk::PhysicalDeviceType::CPU {
+            "shaped for a GPU, as SOFTVK_WORKGROUPS says"
+        } else {
+            "shaped for a GPU"
+        }
+    );
     println!("devices (SOFTVK_DEVICE takes an index or a name substring):");
     for (i, d) in softvk::gpu::list_devices(ctx.instance())?
         .iter()

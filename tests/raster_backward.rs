@@ -920,3 +920,48 @@ fn one_view_past_the_entry_budget_renders_and_differentiates_window_by_window() 
         }
     }
 }
+
+/// The workgroup shapes made for a GPU (64 invocations: a tile's faces round robin over the
+/// subgroups, one pixel per forward invocation, one texel per texel-reduction invocation) and
+/// those made for a CPU device (`Context::cpu_workgroups`) compute the same bits: images, aux
+/// and gradients, with surface colours (masked texel slots at R = 4, zero-filled at R = 6) and
+/// vertex colours, at tiles of 8 and 16. On a GPU both contexts take the GPU's shapes.
+#[test]
+fn gpu_and_cpu_workgroup_shapes_give_the_same_bits() {
+    let Some(own) = common::gpu() else { return };
+    let Some(gpu_shapes) = common::gpu_with(|o| o.gpu_workgroups = true) else {
+        return;
+    };
+    assert!(!gpu_shapes.cpu_workgroups());
+    let cams = [Camera::from_angles(2.732, 15.0, 20.0)];
+    let w = weights(24 * 16, 13);
+    for (res, color_mode) in [
+        (4, ColorMode::Surface),
+        (6, ColorMode::Surface),
+        (2, ColorMode::Vertex),
+    ] {
+        let mesh = scene(res, 17);
+        let s = RasterSettings {
+            color_mode,
+            ..settings(24, 16)
+        };
+        for tile in [8, 16] {
+            let method = Method::Tiled { tile };
+            let run = |gpu: &common::Gpu| {
+                let r = Renderer::new(gpu).unwrap();
+                let frames = r
+                    .render_views(gpu, &mesh, &cams, &lighting(), &s, method)
+                    .unwrap();
+                let scene = forward(&r, gpu, &mesh, &cams, &s, method);
+                let g = r
+                    .backward(gpu, &scene.binned(method).unwrap(), &w, true)
+                    .unwrap();
+                (frame_bits(&frames), bits(&g))
+            };
+            let (a, b) = (run(&own), run(&gpu_shapes));
+            let what = format!("R = {res}, {color_mode:?}, tile {tile}");
+            assert!(a.0 == b.0, "{what}: forward bits differ");
+            assert!(a.1 == b.1, "{what}: gradient bits differ");
+        }
+    }
+}

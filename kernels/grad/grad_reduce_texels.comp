@@ -1,21 +1,22 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 // Surface colours: the texel share of the backward's partials, one window of one chunk, one
-// range of a view group's views and one range of texels at a time. Invocation `face` adds, view
-// after view and texel after texel, the texel's slots of the face's units in
-// [window_begin, window_end) to the running dL/d(lit texel) of the view's mesh. Units are
-// item-major (view-major), and windows, chunks, view ranges and groups are recorded in unit
-// order, so every texel gradient adds its partials in unit order whatever the chunking: results
-// do not depend on it, bit for bit. One writer per (mesh, face, texel), fixed order:
+// range of a view group's views and one range of texels at a time. An invocation adds, view
+// after view and texel after texel of its group of one face's texels, the texel's slots of the
+// face's units in [window_begin, window_end) to the running dL/d(lit texel) of the view's mesh.
+// Units are item-major (view-major), and windows, chunks, view ranges and groups are recorded
+// in unit order, so every texel gradient adds its partials in unit order whatever the chunking
+// or grouping: results do not depend on them, bit for bit. One writer per (mesh, face, texel), fixed order:
 // deterministic. Twin: the per-texel sums of `reference_grad::backward_view` over the mesh's
 // views.
 //
-// One invocation per face, not per (face, texel): on llvmpipe every subgroup of a workgroup is
+// An invocation takes `texel_group` consecutive texels of one face: all of the dispatch's on a
+// CPU device, one on a GPU (`texel_reduce_group`). On llvmpipe every subgroup of a workgroup is
 // a coroutine with a set-up cost of its own (an empty kernel over spot-256's 1 024 blocks of 64
-// invocations takes 1.6 ms), and per (face, texel) there were R² times as many; the loads and
+// invocations takes 1.6 ms), and per (face, texel) there are R² times as many; the loads and
 // stores per texel are the same. On spot-256 (R = 5) this reduction took 4.3 of the backward's
 // 24.5 ms per (face, texel) with storage reads, 3.4 with texel reads, 2.2 per face
-// (BENCHMARKS.md, issue #11).
+// (BENCHMARKS.md, issue #11). A GPU wants the threads.
 #include "common.glsl"
 #include "view.glsl"
 
@@ -36,6 +37,7 @@ layout(push_constant) uniform Push {
     uint texels;       // R² per face
     uint texel_begin;  // texels added by this dispatch: [texel_begin, texel_end)
     uint texel_end;
+    uint texel_group;  // texels per invocation (at least 1)
     uint stride;       // floats per partial
     uint unit_total;   // units of the view group
     uint chunk_begin;  // the first unit of the chunk in `partials`
@@ -50,10 +52,14 @@ layout(push_constant) uniform Push {
 } pc;
 
 void main() {
-    uint face = linear_group_id() * 64u + gl_LocalInvocationIndex;
+    uint id = linear_group_id() * 64u + gl_LocalInvocationIndex;
+    uint groups = (pc.texel_end - pc.texel_begin + pc.texel_group - 1u) / pc.texel_group;
+    uint face = id / groups;
     if (face >= pc.face_count) {
         return;
     }
+    uint first = pc.texel_begin + (id - face * groups) * pc.texel_group;
+    uint last = min(first + pc.texel_group, pc.texel_end);
     for (uint v = pc.view_begin; v < pc.view_end; ++v) {
         uint item = v * pc.face_count + face;
         uint begin;
@@ -73,7 +79,7 @@ void main() {
         }
         uint mesh = views[pc.first_view + v].mesh;
         uint face_texels = (mesh * pc.face_count + face) * pc.texels;
-        for (uint texel = pc.texel_begin; texel < pc.texel_end; ++texel) {
+        for (uint texel = first; texel < last; ++texel) {
             uint o = 3u * (face_texels + texel);
             vec3 acc = vec3(texel_grads[o], texel_grads[o + 1u], texel_grads[o + 2u]);
             for (uint u = begin; u < end; ++u) {

@@ -70,13 +70,18 @@ pub struct ContextOptions {
     /// it: the way to exercise that path on any device. `false`: push descriptors where the
     /// device has them, sets elsewhere.
     pub descriptor_sets: bool,
+    /// Shape the kernels' workgroups as for a GPU even on a CPU device
+    /// ([`Context::cpu_workgroups`] false): the way to exercise a GPU's shapes on any device.
+    /// `false`: a CPU device gets the shapes made for it.
+    pub gpu_workgroups: bool,
 }
 
 impl ContextOptions {
     /// Reads `SOFTVK_VALIDATION` (`1`/`true` turns validation on), `SOFTVK_DEVICE`,
     /// `SOFTVK_PIPELINE_CACHE` (a file, or `off`; default `softvk/pipelines.bin` under
-    /// `$XDG_CACHE_HOME`, else `$HOME/.cache`) and `SOFTVK_DESCRIPTORS` (`sets` sets
-    /// [`ContextOptions::descriptor_sets`]; anything else, `push` say, leaves the default).
+    /// `$XDG_CACHE_HOME`, else `$HOME/.cache`), `SOFTVK_DESCRIPTORS` (`sets` sets
+    /// [`ContextOptions::descriptor_sets`]; anything else, `push` say, leaves the default) and
+    /// `SOFTVK_WORKGROUPS` (`gpu` sets [`ContextOptions::gpu_workgroups`]).
     pub fn from_env() -> Self {
         let validation = std::env::var("SOFTVK_VALIDATION")
             .map(|v| matches!(v.trim(), "1" | "true" | "yes" | "on"))
@@ -99,11 +104,14 @@ impl ContextOptions {
         };
         let descriptor_sets = std::env::var("SOFTVK_DESCRIPTORS")
             .is_ok_and(|v| v.trim().eq_ignore_ascii_case(DescriptorMode::Sets.as_str()));
+        let gpu_workgroups =
+            std::env::var("SOFTVK_WORKGROUPS").is_ok_and(|v| v.trim().eq_ignore_ascii_case("gpu"));
         Self {
             validation,
             device,
             pipeline_cache,
             descriptor_sets,
+            gpu_workgroups,
         }
     }
 }
@@ -327,6 +335,8 @@ pub struct Context {
     /// What softvk did on its own behalf ([`Context::counters`]).
     pub(crate) counters: CounterCells,
     info: DeviceInfo,
+    /// [`Context::cpu_workgroups`].
+    cpu_workgroups: bool,
 }
 
 /// The atomic cells behind [`Counters`].
@@ -574,7 +584,7 @@ impl Context {
         };
         // SAFETY: we just created all of these with the required extensions (and push
         // descriptors exactly when `push_descriptor` says).
-        unsafe {
+        let mut ctx = unsafe {
             Self::assemble(
                 raw,
                 true,
@@ -582,7 +592,9 @@ impl Context {
                 validation_log,
                 options.pipeline_cache.clone(),
             )
-        }
+        }?;
+        ctx.cpu_workgroups &= !options.gpu_workgroups;
+        Ok(ctx)
     }
 
     /// Adopts a host engine's Vulkan objects without taking ownership of them.
@@ -699,6 +711,7 @@ impl Context {
             command_pool,
             pool_lock: Mutex::new(()),
             counters: CounterCells::default(),
+            cpu_workgroups: info.device_type == vk::PhysicalDeviceType::CPU,
             info,
         })
     }
@@ -706,6 +719,16 @@ impl Context {
     /// The device this context runs on.
     pub fn info(&self) -> &DeviceInfo {
         &self.info
+    }
+
+    /// Whether the kernels' workgroups take the shapes made for a CPU driver: on a CPU device,
+    /// unless [`ContextOptions::gpu_workgroups`]. llvmpipe runs a workgroup's subgroups one
+    /// after another as coroutines, each with a set-up cost, where a GPU runs them side by
+    /// side: the tiled fine passes then take one subgroup per workgroup, and the texel
+    /// reduction one face per invocation (`raster::fine`, `raster::backward`). Results are the
+    /// same bits either way.
+    pub fn cpu_workgroups(&self) -> bool {
+        self.cpu_workgroups
     }
 
     /// How dispatches bind their buffers on this context: push descriptors, or descriptor sets

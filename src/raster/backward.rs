@@ -88,6 +88,7 @@ struct TexelReducePush {
     texels: u32,
     texel_begin: u32,
     texel_end: u32,
+    texel_group: u32,
     stride: u32,
     unit_total: u32,
     chunk_begin: u32,
@@ -341,6 +342,18 @@ fn tile_faces(
         debug_assert!(iterations(faces) <= limit);
     }
     Ok(faces)
+}
+
+/// Texels per invocation of `grad_reduce_texels.comp` for a dispatch over `texels` texels: all
+/// of them on a CPU device ([`Context::cpu_workgroups`]), whose driver pays a set-up per subgroup of invocations (llvmpipe:
+/// per (face, texel), the reduction took twice as long on spot-256; BENCHMARKS.md, issue #11),
+/// one on a GPU, which wants the threads.
+fn texel_reduce_group(ctx: &Context, texels: u32) -> u32 {
+    if ctx.cpu_workgroups() {
+        texels.max(1)
+    } else {
+        1
+    }
 }
 
 /// How one chunk's partials are added up: units per `grad_reduce.comp` dispatch (its window),
@@ -1048,6 +1061,9 @@ impl GradKernels {
         t: u32,
         t_end: u32,
     ) -> Result<()> {
+        let group_texels = texel_reduce_group(rec.context(), t_end - t);
+        let invocations =
+            u64::from(scene.face_count) * u64::from((t_end - t).div_ceil(group_texels));
         let mut w = begin;
         while w < end {
             let w_end = end.min(w + texel_window);
@@ -1059,6 +1075,7 @@ impl GradKernels {
                     texels: scene.texture_res * scene.texture_res,
                     texel_begin: t,
                     texel_end: t_end,
+                    texel_group: group_texels,
                     stride: gb.stride,
                     unit_total: group.units as u32,
                     chunk_begin: begin as u32,
@@ -1081,7 +1098,7 @@ impl GradKernels {
                     }
                     .for_kernel(&self.reduce_texels)?,
                     &push,
-                    groups(u64::from(scene.face_count), 64)?,
+                    groups(invocations, 64)?,
                 )?;
                 v = v_end;
             }

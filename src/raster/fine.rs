@@ -4,7 +4,6 @@
 //! tile ([`crate::primitives::binning`]) and is bit for bit the brute-force pass
 //! ([`crate::raster::brute`]).
 
-use ash::vk;
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
@@ -166,13 +165,13 @@ impl FineModes {
 }
 
 /// Invocations per workgroup of `raster_tiled.comp` for tiles of at most `run` faces: 64 (one
-/// per pixel of the 8×8 block), or on a CPU device as few whole subgroups as llvmpipe's loop
-/// cap allows for `run` (each invocation then shades a pixel of `64 / workgroup` segments, one
-/// after another). llvmpipe runs every subgroup of a workgroup as a coroutine with a set-up
-/// cost of its own: an empty kernel over spot-256's 1 024 blocks took 1.6 ms with 64
-/// invocations a block and 0.6 ms with 8 (the latter in a phase where every pass ran 1.7×
-/// slower), and spot-256's tiled forward 6.5 % less time (BENCHMARKS.md, issue #11). A GPU runs
-/// the subgroups side by side: one pixel each.
+/// per pixel of the 8×8 block), or on a CPU device ([`Context::cpu_workgroups`]) as few whole
+/// subgroups as llvmpipe's loop cap allows for `run` (each invocation then shades a pixel of
+/// `64 / workgroup` segments, one after another). llvmpipe runs every subgroup of a workgroup
+/// as a coroutine with a set-up cost of its own: an empty kernel over spot-256's 1 024 blocks
+/// took 1.6 ms with 64 invocations a block and 0.6 ms with 8 (the latter in a phase where every
+/// pass ran 1.7× slower), and spot-256's tiled forward 6.5 % less time (BENCHMARKS.md, issue
+/// #11). A GPU runs the subgroups side by side: one pixel each.
 pub(crate) fn tiled_forward_workgroup(ctx: &Context, run: u64) -> u32 {
     forward_workgroup(
         is_cpu(ctx),
@@ -198,8 +197,9 @@ fn forward_workgroup(cpu: bool, lanes: u32, limit: Option<u64>, run: u64) -> u32
 }
 
 /// Invocations per workgroup of `grad_tiled.comp` (its `local_size_x_id = 5`): one subgroup on
-/// a CPU device, 64 elsewhere. A workgroup takes one tile's faces, a subgroup `lanes` of them at
-/// a time; most tiles hold fewer faces than 64 (spot-256: 24 on average). A GPU runs a
+/// a CPU device ([`Context::cpu_workgroups`]), 64 elsewhere. A workgroup takes one tile's
+/// faces, a subgroup `lanes` of them at a time; most tiles hold fewer faces than 64 (spot-256:
+/// 24 on average). A GPU runs a
 /// workgroup's subgroups side by side, and the spare ones leave at once. llvmpipe runs them one
 /// after another as coroutines with a set-up cost each (an empty kernel over spot-256's 1 024
 /// blocks of 64 invocations takes 1.6 ms): with one subgroup a workgroup, a tile's faces go
@@ -212,7 +212,7 @@ pub(crate) fn tiled_backward_workgroup(ctx: &Context) -> u32 {
 }
 
 fn is_cpu(ctx: &Context) -> bool {
-    ctx.info().device_type == vk::PhysicalDeviceType::CPU
+    ctx.cpu_workgroups()
 }
 
 /// The subgroup size the 64-invocation tiled kernels are specialized for (`SUBGROUP_SIZE` in
