@@ -6,9 +6,9 @@
 // face's units in [window_begin, window_end) to the running dL/d(lit texel) of the view's mesh.
 // Units are item-major (view-major), and windows, chunks, view ranges and groups are recorded
 // in unit order, so every texel gradient adds its partials in unit order whatever the chunking
-// or grouping: results do not depend on them, bit for bit. One writer per (mesh, face, texel), fixed order:
-// deterministic. Twin: the per-texel sums of `reference_grad::backward_view` over the mesh's
-// views.
+// or grouping: results do not depend on them, bit for bit. One writer per (mesh, face, texel),
+// fixed order: deterministic. Twin: the per-texel sums of `reference_grad::backward_view` over
+// the mesh's views.
 //
 // An invocation takes `texel_group` consecutive texels of one face: all of the dispatch's on a
 // CPU device, one on a GPU (`texel_reduce_group`). On llvmpipe every subgroup of a workgroup is

@@ -320,9 +320,9 @@ pub(crate) enum ColorWork {
 /// Loop iterations one invocation of `grad_tiled.comp` runs for a tile of `run` entries when a
 /// workgroup of `workgroup` invocations takes at most `faces` of them, with subgroups of
 /// `subgroup` lanes: two binary searches over the run (for the chunk's sub-run), then per batch
-/// (a subgroup's lanes' faces, every `workgroup` faces of the workgroup's) one iteration, the final writes (3) and per segment of
-/// `lanes` pixels one iteration, one per ballot word, and per kept face (at most `lanes`) one
-/// iteration, the three screen sums and the colour work.
+/// (a subgroup's lanes' faces, every `workgroup` faces of the workgroup's) one iteration, the
+/// final writes (3) and per segment of `lanes` pixels one iteration, one per ballot word, and
+/// per kept face (at most `lanes`) one iteration, the three screen sums and the colour work.
 pub(crate) fn tiled_backward_iterations(
     run: u64,
     tile: u32,
