@@ -7,11 +7,11 @@
 // Tiled soft rasterization: one workgroup per 8×8 block of pixels (a block is the unit a tile
 // size must be a multiple of; 64 invocations, one per pixel, or fewer, each shading a pixel of
 // several of the block's segments in turn: `tiled_forward_workgroup` in src/raster/fine.rs says
-// when and why), visiting only the faces binned
-// to the block's tile (`kernels/binning/`), in index order. Binning keeps every face that can
-// touch a pixel of the tile (a superset is harmless: the step ignores a face beyond its cut-off
-// exactly as brute force does), so the pixels are bit for bit those of `raster_brute.comp`,
-// which calls the same `shade_face` for every face. Twin: `reference::shade_pixel`.
+// when and why), visiting only the faces binned to the block's tile (`kernels/binning/`), in
+// index order. Binning keeps every face that can touch a pixel of the tile (a superset is
+// harmless: the step ignores a face beyond its cut-off exactly as brute force does), so the
+// pixels are bit for bit those of `raster_brute.comp`, which calls the same `shade_face` for
+// every face. Twin: `reference::shade_pixel`.
 //
 // Each subgroup works alone, with no shared memory and no barrier: per batch of as many binned
 // faces as it has lanes, each lane loads one face; a ballot keeps the faces whose box touches
