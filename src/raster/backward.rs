@@ -1027,82 +1027,50 @@ impl GradKernels {
         let mut t = 0;
         while t < texels {
             let t_end = texels.min(t + texel_step as u32);
-            self.record_reduce_texels(
-                rec,
-                scene,
-                gb,
-                io,
-                group,
-                begin,
-                end,
-                texel_window,
-                view_step,
-                t,
-                t_end,
-            )?;
-            t = t_end;
-        }
-        Ok(())
-    }
-
-    /// `grad_reduce_texels.comp` over texels `t .. t_end` of units `begin .. end` of `group`.
-    #[allow(clippy::too_many_arguments)]
-    fn record_reduce_texels(
-        &self,
-        rec: &mut Recorder<'_>,
-        scene: &GpuScene,
-        gb: &GradBuffers,
-        io: &GradIo<'_>,
-        group: &UnitGroup<'_>,
-        begin: u64,
-        end: u64,
-        texel_window: u64,
-        view_step: u64,
-        t: u32,
-        t_end: u32,
-    ) -> Result<()> {
-        let group_texels = texel_reduce_group(rec.context(), t_end - t);
-        let invocations =
-            u64::from(scene.face_count) * u64::from((t_end - t).div_ceil(group_texels));
-        let mut w = begin;
-        while w < end {
-            let w_end = end.min(w + texel_window);
-            let mut v = 0;
-            while v < group.views {
-                let v_end = group.views.min(v + view_step as u32);
-                let push = TexelReducePush {
-                    face_count: scene.face_count,
-                    texels: scene.texture_res * scene.texture_res,
-                    texel_begin: t,
-                    texel_end: t_end,
-                    texel_group: group_texels,
-                    stride: gb.stride,
-                    unit_total: group.units as u32,
-                    chunk_begin: begin as u32,
-                    window_begin: w as u32,
-                    window_end: w_end as u32,
-                    parts: group.parts,
-                    first_view: group.first_view,
-                    group_views: group.views,
-                    view_begin: v,
-                    view_end: v_end,
-                    masked: u32::from(gb.texel_masks(scene)),
-                };
-                rec.dispatch(
-                    &self.reduce_texels,
-                    &specs::GradReduceTexelsBindings {
-                        views: scene.views.whole(),
-                        offsets: group.offsets,
-                        partials: gb.partials.whole(),
-                        texel_grads: io.colors,
-                    }
-                    .for_kernel(&self.reduce_texels)?,
-                    &push,
-                    groups(invocations, 64)?,
-                )?;
-                v = v_end;
+            let group_texels = texel_reduce_group(rec.context(), t_end - t);
+            let invocations =
+                u64::from(scene.face_count) * u64::from((t_end - t).div_ceil(group_texels));
+            let mut w = begin;
+            while w < end {
+                let w_end = end.min(w + texel_window);
+                let mut v = 0;
+                while v < group.views {
+                    let v_end = group.views.min(v + view_step as u32);
+                    let push = TexelReducePush {
+                        face_count: scene.face_count,
+                        texels,
+                        texel_begin: t,
+                        texel_end: t_end,
+                        texel_group: group_texels,
+                        stride: gb.stride,
+                        unit_total: group.units as u32,
+                        chunk_begin: begin as u32,
+                        window_begin: w as u32,
+                        window_end: w_end as u32,
+                        parts: group.parts,
+                        first_view: group.first_view,
+                        group_views: group.views,
+                        view_begin: v,
+                        view_end: v_end,
+                        masked: u32::from(gb.texel_masks(scene)),
+                    };
+                    rec.dispatch(
+                        &self.reduce_texels,
+                        &specs::GradReduceTexelsBindings {
+                            views: scene.views.whole(),
+                            offsets: group.offsets,
+                            partials: gb.partials.whole(),
+                            texel_grads: io.colors,
+                        }
+                        .for_kernel(&self.reduce_texels)?,
+                        &push,
+                        groups(invocations, 64)?,
+                    )?;
+                    v = v_end;
+                }
+                w = w_end;
             }
-            w = w_end;
+            t = t_end;
         }
         Ok(())
     }

@@ -174,7 +174,7 @@ impl FineModes {
 /// #11). A GPU runs the subgroups side by side: one pixel each.
 pub(crate) fn tiled_forward_workgroup(ctx: &Context, run: u64) -> u32 {
     forward_workgroup(
-        is_cpu(ctx),
+        ctx.cpu_workgroups(),
         known_subgroup_size(ctx),
         ctx.info().shader_loop_limit(),
         run,
@@ -199,20 +199,19 @@ fn forward_workgroup(cpu: bool, lanes: u32, limit: Option<u64>, run: u64) -> u32
 /// Invocations per workgroup of `grad_tiled.comp` (its `local_size_x_id = 5`): one subgroup on
 /// a CPU device ([`Context::cpu_workgroups`]), 64 elsewhere. A workgroup takes one tile's
 /// faces, a subgroup `lanes` of them at a time; most tiles hold fewer faces than 64 (spot-256:
-/// 24 on average). A GPU runs a
-/// workgroup's subgroups side by side, and the spare ones leave at once. llvmpipe runs them one
-/// after another as coroutines with a set-up cost each (an empty kernel over spot-256's 1 024
-/// blocks of 64 invocations takes 1.6 ms): with one subgroup a workgroup, a tile's faces go
-/// through that subgroup batch after batch, and spot-256's backward took 5.6 % less time
-/// (BENCHMARKS.md, issue #11). Needs the subgroup size known ([`known_subgroup_size`]); 64
-/// otherwise.
+/// 24 on average). A GPU runs a workgroup's subgroups side by side, and the spare ones leave at
+/// once. llvmpipe runs them one after another as coroutines with a set-up cost each (an empty
+/// kernel over spot-256's 1 024 blocks of 64 invocations takes 1.6 ms): with one subgroup a
+/// workgroup, a tile's faces go through that subgroup batch after batch, and spot-256's
+/// backward took 5.6 % less time (BENCHMARKS.md, issue #11). Needs the subgroup size known
+/// ([`known_subgroup_size`]); 64 otherwise.
 pub(crate) fn tiled_backward_workgroup(ctx: &Context) -> u32 {
     let lanes = known_subgroup_size(ctx);
-    if is_cpu(ctx) && lanes != 0 { lanes } else { 64 }
-}
-
-fn is_cpu(ctx: &Context) -> bool {
-    ctx.cpu_workgroups()
+    if ctx.cpu_workgroups() && lanes != 0 {
+        lanes
+    } else {
+        64
+    }
 }
 
 /// The subgroup size the 64-invocation tiled kernels are specialized for (`SUBGROUP_SIZE` in
