@@ -163,13 +163,15 @@ fn guarded_binning_equals_the_twin_at_any_capacity_that_holds_the_count() {
     let Some(gpu) = common::gpu() else { return };
     let binner = Binner::new(&gpu).unwrap();
     let mut rng = common::rng(7);
-    // (width, height, views, binned by masks): 520×264 is 65×33 tiles of 8, over the masks'
-    // limit; 512×512 is 4096 tiles, a power of two.
-    for (w, h, views, masks) in [
-        (37, 23, 3, true),
-        (32, 32, 4, true),
-        (520, 264, 2, false),
-        (512, 512, 1, false),
+    // (width, height, views, items per view, binned by masks): 520×264 is 65×33 tiles of 8,
+    // over the masks' limit; 512×512 is 4096 tiles, a power of two. 2 100 items per view make
+    // masks of 66 words, whose summaries take three words a tile (the last one partly).
+    for (w, h, views, per_view, masks) in [
+        (37, 23, 3, 60, true),
+        (32, 32, 4, 60, true),
+        (40, 24, 2, 2100, true),
+        (520, 264, 2, 60, false),
+        (512, 512, 1, 60, false),
     ] {
         let image = TileGrid::new(w, h, 8).unwrap();
         assert_eq!(
@@ -183,7 +185,6 @@ fn guarded_binning_equals_the_twin_at_any_capacity_that_holds_the_count() {
         for grid in [image, window] {
             // 520×264's window (65 × 31 tiles) is binned by masks, 512×512's by the sort.
             let masks = grid.tiles_per_view() <= MASK_MAX_TILES_PER_VIEW;
-            let per_view = 60u32;
             let n = (per_view * views) as usize;
             // Boxes in pixel-centre coordinates (x, y in about [-1.2, 1.2]), a fifth not binned.
             let mut words = Vec::with_capacity(5 * n);

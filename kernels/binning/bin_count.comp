@@ -9,7 +9,10 @@
 // the item's bit in the mask of every tile of the rectangle (tile t's items are the set bits of
 // words `[t W, (t + 1) W)`, W = ⌈items per view / 32⌉; integer `atomicOr`, so the result does not
 // depend on the order of the writes). `bin_mask_counts.comp`, a scan and `bin_mask_list.comp`
-// list them.
+// list them. Each tile also has a summary of its mask, S = ⌈W / 32⌉ words from word
+// `pc.summary_offset + t S`: bit w set where mask word w is not zero, set by the item that made
+// the word non-zero. The counts and the lists walk the summaries' set bits instead of every word
+// of every mask (a tile holds tens of items; a mask of spot's 5 856 faces has 183 words).
 #include "common.glsl"
 
 layout(local_size_x = 64) in;
@@ -47,9 +50,16 @@ void main() {
     uint tile_base = view * pc.tiles_x * pc.tiles_y;
     uint word = item / 32u;
     uint bit = 1u << (item & 31u);
+    uint summary_words = (words + 31u) / 32u;
+    uint summary_bit = 1u << (word & 31u);
     for (uint ty = rect.y; ty <= rect.w; ++ty) {
         for (uint tx = rect.x; tx <= rect.z; ++tx) {
-            atomicOr(tile_masks[(tile_base + ty * pc.tiles_x + tx) * words + word], bit);
+            uint tile = tile_base + ty * pc.tiles_x + tx;
+            // Exactly one item sees the word empty: the one whose bit came first.
+            if (atomicOr(tile_masks[tile * words + word], bit) == 0u) {
+                atomicOr(tile_masks[pc.summary_offset + tile * summary_words + word / 32u],
+                         summary_bit);
+            }
         }
     }
 }

@@ -3,7 +3,8 @@
 // Binning through per-tile item masks: one invocation per tile counts the set bits of its mask
 // (words `[t W, (t + 1) W)`, set by `bin_count.comp` for faces, `probe_items.comp` for anchors):
 // the tile's entry count, which an exclusive scan over the tiles turns into each tile's first
-// entry. `bin_mask_list.comp` and `probe_mask_list.comp` then write each tile's entries, its
+// entry. With summaries (`pc.summary_offset` ≠ 0; see `bin_count.comp`) it visits only the
+// words its summary marks non-zero. `bin_mask_list.comp` and `probe_mask_list.comp` then write each tile's entries, its
 // items in index order.
 #include "common.glsl"
 
@@ -16,7 +17,7 @@ layout(push_constant) uniform Push {
     uint tiles;
     uint words_per_tile; // W = ⌈items per view / 32⌉
     uint pad0;
-    uint pad1;
+    uint summary_offset; // the first summary word; 0: no summaries, every word is counted
 } pc;
 
 void main() {
@@ -26,8 +27,21 @@ void main() {
     }
     uint base = tile * pc.words_per_tile;
     uint c = 0u;
-    for (uint w = 0u; w < pc.words_per_tile; ++w) {
-        c += uint(bitCount(masks[base + w]));
+    if (pc.summary_offset != 0u) {
+        uint summary_words = (pc.words_per_tile + 31u) / 32u;
+        uint summary = pc.summary_offset + tile * summary_words;
+        for (uint s = 0u; s < summary_words; ++s) {
+            uint nonzero = masks[summary + s];
+            while (nonzero != 0u) {
+                uint w = 32u * s + uint(findLSB(nonzero));
+                nonzero &= nonzero - 1u;
+                c += uint(bitCount(masks[base + w]));
+            }
+        }
+    } else {
+        for (uint w = 0u; w < pc.words_per_tile; ++w) {
+            c += uint(bitCount(masks[base + w]));
+        }
     }
     counts[tile] = c;
 }

@@ -3,7 +3,8 @@
 // Binning through per-tile item masks, last step (`BinStrategy::Masks`; in place of the
 // scatter, the sort and the ranges pass): one invocation per tile writes the tile's entries
 // from its first one on (the scan of `bin_mask_counts.comp`'s counts), its items in index
-// order (the set bits of its mask, word by word, lowest first), and its `[start, end)` range
+// order (the set bits of its mask, word by word, lowest first: the words its summary marks
+// non-zero; see `bin_count.comp`), and its `[start, end)` range
 // (`[0, 0]` when empty). Each entry is the item-major slot of its (item, tile) pair: the item's
 // first slot (the count's scan) plus the tile's row-major place in the item's rectangle, which
 // is where `bin_scatter.comp` would have put it; the item of every slot is written too. So the
@@ -28,7 +29,7 @@ layout(push_constant) uniform Push {
     uint items_per_view;
     uint tiles_x;
     uint tiles_per_view;
-    uint pad0;
+    uint summary_offset; // the first summary word (see bin_count.comp)
     uint pad1;
     uint pad2;
 } pc;
@@ -48,22 +49,29 @@ void main() {
     uint first = tile_offsets[tile];
     uint o = first;
     uint base = tile * pc.words_per_tile;
-    for (uint w = 0u; w < pc.words_per_tile; ++w) {
-        uint m = masks[base + w];
-        while (m != 0u) {
-            uint item = 32u * w + uint(findLSB(m));
-            m &= m - 1u;
-            uint id = view * pc.items_per_view + item;
-            uvec2 r = rects[id];
-            uint x0 = r.x & 0xFFFFu;
-            uint x1 = r.x >> 16u;
-            uint y0 = r.y & 0xFFFFu;
-            uint slot = item_offsets[id] + (ty - y0) * (x1 - x0 + 1u) + (tx - x0);
-            if (o < cap && slot < cap) {
-                entries[o] = slot;
-                entry_items[slot] = item;
+    uint summary_words = (pc.words_per_tile + 31u) / 32u;
+    uint summary = pc.summary_offset + tile * summary_words;
+    for (uint s = 0u; s < summary_words; ++s) {
+        uint nonzero = masks[summary + s];
+        while (nonzero != 0u) {
+            uint w = 32u * s + uint(findLSB(nonzero));
+            nonzero &= nonzero - 1u;
+            uint m = masks[base + w];
+            while (m != 0u) {
+                uint item = 32u * w + uint(findLSB(m));
+                m &= m - 1u;
+                uint id = view * pc.items_per_view + item;
+                uvec2 r = rects[id];
+                uint x0 = r.x & 0xFFFFu;
+                uint x1 = r.x >> 16u;
+                uint y0 = r.y & 0xFFFFu;
+                uint slot = item_offsets[id] + (ty - y0) * (x1 - x0 + 1u) + (tx - x0);
+                if (o < cap && slot < cap) {
+                    entries[o] = slot;
+                    entry_items[slot] = item;
+                }
+                ++o;
             }
-            ++o;
         }
     }
     ranges[tile] = o == first ? uvec2(0u) : uvec2(first, o);

@@ -27,7 +27,7 @@ layout(push_constant) uniform Push {
     uint tiles_y;
     uint words_per_tile;  // count: W of the per-tile item masks to set (0: none; see bin_count)
     uint first_row;       // the window's first tile row (tiles_y rows from it; 0: the image)
-    uint pad1;
+    uint summary_offset;  // count with masks: the first summary word (see bin_count)
     uint pad2;
 } pc;
 #endif

@@ -12,12 +12,15 @@
 //!
 //! - **Masks** (grids of at most [`MASK_MAX_TILES_PER_VIEW`] tiles per view: every image size
 //!   the fits and benchmarks use). The count pass also sets each item's bit in a per-tile mask
-//!   of its view's items (integer `atomicOr`, so order-independent), one invocation per tile
-//!   counts its bits (`bin_mask_counts.comp`), an exclusive [`Scan`] over the tiles gives each
-//!   tile its first entry, and one invocation per tile lists its items, lowest bit first, with
-//!   each entry's item-major slot and its range (`bin_mask_list.comp`). No sort: the masks cost
-//!   about three word visits per tile and mask word, the sort several passes over every entry
-//!   (on llvmpipe the sort was a quarter of a mesh-fitting iteration).
+//!   of its view's items (integer `atomicOr`, so order-independent) and, in the tile's summary
+//!   of the mask, the bit of each mask word it made non-zero; one invocation per tile counts
+//!   its bits (`bin_mask_counts.comp`), an exclusive [`Scan`] over the tiles gives each tile
+//!   its first entry, and one invocation per tile lists its items, lowest bit first, with each
+//!   entry's item-major slot and its range (`bin_mask_list.comp`). Both visit only the mask
+//!   words the summary marks. No sort: the masks cost a memset and a few word visits per
+//!   entry, the sort several passes over every entry (on llvmpipe the sort was a quarter of a
+//!   mesh-fitting iteration; walking every mask word, as the masks did before summaries, took
+//!   half of spot-256's binning).
 //! - **Sort** (larger grids, where the masks would be mostly empty words): a **scatter**
 //!   (`bin_scatter.comp`) writes one entry per (item, tile), item-major (view-major, then item
 //!   index), keyed by tile; the stable [`RadixSort`] by tile, over exactly as many key bits as
@@ -196,6 +199,14 @@ impl BinJob {
 /// sort spends on a few entries; beyond it, mostly empty mask words would outweigh the sort.
 pub const MASK_MAX_TILES_PER_VIEW: u64 = 2048;
 
+/// The words the masks of `tiles` tiles take, `words_per_tile` each, followed by their summaries
+/// (⌈W / 32⌉ words a tile, one bit per mask word that is not zero: `bin_count.comp`), and the
+/// index of the first summary word.
+fn mask_layout(words_per_tile: u32, tiles: u64) -> (u64, u64) {
+    let w = u64::from(words_per_tile);
+    ((w + w.div_ceil(32)) * tiles, w * tiles)
+}
+
 /// How a binning puts its entries in tile order (see the module docs). Either way the entries
 /// are the same, bit for bit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -219,8 +230,10 @@ impl BinJob {
     /// of its view); else the sort.
     pub fn strategy(&self, ctx: &Context) -> BinStrategy {
         let words = u64::from(self.items_per_view.div_ceil(32)).max(1);
-        let bytes = 4 * words * self.tile_count();
-        let list_iterations = words + u64::from(self.items_per_view);
+        let bytes = 4 * (words + words.div_ceil(32)) * self.tile_count();
+        // A tile's list walks its summary words, the mask words they mark and, at worst, every
+        // item of its view.
+        let list_iterations = words.div_ceil(32) + words + u64::from(self.items_per_view);
         let fits = self.grid.tiles_per_view() <= MASK_MAX_TILES_PER_VIEW
             && self.grid.tiles_x <= 0xFFFF
             && self.grid.tiles_y <= 0xFFFF
@@ -260,7 +273,9 @@ struct BinPush {
     words_per_tile: u32,
     /// First tile row of the grid's window ([`TileGrid::window`]).
     first_row: u32,
-    pad: [u32; 2],
+    /// `bin_count.comp` with masks: the first word of the masks' summaries ([`mask_layout`]).
+    summary_offset: u32,
+    pad: u32,
 }
 
 /// Push constants of `bin_mask_counts.comp` (its first four words).
@@ -269,7 +284,9 @@ struct BinPush {
 struct MaskCountsPush {
     tiles: u32,
     words_per_tile: u32,
-    pad: [u32; 2],
+    pad: u32,
+    /// The first word of the masks' summaries ([`mask_layout`]); 0: none (every word is read).
+    summary_offset: u32,
 }
 
 /// Push constants of `bin_mask_list.comp`.
@@ -281,7 +298,8 @@ struct MaskListPush {
     items_per_view: u32,
     tiles_x: u32,
     tiles_per_view: u32,
-    pad: [u32; 3],
+    summary_offset: u32,
+    pad: [u32; 2],
 }
 
 /// Push constants of `bin_count_sum.comp`.
@@ -401,7 +419,7 @@ impl Bins {
             self.tile_capacity = job.tile_count();
         }
         if let BinStrategy::Masks { words_per_tile } = job.strategy(ctx) {
-            let words = u64::from(words_per_tile) * job.tile_count();
+            let (words, _) = mask_layout(words_per_tile, job.tile_count());
             if words > self.mask_words {
                 self.masks = ctx.create_buffer("bin tile masks", 4 * words, MemoryKind::Device)?;
                 self.mask_words = words;
@@ -554,7 +572,12 @@ impl Binner {
             tiles_y: job.grid.tiles_y,
             words_per_tile,
             first_row: job.grid.first_row,
-            pad: [0; 2],
+            summary_offset: if words_per_tile == 0 {
+                0
+            } else {
+                mask_layout(words_per_tile, job.tile_count()).1 as u32
+            },
+            pad: 0,
         }
     }
 
@@ -591,7 +614,9 @@ impl Binner {
             ),
         )?;
         let mask_words = match strategy {
-            BinStrategy::Masks { words_per_tile } => u64::from(words_per_tile) * job.tile_count(),
+            BinStrategy::Masks { words_per_tile } => {
+                mask_layout(words_per_tile, job.tile_count()).0
+            }
             BinStrategy::Sort => 0,
         };
         if job.item_count() > bins.item_capacity
@@ -631,9 +656,8 @@ impl Binner {
         let counts = bins.counts.range(0, 4 * n);
         let (words_per_tile, masks) = match strategy {
             BinStrategy::Masks { words_per_tile } => {
-                let masks = bins
-                    .masks
-                    .range(0, 4 * u64::from(words_per_tile) * job.tile_count());
+                let (words, _) = mask_layout(words_per_tile, job.tile_count());
+                let masks = bins.masks.range(0, 4 * words);
                 rec.fill(masks, 0);
                 (words_per_tile, masks)
             }
@@ -757,14 +781,16 @@ impl Binner {
     ) -> Result<()> {
         let tiles = job.tile_count();
         let n = job.item_count();
-        let masks = bins.masks.range(0, 4 * u64::from(words_per_tile) * tiles);
+        let (words, summary_offset) = mask_layout(words_per_tile, tiles);
+        let masks = bins.masks.range(0, 4 * words);
         let tile_counts = bins.tile_counts.range(0, 4 * tiles);
         let groups =
             |spec: &crate::gpu::KernelSpec| tiles.div_ceil(u64::from(spec.workgroup_size[0]));
         let push = MaskCountsPush {
             tiles: tiles as u32,
             words_per_tile,
-            pad: [0; 2],
+            pad: 0,
+            summary_offset: summary_offset as u32,
         };
         rec.dispatch(
             &self.mask_counts,
@@ -789,7 +815,8 @@ impl Binner {
             items_per_view: job.items_per_view,
             tiles_x: job.grid.tiles_x,
             tiles_per_view: job.grid.tiles_per_view() as u32,
-            pad: [0; 3],
+            summary_offset: summary_offset as u32,
+            pad: [0; 2],
         };
         let cap = cap.max(1);
         let bindings = specs::BinMaskListBindings {
