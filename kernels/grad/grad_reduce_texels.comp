@@ -16,7 +16,9 @@
 // invocations takes 1.6 ms), and per (face, texel) there are R² times as many; the loads and
 // stores per texel are the same. On spot-256 (R = 5) this reduction took 4.3 of the backward's
 // 24.5 ms per (face, texel) with storage reads, 3.4 with texel reads, 2.2 per face
-// (BENCHMARKS.md, issue #11). A GPU wants the threads.
+// (BENCHMARKS.md, issue #11). A GPU wants the threads. With masks, an invocation visits only
+// the texels of its group that some unit wrote (grad tiled −1.2 ms on spot-256, where 25 texels
+// a face meet a handful of pixels).
 #include "common.glsl"
 #include "view.glsl"
 
@@ -51,6 +53,28 @@ layout(push_constant) uniform Push {
     uint masked;       // 1: a partial's slots are valid where its mask says (TEXEL_MASKS)
 } pc;
 
+// The first vec4 of partial `u` of the chunk.
+int partial_at(uint u) {
+    return int((u - pc.chunk_begin) * (pc.stride / 4u));
+}
+
+// Adds texel `texel`'s slots of units [begin, end) to its running gradient at texel index
+// `face_texels + texel`, in unit order: past the three screen corners, the texel slots; with
+// masks, only those written. An unwritten slot is read and dropped by a select (no branch).
+void add_texel(uint face_texels, uint texel, uint begin, uint end) {
+    uint o = 3u * (face_texels + texel);
+    vec3 acc = vec3(texel_grads[o], texel_grads[o + 1u], texel_grads[o + 2u]);
+    for (uint u = begin; u < end; ++u) {
+        int p = partial_at(u);
+        bool written = pc.masked == 0u || ((imageLoad(partials, p).w >> texel) & 1u) != 0u;
+        vec3 slot = uintBitsToFloat(imageLoad(partials, p + 3 + int(texel)).xyz);
+        acc = written ? acc + slot : acc;
+    }
+    texel_grads[o] = acc.x;
+    texel_grads[o + 1u] = acc.y;
+    texel_grads[o + 2u] = acc.z;
+}
+
 void main() {
     uint id = linear_group_id() * 64u + gl_LocalInvocationIndex;
     uint groups = (pc.texel_end - pc.texel_begin + pc.texel_group - 1u) / pc.texel_group;
@@ -77,23 +101,28 @@ void main() {
         if (begin >= end) {
             continue;
         }
-        uint mesh = views[pc.first_view + v].mesh;
-        uint face_texels = (mesh * pc.face_count + face) * pc.texels;
-        for (uint texel = first; texel < last; ++texel) {
-            uint o = 3u * (face_texels + texel);
-            vec3 acc = vec3(texel_grads[o], texel_grads[o + 1u], texel_grads[o + 2u]);
-            for (uint u = begin; u < end; ++u) {
-                // Past the three screen corners, the texel slots; with masks, only those
-                // written (the mask is the first corner's fourth float; see raster_grad.glsl).
-                // An unwritten slot is read and dropped by a select (no branch).
-                int p = int((u - pc.chunk_begin) * (pc.stride / 4u));
-                bool written = pc.masked == 0u || ((imageLoad(partials, p).w >> texel) & 1u) != 0u;
-                vec3 slot = uintBitsToFloat(imageLoad(partials, p + 3 + int(texel)).xyz);
-                acc = written ? acc + slot : acc;
+        uint face_texels = (views[pc.first_view + v].mesh * pc.face_count + face) * pc.texels;
+        if (pc.masked == 0u) {
+            for (uint texel = first; texel < last; ++texel) {
+                add_texel(face_texels, texel, begin, end);
             }
-            texel_grads[o] = acc.x;
-            texel_grads[o + 1u] = acc.y;
-            texel_grads[o + 2u] = acc.z;
+            continue;
+        }
+        // With masks, only the texels some unit wrote (the union of the units' masks, each the
+        // first corner's fourth float; see raster_grad.glsl): a face covers a few pixels of a
+        // few tiles, and most of its R² texels get nothing (a loop over set bits is what skips
+        // work on llvmpipe; a branch only narrows the lane mask).
+        uint touched = 0u;
+        for (uint u = begin; u < end; ++u) {
+            touched |= imageLoad(partials, partial_at(u)).w;
+        }
+        // Bits first .. last - 1 (last - first ≤ 32 with masks).
+        uint span = last - first;
+        touched = (touched >> first) & (span >= 32u ? 0xFFFFFFFFu : (1u << span) - 1u);
+        while (touched != 0u) {
+            uint texel = first + uint(findLSB(touched));
+            touched &= touched - 1u;
+            add_texel(face_texels, texel, begin, end);
         }
     }
 }

@@ -391,13 +391,13 @@ fn reduce_plan(
         } else {
             // Views per dispatch with every texel and whole items; else one view, fewer texels
             // and a window of units.
-            let per_view = 1 + texels * (1 + per_item);
+            let per_view = 2 + texels + (texels + 1) * per_item;
             let step = (budget / per_view).min(views);
             if step >= 1 {
                 (step, chunk, texels)
             } else {
-                let texel_step = texels.min((budget - 1) / 2);
-                let units = (budget - 1 - texel_step) / texel_step;
+                let texel_step = texels.min((budget - 3) / 2);
+                let units = (budget - 2 - texel_step) / (texel_step + 1);
                 (1, units, texel_step)
             }
         };

@@ -355,9 +355,10 @@ pub(crate) fn reduce_iterations(units: u64) -> u64 {
 }
 
 /// Loop iterations one invocation (one face) of `grad_reduce_texels.comp` runs over `views`
-/// views and `texels` texels, adding at most `units` partials in all per texel.
+/// views and `texels` texels, adding at most `units` partials in all per texel (with masks,
+/// a loop over the units for their union first).
 pub(crate) fn texel_reduce_iterations(views: u64, units: u64, texels: u64) -> u64 {
-    views * (1 + texels) + texels * units + 2
+    views * (2 + texels) + (texels + 1) * units + 2
 }
 
 /// The most entries any tile of a group holds, read back from its ranges.
