@@ -19,7 +19,8 @@
 // Each subgroup works alone (no shared memory, no barrier; see `raster_tiled.comp`): it takes
 // as many faces as it has lanes (one per lane, whose lane keeps its sums), then walks the tile's
 // pixels as many at a time (a segment: a `segment_shape` block, 4 × 2 for 8 lanes, blocks
-// row-major), each lane loading one pixel's upstream. A ballot keeps the faces whose box
+// row-major; only the segments some of its faces' boxes meet), each lane loading one pixel's
+// upstream. A ballot keeps the faces whose box
 // touches the segment's pixels with a non-zero upstream (any other face adds nothing there),
 // and the loop over its bits broadcasts each kept face with shuffles: every lane takes its
 // pixel's contribution, `lane_sum` adds them up, and the face's own lane adds the sum to its
@@ -67,6 +68,69 @@ uint first_slot_from(uint lo, uint hi, uint s) {
         }
     }
     return lo;
+}
+
+// Pixel centres along one axis, as `pixel_center` takes them: column c's x, row r's y.
+float center_x(int c) {
+    return pixel_center(uint(c), 0u, pc.width, pc.height).x;
+}
+
+float center_y(int r) {
+    return pixel_center(0u, uint(r), pc.width, pc.height).y;
+}
+
+// The segments (`segment_shape` blocks of the tile whose first pixel is (col0, row0), as block
+// columns and rows x0, y0, x1, y1) whose pixel centres' box meets face `f`'s box: those with a
+// column whose centre is at most the box's right edge and one whose centre is at least its left
+// edge, and rows likewise. The first and last such column and row are found by the binning's
+// arithmetic and corrected by a step either way with the centres `pixel_center` computes, so
+// the test is the ballot's own (`!(hi.x < bbox.x || ...)` over the segment's pixels in the
+// image). Every segment when the lanes make no blocks (rows of pixels); none (x0 > x1) for a
+// face no pixel sees.
+uvec4 segment_rect(Face f, uint col0, uint row0, uint lanes) {
+    uvec2 shape = segment_shape(lanes);
+    if ((f.flags & FACE_FINITE) == 0u) {
+        return uvec4(1u, 0u, 0u, 0u);
+    }
+    if (shape.x == 0u) {
+        return uvec4(0u, 0u, 0xFFFFFFFFu, 0xFFFFFFFFu);
+    }
+    int w = int(pc.width);
+    int h = int(pc.height);
+    float fw = float(w);
+    float fh = float(h);
+    float scale = min(fw, fh);
+    // Estimates within a column or row of the exact ones, clamped to [-1, size] (±∞ boxes too).
+    int right = int(clamp(floor((f.bbox.z * scale + (fw - 1.0)) * 0.5), -1.0, fw));
+    int left = int(clamp(ceil((f.bbox.x * scale + (fw - 1.0)) * 0.5), -1.0, fw));
+    int top = int(clamp(ceil(((fh - 1.0) - f.bbox.w * scale) * 0.5), -1.0, fh));
+    int bottom = int(clamp(floor(((fh - 1.0) - f.bbox.y * scale) * 0.5), -1.0, fh));
+    // right: the last column whose centre is at most bbox.z; left: the first at least bbox.x.
+    right = right + 1 < w && center_x(right + 1) <= f.bbox.z ? right + 1 : right;
+    right = right >= 0 && right < w && center_x(right) > f.bbox.z ? right - 1 : right;
+    left = left - 1 >= 0 && center_x(left - 1) >= f.bbox.x ? left - 1 : left;
+    left = left >= 0 && left < w && center_x(left) < f.bbox.x ? left + 1 : left;
+    // top: the first row whose centre is at most bbox.w (y falls as rows go down); bottom: the
+    // last at least bbox.y.
+    top = top - 1 >= 0 && center_y(top - 1) <= f.bbox.w ? top - 1 : top;
+    top = top >= 0 && top < h && center_y(top) > f.bbox.w ? top + 1 : top;
+    bottom = bottom + 1 < h && center_y(bottom + 1) >= f.bbox.y ? bottom + 1 : bottom;
+    bottom = bottom >= 0 && bottom < h && center_y(bottom) < f.bbox.y ? bottom - 1 : bottom;
+    // A segment of columns [a, b] (b within the image) meets the box in x where a <= right and
+    // b >= left; in the tile's columns, a = x w_s, b = a + w_s - 1.
+    int c0 = int(col0);
+    int r0 = int(row0);
+    int t = int(pc.tile_size);
+    int sw = int(shape.x);
+    int sh = int(shape.y);
+    int x0 = max(left - c0, 0) / sw;
+    int x1 = min(right - c0, t - 1);
+    int y0 = max(top - r0, 0) / sh;
+    int y1 = min(bottom - r0, t - 1);
+    if (x1 < 0 || y1 < 0 || left >= w || top >= h || left > right || top > bottom) {
+        return uvec4(1u, 0u, 0u, 0u);
+    }
+    return uvec4(uint(x0), uint(y0), uint(x1 / sw), uint(y1 / sh));
 }
 
 void main() {
@@ -119,82 +183,111 @@ void main() {
         vec3 acc[3] = vec3[3](vec3(0.0), vec3(0.0), vec3(0.0));
         vec3 cacc[3] = vec3[3](vec3(0.0), vec3(0.0), vec3(0.0));
         uint written = 0u; // TEXEL_MASKS: the texel slots of this lane's partial written so far
-        for (uint base = 0u; base < pixels; base += lanes) {
-            uint i = base + lane;
-            uvec2 at = segment_pixel(i, pc.tile_size, lanes);
-            uint col = tx * pc.tile_size + at.x;
-            uint row = (pc.first_row + ty) * pc.tile_size + at.y;
-            bool live = i < pixels && lane < lanes && col < pc.width && row < pc.height;
-            Upstream u = live ? load_upstream(gview, col, row) : zero_upstream();
-            live = live && !upstream_is_zero(u);
-            vec2 lo = lane_min(live ? u.p : vec2(inf));
-            vec2 hi = lane_max(live ? u.p : vec2(-inf));
-            bool touches = (f.flags & FACE_FINITE) != 0u
-                        && !(hi.x < f.bbox.x || hi.y < f.bbox.y || lo.x > f.bbox.z
-                             || lo.y > f.bbox.w);
-            uvec4 kept = subgroupBallot(touches);
-            for (uint word = 0u; word < ballot_words(); ++word) {
-                uint mask = kept[word];
-                while (mask != 0u) {
-                    uint q = 32u * word + uint(findLSB(mask));
-                    mask &= mask - 1u;
-                    uint fq = subgroupShuffle(face, q);
-                    FaceGrad g;
-                    bool hit = live && pixel_face_grad(face_shuffle(f, q), fq, u, g);
-                    bool mine = lane == q;
-                    for (uint c = 0u; c < 3u; ++c) {
-                        // With an alpha-only upstream no depth has a gradient: z stays +0.
-                        if (ALPHA_ONLY) {
-                            vec2 sum = lane_sum(hit ? g.screen[c].xy : vec2(0.0));
-                            acc[c].xy += mine ? sum : vec2(0.0);
-                        } else {
-                            vec3 sum = lane_sum(hit ? g.screen[c] : vec3(0.0));
-                            acc[c] += mine ? sum : vec3(0.0);
-                        }
-                    }
-                    if (ALPHA_ONLY) {
-                        continue;
-                    }
-                    bool colored = hit && g.colored;
-                    if (VERTEX_COLORS) {
+        // Segments 32 at a time, only those some face of the batch may touch. A segment no
+        // face touches would cost a whole visit: on llvmpipe a loop runs its first iteration
+        // whatever its condition (with no lane active, but every instruction), so the empty
+        // ballot's loop below would still run the per-pair maths once; on spot-256 45 % of the
+        // (segment, batch) pairs were such. Each lane marks the segments its face's box may
+        // reach (`segment_rect`: a superset of those whose pixel centres' box meets it) and
+        // the subgroup takes the union; the loop below skips only segments whose ballot would
+        // be empty, so every sum is the same, bit for bit.
+        uint segments = (pixels + lanes - 1u) / lanes;
+        uvec4 reach = segment_rect(f, tx * pc.tile_size, (pc.first_row + ty) * pc.tile_size,
+                                   lanes);
+        uint per_row = max(pc.tile_size / max(segment_shape(lanes).x, 1u), 1u);
+        for (uint group0 = 0u; group0 < segments; group0 += 32u) {
+            uint count = min(32u, segments - group0);
+            uint mine = 0u;
+            uint sx = group0 % per_row;
+            uint sy = group0 / per_row;
+            for (uint s = 0u; s < count; ++s) {
+                bool in_reach = sx >= reach.x && sx <= reach.z && sy >= reach.y && sy <= reach.w;
+                mine |= in_reach ? 1u << s : 0u;
+                sx += 1u;
+                bool wrap = sx == per_row;
+                sx = wrap ? 0u : sx;
+                sy += wrap ? 1u : 0u;
+            }
+            uint todo = lane_or(mine);
+            while (todo != 0u) {
+                uint base = (group0 + uint(findLSB(todo))) * lanes;
+                todo &= todo - 1u;
+                uint i = base + lane;
+                uvec2 at = segment_pixel(i, pc.tile_size, lanes);
+                uint col = tx * pc.tile_size + at.x;
+                uint row = (pc.first_row + ty) * pc.tile_size + at.y;
+                bool live = i < pixels && lane < lanes && col < pc.width && row < pc.height;
+                Upstream u = live ? load_upstream(gview, col, row) : zero_upstream();
+                live = live && !upstream_is_zero(u);
+                vec2 lo = lane_min(live ? u.p : vec2(inf));
+                vec2 hi = lane_max(live ? u.p : vec2(-inf));
+                bool touches = (f.flags & FACE_FINITE) != 0u
+                            && !(hi.x < f.bbox.x || hi.y < f.bbox.y || lo.x > f.bbox.z
+                                 || lo.y > f.bbox.w);
+                uvec4 kept = subgroupBallot(touches);
+                for (uint word = 0u; word < ballot_words(); ++word) {
+                    uint mask = kept[word];
+                    while (mask != 0u) {
+                        uint q = 32u * word + uint(findLSB(mask));
+                        mask &= mask - 1u;
+                        uint fq = subgroupShuffle(face, q);
+                        FaceGrad g;
+                        bool hit = live && pixel_face_grad(face_shuffle(f, q), fq, u, g);
+                        bool mine = lane == q;
                         for (uint c = 0u; c < 3u; ++c) {
-                            vec3 sum = lane_sum(colored ? g.color[c] : vec3(0.0));
-                            cacc[c] += mine ? sum : vec3(0.0);
-                        }
-                    } else {
-                        // Texel slots: the segment's pixels that share a texel of face q are
-                        // summed in pixel order (one shuffle step per lane: texels are finer
-                        // than pixels, so most pixels have a texel of their own), and the
-                        // lowest of them adds the sum to the slot: one read-modify-write per
-                        // face and segment, each lane on its own texel, rather than one per
-                        // pixel (on llvmpipe each is a scalar loop over the lanes).
-                        uint texel = colored ? g.texel : 0xFFFFFFFFu;
-                        vec3 sum = vec3(0.0);
-                        bool leader = colored;
-                        for (uint k = 0u; k < lanes; ++k) {
-                            bool same = subgroupShuffle(texel, k) == texel;
-                            vec3 value = subgroupShuffle(g.color[0], k);
-                            sum += same ? value : vec3(0.0);
-                            leader = leader && !(same && k < lane);
-                        }
-                        uint oq = subgroupShuffle(o, q);
-                        if (TEXEL_MASKS) {
-                            // A slot face q's partial has not written yet is written, not
-                            // read (the read was a cache miss); then face q's lane notes the
-                            // slots its leaders wrote.
-                            uint seen = subgroupShuffle(written, q);
-                            uint bit = leader ? 1u << texel : 0u;
-                            if (leader) {
-                                vec4 old = vec4(0.0);
-                                if ((seen & bit) != 0u) {
-                                    old = partials[oq + PARTIAL_COLORS + texel];
-                                }
-                                partials[oq + PARTIAL_COLORS + texel] = old + vec4(sum, 0.0);
+                            // With an alpha-only upstream no depth has a gradient: z stays +0.
+                            if (ALPHA_ONLY) {
+                                vec2 sum = lane_sum(hit ? g.screen[c].xy : vec2(0.0));
+                                acc[c].xy += mine ? sum : vec2(0.0);
+                            } else {
+                                vec3 sum = lane_sum(hit ? g.screen[c] : vec3(0.0));
+                                acc[c] += mine ? sum : vec3(0.0);
                             }
-                            uint bits = lane_or(bit);
-                            written |= mine ? bits : 0u;
-                        } else if (leader) {
-                            partials[oq + PARTIAL_COLORS + texel] += vec4(sum, 0.0);
+                        }
+                        if (ALPHA_ONLY) {
+                            continue;
+                        }
+                        bool colored = hit && g.colored;
+                        if (VERTEX_COLORS) {
+                            for (uint c = 0u; c < 3u; ++c) {
+                                vec3 sum = lane_sum(colored ? g.color[c] : vec3(0.0));
+                                cacc[c] += mine ? sum : vec3(0.0);
+                            }
+                        } else {
+                            // Texel slots: the segment's pixels that share a texel of face q are
+                            // summed in pixel order (one shuffle step per lane: texels are finer
+                            // than pixels, so most pixels have a texel of their own), and the
+                            // lowest of them adds the sum to the slot: one read-modify-write per
+                            // face and segment, each lane on its own texel, rather than one per
+                            // pixel (on llvmpipe each is a scalar loop over the lanes).
+                            uint texel = colored ? g.texel : 0xFFFFFFFFu;
+                            vec3 sum = vec3(0.0);
+                            bool leader = colored;
+                            for (uint k = 0u; k < lanes; ++k) {
+                                bool same = subgroupShuffle(texel, k) == texel;
+                                vec3 value = subgroupShuffle(g.color[0], k);
+                                sum += same ? value : vec3(0.0);
+                                leader = leader && !(same && k < lane);
+                            }
+                            uint oq = subgroupShuffle(o, q);
+                            if (TEXEL_MASKS) {
+                                // A slot face q's partial has not written yet is written, not
+                                // read (the read was a cache miss); then face q's lane notes the
+                                // slots its leaders wrote.
+                                uint seen = subgroupShuffle(written, q);
+                                uint bit = leader ? 1u << texel : 0u;
+                                if (leader) {
+                                    vec4 old = vec4(0.0);
+                                    if ((seen & bit) != 0u) {
+                                        old = partials[oq + PARTIAL_COLORS + texel];
+                                    }
+                                    partials[oq + PARTIAL_COLORS + texel] = old + vec4(sum, 0.0);
+                                }
+                                uint bits = lane_or(bit);
+                                written |= mine ? bits : 0u;
+                            } else if (leader) {
+                                partials[oq + PARTIAL_COLORS + texel] += vec4(sum, 0.0);
+                            }
                         }
                     }
                 }

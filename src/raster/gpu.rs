@@ -339,7 +339,10 @@ pub(crate) fn tiled_backward_iterations(
             ColorWork::Texels => words + lanes,
         };
     let search = u64::from(u64::BITS - run.leading_zeros());
-    let batch = 1 + 3 + segments * (1 + words + lanes * per_face);
+    // Per group of 32 segments one iteration, per segment one of the pre-pass that finds those
+    // a face touches, and for each of those (at most all) the visits.
+    let batch =
+        1 + 3 + segments.div_ceil(32) + segments + segments * (1 + words + lanes * per_face);
     2 * search + faces.min(run).div_ceil(u64::from(workgroup.max(1))) * batch + 2
 }
 
