@@ -41,6 +41,16 @@
 
 layout(local_size_x = 64, local_size_x_id = 5) in;
 
+// The tile size, when the host specializes it (constant 6; 0: `pc.tile_size`). As a constant,
+// the segment loops' trip counts are known: the driver unrolls the loop over groups of 32
+// segments (one group for tiles of 8 or 16 and 8 lanes), which as a loop cost spot-256's
+// backward 4 % on llvmpipe, and divides by constants.
+layout(constant_id = 6) const uint TILE_SIZE = 0u;
+
+uint tile_size() {
+    return TILE_SIZE != 0u ? TILE_SIZE : pc.tile_size;
+}
+
 // This chunk's partials: `grad_stride` floats per entry, as vec4 records (`PARTIAL_COLORS` in
 // raster_grad.glsl). The texel slots arrive zeroed (the host fills them) and are summed into
 // here; with `TEXEL_MASKS` they arrive unwritten, and the mask says which were written.
@@ -120,7 +130,7 @@ uvec4 segment_rect(Face f, uint col0, uint row0, uint lanes) {
     // b >= left; in the tile's columns, a = x w_s, b = a + w_s - 1.
     int c0 = int(col0);
     int r0 = int(row0);
-    int t = int(pc.tile_size);
+    int t = int(tile_size());
     int sw = int(shape.x);
     int sh = int(shape.y);
     int x0 = max(left - c0, 0) / sw;
@@ -131,6 +141,116 @@ uvec4 segment_rect(Face f, uint col0, uint row0, uint lanes) {
         return uvec4(1u, 0u, 0u, 0u);
     }
     return uvec4(uint(x0), uint(y0), uint(x1 / sw), uint(y1 / sh));
+}
+
+// The visits of one group of at most 32 segments, from segment `group0` on, of the batch whose
+// lane holds face `f` (index `face`, partial at `o`): the segments some face's box reaches
+// (each lane's `reach`, the subgroup's union), one after another in segment order, each with
+// its upstream, its ballot of the faces whose box meets its live pixels' and those faces'
+// contributions (see the header).
+void visit_group(uint group0, uint segments, Face f, uint face, uint o, uvec4 reach,
+                 uint per_row, uint tx, uint ty, uint gview, inout vec3 acc[3],
+                 inout vec3 cacc[3], inout uint written) {
+    uint lanes = subgroup_lanes();
+    uint lane = gl_SubgroupInvocationID;
+    uint pixels = tile_size() * tile_size();
+    float inf = uintBitsToFloat(0x7f800000u);
+    uint count = min(32u, segments - group0);
+    uint mine = 0u;
+    uint sx = group0 % per_row;
+    uint sy = group0 / per_row;
+    for (uint s = 0u; s < count; ++s) {
+        bool in_reach = sx >= reach.x && sx <= reach.z && sy >= reach.y && sy <= reach.w;
+        mine |= in_reach ? 1u << s : 0u;
+        sx += 1u;
+        bool wrap = sx == per_row;
+        sx = wrap ? 0u : sx;
+        sy += wrap ? 1u : 0u;
+    }
+    uint todo = lane_or(mine);
+    while (todo != 0u) {
+        uint base = (group0 + uint(findLSB(todo))) * lanes;
+        todo &= todo - 1u;
+        uint i = base + lane;
+        uvec2 at = segment_pixel(i, tile_size(), lanes);
+        uint col = tx * tile_size() + at.x;
+        uint row = (pc.first_row + ty) * tile_size() + at.y;
+        bool live = i < pixels && lane < lanes && col < pc.width && row < pc.height;
+        Upstream u = live ? load_upstream(gview, col, row) : zero_upstream();
+        live = live && !upstream_is_zero(u);
+        vec2 lo = lane_min(live ? u.p : vec2(inf));
+        vec2 hi = lane_max(live ? u.p : vec2(-inf));
+        bool touches = (f.flags & FACE_FINITE) != 0u
+                    && !(hi.x < f.bbox.x || hi.y < f.bbox.y || lo.x > f.bbox.z
+                         || lo.y > f.bbox.w);
+        uvec4 kept = subgroupBallot(touches);
+        for (uint word = 0u; word < ballot_words(); ++word) {
+            uint mask = kept[word];
+            while (mask != 0u) {
+                uint q = 32u * word + uint(findLSB(mask));
+                mask &= mask - 1u;
+                uint fq = subgroupShuffle(face, q);
+                FaceGrad g;
+                bool hit = live && pixel_face_grad(face_shuffle(f, q), fq, u, g);
+                bool mine = lane == q;
+                for (uint c = 0u; c < 3u; ++c) {
+                    // With an alpha-only upstream no depth has a gradient: z stays +0.
+                    if (ALPHA_ONLY) {
+                        vec2 sum = lane_sum(hit ? g.screen[c].xy : vec2(0.0));
+                        acc[c].xy += mine ? sum : vec2(0.0);
+                    } else {
+                        vec3 sum = lane_sum(hit ? g.screen[c] : vec3(0.0));
+                        acc[c] += mine ? sum : vec3(0.0);
+                    }
+                }
+                if (ALPHA_ONLY) {
+                    continue;
+                }
+                bool colored = hit && g.colored;
+                if (VERTEX_COLORS) {
+                    for (uint c = 0u; c < 3u; ++c) {
+                        vec3 sum = lane_sum(colored ? g.color[c] : vec3(0.0));
+                        cacc[c] += mine ? sum : vec3(0.0);
+                    }
+                } else {
+                    // Texel slots: the segment's pixels that share a texel of face q are
+                    // summed in pixel order (one shuffle step per lane: texels are finer
+                    // than pixels, so most pixels have a texel of their own), and the
+                    // lowest of them adds the sum to the slot: one read-modify-write per
+                    // face and segment, each lane on its own texel, rather than one per
+                    // pixel (on llvmpipe each is a scalar loop over the lanes).
+                    uint texel = colored ? g.texel : 0xFFFFFFFFu;
+                    vec3 sum = vec3(0.0);
+                    bool leader = colored;
+                    for (uint k = 0u; k < lanes; ++k) {
+                        bool same = subgroupShuffle(texel, k) == texel;
+                        vec3 value = subgroupShuffle(g.color[0], k);
+                        sum += same ? value : vec3(0.0);
+                        leader = leader && !(same && k < lane);
+                    }
+                    uint oq = subgroupShuffle(o, q);
+                    if (TEXEL_MASKS) {
+                        // A slot face q's partial has not written yet is written, not
+                        // read (the read was a cache miss); then face q's lane notes the
+                        // slots its leaders wrote.
+                        uint seen = subgroupShuffle(written, q);
+                        uint bit = leader ? 1u << texel : 0u;
+                        if (leader) {
+                            vec4 old = vec4(0.0);
+                            if ((seen & bit) != 0u) {
+                                old = partials[oq + PARTIAL_COLORS + texel];
+                            }
+                            partials[oq + PARTIAL_COLORS + texel] = old + vec4(sum, 0.0);
+                        }
+                        uint bits = lane_or(bit);
+                        written |= mine ? bits : 0u;
+                    } else if (leader) {
+                        partials[oq + PARTIAL_COLORS + texel] += vec4(sum, 0.0);
+                    }
+                }
+            }
+        }
+    }
 }
 
 void main() {
@@ -162,7 +282,7 @@ void main() {
     }
     uint first = lo + part * pc.split;
     uint last = first + min(pc.split, hi - first);
-    uint pixels = pc.tile_size * pc.tile_size;
+    uint pixels = tile_size() * tile_size();
 
     uint lane = gl_SubgroupInvocationID;
     float inf = uintBitsToFloat(0x7f800000u);
@@ -192,105 +312,18 @@ void main() {
         // the subgroup takes the union; the loop below skips only segments whose ballot would
         // be empty, so every sum is the same, bit for bit.
         uint segments = (pixels + lanes - 1u) / lanes;
-        uvec4 reach = segment_rect(f, tx * pc.tile_size, (pc.first_row + ty) * pc.tile_size,
+        uvec4 reach = segment_rect(f, tx * tile_size(), (pc.first_row + ty) * tile_size(),
                                    lanes);
-        uint per_row = max(pc.tile_size / max(segment_shape(lanes).x, 1u), 1u);
-        for (uint group0 = 0u; group0 < segments; group0 += 32u) {
-            uint count = min(32u, segments - group0);
-            uint mine = 0u;
-            uint sx = group0 % per_row;
-            uint sy = group0 / per_row;
-            for (uint s = 0u; s < count; ++s) {
-                bool in_reach = sx >= reach.x && sx <= reach.z && sy >= reach.y && sy <= reach.w;
-                mine |= in_reach ? 1u << s : 0u;
-                sx += 1u;
-                bool wrap = sx == per_row;
-                sx = wrap ? 0u : sx;
-                sy += wrap ? 1u : 0u;
-            }
-            uint todo = lane_or(mine);
-            while (todo != 0u) {
-                uint base = (group0 + uint(findLSB(todo))) * lanes;
-                todo &= todo - 1u;
-                uint i = base + lane;
-                uvec2 at = segment_pixel(i, pc.tile_size, lanes);
-                uint col = tx * pc.tile_size + at.x;
-                uint row = (pc.first_row + ty) * pc.tile_size + at.y;
-                bool live = i < pixels && lane < lanes && col < pc.width && row < pc.height;
-                Upstream u = live ? load_upstream(gview, col, row) : zero_upstream();
-                live = live && !upstream_is_zero(u);
-                vec2 lo = lane_min(live ? u.p : vec2(inf));
-                vec2 hi = lane_max(live ? u.p : vec2(-inf));
-                bool touches = (f.flags & FACE_FINITE) != 0u
-                            && !(hi.x < f.bbox.x || hi.y < f.bbox.y || lo.x > f.bbox.z
-                                 || lo.y > f.bbox.w);
-                uvec4 kept = subgroupBallot(touches);
-                for (uint word = 0u; word < ballot_words(); ++word) {
-                    uint mask = kept[word];
-                    while (mask != 0u) {
-                        uint q = 32u * word + uint(findLSB(mask));
-                        mask &= mask - 1u;
-                        uint fq = subgroupShuffle(face, q);
-                        FaceGrad g;
-                        bool hit = live && pixel_face_grad(face_shuffle(f, q), fq, u, g);
-                        bool mine = lane == q;
-                        for (uint c = 0u; c < 3u; ++c) {
-                            // With an alpha-only upstream no depth has a gradient: z stays +0.
-                            if (ALPHA_ONLY) {
-                                vec2 sum = lane_sum(hit ? g.screen[c].xy : vec2(0.0));
-                                acc[c].xy += mine ? sum : vec2(0.0);
-                            } else {
-                                vec3 sum = lane_sum(hit ? g.screen[c] : vec3(0.0));
-                                acc[c] += mine ? sum : vec3(0.0);
-                            }
-                        }
-                        if (ALPHA_ONLY) {
-                            continue;
-                        }
-                        bool colored = hit && g.colored;
-                        if (VERTEX_COLORS) {
-                            for (uint c = 0u; c < 3u; ++c) {
-                                vec3 sum = lane_sum(colored ? g.color[c] : vec3(0.0));
-                                cacc[c] += mine ? sum : vec3(0.0);
-                            }
-                        } else {
-                            // Texel slots: the segment's pixels that share a texel of face q are
-                            // summed in pixel order (one shuffle step per lane: texels are finer
-                            // than pixels, so most pixels have a texel of their own), and the
-                            // lowest of them adds the sum to the slot: one read-modify-write per
-                            // face and segment, each lane on its own texel, rather than one per
-                            // pixel (on llvmpipe each is a scalar loop over the lanes).
-                            uint texel = colored ? g.texel : 0xFFFFFFFFu;
-                            vec3 sum = vec3(0.0);
-                            bool leader = colored;
-                            for (uint k = 0u; k < lanes; ++k) {
-                                bool same = subgroupShuffle(texel, k) == texel;
-                                vec3 value = subgroupShuffle(g.color[0], k);
-                                sum += same ? value : vec3(0.0);
-                                leader = leader && !(same && k < lane);
-                            }
-                            uint oq = subgroupShuffle(o, q);
-                            if (TEXEL_MASKS) {
-                                // A slot face q's partial has not written yet is written, not
-                                // read (the read was a cache miss); then face q's lane notes the
-                                // slots its leaders wrote.
-                                uint seen = subgroupShuffle(written, q);
-                                uint bit = leader ? 1u << texel : 0u;
-                                if (leader) {
-                                    vec4 old = vec4(0.0);
-                                    if ((seen & bit) != 0u) {
-                                        old = partials[oq + PARTIAL_COLORS + texel];
-                                    }
-                                    partials[oq + PARTIAL_COLORS + texel] = old + vec4(sum, 0.0);
-                                }
-                                uint bits = lane_or(bit);
-                                written |= mine ? bits : 0u;
-                            } else if (leader) {
-                                partials[oq + PARTIAL_COLORS + texel] += vec4(sum, 0.0);
-                            }
-                        }
-                    }
-                }
+        uint per_row = max(tile_size() / max(segment_shape(lanes).x, 1u), 1u);
+        // With the tile and subgroup sizes known, one group needs no loop around it (a loop
+        // level cost spot-256's backward 4 % on llvmpipe, even run once).
+        if (TILE_SIZE != 0u && SUBGROUP_SIZE != 0u && segments <= 32u) {
+            visit_group(0u, segments, f, face, o, reach, per_row, tx, ty, gview, acc, cacc,
+                        written);
+        } else {
+            for (uint group0 = 0u; group0 < segments; group0 += 32u) {
+                visit_group(group0, segments, f, face, o, reach, per_row, tx, ty, gview, acc,
+                            cacc, written);
             }
         }
         if (has) {

@@ -877,11 +877,13 @@ impl GradKernels {
             )));
         }
         let limit = rec.context().info().shader_loop_limit();
-        let kernel = self.tiled.get(
-            rec.context(),
-            &gb.modes(scene)
-                .constants(rec.context(), tiled_backward_workgroup(rec.context())),
-        )?;
+        // The modes, then the tile size (constant 6 of `grad_tiled.comp`).
+        let modes = gb
+            .modes(scene)
+            .constants(rec.context(), tiled_backward_workgroup(rec.context()));
+        let mut constants = modes.to_vec();
+        constants.push(tile);
+        let kernel = self.tiled.get(rec.context(), &constants)?;
         for (group, bins) in scene.groups.iter().zip(&scene.bins) {
             let grid = grid.window(group.tile_rows.0, group.tile_rows.1)?;
             if group.entries == 0 {
