@@ -6,9 +6,9 @@ use rand::RngExt;
 use softvk::primitives::sort::cpu::sort_pairs;
 use softvk::primitives::{RadixSort, Scan, scan};
 
-/// Sizes the issue names, plus block and multi-level boundaries.
+/// Sizes the issue names, plus block (`SCAN_BLOCK` = 8 192) and multi-level boundaries.
 const SIZES: &[usize] = &[
-    0, 1, 2, 1023, 1024, 1025, 4095, 4096, 4097, 1_048_575, 1_000_000,
+    0, 1, 2, 1023, 1024, 1025, 4095, 4096, 4097, 8191, 8192, 8193, 1_048_575, 1_000_000,
 ];
 
 fn check_scan(scan: &Scan, gpu: &common::Gpu, data: &[u32]) {
