@@ -259,7 +259,8 @@ mod tests {
             std::mem::size_of::<BlockPush>() as u32,
             specs::SCAN_BLOCK.push_constant_size
         );
-        assert_eq!(specs::SCAN_BLOCK.workgroup_size[0] * 16, SCAN_BLOCK);
+        // ITEMS (scan_config.glsl) elements an invocation.
+        assert_eq!(specs::SCAN_BLOCK.workgroup_size[0] * 32, SCAN_BLOCK);
         assert_eq!(specs::SCAN_REDUCE.bindings.len(), 2);
         assert_eq!(specs::SCAN_BLOCK.bindings.len(), 4);
     }

@@ -151,7 +151,8 @@ impl FineModes {
     /// The specialization constants, by `constant_id`: the modes, the subgroup size the tiled
     /// kernels may rely on ([`known_subgroup_size`]), then the tiled kernels' `workgroup` size
     /// ([`tiled_forward_workgroup`], [`tiled_backward_workgroup`]; the brute-force kernels have
-    /// no constant 5, and any value does for them).
+    /// no constant 5, and any value does for them). `grad_tiled.comp` takes one more, the tile
+    /// size (constant 6), which its caller appends.
     pub fn constants(&self, ctx: &Context, workgroup: u32) -> [u32; 6] {
         [
             self.dist,
