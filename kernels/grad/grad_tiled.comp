@@ -20,11 +20,10 @@
 // as many faces as it has lanes (one per lane, whose lane keeps its sums), then walks the tile's
 // pixels as many at a time (a segment: a `segment_shape` block, 4 × 2 for 8 lanes, blocks
 // row-major; only the segments some of its faces' boxes meet), each lane loading one pixel's
-// upstream. A ballot keeps the faces whose box
-// touches the segment's pixels with a non-zero upstream (any other face adds nothing there),
-// and the loop over its bits broadcasts each kept face with shuffles: every lane takes its
-// pixel's contribution, `lane_sum` adds them up, and the face's own lane adds the sum to its
-// running total. So a face's partial is summed segment by segment in segment order, each
+// upstream. A ballot keeps the faces whose box touches the segment's pixels with a non-zero
+// upstream (any other face adds nothing there), and the loop over its bits broadcasts each kept
+// face with shuffles: every lane takes its pixel's contribution, `lane_sum` adds them up, and
+// the face's own lane adds the sum to its running total. So a face's partial is summed segment by segment in segment order, each
 // segment by the subgroup's reduction (a fixed order on a given device: runs are
 // bit-identical; against brute force it differs by float reassociation). A texel slot gets,
 // segment by segment, the sum in lane order of the segment's pixels on that texel, added by the
@@ -285,7 +284,6 @@ void main() {
     uint pixels = tile_size() * tile_size();
 
     uint lane = gl_SubgroupInvocationID;
-    float inf = uintBitsToFloat(0x7f800000u);
     // The workgroup's faces go to its subgroups `lanes` at a time, round robin.
     for (uint start = first + gl_SubgroupID * lanes; start < last;
          start += gl_NumSubgroups * lanes) {
