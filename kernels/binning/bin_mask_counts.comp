@@ -4,8 +4,8 @@
 // (words `[t W, (t + 1) W)`, set by `bin_count.comp` for faces, `probe_items.comp` for anchors):
 // the tile's entry count, which an exclusive scan over the tiles turns into each tile's first
 // entry. With summaries (`pc.summary_offset` ≠ 0; see `bin_count.comp`) it visits only the
-// words its summary marks non-zero. `bin_mask_list.comp` and `probe_mask_list.comp` then write each tile's entries, its
-// items in index order.
+// words its summary marks non-zero. `bin_mask_list.comp` and `probe_mask_list.comp` then write
+// each tile's entries, its items in index order.
 #include "common.glsl"
 
 layout(local_size_x = 64) in;

@@ -4,11 +4,11 @@
 // scatter, the sort and the ranges pass): one invocation per tile writes the tile's entries
 // from its first one on (the scan of `bin_mask_counts.comp`'s counts), its items in index
 // order (the set bits of its mask, word by word, lowest first: the words its summary marks
-// non-zero; see `bin_count.comp`), and its `[start, end)` range
-// (`[0, 0]` when empty). Each entry is the item-major slot of its (item, tile) pair: the item's
-// first slot (the count's scan) plus the tile's row-major place in the item's rectangle, which
-// is where `bin_scatter.comp` would have put it; the item of every slot is written too. So the
-// result is the sorted binning's, entry for entry. (One invocation per tile rather than per
+// non-zero; see `bin_count.comp`), and its `[start, end)` range (`[0, 0]` when empty). Each
+// entry is the item-major slot of its (item, tile) pair: the item's first slot (the count's
+// scan) plus the tile's row-major place in the item's rectangle, which is where
+// `bin_scatter.comp` would have put it; the item of every slot is written too. So the result is
+// the sorted binning's, entry for entry. (One invocation per tile rather than per
 // mask word: on llvmpipe the workgroups of a dispatch over every word cost more than the loop.)
 // Twin: `binning::cpu::bin`.
 #include "common.glsl"
