@@ -23,11 +23,11 @@
 // upstream. A ballot keeps the faces whose box touches the segment's pixels with a non-zero
 // upstream (any other face adds nothing there), and the loop over its bits broadcasts each kept
 // face with shuffles: every lane takes its pixel's contribution, `lane_sum` adds them up, and
-// the face's own lane adds the sum to its running total. So a face's partial is summed segment by segment in segment order, each
-// segment by the subgroup's reduction (a fixed order on a given device: runs are
-// bit-identical; against brute force it differs by float reassociation). A texel slot gets,
-// segment by segment, the sum in lane order of the segment's pixels on that texel, added by the
-// lowest of them (same order on every run).
+// the face's own lane adds the sum to its running total. So a face's partial is summed segment
+// by segment in segment order, each segment by the subgroup's reduction (a fixed order on a
+// given device: runs are bit-identical; against brute force it differs by float
+// reassociation). A texel slot gets, segment by segment, the sum in lane order of the
+// segment's pixels on that texel, added by the lowest of them (same order on every run).
 // 64 invocations (a multiple of any subgroup size up to 64), or one subgroup on a CPU device:
 // `tiled_backward_workgroup` (src/raster/fine.rs) says why. Nothing here depends on how many
 // subgroups a workgroup has: its faces go to them round robin.
