@@ -1,6 +1,6 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
-// Grid backward, step 3 of 4: one invocation per chunk of GRID_CHUNK sorted positions walks its
+// Grid backward, step 2 of 3: one invocation per chunk of GRID_CHUNK sorted positions walks its
 // positions in order and sums the 8 corner contributions w_k · dL/df of each run of one cell
 // (a "piece": a cell's points within one chunk). The 8 sums land at the piece's first position:
 // partial[8 s + k]. Sequential, fixed order. Twin: the plain sums of `cpu::backward`.

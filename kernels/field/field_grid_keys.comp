@@ -1,6 +1,6 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
-// Grid backward, step 1 of 4: per point of a batch, its cell as a sort key (the point index as
+// Grid backward, step 1 of 3: per point of a batch, its cell as a sort key (the point index as
 // the value), and (t, dL/df) with dL/df = dL/dφ · φ (1 − φ). Twin: `crate::field::cpu::backward`.
 #include "common.glsl"
 

@@ -1,14 +1,18 @@
-//! The dense grid field's kernels: `field_grid_eval`, and the four-step deterministic backward
-//! (`field_grid_keys` → stable radix sort by cell → `field_grid_bounds` → `field_grid_chunks`
-//! → `field_grid_gather`).
+//! The dense grid field's kernels: `field_grid_eval`, and the deterministic backward
+//! (`field_grid_keys` → stable radix sort by cell → `field_grid_chunks` → `field_grid_corner`
+//! once per corner).
 //!
 //! The backward scatters each point's 8 trilinear weights × dL/df to the corners of its cell
 //! without float atomics: the points of a batch are sorted by cell (stably, so a cell's points
 //! stay in point order); one invocation per chunk of [`GRID_CHUNK`] sorted points sums each run
-//! of one cell ("piece") sequentially; then each grid node adds, for the (up to) 8 cells it is a
-//! corner of in a fixed order, those cells' pieces in position order. Every sum has a fixed order,
-//! so repeated runs are bit-identical. One invocation's loops are bounded by the chunk (256
-//! points) and by `8 (batch / GRID_CHUNK + 1)` pieces: far under llvmpipe's cap for any input.
+//! of one cell ("piece") sequentially; then, corner by corner (eight dispatches), the first
+//! position of each cell's run adds the cell's pieces in position order to the node at that
+//! corner. A node is one corner of at most one cell, so no two invocations of a dispatch share
+//! it, and each node sums its (up to) 8 cells in corner order. Only occupied cells work: a
+//! gather over every node cost a 48³ grid milliseconds on llvmpipe for the few thousand anchors
+//! of a fit-field iteration. Every sum has a fixed order, so repeated runs are bit-identical.
+//! One invocation's loops are bounded by the chunk (256 points) and by `batch / GRID_CHUNK + 1`
+//! pieces: far under llvmpipe's cap for any input.
 
 use bytemuck::{Pod, Zeroable};
 
@@ -39,57 +43,48 @@ struct CountPush {
     n: u32,
 }
 
-/// Push constants of `field_grid_gather`.
+/// Push constants of `field_grid_corner`.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
-struct GatherPush {
+struct CornerPush {
+    n: u32,
     res: u32,
-    accumulate: u32,
+    corner: u32,
+    pad: u32,
 }
 
 pub(crate) struct GridGpu {
     res: u32,
     eval: Kernel,
     keys_kernel: Kernel,
-    bounds: Kernel,
     chunks: Kernel,
-    gather: Kernel,
+    corner: Kernel,
     sort: RadixSort,
     sort_scratch: SortScratch,
     keys: Buffer,
     values: Buffer,
     records: Buffer,
     partial: Buffer,
-    cell_start: Buffer,
-    cell_end: Buffer,
 }
 
 impl GridGpu {
     pub fn new(ctx: &Context, res: u32) -> Result<Self> {
         let what = format!("grid field of resolution {res}");
         let nodes = u64::from(res).pow(3);
-        let cells = u64::from(res - 1).pow(3);
         check_binding_bytes(ctx, &what, 4 * nodes)?;
         let batch = u64::from(GRID_BATCH);
         Ok(Self {
             res,
             eval: Kernel::new(ctx, &specs::FIELD_GRID_EVAL)?,
             keys_kernel: Kernel::new(ctx, &specs::FIELD_GRID_KEYS)?,
-            bounds: Kernel::new(ctx, &specs::FIELD_GRID_BOUNDS)?,
             chunks: Kernel::new(ctx, &specs::FIELD_GRID_CHUNKS)?,
-            gather: Kernel::new(ctx, &specs::FIELD_GRID_GATHER)?,
+            corner: Kernel::new(ctx, &specs::FIELD_GRID_CORNER)?,
             sort: RadixSort::new(ctx)?,
             sort_scratch: SortScratch::new(ctx, batch)?,
             keys: ctx.create_buffer("grid field sort keys", 8 * batch, MemoryKind::Device)?,
             values: ctx.create_buffer("grid field sort values", 4 * batch, MemoryKind::Device)?,
             records: ctx.create_buffer("grid field records", 16 * batch, MemoryKind::Device)?,
             partial: ctx.create_buffer("grid field piece sums", 32 * batch, MemoryKind::Device)?,
-            cell_start: ctx.create_buffer(
-                "grid field cell starts",
-                4 * cells,
-                MemoryKind::Device,
-            )?,
-            cell_end: ctx.create_buffer("grid field cell ends", 4 * cells, MemoryKind::Device)?,
         })
     }
 
@@ -161,19 +156,6 @@ impl GridGpu {
             u64::from(n),
             key_bits,
         )?;
-        rec.fill(self.cell_start.whole(), 0);
-        rec.fill(self.cell_end.whole(), 0);
-        rec.dispatch(
-            &self.bounds,
-            &specs::FieldGridBoundsBindings {
-                keys: self.keys.whole(),
-                cell_start: self.cell_start.whole(),
-                cell_end: self.cell_end.whole(),
-            }
-            .for_kernel(&self.bounds)?,
-            &CountPush { n },
-            n.div_ceil(64),
-        )?;
         rec.dispatch(
             &self.chunks,
             &specs::FieldGridChunksBindings {
@@ -186,22 +168,28 @@ impl GridGpu {
             &CountPush { n },
             n.div_ceil(GRID_CHUNK).div_ceil(64),
         )?;
-        let nodes = u64::from(self.res).pow(3);
-        rec.dispatch(
-            &self.gather,
-            &specs::FieldGridGatherBindings {
-                cell_start: self.cell_start.whole(),
-                cell_end: self.cell_end.whole(),
-                partial: self.partial.whole(),
-                d_params,
-            }
-            .for_kernel(&self.gather)?,
-            &GatherPush {
-                res: self.res,
-                accumulate: u32::from(accumulate),
-            },
-            super::groups(nodes, 64)?,
-        )
+        if !accumulate {
+            rec.fill(d_params, 0);
+        }
+        for corner in 0..8 {
+            rec.dispatch(
+                &self.corner,
+                &specs::FieldGridCornerBindings {
+                    keys: self.keys.whole(),
+                    partial: self.partial.whole(),
+                    d_params,
+                }
+                .for_kernel(&self.corner)?,
+                &CornerPush {
+                    n,
+                    res: self.res,
+                    corner,
+                    pad: 0,
+                },
+                n.div_ceil(64),
+            )?;
+        }
+        Ok(())
     }
 }
 
@@ -220,11 +208,19 @@ mod tests {
         };
         assert_eq!(size(grid), specs::FIELD_GRID_EVAL.push_constant_size);
         assert_eq!(size(grid), specs::FIELD_GRID_KEYS.push_constant_size);
-        assert_eq!(4, specs::FIELD_GRID_BOUNDS.push_constant_size);
         assert_eq!(4, specs::FIELD_GRID_CHUNKS.push_constant_size);
-        assert_eq!(8, specs::FIELD_GRID_GATHER.push_constant_size);
+        let corner = CornerPush {
+            n: 0,
+            res: 0,
+            corner: 0,
+            pad: 0,
+        };
+        assert_eq!(
+            std::mem::size_of_val(&corner) as u32,
+            specs::FIELD_GRID_CORNER.push_constant_size
+        );
         assert_eq!(specs::FIELD_GRID_KEYS.bindings.len(), 6);
-        assert_eq!(specs::FIELD_GRID_GATHER.bindings.len(), 4);
+        assert_eq!(specs::FIELD_GRID_CORNER.bindings.len(), 3);
         assert_eq!(GRID_BATCH % GRID_CHUNK, 0);
     }
 }

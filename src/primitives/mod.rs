@@ -7,4 +7,4 @@ pub mod sort;
 
 pub use binning::{BinJob, Binner, Bins, ItemLayout, TileGrid};
 pub use scan::{SCAN_BLOCK, Scan, ScanScratch};
-pub use sort::{RADIX_BITS, RadixSort, SORT_BLOCK, SortScratch};
+pub use sort::{RADIX_BITS, RadixSort, SMALL_SORT_MAX, SORT_BLOCK, SortScratch};

@@ -4,6 +4,11 @@
 //! sort is stable, so sorting by (tile, depth) keys keeps equal keys in face order.
 //!
 //! Keys travel as `[u32; 2]` (lo, hi) so kernels need no `shaderInt64`.
+//!
+//! A sort of at most [`SMALL_SORT_MAX`] pairs (one block) with a count known when recording runs
+//! every pass in one workgroup and one dispatch (`radix_small.comp`): the same passes, the same
+//! result (a stable sort's output is unique), without the three dispatches a pass that cost
+//! about 0.1 ms each on llvmpipe whatever their size.
 
 use bytemuck::{Pod, Zeroable};
 
@@ -16,6 +21,21 @@ pub const RADIX_BITS: u32 = 4;
 const RADIX: u64 = 1 << RADIX_BITS;
 /// Elements per workgroup (mirrors `BLOCK` in `kernels/include/radix_config.glsl`).
 pub const SORT_BLOCK: u32 = 4096;
+
+/// The most pairs [`RadixSort::record`] sorts in one workgroup (`radix_small.comp`): one block.
+/// The grid field's backward sorts its 4 096 anchors by cell every fit-field iteration (17 bits,
+/// five passes): one dispatch instead of fifteen. Sphere probing's 12 288 rays (three blocks)
+/// sorted in one workgroup were slower on llvmpipe than the three workgroups' dispatches
+/// (+0.8 ms a sort: a workgroup runs on one core), so larger sorts keep them.
+pub const SMALL_SORT_MAX: u64 = SORT_BLOCK as u64;
+
+/// Push constants of `radix_small.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct SmallPush {
+    n: u32,
+    key_bits: u32,
+}
 
 /// Push constants of `radix_count.comp` and `radix_scatter.comp`.
 #[repr(C)]
@@ -31,6 +51,7 @@ struct RadixPush {
 
 /// The sort's pipelines, made once per context.
 pub struct RadixSort {
+    small: Kernel,
     count: Kernel,
     scatter: Kernel,
     scan: Scan,
@@ -56,15 +77,13 @@ impl SortScratch {
             )));
         }
         let counts_len = RADIX * capacity.div_ceil(u64::from(SORT_BLOCK)).max(1);
+        // The one-workgroup sort ping-pongs between two halves of the alternate buffers.
+        let alt = capacity.max(2 * capacity.min(SMALL_SORT_MAX));
         Ok(Self {
-            keys_alt: ctx.create_buffer(
-                "sort keys (ping-pong)",
-                8 * capacity,
-                MemoryKind::Device,
-            )?,
+            keys_alt: ctx.create_buffer("sort keys (ping-pong)", 8 * alt, MemoryKind::Device)?,
             values_alt: ctx.create_buffer(
                 "sort values (ping-pong)",
-                4 * capacity,
+                4 * alt,
                 MemoryKind::Device,
             )?,
             counts: ctx.create_buffer("sort digit counts", 4 * counts_len, MemoryKind::Device)?,
@@ -83,6 +102,7 @@ impl RadixSort {
     /// Builds the sort pipelines.
     pub fn new(ctx: &Context) -> Result<Self> {
         Ok(Self {
+            small: Kernel::new(ctx, &specs::RADIX_SMALL)?,
             count: Kernel::new(ctx, &specs::RADIX_COUNT)?,
             scatter: Kernel::new(ctx, &specs::RADIX_SCATTER)?,
             scan: Scan::new(ctx)?,
@@ -161,6 +181,23 @@ impl RadixSort {
         }
         if n == 0 || key_bits == 0 {
             return Ok(());
+        }
+        if count.is_none() && n <= SMALL_SORT_MAX {
+            return rec.dispatch(
+                &self.small,
+                &specs::RadixSmallBindings {
+                    keys: keys.range(0, 8 * n),
+                    vals: values.range(0, 4 * n),
+                    keys_alt: scratch.keys_alt.range(0, 16 * n),
+                    vals_alt: scratch.values_alt.range(0, 8 * n),
+                }
+                .for_kernel(&self.small)?,
+                &SmallPush {
+                    n: n as u32,
+                    key_bits,
+                },
+                1,
+            );
         }
         let n_blocks = n.div_ceil(u64::from(SORT_BLOCK));
         let counts = scratch.counts.range(0, 4 * RADIX * n_blocks);
@@ -284,6 +321,9 @@ mod tests {
         assert_eq!(specs::RADIX_SCATTER.workgroup_size[0] * 16, SORT_BLOCK);
         assert_eq!(specs::RADIX_SCATTER.bindings.len(), 6);
         assert_eq!(specs::RADIX_COUNT.bindings.len(), 3);
+        let small = std::mem::size_of::<SmallPush>() as u32;
+        assert_eq!(small, specs::RADIX_SMALL.push_constant_size);
+        assert_eq!(specs::RADIX_SMALL.workgroup_size[0] * 16, SORT_BLOCK);
     }
 
     #[test]
