@@ -89,11 +89,12 @@ fn sort_equals_cpu_twin_on_edge_and_random_sizes() {
     }
 }
 
-/// Both paths of the sort and their boundary: one workgroup for at most `SMALL_SORT_MAX` pairs
-/// (one block, full or partial), three dispatches a pass above it; odd and even pass counts, a
-/// last pass narrower than `RADIX_BITS`, and heavy ties (stability).
+/// Every path of the sort and their boundaries: one workgroup for at most `SMALL_SORT_MAX` pairs
+/// (one block, full or partial); up to eight blocks, the scatter sums the digit counts itself;
+/// above, a scan dispatch. Odd and even pass counts, a last pass narrower than `RADIX_BITS`, and
+/// heavy ties (stability).
 #[test]
-fn small_and_multi_workgroup_sorts_agree_with_the_twin_at_their_boundary() {
+fn sort_paths_agree_with_the_twin_at_their_boundaries() {
     use softvk::primitives::{SMALL_SORT_MAX, SORT_BLOCK};
     let Some(gpu) = common::gpu() else { return };
     let sort = RadixSort::new(&gpu).unwrap();
@@ -101,7 +102,17 @@ fn small_and_multi_workgroup_sorts_agree_with_the_twin_at_their_boundary() {
     let max = SMALL_SORT_MAX as usize;
     let block = SORT_BLOCK as usize;
     assert_eq!(max, block, "the one-workgroup sort holds one block");
-    for n in [1, 5, 100, max - 1, max, max + 1, 3 * block] {
+    for n in [
+        1,
+        5,
+        100,
+        max - 1,
+        max,
+        max + 1,
+        3 * block,
+        8 * block,
+        8 * block + 1,
+    ] {
         let keys: Vec<u64> = (0..n).map(|_| rng.random::<u64>()).collect();
         for bits in [3, 8, 11, 13, 17] {
             check_sort(&sort, &gpu, &keys, bits);

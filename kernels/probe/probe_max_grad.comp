@@ -34,7 +34,10 @@ void main() {
     uvec2 range = anchor_ranges[anchor];
     for (uint q = range.x; q < range.y; ++q) {
         uint ray = order[q];
-        s += outs[ray].psi - rays[ray].label;
+        RayOut out_ = outs[ray];
+        // Rays without a hit share the last anchor's run (`probe_aux_keys.comp`); adding +0
+        // for them leaves s as it is (s starts at +0, so it is never −0).
+        s += out_.aux == anchor ? out_.psi - rays[ray].label : 0.0;
     }
     float g = pc.coef * s;
     d_phi[anchor] = pc.accumulate != 0u ? d_phi[anchor] + g : g;

@@ -20,6 +20,7 @@ layout(push_constant) uniform Push {
     uint digit_mask;
     uint counted;    // 1: sort only the first min(n, count[0]) pairs
     uint copy_tail;  // scatter only
+    uint scan_counts; // scatter only
 } pc;
 
 shared uint hist[RADIX];

@@ -15,7 +15,8 @@ layout(std430, set = 0, binding = 0) readonly buffer KeysIn { uvec2 keys_in[]; }
 layout(std430, set = 0, binding = 1) readonly buffer ValsIn { uint vals_in[]; };
 layout(std430, set = 0, binding = 2) writeonly buffer KeysOut { uvec2 keys_out[]; };
 layout(std430, set = 0, binding = 3) writeonly buffer ValsOut { uint vals_out[]; };
-// Exclusive scan of radix_count's histogram (digit-major).
+// Exclusive scan of radix_count's histogram (digit-major); with `scan_counts`, the histogram
+// itself.
 layout(std430, set = 0, binding = 4) readonly buffer Offsets { uint offsets[]; };
 // Counted sorts: the number of pairs to sort, at most `n` (read only when `counted` is set).
 layout(std430, set = 0, binding = 5) readonly buffer Count { uint count[]; };
@@ -27,10 +28,12 @@ layout(push_constant) uniform Push {
     uint digit_mask;
     uint counted;    // 1: sort only the first min(n, count[0]) pairs; the rest stay in place
     uint copy_tail;  // counted: copy the pairs past the count through to the output
+    uint scan_counts; // `offsets` holds the counts: scan them here (few blocks; no scan dispatch)
 } pc;
 
 shared uvec4 scan_lo[WG_SIZE]; // packed counters of digits 0..7
 shared uvec4 scan_hi[WG_SIZE]; // packed counters of digits 8..15
+shared uint digit_offset[RADIX]; // this block's first output position per digit
 
 uint packed_get(uvec4 lo, uvec4 hi, uint digit) {
     uint word = digit < 8u ? lo[(digit >> 1) & 3u] : hi[(digit >> 1) & 3u];
@@ -57,6 +60,17 @@ void main() {
     }
     if (block * BLOCK >= n) {
         return; // uniform: the whole block is past the count
+    }
+
+    if (lid < RADIX) {
+        // Digit-major: the (digit, block) entry's exclusive prefix sums every entry before it
+        // (at most RADIX * n_blocks of them; the host scans here only for a few blocks).
+        uint at = lid * pc.n_blocks + block;
+        uint before = 0u;
+        for (uint j = 0u; j < at * pc.scan_counts; ++j) {
+            before += offsets[j];
+        }
+        digit_offset[lid] = pc.scan_counts != 0u ? before : offsets[at];
     }
 
     uvec2 key[ITEMS];
@@ -103,8 +117,7 @@ void main() {
         uint i = base + k;
         if (i < n) {
             uint d = digit[k];
-            uint dst = offsets[d * pc.n_blocks + block] + packed_get(before_lo, before_hi, d)
-                + rank_in_chunk[k];
+            uint dst = digit_offset[d] + packed_get(before_lo, before_hi, d) + rank_in_chunk[k];
             keys_out[dst] = key[k];
             vals_out[dst] = val[k];
         }

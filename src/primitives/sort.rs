@@ -1,5 +1,6 @@
 //! Stable LSD radix sort of `(u64 key, u32 value)` pairs, [`RADIX_BITS`] bits per pass. Each pass
-//! counts digits per block (digit-major), scans the counts with [`Scan`], and scatters every pair
+//! counts digits per block (digit-major), scans the counts with [`Scan`] (or, for a few blocks,
+//! each scatter workgroup sums the counts before its own), and scatters every pair
 //! to `offset[digit][block] + rank`, where the rank among equal digits follows input order: the
 //! sort is stable, so sorting by (tile, depth) keys keeps equal keys in face order.
 //!
@@ -29,6 +30,11 @@ pub const SORT_BLOCK: u32 = 4096;
 /// (+0.8 ms a sort: a workgroup runs on one core), so larger sorts keep them.
 pub const SMALL_SORT_MAX: u64 = SORT_BLOCK as u64;
 
+/// Sorts of at most this many blocks skip a pass's scan dispatch: each scatter workgroup sums
+/// the few digit counts before its own (at most `RADIX` × this many) itself. On llvmpipe a
+/// dispatch costs about 0.1 ms whatever its size (sphere probing's rays: three blocks).
+const SCATTER_SCAN_MAX_BLOCKS: u64 = 8;
+
 /// Push constants of `radix_small.comp`.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -47,6 +53,7 @@ struct RadixPush {
     digit_mask: u32,
     counted: u32,
     copy_tail: u32,
+    scan_counts: u32,
 }
 
 /// The sort's pipelines, made once per context.
@@ -202,6 +209,7 @@ impl RadixSort {
         let n_blocks = n.div_ceil(u64::from(SORT_BLOCK));
         let counts = scratch.counts.range(0, 4 * RADIX * n_blocks);
         let passes = key_bits.div_ceil(RADIX_BITS);
+        let scan_in_scatter = n_blocks <= SCATTER_SCAN_MAX_BLOCKS;
         let mut src = (keys, values);
         let mut dst = (&scratch.keys_alt, &scratch.values_alt);
         for pass in 0..passes {
@@ -214,6 +222,7 @@ impl RadixSort {
                 digit_mask: (1 << digit_bits) - 1,
                 counted: u32::from(count.is_some()),
                 copy_tail: u32::from(count.is_some() && pass == 0),
+                scan_counts: u32::from(scan_in_scatter),
             };
             // Without a count, any buffer binds there (it is not read).
             let count_range = count.unwrap_or(counts);
@@ -228,8 +237,10 @@ impl RadixSort {
                 &push,
                 n_blocks as u32,
             )?;
-            self.scan
-                .record(rec, &scratch.scan, counts, counts, RADIX * n_blocks)?;
+            if !scan_in_scatter {
+                self.scan
+                    .record(rec, &scratch.scan, counts, counts, RADIX * n_blocks)?;
+            }
             rec.dispatch(
                 &self.scatter,
                 &specs::RadixScatterBindings {

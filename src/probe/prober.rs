@@ -963,8 +963,9 @@ impl Prober {
         coef: f32,
     ) -> Result<()> {
         let n = self.rays();
-        // One bucket per anchor and one for the rays without a hit.
-        let buckets = self.anchors() + 1;
+        // One bucket per anchor; the rays without a hit join the last one's and are skipped
+        // there.
+        let buckets = self.anchors();
         let key_bits = (u64::BITS - (buckets.max(2) - 1).leading_zeros()).max(1);
         let ranges = self.item_ranges.range(0, 8 * buckets);
         rec.pass("  ray sort by anchor", |rec| {
