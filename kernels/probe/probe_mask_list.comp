@@ -21,9 +21,13 @@ layout(std430, set = 0, binding = 4) writeonly buffer ListTiles { uint list_tile
 layout(push_constant) uniform Push {
     uint tiles;
     uint words_per_tile; // W = ⌈anchors / 32⌉
-    uint write_tiles;    // write `list_tiles` and `word_prefix` (the per-entry backward's)
     uint pad0;
+    uint pad1;
 } pc;
+
+// Write `list_tiles` and `word_prefix` (the per-entry backward's): a specialization constant,
+// since on llvmpipe a store under a false `if` still costs a masked scalar loop per entry.
+layout(constant_id = 0) const uint WRITE_TILES = 1u;
 
 void main() {
     uint tile = linear_group_id() * 64u + gl_LocalInvocationIndex;
@@ -35,12 +39,12 @@ void main() {
     uint base = tile * pc.words_per_tile;
     for (uint w = 0u; w < pc.words_per_tile; ++w) {
         uint m = masks[base + w];
-        if (pc.write_tiles != 0u) {
+        if (WRITE_TILES != 0u) {
             word_prefix[base + w] = o - first;
         }
         while (m != 0u) {
             list[o] = 32u * w + uint(findLSB(m));
-            if (pc.write_tiles != 0u) {
+            if (WRITE_TILES != 0u) {
                 list_tiles[o] = tile;
             }
             m &= m - 1u;

@@ -137,9 +137,9 @@ struct ForwardPush {
 struct WordsPush {
     tiles: u32,
     words_per_tile: u32,
-    /// `probe_mask_list.comp`: write each entry's tile and each word's prefix too.
-    write_tiles: u32,
     pad: u32,
+    /// `bin_mask_counts.comp`: the first summary word (0: none).
+    summary_offset: u32,
 }
 
 /// Push constants of `probe_aux_keys.comp`.
@@ -254,7 +254,8 @@ pub struct Prober {
     backward_kernel: KernelVariants,
     reduce_kernel: Kernel,
     mask_counts_kernel: Kernel,
-    mask_list_kernel: Kernel,
+    /// Specialized by whether it writes each entry's tile (constant 0: not under G = max).
+    mask_list_kernel: KernelVariants,
     aux_keys_kernel: Kernel,
     max_grad_kernel: Kernel,
     binner: Binner,
@@ -408,7 +409,7 @@ impl Prober {
             backward_kernel: KernelVariants::new(&specs::PROBE_BACKWARD),
             reduce_kernel: Kernel::new(ctx, &specs::PROBE_REDUCE)?,
             mask_counts_kernel: Kernel::new(ctx, &specs::BIN_MASK_COUNTS)?,
-            mask_list_kernel: Kernel::new(ctx, &specs::PROBE_MASK_LIST)?,
+            mask_list_kernel: KernelVariants::new(&specs::PROBE_MASK_LIST),
             aux_keys_kernel: Kernel::new(ctx, &specs::PROBE_AUX_KEYS)?,
             max_grad_kernel: Kernel::new(ctx, &specs::PROBE_MAX_GRAD)?,
             binner: Binner::new(ctx)?,
@@ -559,8 +560,8 @@ impl Prober {
             &WordsPush {
                 tiles: tiles as u32,
                 words_per_tile: self.words_per_tile() as u32,
-                write_tiles: 0,
                 pad: 0,
+                summary_offset: 0,
             },
             groups(tiles, 64)?,
         )?;
@@ -580,8 +581,10 @@ impl Prober {
         if total == 0 {
             return Ok(());
         }
+        let write_tiles = u32::from(!self.max_by_rays(rec.context()));
+        let kernel = self.mask_list_kernel.get(rec.context(), &[write_tiles])?;
         rec.dispatch(
-            &self.mask_list_kernel,
+            &kernel,
             &specs::ProbeMaskListBindings {
                 masks: self.masks.whole(),
                 offsets: self.offsets.whole(),
@@ -589,12 +592,12 @@ impl Prober {
                 list: self.list.range(0, 4 * total),
                 list_tiles: self.list_tiles.range(0, 4 * total),
             }
-            .for_kernel(&self.mask_list_kernel)?,
+            .for_kernel(&kernel)?,
             &WordsPush {
                 tiles: tiles as u32,
                 words_per_tile: self.words_per_tile() as u32,
-                write_tiles: u32::from(!self.max_by_rays(rec.context())),
                 pad: 0,
+                summary_offset: 0,
             },
             groups(tiles, 64)?,
         )
