@@ -223,7 +223,16 @@ fn probing_forward_and_backward_match_the_twin_for_every_aggregate() {
         let s = settings(aggregate);
         let got = run(&p, &s, false);
         let want = probe_cpu::forward(&p.targets, &s, &p.it.anchors, &phi64, &p.it.rays);
-        assert!(got.entries > 0);
+        // The binning: as many (anchor, tile) entries as the twin's boxes give (a box a
+        // fraction of a pixel off changes the count).
+        let grid = softvk::primitives::binning::TileGrid::new(40, 32, s.tile_size).unwrap();
+        let twin_entries: u64 = probe_cpu::items(&p.targets, s.tau, &p.it.anchors)
+            .iter()
+            .filter(|item| item.flags & softvk::probe::prober::FLAG_VALID != 0)
+            .filter_map(|item| softvk::primitives::binning::cpu::tile_rect(item.screen_box, &grid))
+            .map(|r| u64::from((r[2] - r[0] + 1) * (r[3] - r[1] + 1)))
+            .sum();
+        assert_eq!(got.entries, twin_entries, "{aggregate:?}: entries");
         let hit_rays = want.hits.iter().filter(|h| !h.is_empty()).count();
         let multi = want.hits.iter().filter(|h| h.len() > 2).count();
         let n = p.it.rays.len();
@@ -713,5 +722,94 @@ fn guarded_probing_gives_the_exact_runs_bits_or_stops_untouched() {
         let (_, _, d_phi, status) = run_guarded(&p, &s, entries - 1);
         assert_eq!(status.stopped, Some((1, entries)), "{aggregate:?}");
         assert!(d_phi.iter().all(|&x| x == 7.0), "{aggregate:?}");
+    }
+}
+
+/// The binning's screen box of an anchor (the sphere's extent on each screen axis within its
+/// τ-cube's corner box, `probe_items.comp` and its twin) is conservative: every continuous pixel
+/// position whose ray passes within τ of the anchor (the forward's own f32 hit test) lies in a
+/// tile of the box's rectangle. Perspective views near and far and an orthographic one, anchors
+/// all over the cube, two τ; rays at 4 × 4 positions per pixel, edges included. A box too tight
+/// by a fraction of a pixel loses rays here (and the tiled forward would then differ from brute
+/// force).
+#[test]
+fn anchor_boxes_hold_every_ray_that_can_hit_the_anchor() {
+    use rand::RngExt;
+    use softvk::primitives::binning::{TileGrid, cpu::tile_rect};
+    let cameras = vec![
+        Camera::from_angles(2.732, 30.0, 100.0),
+        Camera {
+            projection: Projection::Perspective {
+                viewing_angle_deg: 40.0,
+            },
+            ..Camera::from_angles(1.9, -20.0, 35.0)
+        },
+        Camera {
+            projection: Projection::Orthographic { scale: 0.8 },
+            ..Camera::from_angles(3.0, 10.0, 250.0)
+        },
+    ];
+    let (w, h) = (40u32, 32u32);
+    let t = sphere_silhouettes(&cameras, w, h, RADIUS).unwrap();
+    let grid = TileGrid::new(w, h, 8).unwrap();
+    let inv_s = (1.0 / f64::from(w.min(h))) as f32;
+    let mut rng = common::rng(17);
+    let anchors: Vec<[f32; 4]> = (0..300)
+        .map(|_| {
+            let mut c = || rng.random_range(-1.0..1.0f32);
+            [c(), c(), c(), 1.0]
+        })
+        .collect();
+    let sub = [0.0f32, 0.3, 0.6, 0.999];
+    for tau in [0.08f32, 0.3] {
+        let items = probe_cpu::items(&t, f64::from(tau), &anchors);
+        let mut hits = 0usize;
+        for (k, view) in t.views.iter().enumerate() {
+            let tiles_per_view = grid.tiles_x * grid.tiles_y;
+            for (j, a) in anchors.iter().enumerate() {
+                let item = &items[k * anchors.len() + j];
+                if item.flags & softvk::probe::prober::FLAG_VALID == 0 {
+                    continue;
+                }
+                let rect = tile_rect(item.screen_box, &grid);
+                for row in 0..h {
+                    for col in 0..w {
+                        for dy in sub {
+                            for dx in sub {
+                                let ray = Ray {
+                                    px: col as f32 + dx,
+                                    py: row as f32 + dy,
+                                    view: k as u32,
+                                    label: 0.0,
+                                };
+                                let (o, d) = probe_cpu::ray_line(view, &ray, w, h, inv_s);
+                                let bound = probe_cpu::hit_bound(d, tau * tau);
+                                if !probe_cpu::ray_hits(o, d, bound, [a[0], a[1], a[2]]) {
+                                    continue;
+                                }
+                                hits += 1;
+                                let tile =
+                                    probe_cpu::ray_tile(&ray, &grid) - k as u32 * tiles_per_view;
+                                let (tx, ty) = (tile % grid.tiles_x, tile / grid.tiles_x);
+                                let inside = rect.is_some_and(|r| {
+                                    (r[0]..=r[2]).contains(&tx) && (r[1]..=r[3]).contains(&ty)
+                                });
+                                assert!(
+                                    inside,
+                                    "view {k}, anchor {a:?}, tau {tau}: the ray at ({}, {}) hits \
+                                     it in tile ({tx}, {ty}) outside the box's tiles {rect:?} (box \
+                                     {:?})",
+                                    ray.px, ray.py, item.screen_box
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            hits > 10_000,
+            "tau {tau}: only {hits} hits; the test proves little"
+        );
     }
 }

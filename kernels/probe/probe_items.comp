@@ -1,12 +1,13 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 // Sphere probing: every anchor in every view as a binning item (`ProbeItem` of probe.glsl), one
-// invocation per (view, anchor), view-major. The screen box is the box of the projected corners
-// of the anchor's τ-cube: it holds the projection of the anchor's sphere (a projective map sends
-// the cube to the hull of its corners when they are all in front of the camera), so binning by it
-// loses no ray that can hit the sphere. FLAG_VALID: all corners in front (depth and the
-// projection's denominator positive); an anchor reaching behind the camera is not probed in that
-// view. FLAG_INSIDE: the pixel holding the centre's projection is inside the silhouette (pixels
+// invocation per (view, anchor), view-major. The screen box holds the projection of the anchor's
+// sphere, so binning by it loses no ray that can hit the sphere: the sphere's own extent on each
+// screen axis (`sphere_extent`) within the box of the projected corners of its τ-cube (a
+// projective map sends the cube to the hull of its corners when they are all in front of the
+// camera; the corner box alone is up to √3 wider, and every tile it adds costs the binning, the
+// list and the forward an entry). FLAG_VALID: all corners in front (depth and the projection's
+// denominator positive); an anchor reaching behind the camera is not probed in that view. FLAG_INSIDE: the pixel holding the centre's projection is inside the silhouette (pixels
 // outside the image are outside). Twin: `probe::prober::cpu::items`.
 //
 // It also bins the item (binning step 1, in place of the generic binning's count, scatter and
@@ -46,6 +47,37 @@ layout(push_constant) uniform Push {
 #define BINNING_TILE_RECT_ONLY
 #include "binning.glsl"
 
+// The extent [lo, hi] of screen coordinate s = affine(a, p) / affine(a2, p) over the sphere
+// |p − c| ≤ τ: the planes s = const tangent to the sphere, (A − s B)² = τ² |u − s w|² with
+// A = affine(a, c), B = affine(a2, c), u = a.xyz, w = a2.xyz, a quadratic
+// qa s² − 2 qb s + qc = 0 whose discriminant is τ² (|A w − B u|² − τ² |u × w|²), written that
+// way against cancellation. False where the sphere reaches the plane B = 0 (qa ≤ 0) or
+// rounding leaves no real roots: the caller keeps the corner box. `precise` throughout: the twin
+// (`probe::prober::cpu::sphere_extent`) repeats every rounding. Rounding moves the ends by a few
+// ulps; tile_rect widens every box by a pixel.
+bool sphere_extent(vec4 a, vec4 a2, vec3 c, float tau, out vec2 ext) {
+    precise float A = affine(a, c);
+    precise float B = affine(a2, c);
+    vec3 u = a.xyz;
+    vec3 w = a2.xyz;
+    precise float tau2 = tau * tau;
+    precise float qa = B * B - tau2 * (w.x * w.x + w.y * w.y + w.z * w.z);
+    precise float qb = A * B - tau2 * (u.x * w.x + u.y * w.y + u.z * w.z);
+    precise vec3 v = A * w - B * u;
+    precise vec3 x = vec3(u.y * w.z - u.z * w.y, u.z * w.x - u.x * w.z, u.x * w.y - u.y * w.x);
+    precise float disc = tau2 * ((v.x * v.x + v.y * v.y + v.z * v.z)
+                                 - tau2 * (x.x * x.x + x.y * x.y + x.z * x.z));
+    ext = vec2(0.0);
+    if (!(qa > 0.0 && disc >= 0.0)) {
+        return false;
+    }
+    precise float r = sqrt(disc);
+    precise float lo = (qb - r) / qa;
+    precise float hi = (qb + r) / qa;
+    ext = vec2(lo, hi);
+    return true;
+}
+
 void main() {
     uint id = linear_group_id() * 64u + gl_LocalInvocationIndex;
     if (id >= pc.anchors * pc.views) {
@@ -68,6 +100,11 @@ void main() {
         box = vec4(min(box.xy, s), max(box.zw, s));
     }
 
+    vec2 ex;
+    vec2 ey;
+    if (sphere_extent(v.a0, v.a2, p, pc.tau, ex) && sphere_extent(v.a1, v.a2, p, pc.tau, ey)) {
+        box = vec4(max(box.xy, vec2(ex.x, ey.x)), min(box.zw, vec2(ex.y, ey.y)));
+    }
     float w = float(pc.width);
     float h = float(pc.height);
     float smin = min(w, h);

@@ -1,8 +1,9 @@
 //! Sphere probing, forward and backward (SPEC §5), on screen tiles.
 //!
 //! **Forward.** Every anchor j is a sphere of radius τ. Per view k, `probe_items.comp` writes
-//! the anchor as a binning item ([`ProbeItem`]): the screen box of its τ-cube's projected
-//! corners (which holds the sphere's projection), the flag [`FLAG_VALID`] (the cube is wholly in
+//! the anchor as a binning item ([`ProbeItem`]): a screen box that holds the sphere's projection
+//! (its exact extent on each screen axis, within the box of its τ-cube's projected corners), the
+//! flag [`FLAG_VALID`] (the cube is wholly in
 //! front of the camera; otherwise the anchor is not probed in that view) and [`FLAG_INSIDE`]
 //! (its centre projects into the silhouette). The items are binned to screen tiles by the
 //! generic binning's tile rectangles ([`crate::primitives::binning`]'s `tile_rect`), but
@@ -70,7 +71,8 @@ pub const NO_HIT: u32 = u32::MAX;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct ProbeItem {
-    /// Screen box `(x_min, y_min, x_max, y_max)` of the projected τ-cube.
+    /// Screen box `(x_min, y_min, x_max, y_max)` holding the projected τ-sphere: its extent
+    /// on each axis ([`cpu::sphere_extent`]) within the box of the projected τ-cube's corners.
     pub screen_box: [f32; 4],
     /// [`FLAG_VALID`] | [`FLAG_INSIDE`].
     pub flags: u32,
@@ -1200,6 +1202,33 @@ pub mod cpu {
         a[0] * p[0] + a[1] * p[1] + a[2] * p[2] + a[3]
     }
 
+    /// `sphere_extent` of `probe_items.comp`, rounding for rounding: the extent `[lo, hi]` of the
+    /// screen coordinate `affine(a, p) / affine(a2, p)` over the sphere of radius `tau` around
+    /// `c`; `None` where the sphere reaches the plane `affine(a2, p) = 0` (or rounding leaves no
+    /// real roots).
+    pub fn sphere_extent(a: &[f32; 4], a2: &[f32; 4], c: V3, tau: f32) -> Option<(f32, f32)> {
+        let big_a = affine(a, c);
+        let big_b = affine(a2, c);
+        let (u, w) = ([a[0], a[1], a[2]], [a2[0], a2[1], a2[2]]);
+        let tau2 = tau * tau;
+        let qa = big_b * big_b - tau2 * (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+        let qb = big_a * big_b - tau2 * (u[0] * w[0] + u[1] * w[1] + u[2] * w[2]);
+        let v = [0, 1, 2].map(|i| big_a * w[i] - big_b * u[i]);
+        let x = [
+            u[1] * w[2] - u[2] * w[1],
+            u[2] * w[0] - u[0] * w[2],
+            u[0] * w[1] - u[1] * w[0],
+        ];
+        let disc = tau2
+            * ((v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+                - tau2 * (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]));
+        if !(qa > 0.0 && disc >= 0.0) {
+            return None;
+        }
+        let r = disc.sqrt();
+        Some(((qb - r) / qa, (qb + r) / qa))
+    }
+
     /// `probe_items.comp`.
     pub fn items(targets: &Targets, tau: f64, anchors: &[[f32; 4]]) -> Vec<ProbeItem> {
         let tau = tau as f32;
@@ -1222,6 +1251,17 @@ pub mod cpu {
                     valid = valid && affine(&v.depth, corner) > 0.0 && den > 0.0;
                     let (sx, sy) = (affine(&v.a0, corner) / den, affine(&v.a1, corner) / den);
                     b = [b[0].min(sx), b[1].min(sy), b[2].max(sx), b[3].max(sy)];
+                }
+                if let (Some(ex), Some(ey)) = (
+                    sphere_extent(&v.a0, &v.a2, p, tau),
+                    sphere_extent(&v.a1, &v.a2, p, tau),
+                ) {
+                    b = [
+                        b[0].max(ex.0),
+                        b[1].max(ey.0),
+                        b[2].min(ex.1),
+                        b[3].min(ey.1),
+                    ];
                 }
                 let den = affine(&v.a2, p);
                 let sx = affine(&v.a0, p) / den;
