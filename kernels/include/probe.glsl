@@ -11,6 +11,8 @@
 // Twin of `ProbeView` (src/probe/targets.rs); 160 bytes. Screen position of a world point p:
 // (a0·(p, 1) / a2·(p, 1), a1·(p, 1) / a2·(p, 1)); depth: depth·(p, 1). The line of points that
 // project to screen point s is o0 + s.x ox + s.y oy + t (d0 + s.x dx + s.y dy).
+// Texels (uvec4) of a `ProbeView` read as a texel buffer: a0, a1, a2, depth, ... in order.
+#define PROBE_VIEW_TEXELS 10u
 struct ProbeView {
     vec4 a0;
     vec4 a1;

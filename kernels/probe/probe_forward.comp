@@ -34,11 +34,15 @@ uint ballot_words() {
     return (gl_SubgroupSize + 31u) / 32u;
 }
 
-layout(std430, set = 0, binding = 0) readonly buffer Rays { Ray rays[]; };
-layout(std430, set = 0, binding = 1) readonly buffer Views { ProbeView views[]; };
-layout(std430, set = 0, binding = 2) readonly buffer Anchors { vec4 anchors[]; };
+// The rays (one texel each), the views (`ProbeView`, ten texels), the anchors (one texel) and
+// the items (`ProbeItem`, two texels) as texel buffers of the same bytes: on llvmpipe a
+// storage-buffer load is a scalar loop over the lanes with a bounds-check branch per component,
+// a texel fetch one branch-free gather of a whole texel.
+layout(set = 0, binding = 0, rgba32ui) uniform readonly restrict uimageBuffer rays;
+layout(set = 0, binding = 1, rgba32ui) uniform readonly restrict uimageBuffer views;
+layout(set = 0, binding = 2, rgba32ui) uniform readonly restrict uimageBuffer anchors;
 layout(std430, set = 0, binding = 3) readonly buffer Phi { float phi[]; };
-layout(std430, set = 0, binding = 4) readonly buffer Items { ProbeItem items[]; };
+layout(set = 0, binding = 4, rgba32ui) uniform readonly restrict uimageBuffer items;
 // Each tile's first entry, then the entry count: tile t's entries are [offsets[t], offsets[t + 1])
 // (`bin_mask_counts.comp` and the scan).
 layout(std430, set = 0, binding = 5) readonly buffer Offsets { uint offsets[]; };
@@ -50,17 +54,30 @@ layout(std430, set = 0, binding = 8) readonly buffer RayOrder { uint ray_order[]
 
 #include "probe_forward.glsl"
 
+vec4 texel_f(uvec4 t) {
+    return uintBitsToFloat(t);
+}
+
 void main() {
     uint q = linear_group_id() * 64u + gl_LocalInvocationIndex;
     bool live = q < pc.rays;
     // A lane past the end stands in for ray 0 (pc.rays > 0: the host dispatches nothing
     // otherwise) and aggregates nothing.
     uint id = live ? ray_order[q] : 0u;
-    Ray r = rays[id];
+    uvec4 rt = imageLoad(rays, int(id));
+    Ray r = Ray(uintBitsToFloat(rt.x), uintBitsToFloat(rt.y), rt.z, uintBitsToFloat(rt.w));
+    // The fields of the ray's view that `view_ray` reads: o0, ox, oy, d0, dx, dy.
+    ProbeView v;
+    int vt = int(r.view * PROBE_VIEW_TEXELS);
+    v.o0 = texel_f(imageLoad(views, vt + 4));
+    v.ox = texel_f(imageLoad(views, vt + 5));
+    v.oy = texel_f(imageLoad(views, vt + 6));
+    v.d0 = texel_f(imageLoad(views, vt + 7));
+    v.dx = texel_f(imageLoad(views, vt + 8));
+    v.dy = texel_f(imageLoad(views, vt + 9));
     vec3 o;
     vec3 d;
-    view_ray(views[r.view],
-             pixel_to_screen(r.px, r.py, float(pc.width), float(pc.height), pc.inv_s), o, d);
+    view_ray(v, pixel_to_screen(r.px, r.py, float(pc.width), float(pc.height), pc.inv_s), o, d);
     float bound = hit_bound(d, pc.tau2);
     uint tile = ray_tile(r, pc.width, pc.height, pc.tile_size, pc.tiles_x, pc.tiles_y);
     bool inside = r.label >= 0.5;
@@ -87,8 +104,9 @@ void main() {
             bool loaded = k < range.y && lane < lanes;
             if (loaded) {
                 anchor = list[k];
-                flags = items[item_base + anchor].flags;
-                a = vec4(anchors[anchor].xyz, phi[anchor]);
+                // ProbeItem's second texel starts with its flags.
+                flags = imageLoad(items, int(2u * (item_base + anchor) + 1u)).x;
+                a = vec4(texel_f(imageLoad(anchors, int(anchor))).xyz, phi[anchor]);
             }
             bool side_in = (flags & FLAG_INSIDE) != 0u;
             bool usable = BOUNDARY_AWARE == 0u || (side_in ? any_in : any_out);

@@ -23,8 +23,12 @@
 
 layout(local_size_x = 64) in;
 
-layout(std430, set = 0, binding = 0) readonly buffer Views { ProbeView views[]; };
-layout(std430, set = 0, binding = 1) readonly buffer Anchors { vec4 anchors[]; };
+// The views (`ProbeView`, ten texels each) and the anchors (one texel each) as texel buffers of
+// the same bytes: on llvmpipe a storage-buffer load is a scalar loop over the lanes with a
+// bounds-check branch per component (sixteen components of a view here), a texel fetch one
+// branch-free gather of a whole texel.
+layout(set = 0, binding = 0, rgba32ui) uniform readonly restrict uimageBuffer views;
+layout(set = 0, binding = 1, rgba32ui) uniform readonly restrict uimageBuffer anchors;
 layout(std430, set = 0, binding = 2) readonly buffer Masks { float masks[]; };
 layout(std430, set = 0, binding = 3) writeonly buffer Items { ProbeItem items[]; };
 // Per tile, a bit per anchor; zero before this kernel.
@@ -85,8 +89,13 @@ void main() {
     }
     uint view = id / pc.anchors;
     uint anchor = id - view * pc.anchors;
-    ProbeView v = views[view];
-    vec3 p = anchors[anchor].xyz;
+    ProbeView v;
+    int vt = int(view * PROBE_VIEW_TEXELS);
+    v.a0 = uintBitsToFloat(imageLoad(views, vt));
+    v.a1 = uintBitsToFloat(imageLoad(views, vt + 1));
+    v.a2 = uintBitsToFloat(imageLoad(views, vt + 2));
+    v.depth = uintBitsToFloat(imageLoad(views, vt + 3));
+    vec3 p = uintBitsToFloat(imageLoad(anchors, int(anchor)).xyz);
 
     bool valid = true;
     vec4 box = vec4(1e30, 1e30, -1e30, -1e30);
