@@ -175,6 +175,9 @@ pub enum LimitKind {
     /// (item, tile) entries one binning may hold (its sort keys and the backward's partials each
     /// in one binding).
     BinEntries,
+    /// 16-byte texels one texel-buffer binding may span (`maxTexelBufferElements`): what kernels
+    /// read through texel fetches, the gathers llvmpipe vectorizes.
+    TexelBinding,
 }
 
 impl LimitKind {
@@ -184,6 +187,7 @@ impl LimitKind {
             LimitKind::LoopIterations => "loop iterations in one shader invocation",
             LimitKind::StorageBinding => "bytes in one storage-buffer binding",
             LimitKind::BinEntries => "(item, tile) entries in one binning",
+            LimitKind::TexelBinding => "texels in one texel-buffer binding",
         }
     }
 }

@@ -34,8 +34,8 @@ uint ballot_words() {
     return (gl_SubgroupSize + 31u) / 32u;
 }
 
-// The rays (one texel each), the views (`ProbeView`, ten texels), the anchors (one texel) and
-// the items (`ProbeItem`, two texels) as texel buffers of the same bytes: on llvmpipe a
+// The rays (one texel each), the views (`ProbeView`, ten texels), the anchors (one texel), the
+// items (`ProbeItem`, two texels) and the entries (below) as texel buffers of the same bytes: on llvmpipe a
 // storage-buffer load is a scalar loop over the lanes with a bounds-check branch per component,
 // a texel fetch one branch-free gather of a whole texel.
 layout(set = 0, binding = 0, rgba32ui) uniform readonly restrict uimageBuffer rays;
@@ -46,8 +46,8 @@ layout(set = 0, binding = 4, rgba32ui) uniform readonly restrict uimageBuffer it
 // Each tile's first entry, then the entry count: tile t's entries are [offsets[t], offsets[t + 1])
 // (`bin_mask_counts.comp` and the scan).
 layout(std430, set = 0, binding = 5) readonly buffer Offsets { uint offsets[]; };
-// The anchor of every entry, sorted by tile, each tile's in index order.
-layout(std430, set = 0, binding = 6) readonly buffer List { uint list[]; };
+// The anchor of every entry, sorted by tile, each tile's in index order: four entries a texel.
+layout(set = 0, binding = 6, rgba32ui) uniform readonly restrict uimageBuffer list;
 layout(std430, set = 0, binding = 7) writeonly buffer Outs { RayOut outs[]; };
 // Ray indices sorted by tile (`probe_ray_keys.comp` and the stable sort).
 layout(std430, set = 0, binding = 8) readonly buffer RayOrder { uint ray_order[]; };
@@ -103,7 +103,7 @@ void main() {
             vec4 a = vec4(0.0);
             bool loaded = k < range.y && lane < lanes;
             if (loaded) {
-                anchor = list[k];
+                anchor = imageLoad(list, int(k >> 2u))[k & 3u];
                 // ProbeItem's second texel starts with its flags.
                 flags = imageLoad(items, int(2u * (item_base + anchor) + 1u)).x;
                 a = vec4(texel_f(imageLoad(anchors, int(anchor))).xyz, phi[anchor]);

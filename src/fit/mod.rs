@@ -140,6 +140,24 @@ pub(crate) fn check_binding(ctx: &Context, what: &str, bytes: u64) -> Result<u64
     Ok(bytes.max(4))
 }
 
+/// [`Error::DeviceLimit`] unless `bytes` (whole 16-byte texels) fit one texel-buffer binding
+/// (`maxTexelBufferElements`); the texel count.
+pub(crate) fn check_texels(ctx: &Context, what: &str, bytes: u64) -> Result<u64> {
+    let texels = bytes.div_ceil(crate::gpu::TEXEL_BYTES);
+    let max = u64::from(ctx.info().limits.max_texel_buffer_elements);
+    if texels > max {
+        return Err(Error::DeviceLimit {
+            kind: LimitKind::TexelBinding,
+            what: what.to_string(),
+            need: texels,
+            max,
+            device: ctx.info().name.clone(),
+            hint: "",
+        });
+    }
+    Ok(texels)
+}
+
 /// The entry capacity of a fit's guarded binning for a count of `total`: with
 /// [`mesh_fit::ENTRY_HEADROOM`], at most `max` (what the device holds); [`Error::DeviceLimit`]
 /// naming `what` and `hint` when even `total` is over it. The mesh, field and pose fits share it.

@@ -48,7 +48,7 @@ use super::ProbeSettings;
 use super::targets::GpuTargets;
 use crate::error::{Error, LimitKind, Result};
 use crate::fit::reduce::{Sum, SumPush};
-use crate::fit::{GradOut, check_binding, check_floats, groups};
+use crate::fit::{GradOut, check_binding, check_floats, check_texels, groups};
 use std::sync::Arc;
 
 use crate::gpu::gate::IterationGate;
@@ -387,6 +387,11 @@ impl Prober {
         let items = anchors * u64::from(views);
         check_binding(ctx, "sphere probing: anchor items", 32 * items)?;
         check_binding(ctx, "sphere probing: rays", 16 * rays)?;
+        // The items and forward kernels fetch these as texels.
+        check_texels(ctx, "sphere probing: anchor items", 32 * items)?;
+        check_texels(ctx, "sphere probing: rays", 16 * rays)?;
+        check_texels(ctx, "sphere probing: anchors", 16 * anchors)?;
+        check_texels(ctx, "sphere probing: views", 160 * u64::from(views))?;
         let tiles = job.tile_count();
         if grid.tiles_x > 0xFFFF || grid.tiles_y > 0xFFFF {
             return Err(Error::Limit(format!(
@@ -738,7 +743,13 @@ impl Prober {
         let bytes = 4 * cap;
         check_binding(ctx, "sphere probing: entries", bytes)?;
         // Drop the old buffers before making the new ones.
-        self.list = ctx.create_buffer("probe entry anchors", bytes, MemoryKind::Device)?;
+        // Whole texels: the forward fetches the anchors of the entries as texels.
+        check_texels(ctx, "sphere probing: entries", bytes)?;
+        self.list = ctx.create_buffer(
+            "probe entry anchors",
+            bytes.next_multiple_of(crate::gpu::TEXEL_BYTES),
+            MemoryKind::Device,
+        )?;
         self.list_tiles = ctx.create_buffer("probe entry tiles", bytes, MemoryKind::Device)?;
         self.partials = ctx.create_buffer("probe partials", bytes, MemoryKind::Device)?;
         self.entry_capacity = cap;
