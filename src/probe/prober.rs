@@ -499,7 +499,8 @@ impl Prober {
         Ok(())
     }
 
-    /// Records the anchor items of every view ([`Prober::items`]) and their tiles' anchor masks;
+    /// Records the anchor items of every view ([`Prober::items`]) and their tiles' anchor masks
+    /// (the anchors fetched as texels, as [`Prober::record_forward`] says);
     /// [`Prober::record_count`] includes it.
     pub fn record_items(
         &self,
@@ -797,6 +798,9 @@ impl Prober {
     /// Submission 2: records the rest of the binning, ψ per ray ([`Prober::outputs`]) and
     /// L_sil ([`Prober::loss_buffer`]). `phi` holds φ at the anchors (one `f32` each), `rays`
     /// the rays ([`Ray`](super::sampler::Ray) each, view-major, `rays_per_view` per view).
+    /// The kernels fetch the anchors and the rays as texels (see [`crate::gpu::TEXEL_FORMAT`]):
+    /// their ranges start at offsets aligned to `minTexelBufferOffsetAlignment`, as every
+    /// softvk buffer's whole range does.
     pub fn record_forward(
         &self,
         rec: &mut Recorder<'_>,
