@@ -7,4 +7,8 @@ uint linear_group_id() {
     return gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
 }
 
+// Word i of a texel buffer read as uvec4 texels, four words a texel (the (anchor, tile)
+// entries of sphere probing). `i` is evaluated twice: pass a plain value.
+#define ENTRY_WORD(texels, i) (imageLoad(texels, int((i) >> 2u))[(i) & 3u])
+
 #endif

@@ -3,9 +3,9 @@
 // Sphere probing, backward under G = max, step 1: every ray's sort key is the anchor its ψ came
 // from (`aux`), with the ray's index as the value. Rays without a hit join the last anchor's
 // run, which `probe_max_grad.comp` skips them in: a bucket of their own past the last anchor
-// would cost a key bit, and with 2^k anchors a whole sort pass. A stable sort then lists each anchor's rays in ray order (view by view: the rays
-// are view-major), and the binning's ranges pass gives each anchor its run
-// (`probe_max_grad.comp`).
+// would cost a key bit, and with 2^k anchors a whole sort pass. A stable sort then lists each
+// anchor's rays in ray order (view by view: the rays are view-major), and the binning's ranges
+// pass gives each anchor its run (`probe_max_grad.comp`).
 #include "common.glsl"
 #include "probe.glsl"
 

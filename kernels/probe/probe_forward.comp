@@ -35,9 +35,9 @@ uint ballot_words() {
 }
 
 // The rays (one texel each), the views (`ProbeView`, ten texels), the anchors (one texel), the
-// items (`ProbeItem`, two texels) and the entries (below) as texel buffers of the same bytes: on llvmpipe a
-// storage-buffer load is a scalar loop over the lanes with a bounds-check branch per component,
-// a texel fetch one branch-free gather of a whole texel.
+// items (`ProbeItem`, two texels) and the entries (below) as texel buffers of the same bytes:
+// on llvmpipe a storage-buffer load is a scalar loop over the lanes with a bounds-check branch
+// per component, a texel fetch one branch-free gather of a whole texel.
 layout(set = 0, binding = 0, rgba32ui) uniform readonly restrict uimageBuffer rays;
 layout(set = 0, binding = 1, rgba32ui) uniform readonly restrict uimageBuffer views;
 layout(set = 0, binding = 2, rgba32ui) uniform readonly restrict uimageBuffer anchors;
@@ -103,7 +103,7 @@ void main() {
             vec4 a = vec4(0.0);
             bool loaded = k < range.y && lane < lanes;
             if (loaded) {
-                anchor = imageLoad(list, int(k >> 2u))[k & 3u];
+                anchor = ENTRY_WORD(list, k);
                 // ProbeItem's second texel starts with its flags.
                 flags = imageLoad(items, int(2u * (item_base + anchor) + 1u)).x;
                 a = vec4(texel_f(imageLoad(anchors, int(anchor))).xyz, phi[anchor]);

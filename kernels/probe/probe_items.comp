@@ -7,7 +7,8 @@
 // projective map sends the cube to the hull of its corners when they are all in front of the
 // camera; the corner box alone is up to √3 wider, and every tile it adds costs the binning, the
 // list and the forward an entry). FLAG_VALID: all corners in front (depth and the projection's
-// denominator positive); an anchor reaching behind the camera is not probed in that view. FLAG_INSIDE: the pixel holding the centre's projection is inside the silhouette (pixels
+// denominator positive); an anchor reaching behind the camera is not probed in that view.
+// FLAG_INSIDE: the pixel holding the centre's projection is inside the silhouette (pixels
 // outside the image are outside). Twin: `probe::prober::cpu::items`.
 //
 // It also bins the item (binning step 1, in place of the generic binning's count, scatter and
