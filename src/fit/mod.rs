@@ -123,20 +123,27 @@ pub(crate) fn check_floats(what: &str, range: &BufferRange<'_>, floats: u64) -> 
     Ok(())
 }
 
-/// Fails with [`Error::Limit`] when `bytes` do not fit one storage-buffer binding; returns the
-/// byte count (at least 4, so that empty problems still get a bindable buffer).
-pub(crate) fn check_binding(ctx: &Context, what: &str, bytes: u64) -> Result<u64> {
-    let max = u64::from(ctx.info().limits.max_storage_buffer_range);
-    if bytes > max {
+/// [`Error::DeviceLimit`] of `kind` naming `what` when `need` is over the device's `max`.
+fn check_limit(ctx: &Context, kind: LimitKind, what: &str, need: u64, max: u64) -> Result<()> {
+    if need > max {
         return Err(Error::DeviceLimit {
-            kind: LimitKind::StorageBinding,
+            kind,
             what: what.to_string(),
-            need: bytes,
+            need,
             max,
             device: ctx.info().name.clone(),
             hint: "",
         });
     }
+    Ok(())
+}
+
+/// [`Error::DeviceLimit`] when `bytes` do not fit one storage-buffer binding
+/// (`maxStorageBufferRange`); the byte count (at least 4, so that empty problems still get a
+/// bindable buffer).
+pub(crate) fn check_binding(ctx: &Context, what: &str, bytes: u64) -> Result<u64> {
+    let max = u64::from(ctx.info().limits.max_storage_buffer_range);
+    check_limit(ctx, LimitKind::StorageBinding, what, bytes, max)?;
     Ok(bytes.max(4))
 }
 
@@ -145,16 +152,7 @@ pub(crate) fn check_binding(ctx: &Context, what: &str, bytes: u64) -> Result<u64
 pub(crate) fn check_texels(ctx: &Context, what: &str, bytes: u64) -> Result<u64> {
     let texels = bytes.div_ceil(crate::gpu::TEXEL_BYTES);
     let max = u64::from(ctx.info().limits.max_texel_buffer_elements);
-    if texels > max {
-        return Err(Error::DeviceLimit {
-            kind: LimitKind::TexelBinding,
-            what: what.to_string(),
-            need: texels,
-            max,
-            device: ctx.info().name.clone(),
-            hint: "",
-        });
-    }
+    check_limit(ctx, LimitKind::TexelBinding, what, texels, max)?;
     Ok(texels)
 }
 
