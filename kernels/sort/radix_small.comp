@@ -18,9 +18,10 @@
 
 layout(local_size_x = WG_SIZE) in;
 
-layout(std430, set = 0, binding = 0) coherent buffer Keys { uvec2 keys[]; };
-layout(std430, set = 0, binding = 1) coherent buffer Vals { uint vals[]; };
-// 2n pairs: the ping-pong halves [0, n) and [n, 2n).
+// Each invocation reads and writes the same pairs of these (copied in, then back).
+layout(std430, set = 0, binding = 0) buffer Keys { uvec2 keys[]; };
+layout(std430, set = 0, binding = 1) buffer Vals { uint vals[]; };
+// 2n pairs: the ping-pong halves [0, n) and [n, 2n), written and read across invocations.
 layout(std430, set = 0, binding = 2) coherent buffer KeysAlt { uvec2 keys_alt[]; };
 layout(std430, set = 0, binding = 3) coherent buffer ValsAlt { uint vals_alt[]; };
 

@@ -3,22 +3,21 @@
 //! **Forward.** Every anchor j is a sphere of radius τ. Per view k, `probe_items.comp` writes
 //! the anchor as a binning item ([`ProbeItem`]): a screen box that holds the sphere's projection
 //! (its exact extent on each screen axis, within the box of its τ-cube's projected corners), the
-//! flag [`FLAG_VALID`] (the cube is wholly in
-//! front of the camera; otherwise the anchor is not probed in that view) and [`FLAG_INSIDE`]
-//! (its centre projects into the silhouette). The items are binned to screen tiles by the
-//! generic binning's tile rectangles ([`crate::primitives::binning`]'s `tile_rect`), but
-//! without its scatter and sort: the items kernel sets the anchor's bit in an anchor mask per
-//! tile (`⌈anchors / 32⌉` words, integer `atomicOr`), `bin_mask_counts.comp` counts each
-//! tile's bits, a scan gives each tile's first entry, the entry count is read back, and
-//! `probe_mask_list.comp` writes each tile's anchors in index order: the entries the generic
-//! binning's stable sort gives, at a fraction of the cost on llvmpipe. Then one invocation per
-//! ray, the rays taken in tile order (a stable [`RadixSort`] of their tile keys and the
-//! binning's ranges pass), visits the anchors of its tile in anchor order
-//! (`probe_forward.comp`: per subgroup, batches of anchors loaded one per lane and broadcast with
-//! shuffles) and aggregates, with G of [`Aggregate`](super::Aggregate), the φ of those whose
-//! centre lies within τ of the ray's line, skipping under boundary-aware assignment the anchors
-//! whose [`FLAG_INSIDE`] differs from the ray's label. No hit: ψ = 0. The loss is
-//! `L_sil = mean_i (ψ_i − S_i)²` over every ray of every view, summed in a fixed order.
+//! flag [`FLAG_VALID`] (the cube is wholly in front of the camera; otherwise the anchor is not
+//! probed in that view) and [`FLAG_INSIDE`] (its centre projects into the silhouette). The
+//! items are binned to screen tiles by the generic binning's tile rectangles
+//! ([`crate::primitives::binning`]'s `tile_rect`), but without its scatter and sort: the items
+//! kernel sets the anchor's bit in an anchor mask per tile (`⌈anchors / 32⌉` words, integer
+//! `atomicOr`), `bin_mask_counts.comp` counts each tile's bits, a scan gives each tile's first
+//! entry, the entry count is read back, and `probe_mask_list.comp` writes each tile's anchors in
+//! index order: the entries the generic binning's stable sort gives, at a fraction of the cost
+//! on llvmpipe. Then one invocation per ray, the rays taken in tile order (a stable
+//! [`RadixSort`] of their tile keys and the binning's ranges pass), visits the anchors of its
+//! tile in anchor order (`probe_forward.comp`: per subgroup, batches of anchors loaded one per
+//! lane and broadcast with shuffles) and aggregates, with G of [`Aggregate`](super::Aggregate),
+//! the φ of those whose centre lies within τ of the ray's line, skipping under boundary-aware
+//! assignment the anchors whose [`FLAG_INSIDE`] differs from the ray's label. No hit: ψ = 0. The
+//! loss is `L_sil = mean_i (ψ_i − S_i)²` over every ray of every view, summed in a fixed order.
 //! `probe_forward_brute.comp` visits every anchor instead: the baseline the tiled pass equals bit
 //! for bit. The aggregation and the assignment are specialization constants of both (and of
 //! the backward): a pipeline per combination, built on first use.
