@@ -201,6 +201,7 @@ fn a_model_round_trips_through_its_file_and_bad_files_are_refused() {
     let params: Vec<f32> = (0..n).map(|_| r.random_range(-0.3f32..0.3)).collect();
     let model = ReconModel {
         net,
+        field: None,
         params,
         iteration: 7,
         train: None,

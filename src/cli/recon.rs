@@ -226,6 +226,7 @@ fn validate(
 ) -> Result<f64> {
     let model = ReconModel {
         net,
+        field: None,
         params,
         iteration: 0,
         train: None,
@@ -339,6 +340,7 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
         let (adam_m, adam_v) = trainer.read_moments()?;
         ReconModel {
             net: opts.net,
+            field: None,
             params: trainer.read_params()?,
             iteration: it,
             train: Some(TrainState {
@@ -414,6 +416,7 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
     }
     ReconModel {
         net: opts.net,
+        field: None,
         params: trainer.read_params()?,
         iteration: done,
         train: None,

@@ -506,7 +506,7 @@ pub(crate) struct SumChunks {
 }
 
 impl SumChunks {
-    fn new(ctx: &Context) -> Result<Self> {
+    pub(crate) fn new(ctx: &Context) -> Result<Self> {
         Ok(Self {
             kernel: Kernel::new(ctx, &specs::FIELD_SUM_CHUNKS)?,
         })

@@ -18,6 +18,7 @@ pub mod batch;
 pub mod dataset;
 pub mod decode;
 pub mod eval;
+pub mod field;
 pub mod model;
 pub mod npz;
 pub mod shapes;

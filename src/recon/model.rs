@@ -6,10 +6,11 @@
 //! |---|---|---|
 //! | `format` | int32 (1) | [`FORMAT`] |
 //! | `net` | int32 (6) | [`NetShape`]: image, channels ×3, latent, hidden |
-//! | `params` | float32 (P) | the network's parameters, [`crate::nn::Sequential`]'s layout |
+//! | `field` | int32 (3) | a conditioned-field model only ([`super::field`]): the MLP's hidden layers, width, frequencies |
+//! | `params` | float32 (P) | the network's parameters, [`crate::nn::Sequential`]'s layout (a field model: then the MLP's) |
 //! | `iteration` | int32 (1) | iterations trained |
 //! | `adam_m`, `adam_v` | float32 (P) | Adam's moments (a checkpoint; absent from a final model) |
-//! | `train` | float64 (9) | seed, batch, lr, β1, β2, λ_lap, λ_flat, λ_col, σ (a checkpoint) |
+//! | `train` | float64 (11) | [`TrainState::settings`] (a checkpoint) |
 //! | `log` | float64 (R, 6) | iteration, L_sil, L_col, L_lap, L_flat, total (a checkpoint) |
 //! | `val` | float64 (S, 2) | iteration, validation 3D IoU (a checkpoint) |
 //!
@@ -19,10 +20,12 @@
 use std::path::Path;
 
 use super::decode::MeshDecoder;
+use super::field::FieldNet;
 use super::npz::{NpyArray, NpyData, Npz, npz_bytes};
 use super::train::NetShape;
 use crate::atomic_file::AtomicFile;
 use crate::error::{Error, Result};
+use crate::field::MlpLayout;
 use crate::gpu::{Buffer, Context, MemoryKind};
 use crate::nn::Sequential;
 
@@ -40,7 +43,8 @@ pub struct TrainState {
     /// Adam's second moments.
     pub adam_v: Vec<f32>,
     /// `[seed, batch, lr, β1, β2, λ_lap, λ_flat, λ_col, σ, lr step's iteration (0: none),
-    /// lr step's factor]` of the run, checked on resume. (Files written before the step
+    /// lr step's factor]` of the run, checked on resume; a field model's hold rays per view,
+    /// anchors, τ and the tile size where the mesh's hold λ_lap, λ_flat, λ_col and σ. (Files written before the step
     /// existed hold the first nine; they read as no step.)
     pub settings: [f64; SETTINGS],
     /// The loss log so far: `[iteration, L_sil, L_col, L_lap, L_flat, total]` per row.
@@ -52,8 +56,11 @@ pub struct TrainState {
 /// A reconstruction network: its shape, its parameters, how long it trained.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ReconModel {
-    /// The network's shape.
+    /// The network's shape (a field model: its encoder).
     pub net: NetShape,
+    /// `Some` for a conditioned-field model ([`super::field`]): the shared occupancy MLP, whose
+    /// parameters follow the encoder's in `params`.
+    pub field: Option<MlpLayout>,
     /// Its parameters.
     pub params: Vec<f32>,
     /// Iterations trained.
@@ -90,6 +97,17 @@ impl ReconModel {
             ("params", params),
             ("iteration", iteration),
         ];
+        if let Some(m) = self.field {
+            arrays.push((
+                "field",
+                i32s(
+                    [m.hidden_layers, m.width, m.frequencies]
+                        .iter()
+                        .map(|&x| x as i32)
+                        .collect(),
+                )?,
+            ));
+        }
         if let Some(t) = &self.train {
             arrays.push(("adam_m", f32s(&t.adam_m)?));
             arrays.push(("adam_v", f32s(&t.adam_v)?));
@@ -156,8 +174,28 @@ impl ReconModel {
             },
             _ => return Err(bad(format!("network shape {net:?}"))),
         };
+        let field = if npz.names().contains(&"field") {
+            let f = ints(npz.array("field")?, "field")?;
+            let layout = match f[..] {
+                [l, w, freqs] if l > 0 && w > 0 && freqs >= 0 => MlpLayout {
+                    hidden_layers: l as u32,
+                    width: w as u32,
+                    frequencies: freqs as u32,
+                },
+                _ => return Err(bad(format!("field shape {f:?}"))),
+            };
+            layout
+                .validate()
+                .map_err(|e| bad(format!("field shape {f:?}: {e}")))?;
+            Some(layout)
+        } else {
+            None
+        };
         let params = floats(npz.array("params")?, "params")?;
-        let expected = super::train::param_count(&shape)?;
+        let expected = match field {
+            Some(mlp) => FieldNet { net: shape, mlp }.param_count()?,
+            None => super::train::param_count(&shape)?,
+        };
         if params.len() as u64 != expected {
             return Err(bad(format!(
                 "{} parameters for a network {shape:?} of {expected}",
@@ -217,11 +255,33 @@ impl ReconModel {
         };
         Ok(ReconModel {
             net: shape,
+            field,
             params,
             iteration,
             train,
         })
     }
+}
+
+/// `images` (uint8 RGBA planes, `4 × image²` bytes each, at most `capacity` of them) as the
+/// network's input floats, as the batch gather converts them (the byte times the f32 nearest
+/// 1/255); with their count.
+pub(crate) fn input_floats(images: &[u8], image: u32, capacity: u32) -> Result<(usize, Vec<f32>)> {
+    let per = 4 * (image as usize).pow(2);
+    if images.is_empty() || images.len() % per != 0 {
+        return Err(Error::Input(format!(
+            "{} image bytes: a whole number of {image}×{image} RGBA images, at least one",
+            images.len(),
+        )));
+    }
+    let n = images.len() / per;
+    if n > capacity as usize {
+        return Err(Error::Input(format!(
+            "{n} images for a reconstructor of {capacity}"
+        )));
+    }
+    let scale = 1.0f32 / 255.0;
+    Ok((n, images.iter().map(|&b| f32::from(b) * scale).collect()))
 }
 
 /// One reconstructed mesh: positions of the template's vertices ([`super::train::template`]'s
@@ -252,6 +312,12 @@ pub struct Reconstructor {
 impl Reconstructor {
     /// Uploads `model` for batches of up to `capacity` images.
     pub fn new(ctx: &Context, model: &ReconModel, capacity: u32) -> Result<Self> {
+        if model.field.is_some() {
+            return Err(Error::Input(
+                "a conditioned-field model: reconstruct with recon::field::FieldReconstructor"
+                    .into(),
+            ));
+        }
         if capacity == 0 {
             return Err(Error::Input("a reconstruction batch of 0 images".into()));
         }
@@ -293,25 +359,7 @@ impl Reconstructor {
     /// The meshes the network predicts from `images` (one per image): uint8 RGBA planes
     /// (`4 × H × W` per image, the NMR layout), at most the capacity.
     pub fn reconstruct(&self, ctx: &Context, images: &[u8]) -> Result<Vec<Reconstruction>> {
-        let per = 4 * (self.image as usize).pow(2);
-        if images.is_empty() || images.len() % per != 0 {
-            return Err(Error::Input(format!(
-                "{} image bytes: a whole number of {}×{} RGBA images, at least one",
-                images.len(),
-                self.image,
-                self.image
-            )));
-        }
-        let n = images.len() / per;
-        if n > self.capacity as usize {
-            return Err(Error::Input(format!(
-                "{n} images for a reconstructor of {}",
-                self.capacity
-            )));
-        }
-        // As the batch gather converts them: the byte times the f32 nearest 1/255.
-        let scale = 1.0f32 / 255.0;
-        let input: Vec<f32> = images.iter().map(|&b| f32::from(b) * scale).collect();
+        let (n, input) = input_floats(images, self.image, self.capacity)?;
         ctx.write_buffer(&self.input, 0, &input)?;
         ctx.submit_and_wait(|rec| {
             self.net
