@@ -135,7 +135,7 @@ fn train_twice_resume_evaluate_and_reconstruct() {
         "header, two classes, mean, protocol:\n{table}"
     );
     assert!(
-        rows[4].starts_with("predictions voxelized by parity"),
+        rows[4].starts_with("mesh predictions voxelized by parity"),
         "{table}"
     );
     let rows = &rows[..4];
@@ -183,6 +183,109 @@ fn train_twice_resume_evaluate_and_reconstruct() {
         "{err}"
     );
     assert!(!dir.path("out/x.obj").exists());
+}
+
+/// The `--field` flags of a tiny conditioned field.
+const FIELD: [&str; 11] = [
+    "--field",
+    "--field-layers",
+    "2",
+    "--field-width",
+    "16",
+    "--field-freqs",
+    "2",
+    "--rays",
+    "16",
+    "--anchors",
+    "512",
+];
+
+#[test]
+fn a_conditioned_field_trains_resumes_and_sits_beside_the_mesh_in_the_table() {
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    let dir = TempDir::new("recon-cli-field");
+    let data = dataset(&dir);
+    let (f, g, mesh) = (dir.path("f.npz"), dir.path("g.npz"), dir.path("m.npz"));
+    let said = train(&data, &f, 4, &FIELD);
+    assert!(said.contains("trained 4 iterations"), "{said}");
+    // Stopped after 2, resumed to 4: the same model, bit for bit.
+    train(&data, &g, 2, &FIELD);
+    train(&data, &g, 4, &[&FIELD[..], &["--resume"]].concat());
+    let bytes = |p: &Path| std::fs::read(p).unwrap();
+    assert!(bytes(&f) == bytes(&g), "a resumed field run differs");
+    // A field checkpoint does not resume as a mesh run.
+    let refused = softvk()
+        .args(["train-recon", "--dataset", data.to_str().unwrap()])
+        .args(["--out", g.to_str().unwrap(), "--iters", "6", "--batch", "2"])
+        .args(["--channels", "2,3,4", "--latent", "8", "--hidden", "8"])
+        .args(["--lr", "1e-3", "--resume"])
+        .output()
+        .unwrap();
+    assert!(!refused.status.success());
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        err.contains("other options") && err.lines().count() == 1,
+        "{err}"
+    );
+    train(&data, &mesh, 2, &[]);
+    let eval_dir = dir.path("eval");
+    let table = ok(
+        softvk()
+            .args(["eval-recon", "--dataset", data.to_str().unwrap()])
+            .args(["--model", mesh.to_str().unwrap()])
+            .args(["--model", f.to_str().unwrap(), "--views", "2"])
+            .args(["--report", eval_dir.to_str().unwrap()])
+            .env("SOFTVK_VALIDATION", "1")
+            .output()
+            .unwrap(),
+        "softvk eval-recon",
+    );
+    let rows: Vec<&str> = table.lines().collect();
+    assert_eq!(
+        rows.len(),
+        6,
+        "header, two classes, mean, two notes:\n{table}"
+    );
+    assert!(
+        rows[0].contains("m (mesh)") && rows[0].contains("f (field)"),
+        "{table}"
+    );
+    assert!(rows[5].starts_with("field predictions"), "{table}");
+    for r in &rows[1..4] {
+        let cols: Vec<f64> = r
+            .split_whitespace()
+            .rev()
+            .take(6)
+            .map(|c| c.parse().unwrap())
+            .collect();
+        assert!(cols.iter().all(|v| (0.0..=1.0).contains(v)), "{r}");
+    }
+    assert!(eval_dir.join("examples.png").exists());
+    let input = eval_dir.join("input-03001627-0.png");
+    let obj = dir.path("out/field.obj");
+    let run = softvk()
+        .args(["recon", "--model", f.to_str().unwrap()])
+        .args(["--image", input.to_str().unwrap()])
+        .args(["--out", obj.to_str().unwrap()])
+        .env("SOFTVK_VALIDATION", "1")
+        .output()
+        .unwrap();
+    // Four iterations may leave the field without a surface: then one clear error, no file.
+    if run.status.success() {
+        let text = std::fs::read_to_string(&obj).unwrap();
+        assert!(text.lines().any(|l| l.starts_with("f ")), "no faces");
+        assert!(dir.path("out/field-turntable.gif").exists());
+    } else {
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(
+            err.contains("no φ = 0.5 surface") && err.lines().count() == 1,
+            "{err}"
+        );
+        assert!(!obj.exists());
+    }
 }
 
 #[test]

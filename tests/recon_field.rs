@@ -16,7 +16,8 @@ use softvk::raster::gpu::{Method, Renderer};
 use softvk::raster::reference::RasterSettings;
 use softvk::recon::dataset::{occupancy_to_nmr, voxel_cube};
 use softvk::recon::field::{
-    FieldNet, FieldReconTrainer, FieldReconstructor, FieldTrainOptions, default_probe, field_cube,
+    FieldNet, FieldReconTrainer, FieldReconstructor, FieldTrainOptions, MAX_BATCH, default_probe,
+    field_cube,
 };
 use softvk::recon::model::ReconModel;
 use softvk::recon::train::{LrStep, NetShape, TrainImages, VIEWS};
@@ -313,4 +314,45 @@ fn reconstruction_is_the_twins_field_and_the_model_round_trips() {
         recon.codes(&gpu, &images[1..]),
         Err(softvk::Error::Input(_))
     ));
+}
+
+#[test]
+fn the_largest_batch_runs_and_one_more_is_an_input_error() {
+    let Some(gpu) = common::gpu() else { return };
+    let data = data(&gpu);
+    let opts = FieldTrainOptions {
+        batch: MAX_BATCH,
+        ..options()
+    };
+    let mut trainer = FieldReconTrainer::new(&gpu, &data, &opts, None).unwrap();
+    assert_eq!(trainer.run(1, 1).unwrap(), None);
+    for bad in [
+        FieldTrainOptions {
+            batch: MAX_BATCH + 1,
+            ..options()
+        },
+        FieldTrainOptions {
+            batch: 0,
+            ..options()
+        },
+        FieldTrainOptions {
+            probe: softvk::probe::ProbeSettings {
+                geo_lambda: 0.1,
+                ..options().probe
+            },
+            ..options()
+        },
+        FieldTrainOptions {
+            probe: softvk::probe::ProbeSettings {
+                cube_half: 1.0,
+                ..options().probe
+            },
+            ..options()
+        },
+    ] {
+        assert!(matches!(
+            FieldReconTrainer::new(&gpu, &data, &bad, None),
+            Err(softvk::Error::Input(_))
+        ));
+    }
 }

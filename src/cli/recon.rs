@@ -1,29 +1,36 @@
 //! Single-view reconstruction learned from silhouettes (issue #15):
 //!
-//! - `softvk train-recon --dataset DIR --out MODEL [--iters N]`: trains the network on the
-//!   dataset's train split ([`softvk::recon::train`]), k iterations per submission, with a
+//! - `softvk train-recon --dataset DIR --out MODEL [--iters N] [--field]`: trains the network
+//!   on the dataset's train split ([`softvk::recon::train`]; with `--field` the conditioned
+//!   implicit field of [`softvk::recon::field`]), k iterations per submission, with a
 //!   progress bar, a loss log and plot, the validation split's 3D IoU every `--val-every`
 //!   iterations, and checkpoints (`--resume` goes on from the last one, bit for bit).
-//! - `softvk recon --model MODEL --image IMG --out M.obj`: one image to a mesh, and a shaded
-//!   turntable GIF of it beside the input.
-//! - `softvk eval-recon --dataset DIR --model MODEL`: the table of 3D IoU per class on the
-//!   test split, beside the retrieval and mean-shape baselines ([`softvk::recon::eval`]).
+//! - `softvk recon --model MODEL --image IMG --out M.obj`: one image to a mesh (a field's by
+//!   marching cubes), and a shaded turntable GIF of it beside the input.
+//! - `softvk eval-recon --dataset DIR --model MODEL [--model MODEL ...]`: the table of 3D IoU
+//!   per class on the test split, a column per model, beside the retrieval and mean-shape
+//!   baselines ([`softvk::recon::eval`]).
 
 use std::path::{Path, PathBuf};
 
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use softvk::camera::Camera;
+use softvk::field::MlpLayout;
 use softvk::fit::AdamOptions;
 use softvk::fit::io::write_obj_colored;
 use softvk::fit::report::{self, GifWriter, Series};
 use softvk::gpu::{Context, ContextOptions};
 use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
+use softvk::probe::ProbeSettings;
 use softvk::raster::gpu::{Method, Renderer};
 use softvk::raster::reference::{ColorMode, RasterSettings};
 use softvk::recon::dataset::{self, ClassData, Dataset, Split};
 use softvk::recon::eval::{self, Mask, ScoreRow};
+use softvk::recon::field::{
+    self, FieldNet, FieldReconTrainer, FieldReconstructor, FieldTrainOptions,
+};
 use softvk::recon::model::{ReconModel, Reconstruction, Reconstructor, SETTINGS, TrainState};
 use softvk::recon::train::{self, LrStep, NetShape, ReconTrainer, TrainImages, TrainOptions};
 use softvk::{Error, Result};
@@ -67,9 +74,9 @@ pub struct TrainReconArgs {
     #[arg(long, value_name = "B", default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..))]
     pub batch: u32,
 
-    /// Adam's learning rate (SoftRas: 1e-4).
-    #[arg(long, default_value_t = 1e-4, value_parser = positive)]
-    pub lr: f64,
+    /// Adam's learning rate [default: 1e-4 (SoftRas's), 1e-3 with --field].
+    #[arg(long, value_parser = positive)]
+    pub lr: Option<f64>,
 
     /// From this iteration on, train at `--lr-decay` × `--lr` (SoftRas's `step` schedule:
     /// × 0.3 from 150 000). A resumed run may add or move the step if the iterations already
@@ -122,6 +129,36 @@ pub struct TrainReconArgs {
     /// Go on from the checkpoint in `<MODEL stem>-train/` (same dataset and options).
     #[arg(long)]
     pub resume: bool,
+
+    /// Train a conditioned implicit field instead of the mesh decoder: the encoder predicts
+    /// each hidden layer's bias of a shared occupancy MLP, trained by sphere probing against
+    /// every view's silhouette (issue #16). `--sigma` and `--color` do not apply.
+    #[arg(long)]
+    pub field: bool,
+
+    /// With --field: the MLP's hidden layers.
+    #[arg(long, value_name = "L", default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=32))]
+    pub field_layers: u32,
+
+    /// With --field: the MLP's width.
+    #[arg(long, value_name = "W", default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=256))]
+    pub field_width: u32,
+
+    /// With --field: the MLP's positional-encoding frequencies.
+    #[arg(long, value_name = "F", default_value_t = 4, value_parser = clap::value_parser!(u32).range(0..=16))]
+    pub field_freqs: u32,
+
+    /// With --field: probing rays per view (all 24 views) per object and iteration.
+    #[arg(long, value_name = "N", default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..))]
+    pub rays: u32,
+
+    /// With --field: anchors per object and iteration.
+    #[arg(long, value_name = "N", default_value_t = 2048, value_parser = clap::value_parser!(u32).range(1..))]
+    pub anchors: u32,
+
+    /// With --field: the anchors' radius τ, in half-edges of the field's cube.
+    #[arg(long, default_value_t = 0.045, value_parser = positive)]
+    pub tau: f64,
 }
 
 /// The flags of `softvk recon`.
@@ -148,9 +185,10 @@ pub struct EvalReconArgs {
     #[arg(long, value_name = "DIR")]
     pub dataset: PathBuf,
 
-    /// A model written by `softvk train-recon`.
-    #[arg(long, value_name = "MODEL")]
-    pub model: PathBuf,
+    /// A model written by `softvk train-recon` (mesh or field); repeat it for a column per
+    /// model.
+    #[arg(long, value_name = "MODEL", required = true)]
+    pub model: Vec<PathBuf>,
 
     /// Inputs per test object: views spread evenly over the 24 (24: every view, as SoftRas).
     #[arg(long, value_name = "V", default_value_t = 24, value_parser = clap::value_parser!(u32).range(1..))]
@@ -216,36 +254,133 @@ fn report_dir(out: &Path) -> PathBuf {
     out.with_file_name(format!("{stem}-train"))
 }
 
-/// The mean validation IoU of `params` over `views` of every val object.
-fn validate(
-    ctx: &Context,
-    net: NetShape,
-    params: Vec<f32>,
-    val: &Dataset,
-    views: &[usize],
-) -> Result<f64> {
-    let model = ReconModel {
-        net,
-        field: None,
-        params,
-        iteration: 0,
-        train: None,
-    };
-    let recon = Reconstructor::new(ctx, &model, 32)?;
+/// A trained model of either kind, ready to reconstruct.
+enum AnyReconstructor {
+    /// The mesh decoder's.
+    Mesh(Box<Reconstructor>),
+    /// A conditioned field's.
+    Field(Box<FieldReconstructor>),
+}
+
+impl AnyReconstructor {
+    /// `model`'s reconstructor, for batches of up to `capacity` images.
+    fn new(ctx: &Context, model: &ReconModel, capacity: u32) -> Result<Self> {
+        Ok(match model.field {
+            Some(_) => Self::Field(Box::new(FieldReconstructor::new(ctx, model, capacity)?)),
+            None => Self::Mesh(Box::new(Reconstructor::new(ctx, model, capacity)?)),
+        })
+    }
+
+    /// The 3D IoU of the reconstruction from each `(object, view)` input of `class`.
+    fn ious(
+        &self,
+        ctx: &Context,
+        class: &ClassData,
+        inputs: &[(usize, usize)],
+        voxelizer: eval::Voxelizer,
+    ) -> Result<Vec<f64>> {
+        match self {
+            Self::Mesh(r) => eval::reconstruction_ious(ctx, r, class, inputs, voxelizer),
+            Self::Field(r) => eval::field_reconstruction_ious(ctx, r, class, inputs),
+        }
+    }
+
+    /// The mesh of one image (`4 × H × W` bytes): the deformed template with its colours, or
+    /// the field's marching-cubes mesh in grey (`None` when φ never crosses 0.5).
+    fn mesh(&self, ctx: &Context, image: &[u8]) -> Result<Option<Mesh>> {
+        match self {
+            Self::Mesh(r) => Ok(Some(colored_mesh(r.reconstruct(ctx, image)?.remove(0)))),
+            Self::Field(r) => {
+                let iso = r.isosurface(ctx, image, FIELD_MESH_RES)?;
+                if iso.is_empty() {
+                    return Ok(None);
+                }
+                let mut mesh = iso.to_mesh()?;
+                mesh.vertex_colors = Some(vec![[0.7; 3]; mesh.positions.len()]);
+                Ok(Some(mesh))
+            }
+        }
+    }
+
+    /// `mesh` or `field`.
+    fn kind(&self) -> &'static str {
+        match self {
+            Self::Mesh(_) => "mesh",
+            Self::Field(_) => "field",
+        }
+    }
+}
+
+/// Lattice of the marching cubes that mesh a conditioned field.
+const FIELD_MESH_RES: u32 = 64;
+
+/// The mean validation IoU of `model` over `views` of every val object.
+fn validate(ctx: &Context, model: &ReconModel, val: &Dataset, views: &[usize]) -> Result<f64> {
+    let recon = AnyReconstructor::new(ctx, model, 32)?;
     let mut all = Vec::new();
     for c in &val.classes {
         let inputs: Vec<(usize, usize)> = (0..c.count)
             .flat_map(|n| views.iter().map(move |&v| (n, v)))
             .collect();
-        all.extend(eval::reconstruction_ious(
-            ctx,
-            &recon,
-            c,
-            &inputs,
-            eval::Voxelizer::default(),
-        )?);
+        all.extend(recon.ious(ctx, c, &inputs, eval::Voxelizer::default())?);
     }
     Ok(all.iter().sum::<f64>() / all.len().max(1) as f64)
+}
+
+/// What the training loop needs of either trainer.
+trait Training {
+    /// Runs iterations `first ..= last`; `Some(i)` when iteration `i` must run again.
+    fn run(&mut self, first: u32, last: u32) -> Result<Option<u32>>;
+    /// The log row of the last iteration: iteration, L_sil, L_col, L_lap, L_flat, total.
+    fn log(&self, iteration: u32) -> Result<[f64; 6]>;
+    fn params(&self) -> Result<Vec<f32>>;
+    fn moments(&self) -> Result<(Vec<f32>, Vec<f32>)>;
+    fn set_moments(&self, m: &[f32], v: &[f32]) -> Result<()>;
+}
+
+impl Training for ReconTrainer<'_> {
+    fn run(&mut self, first: u32, last: u32) -> Result<Option<u32>> {
+        ReconTrainer::run(self, first, last)
+    }
+    fn log(&self, iteration: u32) -> Result<[f64; 6]> {
+        let l = self.read_log(iteration)?;
+        Ok([
+            f64::from(iteration),
+            f64::from(l.silhouette),
+            f64::from(l.color),
+            f64::from(l.laplacian),
+            f64::from(l.flatten),
+            f64::from(l.total),
+        ])
+    }
+    fn params(&self) -> Result<Vec<f32>> {
+        self.read_params()
+    }
+    fn moments(&self) -> Result<(Vec<f32>, Vec<f32>)> {
+        self.read_moments()
+    }
+    fn set_moments(&self, m: &[f32], v: &[f32]) -> Result<()> {
+        self.write_moments(m, v)
+    }
+}
+
+impl Training for FieldReconTrainer<'_> {
+    fn run(&mut self, first: u32, last: u32) -> Result<Option<u32>> {
+        FieldReconTrainer::run(self, first, last)
+    }
+    fn log(&self, iteration: u32) -> Result<[f64; 6]> {
+        let l = f64::from(self.read_log(iteration)?.silhouette);
+        Ok([f64::from(iteration), l, 0.0, 0.0, 0.0, l])
+    }
+    fn params(&self) -> Result<Vec<f32>> {
+        self.read_params()
+    }
+    fn moments(&self) -> Result<(Vec<f32>, Vec<f32>)> {
+        self.read_moments()
+    }
+    fn set_moments(&self, m: &[f32], v: &[f32]) -> Result<()> {
+        self.write_moments(m, v)
+    }
 }
 
 /// `softvk train-recon`.
@@ -255,39 +390,90 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
         Ok(v) if !v.classes.is_empty() => Some(v),
         _ => None,
     };
-    let opts = TrainOptions {
-        net: NetShape {
-            image: dataset::IMAGE_SIZE as u32,
-            channels: args.channels,
-            latent: args.latent,
-            hidden: args.hidden,
-        },
+    let net = NetShape {
+        image: dataset::IMAGE_SIZE as u32,
+        channels: args.channels,
+        latent: args.latent,
+        hidden: args.hidden,
+    };
+    let lr_step = args.lr_step.map(|at| LrStep {
+        at,
+        factor: args.lr_decay,
+    });
+    let step = [
+        lr_step.map_or(0.0, |s| f64::from(s.at)),
+        lr_step.map_or(1.0, |s| s.factor),
+    ];
+    let mesh_opts = TrainOptions {
+        net,
         batch: args.batch,
         adam: AdamOptions {
-            lr: args.lr,
+            lr: args.lr.unwrap_or(1e-4),
             ..AdamOptions::default()
         },
-        lr_step: args.lr_step.map(|at| LrStep {
-            at,
-            factor: args.lr_decay,
-        }),
+        lr_step,
         sigma: args.sigma,
         color: args.color as f32,
         seed: args.seed,
         ..TrainOptions::default()
     };
+    let field_opts = FieldTrainOptions {
+        net: FieldNet {
+            net,
+            mlp: MlpLayout {
+                hidden_layers: args.field_layers,
+                width: args.field_width,
+                frequencies: args.field_freqs,
+            },
+        },
+        batch: args.batch,
+        adam: AdamOptions {
+            lr: args.lr.unwrap_or(1e-3),
+            ..AdamOptions::default()
+        },
+        lr_step,
+        probe: ProbeSettings {
+            rays_per_view: args.rays,
+            anchors: args.anchors,
+            tau: args.tau * field::field_cube().half,
+            ..field::default_probe()
+        },
+        seed: args.seed,
+    };
+    let field_layout = args.field.then_some(field_opts.net.mlp);
+    let (adam, seed, batch) = if args.field {
+        (field_opts.adam, field_opts.seed, field_opts.batch)
+    } else {
+        (mesh_opts.adam, mesh_opts.seed, mesh_opts.batch)
+    };
+    let specific = if args.field {
+        let p = &field_opts.probe;
+        [
+            f64::from(p.rays_per_view),
+            f64::from(p.anchors),
+            p.tau,
+            f64::from(p.tile_size),
+        ]
+    } else {
+        [
+            f64::from(mesh_opts.laplacian),
+            f64::from(mesh_opts.flatten),
+            f64::from(mesh_opts.color),
+            mesh_opts.sigma,
+        ]
+    };
     let settings = [
-        opts.seed as f64,
-        f64::from(opts.batch),
-        opts.adam.lr,
-        opts.adam.betas.0,
-        opts.adam.betas.1,
-        f64::from(opts.laplacian),
-        f64::from(opts.flatten),
-        f64::from(opts.color),
-        opts.sigma,
-        opts.lr_step.map_or(0.0, |s| f64::from(s.at)),
-        opts.lr_step.map_or(1.0, |s| s.factor),
+        seed as f64,
+        f64::from(batch),
+        adam.lr,
+        adam.betas.0,
+        adam.betas.1,
+        specific[0],
+        specific[1],
+        specific[2],
+        specific[3],
+        step[0],
+        step[1],
     ];
     let dir = report_dir(&args.out);
     let ckpt_path = dir.join("checkpoint.npz");
@@ -299,11 +485,16 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
                 ckpt_path.display()
             )));
         };
-        if m.net != opts.net || !same_past(&t.settings, &settings, m.iteration) {
+        if m.net != net
+            || m.field != field_layout
+            || !same_past(&t.settings, &settings, m.iteration)
+        {
             return Err(Error::Input(format!(
-                "{}: written by a run with other options (network {:?}, settings {:?})",
+                "{}: written by a run with other options (network {:?}, field {:?}, settings \
+                 {:?})",
                 ckpt_path.display(),
                 m.net,
+                m.field,
                 t.settings
             )));
         }
@@ -313,16 +504,21 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
     };
     let ctx = Context::new(&ContextOptions::from_env())?;
     let images = train_images(&data);
-    let mut trainer = ReconTrainer::new(
-        &ctx,
-        &images,
-        &opts,
-        resumed.as_ref().map(|m| &m.params[..]),
-    )?;
+    let resume_params = resumed.as_ref().map(|m| &m.params[..]);
+    let mut trainer: Box<dyn Training> = if args.field {
+        Box::new(FieldReconTrainer::new(
+            &ctx,
+            &images,
+            &field_opts,
+            resume_params,
+        )?)
+    } else {
+        Box::new(ReconTrainer::new(&ctx, &images, &mesh_opts, resume_params)?)
+    };
     let (mut log, mut vals, start) = match &resumed {
         Some(m) => {
             let t = m.train.as_ref().expect("checked above");
-            trainer.write_moments(&t.adam_m, &t.adam_v)?;
+            trainer.set_moments(&t.adam_m, &t.adam_v)?;
             (t.log.clone(), t.val.clone(), m.iteration)
         }
         None => (Vec::new(), Vec::new(), 0),
@@ -336,21 +532,26 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
             .expect("a valid template"),
     );
     bar.set_position(u64::from(start));
-    let save = |trainer: &ReconTrainer, it: u32, log: &[[f64; 6]], vals: &[[f64; 2]]| {
-        let (adam_m, adam_v) = trainer.read_moments()?;
-        ReconModel {
-            net: opts.net,
-            field: None,
-            params: trainer.read_params()?,
-            iteration: it,
-            train: Some(TrainState {
+    let model_of = |params: Vec<f32>, iteration: u32, train: Option<TrainState>| ReconModel {
+        net,
+        field: field_layout,
+        params,
+        iteration,
+        train,
+    };
+    let save = |trainer: &dyn Training, it: u32, log: &[[f64; 6]], vals: &[[f64; 2]]| {
+        let (adam_m, adam_v) = trainer.moments()?;
+        model_of(
+            trainer.params()?,
+            it,
+            Some(TrainState {
                 adam_m,
                 adam_v,
                 settings,
                 log: log.to_vec(),
                 val: vals.to_vec(),
             }),
-        }
+        )
         .save(&ckpt_path)
     };
     let mut it = start + 1;
@@ -362,32 +563,26 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
             it = stopped;
             continue;
         }
-        let l = trainer.read_log(last)?;
-        if !l.total.is_finite() {
+        let row = trainer.log(last)?;
+        if !row[5].is_finite() {
             return Err(Error::Input(format!(
                 "training diverged at iteration {last} (loss {}); try a smaller --lr",
-                l.total
+                row[5]
             )));
         }
-        log.push([
-            f64::from(last),
-            f64::from(l.silhouette),
-            f64::from(l.color),
-            f64::from(l.laplacian),
-            f64::from(l.flatten),
-            f64::from(l.total),
-        ]);
+        log.push(row);
         done = last;
         bar.set_position(u64::from(last));
-        bar.set_message(format!("L_sil {:.4}", l.silhouette));
+        bar.set_message(format!("L_sil {:.4}", row[1]));
         let interrupted = interrupt::requested().is_some();
         if last == boundary || last == args.iters {
             if let Some(val) = &val {
-                let iou = validate(&ctx, opts.net, trainer.read_params()?, val, &val_views)?;
+                let model = model_of(trainer.params()?, last, None);
+                let iou = validate(&ctx, &model, val, &val_views)?;
                 vals.push([f64::from(last), iou]);
                 let line = format!(
                     "iteration {last}: L_sil {:.4}, validation 3D IoU {iou:.4}",
-                    l.silhouette
+                    row[1]
                 );
                 if bar.is_hidden() {
                     eprintln!("{line}");
@@ -397,7 +592,7 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
             }
         }
         if last == boundary || last == args.iters || interrupted {
-            save(&trainer, last, &log, &vals)?;
+            save(trainer.as_ref(), last, &log, &vals)?;
             write_train_report(&dir, &log, &vals)?;
         }
         if interrupted {
@@ -414,14 +609,7 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
         );
         return Ok(());
     }
-    ReconModel {
-        net: opts.net,
-        field: None,
-        params: trainer.read_params()?,
-        iteration: done,
-        train: None,
-    }
-    .save(&args.out)?;
+    model_of(trainer.params()?, done, None).save(&args.out)?;
     let last = log.last().copied().unwrap_or([0.0; 6]);
     println!(
         "trained {done} iterations: L_sil {:.4}{}; model {}",
@@ -512,9 +700,13 @@ pub fn recon(args: &ReconArgs) -> Result<()> {
     let model = ReconModel::load(&args.model)?;
     let input = read_input(&args.image, model.net.image)?;
     let ctx = Context::new(&ContextOptions::from_env())?;
-    let recon = Reconstructor::new(&ctx, &model, 1)?;
-    let r = recon.reconstruct(&ctx, &input)?.remove(0);
-    let mesh = colored_mesh(r);
+    let recon = AnyReconstructor::new(&ctx, &model, 1)?;
+    let mesh = recon.mesh(&ctx, &input)?.ok_or_else(|| {
+        Error::Input(format!(
+            "{}: the field is empty for this image (no φ = 0.5 surface)",
+            args.image.display()
+        ))
+    })?;
     let stem = args
         .out
         .file_stem()
@@ -593,7 +785,11 @@ fn write_turntable(ctx: &Context, path: &Path, mesh: &Mesh, input: &[u8], size: 
 
 /// `softvk eval-recon`.
 pub fn evaluate(args: &EvalReconArgs) -> Result<()> {
-    let model = ReconModel::load(&args.model)?;
+    let models = args
+        .model
+        .iter()
+        .map(|p| ReconModel::load(p))
+        .collect::<Result<Vec<_>>>()?;
     let train = Dataset::open(&args.dataset, Split::Train)?;
     let test = Dataset::open(&args.dataset, Split::Test)?;
     if test.classes.is_empty() {
@@ -603,7 +799,21 @@ pub fn evaluate(args: &EvalReconArgs) -> Result<()> {
         )));
     }
     let ctx = Context::new(&ContextOptions::from_env())?;
-    let recon = Reconstructor::new(&ctx, &model, 32)?;
+    let recons = models
+        .iter()
+        .map(|m| AnyReconstructor::new(&ctx, m, 32))
+        .collect::<Result<Vec<_>>>()?;
+    let names: Vec<String> = args
+        .model
+        .iter()
+        .zip(&recons)
+        .map(|(p, r)| {
+            let stem = p
+                .file_stem()
+                .map_or_else(|| "model".into(), |s| s.to_string_lossy().into_owned());
+            format!("{stem} ({})", r.kind())
+        })
+        .collect();
     let views = spread_views(args.views);
     // Retrieval: every training object's silhouette per view.
     let train_objects: Vec<(&ClassData, usize)> = train
@@ -621,11 +831,15 @@ pub fn evaluate(args: &EvalReconArgs) -> Result<()> {
     // The retrieved objects' visual hulls, made when first retrieved.
     let mut train_hulls: Vec<Option<Vec<bool>>> = vec![None; train_objects.len()];
     let mut rows = Vec::new();
+    let avg = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
     for class in &test.classes {
         let inputs: Vec<(usize, usize)> = (0..class.count)
             .flat_map(|n| views.iter().map(move |&v| (n, v)))
             .collect();
-        let ours = eval::reconstruction_ious(&ctx, &recon, class, &inputs, args.voxelize.into())?;
+        let reconstructions = recons
+            .iter()
+            .map(|r| Ok(avg(&r.ious(&ctx, class, &inputs, args.voxelize.into())?)))
+            .collect::<Result<Vec<f64>>>()?;
         let mut retrieval = Vec::with_capacity(inputs.len());
         let mut retrieval_hull = Vec::with_capacity(inputs.len());
         for &(n, v) in &inputs {
@@ -657,31 +871,36 @@ pub fn evaluate(args: &EvalReconArgs) -> Result<()> {
         let hull = (0..class.count)
             .map(|n| eval::visual_hull_iou(class, n))
             .collect::<Result<Vec<f64>>>()?;
-        let avg = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
         rows.push(ScoreRow {
             class: class_label(class),
             inputs: inputs.len(),
-            reconstruction: avg(&ours),
+            reconstructions,
             retrieval: avg(&retrieval),
             retrieval_hull: avg(&retrieval_hull),
             mean_shape: avg(&mean_iou),
             visual_hull: avg(&hull),
         });
     }
-    let table = format!(
-        "{}predictions voxelized by {}\n",
-        eval::format_table(&rows),
-        match args.voxelize {
-            VoxelizeArg::Softras => "SoftRas's evaluation (surface voxels and what they enclose)",
-            VoxelizeArg::Parity => "parity (voxel centres inside)",
-        }
+    let mesh_voxelizer = match args.voxelize {
+        VoxelizeArg::Softras => "SoftRas's evaluation (surface voxels and what they enclose)",
+        VoxelizeArg::Parity => "parity (voxel centres inside)",
+    };
+    let mut table = format!(
+        "{}mesh predictions voxelized by {mesh_voxelizer}\n",
+        eval::format_table(&names, &rows),
     );
+    if recons
+        .iter()
+        .any(|r| matches!(r, AnyReconstructor::Field(_)))
+    {
+        table.push_str("field predictions: φ > 0.5 at the voxel centres\n");
+    }
     print!("{table}");
     if let Some(dir) = &args.report {
         std::fs::create_dir_all(dir)
             .map_err(|e| Error::Input(format!("cannot create {}: {e}", dir.display())))?;
         AtomicFile::create(&dir.join("table.txt"))?.commit(table.as_bytes())?;
-        write_examples(&ctx, &recon, &test, dir)?;
+        write_examples(&ctx, &names, &recons, &test, dir)?;
     }
     Ok(())
 }
@@ -694,10 +913,16 @@ fn class_label(class: &ClassData) -> String {
     }
 }
 
-/// `examples.png`: per class, the first test object's views 0 and 9 as inputs beside the
-/// reconstructions, shaded and seen from the input's camera; and each input as
+/// `examples.png`: per class, the first test object's views 0 and 9 as inputs beside each
+/// model's reconstructions, shaded and seen from the input's camera; and each input as
 /// `input-<class>-<view>.png` (what `softvk recon --image` takes).
-fn write_examples(ctx: &Context, recon: &Reconstructor, test: &Dataset, dir: &Path) -> Result<()> {
+fn write_examples(
+    ctx: &Context,
+    names: &[String],
+    recons: &[AnyReconstructor],
+    test: &Dataset,
+    dir: &Path,
+) -> Result<()> {
     const SIZE: u32 = 128;
     let size = dataset::IMAGE_SIZE as u32;
     let px = (size * size) as usize;
@@ -708,15 +933,26 @@ fn write_examples(ctx: &Context, recon: &Reconstructor, test: &Dataset, dir: &Pa
         let mut cells: Vec<(String, Vec<[f32; 4]>)> = Vec::new();
         for v in [0usize, 9] {
             let input = class.image(0, v);
-            let mesh = colored_mesh(recon.reconstruct(ctx, input)?.remove(0));
-            let shaded = renderer.render_views(
-                ctx,
-                &mesh,
-                &[dataset::view_camera(v)],
-                &Lighting::default(),
-                &settings,
-                Method::default(),
-            )?;
+            let mut shaded = Vec::with_capacity(recons.len());
+            for recon in recons {
+                // An empty field shows as an empty (black) cell.
+                let images = match recon.mesh(ctx, input)? {
+                    Some(mesh) => {
+                        renderer
+                            .render_views(
+                                ctx,
+                                &mesh,
+                                &[dataset::view_camera(v)],
+                                &Lighting::default(),
+                                &settings,
+                                Method::default(),
+                            )?
+                            .images
+                    }
+                    None => vec![[0.0; 4]; (SIZE * SIZE) as usize],
+                };
+                shaded.push(images);
+            }
             let name = format!("input-{}-{v}.png", class.class_id);
             let rgba: Vec<u8> = (0..px)
                 .flat_map(|p| [0, 1, 2, 3].map(|c| input[c * px + p]))
@@ -730,7 +966,9 @@ fn write_examples(ctx: &Context, recon: &Reconstructor, test: &Dataset, dir: &Pa
                 ),
                 upscale(input, size, SIZE),
             ));
-            cells.push(("reconstruction".into(), shaded.images));
+            for (name, images) in names.iter().zip(shaded) {
+                cells.push((name.clone(), images));
+            }
         }
         let refs: Vec<(&str, &[[f32; 4]])> =
             cells.iter().map(|(n, i)| (n.as_str(), &i[..])).collect();

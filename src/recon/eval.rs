@@ -105,8 +105,8 @@ pub struct ScoreRow {
     pub class: String,
     /// Test inputs scored (objects × views).
     pub inputs: usize,
-    /// The network's reconstructions.
-    pub reconstruction: f64,
+    /// Each model's reconstructions (the table's columns after `inputs`).
+    pub reconstructions: Vec<f64>,
     /// The retrieval baseline.
     pub retrieval: f64,
     /// Retrieval answering with the retrieved object's visual hull instead of its voxels: what
@@ -119,47 +119,59 @@ pub struct ScoreRow {
     pub visual_hull: f64,
 }
 
-/// The table as text: one row per class, then the mean over classes.
-pub fn format_table(rows: &[ScoreRow]) -> String {
+/// The table as text: a column per model (`models` names them, in the order of
+/// [`ScoreRow::reconstructions`]), then the baselines; one row per class, then the mean over
+/// classes.
+pub fn format_table(models: &[String], rows: &[ScoreRow]) -> String {
     use std::fmt::Write;
+    let widths: Vec<usize> = models.iter().map(|m| m.chars().count().max(14)).collect();
     let mut s = String::new();
+    let _ = write!(s, "{:<22} {:>7}", "class", "inputs");
+    for (m, w) in models.iter().zip(&widths) {
+        let _ = write!(s, " {m:>w$}");
+    }
     let _ = writeln!(
         s,
-        "{:<22} {:>7} {:>14} {:>10} {:>15} {:>11} {:>12}",
-        "class",
-        "inputs",
-        "reconstruction",
-        "retrieval",
-        "retrieval hull",
-        "mean shape",
-        "visual hull"
+        " {:>10} {:>15} {:>11} {:>12}",
+        "retrieval", "retrieval hull", "mean shape", "visual hull"
     );
-    for r in rows {
+    let line = |s: &mut String, class: &str, inputs: usize, recon: &[f64], rest: [f64; 4]| {
+        let _ = write!(s, "{class:<22} {inputs:>7}");
+        for (r, w) in recon.iter().zip(&widths) {
+            let _ = write!(s, " {r:>w$.4}");
+        }
         let _ = writeln!(
             s,
-            "{:<22} {:>7} {:>14.4} {:>10.4} {:>15.4} {:>11.4} {:>12.4}",
-            r.class,
+            " {:>10.4} {:>15.4} {:>11.4} {:>12.4}",
+            rest[0], rest[1], rest[2], rest[3]
+        );
+    };
+    for r in rows {
+        line(
+            &mut s,
+            &r.class,
             r.inputs,
-            r.reconstruction,
-            r.retrieval,
-            r.retrieval_hull,
-            r.mean_shape,
-            r.visual_hull
+            &r.reconstructions,
+            [r.retrieval, r.retrieval_hull, r.mean_shape, r.visual_hull],
         );
     }
     if !rows.is_empty() {
         let n = rows.len() as f64;
-        let mean = |f: fn(&ScoreRow) -> f64| rows.iter().map(f).sum::<f64>() / n;
-        let _ = writeln!(
-            s,
-            "{:<22} {:>7} {:>14.4} {:>10.4} {:>15.4} {:>11.4} {:>12.4}",
+        let mean = |f: &dyn Fn(&ScoreRow) -> f64| rows.iter().map(f).sum::<f64>() / n;
+        let recon: Vec<f64> = (0..models.len())
+            .map(|k| mean(&|r: &ScoreRow| r.reconstructions.get(k).copied().unwrap_or(f64::NAN)))
+            .collect();
+        line(
+            &mut s,
             "mean",
             rows.iter().map(|r| r.inputs).sum::<usize>(),
-            mean(|r| r.reconstruction),
-            mean(|r| r.retrieval),
-            mean(|r| r.retrieval_hull),
-            mean(|r| r.mean_shape),
-            mean(|r| r.visual_hull)
+            &recon,
+            [
+                mean(&|r| r.retrieval),
+                mean(&|r| r.retrieval_hull),
+                mean(&|r| r.mean_shape),
+                mean(&|r| r.visual_hull),
+            ],
         );
     }
     s
@@ -258,6 +270,27 @@ pub fn reconstruction_ious(
                 &voxelizer.voxelize(&mesh.positions, &faces)?,
                 class.voxels_of(n),
             )?);
+        }
+    }
+    Ok(ious)
+}
+
+/// As [`reconstruction_ious`] for a conditioned field: each input's field occupied at the voxel
+/// centres ([`super::field::FieldReconstructor::occupancy`]) against the object's voxels.
+pub fn field_reconstruction_ious(
+    ctx: &crate::gpu::Context,
+    recon: &super::field::FieldReconstructor,
+    class: &super::dataset::ClassData,
+    inputs: &[(usize, usize)],
+) -> Result<Vec<f64>> {
+    let mut ious = Vec::with_capacity(inputs.len());
+    for chunk in inputs.chunks(recon.capacity() as usize) {
+        let images: Vec<u8> = chunk
+            .iter()
+            .flat_map(|&(n, v)| class.image(n, v).iter().copied())
+            .collect();
+        for (occ, &(n, _)) in recon.occupancy(ctx, &images)?.iter().zip(chunk) {
+            ious.push(voxel_iou(occ, class.voxels_of(n))?);
         }
     }
     Ok(ious)

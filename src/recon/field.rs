@@ -153,6 +153,10 @@ impl FieldNet {
     }
 }
 
+/// Most objects per batch: every slot records its own probing (about 14 dispatches) into the
+/// iteration's one gated region, which holds [`crate::gpu::gate::GATE_SLOTS`] (512).
+pub const MAX_BATCH: u32 = 32;
+
 /// What training a conditioned field needs besides the data.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FieldTrainOptions {
@@ -223,11 +227,15 @@ impl FieldTrainOptions {
         }
     }
 
-    /// [`Error::Input`] for a zero batch, a bad step, Adam options, probe settings, a probe
+    /// [`Error::Input`] for a batch of 0 or over [`MAX_BATCH`], a bad step, Adam options, probe settings, a probe
     /// cube other than [`field_cube`] or a regularizer weight (not supported here).
     pub fn validate(&self) -> Result<()> {
-        if self.batch == 0 {
-            return Err(Error::Input("a batch of 0 objects".into()));
+        if !(1..=MAX_BATCH).contains(&self.batch) {
+            return Err(Error::Input(format!(
+                "a conditioned field's batch of {} objects: 1 to {MAX_BATCH} (an iteration's \
+                 gated dispatches must fit the gate)",
+                self.batch
+            )));
         }
         if let Some(s) = self.lr_step {
             if s.at == 0 || !(s.factor.is_finite() && s.factor >= 0.0) {
@@ -860,7 +868,9 @@ impl FieldReconstructor {
     }
 
     /// The 32³ occupancy of each image's field in the dataset's voxel order: φ > 0.5 at the
-    /// voxel centres ([`super::dataset::voxel_center`]), the ground truth's convention.
+    /// voxel centres ([`super::dataset::voxel_center`]), the ground truth's convention. (That is
+    /// the marching-cubes mesh of φ on the lattice of the voxel centres voxelized by centres,
+    /// as mesh predictions are: its inside nodes are those with φ > 0.5.)
     pub fn occupancy(&self, ctx: &Context, images: &[u8]) -> Result<Vec<Vec<bool>>> {
         use super::dataset::{VOXEL_RES, voxel_center};
         let r = VOXEL_RES;
