@@ -910,3 +910,49 @@ impl FieldReconstructor {
         self.capacity
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn codes_replace_exactly_the_hidden_biases() {
+        let net = FieldNet {
+            net: NetShape {
+                image: 16,
+                channels: [2, 3, 4],
+                latent: 8,
+                hidden: 8,
+            },
+            mlp: MlpLayout {
+                hidden_layers: 2,
+                width: 8,
+                frequencies: 1,
+            },
+        };
+        // E = 9: layer 0 is 8 × 9 weights then 8 biases; layer 1 is 8 × 8 then 8; the output
+        // 8 + 1.
+        assert_eq!(net.code_ranges(), vec![72..80, 144..152]);
+        assert_eq!(net.code_len(), 16);
+        let shared: Vec<f32> = (0..net.mlp.param_count()).map(|i| i as f32).collect();
+        let code: Vec<f32> = (0..16).map(|i| -1.0 - i as f32).collect();
+        let p = net.object_field(&shared, &code).unwrap();
+        for (i, (&a, &b)) in p.iter().zip(&shared).enumerate() {
+            match i {
+                72..80 => assert_eq!(a, code[i - 72]),
+                144..152 => assert_eq!(a, code[8 + i - 144]),
+                _ => assert_eq!(a, b),
+            }
+        }
+        assert!(net.object_field(&shared, &code[1..]).is_err());
+        let e = net.encoder_param_count().unwrap();
+        assert_eq!(net.param_count().unwrap(), e + net.mlp.param_count() as u64);
+        assert_eq!(
+            net.init(5).unwrap().len() as u64,
+            net.param_count().unwrap()
+        );
+        // The encoder's head gives the codes.
+        let layers = net.encoder_layers().unwrap();
+        assert_eq!(layers.last().unwrap().output_len(), 16);
+    }
+}
