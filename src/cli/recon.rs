@@ -141,11 +141,11 @@ pub struct TrainReconArgs {
     pub field_layers: u32,
 
     /// With --field: the MLP's width.
-    #[arg(long, value_name = "W", default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=256))]
+    #[arg(long, value_name = "W", default_value_t = 32, value_parser = clap::value_parser!(u32).range(1..=256))]
     pub field_width: u32,
 
     /// With --field: the MLP's positional-encoding frequencies.
-    #[arg(long, value_name = "F", default_value_t = 4, value_parser = clap::value_parser!(u32).range(0..=16))]
+    #[arg(long, value_name = "F", default_value_t = 3, value_parser = clap::value_parser!(u32).range(0..=16))]
     pub field_freqs: u32,
 
     /// With --field: probing rays per view (all 24 views) per object and iteration.

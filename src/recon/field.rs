@@ -78,14 +78,15 @@ pub struct FieldNet {
 }
 
 impl Default for FieldNet {
-    /// The default encoder and a 3 × 64 MLP with 4 encoding frequencies.
+    /// The default encoder and a 3 × 32 MLP with 3 encoding frequencies (RESULTS.md: a wider
+    /// MLP's per-point loops cost llvmpipe 2.5× the iteration at 3 × 64).
     fn default() -> Self {
         Self {
             net: NetShape::default(),
             mlp: MlpLayout {
                 hidden_layers: 3,
-                width: 64,
-                frequencies: 4,
+                width: 32,
+                frequencies: 3,
             },
         }
     }
