@@ -177,13 +177,13 @@ pub struct FieldTrainOptions {
 }
 
 impl Default for FieldTrainOptions {
-    /// Batches of 8, Adam at 1e-3, and per object and iteration 64 rays in each of the 24
-    /// views and 2 048 anchors of radius τ = 0.045 half-edges on 8-pixel tiles; no geometric
-    /// regularizer.
+    /// Batches of 16 (as `train-recon`'s), Adam at 1e-3, and per object and iteration 64 rays
+    /// in each of the 24 views and 2 048 anchors of radius τ = 0.045 half-edges on 8-pixel
+    /// tiles; no geometric regularizer.
     fn default() -> Self {
         Self {
             net: FieldNet::default(),
-            batch: 8,
+            batch: 16,
             adam: AdamOptions {
                 lr: 1e-3,
                 ..AdamOptions::default()
