@@ -5,15 +5,11 @@
 
 mod common;
 
-use softvk::camera::Camera;
 use softvk::field::cpu as field_cpu;
 use softvk::field::voxel::field_occupancy;
 use softvk::field::{FieldKind, MlpLayout};
 use softvk::fit::AdamOptions;
-use softvk::lighting::Lighting;
-use softvk::mesh::Mesh;
-use softvk::raster::gpu::{Method, Renderer};
-use softvk::raster::reference::RasterSettings;
+use softvk::recon::Reconstructor;
 use softvk::recon::dataset::{occupancy_to_nmr, voxel_cube};
 use softvk::recon::field::{
     FieldNet, FieldReconTrainer, FieldReconstructor, FieldTrainOptions, MAX_BATCH, default_probe,
@@ -21,53 +17,12 @@ use softvk::recon::field::{
 };
 use softvk::recon::model::ReconModel;
 use softvk::recon::train::{LrStep, NetShape, TrainImages, VIEWS};
-use softvk::recon::{Reconstructor, view_camera};
 
 const SIZE: u32 = 16;
 
-/// Two classes of one object each, every view rendered by softvk at 16²: a box and a flat
-/// slab (as `tests/recon_train.rs`).
+/// Two classes of one object each at 16² (a box and a flat slab).
 fn data(ctx: &softvk::gpu::Context) -> TrainImages {
-    let renderer = Renderer::new(ctx).unwrap();
-    let settings = RasterSettings {
-        width: SIZE,
-        height: SIZE,
-        sigma: 1e-5,
-        ..RasterSettings::default()
-    };
-    let cams: Vec<Camera> = (0..VIEWS as usize).map(view_camera).collect();
-    let mut images = Vec::new();
-    for mesh in [
-        Mesh::cuboid([0.3, 0.2, 0.25]),
-        Mesh::cuboid([0.4, 0.08, 0.3]),
-    ] {
-        let frames = renderer
-            .render_views(
-                ctx,
-                &mesh,
-                &cams,
-                &Lighting::default(),
-                &settings,
-                Method::default(),
-            )
-            .unwrap();
-        let px = (SIZE * SIZE) as usize;
-        for v in 0..VIEWS as usize {
-            let img = frames.image(v);
-            for c in 0..4 {
-                images.extend(
-                    img[..px]
-                        .iter()
-                        .map(|p| (p[c].clamp(0.0, 1.0) * 255.0).round() as u8),
-                );
-            }
-        }
-    }
-    TrainImages {
-        images,
-        classes: vec![("box".into(), 0..1), ("slab".into(), 1..2)],
-        size: SIZE,
-    }
+    common::recon::two_objects(ctx, SIZE)
 }
 
 fn options() -> FieldTrainOptions {

@@ -4,15 +4,12 @@
 
 mod common;
 
-use softvk::camera::Camera;
 use softvk::fit::flatten::{self, FlattenEdges};
 use softvk::fit::laplacian::{self, Adjacency};
 use softvk::fit::{AdamOptions, silhouette};
 use softvk::lighting::Lighting;
-use softvk::mesh::Mesh;
 use softvk::nn::cpu as nn_cpu;
-use softvk::raster::gpu::{Method, Renderer};
-use softvk::raster::reference::{self, RasterSettings};
+use softvk::raster::reference;
 use softvk::raster::reference_grad;
 use softvk::recon::batch::{self, BatchShape};
 use softvk::recon::decode;
@@ -25,49 +22,9 @@ use softvk::recon::view_rotation;
 
 const SIZE: u32 = 16;
 
-/// Two classes of one object each, every view rendered by softvk at 16²: a box and a flat
-/// slab, so that the two differ from every side.
+/// Two classes of one object each at 16² (a box and a flat slab).
 fn data(ctx: &softvk::gpu::Context) -> TrainImages {
-    let renderer = Renderer::new(ctx).unwrap();
-    let settings = RasterSettings {
-        width: SIZE,
-        height: SIZE,
-        sigma: 1e-5,
-        ..RasterSettings::default()
-    };
-    let cams: Vec<Camera> = (0..VIEWS as usize).map(view_camera).collect();
-    let mut images = Vec::new();
-    for mesh in [
-        Mesh::cuboid([0.3, 0.2, 0.25]),
-        Mesh::cuboid([0.4, 0.08, 0.3]),
-    ] {
-        let frames = renderer
-            .render_views(
-                ctx,
-                &mesh,
-                &cams,
-                &Lighting::default(),
-                &settings,
-                Method::default(),
-            )
-            .unwrap();
-        let px = (SIZE * SIZE) as usize;
-        for v in 0..VIEWS as usize {
-            let img = frames.image(v);
-            for c in 0..4 {
-                images.extend(
-                    img[..px]
-                        .iter()
-                        .map(|p| (p[c].clamp(0.0, 1.0) * 255.0).round() as u8),
-                );
-            }
-        }
-    }
-    TrainImages {
-        images,
-        classes: vec![("box".into(), 0..1), ("slab".into(), 1..2)],
-        size: SIZE,
-    }
+    common::recon::two_objects(ctx, SIZE)
 }
 
 fn options() -> TrainOptions {

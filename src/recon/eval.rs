@@ -260,10 +260,7 @@ pub fn reconstruction_ious(
     let faces = super::train::template().faces;
     let mut ious = Vec::with_capacity(inputs.len());
     for chunk in inputs.chunks(recon.capacity() as usize) {
-        let images: Vec<u8> = chunk
-            .iter()
-            .flat_map(|&(n, v)| class.image(n, v).iter().copied())
-            .collect();
+        let images = input_images(class, chunk);
         let meshes = recon.reconstruct(ctx, &images)?;
         for (mesh, &(n, _)) in meshes.iter().zip(chunk) {
             ious.push(voxel_iou(
@@ -273,6 +270,14 @@ pub fn reconstruction_ious(
         }
     }
     Ok(ious)
+}
+
+/// The images of `(object, view)` inputs of `class`, one after another.
+fn input_images(class: &super::dataset::ClassData, inputs: &[(usize, usize)]) -> Vec<u8> {
+    inputs
+        .iter()
+        .flat_map(|&(n, v)| class.image(n, v).iter().copied())
+        .collect()
 }
 
 /// As [`reconstruction_ious`] for a conditioned field: each input's field occupied at the voxel
@@ -285,10 +290,7 @@ pub fn field_reconstruction_ious(
 ) -> Result<Vec<f64>> {
     let mut ious = Vec::with_capacity(inputs.len());
     for chunk in inputs.chunks(recon.capacity() as usize) {
-        let images: Vec<u8> = chunk
-            .iter()
-            .flat_map(|&(n, v)| class.image(n, v).iter().copied())
-            .collect();
+        let images = input_images(class, chunk);
         for (occ, &(n, _)) in recon.occupancy(ctx, &images)?.iter().zip(chunk) {
             ious.push(voxel_iou(occ, class.voxels_of(n))?);
         }

@@ -55,7 +55,7 @@ use super::batch::{BatchBuffers, BatchGather, BatchShape};
 use super::dataset::view_camera;
 use super::decode::view_rotation;
 use super::model::ReconModel;
-use super::train::{LrStep, NetShape, TrainImages, VIEWS, schedule_entry, view_azimuth};
+use super::train::{LrStep, NetShape, Schedule, TrainImages, VIEWS, schedule_entry, view_azimuth};
 
 /// The cube the conditioned field lives in: the dataset's objects fill `[−0.5, 0.5]³`, its
 /// voxel centres reach ±0.5 ([`super::dataset::voxel_cube`]); a margin keeps the uniform anchors
@@ -321,8 +321,7 @@ pub struct FieldReconTrainer<'c> {
     gather: BatchGather,
     images: Buffer,
     view_table: Buffer,
-    schedule: Buffer,
-    schedule_upload: Buffer,
+    schedule: Schedule,
     input: Buffer,
     targets: Buffer,
     rotations: Buffer,
@@ -405,13 +404,16 @@ impl<'c> FieldReconTrainer<'c> {
         let first: Vec<u32> = (0..opts.batch)
             .map(|s| schedule_entry(opts.seed, 1, s, &data.classes)[0])
             .collect();
-        let mut counted = 0u64;
-        for (prober, &j) in probers.iter().zip(&first) {
-            let o = &objects[j as usize];
-            ctx.submit_and_wait(|rec| {
+        ctx.submit_and_wait(|rec| {
+            for (prober, &j) in probers.iter().zip(&first) {
+                let o = &objects[j as usize];
                 o.sampler.record(rec, &o.gpu, 1)?;
-                prober.record_count(rec, &o.gpu, o.sampler.anchors().whole())
-            })?;
+                prober.record_count(rec, &o.gpu, o.sampler.anchors().whole())?;
+            }
+            Ok(())
+        })?;
+        let mut counted = 0u64;
+        for prober in &probers {
             let total = ctx.read_buffer::<u32>(prober.total_buffer().buffer, 0, 1)?[0];
             counted = counted.max(u64::from(total));
         }
@@ -448,12 +450,7 @@ impl<'c> FieldReconTrainer<'c> {
                 &super::batch::cpu::pack_bytes(&data.images),
             )?,
             view_table: ctx.upload_buffer("recon view rotations", &table)?,
-            schedule: device("recon schedule", 4 * b)?,
-            schedule_upload: ctx.create_buffer(
-                "recon schedule (upload)",
-                16 * b,
-                MemoryKind::Upload,
-            )?,
+            schedule: Schedule::new(ctx, opts.batch)?,
             input: device("recon input", 4 * b * px)?,
             targets: device("recon targets", 2 * b * px)?,
             rotations: device("recon rotations", 4 * b)?,
@@ -503,7 +500,7 @@ impl<'c> FieldReconTrainer<'c> {
                 row,
                 BatchBuffers {
                     images: self.images.whole(),
-                    schedule: self.schedule.whole(),
+                    schedule: self.schedule.buffer().whole(),
                     view_rotations: self.view_table.whole(),
                     input: self.input.whole(),
                     targets: self.targets.whole(),
@@ -637,26 +634,11 @@ impl<'c> FieldReconTrainer<'c> {
             )));
         }
         let b = self.opts.batch;
-        let entries: Vec<[u32; 4]> = (first..=last)
-            .flat_map(|it| (0..b).map(move |s| (it, s)))
-            .map(|(it, s)| schedule_entry(self.opts.seed, it, s, &self.classes))
-            .collect();
-        let bytes: &[u8] = bytemuck::cast_slice(&entries);
-        let size = bytes.len() as u64;
-        if size > self.schedule.size() {
-            self.schedule = self
-                .ctx
-                .create_buffer("recon schedule", size, MemoryKind::Device)?;
-            self.schedule_upload =
-                self.ctx
-                    .create_buffer("recon schedule (upload)", size, MemoryKind::Upload)?;
-        }
-        self.schedule_upload
-            .mapped_mut()
-            .ok_or_else(|| Error::Limit("upload memory is not host-mapped".into()))?[..bytes.len()]
-            .copy_from_slice(bytes);
+        let entries =
+            self.schedule
+                .stage(self.ctx, self.opts.seed, &self.classes, b, first..=last)?;
         self.ctx.submit_and_wait(|rec| {
-            rec.copy(&self.schedule_upload, 0, &self.schedule, 0, size);
+            self.schedule.record_copy(rec);
             let mut gate = self.gate.borrow_mut();
             gate.reset();
             for it in first..=last {

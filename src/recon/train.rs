@@ -283,6 +283,65 @@ pub fn schedule_entry(
     ]
 }
 
+/// The batch schedule on the GPU: a submission's rows ([`schedule_entry`]) are staged in
+/// host-visible memory and copied to the device buffer at its start (no submission of their
+/// own). Both trainers use it.
+pub(crate) struct Schedule {
+    device: Buffer,
+    upload: Buffer,
+    /// Bytes staged for the next copy.
+    staged: u64,
+}
+
+impl Schedule {
+    /// Room for one iteration of `batch` slots (it grows as submissions need).
+    pub(crate) fn new(ctx: &Context, batch: u32) -> Result<Self> {
+        let bytes = 16 * u64::from(batch.max(1));
+        Ok(Self {
+            device: ctx.create_buffer("recon schedule", bytes, MemoryKind::Device)?,
+            upload: ctx.create_buffer("recon schedule (upload)", bytes, MemoryKind::Upload)?,
+            staged: 0,
+        })
+    }
+
+    /// Stages the rows of `iterations` (`batch` slots each, iteration-major) and returns them.
+    pub(crate) fn stage(
+        &mut self,
+        ctx: &Context,
+        seed: u64,
+        classes: &[(String, Range<u32>)],
+        batch: u32,
+        iterations: std::ops::RangeInclusive<u32>,
+    ) -> Result<Vec<[u32; 4]>> {
+        let entries: Vec<[u32; 4]> = iterations
+            .flat_map(|it| (0..batch).map(move |s| (it, s)))
+            .map(|(it, s)| schedule_entry(seed, it, s, classes))
+            .collect();
+        let bytes: &[u8] = bytemuck::cast_slice(&entries);
+        let size = bytes.len() as u64;
+        if size > self.device.size() {
+            self.device = ctx.create_buffer("recon schedule", size, MemoryKind::Device)?;
+            self.upload = ctx.create_buffer("recon schedule (upload)", size, MemoryKind::Upload)?;
+        }
+        self.upload
+            .mapped_mut()
+            .ok_or_else(|| Error::Limit("upload memory is not host-mapped".into()))?[..bytes.len()]
+            .copy_from_slice(bytes);
+        self.staged = size;
+        Ok(entries)
+    }
+
+    /// Records the copy of the staged rows to the device buffer.
+    pub(crate) fn record_copy(&self, rec: &mut Recorder<'_>) {
+        rec.copy(&self.upload, 0, &self.device, 0, self.staged);
+    }
+
+    /// The rows on the device (what the batch gather reads).
+    pub(crate) fn buffer(&self) -> &Buffer {
+        &self.device
+    }
+}
+
 /// The losses of the last iteration a submission ran.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TrainLog {
@@ -324,10 +383,7 @@ pub struct ReconTrainer<'c> {
     gather: BatchGather,
     images: Buffer,
     view_table: Buffer,
-    schedule: Buffer,
-    /// Host-visible: a submission's rows are written here and copied to `schedule` at its
-    /// start (no submission of their own).
-    schedule_upload: Buffer,
+    schedule: Schedule,
     input: Buffer,
     targets: Buffer,
     target_images: Buffer,
@@ -451,12 +507,7 @@ impl<'c> ReconTrainer<'c> {
                 &super::batch::cpu::pack_bytes(&data.images),
             )?,
             view_table: ctx.upload_buffer("recon view rotations", &table)?,
-            schedule: device("recon schedule", 4 * b)?,
-            schedule_upload: ctx.create_buffer(
-                "recon schedule (upload)",
-                16 * b,
-                MemoryKind::Upload,
-            )?,
+            schedule: Schedule::new(ctx, opts.batch)?,
             input: device("recon input", 4 * b * px)?,
             targets: device("recon targets", u64::from(COPIES) * b * px)?,
             target_images: device("recon target images", 4 * u64::from(COPIES) * b * px)?,
@@ -512,7 +563,7 @@ impl<'c> ReconTrainer<'c> {
                 row,
                 BatchBuffers {
                     images: self.images.whole(),
-                    schedule: self.schedule.whole(),
+                    schedule: self.schedule.buffer().whole(),
                     view_rotations: self.view_table.whole(),
                     input: self.input.whole(),
                     targets: self.targets.whole(),
@@ -646,26 +697,15 @@ impl<'c> ReconTrainer<'c> {
                 "iterations {first}..={last}: they count from 1"
             )));
         }
-        let entries: Vec<[u32; 4]> = (first..=last)
-            .flat_map(|it| (0..self.opts.batch).map(move |s| (it, s)))
-            .map(|(it, s)| schedule_entry(self.opts.seed, it, s, &self.classes))
-            .collect();
-        let bytes: &[u8] = bytemuck::cast_slice(&entries);
-        let size = bytes.len() as u64;
-        if size > self.schedule.size() {
-            self.schedule = self
-                .ctx
-                .create_buffer("recon schedule", size, MemoryKind::Device)?;
-            self.schedule_upload =
-                self.ctx
-                    .create_buffer("recon schedule (upload)", size, MemoryKind::Upload)?;
-        }
-        self.schedule_upload
-            .mapped_mut()
-            .ok_or_else(|| Error::Limit("upload memory is not host-mapped".into()))?[..bytes.len()]
-            .copy_from_slice(bytes);
+        self.schedule.stage(
+            self.ctx,
+            self.opts.seed,
+            &self.classes,
+            self.opts.batch,
+            first..=last,
+        )?;
         self.ctx.submit_and_wait(|rec| {
-            rec.copy(&self.schedule_upload, 0, &self.schedule, 0, size);
+            self.schedule.record_copy(rec);
             let mut gate = self.gate.borrow_mut();
             gate.reset();
             for it in first..=last {
