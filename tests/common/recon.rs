@@ -49,6 +49,6 @@ pub fn two_objects(ctx: &softvk::gpu::Context, size: u32) -> TrainImages {
     TrainImages {
         images,
         classes: vec![("box".into(), 0..1), ("slab".into(), 1..2)],
-        size: size,
+        size,
     }
 }
