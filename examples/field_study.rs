@@ -24,9 +24,12 @@
 //! (grid|mlp), `res`, `layers`, `width`, `freqs`, `lr`, `b1`, `b2`, `init` (initial logit),
 //! `seed`, `log`, `margin` (auto cube), and the probe settings in cube units: `rays`,
 //! `ray_uniform`, `contour_sigma`, `anchors`, `anchor_uniform`, `anchor_sigma`, `hull_res`,
-//! `tau`, `agg` (max|lse|union), `temp`, `boundary` (0|1), `tile`, `geo_n`, `geo_uniform`,
-//! `geo_delta`, `geo_dn`, `geo_eps`, `geo_p`, `lambda`; `size` (image side), `va` (viewing angle, degrees; 15), `eval_res`
-//! (IoU grid), `mc` (write the marching-cubes OBJ and preview to this folder).
+//! `tau`, `tau_out` (the outside rays' radius), `agg` (max|lse|union), `temp`, `boundary` (0|1),
+//! `tile`, `geo_n`, `geo_uniform`, `geo_delta`, `geo_dn`, `geo_eps`, `geo_p`, `lambda`; `size`
+//! (image side), `va` (viewing angle, degrees; 15), `eval_res` (IoU grid), `mc` (write the
+//! marching-cubes OBJ and preview to this folder), `diag=1` (where the fit differs from the
+//! object, split by the visual hull: [`diagnose`]), `stages=TAU:ITERS,...` (τ in stages, each a
+//! fresh fitter starting from the previous stage's field; the other keys as usual).
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -98,6 +101,10 @@ fn options(keys: &Keys) -> FieldFitOptions {
             anchor_sigma: get(keys, "anchor_sigma", p.anchor_sigma),
             hull_resolution: get(keys, "hull_res", p.hull_resolution),
             tau: get(keys, "tau", p.tau),
+            tau_outside: keys
+                .get("tau_out")
+                .map(|v| v.parse().expect("tau_out: a number"))
+                .or(p.tau_outside),
             aggregate,
             temperature: get(keys, "temp", p.temperature),
             boundary_aware: get(keys, "boundary", u8::from(p.boundary_aware)) != 0,
@@ -256,6 +263,48 @@ fn run_fit(ctx: &Context, p: &Problem, keys: &Keys, label: &str) -> f64 {
     let verbose = get(keys, "verbose", 1u8) != 0;
     let load_before = load();
     let t = Instant::now();
+    if let Some(stages) = keys.get("stages") {
+        // τ in stages: each stage a fresh fitter (fresh Adam moments) from the last one's field,
+        // its iterations numbered on from the last one's so that its samples are new.
+        let mut field = None::<softvk::field::Field>;
+        let mut it0 = 0;
+        for stage in stages.split(',') {
+            let (tau, n) = stage.split_once(':').expect("stages=TAU:ITERS,...");
+            let mut o = options(keys);
+            o.probe.tau = tau.parse().expect("stages: a number for τ");
+            o.probe = scaled_to_cube(&o.probe, &p.cube);
+            let n: u32 = n.parse().expect("stages: a number of iterations");
+            let mut f = softvk::fit::field_fit::FieldFitter::new(ctx, &p.targets, &o).unwrap();
+            if let Some(before) = &field {
+                f.field()
+                    .set_params(ctx, &before.read_params(ctx).unwrap())
+                    .unwrap();
+            }
+            let mut first = it0 + 1;
+            while first <= it0 + n {
+                let last = (first + 49).min(it0 + n);
+                // `Some(i)`: the entry buffers grew at iteration i, run again from there.
+                first = f.run(ctx, first, last, None).unwrap().unwrap_or(last + 1);
+            }
+            it0 += n;
+            field = Some(f.into_field());
+        }
+        let field = field.expect("stages: at least one");
+        let occ = voxel::field_occupancy(ctx, &field, &p.cube, p.object.res).unwrap();
+        let iou = voxel::iou(&occ, &p.object).unwrap();
+        let hull_iou = voxel::iou(&p.hull, &p.object).unwrap();
+        println!(
+            "{} {label}: 3D IoU {iou:.4} (hull {hull_iou:.4}, ratio {:.3}) | {} its, {:.1} s",
+            p.name,
+            iou / hull_iou,
+            it0,
+            t.elapsed().as_secs_f64()
+        );
+        if get(keys, "diag", 0u8) != 0 {
+            diagnose(p, &occ);
+        }
+        return iou;
+    }
     let r = fit_field(ctx, &p.targets, &opts, |l| {
         if verbose {
             eprintln!(
@@ -287,6 +336,9 @@ fn run_fit(ctx: &Context, p: &Problem, keys: &Keys, label: &str) -> f64 {
         last.map_or(f32::NAN, |l| l.geo),
         load()
     );
+    if get(keys, "diag", 0u8) != 0 {
+        diagnose(p, &occ);
+    }
     if let Some(dir) = keys.get("mc") {
         let dir = std::path::Path::new(dir);
         std::fs::create_dir_all(dir).unwrap();
@@ -310,6 +362,101 @@ fn run_fit(ctx: &Context, p: &Problem, keys: &Keys, label: &str) -> f64 {
         softvk::fit::report::write_png(&dir.join(format!("{}-{label}.png", p.name)), &img).unwrap();
     }
     iou
+}
+
+/// Where a fitted occupancy differs from the object, split by the visual hull: what the fit adds
+/// outside the hull, and what it carves from the hull (rightly: not object; wrongly: object).
+fn diagnose(p: &Problem, fit: &Occupancy) {
+    let res = fit.res;
+    let centre = |i: usize| {
+        let i = i as u32;
+        glam::DVec3::from(fit.center([i % res, (i / res) % res, i / (res * res)]))
+    };
+    let (mut tp, mut fp_out, mut fp_in, mut fn_in, mut fn_out, mut carved_right) =
+        (0, 0, 0, 0, 0, 0);
+    for i in 0..fit.inside.len() {
+        let (f, o, h) = (fit.inside[i], p.object.inside[i], p.hull.inside[i]);
+        match (f, o, h) {
+            (true, true, _) => tp += 1,
+            (true, false, false) => fp_out += 1,
+            (true, false, true) => fp_in += 1,
+            (false, true, true) => fn_in += 1,
+            (false, true, false) => fn_out += 1,
+            (false, false, true) => carved_right += 1,
+            _ => {}
+        }
+    }
+    // How far outside the silhouettes the fit's voxels outside the hull are: per voxel, the
+    // largest distance (pixels) from its projection to the nearest inside pixel centre over the
+    // views that veto it; a histogram by that distance.
+    let (w, h) = (p.targets.width, p.targets.height);
+    let inside_px: Vec<Vec<(f64, f64)>> = (0..p.targets.views.len())
+        .map(|v| {
+            let m = &p.targets.masks[v * (w * h) as usize..(v + 1) * (w * h) as usize];
+            (0..w * h)
+                .filter(|&i| m[i as usize] > 0.5)
+                .map(|i| softvk::camera::pixel_center(i % w, i / w, w, h))
+                .collect()
+        })
+        .collect();
+    let mut hist = [0usize; 6];
+    for i in 0..fit.inside.len() {
+        if !(fit.inside[i] && !p.object.inside[i] && !p.hull.inside[i]) {
+            continue;
+        }
+        let c = centre(i);
+        let mut worst = 0.0f64;
+        for (v, cam) in p.targets.cameras.iter().enumerate() {
+            let [x, y, _] = cam.to_screen(c);
+            let d = inside_px[v]
+                .iter()
+                .map(|&(px, py)| ((px - x).powi(2) + (py - y).powi(2)).sqrt())
+                .fold(f64::INFINITY, f64::min)
+                * f64::from(w.min(h))
+                / 2.0;
+            worst = worst.max(d);
+        }
+        hist[match worst {
+            d if d < 0.5 => 0,
+            d if d < 0.75 => 1,
+            d if d < 1.0 => 2,
+            d if d < 1.5 => 3,
+            d if d < 2.5 => 4,
+            _ => 5,
+        }] += 1;
+    }
+    // The fit carved by every view that sees a voxel's centre in its frame: what a perfect
+    // space-carving term would leave.
+    let mut carved = fit.clone();
+    for i in 0..fit.inside.len() {
+        if !fit.inside[i] {
+            continue;
+        }
+        let c = centre(i);
+        carved.inside[i] = p.targets.cameras.iter().enumerate().all(|(v, cam)| {
+            let [x, y, _] = cam.to_screen(c);
+            voxel::screen_to_pixel(x, y, w, h).is_none_or(|(col, row)| {
+                p.targets.masks[v * (w * h) as usize + (row * w + col) as usize] > 0.5
+            })
+        });
+    }
+    let hull_iou = voxel::iou(&p.hull, &p.object).unwrap();
+    println!(
+        "  carved in frame: {} voxels, 3D IoU {:.4}, ratio {:.3}",
+        carved.count(),
+        voxel::iou(&carved, &p.object).unwrap(),
+        voxel::iou(&carved, &p.object).unwrap() / hull_iou
+    );
+    println!(
+        "  outside-hull voxels by pixels outside (<0.5, <0.75, <1, <1.5, <2.5, more): {hist:?}"
+    );
+    println!(
+        "  {}: object {} hull {} fit {} | fit∩object {tp} | fit−object: outside hull {fp_out}, inside {fp_in} | object−fit: inside hull {fn_in}, outside {fn_out} | hull carved rightly {carved_right}",
+        p.name,
+        p.object.count(),
+        p.hull.count(),
+        fit.count()
+    );
 }
 
 /// Named sweeps: (key, values).

@@ -219,14 +219,26 @@ fn max_abs(v: impl Iterator<Item = f64>) -> f64 {
 fn probing_forward_and_backward_match_the_twin_for_every_aggregate() {
     let Some(p) = probe_setup() else { return };
     let phi64: Vec<f64> = p.phi_host.iter().map(|&x| f64::from(x)).collect();
-    for aggregate in [Aggregate::Max, Aggregate::LogSumExp, Aggregate::Union] {
-        let s = settings(aggregate);
+    // Every aggregate with one radius, and max and LSE (the two backward paths) with a larger
+    // radius for the rays outside the silhouettes.
+    let cases = [Aggregate::Max, Aggregate::LogSumExp, Aggregate::Union]
+        .map(|a| settings(a))
+        .into_iter()
+        .chain(
+            [Aggregate::Max, Aggregate::LogSumExp].map(|a| ProbeSettings {
+                tau_outside: Some(0.12),
+                ..settings(a)
+            }),
+        );
+    for s in cases {
+        let aggregate = s.aggregate;
         let got = run(&p, &s, false);
         let want = probe_cpu::forward(&p.targets, &s, &p.it.anchors, &phi64, &p.it.rays);
         // The binning: as many (anchor, tile) entries as the twin's boxes give (a box a
-        // fraction of a pixel off changes the count).
+        // fraction of a pixel off changes the count); the boxes hold the larger radius.
         let grid = softvk::primitives::binning::TileGrid::new(40, 32, s.tile_size).unwrap();
-        let twin_entries: u64 = probe_cpu::items(&p.targets, s.tau, &p.it.anchors)
+        let box_tau = s.tau.max(s.tau_outside.unwrap_or(s.tau));
+        let twin_entries: u64 = probe_cpu::items(&p.targets, box_tau, &p.it.anchors)
             .iter()
             .filter(|item| item.flags & softvk::probe::prober::FLAG_VALID != 0)
             .filter_map(|item| softvk::primitives::binning::cpu::tile_rect(item.screen_box, &grid))
@@ -290,11 +302,52 @@ fn probing_forward_and_backward_match_the_twin_for_every_aggregate() {
     }
 }
 
+/// A radius of its own for the outside rays changes what those rays hit and leaves the inside
+/// rays exactly as they were.
+#[test]
+fn the_outside_radius_changes_only_the_outside_rays() {
+    let Some(p) = probe_setup() else { return };
+    let s = settings(Aggregate::Max);
+    let one = run(&p, &s, false);
+    let two = run(
+        &p,
+        &ProbeSettings {
+            tau_outside: Some(0.12),
+            ..s
+        },
+        false,
+    );
+    let (mut inside, mut changed) = (0, 0);
+    for (i, r) in p.it.rays.iter().enumerate() {
+        if r.label >= 0.5 {
+            inside += 1;
+            assert_eq!(
+                bits(&[one.outs[i]]),
+                bits(&[two.outs[i]]),
+                "inside ray {i} changed"
+            );
+        } else if bits(&[one.outs[i]]) != bits(&[two.outs[i]]) {
+            changed += 1;
+        }
+    }
+    assert!(
+        inside > 20 && changed > 20,
+        "{inside} inside rays, {changed} outside rays changed"
+    );
+}
+
 #[test]
 fn tiled_probing_equals_the_brute_force_loop_for_every_tile_size() {
     let Some(p) = probe_setup() else { return };
-    for aggregate in [Aggregate::Max, Aggregate::LogSumExp, Aggregate::Union] {
-        let s = settings(aggregate);
+    let cases = [Aggregate::Max, Aggregate::LogSumExp, Aggregate::Union]
+        .map(|a| settings(a))
+        .into_iter()
+        .chain([ProbeSettings {
+            tau_outside: Some(0.12),
+            ..settings(Aggregate::LogSumExp)
+        }]);
+    for s in cases {
+        let aggregate = s.aggregate;
         let brute = run(&p, &s, true);
         for tile_size in [4, 8, 16, 40] {
             let tiled = run(&p, &ProbeSettings { tile_size, ..s }, false);

@@ -116,6 +116,11 @@ void view_ray(ProbeView v, vec2 s, out vec3 o, out vec3 d) {
     d = dd;
 }
 
+// τ² of a ray with `label`: inside rays use τ, outside rays their own radius (`tau_outside`).
+float ray_tau2(float label, float tau2, float tau2_outside) {
+    return label >= 0.5 ? tau2 : tau2_outside;
+}
+
 // τ² |d|², the right-hand side of the hit test.
 float hit_bound(vec3 d, float tau2) {
     precise float dd = d.x * d.x + d.y * d.y + d.z * d.z;

@@ -18,7 +18,7 @@ layout(push_constant) uniform Push {
     float temperature;   // LSE: T
     float inv_t;         // LSE: 1 / T
     uint boundary_aware; // unused: BOUNDARY_AWARE
-    uint pad0;
+    float tau2_outside;  // τ² of the rays outside the silhouettes
     uint pad1;
     uint pad2;
 } pc;

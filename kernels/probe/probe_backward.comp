@@ -64,6 +64,10 @@ layout(push_constant) uniform Push {
     float tau2;
     float inv_t;
     uint total_index;    // where `offsets` holds the entry count (the tile count)
+    float tau2_outside;  // τ² of the rays outside the silhouettes
+    uint pad0;
+    uint pad1;
+    uint pad2;
 } pc;
 
 layout(constant_id = 0) const uint MODE = AGG_MAX;
@@ -128,7 +132,8 @@ void main() {
                     vec3 d;
                     view_ray(v, pixel_to_screen(px, py, float(pc.width), float(pc.height),
                                                 pc.inv_s), o, d);
-                    if (use && ray_hits(o, d, hit_bound(d, pc.tau2), p)) {
+                    float bound = hit_bound(d, ray_tau2(label, pc.tau2, pc.tau2_outside));
+                    if (use && ray_hits(o, d, bound, p)) {
                         sum += err_i * agg_grad(ro_i, MODE, pc.inv_t, phi_j);
                     }
                 }

@@ -78,7 +78,7 @@ void main() {
     vec3 o;
     vec3 d;
     view_ray(v, pixel_to_screen(r.px, r.py, float(pc.width), float(pc.height), pc.inv_s), o, d);
-    float bound = hit_bound(d, pc.tau2);
+    float bound = hit_bound(d, ray_tau2(r.label, pc.tau2, pc.tau2_outside));
     uint tile = ray_tile(r, pc.width, pc.height, pc.tile_size, pc.tiles_x, pc.tiles_y);
     bool inside = r.label >= 0.5;
     uint tiles_per_view = pc.tiles_x * pc.tiles_y;

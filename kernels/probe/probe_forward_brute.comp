@@ -27,7 +27,7 @@ void main() {
     vec3 d;
     view_ray(views[r.view],
              pixel_to_screen(r.px, r.py, float(pc.width), float(pc.height), pc.inv_s), o, d);
-    float bound = hit_bound(d, pc.tau2);
+    float bound = hit_bound(d, ray_tau2(r.label, pc.tau2, pc.tau2_outside));
     uint item_base = r.view * pc.anchors;
     Agg g = agg_init(MODE);
     for (uint anchor = 0u; anchor < pc.anchors; ++anchor) {

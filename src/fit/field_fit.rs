@@ -152,6 +152,7 @@ pub fn scaled_to_cube(settings: &ProbeSettings, cube: &Cube) -> ProbeSettings {
         cube_center: cube.center,
         cube_half: h,
         tau: settings.tau * h,
+        tau_outside: settings.tau_outside.map(|t| t * h),
         anchor_sigma: settings.anchor_sigma * h,
         geo_delta: settings.geo_delta * h,
         geo_normal_delta: settings.geo_normal_delta * h,

@@ -133,6 +133,11 @@ pub struct ProbeSettings {
     /// τ, the anchor spheres' radius (default 0.03: a bit over 0.027, the half-diagonal of a
     /// voxel of a 64³ grid over the default cube).
     pub tau: f64,
+    /// The radius for the rays outside the silhouettes, when it differs from τ (default `None`:
+    /// τ for every ray). Under boundary-aware assignment the two kinds of rays use disjoint
+    /// anchors: a larger radius outside lets each outside ray carve more of the space next to
+    /// the contour without loosening what an inside ray needs.
+    pub tau_outside: Option<f64>,
     /// G, how a ray combines its hits (default [`Aggregate::Max`]).
     pub aggregate: Aggregate,
     /// T, the log-sum-exp temperature (default 0.05; only for [`Aggregate::LogSumExp`]).
@@ -176,6 +181,7 @@ impl Default for ProbeSettings {
             anchor_sigma: 0.04,
             hull_resolution: 64,
             tau: 0.03,
+            tau_outside: None,
             aggregate: Aggregate::Max,
             temperature: 0.05,
             boundary_aware: true,
@@ -247,6 +253,7 @@ impl ProbeSettings {
         }
         for (what, x) in [
             ("tau", self.tau),
+            ("tau_outside", self.tau_outside.unwrap_or(self.tau)),
             ("temperature", self.temperature),
             ("geo_delta", self.geo_delta),
             ("geo_normal_delta", self.geo_normal_delta),

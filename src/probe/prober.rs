@@ -15,7 +15,9 @@
 //! [`RadixSort`] of their tile keys and the binning's ranges pass), visits the anchors of its
 //! tile in anchor order (`probe_forward.comp`: per subgroup, batches of anchors loaded one per
 //! lane and broadcast with shuffles) and aggregates, with G of [`Aggregate`](super::Aggregate),
-//! the φ of those whose centre lies within τ of the ray's line, skipping under boundary-aware
+//! the φ of those whose centre lies within τ of the ray's line (within
+//! [`ProbeSettings::tau_outside`] for a ray outside the silhouette, when set; the items' boxes
+//! hold the larger radius), skipping under boundary-aware
 //! assignment the anchors whose [`FLAG_INSIDE`] differs from the ray's label. No hit: ψ = 0. The
 //! loss is `L_sil = mean_i (ψ_i − S_i)²` over every ray of every view, summed in a fixed order.
 //! `probe_forward_brute.comp` visits every anchor instead: the baseline the tiled pass equals bit
@@ -129,7 +131,8 @@ struct ForwardPush {
     temperature: f32,
     inv_t: f32,
     boundary_aware: u32,
-    pad: [u32; 3],
+    tau2_outside: f32,
+    pad: [u32; 2],
 }
 
 /// Push constants of `bin_mask_counts.comp` and `probe_mask_list.comp`.
@@ -193,6 +196,8 @@ struct BackwardPush {
     inv_t: f32,
     /// Where `offsets` holds the entry count (the tile count).
     total_index: u32,
+    tau2_outside: f32,
+    pad: [u32; 3],
 }
 
 /// Push constants of `probe_reduce.comp`.
@@ -213,18 +218,33 @@ struct ReducePush {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Constants {
     pub inv_s: f32,
+    /// The larger radius: the items' screen boxes hold it.
     pub tau: f32,
+    /// τ² of the rays inside the silhouettes.
     pub tau2: f32,
+    /// τ² of the rays outside.
+    pub tau2_outside: f32,
     pub temperature: f32,
     pub inv_t: f32,
 }
 
 impl Constants {
+    /// τ² of a ray with `label` (`ray_tau2` of `probe.glsl`).
+    pub fn ray_tau2(&self, label: f32) -> f32 {
+        if label >= 0.5 {
+            self.tau2
+        } else {
+            self.tau2_outside
+        }
+    }
+
     pub fn new(settings: &ProbeSettings, width: u32, height: u32) -> Self {
+        let tau_outside = settings.tau_outside.unwrap_or(settings.tau);
         Self {
             inv_s: (1.0 / f64::from(width.min(height))) as f32,
-            tau: settings.tau as f32,
+            tau: settings.tau.max(tau_outside) as f32,
             tau2: (settings.tau * settings.tau) as f32,
+            tau2_outside: (tau_outside * tau_outside) as f32,
             temperature: settings.temperature as f32,
             inv_t: (1.0 / settings.temperature) as f32,
         }
@@ -773,7 +793,8 @@ impl Prober {
             temperature: c.temperature,
             inv_t: c.inv_t,
             boundary_aware: u32::from(self.settings.boundary_aware),
-            pad: [0; 3],
+            tau2_outside: c.tau2_outside,
+            pad: [0; 2],
         }
     }
 
@@ -1123,6 +1144,8 @@ impl Prober {
                     tau2: c.tau2,
                     inv_t: c.inv_t,
                     total_index: self.job.tile_count() as u32,
+                    tau2_outside: c.tau2_outside,
+                    pad: [0; 3],
                 },
                 groups(total, 64)?,
             )
@@ -1345,13 +1368,13 @@ pub mod cpu {
         rays: &[Ray],
     ) -> Vec<Vec<u32>> {
         let c = Constants::new(settings, targets.width, targets.height);
-        let items = items(targets, settings.tau, anchors);
+        let items = items(targets, f64::from(c.tau), anchors);
         let n = anchors.len();
         rays.iter()
             .map(|r| {
                 let view = &targets.views[r.view as usize];
                 let (o, d) = ray_line(view, r, targets.width, targets.height, c.inv_s);
-                let bound = hit_bound(d, c.tau2);
+                let bound = hit_bound(d, c.ray_tau2(r.label));
                 (0..n)
                     .filter(|&j| {
                         let flags = items[r.view as usize * n + j].flags;
