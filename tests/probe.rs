@@ -222,7 +222,7 @@ fn probing_forward_and_backward_match_the_twin_for_every_aggregate() {
     // Every aggregate with one radius, and max and LSE (the two backward paths) with a larger
     // radius for the rays outside the silhouettes.
     let cases = [Aggregate::Max, Aggregate::LogSumExp, Aggregate::Union]
-        .map(|a| settings(a))
+        .map(settings)
         .into_iter()
         .chain(
             [Aggregate::Max, Aggregate::LogSumExp].map(|a| ProbeSettings {
@@ -340,7 +340,7 @@ fn the_outside_radius_changes_only_the_outside_rays() {
 fn tiled_probing_equals_the_brute_force_loop_for_every_tile_size() {
     let Some(p) = probe_setup() else { return };
     let cases = [Aggregate::Max, Aggregate::LogSumExp, Aggregate::Union]
-        .map(|a| settings(a))
+        .map(settings)
         .into_iter()
         .chain([ProbeSettings {
             tau_outside: Some(0.12),
