@@ -135,8 +135,10 @@ pub struct ProbeSettings {
     pub tau: f64,
     /// The radius for the rays outside the silhouettes, when it differs from τ (default `None`:
     /// τ for every ray). Under boundary-aware assignment the two kinds of rays use disjoint
-    /// anchors: a larger radius outside lets each outside ray carve more of the space next to
-    /// the contour without loosening what an inside ray needs.
+    /// anchors, so each kind may have its own radius: a larger one outside lets each outside ray
+    /// carve more next to the contour without widening an inside ray's tube. Measured on thin
+    /// shapes (`RESULTS.md`, "Thin structures, continued"), it thins the rim a fit leaves around
+    /// flat parts but also erodes sub-pixel ones; no default uses it.
     pub tau_outside: Option<f64>,
     /// G, how a ray combines its hits (default [`Aggregate::Max`]).
     pub aggregate: Aggregate,
