@@ -168,15 +168,28 @@ fn grid_eval_matches_the_twin_inside_and_outside_the_cube() {
 #[test]
 fn mlp_eval_matches_the_twin() {
     let Some(ctx) = common::gpu() else { return };
-    let kind = small_mlp();
-    let (field, params) = field_with_structure(&ctx, kind, 3);
-    let points = random_points(&mut common::rng(4), 2000, &cube());
-    let phi = field.eval(&ctx, &points).unwrap();
-    let twin: Vec<f64> = points
-        .iter()
-        .map(|p| cpu::eval(&kind, &cube(), &widen(&params), xyz(p)))
-        .collect();
-    assert_phi_close("mlp", &phi, &twin, 1e-4);
+    // Unrolled evaluation (`mlp::UNROLL_WEIGHTS`) with an even and an odd layer count (the
+    // activations ping-pong between two halves), and the looped one (64 units).
+    let unrolled_odd = FieldKind::Mlp {
+        hidden_layers: 3,
+        width: 32,
+        frequencies: 3,
+    };
+    let looped = FieldKind::Mlp {
+        hidden_layers: 3,
+        width: 64,
+        frequencies: 2,
+    };
+    for (k, kind) in [small_mlp(), unrolled_odd, looped].into_iter().enumerate() {
+        let (field, params) = field_with_structure(&ctx, kind, 3 + k as u64);
+        let points = random_points(&mut common::rng(4), 2000, &cube());
+        let phi = field.eval(&ctx, &points).unwrap();
+        let twin: Vec<f64> = points
+            .iter()
+            .map(|p| cpu::eval(&kind, &cube(), &widen(&params), xyz(p)))
+            .collect();
+        assert_phi_close(&format!("{kind:?}"), &phi, &twin, 1e-4);
+    }
 }
 
 #[test]

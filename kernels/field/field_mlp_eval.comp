@@ -26,9 +26,13 @@ layout(push_constant) uniform Push {
 #include "field_mlp.glsl"
 
 void main() {
-    uint i = linear_group_id() * 64u + gl_LocalInvocationIndex;
-    if (i >= pc.n) {
-        return;
+    // No early return: on llvmpipe, code after a divergent return runs masked, and a masked
+    // load of a uniform address (every weight) is a per-lane gather instead of one load. Lanes
+    // past the end evaluate the last point and store nothing.
+    uint id = linear_group_id() * 64u + gl_LocalInvocationIndex;
+    uint i = min(id, pc.n - 1u);
+    float value = field_sigmoid(mlp_forward(points[i].xyz, i));
+    if (id < pc.n) {
+        phi[id] = value;
     }
-    phi[i] = field_sigmoid(mlp_forward(points[i].xyz, i));
 }

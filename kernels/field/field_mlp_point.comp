@@ -38,8 +38,8 @@ void main() {
         return;
     }
     float phi = field_sigmoid(mlp_forward(points[i].xyz, i));
-    uint w = pc.width;
-    uint layers = pc.layers;
+    uint w = MLP_WIDTH;
+    uint layers = MLP_LAYERS;
     deltas[layers * w * pc.batch + i] = d_phi[i] * (phi * (1.0 - phi));
     for (uint l = layers; l-- > 0u;) {
         // δ_{l+1} into the private array, then W_{l+1}ᵀ δ_{l+1} per unit of layer l.

@@ -5,25 +5,38 @@
 // layer (L hidden, then the output): weights row-major [out][in], then biases [out].
 //
 // The includer declares `params[]` and a push-constant block `pc` with cube, layers, width,
-// freqs, beta (and, with MLP_SAVE, batch), and with MLP_SAVE the buffers `acts[]` and `deltas[]`
+// freqs (read from the specialization constants below instead), beta (and, with MLP_SAVE, batch), and with MLP_SAVE the buffers `acts[]` and `deltas[]`
 // (feature-major: feature f of point i at f * pc.batch + i). Twin: `crate::field::cpu` (Mlp).
 #ifndef SOFTVK_FIELD_MLP_GLSL
 #define SOFTVK_FIELD_MLP_GLSL
+#extension GL_EXT_control_flow_attributes : require
 
-#define MLP_MAX_WIDTH 256u
 #define MLP_PI 3.14159265358979
 
-// Ping-pong activations of one invocation: halves [0, MAX) and [MAX, 2 MAX).
-float mlp_act[2u * MLP_MAX_WIDTH];
+// The shape as specialization constants (the push constants' layers, width and freqs are not
+// read; the host specializes every pipeline for its layout). MLP_HALF ≥ max(inputs, width).
+// MLP_UNROLL (the host sets it for small networks, `MlpLayout::constants`): every layer and
+// unit loop unrolled, so that `mlp_act` is only ever indexed by constants and lives in
+// registers. On llvmpipe an array indexed at run time is scratch memory, read and written lane
+// by lane: unrolled, a 3 × 32 network evaluates 13× faster (BENCHMARKS.md). Large networks keep the loops
+// (unrolled, their code takes minutes to compile).
+layout(constant_id = 0) const uint MLP_LAYERS = 1u;
+layout(constant_id = 1) const uint MLP_WIDTH = 1u;
+layout(constant_id = 2) const uint MLP_FREQS = 0u;
+layout(constant_id = 3) const uint MLP_HALF = 256u;
+layout(constant_id = 4) const bool MLP_UNROLL = false;
+
+// Ping-pong activations of one invocation: halves [0, HALF) and [HALF, 2 HALF).
+float mlp_act[2u * MLP_HALF];
 
 uint mlp_inputs() {
-    return 3u + 6u * pc.freqs;
+    return 3u + 6u * MLP_FREQS;
 }
 
 // Parameter offset of layer l (0 ≤ l ≤ L; layer L is the output).
 uint mlp_layer_offset(uint l) {
     uint e = mlp_inputs();
-    uint w = pc.width;
+    uint w = MLP_WIDTH;
     return l == 0u ? 0u : w * e + w + (l - 1u) * (w * w + w);
 }
 
@@ -36,18 +49,58 @@ float mlp_softplus_grad(float z) {
     return field_sigmoid(pc.beta * z);
 }
 
+// Four terms of mlp_dot.
+float mlp_dot4(uint row, uint src) {
+    return params[row] * mlp_act[src] + params[row + 1u] * mlp_act[src + 1u]
+         + params[row + 2u] * mlp_act[src + 2u] + params[row + 3u] * mlp_act[src + 3u];
+}
+
 // Σ_i params[row + i] · mlp_act[src + i], i < n, four terms per iteration.
 float mlp_dot(uint row, uint src, uint n) {
     float s = 0.0;
     uint i = 0u;
-    for (; i + 4u <= n; i += 4u) {
-        s += params[row + i] * mlp_act[src + i] + params[row + i + 1u] * mlp_act[src + i + 1u]
-           + params[row + i + 2u] * mlp_act[src + i + 2u] + params[row + i + 3u] * mlp_act[src + i + 3u];
-    }
-    for (; i < n; ++i) {
-        s += params[row + i] * mlp_act[src + i];
+    if (MLP_UNROLL) {
+        [[unroll]] for (; i + 4u <= n; i += 4u) {
+            s += mlp_dot4(row + i, src + i);
+        }
+        [[unroll]] for (; i < n; ++i) {
+            s += params[row + i] * mlp_act[src + i];
+        }
+    } else {
+        for (; i + 4u <= n; i += 4u) {
+            s += mlp_dot4(row + i, src + i);
+        }
+        for (; i < n; ++i) {
+            s += params[row + i] * mlp_act[src + i];
+        }
     }
     return s;
+}
+
+// Hidden layer l (its parameters at `off`): mlp_act[dst + o] = softplus(W a + b)[o] from the
+// `in_dim` inputs at mlp_act[src ..]; with MLP_SAVE, its outputs into acts and softplus'(z) into
+// deltas for point `point`.
+void mlp_unit(uint l, uint off, uint src, uint dst, uint in_dim, uint o, uint point) {
+    uint w = MLP_WIDTH;
+    float z = mlp_dot(off + o * in_dim, src, in_dim) + params[off + w * in_dim + o];
+    float a = mlp_softplus(z);
+    mlp_act[dst + o] = a;
+#ifdef MLP_SAVE
+    acts[(mlp_inputs() + l * w + o) * pc.batch + point] = a;
+    deltas[(l * w + o) * pc.batch + point] = mlp_softplus_grad(z);
+#endif
+}
+
+void mlp_layer(uint l, uint off, uint src, uint dst, uint in_dim, uint point) {
+    if (MLP_UNROLL) {
+        [[unroll]] for (uint o = 0u; o < MLP_WIDTH; ++o) {
+            mlp_unit(l, off, src, dst, in_dim, o, point);
+        }
+    } else {
+        [[dont_unroll]] for (uint o = 0u; o < MLP_WIDTH; ++o) {
+            mlp_unit(l, off, src, dst, in_dim, o, point);
+        }
+    }
 }
 
 // The logit at p. With MLP_SAVE, also stores every layer's input (acts: the encoding, then each
@@ -60,7 +113,7 @@ float mlp_forward(vec3 p, uint point) {
     mlp_act[1] = u.y;
     mlp_act[2] = u.z;
     float freq = MLP_PI;
-    for (uint k = 0u; k < pc.freqs; ++k) {
+    [[unroll]] for (uint k = 0u; k < MLP_FREQS; ++k) {
         vec3 s = sin(freq * u);
         vec3 c = cos(freq * u);
         uint b = 3u + 6u * k;
@@ -77,26 +130,24 @@ float mlp_forward(vec3 p, uint point) {
         acts[i * pc.batch + point] = mlp_act[i];
     }
 #endif
-    uint w = pc.width;
-    uint in_dim = e;
-    uint src = 0u;
-    uint off = 0u;
-    for (uint l = 0u; l < pc.layers; ++l) {
-        uint dst = MLP_MAX_WIDTH - src;
-        for (uint o = 0u; o < w; ++o) {
-            float z = mlp_dot(off + o * in_dim, src, in_dim) + params[off + w * in_dim + o];
-            float a = mlp_softplus(z);
-            mlp_act[dst + o] = a;
-#ifdef MLP_SAVE
-            acts[(e + l * w + o) * pc.batch + point] = a;
-            deltas[(l * w + o) * pc.batch + point] = mlp_softplus_grad(z);
-#endif
+    mlp_layer(0u, 0u, 0u, MLP_HALF, e, point);
+    // The hidden layers after the first: every trip count below is a constant, so the compiler
+    // can unroll them all and keep `mlp_act` in registers (on llvmpipe, an array indexed at run
+    // time is scratch memory, read lane by lane).
+    if (MLP_UNROLL) {
+        [[unroll]] for (uint l = 1u; l < MLP_LAYERS; ++l) {
+            uint src = (l & 1u) == 1u ? MLP_HALF : 0u; // layer l − 1 wrote there
+            mlp_layer(l, mlp_layer_offset(l), src, MLP_HALF - src, MLP_WIDTH, point);
         }
-        off += w * in_dim + w;
-        in_dim = w;
-        src = dst;
+    } else {
+        [[dont_unroll]] for (uint l = 1u; l < MLP_LAYERS; ++l) {
+            uint src = (l & 1u) == 1u ? MLP_HALF : 0u;
+            mlp_layer(l, mlp_layer_offset(l), src, MLP_HALF - src, MLP_WIDTH, point);
+        }
     }
-    return mlp_dot(off, src, w) + params[off + w];
+    uint last = (MLP_LAYERS & 1u) == 0u ? 0u : MLP_HALF;
+    uint off = mlp_layer_offset(MLP_LAYERS);
+    return mlp_dot(off, last, MLP_WIDTH) + params[off + MLP_WIDTH];
 }
 
 #endif

@@ -33,8 +33,16 @@ use crate::rng::SplitMix64;
 
 /// β of the hidden layers' softplus.
 pub const SOFTPLUS_BETA: f64 = 100.0;
-/// Widest hidden layer the kernels hold (`MLP_MAX_WIDTH` in `field_mlp.glsl`).
+/// Widest hidden layer accepted.
 pub const MAX_WIDTH: u32 = 256;
+/// The evaluation kernel unrolls a network of at most this many weights and [`UNROLL_WIDTH`]
+/// units per layer (3 × 32 with 3 frequencies has 2 752 weights): straight-line code that keeps
+/// the activations in registers, 10–13× faster on llvmpipe (`examples/mlp_speed.rs`,
+/// BENCHMARKS.md). Its compile time is what bounds it: 1–1.5 s for the width-32 networks up
+/// to 4 × 32, but 15–20 s for 2 × 56 or 1 × 128, and minutes for 4 × 64.
+pub const UNROLL_WEIGHTS: usize = 4096;
+/// See [`UNROLL_WEIGHTS`].
+pub const UNROLL_WIDTH: u32 = 32;
 /// Most hidden layers accepted.
 pub const MAX_LAYERS: u32 = 32;
 /// Most encoding frequencies accepted (2^15 π already aliases at f32 precision).
@@ -52,6 +60,25 @@ pub struct MlpLayout {
 }
 
 impl MlpLayout {
+    /// The specialization constants of `field_mlp.glsl`: layers, width, frequencies, the half
+    /// of the activation array (`max(inputs, width)`) and whether the loops unroll (asked for,
+    /// and the network small enough: [`UNROLL_WIDTH`], [`UNROLL_WEIGHTS`]).
+    pub(crate) fn constants(&self, unroll: bool) -> [u32; 5] {
+        let weights = self.param_count() - self.biases();
+        [
+            self.hidden_layers,
+            self.width,
+            self.frequencies,
+            (self.inputs() as u32).max(self.width),
+            u32::from(unroll && self.width <= UNROLL_WIDTH && weights <= UNROLL_WEIGHTS),
+        ]
+    }
+
+    /// Biases: one per hidden unit and the output's.
+    fn biases(&self) -> usize {
+        (self.hidden_layers * self.width) as usize + 1
+    }
+
     /// [`Error::Input`] unless `1 ≤ L ≤ MAX_LAYERS`, `1 ≤ W ≤ MAX_WIDTH`, `F ≤ MAX_FREQUENCIES`.
     pub fn validate(&self) -> Result<()> {
         if !(1..=MAX_LAYERS).contains(&self.hidden_layers)
@@ -205,8 +232,11 @@ impl MlpGpu {
         check_binding_bytes(ctx, &what, (batch / chunk) * p * 4)?;
         Ok(Self {
             layout,
-            eval: Kernel::new(ctx, &specs::FIELD_MLP_EVAL)?,
-            point: Kernel::new(ctx, &specs::FIELD_MLP_POINT)?,
+            eval: Kernel::specialized(ctx, &specs::FIELD_MLP_EVAL, &layout.constants(true))?,
+            // The backward's per-point kernel keeps its loops: unrolled, its compile time
+            // ranges from under a second (3 × 32, 3 frequencies) to minutes (3 × 32, 4
+            // frequencies) on llvmpipe.
+            point: Kernel::specialized(ctx, &specs::FIELD_MLP_POINT, &layout.constants(false))?,
             wgrad: Kernel::new(ctx, &specs::FIELD_MLP_WGRAD)?,
             acts: ctx.create_buffer(
                 "mlp field activations",
