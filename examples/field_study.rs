@@ -38,9 +38,9 @@ use softvk::camera::{Camera, Projection};
 use softvk::field::mcubes::MarchingCubes;
 use softvk::field::preview::{PreviewOptions, render_preview};
 use softvk::field::voxel::{self, Occupancy};
-use softvk::field::{Cube, FieldKind};
+use softvk::field::{Cube, Field, FieldKind};
 use softvk::fit::AdamOptions;
-use softvk::fit::field_fit::{FieldFitOptions, auto_cube, fit_field, scaled_to_cube};
+use softvk::fit::field_fit::{FieldFitOptions, FieldFitter, auto_cube, fit_field, scaled_to_cube};
 use softvk::fit::io::Silhouettes;
 use softvk::gpu::{Context, ContextOptions};
 use softvk::mesh::Mesh;
@@ -256,85 +256,82 @@ fn load() -> String {
         .unwrap_or_else(|_| "?".into())
 }
 
-/// One fit: prints a result line; returns the fitted IoU.
+/// τ in stages (`stages=TAU:ITERS,...`, τ in cube units, the other options from `keys`): each
+/// stage a fresh fitter (fresh Adam moments) from the last one's field, its iterations numbered
+/// on from the last one's so that its samples are new. The field and the iterations run.
+fn staged_fit(ctx: &Context, p: &Problem, keys: &Keys, stages: &str) -> (Field, u32) {
+    let mut field = None::<Field>;
+    let mut done = 0;
+    for stage in stages.split(',') {
+        let (tau, n) = stage.split_once(':').expect("stages=TAU:ITERS,...");
+        let mut o = options(keys);
+        o.probe.tau = tau.parse().expect("stages: a number for τ");
+        o.probe = scaled_to_cube(&o.probe, &p.cube);
+        let n: u32 = n.parse().expect("stages: a number of iterations");
+        let mut f = FieldFitter::new(ctx, &p.targets, &o).unwrap();
+        if let Some(before) = &field {
+            f.field()
+                .set_params(ctx, &before.read_params(ctx).unwrap())
+                .unwrap();
+        }
+        let mut first = done + 1;
+        while first <= done + n {
+            let last = (first + 49).min(done + n);
+            // `Some(i)`: the entry buffers grew at iteration i, run again from there.
+            first = f.run(ctx, first, last, None).unwrap().unwrap_or(last + 1);
+        }
+        done += n;
+        field = Some(f.into_field());
+    }
+    (field.expect("stages: at least one"), done)
+}
+
+/// One fit (`fit_field`, or [`staged_fit`] with `stages=`): prints a result line; returns the
+/// fitted IoU.
 fn run_fit(ctx: &Context, p: &Problem, keys: &Keys, label: &str) -> f64 {
     let mut opts = options(keys);
     opts.probe = scaled_to_cube(&opts.probe, &p.cube);
     let verbose = get(keys, "verbose", 1u8) != 0;
     let load_before = load();
     let t = Instant::now();
-    if let Some(stages) = keys.get("stages") {
-        // τ in stages: each stage a fresh fitter (fresh Adam moments) from the last one's field,
-        // its iterations numbered on from the last one's so that its samples are new.
-        let mut field = None::<softvk::field::Field>;
-        let mut it0 = 0;
-        for stage in stages.split(',') {
-            let (tau, n) = stage.split_once(':').expect("stages=TAU:ITERS,...");
-            let mut o = options(keys);
-            o.probe.tau = tau.parse().expect("stages: a number for τ");
-            o.probe = scaled_to_cube(&o.probe, &p.cube);
-            let n: u32 = n.parse().expect("stages: a number of iterations");
-            let mut f = softvk::fit::field_fit::FieldFitter::new(ctx, &p.targets, &o).unwrap();
-            if let Some(before) = &field {
-                f.field()
-                    .set_params(ctx, &before.read_params(ctx).unwrap())
-                    .unwrap();
+    let (field, summary) = if let Some(stages) = keys.get("stages") {
+        let (field, iterations) = staged_fit(ctx, p, keys, stages);
+        let summary = format!("{iterations} its, {:.1} s", t.elapsed().as_secs_f64());
+        (field, summary)
+    } else {
+        let r = fit_field(ctx, &p.targets, &opts, |l| {
+            if verbose {
+                eprintln!(
+                    "  it {:4}  L_sil {:.5}  L_geo {:.5}  total {:.5}  {:.1} s",
+                    l.iteration, l.silhouette, l.geo, l.total, l.seconds
+                );
             }
-            let mut first = it0 + 1;
-            while first <= it0 + n {
-                let last = (first + 49).min(it0 + n);
-                // `Some(i)`: the entry buffers grew at iteration i, run again from there.
-                first = f.run(ctx, first, last, None).unwrap().unwrap_or(last + 1);
-            }
-            it0 += n;
-            field = Some(f.into_field());
-        }
-        let field = field.expect("stages: at least one");
-        let occ = voxel::field_occupancy(ctx, &field, &p.cube, p.object.res).unwrap();
-        let iou = voxel::iou(&occ, &p.object).unwrap();
-        let hull_iou = voxel::iou(&p.hull, &p.object).unwrap();
-        println!(
-            "{} {label}: 3D IoU {iou:.4} (hull {hull_iou:.4}, ratio {:.3}) | {} its, {:.1} s",
-            p.name,
-            iou / hull_iou,
-            it0,
-            t.elapsed().as_secs_f64()
+            true
+        })
+        .unwrap();
+        let last = r.log.last().copied();
+        let summary = format!(
+            "{} its, fit {:.1} s (setup {:.1} s, logging {:.1} s, {} regrowths), {:.0} ms/it | \
+             L_sil {:.5} L_geo {:.5} | load {load_before} → {}",
+            r.iterations,
+            t.elapsed().as_secs_f64(),
+            r.timings.setup_s,
+            r.timings.log_s,
+            r.timings.regrowths,
+            1e3 * r.timings.iterations_s / f64::from(r.iterations.max(1)),
+            last.map_or(f32::NAN, |l| l.silhouette),
+            last.map_or(f32::NAN, |l| l.geo),
+            load()
         );
-        if get(keys, "diag", 0u8) != 0 {
-            diagnose(p, &occ);
-        }
-        return iou;
-    }
-    let r = fit_field(ctx, &p.targets, &opts, |l| {
-        if verbose {
-            eprintln!(
-                "  it {:4}  L_sil {:.5}  L_geo {:.5}  total {:.5}  {:.1} s",
-                l.iteration, l.silhouette, l.geo, l.total, l.seconds
-            );
-        }
-        true
-    })
-    .unwrap();
-    let wall = t.elapsed().as_secs_f64();
-    let occ = voxel::field_occupancy(ctx, &r.field, &p.cube, p.object.res).unwrap();
+        (r.field, summary)
+    };
+    let occ = voxel::field_occupancy(ctx, &field, &p.cube, p.object.res).unwrap();
     let iou = voxel::iou(&occ, &p.object).unwrap();
     let hull_iou = voxel::iou(&p.hull, &p.object).unwrap();
-    let last = r.log.last().copied();
     println!(
-        "{} {label}: 3D IoU {iou:.4} (hull {hull_iou:.4}, ratio {:.3}) | {} its, fit {:.1} s \
-         (setup {:.1} s, logging {:.1} s, {} regrowths), {:.0} ms/it | L_sil {:.5} L_geo {:.5} | \
-         load {load_before} → {}",
+        "{} {label}: 3D IoU {iou:.4} (hull {hull_iou:.4}, ratio {:.3}) | {summary}",
         p.name,
         iou / hull_iou,
-        r.iterations,
-        wall,
-        r.timings.setup_s,
-        r.timings.log_s,
-        r.timings.regrowths,
-        1e3 * r.timings.iterations_s / f64::from(r.iterations.max(1)),
-        last.map_or(f32::NAN, |l| l.silhouette),
-        last.map_or(f32::NAN, |l| l.geo),
-        load()
     );
     if get(keys, "diag", 0u8) != 0 {
         diagnose(p, &occ);
@@ -343,13 +340,13 @@ fn run_fit(ctx: &Context, p: &Problem, keys: &Keys, label: &str) -> f64 {
         let dir = std::path::Path::new(dir);
         std::fs::create_dir_all(dir).unwrap();
         let mc = MarchingCubes::new(ctx).unwrap();
-        let iso = mc.extract(ctx, &r.field, 64).unwrap();
+        let iso = mc.extract(ctx, &field, 64).unwrap();
         iso.write_obj(&dir.join(format!("{}-{label}.obj", p.name)))
             .unwrap();
         let cam = Camera::from_angles(2.732, 30.0, 45.0);
         let img = render_preview(
             ctx,
-            &r.field,
+            &field,
             &Camera {
                 projection: Projection::Perspective {
                     viewing_angle_deg: 15.0,
@@ -619,7 +616,6 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// Rays probed per second against dense marching at the grid's node spacing, forward and
 /// forward + backward, GPU timestamps (medians over `reps`).
 fn throughput(ctx: &Context, keys: &Keys) {
-    use softvk::field::Field;
     use softvk::fit::GradOut;
     use softvk::gpu::{MemoryKind, Timer};
     use softvk::probe::dense::DenseMarch;

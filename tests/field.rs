@@ -154,15 +154,27 @@ fn assert_grad_close(what: &str, gpu: &[f32], twin: &[f64], rel: f64) {
 #[test]
 fn grid_eval_matches_the_twin_inside_and_outside_the_cube() {
     let Some(ctx) = common::gpu() else { return };
-    let kind = FieldKind::Grid { res: 5 };
-    let (field, params) = field_with_structure(&ctx, kind, 1);
-    let points = random_points(&mut common::rng(2), 4000, &cube());
-    let phi = field.eval(&ctx, &points).unwrap();
+    eval_matches_the_twin(&ctx, FieldKind::Grid { res: 5 }, 1, 2, 4000, 1e-5);
+}
+
+/// φ of a `kind` field with structure (seed `seed`) at `n` random points (seed `points_seed`)
+/// against the twin, within `tol`.
+fn eval_matches_the_twin(
+    ctx: &Context,
+    kind: FieldKind,
+    seed: u64,
+    points_seed: u64,
+    n: usize,
+    tol: f64,
+) {
+    let (field, params) = field_with_structure(ctx, kind, seed);
+    let points = random_points(&mut common::rng(points_seed), n, &cube());
+    let phi = field.eval(ctx, &points).unwrap();
     let twin: Vec<f64> = points
         .iter()
         .map(|p| cpu::eval(&kind, &cube(), &widen(&params), xyz(p)))
         .collect();
-    assert_phi_close("grid", &phi, &twin, 1e-5);
+    assert_phi_close(&format!("{kind:?}"), &phi, &twin, tol);
 }
 
 #[test]
@@ -181,14 +193,7 @@ fn mlp_eval_matches_the_twin() {
         frequencies: 2,
     };
     for (k, kind) in [small_mlp(), unrolled_odd, looped].into_iter().enumerate() {
-        let (field, params) = field_with_structure(&ctx, kind, 3 + k as u64);
-        let points = random_points(&mut common::rng(4), 2000, &cube());
-        let phi = field.eval(&ctx, &points).unwrap();
-        let twin: Vec<f64> = points
-            .iter()
-            .map(|p| cpu::eval(&kind, &cube(), &widen(&params), xyz(p)))
-            .collect();
-        assert_phi_close(&format!("{kind:?}"), &phi, &twin, 1e-4);
+        eval_matches_the_twin(&ctx, kind, 3 + k as u64, 4, 2000, 1e-4);
     }
 }
 
