@@ -29,7 +29,10 @@
 //! (image side), `va` (viewing angle, degrees; 15), `eval_res` (IoU grid), `mc` (write the
 //! marching-cubes OBJ and preview to this folder), `diag=1` (where the fit differs from the
 //! object, split by the visual hull: [`diagnose`]), `stages=TAU:ITERS,...` (τ in stages, each a
-//! fresh fitter starting from the previous stage's field; the other keys as usual).
+//! fresh fitter starting from the previous stage's field; the other keys as usual), `close=1`
+//! (fit the silhouettes closed by a 3 × 3 square: [`closed_targets`]; the hull and the scores stay
+//! those of the silhouettes as given), `carve=1` (also score the fit carved by the silhouettes
+//! afterwards: [`carve_study`]).
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -250,6 +253,92 @@ fn problem(ctx: &Context, which: &str, keys: &Keys) -> Problem {
     }
 }
 
+/// The targets with every mask closed by a 3 × 3 square (dilation, then erosion): one-pixel gaps
+/// in thin parts filled, straight edges unchanged. Also how many pixels changed.
+fn closed_targets(t: &Targets) -> (Targets, usize) {
+    let (w, h) = (t.width as usize, t.height as usize);
+    let pass = |m: &[f32], dilate: bool| -> Vec<f32> {
+        (0..w * h)
+            .map(|i| {
+                let (r, c) = ((i / w) as i64, (i % w) as i64);
+                let mut any = false;
+                let mut all = true;
+                for dr in -1..=1 {
+                    for dc in -1..=1 {
+                        let (rr, cc) = (r + dr, c + dc);
+                        // Beyond the image border: no evidence either way.
+                        if rr < 0 || cc < 0 || rr >= h as i64 || cc >= w as i64 {
+                            continue;
+                        }
+                        let v = m[rr as usize * w + cc as usize] > 0.5;
+                        any |= v;
+                        all &= v;
+                    }
+                }
+                f32::from(u8::from(if dilate { any } else { all }))
+            })
+            .collect()
+    };
+    let mut changed = 0;
+    let masks: Vec<f32> = t
+        .masks
+        .chunks(w * h)
+        .flat_map(|m| {
+            let out = pass(&pass(m, true), false);
+            changed += out.iter().zip(m).filter(|(a, b)| a != b).count();
+            out
+        })
+        .collect();
+    (
+        Targets::new(&t.cameras, t.width, t.height, masks).unwrap(),
+        changed,
+    )
+}
+
+/// The fit carved by the silhouettes afterwards: a voxel goes when its centre falls outside the
+/// silhouette in at least k of the views that see it (in frame, in front of the camera; a view
+/// that does not see a point says nothing about it), with the silhouettes as given and closed.
+fn carve_study(p: &Problem, occ: &Occupancy, label: &str, hull_iou: f64) {
+    let res = occ.res;
+    let centres: Vec<glam::DVec3> = (0..res.pow(3))
+        .map(|i| glam::DVec3::from(occ.center([i % res, (i / res) % res, i / (res * res)])))
+        .collect();
+    let (closed, _) = closed_targets(&p.targets);
+    for (name, t) in [("as given", &p.targets), ("closed", &closed)] {
+        let (w, h) = (t.width, t.height);
+        let vetoes: Vec<usize> = centres
+            .iter()
+            .map(|&c| {
+                t.cameras
+                    .iter()
+                    .enumerate()
+                    .filter(|(v, cam)| {
+                        let [x, y, z] = cam.to_screen(c);
+                        let m = &t.masks[*v * (w * h) as usize..][..(w * h) as usize];
+                        z > 0.0
+                            && voxel::screen_to_pixel(x, y, w, h)
+                                .is_some_and(|(c, r)| m[(r * w + c) as usize] <= 0.5)
+                    })
+                    .count()
+            })
+            .collect();
+        let ratios: Vec<String> = (1..=3)
+            .map(|k| {
+                let mut carved = occ.clone();
+                for (c, &n) in carved.inside.iter_mut().zip(&vetoes) {
+                    *c &= n < k;
+                }
+                format!("{:.3}", voxel::iou(&carved, &p.object).unwrap() / hull_iou)
+            })
+            .collect();
+        println!(
+            "{} {label}: carved by the silhouettes {name} (k = 1, 2, 3 vetoes): ratio {}",
+            p.name,
+            ratios.join(" ")
+        );
+    }
+}
+
 fn load() -> String {
     std::fs::read_to_string("/proc/loadavg")
         .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
@@ -259,7 +348,13 @@ fn load() -> String {
 /// τ in stages (`stages=TAU:ITERS,...`, τ in cube units, the other options from `keys`): each
 /// stage a fresh fitter (fresh Adam moments) from the last one's field, its iterations numbered
 /// on from the last one's so that its samples are new. The field and the iterations run.
-fn staged_fit(ctx: &Context, p: &Problem, keys: &Keys, stages: &str) -> (Field, u32) {
+fn staged_fit(
+    ctx: &Context,
+    p: &Problem,
+    targets: &Targets,
+    keys: &Keys,
+    stages: &str,
+) -> (Field, u32) {
     let mut field = None::<Field>;
     let mut done = 0;
     for stage in stages.split(',') {
@@ -268,7 +363,7 @@ fn staged_fit(ctx: &Context, p: &Problem, keys: &Keys, stages: &str) -> (Field, 
         o.probe.tau = tau.parse().expect("stages: a number for τ");
         o.probe = scaled_to_cube(&o.probe, &p.cube);
         let n: u32 = n.parse().expect("stages: a number of iterations");
-        let mut f = FieldFitter::new(ctx, &p.targets, &o).unwrap();
+        let mut f = FieldFitter::new(ctx, targets, &o).unwrap();
         if let Some(before) = &field {
             f.field()
                 .set_params(ctx, &before.read_params(ctx).unwrap())
@@ -294,12 +389,21 @@ fn run_fit(ctx: &Context, p: &Problem, keys: &Keys, label: &str) -> f64 {
     let verbose = get(keys, "verbose", 1u8) != 0;
     let load_before = load();
     let t = Instant::now();
+    let closed;
+    let targets = if get(keys, "close", 0u8) != 0 {
+        let changed;
+        (closed, changed) = closed_targets(&p.targets);
+        println!("  closing changed {changed} pixels");
+        &closed
+    } else {
+        &p.targets
+    };
     let (field, summary) = if let Some(stages) = keys.get("stages") {
-        let (field, iterations) = staged_fit(ctx, p, keys, stages);
+        let (field, iterations) = staged_fit(ctx, p, targets, keys, stages);
         let summary = format!("{iterations} its, {:.1} s", t.elapsed().as_secs_f64());
         (field, summary)
     } else {
-        let r = fit_field(ctx, &p.targets, &opts, |l| {
+        let r = fit_field(ctx, targets, &opts, |l| {
             if verbose {
                 eprintln!(
                     "  it {:4}  L_sil {:.5}  L_geo {:.5}  total {:.5}  {:.1} s",
@@ -333,6 +437,9 @@ fn run_fit(ctx: &Context, p: &Problem, keys: &Keys, label: &str) -> f64 {
         p.name,
         iou / hull_iou,
     );
+    if get(keys, "carve", 0u8) != 0 {
+        carve_study(p, &occ, label, hull_iou);
+    }
     if get(keys, "diag", 0u8) != 0 {
         diagnose(p, &occ);
     }
