@@ -875,16 +875,18 @@ fn marching_cubes_of_a_random_field_is_closed_despite_ambiguous_faces() {
 #[test]
 fn an_mlp_just_under_the_loop_cap_still_matches_the_twin() {
     let Some(ctx) = common::gpu() else { return };
-    // 4 × 192 with 6 frequencies: ~63 000 loop iterations per point in the backward by the
-    // host's count, just under llvmpipe's 65 535: a count that underestimated the kernel's loops
-    // would let llvmpipe cut them short here, and the gradient would be wrong.
+    // 6 × 216 with 4 frequencies: ~64 200 loop iterations per point in the forward pass (the
+    // evaluation's, and the backward's with its stores) by the host's count, just under
+    // llvmpipe's 65 535: a count that underestimated the kernels' loops would let llvmpipe cut
+    // them short here, and φ or the gradient would be wrong.
     let kind = FieldKind::Mlp {
-        hidden_layers: 4,
-        width: 192,
-        frequencies: 6,
+        hidden_layers: 6,
+        width: 216,
+        frequencies: 4,
     };
     let layout = kind.mlp_layout().unwrap();
-    assert!(layout.backward_iterations() > 60_000 && layout.backward_iterations() <= 65_535);
+    let n = layout.forward_iterations();
+    assert!(n > 60_000 && n <= 65_535, "{n}");
     let (field, params) = field_with_structure(&ctx, kind, 70);
     let mut rng = common::rng(71);
     let points = random_points(&mut rng, 300, &cube());
@@ -893,12 +895,12 @@ fn an_mlp_just_under_the_loop_cap_still_matches_the_twin() {
         .iter()
         .map(|p| cpu::eval(&kind, &cube(), &widen(&params), xyz(p)))
         .collect();
-    assert_phi_close("4 × 192 MLP", &phi, &twin, 1e-4);
+    assert_phi_close("6 × 216 MLP", &phi, &twin, 1e-4);
     let d_phi: Vec<f32> = (0..points.len())
         .map(|_| rng.random_range(-1.0..1.0))
         .collect();
     let grad = field.backward(&ctx, &points, &d_phi).unwrap();
     let pts: Vec<[f64; 3]> = points.iter().map(xyz).collect();
     let twin = cpu::backward(&kind, &cube(), &widen(&params), &pts, &widen(&d_phi));
-    assert_grad_close("4 × 192 MLP backward", &grad, &twin, 1e-3);
+    assert_grad_close("6 × 216 MLP backward", &grad, &twin, 1e-3);
 }

@@ -1,5 +1,5 @@
 //! The MLP field's layout, initialization and loop bounds, and its GPU kernels
-//! (`field_mlp_eval`, `field_mlp_point`, `field_mlp_wgrad`).
+//! (`field_mlp_eval`; the backward's `field_mlp_forward`, `field_mlp_delta`, `field_mlp_wgrad`).
 //!
 //! **Architecture.** `u = (p − c) / h` (the point normalised to the cube), the NeRF encoding
 //! `enc(u) = (u, sin(2^k π u), cos(2^k π u) for k < F)` — per k the three sines then the three
@@ -18,8 +18,9 @@
 //! everywhere, no shape prior (Adam, which normalizes each parameter's step, is not slowed by the
 //! small output weights).
 //!
-//! **Loop bounds.** One invocation evaluates a whole point (forward, and for the backward also
-//! the backward through every layer), so its loop count grows as `L W²`: on llvmpipe
+//! **Loop bounds.** One invocation runs a whole point's forward pass (`field_mlp_eval`, and the
+//! backward's `field_mlp_forward`), so its loop count grows as `L W²` (the backward's other
+//! kernels work on tiles, with loops of at most `W` or a chunk of points): on llvmpipe
 //! ([`crate::gpu::DeviceInfo::shader_loop_limit`]) [`Field::new`](super::Field::new) refuses with
 //! [`Error::Limit`] a network whose per-point loops would pass the cap. 4 × 128 with 6
 //! frequencies fits; 8 × 256 does not.
@@ -152,21 +153,41 @@ impl MlpLayout {
         total
     }
 
-    /// Loop iterations of one invocation of `field_mlp_point`: the forward with its stores, then
-    /// per hidden layer the load of δ_{l+1} and the transposed 4-wide dot products.
-    pub fn backward_iterations(&self) -> u64 {
-        let dot = |n: u64| n / 4 + n % 4 + 2;
-        let w = u64::from(self.width);
-        let mut total = self.eval_iterations() + self.inputs() as u64 + 1;
-        for l in 0..self.hidden_layers as usize {
-            let out_next = self.layer(l + 1).2 as u64;
-            total += 1 + out_next + w * (1 + dot(out_next));
-        }
-        total
+    /// Tiles of `field_mlp_wgrad` per chunk of points: per layer, its `outputs × (inputs + 1)`
+    /// parameters (the bias as a last column) in tiles of [`WGRAD_TILE`].
+    fn wgrad_tiles(&self) -> u64 {
+        let (rows, cols) = WGRAD_TILE;
+        (0..=self.hidden_layers as usize)
+            .map(|l| {
+                let (_, inputs, outputs) = self.layer(l);
+                (outputs.div_ceil(rows) * (inputs + 1).div_ceil(cols)) as u64
+            })
+            .sum()
+    }
+
+    /// Loop iterations of one invocation of `field_mlp_forward`: the forward with its stores.
+    pub fn forward_iterations(&self) -> u64 {
+        self.eval_iterations() + self.inputs() as u64 + 1
     }
 }
 
-/// Push constants shared by the three MLP kernels (`Push` in each).
+/// Rows and columns of `field_mlp_wgrad`'s tiles (`WG_ROWS`, `WG_COLS` there).
+const WGRAD_TILE: (usize, usize) = (8, 8);
+
+/// Units and points of `field_mlp_delta`'s tiles (`DELTA_UNITS`, `DELTA_POINTS` there).
+const DELTA_TILE: (u32, u32) = (8, 4);
+
+/// Push constants of `field_mlp_delta.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(crate) struct DeltaPush {
+    n: u32,
+    batch: u32,
+    layer: u32,
+    pad: u32,
+}
+
+/// Push constants shared by the other MLP kernels (`Push` in each).
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 pub(crate) struct MlpPush {
@@ -188,7 +209,8 @@ const SCRATCH_BUDGET: u64 = 32 << 20;
 pub(crate) struct MlpGpu {
     layout: MlpLayout,
     eval: Kernel,
-    point: Kernel,
+    forward: Kernel,
+    delta: Kernel,
     wgrad: Kernel,
     acts: Buffer,
     deltas: Buffer,
@@ -204,11 +226,11 @@ impl MlpGpu {
             layout.hidden_layers, layout.width, layout.frequencies
         );
         if let Some(limit) = ctx.info().shader_loop_limit() {
-            let needed = layout.backward_iterations();
+            let needed = layout.forward_iterations();
             if needed > limit {
                 return Err(Error::DeviceLimit {
                     kind: LimitKind::LoopIterations,
-                    what: format!("{what}: one point's backward"),
+                    what: format!("{what}: one point's forward pass"),
                     need: needed,
                     max: limit,
                     device: ctx.info().name.clone(),
@@ -234,10 +256,8 @@ impl MlpGpu {
         Ok(Self {
             layout,
             eval: Kernel::specialized(ctx, &specs::FIELD_MLP_EVAL, &layout.constants(true))?,
-            // The backward's per-point kernel keeps its loops: unrolled, its compile time
-            // ranges from under a second (3 × 32, 3 frequencies) to minutes (3 × 32, 4
-            // frequencies) on llvmpipe.
-            point: Kernel::specialized(ctx, &specs::FIELD_MLP_POINT, &layout.constants(false))?,
+            forward: Kernel::specialized(ctx, &specs::FIELD_MLP_FORWARD, &layout.constants(true))?,
+            delta: Kernel::specialized(ctx, &specs::FIELD_MLP_DELTA, &layout.constants(false))?,
             wgrad: Kernel::new(ctx, &specs::FIELD_MLP_WGRAD)?,
             acts: ctx.create_buffer(
                 "mlp field activations",
@@ -299,7 +319,11 @@ impl MlpGpu {
     }
 
     /// One batch of at most [`MlpGpu::batch`] points: d_params = (accumulate ? d_params : 0) +
-    /// the batch's gradient.
+    /// the batch's gradient. Four steps: the forward per point, saving every layer's input and
+    /// softplus' (`field_mlp_forward`); the deltas down the layers, one dispatch per hidden
+    /// layer over tiles of units × points (`field_mlp_delta`); each chunk's partial sums over
+    /// tiles of parameters (`field_mlp_wgrad`); the partials summed in chunk order
+    /// ([`SumChunks`]).
     #[allow(clippy::too_many_arguments)]
     pub fn record_backward_batch(
         &self,
@@ -316,21 +340,40 @@ impl MlpGpu {
         let chunks = n.div_ceil(FIELD_CHUNK);
         let push = self.push(cube, n, chunks);
         rec.dispatch(
-            &self.point,
-            &specs::FieldMlpPointBindings {
+            &self.forward,
+            &specs::FieldMlpForwardBindings {
                 params,
                 points,
                 d_phi,
                 acts: self.acts.whole(),
                 deltas: self.deltas.whole(),
             }
-            .for_kernel(&self.point)?,
+            .for_kernel(&self.forward)?,
             &push,
             n.div_ceil(64),
         )?;
+        let (units, points) = DELTA_TILE;
+        let tiles = u64::from(n.div_ceil(points)) * u64::from(self.layout.width.div_ceil(units));
+        for layer in (0..self.layout.hidden_layers).rev() {
+            rec.dispatch(
+                &self.delta,
+                &specs::FieldMlpDeltaBindings {
+                    params,
+                    deltas: self.deltas.whole(),
+                }
+                .for_kernel(&self.delta)?,
+                &DeltaPush {
+                    n,
+                    batch: self.batch,
+                    layer,
+                    pad: 0,
+                },
+                super::groups(tiles, 64)?,
+            )?;
+        }
         let p = self.layout.param_count() as u64;
         let partial = self.partial.range(0, 4 * p * u64::from(chunks));
-        let invocations = p * u64::from(chunks);
+        let invocations = self.layout.wgrad_tiles() * u64::from(chunks);
         rec.dispatch(
             &self.wgrad,
             &specs::FieldMlpWgradBindings {

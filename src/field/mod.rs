@@ -548,7 +548,11 @@ mod tests {
         );
         let mlp = std::mem::size_of::<mlp::MlpPush>() as u32;
         assert_eq!(mlp, specs::FIELD_MLP_EVAL.push_constant_size);
-        assert_eq!(mlp, specs::FIELD_MLP_POINT.push_constant_size);
+        assert_eq!(mlp, specs::FIELD_MLP_FORWARD.push_constant_size);
+        assert_eq!(
+            std::mem::size_of::<mlp::DeltaPush>() as u32,
+            specs::FIELD_MLP_DELTA.push_constant_size
+        );
         assert_eq!(mlp, specs::FIELD_MLP_WGRAD.push_constant_size);
     }
 

@@ -31,7 +31,7 @@ use super::{
 use crate::error::{Error, Result};
 
 /// Gated dispatches one iteration may record.
-pub const GATE_SLOTS: u64 = 512;
+pub const GATE_SLOTS: u64 = 2048;
 
 /// Push constants of `iteration_gate.comp`.
 #[repr(C)]
