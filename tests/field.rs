@@ -288,6 +288,16 @@ fn mlp_backward_matches_the_twin_over_several_batches_and_is_repeatable() {
     let Some(ctx) = common::gpu() else { return };
     // 20 000 points: more than one backward batch (16 384 points for this network).
     check_backward(&ctx, small_mlp(), 20_000, 13);
+    // Shapes that leave partial tiles everywhere in the backward's kernels (units in tiles of 8,
+    // points of 4, inputs + bias columns of 8, chunks of 256), unrolled (width 13) and looped
+    // (width 37).
+    let mlp = |hidden_layers, width, frequencies| FieldKind::Mlp {
+        hidden_layers,
+        width,
+        frequencies,
+    };
+    check_backward(&ctx, mlp(3, 13, 1), 1_023, 15);
+    check_backward(&ctx, mlp(2, 37, 3), 2_001, 16);
 }
 
 #[test]
