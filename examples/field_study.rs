@@ -295,6 +295,22 @@ fn closed_targets(t: &Targets) -> (Targets, usize) {
     )
 }
 
+/// How many views see `c` (in front of the camera, in frame) outside their silhouette.
+fn vetoes(t: &Targets, c: glam::DVec3) -> usize {
+    let (w, h) = (t.width, t.height);
+    t.cameras
+        .iter()
+        .enumerate()
+        .filter(|(v, cam)| {
+            let [x, y, z] = cam.to_screen(c);
+            let m = &t.masks[*v * (w * h) as usize..][..(w * h) as usize];
+            z > 0.0
+                && voxel::screen_to_pixel(x, y, w, h)
+                    .is_some_and(|(col, row)| m[(row * w + col) as usize] <= 0.5)
+        })
+        .count()
+}
+
 /// The fit carved by the silhouettes afterwards: a voxel goes when its centre falls outside the
 /// silhouette in at least k of the views that see it (in frame, in front of the camera; a view
 /// that does not see a point says nothing about it), with the silhouettes as given and closed.
@@ -305,23 +321,7 @@ fn carve_study(p: &Problem, occ: &Occupancy, label: &str, hull_iou: f64) {
         .collect();
     let (closed, _) = closed_targets(&p.targets);
     for (name, t) in [("as given", &p.targets), ("closed", &closed)] {
-        let (w, h) = (t.width, t.height);
-        let vetoes: Vec<usize> = centres
-            .iter()
-            .map(|&c| {
-                t.cameras
-                    .iter()
-                    .enumerate()
-                    .filter(|(v, cam)| {
-                        let [x, y, z] = cam.to_screen(c);
-                        let m = &t.masks[*v * (w * h) as usize..][..(w * h) as usize];
-                        z > 0.0
-                            && voxel::screen_to_pixel(x, y, w, h)
-                                .is_some_and(|(c, r)| m[(r * w + c) as usize] <= 0.5)
-                    })
-                    .count()
-            })
-            .collect();
+        let vetoes: Vec<usize> = centres.iter().map(|&c| vetoes(t, c)).collect();
         let ratios: Vec<String> = (1..=3)
             .map(|k| {
                 let mut carved = occ.clone();
@@ -533,16 +533,7 @@ fn diagnose(p: &Problem, fit: &Occupancy) {
     // space-carving term would leave.
     let mut carved = fit.clone();
     for i in 0..fit.inside.len() {
-        if !fit.inside[i] {
-            continue;
-        }
-        let c = centre(i);
-        carved.inside[i] = p.targets.cameras.iter().enumerate().all(|(v, cam)| {
-            let [x, y, _] = cam.to_screen(c);
-            voxel::screen_to_pixel(x, y, w, h).is_none_or(|(col, row)| {
-                p.targets.masks[v * (w * h) as usize + (row * w + col) as usize] > 0.5
-            })
-        });
+        carved.inside[i] &= fit.inside[i] && vetoes(&p.targets, centre(i)) == 0;
     }
     let hull_iou = voxel::iou(&p.hull, &p.object).unwrap();
     println!(
