@@ -32,9 +32,12 @@ layout(push_constant) uniform Push {
 #include "field_mlp.glsl"
 
 void main() {
-    // No early return (as in `field_mlp_eval`: uniform weight loads stay scalar): lanes past
-    // the end redo the last point, storing the same values to the same places.
-    uint i = min(linear_group_id() * 64u + gl_LocalInvocationIndex, pc.n - 1u);
-    float phi = field_sigmoid(mlp_forward(points[i].xyz, i));
-    deltas[MLP_LAYERS * MLP_WIDTH * pc.batch + i] = d_phi[i] * (phi * (1.0 - phi));
+    // No early return (as in `field_mlp_eval`: uniform weight loads stay scalar outside control
+    // flow): lanes past the end evaluate the last point and store nothing.
+    uint id = linear_group_id() * 64u + gl_LocalInvocationIndex;
+    uint i = min(id, pc.n - 1u);
+    float phi = field_sigmoid(mlp_forward(points[i].xyz, id < pc.n ? i : MLP_NO_POINT));
+    if (id < pc.n) {
+        deltas[MLP_LAYERS * MLP_WIDTH * pc.batch + i] = d_phi[i] * (phi * (1.0 - phi));
+    }
 }

@@ -13,6 +13,8 @@
 #extension GL_EXT_control_flow_attributes : require
 
 #define MLP_PI 3.14159265358979
+// With MLP_SAVE, the `point` of a lane that stores nothing (one past the end of the batch).
+#define MLP_NO_POINT 0xFFFFFFFFu
 
 #include "field_mlp_shape.glsl"
 
@@ -65,8 +67,10 @@ void mlp_unit(uint l, uint off, uint src, uint dst, uint in_dim, uint o, uint po
     float a = mlp_softplus(z);
     mlp_act[dst + o] = a;
 #ifdef MLP_SAVE
-    acts[(mlp_inputs() + l * w + o) * pc.batch + point] = a;
-    deltas[(l * w + o) * pc.batch + point] = mlp_softplus_grad(z);
+    if (point != MLP_NO_POINT) {
+        acts[(mlp_inputs() + l * w + o) * pc.batch + point] = a;
+        deltas[(l * w + o) * pc.batch + point] = mlp_softplus_grad(z);
+    }
 #endif
 }
 
@@ -84,7 +88,7 @@ void mlp_layer(uint l, uint off, uint src, uint dst, uint in_dim, uint point) {
 
 // The logit at p. With MLP_SAVE, also stores every layer's input (acts: the encoding, then each
 // hidden layer's output) and softplus'(z) of every hidden unit (deltas, overwritten later by the
-// backward) for point `point`.
+// backward) for point `point` (nothing for MLP_NO_POINT).
 float mlp_forward(vec3 p, uint point) {
     vec3 u = field_normalize(p, pc.cube);
     uint e = mlp_inputs();
@@ -105,8 +109,10 @@ float mlp_forward(vec3 p, uint point) {
         freq *= 2.0;
     }
 #ifdef MLP_SAVE
-    for (uint i = 0u; i < e; ++i) {
-        acts[i * pc.batch + point] = mlp_act[i];
+    if (point != MLP_NO_POINT) {
+        for (uint i = 0u; i < e; ++i) {
+            acts[i * pc.batch + point] = mlp_act[i];
+        }
     }
 #endif
     mlp_layer(0u, 0u, 0u, MLP_HALF, e, point);
