@@ -155,7 +155,7 @@ impl FieldNet {
 }
 
 /// Most objects per batch: every slot records its own probing (about 14 dispatches, and one
-/// more per hidden layer of the MLP: at most 46) into the iteration's one gated region, which
+/// more per hidden layer of the MLP: up to about 46) into the iteration's one gated region, which
 /// holds [`crate::gpu::gate::GATE_SLOTS`] (2 048).
 pub const MAX_BATCH: u32 = 32;
 
