@@ -127,6 +127,20 @@ impl Camera {
         }
     }
 
+    /// The camera of points already in screen space `(x_s, y_s, depth)`, as SoftRas's
+    /// `SoftRasterizer` takes its `face_vertices`: at the origin, looking along +z with +y up,
+    /// orthographic with scale 1. Its look-at rows are the unit axes exactly, so
+    /// [`Camera::to_screen`] is the identity, in the f32 face setup as in f64, and the backward's
+    /// chain to world positions passes screen gradients through unchanged.
+    pub fn screen_space() -> Camera {
+        Camera {
+            eye: DVec3::ZERO,
+            at: DVec3::Z,
+            up: DVec3::Y,
+            projection: Projection::Orthographic { scale: 1.0 },
+        }
+    }
+
     /// `R (p - eye)` with R from [`look_at`].
     pub fn to_camera(&self, p_world: DVec3) -> DVec3 {
         let r = look_at(self.eye, self.at, self.up);
@@ -175,6 +189,24 @@ pub fn pixel_center(col: u32, row: u32, width: u32, height: u32) -> (f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The screen-space camera maps every point to itself, bit for bit (what lets SoftRas's
+    /// already-projected `face_vertices` go through the ordinary face setup).
+    #[test]
+    fn the_screen_space_camera_is_the_identity_exactly() {
+        let camera = Camera::screen_space();
+        assert_eq!(
+            look_at(camera.eye, camera.at, camera.up),
+            [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+        );
+        for p in [
+            [0.1, -0.7, 2.5],
+            [-1e-7, 3.3e5, -4.0],
+            [0.3333333333, 0.0, 1e-30],
+        ] {
+            assert_eq!(camera.to_screen(DVec3::from(p)), p);
+        }
+    }
 
     fn close(a: f64, b: f64) -> bool {
         (a - b).abs() < 1e-12

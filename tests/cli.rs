@@ -219,7 +219,7 @@ fn twin(
     let colors = FaceColors::new(mesh, lit, s.color_mode);
     let faces: Vec<_> = project_faces(mesh, cam)
         .into_iter()
-        .map(|v| setup_face(v, s.dist, s.sigma))
+        .map(|v| setup_face(v, s.dist, s.cutoff()))
         .collect();
     let k = if s.antialias { 2 } else { 1 };
     let (w, h) = (s.width * k, s.height * k);

@@ -102,7 +102,7 @@ fn twin(
     let colors = FaceColors::new(mesh, lit, s.color_mode);
     let faces: Vec<_> = project_faces(mesh, cam)
         .into_iter()
-        .map(|v| setup_face(v, s.dist, s.sigma))
+        .map(|v| setup_face(v, s.dist, s.cutoff()))
         .collect();
     let k = if s.antialias { 2 } else { 1 };
     let (w, h) = (s.width * k, s.height * k);
@@ -613,7 +613,7 @@ fn face_setup_matches_the_twin() {
         assert_eq!(setups.len(), cams.len() * mesh.face_count());
         for (v, cam) in cams.iter().enumerate() {
             for (j, tri) in project_faces(&mesh, cam).into_iter().enumerate() {
-                let twin = setup_face(tri, dist, s.sigma);
+                let twin = setup_face(tri, dist, s.cutoff());
                 let g = &setups[v * mesh.face_count() + j];
                 let what = format!("{dist:?} view {v} face {j}");
                 for k in 0..3 {
@@ -675,9 +675,9 @@ fn aux_holds_the_softmax_and_alpha_aggregates() {
         let frames = render_all(&r, &gpu, "aux", &mesh, &[cam], &lighting(), &s);
         let faces: Vec<_> = project_faces(&mesh, &cam)
             .into_iter()
-            .map(|v| setup_face(v, s.dist, s.sigma))
+            .map(|v| setup_face(v, s.dist, s.cutoff()))
             .collect();
-        let t = reference::cutoff(s.sigma);
+        let t = s.cutoff();
         let range = s.far - s.near;
         for (i, a) in frames.aux.iter().enumerate() {
             let (xp, yp) = pixel_center(i as u32 % s.width, i as u32 / s.width, s.width, s.height);

@@ -242,6 +242,14 @@ pub struct RasterArgs {
     #[arg(long, value_enum, default_value_t = DistArg::Euclidean)]
     pub dist: DistArg,
 
+    /// ε_d: a face is ignored at a pixel outside it where its coverage would be below this
+    /// (SoftRas's dist_eps; in (0, 0.5)).
+    #[arg(
+        long, allow_negative_numbers = true, value_name = "EPS", default_value_t = 1e-4,
+        value_parser = positive,
+    )]
+    pub dist_eps: f64,
+
     /// Colour aggregation.
     #[arg(long, value_enum, default_value_t = RgbArg::Softmax)]
     pub rgb: RgbArg,
@@ -313,6 +321,7 @@ impl Default for RasterArgs {
             sigma: 1e-5,
             gamma: 1e-4,
             dist: DistArg::Euclidean,
+            dist_eps: 1e-4,
             rgb: RgbArg::Softmax,
             alpha: AlphaArg::Prod,
             near: 1.0,
@@ -340,6 +349,7 @@ impl RasterArgs {
             near: self.near,
             far: self.far,
             dist: self.dist.into(),
+            dist_eps: self.dist_eps,
             rgb: self.rgb.into(),
             alpha: self.alpha.into(),
             background: self.background.unwrap_or([0.0; 3]),

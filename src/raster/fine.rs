@@ -254,11 +254,7 @@ impl RasterPush {
             face_count,
             view_count,
             sigma: if hard { 1.0 } else { s.sigma as f32 },
-            cutoff: if hard {
-                0.0
-            } else {
-                reference::cutoff(s.sigma) as f32
-            },
+            cutoff: if hard { 0.0 } else { s.cutoff() as f32 },
             near: s.near as f32,
             far: s.far as f32,
             inv_gamma_range,

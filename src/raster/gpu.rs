@@ -912,8 +912,7 @@ impl Renderer {
                 scene.vertex_count,
                 scene.face_count,
                 scene.view_count,
-                scene.settings.dist,
-                scene.settings.sigma,
+                &scene.settings,
             )
         })
     }
@@ -1479,8 +1478,7 @@ impl Renderer {
                 mesh.vertex_count() as u32,
                 mesh.face_count() as u32,
                 views.len() as u32,
-                settings.dist,
-                settings.sigma,
+                settings,
             )
         })?;
         ctx.read_buffer(&setups, 0, n)

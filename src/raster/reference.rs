@@ -18,7 +18,8 @@ use crate::camera::{Camera, pixel_center};
 use crate::lighting::{Lighting, positions_f64};
 use crate::mesh::{Location, Mesh, MeshError, check_texture_res};
 
-/// ε_d of the SPEC: the coverage below which a face is ignored (`dist_eps` in SoftRas).
+/// ε_d of the SPEC by default: the coverage below which a face is ignored (`dist_eps` in
+/// SoftRas; [`RasterSettings::dist_eps`] sets it).
 pub const DIST_EPS: f64 = 1e-4;
 
 /// SoftRas clamps the barycentric determinant away from 0 to ±1e-10.
@@ -97,6 +98,10 @@ pub struct RasterSettings {
     pub far: f64,
     /// Background depth offset ε of the softmax (`eps` in SoftRas, 1e-3).
     pub eps: f64,
+    /// ε_d: a face whose coverage of a pixel outside it would be below this is ignored there
+    /// (`dist_eps` in SoftRas: 1e-4 by default, 1e-10 in its reconstruction). It sets the
+    /// squared-distance cut-off [`RasterSettings::cutoff`], so how far faces reach.
+    pub dist_eps: f64,
     /// Distance function.
     pub dist: Dist,
     /// Colour aggregation.
@@ -124,6 +129,7 @@ impl Default for RasterSettings {
             near: 1.0,
             far: 100.0,
             eps: 1e-3,
+            dist_eps: DIST_EPS,
             dist: Dist::Euclidean,
             rgb: Rgb::Softmax,
             alpha: Alpha::Prod,
@@ -183,6 +189,12 @@ impl RasterSettings {
         if !self.eps.is_finite() {
             return bad(format!("eps must be finite, got {}", self.eps));
         }
+        if !(self.dist_eps > 0.0 && self.dist_eps < 0.5) {
+            return bad(format!(
+                "dist_eps must be in (0, 0.5), got {}",
+                self.dist_eps
+            ));
+        }
         if !self.background.iter().all(|c| c.is_finite()) {
             return bad(format!("background {:?} is not finite", self.background));
         }
@@ -190,10 +202,17 @@ impl RasterSettings {
     }
 }
 
-/// Squared-distance cut-off `T = σ ln(1/ε_d − 1)` (≈ 9.21 σ): beyond it, outside, a face's
-/// coverage is below ε_d and the face is ignored.
-pub fn cutoff(sigma: f64) -> f64 {
-    sigma * (1.0 / DIST_EPS - 1.0).ln()
+/// Squared-distance cut-off `T = σ ln(1/ε_d − 1)` (≈ 9.21 σ at the default ε_d = 1e-4): beyond
+/// it, outside, a face's coverage is below ε_d and the face is ignored.
+pub fn cutoff(sigma: f64, dist_eps: f64) -> f64 {
+    sigma * (1.0 / dist_eps - 1.0).ln()
+}
+
+impl RasterSettings {
+    /// These settings' squared-distance [`cutoff`] `T` (from σ and ε_d).
+    pub fn cutoff(&self) -> f64 {
+        cutoff(self.sigma, self.dist_eps)
+    }
 }
 
 fn sigmoid(x: f64) -> f64 {
@@ -347,7 +366,7 @@ pub fn is_numerically_degenerate(v: &[[f64; 3]; 3]) -> bool {
 ///   mode: its coverage is not bounded by its vertices.
 ///
 /// Every finite box is padded by 1e-9 against rounding.
-pub fn face_screen_bbox_grown(v: &[[f64; 3]; 3], dist: Dist, sigma: f64) -> [f64; 4] {
+pub fn face_screen_bbox_grown(v: &[[f64; 3]; 3], dist: Dist, t: f64) -> [f64; 4] {
     if is_numerically_degenerate(v) {
         return [
             f64::NEG_INFINITY,
@@ -356,7 +375,7 @@ pub fn face_screen_bbox_grown(v: &[[f64; 3]; 3], dist: Dist, sigma: f64) -> [f64
             f64::INFINITY,
         ];
     }
-    let r = cutoff(sigma).sqrt();
+    let r = t.sqrt();
     let xs = [v[0][0], v[1][0], v[2][0]];
     let ys = [v[0][1], v[1][1], v[2][1]];
     let min = |a: [f64; 3]| a[0].min(a[1]).min(a[2]);
@@ -395,7 +414,7 @@ pub fn outside_bbox(bbox: &[f64; 4], xp: f64, yp: f64) -> bool {
 }
 
 /// The setup pass for one face, from its screen-space vertices.
-pub fn setup_face(v: [[f64; 3]; 3], dist: Dist, sigma: f64) -> FaceSetup {
+pub fn setup_face(v: [[f64; 3]; 3], dist: Dist, t: f64) -> FaceSetup {
     let [p0, p1, p2] = v;
     let adj = [
         [p1[1] - p2[1], p2[0] - p1[0], p1[0] * p2[1] - p2[0] * p1[1]],
@@ -408,7 +427,7 @@ pub fn setup_face(v: [[f64; 3]; 3], dist: Dist, sigma: f64) -> FaceSetup {
         inv: adj.map(|row| row.map(|a| a / det)),
         front: is_front_facing(&v),
         finite: v.iter().flatten().all(|c| c.is_finite()),
-        bbox: face_screen_bbox_grown(&v, dist, sigma),
+        bbox: face_screen_bbox_grown(&v, dist, t),
     }
 }
 
@@ -803,7 +822,7 @@ pub fn shade_pixel_aux(
     s: &RasterSettings,
     cull: bool,
 ) -> ([f64; 4], PixelAux) {
-    let t = cutoff(s.sigma);
+    let t = s.cutoff();
     let mut alpha = AlphaAccum::new(s.alpha);
     let mut soft = SoftmaxAccum::new(s.background, s.eps);
     let mut hard = HardAccum::new(s.background);
@@ -899,7 +918,7 @@ pub fn render_f64(
 pub fn setup_view(mesh: &MeshF64, camera: &Camera, settings: &RasterSettings) -> Vec<FaceSetup> {
     project_faces_of(&mesh.positions, &mesh.faces, camera)
         .into_iter()
-        .map(|v| setup_face(v, settings.dist, settings.sigma))
+        .map(|v| setup_face(v, settings.dist, settings.cutoff()))
         .collect()
 }
 
@@ -1327,7 +1346,7 @@ mod tests {
         };
         let cam = Camera::default();
         let img = render(&mesh, &cam, &Lighting::unlit(), &s).unwrap();
-        let face = setup_face(project_faces(&mesh, &cam)[0], s.dist, s.sigma);
+        let face = setup_face(project_faces(&mesh, &cam)[0], s.dist, s.cutoff());
         let (xp, yp) = pixel_center(8, 9, 16, 16);
         let w = clip_barycentric(barycentric(&face, xp, yp));
         assert!(inside_closed(&w));
@@ -1385,8 +1404,8 @@ mod tests {
     fn coverage_is_half_on_the_edge_and_ignored_past_the_cutoff() {
         let v = [[-0.5, -0.5, 2.0], [0.5, -0.5, 2.0], [0.0, 0.5, 2.0]];
         let sigma = 1e-3;
-        let face = setup_face(v, Dist::Euclidean, sigma);
-        let t = cutoff(sigma);
+        let t = cutoff(sigma, DIST_EPS);
+        let face = setup_face(v, Dist::Euclidean, t);
         assert!((t - 9.2102403669758 * sigma).abs() < 1e-12);
         let at =
             |x: f64, y: f64, dist| coverage(&face, &barycentric(&face, x, y), x, y, dist, sigma, t);
@@ -1464,11 +1483,11 @@ mod tests {
             .enumerate()
         {
             for sigma in [1e-5, 1e-3, 2e-2, 1e-1] {
-                let t = cutoff(sigma);
+                let t = cutoff(sigma, DIST_EPS);
                 let random = (0..60).map(|_| random_triangle(&mut rng));
                 for v in special.clone().into_iter().chain(random) {
-                    let face = setup_face(v, dist, sigma);
-                    let plain = face_screen_bbox_grown(&v, Dist::Hard, sigma);
+                    let face = setup_face(v, dist, t);
+                    let plain = face_screen_bbox_grown(&v, Dist::Hard, t);
                     for row in 0..h {
                         for col in 0..w {
                             let (xp, yp) = pixel_center(col, row, w, h);
@@ -1500,9 +1519,9 @@ mod tests {
     fn barycentric_reach_exceeds_sqrt_t_for_large_triangles() {
         let v = [[-1.0, -1.0, 2.0], [1.0, -1.0, 2.0], [0.0, 1.0, 2.0]];
         let sigma = 1e-2;
-        let t = cutoff(sigma);
-        let face = setup_face(v, Dist::Barycentric, sigma);
-        let euclid = face_screen_bbox_grown(&v, Dist::Euclidean, sigma);
+        let t = cutoff(sigma, DIST_EPS);
+        let face = setup_face(v, Dist::Barycentric, t);
+        let euclid = face_screen_bbox_grown(&v, Dist::Euclidean, t);
         // Just below the bottom edge, beyond √T, but within the scaled triangle.
         let (xp, yp) = (0.0, -1.0 - 1.5 * t.sqrt());
         let w = barycentric(&face, xp, yp);
@@ -1516,12 +1535,12 @@ mod tests {
         let v = [[0.2, 0.2, 2.0]; 3];
         assert!(is_numerically_degenerate(&v));
         for dist in [Dist::Barycentric, Dist::Hard] {
-            let face = setup_face(v, dist, 1e-4);
+            let face = setup_face(v, dist, cutoff(1e-4, DIST_EPS));
             let w = barycentric(&face, -0.9, 0.9);
-            assert!(coverage(&face, &w, -0.9, 0.9, dist, 1e-4, cutoff(1e-4)).is_some());
+            assert!(coverage(&face, &w, -0.9, 0.9, dist, 1e-4, cutoff(1e-4, DIST_EPS)).is_some());
         }
         for dist in [Dist::Euclidean, Dist::Barycentric, Dist::Hard] {
-            let b = setup_face(v, dist, 1e-4).bbox;
+            let b = setup_face(v, dist, cutoff(1e-4, DIST_EPS)).bbox;
             assert!(b[0] == f64::NEG_INFINITY && b[3] == f64::INFINITY);
         }
         // A thin but well-conditioned sliver keeps a finite box.
@@ -1531,7 +1550,10 @@ mod tests {
             [0.1, 0.025 + 1e-13, 2.0],
         ];
         assert!(!is_numerically_degenerate(&sliver));
-        assert!(face_screen_bbox_grown(&sliver, Dist::Barycentric, 1e-4)[2].is_finite());
+        assert!(
+            face_screen_bbox_grown(&sliver, Dist::Barycentric, cutoff(1e-4, DIST_EPS))[2]
+                .is_finite()
+        );
     }
 
     #[test]

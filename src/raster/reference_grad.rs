@@ -64,7 +64,7 @@ use crate::lighting::{Lighting, NORMAL_EPS, face_normal_raw, vertex_normal_sums}
 use crate::mesh::Mesh;
 use crate::raster::reference::{
     self, Alpha, ColorMode, Dist, FaceColors, FaceSetup, MeshF64, PixelAux, RasterSettings,
-    RenderError, Rgb, barycentric, clip_barycentric, coverage, cutoff, depth, dist2_point_segment,
+    RenderError, Rgb, barycentric, clip_barycentric, coverage, depth, dist2_point_segment,
     outside_bbox, setup_view, shade_pixel_aux, surface_texel_index,
 };
 
@@ -497,7 +497,7 @@ pub fn pixel_face_grad(
         return None;
     }
     let w = barycentric(face, xp, yp);
-    let d = coverage(face, &w, xp, yp, s.dist, s.sigma, cutoff(s.sigma))?;
+    let d = coverage(face, &w, xp, yp, s.dist, s.sigma, s.cutoff())?;
     let w_clip = clip_barycentric(w);
     let z = depth(face, &w_clip);
     let colored = z >= s.near && z <= s.far && (s.double_sided || face.front);
@@ -1258,7 +1258,7 @@ mod tests {
             }
         }
         let colors = FaceColors::of(mesh, &case.lighting, s.color_mode);
-        let t = cutoff(s.sigma);
+        let t = s.cutoff();
         for camera in cameras {
             let fwd = forward_view(mesh, camera, &colors, s);
             for row in 0..fwd.height {
@@ -1661,7 +1661,7 @@ mod tests {
         let colors = FaceColors::of(&mesh, &Lighting::unlit(), s.color_mode);
         let fwd = forward_view(&mesh, &Camera::default(), &colors, &s);
         let aux = fwd.aux[0];
-        let t = cutoff(s.sigma);
+        let t = s.cutoff();
         let d: Vec<f64> = fwd
             .faces
             .iter()

@@ -12,7 +12,9 @@ use bytemuck::{Pod, Zeroable};
 use crate::camera::{Camera, Projection, look_at};
 use crate::error::{Error, Result};
 use crate::gpu::{BufferRange, Context, Kernel, Recorder, specs};
-use crate::raster::reference::{self, Dist};
+#[cfg(doc)]
+use crate::raster::reference;
+use crate::raster::reference::{Dist, RasterSettings};
 
 /// `Projection::Perspective` in [`GpuView::projection`] (`PROJ_PERSPECTIVE` in the kernel).
 pub const PROJ_PERSPECTIVE: u32 = 0;
@@ -225,8 +227,8 @@ impl FaceSetupKernel {
     ///
     /// `positions` holds the world positions as packed `f32` triples (`vertex_count` per mesh of
     /// the batch, mesh after mesh), `faces` the vertex indices as packed `u32` triples, `views`
-    /// one [`GpuView`] per view. `dist` and `sigma` choose the box
-    /// growth as [`reference::face_screen_bbox_grown`] does.
+    /// one [`GpuView`] per view. `settings`' distance function and cut-off (σ, ε_d) choose the
+    /// box growth as [`reference::face_screen_bbox_grown`] does.
     #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
@@ -238,9 +240,9 @@ impl FaceSetupKernel {
         vertex_count: u32,
         face_count: u32,
         view_count: u32,
-        dist: Dist,
-        sigma: f64,
+        settings: &RasterSettings,
     ) -> Result<()> {
+        let dist = settings.dist;
         let n = u64::from(face_count) * u64::from(view_count);
         let need = n * std::mem::size_of::<GpuFaceSetup>() as u64;
         if setups.size < need || n > u64::from(u32::MAX) {
@@ -258,7 +260,7 @@ impl FaceSetupKernel {
             radius: if dist == Dist::Hard {
                 0.0
             } else {
-                reference::cutoff(sigma).sqrt() as f32
+                settings.cutoff().sqrt() as f32
             },
             degenerate_k: DEGENERATE_ULPS * f32::EPSILON,
             bary_margin: BARY_MARGIN,

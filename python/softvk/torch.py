@@ -1,0 +1,349 @@
+"""softvk's renderer as PyTorch operations.
+
+- :func:`soft_rasterize` is SoftRas's ``soft_rasterize`` (same arguments, defaults, shapes and
+  dtypes): faces already projected to screen space in, RGBA images ``[B, 4, H, W]`` out.
+- :func:`render_mesh` renders world-space meshes through SoftRas's ``look_at`` or
+  ``projection`` camera with its ambient + directional lighting, all in the engine: no
+  ``[B, F, 3, 3]`` tensor is built in Python.
+
+Both are ``torch.autograd.Function`` s whose backward is softvk's: the exact derivative of the
+forward (SoftRas drops some terms; softvk keeps them), deterministic, bit-identical on reruns,
+with no float atomics. Gradients go only to the inputs that ask for them; an upstream gradient
+that is zero on RGB (a silhouette loss) takes the alpha-only backward.
+
+Tensors may live on any device: the engine reads host copies and the results go back to the
+device of the input (CUDA tensors work, through those copies).
+"""
+
+import numpy as np
+import torch
+
+from . import _native
+
+__all__ = ["soft_rasterize", "render_mesh", "rasterize_settings"]
+
+
+def _size(image_size):
+    """``(height, width)`` from an int (square, as SoftRas) or a ``(height, width)`` pair."""
+    if isinstance(image_size, (tuple, list)):
+        height, width = image_size
+        return int(height), int(width)
+    return int(image_size), int(image_size)
+
+
+def rasterize_settings(
+    image_size=256,
+    background_color=(0, 0, 0),
+    near=1,
+    far=100,
+    fill_back=True,
+    eps=1e-3,
+    sigma_val=1e-5,
+    dist_func="euclidean",
+    dist_eps=1e-4,
+    gamma_val=1e-4,
+    aggr_func_rgb="softmax",
+    aggr_func_alpha="prod",
+    texture_type="surface",
+    tile=8,
+    brute=False,
+):
+    """The engine's settings from SoftRas's rasterizer arguments (validated here, once)."""
+    height, width = _size(image_size)
+    background = tuple(float(c) for c in _as_list(background_color))
+    if len(background) != 3:
+        raise ValueError(f"softvk: background_color needs 3 values, got {background_color!r}")
+    return _native.Settings(
+        width,
+        height,
+        sigma=float(sigma_val),
+        gamma=float(gamma_val),
+        near=float(near),
+        far=float(far),
+        eps=float(eps),
+        dist_eps=float(dist_eps),
+        dist_func=dist_func,
+        aggr_func_rgb=aggr_func_rgb,
+        aggr_func_alpha=aggr_func_alpha,
+        background_color=background,
+        fill_back=bool(fill_back),
+        texture_type=texture_type,
+        tile=int(tile),
+        brute=bool(brute),
+    )
+
+
+def _as_list(value):
+    if isinstance(value, torch.Tensor):
+        return value.detach().cpu().reshape(-1).tolist()
+    if isinstance(value, np.ndarray):
+        return value.reshape(-1).tolist()
+    return list(value)
+
+
+def _host(tensor, dtype=np.float32):
+    """A C-contiguous numpy copy (or view) of ``tensor`` on the host."""
+    array = tensor.detach().cpu().numpy()
+    return np.ascontiguousarray(array, dtype=dtype)
+
+
+def _upstream(grad_images):
+    """dL/d(images) ``[B, 4, H, W]`` as the engine takes it (``[B, H, W, 4]`` float32), and
+    whether its RGB part is zero everywhere (then the backward skips the colour terms)."""
+    grad = grad_images.detach()
+    alpha_only = not bool(torch.any(grad[:, :3] != 0))
+    return _host(grad.permute(0, 2, 3, 1)), alpha_only
+
+
+def _images(array, like):
+    """Engine images ``[B, H, W, 4]`` as ``[B, 4, H, W]`` on ``like``'s device and dtype."""
+    images = torch.from_numpy(array).permute(0, 3, 1, 2).contiguous()
+    return images.to(device=like.device, dtype=like.dtype)
+
+
+def _grad(array, like):
+    return torch.from_numpy(array).to(device=like.device, dtype=like.dtype)
+
+
+class SoftRasterizeFunction(torch.autograd.Function):
+    """SoftRas's ``SoftRasterizeFunction`` on softvk's engine."""
+
+    @staticmethod
+    def forward(ctx, face_vertices, textures, settings):
+        images, raster = _native.rasterize(_host(face_vertices), _host(textures), settings)
+        ctx.raster = raster
+        ctx.like = (face_vertices, textures)
+        return _images(images, face_vertices)
+
+    @staticmethod
+    def backward(ctx, grad_images):
+        need_vertices, need_textures = ctx.needs_input_grad[:2]
+        if not (need_vertices or need_textures):
+            return None, None, None
+        upstream, alpha_only = _upstream(grad_images)
+        d_vertices, d_textures, _ = ctx.raster.backward(upstream, alpha_only)
+        face_vertices, textures = ctx.like
+        return (
+            _grad(d_vertices, face_vertices) if need_vertices else None,
+            _grad(d_textures, textures) if need_textures else None,
+            None,
+        )
+
+
+def soft_rasterize(
+    face_vertices,
+    textures,
+    image_size=256,
+    background_color=[0, 0, 0],
+    near=1,
+    far=100,
+    fill_back=True,
+    eps=1e-3,
+    sigma_val=1e-5,
+    dist_func="euclidean",
+    dist_eps=1e-4,
+    gamma_val=1e-4,
+    aggr_func_rgb="softmax",
+    aggr_func_alpha="prod",
+    texture_type="surface",
+):
+    """SoftRas's soft rasterizer.
+
+    ``face_vertices`` ``[B, F, 3, 3]``: each face's three vertices in screen space (x, y in
+    [-1, 1] across the image, y up; depth). ``textures`` ``[B, F, R², 3]`` per-face texels
+    (``texture_type='surface'``) or ``[B, F, 3, 3]`` per-corner colours (``'vertex'``), already
+    lit. Returns RGBA ``[B, 4, H, W]``, row 0 at the top. ``image_size`` may also be a
+    ``(height, width)`` pair.
+    """
+    settings = rasterize_settings(
+        image_size,
+        background_color,
+        near,
+        far,
+        fill_back,
+        eps,
+        sigma_val,
+        dist_func,
+        dist_eps,
+        gamma_val,
+        aggr_func_rgb,
+        aggr_func_alpha,
+        texture_type,
+    )
+    return SoftRasterizeFunction.apply(face_vertices, textures, settings)
+
+
+class RenderMeshFunction(torch.autograd.Function):
+    """World-space meshes through cameras and lights, all in the engine."""
+
+    @staticmethod
+    def forward(ctx, vertices, textures, eyes, faces, cameras, lighting, settings):
+        view_mesh = np.arange(vertices.shape[0], dtype=np.int64)
+        images, raster = _native.render_mesh(
+            _host(vertices),
+            _host(faces, np.int64),
+            _host(textures),
+            view_mesh,
+            cameras,
+            lighting,
+            settings,
+        )
+        ctx.raster = raster
+        ctx.like = (vertices, textures, eyes)
+        return _images(images, vertices)
+
+    @staticmethod
+    def backward(ctx, grad_images):
+        need_vertices, need_textures, need_eyes = ctx.needs_input_grad[:3]
+        if not (need_vertices or need_textures or need_eyes):
+            return (None,) * 7
+        upstream, alpha_only = _upstream(grad_images)
+        d_vertices, d_textures, d_eyes = ctx.raster.backward(upstream, alpha_only, need_eyes)
+        vertices, textures, eyes = ctx.like
+        return (
+            _grad(d_vertices, vertices) if need_vertices else None,
+            _grad(d_textures.reshape(textures.shape), textures) if need_textures else None,
+            _grad(d_eyes, eyes) if need_eyes else None,
+            None,
+            None,
+            None,
+            None,
+        )
+
+
+def _batched(tensor, batch, name):
+    if tensor.dim() == 2:
+        tensor = tensor.unsqueeze(0)
+    if tensor.shape[0] == 1 and batch > 1:
+        tensor = tensor.expand(batch, *tensor.shape[1:])
+    if tensor.shape[0] != batch:
+        raise ValueError(f"softvk: {name} has batch {tensor.shape[0]}, the vertices {batch}")
+    return tensor
+
+
+def render_mesh(
+    vertices,
+    faces,
+    textures=None,
+    eyes=None,
+    image_size=256,
+    background_color=[0, 0, 0],
+    near=1,
+    far=100,
+    fill_back=True,
+    eps=1e-3,
+    sigma_val=1e-5,
+    dist_func="euclidean",
+    dist_eps=1e-4,
+    gamma_val=1e-4,
+    aggr_func_rgb="softmax",
+    aggr_func_alpha="prod",
+    texture_type="surface",
+    camera_mode="look_at",
+    perspective=True,
+    viewing_angle=30,
+    viewing_scale=1.0,
+    P=None,
+    dist_coeffs=None,
+    orig_size=512,
+    light_intensity_ambient=0.5,
+    light_color_ambient=[1, 1, 1],
+    light_intensity_directionals=0.5,
+    light_color_directionals=[1, 1, 1],
+    light_directions=[0, 1, 0],
+):
+    """Renders meshes as SoftRas's ``SoftRenderer`` does (lighting → camera → rasterizer), in
+    the engine.
+
+    ``vertices`` ``[B, V, 3]`` world positions; ``faces`` ``[F, 3]`` or ``[B, F, 3]`` (the same
+    faces for every mesh); ``textures`` ``[B, F, R², 3]`` (surface) or ``[B, V, 3]`` (vertex),
+    before lighting (white when ``None``). ``camera_mode='look_at'``: mesh ``b`` seen from
+    ``eyes[b]`` (``[B, 3]`` or ``[3]``; SoftRas's default eye otherwise) looking at the origin
+    with +y up, perspective with ``viewing_angle`` degrees or orthographic with
+    ``viewing_scale``; ``'projection'``: SoftRas's 3×4 ``P`` (``[B, 3, 4]`` or ``[3, 4]``),
+    ``dist_coeffs`` and ``orig_size``. Lighting is SoftRas's ambient + directional, arguments
+    as ``SoftRenderer``'s. Returns RGBA ``[B, 4, H, W]``. Gradients flow to ``vertices``,
+    ``textures`` and (look_at) ``eyes``.
+    """
+    if vertices.dim() == 2:
+        vertices = vertices.unsqueeze(0)
+    batch = vertices.shape[0]
+    faces = faces.detach()
+    if faces.dim() == 3:
+        if bool(torch.any(faces != faces[:1])):
+            raise ValueError("softvk: render_mesh needs the same faces for every mesh of a batch")
+        faces = faces[0]
+    if textures is None:
+        if texture_type == "vertex":
+            textures = torch.ones(batch, vertices.shape[1], 3, dtype=vertices.dtype)
+        else:
+            textures = torch.ones(batch, faces.shape[0], 1, 3, dtype=vertices.dtype)
+        textures = textures.to(vertices.device)
+    textures = _batched(textures, batch, "textures") if textures.dim() == 3 else textures
+    if textures.dim() == 4 and textures.shape[0] == 1 and batch > 1:
+        textures = textures.expand(batch, *textures.shape[1:])
+
+    if camera_mode in ("look_at", "look"):
+        if camera_mode == "look":
+            raise ValueError("softvk: render_mesh renders look_at and projection cameras")
+        if eyes is None:
+            eyes = torch.tensor([0.0, 0.0, -(1.0 / np.tan(np.radians(viewing_angle)) + 1)])
+            eyes = eyes.to(vertices.device, vertices.dtype)
+        eyes = _batched(eyes.reshape(-1, 3), batch, "eyes")
+        angle = float(viewing_angle) if perspective else None
+        cameras = [
+            ("look_at", tuple(e), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), angle, float(viewing_scale))
+            for e in eyes.detach().cpu().double().tolist()
+        ]
+    elif camera_mode == "projection":
+        if P is None:
+            raise ValueError("softvk: camera_mode 'projection' needs P")
+        matrices = _batched(torch.as_tensor(P).reshape(-1, 3, 4), batch, "P")
+        coeffs = [0.0] * 5 if dist_coeffs is None else _as_list(dist_coeffs)
+        coeffs = np.asarray(coeffs, dtype=np.float64).reshape(-1, 5)
+        if coeffs.shape[0] == 1:
+            coeffs = np.repeat(coeffs, batch, axis=0)
+        cameras = [
+            ("projection", tuple(m), tuple(c), float(orig_size))
+            for m, c in zip(matrices.detach().cpu().double().reshape(batch, 12).tolist(), coeffs.tolist())
+        ]
+        eyes = torch.zeros(batch, 3, dtype=vertices.dtype, device=vertices.device)
+    else:
+        raise ValueError(f"softvk: unknown camera_mode {camera_mode!r}")
+
+    lighting = (
+        float(light_intensity_ambient),
+        tuple(float(c) for c in _as_list(light_color_ambient)),
+        _directionals(light_intensity_directionals, light_color_directionals, light_directions),
+    )
+    settings = rasterize_settings(
+        image_size,
+        background_color,
+        near,
+        far,
+        fill_back,
+        eps,
+        sigma_val,
+        dist_func,
+        dist_eps,
+        gamma_val,
+        aggr_func_rgb,
+        aggr_func_alpha,
+        texture_type,
+    )
+    return RenderMeshFunction.apply(vertices, textures, eyes, faces, cameras, lighting, settings)
+
+
+def _directionals(intensities, colors, directions):
+    """SoftRas's directional lights (one, or one per row) as ``(intensity, colour, direction)``."""
+    directions = np.asarray(_as_list(directions), dtype=np.float64).reshape(-1, 3)
+    colors = np.asarray(_as_list(colors), dtype=np.float64).reshape(-1, 3)
+    intensities = np.asarray(
+        _as_list(intensities) if not np.isscalar(intensities) else [intensities], dtype=np.float64
+    ).reshape(-1)
+    n = max(len(directions), len(colors), len(intensities))
+    pick = lambda a, i: a[i if len(a) > 1 else 0]  # noqa: E731
+    return [
+        (float(pick(intensities, i)), tuple(pick(colors, i)), tuple(pick(directions, i)))
+        for i in range(n)
+    ]

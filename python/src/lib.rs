@@ -1,0 +1,847 @@
+//! `softvk._native`: the engine as Python sees it. The Python package (`softvk.torch`,
+//! `softvk.soft_renderer`) wraps these calls in autograd functions and SoftRas's classes; this
+//! module only moves arrays in and out of the engine.
+//!
+//! - One engine (a [`Context`] and a [`Renderer`]) per process, made on first use from the
+//!   environment (`SOFTVK_DEVICE`, `SOFTVK_VALIDATION`, ...), and used by one call at a time:
+//!   calls from several threads queue on its lock, with the GIL released while the device works.
+//! - A forked child never touches its parent's engine (a Vulkan device does not survive a fork):
+//!   it gets a clear error instead, and drops what it inherited without freeing it.
+//! - [`rasterize`] is SoftRas's `soft_rasterize`: faces already in screen space, rendered with
+//!   the identity camera ([`Camera::screen_space`]) and no lighting, so the engine's backward to
+//!   world positions is the gradient with respect to the screen-space face vertices.
+//! - [`render_mesh`] keeps the camera, the lighting and the face set-up on the device: vertices,
+//!   faces and cameras in, images out.
+//! - [`reference_rasterize`] is the f64 CPU twin of [`rasterize`], the oracle of the tests.
+
+use std::mem::ManuallyDrop;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::{Mutex, MutexGuard};
+
+use glam::DVec3;
+use numpy::{
+    IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArrayDyn,
+    PyUntypedArrayMethods,
+};
+use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyTuple;
+use softvk::Error;
+use softvk::camera::{Camera, Projection};
+use softvk::gpu::{Context, ContextOptions};
+use softvk::lighting::{Directional, Lighting};
+use softvk::mesh::Mesh;
+use softvk::raster::backward::GradBuffers;
+use softvk::raster::gpu::{GpuScene, Method, Renderer};
+use softvk::raster::reference::{self, Alpha, ColorMode, Dist, RasterSettings, Rgb};
+
+/// The process's engine, made on first use.
+struct Engine {
+    ctx: Context,
+    renderer: Renderer,
+}
+
+static ENGINE: Mutex<Option<Engine>> = Mutex::new(None);
+/// The process that made [`ENGINE`] (0: none yet). Read before the lock: a child forked while
+/// another thread held the lock would wait on it forever.
+static OWNER: AtomicU32 = AtomicU32::new(0);
+
+fn forked_error(owner: u32) -> PyErr {
+    PyRuntimeError::new_err(format!(
+        "softvk: this process ({}) was forked from process {owner}, which had already opened the \
+         Vulkan device; a device cannot be used across fork(). Make the first softvk call in \
+         the child instead (for a DataLoader, render in the main process or use \
+         multiprocessing_context='spawn'; torchrun's ranks are separate processes already)",
+        std::process::id()
+    ))
+}
+
+/// Whether this process is a fork of the one that made the engine.
+fn forked() -> Option<u32> {
+    let owner = OWNER.load(Ordering::Acquire);
+    (owner != 0 && owner != std::process::id()).then_some(owner)
+}
+
+/// The engine, made on first use: the lock held for the whole call.
+fn engine() -> PyResult<MutexGuard<'static, Option<Engine>>> {
+    if let Some(owner) = forked() {
+        return Err(forked_error(owner));
+    }
+    let mut guard = ENGINE.lock().map_err(|_| {
+        PyRuntimeError::new_err("softvk: a previous call panicked inside the engine")
+    })?;
+    if guard.is_none() {
+        let ctx = Context::new(&ContextOptions::from_env()).map_err(to_py)?;
+        let renderer = Renderer::new(&ctx).map_err(to_py)?;
+        *guard = Some(Engine { ctx, renderer });
+        OWNER.store(std::process::id(), Ordering::Release);
+    }
+    Ok(guard)
+}
+
+/// Runs `f` on the engine with the GIL released, then checks the validation layer's log.
+fn with_engine<T: Send>(
+    py: Python<'_>,
+    f: impl FnOnce(&Engine) -> softvk::Result<T> + Send,
+) -> PyResult<T> {
+    py.detach(|| {
+        let guard = engine()?;
+        let engine = guard.as_ref().expect("engine() made it");
+        let out = f(engine).map_err(to_py)?;
+        engine.ctx.check_validation().map_err(to_py)?;
+        Ok(out)
+    })
+}
+
+/// softvk's errors as Python exceptions: bad input is a `ValueError`, an allocation the device
+/// cannot hold a `MemoryError`, the rest (no driver, no device, a device limit) `RuntimeError`;
+/// the message is the engine's one line.
+fn to_py(e: Error) -> PyErr {
+    let message = format!("softvk: {e}");
+    match e {
+        Error::Input(_) | Error::Mesh(_) | Error::Render(_) | Error::Parse { .. } => {
+            PyValueError::new_err(message)
+        }
+        Error::Allocation { .. } => PyMemoryError::new_err(message),
+        _ => PyRuntimeError::new_err(message),
+    }
+}
+
+fn value_error(message: String) -> PyErr {
+    PyValueError::new_err(format!("softvk: {message}"))
+}
+
+/// The settings of one render: SoftRas's rasterizer arguments, the image size and how faces
+/// meet pixels.
+#[pyclass(frozen, module = "softvk._native")]
+#[derive(Clone)]
+struct Settings {
+    raster: RasterSettings,
+    method: Method,
+}
+
+fn parse_choice<T: Copy>(what: &str, value: &str, choices: &[(&str, T)]) -> PyResult<T> {
+    choices
+        .iter()
+        .find(|(name, _)| *name == value)
+        .map(|(_, v)| *v)
+        .ok_or_else(|| {
+            let names: Vec<&str> = choices.iter().map(|c| c.0).collect();
+            value_error(format!("{what} must be one of {names:?}, got {value:?}"))
+        })
+}
+
+#[pymethods]
+impl Settings {
+    /// `Settings(width, height, *, sigma=1e-5, gamma=1e-4, near=1, far=100, eps=1e-3,
+    /// dist_eps=1e-4, dist_func='euclidean', aggr_func_rgb='softmax', aggr_func_alpha='prod',
+    /// background_color=(0, 0, 0), fill_back=True, texture_type='surface', tile=8,
+    /// brute=False)`: SoftRas's names and defaults. `tile` is the tiled rasterizer's tile edge
+    /// (a multiple of 8); `brute=True` runs SoftRas's every-face-for-every-pixel loop instead.
+    #[new]
+    #[pyo3(signature = (
+        width, height, *, sigma = 1e-5, gamma = 1e-4, near = 1.0, far = 100.0, eps = 1e-3,
+        dist_eps = 1e-4, dist_func = "euclidean", aggr_func_rgb = "softmax",
+        aggr_func_alpha = "prod", background_color = (0.0, 0.0, 0.0), fill_back = true,
+        texture_type = "surface", tile = softvk::raster::gpu::DEFAULT_TILE, brute = false,
+    ))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        width: u32,
+        height: u32,
+        sigma: f64,
+        gamma: f64,
+        near: f64,
+        far: f64,
+        eps: f64,
+        dist_eps: f64,
+        dist_func: &str,
+        aggr_func_rgb: &str,
+        aggr_func_alpha: &str,
+        background_color: (f64, f64, f64),
+        fill_back: bool,
+        texture_type: &str,
+        tile: u32,
+        brute: bool,
+    ) -> PyResult<Self> {
+        let raster = RasterSettings {
+            width,
+            height,
+            sigma,
+            gamma,
+            near,
+            far,
+            eps,
+            dist_eps,
+            dist: parse_choice(
+                "dist_func",
+                dist_func,
+                &[
+                    ("euclidean", Dist::Euclidean),
+                    ("barycentric", Dist::Barycentric),
+                    ("hard", Dist::Hard),
+                ],
+            )?,
+            rgb: parse_choice(
+                "aggr_func_rgb",
+                aggr_func_rgb,
+                &[("softmax", Rgb::Softmax), ("hard", Rgb::Hard)],
+            )?,
+            alpha: parse_choice(
+                "aggr_func_alpha",
+                aggr_func_alpha,
+                &[
+                    ("prod", Alpha::Prod),
+                    ("sum", Alpha::Sum),
+                    ("hard", Alpha::Hard),
+                ],
+            )?,
+            background: [background_color.0, background_color.1, background_color.2],
+            double_sided: fill_back,
+            antialias: false,
+            color_mode: parse_choice(
+                "texture_type",
+                texture_type,
+                &[
+                    ("surface", ColorMode::Surface),
+                    ("vertex", ColorMode::Vertex),
+                ],
+            )?,
+        };
+        raster.validate().map_err(|e| to_py(e.into()))?;
+        let method = if brute {
+            Method::Brute
+        } else {
+            softvk::raster::fine::check_tile_size(tile).map_err(to_py)?;
+            Method::Tiled { tile }
+        };
+        Ok(Settings { raster, method })
+    }
+
+    /// `(height, width)` of the images.
+    #[getter]
+    fn shape(&self) -> (u32, u32) {
+        (self.raster.height, self.raster.width)
+    }
+}
+
+/// A contiguous array's data and shape, checked against `want` (`None`: any extent).
+fn checked<'a, T: numpy::Element>(
+    name: &str,
+    array: &'a PyReadonlyArrayDyn<'_, T>,
+    want: &[Option<usize>],
+) -> PyResult<(&'a [T], Vec<usize>)> {
+    let shape = array.shape().to_vec();
+    let fits = shape.len() == want.len()
+        && shape
+            .iter()
+            .zip(want)
+            .all(|(s, w)| w.is_none_or(|w| *s == w));
+    if !fits {
+        let want: Vec<String> = want
+            .iter()
+            .map(|w| w.map_or("*".into(), |w| w.to_string()))
+            .collect();
+        return Err(value_error(format!(
+            "{name} has shape {shape:?}; expected [{}]",
+            want.join(", ")
+        )));
+    }
+    let data = array
+        .as_slice()
+        .map_err(|_| value_error(format!("{name} is not C-contiguous")))?;
+    Ok((data, shape))
+}
+
+fn triples<T: Copy>(data: &[T]) -> Vec<[T; 3]> {
+    data.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
+}
+
+/// The texture resolution R of `texels` = R² texels a face.
+fn texture_res(texels: usize) -> PyResult<u32> {
+    let r = (texels as f64).sqrt().round() as usize;
+    if r == 0 || r * r != texels {
+        return Err(value_error(format!(
+            "surface textures need R² texels a face, got {texels}"
+        )));
+    }
+    u32::try_from(r).map_err(|_| value_error(format!("texture resolution {r} is too large")))
+}
+
+/// SoftRas's `face_vertices` and `textures` as one mesh a batch element: three vertices a face,
+/// face `j` = vertices `3j, 3j + 1, 3j + 2`.
+fn face_meshes(
+    face_vertices: &[f32],
+    textures: &[f32],
+    (batch, faces, per_face): (usize, usize, usize),
+    mode: ColorMode,
+) -> PyResult<Vec<Mesh>> {
+    let res = match mode {
+        ColorMode::Surface => texture_res(per_face)?,
+        ColorMode::Vertex => 1,
+    };
+    let face_list: Vec<[u32; 3]> = (0..faces as u32)
+        .map(|j| [3 * j, 3 * j + 1, 3 * j + 2])
+        .collect();
+    let (per_batch_v, per_batch_t) = (9 * faces, 3 * per_face * faces);
+    Ok((0..batch)
+        .map(|b| {
+            let positions = triples(&face_vertices[b * per_batch_v..(b + 1) * per_batch_v]);
+            let colors = triples(&textures[b * per_batch_t..(b + 1) * per_batch_t]);
+            let (textures, vertex_colors) = match mode {
+                ColorMode::Surface => (colors, None),
+                ColorMode::Vertex => (vec![[1.0; 3]; faces], Some(colors)),
+            };
+            Mesh {
+                positions,
+                faces: face_list.clone(),
+                texture_res: res,
+                textures,
+                vertex_colors,
+            }
+        })
+        .collect())
+}
+
+/// RGBA images `[views, H, W, 4]` as a numpy array.
+fn images_array<'py, T: numpy::Element>(
+    py: Python<'py>,
+    flat: Vec<T>,
+    (views, height, width): (usize, usize, usize),
+) -> PyResult<Bound<'py, PyAny>> {
+    Ok(flat
+        .into_pyarray(py)
+        .reshape([views, height, width, 4])?
+        .into_any())
+}
+
+fn array_of<'py>(
+    py: Python<'py>,
+    values: impl Iterator<Item = f32>,
+    shape: &[usize],
+) -> PyResult<Bound<'py, PyAny>> {
+    let flat: Vec<f32> = values.collect();
+    Ok(PyArray1::from_vec(py, flat).reshape(shape)?.into_any())
+}
+
+/// What the backward needs: the rendered scene, kept on the device, and how its arrays map
+/// back to the caller's.
+#[pyclass(module = "softvk._native")]
+struct Raster {
+    /// `None` once [`Raster::release`]d. Never dropped in a forked child (see [`Drop`]).
+    scene: Option<ManuallyDrop<GpuScene>>,
+    method: Method,
+    kind: RasterKind,
+}
+
+#[derive(Clone, Copy)]
+enum RasterKind {
+    /// `rasterize`: gradients go to `[B, F, 3, 3]` face vertices and `[B, F, T, 3]` textures.
+    Faces {
+        batch: usize,
+        faces: usize,
+        per_face: usize,
+    },
+    /// `render_mesh`: to `[B, V, 3]` vertices and `[B, T..., 3]` textures, and to the eyes.
+    Mesh {
+        batch: usize,
+        vertices: usize,
+        colors: usize,
+        views: usize,
+    },
+}
+
+impl Drop for Raster {
+    fn drop(&mut self) {
+        if let Some(scene) = self.scene.take() {
+            // A forked child must not free its parent's device memory: leak it instead.
+            if forked().is_none() {
+                // The buffers free themselves through the context, which outlives them (the
+                // engine is never dropped).
+                drop(ManuallyDrop::into_inner(scene));
+            }
+        }
+    }
+}
+
+#[pymethods]
+impl Raster {
+    /// `backward(grad_images, alpha_only=False, eyes=False)`: dL/d(inputs) given dL/d(images)
+    /// `[views, H, W, 4]` (float32). `alpha_only` declares the RGB part of the upstream
+    /// gradient zero (a silhouette loss): the colour terms are skipped, which changes no bit.
+    /// Returns `(d_positions, d_textures, d_eyes)`: for `rasterize`, `[B, F, 3, 3]` and
+    /// `[B, F, T, 3]`; for `render_mesh`, `[B, V, 3]` and the textures' shape, and with `eyes`,
+    /// `[views, 3]` (else `None`).
+    #[pyo3(signature = (grad_images, alpha_only = false, eyes = false))]
+    fn backward<'py>(
+        &self,
+        py: Python<'py>,
+        grad_images: PyReadonlyArrayDyn<'py, f32>,
+        alpha_only: bool,
+        eyes: bool,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        if let Some(owner) = forked() {
+            return Err(forked_error(owner));
+        }
+        let scene: &GpuScene = self.scene.as_deref().ok_or_else(|| {
+            PyRuntimeError::new_err("softvk: this render was released; its backward is gone")
+        })?;
+        let s = scene.settings();
+        let views = scene.view_count() as usize;
+        let (d_image, _) = checked(
+            "grad_images",
+            &grad_images,
+            &[
+                Some(views),
+                Some(s.height as usize),
+                Some(s.width as usize),
+                Some(4),
+            ],
+        )?;
+        let d_image: Vec<[f32; 4]> = d_image
+            .chunks_exact(4)
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect();
+        let method = self.method;
+        let eyes = eyes && matches!(self.kind, RasterKind::Mesh { .. });
+        let grads = with_engine(py, |engine| {
+            let binned = scene.binned(method)?;
+            let mut gb = GradBuffers::new(&engine.ctx, scene, method)?;
+            gb.set_alpha_only(alpha_only);
+            gb.set_d_image(&engine.ctx, scene, &d_image)?;
+            let kernels = engine.renderer.grad_kernels();
+            engine
+                .ctx
+                .submit_and_wait(|rec| kernels.record(rec, &binned, &gb, &gb.io()))?;
+            kernels.finish(&engine.ctx, scene, &gb, &gb.io(), eyes)
+        })?;
+        let narrow =
+            |v: &[[f64; 3]]| -> Vec<f32> { v.iter().flat_map(|g| g.map(|c| c as f32)).collect() };
+        let (d_pos, d_tex, d_eyes) = match self.kind {
+            RasterKind::Faces {
+                batch,
+                faces,
+                per_face,
+            } => (
+                array_of(
+                    py,
+                    narrow(&grads.positions).into_iter(),
+                    &[batch, faces, 3, 3],
+                )?,
+                array_of(
+                    py,
+                    narrow(&grads.colors).into_iter(),
+                    &[batch, faces, per_face, 3],
+                )?,
+                py.None().into_bound(py),
+            ),
+            RasterKind::Mesh {
+                batch,
+                vertices,
+                colors,
+                views,
+            } => {
+                let d_eyes = if eyes {
+                    let e: Vec<f32> = grads
+                        .cameras
+                        .iter()
+                        .flat_map(|c| c.eye.map(|x| x as f32))
+                        .collect();
+                    array_of(py, e.into_iter(), &[views, 3])?
+                } else {
+                    py.None().into_bound(py)
+                };
+                (
+                    array_of(
+                        py,
+                        narrow(&grads.positions).into_iter(),
+                        &[batch, vertices, 3],
+                    )?,
+                    array_of(py, narrow(&grads.colors).into_iter(), &[batch, colors, 3])?,
+                    d_eyes,
+                )
+            }
+        };
+        PyTuple::new(py, [d_pos, d_tex, d_eyes])
+    }
+
+    /// Frees the render's device buffers now (its backward is gone); the garbage collector
+    /// would otherwise free them with this object.
+    fn release(&mut self) {
+        drop(self.scene.take().map(ManuallyDrop::into_inner));
+    }
+}
+
+/// Renders `scene` by `method` and reads the images back, `[views, H, W, 4]` flat.
+fn forward(engine: &Engine, scene: &mut GpuScene, method: Method) -> softvk::Result<Vec<f32>> {
+    engine.renderer.run(&engine.ctx, scene, method)?;
+    let frames = engine.renderer.read_frames(&engine.ctx, scene)?;
+    Ok(frames.images.into_iter().flatten().collect())
+}
+
+/// `rasterize(face_vertices, textures, settings) -> (images, raster)`: SoftRas's
+/// `soft_rasterize`. `face_vertices` `[B, F, 3, 3]` float32 in screen space (x, y, depth);
+/// `textures` `[B, F, R², 3]` (surface) or `[B, F, 3, 3]` (vertex), float32, not lit. Returns
+/// the RGBA images `[B, H, W, 4]` (row 0 at the top) and the [`Raster`] that differentiates
+/// them.
+#[pyfunction]
+fn rasterize<'py>(
+    py: Python<'py>,
+    face_vertices: PyReadonlyArrayDyn<'py, f32>,
+    textures: PyReadonlyArrayDyn<'py, f32>,
+    settings: &Settings,
+) -> PyResult<(Bound<'py, PyAny>, Raster)> {
+    let (fv, shape) = checked(
+        "face_vertices",
+        &face_vertices,
+        &[None, None, Some(3), Some(3)],
+    )?;
+    let (batch, faces) = (shape[0], shape[1]);
+    let (tex, tshape) = checked(
+        "textures",
+        &textures,
+        &[Some(batch), Some(faces), None, Some(3)],
+    )?;
+    let per_face = tshape[2];
+    let mode = settings.raster.color_mode;
+    if mode == ColorMode::Vertex && per_face != 3 {
+        return Err(value_error(format!(
+            "vertex textures need 3 colours a face, got {per_face}"
+        )));
+    }
+    if batch == 0 || faces == 0 {
+        return Err(value_error(format!(
+            "nothing to render: {batch} meshes of {faces} faces"
+        )));
+    }
+    let meshes = face_meshes(fv, tex, (batch, faces, per_face), mode)?;
+    let views: Vec<(usize, Camera)> = (0..batch).map(|b| (b, Camera::screen_space())).collect();
+    let (raster, method) = (settings.raster, settings.method);
+    let (scene, images) = with_engine(py, move |engine| {
+        let mut scene = engine.renderer.prepare_batch(
+            &engine.ctx,
+            &meshes,
+            &views,
+            &Lighting::unlit(),
+            &raster,
+        )?;
+        let images = forward(engine, &mut scene, method)?;
+        Ok((scene, images))
+    })?;
+    let dims = (batch, raster.height as usize, raster.width as usize);
+    Ok((
+        images_array(py, images, dims)?,
+        Raster {
+            scene: Some(ManuallyDrop::new(scene)),
+            method,
+            kind: RasterKind::Faces {
+                batch,
+                faces,
+                per_face,
+            },
+        },
+    ))
+}
+
+/// `reference_rasterize(face_vertices, textures, settings)`: the f64 CPU twin of
+/// [`rasterize`] (float64 arrays in and out): the oracle softvk's kernels are tested against.
+#[pyfunction]
+fn reference_rasterize<'py>(
+    py: Python<'py>,
+    face_vertices: PyReadonlyArrayDyn<'py, f64>,
+    textures: PyReadonlyArrayDyn<'py, f64>,
+    settings: &Settings,
+) -> PyResult<Bound<'py, PyAny>> {
+    let (fv, shape) = checked(
+        "face_vertices",
+        &face_vertices,
+        &[None, None, Some(3), Some(3)],
+    )?;
+    let (batch, faces) = (shape[0], shape[1]);
+    let (tex, tshape) = checked(
+        "textures",
+        &textures,
+        &[Some(batch), Some(faces), None, Some(3)],
+    )?;
+    let per_face = tshape[2];
+    let s = settings.raster;
+    let res = match s.color_mode {
+        ColorMode::Surface => texture_res(per_face)?,
+        ColorMode::Vertex => 1,
+    };
+    let faces_list: Vec<[u32; 3]> = (0..faces as u32)
+        .map(|j| [3 * j, 3 * j + 1, 3 * j + 2])
+        .collect();
+    let (per_batch_v, per_batch_t) = (9 * faces, 3 * per_face * faces);
+    let images = py.detach(|| -> PyResult<Vec<f64>> {
+        let mut out = Vec::with_capacity(batch * (s.width * s.height) as usize * 4);
+        for b in 0..batch {
+            let positions = triples(&fv[b * per_batch_v..(b + 1) * per_batch_v])
+                .into_iter()
+                .map(DVec3::from)
+                .collect();
+            let colors = triples(&tex[b * per_batch_t..(b + 1) * per_batch_t]);
+            let (textures, vertex_colors) = match s.color_mode {
+                ColorMode::Surface => (colors, None),
+                ColorMode::Vertex => (vec![[1.0; 3]; faces], Some(colors)),
+            };
+            let mesh = reference::MeshF64 {
+                positions,
+                faces: faces_list.clone(),
+                texture_res: res,
+                textures,
+                vertex_colors,
+            };
+            let image =
+                reference::render_f64(&mesh, &Camera::screen_space(), &Lighting::unlit(), &s)
+                    .map_err(|e| to_py(e.into()))?;
+            out.extend(image.into_iter().flatten());
+        }
+        Ok(out)
+    })?;
+    images_array(py, images, (batch, s.height as usize, s.width as usize))
+}
+
+/// A camera from Python: `('look_at', eye, at, up, viewing_angle_or_None, scale)` (perspective
+/// with the viewing angle in degrees, or orthographic with `scale` when the angle is `None`),
+/// or `('projection', P (12 floats, rows), dist_coeffs (5), orig_size)`.
+fn camera_from(item: &Bound<'_, PyAny>) -> PyResult<Camera> {
+    let kind: String = item.get_item(0)?.extract()?;
+    let vec3 = |i: usize| -> PyResult<DVec3> {
+        let v: [f64; 3] = item.get_item(i)?.extract()?;
+        Ok(DVec3::from(v))
+    };
+    match kind.as_str() {
+        "look_at" => {
+            let angle: Option<f64> = item.get_item(4)?.extract()?;
+            let scale: f64 = item.get_item(5)?.extract()?;
+            Ok(Camera {
+                eye: vec3(1)?,
+                at: vec3(2)?,
+                up: vec3(3)?,
+                projection: match angle {
+                    Some(viewing_angle_deg) => Projection::Perspective { viewing_angle_deg },
+                    None => Projection::Orthographic { scale },
+                },
+            })
+        }
+        "projection" => {
+            let p: [f64; 12] = item.get_item(1)?.extract()?;
+            let dist_coeffs: [f64; 5] = item.get_item(2)?.extract()?;
+            let orig_size: f64 = item.get_item(3)?.extract()?;
+            Ok(Camera {
+                projection: Projection::Matrix {
+                    p: [
+                        [p[0], p[1], p[2], p[3]],
+                        [p[4], p[5], p[6], p[7]],
+                        [p[8], p[9], p[10], p[11]],
+                    ],
+                    dist_coeffs,
+                    orig_size,
+                },
+                ..Camera::default()
+            })
+        }
+        other => Err(value_error(format!(
+            "camera kind must be 'look_at' or 'projection', got {other:?}"
+        ))),
+    }
+}
+
+/// `render_mesh(vertices, faces, textures, view_mesh, cameras, lighting, settings)`:
+/// `vertices` `[B, V, 3]` float32 (world), `faces` `[F, 3]` int64 shared by the batch,
+/// `textures` `[B, F, R², 3]` (surface) or `[B, V, 3]` (vertex) float32 before lighting;
+/// view `i` shows mesh `view_mesh[i]` through `cameras[i]` (see [`camera_from`]); `lighting`
+/// is `(ambient_intensity, ambient_color, [(intensity, color, direction), ...])`. Lighting,
+/// camera and face set-up run in the engine. Returns `(images [views, H, W, 4], raster)`.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn render_mesh<'py>(
+    py: Python<'py>,
+    vertices: PyReadonlyArrayDyn<'py, f32>,
+    faces: PyReadonlyArrayDyn<'py, i64>,
+    textures: PyReadonlyArrayDyn<'py, f32>,
+    view_mesh: PyReadonlyArray1<'py, i64>,
+    cameras: Vec<Bound<'py, PyAny>>,
+    lighting: (f64, [f64; 3], Vec<(f64, [f64; 3], [f64; 3])>),
+    settings: &Settings,
+) -> PyResult<(Bound<'py, PyAny>, Raster)> {
+    let (verts, vshape) = checked("vertices", &vertices, &[None, None, Some(3)])?;
+    let (batch, nv) = (vshape[0], vshape[1]);
+    let (face_idx, fshape) = checked("faces", &faces, &[None, Some(3)])?;
+    let nf = fshape[0];
+    let mode = settings.raster.color_mode;
+    let (tex, tshape) = match mode {
+        ColorMode::Surface => checked(
+            "textures",
+            &textures,
+            &[Some(batch), Some(nf), None, Some(3)],
+        )?,
+        ColorMode::Vertex => checked("textures", &textures, &[Some(batch), Some(nv), Some(3)])?,
+    };
+    let res = match mode {
+        ColorMode::Surface => texture_res(tshape[2])?,
+        ColorMode::Vertex => 1,
+    };
+    let view_mesh = view_mesh
+        .as_slice()
+        .map_err(|_| value_error("view_mesh is not contiguous".into()))?;
+    if view_mesh.len() != cameras.len() {
+        return Err(value_error(format!(
+            "{} cameras for {} views",
+            cameras.len(),
+            view_mesh.len()
+        )));
+    }
+    let mut views = Vec::with_capacity(cameras.len());
+    for (&m, camera) in view_mesh.iter().zip(&cameras) {
+        let m = usize::try_from(m)
+            .ok()
+            .filter(|&m| m < batch)
+            .ok_or_else(|| value_error(format!("a view shows mesh {m} of a batch of {batch}")))?;
+        views.push((m, camera_from(camera)?));
+    }
+    let mut face_list = Vec::with_capacity(nf);
+    for f in face_idx.chunks_exact(3) {
+        let mut idx = [0u32; 3];
+        for (k, &i) in f.iter().enumerate() {
+            idx[k] = u32::try_from(i)
+                .ok()
+                .filter(|&i| (i as usize) < nv)
+                .ok_or_else(|| {
+                    value_error(format!("face index {i} is outside the {nv} vertices"))
+                })?;
+        }
+        face_list.push(idx);
+    }
+    let colors_per_mesh = tex.len() / 3 / batch.max(1);
+    let meshes: Vec<Mesh> = (0..batch)
+        .map(|b| {
+            let colors = triples(&tex[b * 3 * colors_per_mesh..(b + 1) * 3 * colors_per_mesh]);
+            let (textures, vertex_colors) = match mode {
+                ColorMode::Surface => (colors, None),
+                ColorMode::Vertex => (vec![[1.0; 3]; nf], Some(colors)),
+            };
+            Mesh {
+                positions: triples(&verts[b * 3 * nv..(b + 1) * 3 * nv]),
+                faces: face_list.clone(),
+                texture_res: res,
+                textures,
+                vertex_colors,
+            }
+        })
+        .collect();
+    let (ambient, ambient_color, directionals) = lighting;
+    let lighting = Lighting {
+        ambient_intensity: ambient,
+        ambient_color,
+        directionals: directionals
+            .into_iter()
+            .map(|(intensity, color, direction)| Directional {
+                intensity,
+                color,
+                direction,
+            })
+            .collect(),
+    };
+    let (raster, method) = (settings.raster, settings.method);
+    let n_views = views.len();
+    let (scene, images) = with_engine(py, move |engine| {
+        let mut scene =
+            engine
+                .renderer
+                .prepare_batch(&engine.ctx, &meshes, &views, &lighting, &raster)?;
+        let images = forward(engine, &mut scene, method)?;
+        Ok((scene, images))
+    })?;
+    let dims = (n_views, raster.height as usize, raster.width as usize);
+    Ok((
+        images_array(py, images, dims)?,
+        Raster {
+            scene: Some(ManuallyDrop::new(scene)),
+            method,
+            kind: RasterKind::Mesh {
+                batch,
+                vertices: nv,
+                colors: colors_per_mesh,
+                views: n_views,
+            },
+        },
+    ))
+}
+
+/// `read_exr(path)`: the first RGBA layer of an EXR (what `softvk render --out X.exr` writes)
+/// as float32 `[H, W, 4]`, row 0 at the top; missing channels read as 0.
+#[pyfunction]
+fn read_exr<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bound<'py, PyAny>> {
+    use exr::prelude::{ReadChannels, ReadLayers, Vec2, read};
+    let image = py
+        .detach(|| {
+            read()
+                .no_deep_data()
+                .largest_resolution_level()
+                .rgba_channels(
+                    |size, _| (size.width(), vec![[0f32; 4]; size.area()]),
+                    |(w, px): &mut (usize, Vec<[f32; 4]>),
+                     p: Vec2<usize>,
+                     (r, g, b, a): (f32, f32, f32, f32)| {
+                        px[p.y() * *w + p.x()] = [r, g, b, a];
+                    },
+                )
+                .first_valid_layer()
+                .all_attributes()
+                .from_file(&path)
+        })
+        .map_err(|e| value_error(format!("{}: not a readable RGBA EXR: {e}", path.display())))?;
+    let size = image.layer_data.size;
+    let (_, pixels) = image.layer_data.channel_data.pixels;
+    let flat: Vec<f32> = pixels.into_iter().flatten().collect();
+    Ok(flat
+        .into_pyarray(py)
+        .reshape([size.height(), size.width(), 4])?
+        .into_any())
+}
+
+/// `write_exr(path, image)`: float32 `[H, W, 4]` RGBA (row 0 at the top) as a lossless EXR, the
+/// format `softvk grad --weights` reads.
+#[pyfunction]
+fn write_exr(path: std::path::PathBuf, image: PyReadonlyArrayDyn<'_, f32>) -> PyResult<()> {
+    use exr::prelude::{Encoding, Image, SpecificChannels, Vec2, WritableImage};
+    let (data, shape) = checked("image", &image, &[None, None, Some(4)])?;
+    let (height, width) = (shape[0], shape[1]);
+    let channels = SpecificChannels::rgba(|p: Vec2<usize>| {
+        let i = 4 * (p.y() * width + p.x());
+        (data[i], data[i + 1], data[i + 2], data[i + 3])
+    });
+    Image::from_encoded_channels((width, height), Encoding::SMALL_LOSSLESS, channels)
+        .write()
+        .to_file(&path)
+        .map_err(|e| value_error(format!("{}: cannot write EXR: {e}", path.display())))
+}
+
+/// The name of the Vulkan device softvk renders on (opening it if need be).
+#[pyfunction]
+fn device_name(py: Python<'_>) -> PyResult<String> {
+    with_engine(py, |engine| Ok(engine.ctx.info().name.clone()))
+}
+
+/// Whether this process is a fork of the one that opened the device (then every call fails).
+#[pyfunction]
+fn is_forked_child() -> bool {
+    forked().is_some()
+}
+
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Settings>()?;
+    m.add_class::<Raster>()?;
+    m.add_function(wrap_pyfunction!(rasterize, m)?)?;
+    m.add_function(wrap_pyfunction!(reference_rasterize, m)?)?;
+    m.add_function(wrap_pyfunction!(render_mesh, m)?)?;
+    m.add_function(wrap_pyfunction!(device_name, m)?)?;
+    m.add_function(wrap_pyfunction!(read_exr, m)?)?;
+    m.add_function(wrap_pyfunction!(write_exr, m)?)?;
+    m.add_function(wrap_pyfunction!(is_forked_child, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}
