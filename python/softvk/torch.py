@@ -289,7 +289,11 @@ def render_mesh(
         if eyes is None:
             eyes = torch.tensor([0.0, 0.0, -(1.0 / np.tan(np.radians(viewing_angle)) + 1)])
             eyes = eyes.to(vertices.device, vertices.dtype)
-        eyes = _batched(eyes.reshape(-1, 3), batch, "eyes")
+        eyes = eyes.reshape(-1, 3)
+        if eyes.shape[0] == 1 and batch > 1:
+            eyes = eyes.expand(batch, 3)
+        if eyes.shape[0] != batch:
+            raise ValueError(f"softvk: {eyes.shape[0]} eyes for a batch of {batch} meshes")
         angle = float(viewing_angle) if perspective else None
         cameras = [
             ("look_at", tuple(e), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), angle, float(viewing_scale))
