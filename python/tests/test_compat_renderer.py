@@ -48,8 +48,11 @@ class FakeEngine:
 
 @pytest.fixture
 def engine(monkeypatch):
+    """Records the composed steps' call of ``soft_rasterize`` (the engine's fast path, which
+    test_fast_path.py compares with these steps, is turned off here)."""
     fake = FakeEngine()
     monkeypatch.setattr(srf, "soft_rasterize", fake)
+    monkeypatch.setattr(sr.SoftRenderer, "_engine_arguments", lambda self, mesh, mode: None)
     return fake
 
 
