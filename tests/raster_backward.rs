@@ -502,6 +502,62 @@ fn a_batch_differentiates_as_each_mesh_alone() {
     }
 }
 
+/// A scene whose meshes are replaced (`update_meshes`: new positions and textures, the same
+/// topology) renders and differentiates bit for bit as a scene prepared for the new meshes;
+/// a mesh of another topology is refused, and the scene still renders its old meshes.
+#[test]
+fn updated_meshes_render_and_differentiate_as_a_fresh_scene() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let old = [scene(2, 31), scene(2, 32)];
+    let mut new = old.clone();
+    let mut rng = common::rng(33);
+    for mesh in &mut new {
+        for p in &mut mesh.positions {
+            p.iter_mut()
+                .for_each(|c| *c *= 1.0 + rng.random_range(-0.1f32..0.1));
+        }
+        mesh.textures = random_colors(mesh.textures.len(), 34);
+    }
+    let cams = [
+        Camera::from_angles(2.732, 15.0, 20.0),
+        Camera::from_angles(2.5, -10.0, 150.0),
+    ];
+    let views = [(0, cams[0]), (1, cams[1])];
+    let s = settings(16, 16);
+    let w = weights(16 * 16 * views.len(), 35);
+    let method = Method::Tiled { tile: 8 };
+    let render = |scene: &mut softvk::raster::gpu::GpuScene| {
+        r.run(&gpu, scene, method).unwrap();
+        let frames = r.read_frames(&gpu, scene).unwrap();
+        let grads = r
+            .backward(&gpu, &scene.binned(method).unwrap(), &w, true)
+            .unwrap();
+        (frames.images, grads)
+    };
+    let mut fresh = r
+        .prepare_batch(&gpu, &new, &views, &lighting(), &s)
+        .unwrap();
+    let expected = render(&mut fresh);
+    let mut reused = r
+        .prepare_batch(&gpu, &old, &views, &lighting(), &s)
+        .unwrap();
+    let before = render(&mut reused);
+    assert!(
+        before.0 != expected.0,
+        "the new meshes must render differently"
+    );
+    reused.update_meshes(&gpu, &new).unwrap();
+    assert!(render(&mut reused) == expected);
+
+    let mut other = new.clone();
+    other[1].faces.swap(0, 1);
+    let err = reused.update_meshes(&gpu, &other).unwrap_err();
+    assert!(err.to_string().contains("topology"), "{err}");
+    assert!(render(&mut reused) == expected);
+    assert!(reused.update_meshes(&gpu, &new[..1]).is_err());
+}
+
 /// llvmpipe ends a shader invocation's loops after 65 535 iterations in all: every forward kernel
 /// whose loops grow with the input refuses, on such a driver, what would exceed it, instead of
 /// silently skipping work (the backward splits instead: see the tests below). (On drivers

@@ -5,13 +5,15 @@
 // vertex colours, of their lit-colour gradients. One writer per vertex: deterministic.
 // Twin: `reference_grad::VertexFaces::gather`.
 #include "common.glsl"
-#include "view.glsl"
 
 layout(local_size_x = 64) in;
 
 layout(std430, set = 0, binding = 0) readonly buffer Offsets { uint vertex_offsets[]; };
 layout(std430, set = 0, binding = 1) readonly buffer Slots { uint vertex_slots[]; };
-layout(std430, set = 0, binding = 2) readonly buffer Views { View views[]; };
+// Each mesh's views, ascending (CSR): `mesh_views[m] .. mesh_views[m + 1]` index the list
+// that starts at `mesh_views[mesh_count + 1]`. A mesh visits only its own views: a batch of B
+// meshes seen once each costs B times less than scanning every view for its mesh.
+layout(std430, set = 0, binding = 2) readonly buffer Views { uint mesh_views[]; };
 layout(std430, set = 0, binding = 3) readonly buffer CornerWorld { float corner_world[]; };
 layout(std430, set = 0, binding = 4) readonly buffer FaceGrads { float face_grads[]; };
 // 3 floats per (mesh, vertex): dL/d(world position) through the projections.
@@ -41,10 +43,11 @@ void main() {
     uint end = vertex_offsets[vertex + 1u];
     vec3 pos = vec3(0.0);
     vec3 col = vec3(0.0);
-    for (uint v = 0u; v < pc.view_count; ++v) {
-        if (views[v].mesh != mesh) {
-            continue;
-        }
+    uint list = pc.mesh_count + 1u;
+    uint first = mesh_views[mesh];
+    uint last = mesh_views[mesh + 1u];
+    for (uint k = first; k < last; ++k) {
+        uint v = mesh_views[list + k];
         for (uint s = begin; s < end; ++s) {
             uint slot = vertex_slots[s]; // 3 face + corner
             uint face = slot / 3u;

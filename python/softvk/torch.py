@@ -47,8 +47,11 @@ def rasterize_settings(
     texture_type="surface",
     tile=8,
     brute=False,
+    silhouettes=False,
 ):
-    """The engine's settings from SoftRas's rasterizer arguments (validated here, once)."""
+    """The engine's settings from SoftRas's rasterizer arguments (validated here, once).
+    ``silhouettes=True`` renders alpha alone (RGB left zero), without the depth and colour
+    work."""
     height, width = _size(image_size)
     background = tuple(float(c) for c in _as_list(background_color))
     if len(background) != 3:
@@ -70,6 +73,7 @@ def rasterize_settings(
         texture_type=texture_type,
         tile=int(tile),
         brute=bool(brute),
+        silhouettes=bool(silhouettes),
     )
 
 
@@ -251,6 +255,7 @@ def render_mesh(
     light_intensity_directionals=0.5,
     light_color_directionals=[1, 1, 1],
     light_directions=[0, 1, 0],
+    silhouettes=False,
 ):
     """Renders meshes as SoftRas's ``SoftRenderer`` does (lighting → camera → rasterizer), in
     the engine.
@@ -262,8 +267,9 @@ def render_mesh(
     with +y up, perspective with ``viewing_angle`` degrees or orthographic with
     ``viewing_scale``; ``'projection'``: SoftRas's 3×4 ``P`` (``[B, 3, 4]`` or ``[3, 4]``),
     ``dist_coeffs`` and ``orig_size``. Lighting is SoftRas's ambient + directional, arguments
-    as ``SoftRenderer``'s. Returns RGBA ``[B, 4, H, W]``. Gradients flow to ``vertices``,
-    ``textures`` and (look_at) ``eyes``.
+    as ``SoftRenderer``'s. Returns RGBA ``[B, 4, H, W]``; with ``silhouettes=True`` only its
+    alpha is rendered (RGB is zero), which saves the depth and colour work forward and
+    backward. Gradients flow to ``vertices``, ``textures`` and (look_at) ``eyes``.
     """
     if vertices.dim() == 2:
         vertices = vertices.unsqueeze(0)
@@ -334,6 +340,7 @@ def render_mesh(
         aggr_func_rgb,
         aggr_func_alpha,
         texture_type,
+        silhouettes=silhouettes,
     )
     return RenderMeshFunction.apply(vertices, textures, eyes, faces, cameras, lighting, settings)
 

@@ -13,6 +13,10 @@
 //! - [`render_mesh`] keeps the camera, the lighting and the face set-up on the device: vertices,
 //!   faces and cameras in, images out.
 //! - [`reference_rasterize`] is the f64 CPU twin of [`rasterize`], the oracle of the tests.
+//! - A training loop renders the same shapes through the same views every iteration: when a
+//!   render's [`Raster`] is dropped (its backward done), its scene is kept as a spare, and the
+//!   next render of the same key (topology, views, lights, settings) writes its new vertices
+//!   and textures into it ([`GpuScene::update_meshes`]) instead of making every buffer again.
 
 use std::mem::ManuallyDrop;
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -35,6 +39,9 @@ use softvk::raster::backward::GradBuffers;
 use softvk::raster::gpu::{GpuScene, Method, Renderer};
 use softvk::raster::reference::{self, Alpha, ColorMode, Dist, RasterSettings, Rgb};
 
+/// Lights from Python: `(ambient intensity, ambient colour, [(intensity, colour, direction)])`.
+type PyLighting = (f64, [f64; 3], Vec<(f64, [f64; 3], [f64; 3])>);
+
 /// The process's engine, made on first use.
 struct Engine {
     ctx: Context,
@@ -42,6 +49,11 @@ struct Engine {
 }
 
 static ENGINE: Mutex<Option<Engine>> = Mutex::new(None);
+/// Scenes of dropped renders, newest last, for the next render of the same [`SceneKey`].
+static SPARES: Mutex<Vec<(SceneKey, GpuScene)>> = Mutex::new(Vec::new());
+/// How many spare scenes are kept (a loop alternates between at most two of a kind: the one
+/// being differentiated and the next iteration's).
+const MAX_SPARES: usize = 4;
 /// The process that made [`ENGINE`] (0: none yet). Read before the lock: a child forked while
 /// another thread held the lock would wait on it forever.
 static OWNER: AtomicU32 = AtomicU32::new(0);
@@ -118,6 +130,70 @@ fn value_error(message: String) -> PyErr {
 struct Settings {
     raster: RasterSettings,
     method: Method,
+    silhouettes: bool,
+}
+
+/// What a scene is made for: renders with equal keys can share one ([`SPARES`]).
+#[derive(Clone, PartialEq)]
+struct SceneKey {
+    raster: RasterSettings,
+    method: Method,
+    silhouettes: bool,
+    faces: Vec<[u32; 3]>,
+    meshes: usize,
+    vertices: usize,
+    texture_res: u32,
+    vertex_colors: bool,
+    views: Vec<(usize, Camera)>,
+    lighting: Lighting,
+}
+
+impl SceneKey {
+    fn new(
+        settings: &Settings,
+        meshes: &[Mesh],
+        views: &[(usize, Camera)],
+        lighting: &Lighting,
+    ) -> Self {
+        let first = &meshes[0];
+        SceneKey {
+            raster: settings.raster,
+            method: settings.method,
+            silhouettes: settings.silhouettes,
+            faces: first.faces.clone(),
+            meshes: meshes.len(),
+            vertices: first.positions.len(),
+            texture_res: first.texture_res,
+            vertex_colors: first.vertex_colors.is_some(),
+            views: views.to_vec(),
+            lighting: lighting.clone(),
+        }
+    }
+}
+
+/// A scene for `meshes` as `key` says: a spare of that key with the meshes written into it,
+/// or a new one.
+fn scene_for(engine: &Engine, key: &SceneKey, meshes: &[Mesh]) -> softvk::Result<GpuScene> {
+    let spare = {
+        let mut spares = SPARES.lock().unwrap_or_else(|e| e.into_inner());
+        spares
+            .iter()
+            .rposition(|(k, _)| k == key)
+            .map(|i| spares.remove(i).1)
+    };
+    if let Some(mut scene) = spare {
+        scene.update_meshes(&engine.ctx, meshes)?;
+        return Ok(scene);
+    }
+    let mut scene = engine.renderer.prepare_batch(
+        &engine.ctx,
+        meshes,
+        &key.views,
+        &key.lighting,
+        &key.raster,
+    )?;
+    scene.set_silhouette_only(key.silhouettes);
+    Ok(scene)
 }
 
 fn parse_choice<T: Copy>(what: &str, value: &str, choices: &[(&str, T)]) -> PyResult<T> {
@@ -136,14 +212,18 @@ impl Settings {
     /// `Settings(width, height, *, sigma=1e-5, gamma=1e-4, near=1, far=100, eps=1e-3,
     /// dist_eps=1e-4, dist_func='euclidean', aggr_func_rgb='softmax', aggr_func_alpha='prod',
     /// background_color=(0, 0, 0), fill_back=True, texture_type='surface', tile=8,
-    /// brute=False)`: SoftRas's names and defaults. `tile` is the tiled rasterizer's tile edge
-    /// (a multiple of 8); `brute=True` runs SoftRas's every-face-for-every-pixel loop instead.
+    /// brute=False, silhouettes=False)`: SoftRas's names and defaults. `tile` is the tiled
+    /// rasterizer's tile edge (a multiple of 8); `brute=True` runs SoftRas's
+    /// every-face-for-every-pixel loop instead; `silhouettes=True` renders alpha alone (the
+    /// same bits as a full render's alpha; RGB is left zero), skipping the depth and colour
+    /// work forward and backward.
     #[new]
     #[pyo3(signature = (
         width, height, *, sigma = 1e-5, gamma = 1e-4, near = 1.0, far = 100.0, eps = 1e-3,
         dist_eps = 1e-4, dist_func = "euclidean", aggr_func_rgb = "softmax",
         aggr_func_alpha = "prod", background_color = (0.0, 0.0, 0.0), fill_back = true,
         texture_type = "surface", tile = softvk::raster::gpu::DEFAULT_TILE, brute = false,
+        silhouettes = false,
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -163,6 +243,7 @@ impl Settings {
         texture_type: &str,
         tile: u32,
         brute: bool,
+        silhouettes: bool,
     ) -> PyResult<Self> {
         let raster = RasterSettings {
             width,
@@ -215,7 +296,11 @@ impl Settings {
             softvk::raster::fine::check_tile_size(tile).map_err(to_py)?;
             Method::Tiled { tile }
         };
-        Ok(Settings { raster, method })
+        Ok(Settings {
+            raster,
+            method,
+            silhouettes,
+        })
     }
 
     /// `(height, width)` of the images.
@@ -330,6 +415,8 @@ fn array_of<'py>(
 struct Raster {
     /// `None` once [`Raster::release`]d. Never dropped in a forked child (see [`Drop`]).
     scene: Option<ManuallyDrop<GpuScene>>,
+    /// What the scene was made for: it goes back to [`SPARES`] under this key when dropped.
+    key: SceneKey,
     method: Method,
     kind: RasterKind,
 }
@@ -356,9 +443,14 @@ impl Drop for Raster {
         if let Some(scene) = self.scene.take() {
             // A forked child must not free its parent's device memory: leak it instead.
             if forked().is_none() {
-                // The buffers free themselves through the context, which outlives them (the
-                // engine is never dropped).
-                drop(ManuallyDrop::into_inner(scene));
+                // Kept for the next render of its kind; the oldest spare goes (its buffers
+                // free themselves through the context, which outlives them).
+                let scene = ManuallyDrop::into_inner(scene);
+                let mut spares = SPARES.lock().unwrap_or_else(|e| e.into_inner());
+                spares.push((self.key.clone(), scene));
+                if spares.len() > MAX_SPARES {
+                    spares.remove(0);
+                }
             }
         }
     }
@@ -405,15 +497,31 @@ impl Raster {
         let method = self.method;
         let eyes = eyes && matches!(self.kind, RasterKind::Mesh { .. });
         let grads = with_engine(py, |engine| {
+            let t0 = std::time::Instant::now();
             let binned = scene.binned(method)?;
             let mut gb = GradBuffers::new(&engine.ctx, scene, method)?;
             gb.set_alpha_only(alpha_only);
             gb.set_d_image(&engine.ctx, scene, &d_image)?;
+            let t1 = std::time::Instant::now();
             let kernels = engine.renderer.grad_kernels();
-            engine
-                .ctx
-                .submit_and_wait(|rec| kernels.record(rec, &binned, &gb, &gb.io()))?;
-            kernels.finish(&engine.ctx, scene, &gb, &gb.io(), eyes)
+            let mut timer = softvk::gpu::Timer::new(&engine.ctx, 64)?;
+            engine.ctx.submit_and_wait_timed(Some(&mut timer), |rec| {
+                kernels.record(rec, &binned, &gb, &gb.io())
+            })?;
+            let t2 = std::time::Instant::now();
+            let r = kernels.finish(&engine.ctx, scene, &gb, &gb.io(), eyes);
+            eprintln!(
+                "alpha {alpha_only} bw setup {:?} run {:?} finish {:?} {:?}",
+                t1 - t0,
+                t2 - t1,
+                t2.elapsed(),
+                timer
+                    .results(&engine.ctx)?
+                    .iter()
+                    .map(|p| format!("{} {:.1}", p.name, p.ms))
+                    .collect::<Vec<_>>()
+            );
+            r
         })?;
         let narrow =
             |v: &[[f64; 3]]| -> Vec<f32> { v.iter().flat_map(|g| g.map(|c| c as f32)).collect() };
@@ -472,11 +580,28 @@ impl Raster {
     }
 }
 
-/// Renders `scene` by `method` and reads the images back, `[views, H, W, 4]` flat.
-fn forward(engine: &Engine, scene: &mut GpuScene, method: Method) -> softvk::Result<Vec<f32>> {
-    engine.renderer.run(&engine.ctx, scene, method)?;
-    let frames = engine.renderer.read_frames(&engine.ctx, scene)?;
-    Ok(frames.images.into_iter().flatten().collect())
+/// Renders `meshes` as `key` says (in a spare scene of that key if there is one) and reads
+/// the images back, `[views, H, W, 4]` flat.
+fn forward(
+    engine: &Engine,
+    key: &SceneKey,
+    meshes: &[Mesh],
+) -> softvk::Result<(GpuScene, Vec<f32>)> {
+    let mut scene = scene_for(engine, key, meshes)?;
+    engine.renderer.run(&engine.ctx, &mut scene, key.method)?;
+    let s = scene.settings();
+    let pixels = (s.width * s.height * scene.view_count()) as usize;
+    let images: Vec<[f32; 4]> = engine.ctx.read_buffer(scene.output(), 0, pixels)?;
+    Ok((scene, images.into_iter().flatten().collect()))
+}
+
+/// Frees the scenes kept for reuse (they hold device memory until the next render of their
+/// kind, or until this is called).
+#[pyfunction]
+fn release_cached_scenes() {
+    if forked().is_none() {
+        SPARES.lock().unwrap_or_else(|e| e.into_inner()).clear();
+    }
 }
 
 /// `rasterize(face_vertices, textures, settings) -> (images, raster)`: SoftRas's
@@ -516,24 +641,16 @@ fn rasterize<'py>(
     }
     let meshes = face_meshes(fv, tex, (batch, faces, per_face), mode)?;
     let views: Vec<(usize, Camera)> = (0..batch).map(|b| (b, Camera::screen_space())).collect();
-    let (raster, method) = (settings.raster, settings.method);
-    let (scene, images) = with_engine(py, move |engine| {
-        let mut scene = engine.renderer.prepare_batch(
-            &engine.ctx,
-            &meshes,
-            &views,
-            &Lighting::unlit(),
-            &raster,
-        )?;
-        let images = forward(engine, &mut scene, method)?;
-        Ok((scene, images))
-    })?;
+    let key = SceneKey::new(settings, &meshes, &views, &Lighting::unlit());
+    let (scene, images) = with_engine(py, |engine| forward(engine, &key, &meshes))?;
+    let raster = settings.raster;
     let dims = (batch, raster.height as usize, raster.width as usize);
     Ok((
         images_array(py, images, dims)?,
         Raster {
             scene: Some(ManuallyDrop::new(scene)),
-            method,
+            method: key.method,
+            key,
             kind: RasterKind::Faces {
                 batch,
                 faces,
@@ -663,7 +780,7 @@ fn render_mesh<'py>(
     textures: PyReadonlyArrayDyn<'py, f32>,
     view_mesh: PyReadonlyArray1<'py, i64>,
     cameras: Vec<Bound<'py, PyAny>>,
-    lighting: (f64, [f64; 3], Vec<(f64, [f64; 3], [f64; 3])>),
+    lighting: PyLighting,
     settings: &Settings,
 ) -> PyResult<(Bound<'py, PyAny>, Raster)> {
     let (verts, vshape) = checked("vertices", &vertices, &[None, None, Some(3)])?;
@@ -744,22 +861,22 @@ fn render_mesh<'py>(
             })
             .collect(),
     };
-    let (raster, method) = (settings.raster, settings.method);
     let n_views = views.len();
-    let (scene, images) = with_engine(py, move |engine| {
-        let mut scene =
-            engine
-                .renderer
-                .prepare_batch(&engine.ctx, &meshes, &views, &lighting, &raster)?;
-        let images = forward(engine, &mut scene, method)?;
-        Ok((scene, images))
-    })?;
+    if meshes.is_empty() || nf == 0 || n_views == 0 {
+        return Err(value_error(format!(
+            "nothing to render: {batch} meshes of {nf} faces, {n_views} views"
+        )));
+    }
+    let key = SceneKey::new(settings, &meshes, &views, &lighting);
+    let (scene, images) = with_engine(py, |engine| forward(engine, &key, &meshes))?;
+    let raster = settings.raster;
     let dims = (n_views, raster.height as usize, raster.width as usize);
     Ok((
         images_array(py, images, dims)?,
         Raster {
             scene: Some(ManuallyDrop::new(scene)),
-            method,
+            method: key.method,
+            key,
             kind: RasterKind::Mesh {
                 batch,
                 vertices: nv,
@@ -839,6 +956,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(reference_rasterize, m)?)?;
     m.add_function(wrap_pyfunction!(render_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(device_name, m)?)?;
+    m.add_function(wrap_pyfunction!(release_cached_scenes, m)?)?;
     m.add_function(wrap_pyfunction!(read_exr, m)?)?;
     m.add_function(wrap_pyfunction!(write_exr, m)?)?;
     m.add_function(wrap_pyfunction!(is_forked_child, m)?)?;

@@ -204,6 +204,8 @@ pub struct GradBuffers {
     corner_cam: Buffer,
     vertex_offsets: Buffer,
     vertex_slots: Buffer,
+    /// Each mesh's views, as `grad_gather.comp` reads them ([`mesh_view_lists`]).
+    mesh_views: Buffer,
     position_grads: Buffer,
     color_grads: Buffer,
     method: Method,
@@ -568,6 +570,7 @@ impl GradBuffers {
             corner_cam: device("corner camera grads", items * 36)?,
             vertex_offsets: ctx.upload_buffer("vertex offsets", &adjacency.offsets)?,
             vertex_slots: ctx.upload_buffer("vertex slots", &adjacency.slots)?,
+            mesh_views: ctx.upload_buffer("mesh views", &mesh_view_lists(scene))?,
             position_grads: device("position grads", vertices * 12)?,
             color_grads: device("colour grads", color_values * 12)?,
             method,
@@ -679,6 +682,25 @@ impl GradBuffers {
     }
 }
 
+/// Each mesh's views in ascending order, as CSR in one list: `meshes + 1` offsets, then the
+/// view indices (what `grad_gather.comp` visits per vertex, in the order the twin sums them).
+fn mesh_view_lists(scene: &GpuScene) -> Vec<u32> {
+    let meshes = scene.meshes.len();
+    let mut lists: Vec<Vec<u32>> = vec![Vec::new(); meshes];
+    for (v, (m, _)) in scene.views_host.iter().enumerate() {
+        lists[*m].push(v as u32);
+    }
+    let mut out = Vec::with_capacity(meshes + 1 + scene.views_host.len());
+    let mut offset = 0;
+    out.push(0);
+    for list in &lists {
+        offset += list.len() as u32;
+        out.push(offset);
+    }
+    out.extend(lists.into_iter().flatten());
+    out
+}
+
 impl GradKernels {
     fn fine_push(scene: &GpuScene, stride: u32) -> RasterPush {
         let s = &scene.settings;
@@ -777,7 +799,7 @@ impl GradKernels {
                 &specs::GradGatherBindings {
                     offsets: gb.vertex_offsets.whole(),
                     slots: gb.vertex_slots.whole(),
-                    views: scene.views.whole(),
+                    views: gb.mesh_views.whole(),
                     corner_world: gb.corner_world.whole(),
                     face_grads: gb.face_grads.whole(),
                     position_grads: io.positions,

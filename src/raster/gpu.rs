@@ -665,6 +665,57 @@ impl GpuScene {
         )
     }
 
+    /// Replaces the batch's meshes by `meshes` of the same topology (faces, vertex count,
+    /// texture resolution and colour source), for the next forward: their positions and
+    /// colours, lit anew with the scene's lighting, are written into the scene's buffers, and
+    /// the backward's host share reads them. What a loop that renders new vertices or textures
+    /// every iteration through the same views calls instead of [`Renderer::prepare_batch`]:
+    /// no buffer is made again, and the bins keep their size. An error, with nothing changed,
+    /// when a mesh does not fit.
+    pub fn update_meshes(&mut self, ctx: &Context, meshes: &[Mesh]) -> Result<()> {
+        if meshes.len() != self.meshes.len() {
+            return Err(Error::Input(format!(
+                "{} meshes for a scene of {}",
+                meshes.len(),
+                self.meshes.len()
+            )));
+        }
+        if self.position_layout != VertexLayout::default() {
+            return Err(Error::Misuse(
+                "update_meshes writes the scene's own positions; this scene renders a host's                  (bind_positions)"
+                    .into(),
+            ));
+        }
+        for (i, (new, old)) in meshes.iter().zip(&self.meshes).enumerate() {
+            new.validate()?;
+            let same_colors = match self.settings.color_mode {
+                ColorMode::Surface => true,
+                ColorMode::Vertex => new.vertex_colors.is_some() == old.vertex_colors.is_some(),
+            };
+            if new.faces != old.faces
+                || new.positions.len() != old.positions.len()
+                || new.texture_res != old.texture_res
+                || !same_colors
+            {
+                return Err(Error::Input(format!(
+                    "mesh {i} does not share the scene's topology (faces, vertex count, texture                      resolution and colour source must be equal)"
+                )));
+            }
+        }
+        let positions: Vec<f32> = meshes
+            .iter()
+            .flat_map(|m| m.positions.iter().flatten().copied())
+            .collect();
+        let colors: Vec<f32> = meshes
+            .iter()
+            .flat_map(|m| lit_colors(m, &self.lighting, self.settings.color_mode))
+            .collect();
+        ctx.write_buffer(&self.positions, 0, &positions)?;
+        ctx.write_buffer(&self.colors, 0, &colors)?;
+        self.meshes = meshes.iter().map(MeshF64::from_mesh).collect();
+        Ok(())
+    }
+
     /// The [`Binned`] the scene's last forward by `method` left, for a backward recorded apart
     /// from its forward (a benchmark timing the backward alone over one render). Tiled:
     /// [`Error::Misuse`] unless the last tiled forward used these tiles. The forward's own

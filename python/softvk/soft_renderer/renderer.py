@@ -173,7 +173,8 @@ class SoftRenderer(nn.Module):
 
         scale = 2 if self.rasterizer.anti_aliasing else 1
         images = st.render_mesh(mesh.vertices, mesh.faces[0], mesh.textures,
-                                image_size=self.rasterizer.image_size * scale, **arguments)
+                                image_size=self.rasterizer.image_size * scale,
+                                silhouettes=mode == "silhouettes", **arguments)
         if scale == 2:
             images = F.avg_pool2d(images, kernel_size=2, stride=2)
         if mode == "rgb":
