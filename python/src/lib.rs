@@ -497,31 +497,15 @@ impl Raster {
         let method = self.method;
         let eyes = eyes && matches!(self.kind, RasterKind::Mesh { .. });
         let grads = with_engine(py, |engine| {
-            let t0 = std::time::Instant::now();
             let binned = scene.binned(method)?;
             let mut gb = GradBuffers::new(&engine.ctx, scene, method)?;
             gb.set_alpha_only(alpha_only);
             gb.set_d_image(&engine.ctx, scene, &d_image)?;
-            let t1 = std::time::Instant::now();
             let kernels = engine.renderer.grad_kernels();
-            let mut timer = softvk::gpu::Timer::new(&engine.ctx, 64)?;
-            engine.ctx.submit_and_wait_timed(Some(&mut timer), |rec| {
-                kernels.record(rec, &binned, &gb, &gb.io())
-            })?;
-            let t2 = std::time::Instant::now();
-            let r = kernels.finish(&engine.ctx, scene, &gb, &gb.io(), eyes);
-            eprintln!(
-                "alpha {alpha_only} bw setup {:?} run {:?} finish {:?} {:?}",
-                t1 - t0,
-                t2 - t1,
-                t2.elapsed(),
-                timer
-                    .results(&engine.ctx)?
-                    .iter()
-                    .map(|p| format!("{} {:.1}", p.name, p.ms))
-                    .collect::<Vec<_>>()
-            );
-            r
+            engine
+                .ctx
+                .submit_and_wait(|rec| kernels.record(rec, &binned, &gb, &gb.io()))?;
+            kernels.finish(&engine.ctx, scene, &gb, &gb.io(), eyes)
         })?;
         let narrow =
             |v: &[[f64; 3]]| -> Vec<f32> { v.iter().flat_map(|g| g.map(|c| c as f32)).collect() };
