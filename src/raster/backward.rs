@@ -1135,6 +1135,21 @@ impl GradKernels {
                 .iter()
                 .map(|&c| widen(c))
                 .collect();
+            if d_lit.iter().all(|c| *c == [0.0; 3]) {
+                // Nothing reached the lit colours (an alpha-only upstream): lighting's share is
+                // exactly zero, for colours and positions alike; skip computing it.
+                let texels = match mode {
+                    ColorMode::Surface => mesh.textures.len(),
+                    ColorMode::Vertex => nv,
+                };
+                out.positions.extend(
+                    positions[m * nv..(m + 1) * nv]
+                        .iter()
+                        .map(|&g| widen(g).map(|c| c + 0.0)),
+                );
+                out.colors.extend(std::iter::repeat_n([0.0; 3], texels));
+                continue;
+            }
             let (colors, corners) = match mode {
                 ColorMode::Surface => lighting_grad_surface(
                     &scene.lighting,
