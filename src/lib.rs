@@ -41,6 +41,7 @@ pub mod atomic_file;
 pub mod bench;
 pub mod camera;
 pub mod error;
+pub mod exr_io;
 pub mod field;
 pub mod fit;
 pub mod gpu;

@@ -31,7 +31,9 @@ use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 use softvk::Error;
+use softvk::atomic_file::AtomicFile;
 use softvk::camera::{Camera, Projection};
+use softvk::exr_io::{encode_rgba, read_rgba};
 use softvk::gpu::{Context, ContextOptions};
 use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
@@ -353,39 +355,116 @@ fn texture_res(texels: usize) -> PyResult<u32> {
     u32::try_from(r).map_err(|_| value_error(format!("texture resolution {r} is too large")))
 }
 
-/// SoftRas's `face_vertices` and `textures` as one mesh a batch element: three vertices a face,
-/// face `j` = vertices `3j, 3j + 1, 3j + 2`.
-fn face_meshes(
-    face_vertices: &[f32],
-    textures: &[f32],
-    (batch, faces, per_face): (usize, usize, usize),
+/// SoftRas's `face_vertices` `[B, F, 3, 3]` and `textures` (`[B, F, R², 3]` surface, `[B, F, 3,
+/// 3]` vertex), checked: one mesh a batch element, three vertices a face (face `j` = vertices
+/// `3j, 3j + 1, 3j + 2`).
+struct FaceInputs<'a, T> {
+    vertices: &'a [T],
+    textures: &'a [T],
+    batch: usize,
+    faces: usize,
+    /// Colours a face: R² texels, or 3 corners.
+    per_face: usize,
+    texture_res: u32,
     mode: ColorMode,
-) -> PyResult<Vec<Mesh>> {
-    let res = match mode {
-        ColorMode::Surface => texture_res(per_face)?,
-        ColorMode::Vertex => 1,
-    };
-    let face_list: Vec<[u32; 3]> = (0..faces as u32)
-        .map(|j| [3 * j, 3 * j + 1, 3 * j + 2])
-        .collect();
-    let (per_batch_v, per_batch_t) = (9 * faces, 3 * per_face * faces);
-    Ok((0..batch)
-        .map(|b| {
-            let positions = triples(&face_vertices[b * per_batch_v..(b + 1) * per_batch_v]);
-            let colors = triples(&textures[b * per_batch_t..(b + 1) * per_batch_t]);
-            let (textures, vertex_colors) = match mode {
-                ColorMode::Surface => (colors, None),
-                ColorMode::Vertex => (vec![[1.0; 3]; faces], Some(colors)),
-            };
-            Mesh {
-                positions,
-                faces: face_list.clone(),
-                texture_res: res,
-                textures,
-                vertex_colors,
+}
+
+impl<'a, T: numpy::Element + Copy> FaceInputs<'a, T> {
+    fn new(
+        face_vertices: &'a PyReadonlyArrayDyn<'_, T>,
+        textures: &'a PyReadonlyArrayDyn<'_, T>,
+        mode: ColorMode,
+    ) -> PyResult<Self> {
+        let (vertices, shape) = checked(
+            "face_vertices",
+            face_vertices,
+            &[None, None, Some(3), Some(3)],
+        )?;
+        let (batch, faces) = (shape[0], shape[1]);
+        let (textures, tshape) = checked(
+            "textures",
+            textures,
+            &[Some(batch), Some(faces), None, Some(3)],
+        )?;
+        let per_face = tshape[2];
+        let texture_res = match mode {
+            ColorMode::Surface => texture_res(per_face)?,
+            ColorMode::Vertex if per_face == 3 => 1,
+            ColorMode::Vertex => {
+                return Err(value_error(format!(
+                    "vertex textures need 3 colours a face, got {per_face}"
+                )));
             }
+        };
+        if batch == 0 || faces == 0 {
+            return Err(value_error(format!(
+                "nothing to render: {batch} meshes of {faces} faces"
+            )));
+        }
+        Ok(FaceInputs {
+            vertices,
+            textures,
+            batch,
+            faces,
+            per_face,
+            texture_res,
+            mode,
         })
-        .collect())
+    }
+
+    fn face_list(&self) -> Vec<[u32; 3]> {
+        (0..self.faces as u32)
+            .map(|j| [3 * j, 3 * j + 1, 3 * j + 2])
+            .collect()
+    }
+
+    /// Batch element `b`: its vertex positions, and its colours as (texels, vertex colours).
+    #[allow(clippy::type_complexity)]
+    fn mesh_parts(&self, b: usize, white: T) -> (Vec<[T; 3]>, Vec<[T; 3]>, Option<Vec<[T; 3]>>) {
+        let (v, t) = (9 * self.faces, 3 * self.per_face * self.faces);
+        let positions = triples(&self.vertices[b * v..(b + 1) * v]);
+        let colors = triples(&self.textures[b * t..(b + 1) * t]);
+        match self.mode {
+            ColorMode::Surface => (positions, colors, None),
+            ColorMode::Vertex => (positions, vec![[white; 3]; self.faces], Some(colors)),
+        }
+    }
+}
+
+impl FaceInputs<'_, f32> {
+    fn meshes(&self) -> Vec<Mesh> {
+        let faces = self.face_list();
+        (0..self.batch)
+            .map(|b| {
+                let (positions, textures, vertex_colors) = self.mesh_parts(b, 1.0);
+                Mesh {
+                    positions,
+                    faces: faces.clone(),
+                    texture_res: self.texture_res,
+                    textures,
+                    vertex_colors,
+                }
+            })
+            .collect()
+    }
+}
+
+impl FaceInputs<'_, f64> {
+    fn meshes_f64(&self) -> Vec<reference::MeshF64> {
+        let faces = self.face_list();
+        (0..self.batch)
+            .map(|b| {
+                let (positions, textures, vertex_colors) = self.mesh_parts(b, 1.0);
+                reference::MeshF64 {
+                    positions: positions.into_iter().map(DVec3::from).collect(),
+                    faces: faces.clone(),
+                    texture_res: self.texture_res,
+                    textures,
+                    vertex_colors,
+                }
+            })
+            .collect()
+    }
 }
 
 /// RGBA images `[views, H, W, 4]` as a numpy array.
@@ -600,30 +679,9 @@ fn rasterize<'py>(
     textures: PyReadonlyArrayDyn<'py, f32>,
     settings: &Settings,
 ) -> PyResult<(Bound<'py, PyAny>, Raster)> {
-    let (fv, shape) = checked(
-        "face_vertices",
-        &face_vertices,
-        &[None, None, Some(3), Some(3)],
-    )?;
-    let (batch, faces) = (shape[0], shape[1]);
-    let (tex, tshape) = checked(
-        "textures",
-        &textures,
-        &[Some(batch), Some(faces), None, Some(3)],
-    )?;
-    let per_face = tshape[2];
-    let mode = settings.raster.color_mode;
-    if mode == ColorMode::Vertex && per_face != 3 {
-        return Err(value_error(format!(
-            "vertex textures need 3 colours a face, got {per_face}"
-        )));
-    }
-    if batch == 0 || faces == 0 {
-        return Err(value_error(format!(
-            "nothing to render: {batch} meshes of {faces} faces"
-        )));
-    }
-    let meshes = face_meshes(fv, tex, (batch, faces, per_face), mode)?;
+    let inputs = FaceInputs::new(&face_vertices, &textures, settings.raster.color_mode)?;
+    let (batch, faces, per_face) = (inputs.batch, inputs.faces, inputs.per_face);
+    let meshes = inputs.meshes();
     let views: Vec<(usize, Camera)> = (0..batch).map(|b| (b, Camera::screen_space())).collect();
     let key = SceneKey::new(settings, &meshes, &views, &Lighting::unlit());
     let (scene, images) = with_engine(py, |engine| forward(engine, &key, &meshes))?;
@@ -653,48 +711,14 @@ fn reference_rasterize<'py>(
     textures: PyReadonlyArrayDyn<'py, f64>,
     settings: &Settings,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let (fv, shape) = checked(
-        "face_vertices",
-        &face_vertices,
-        &[None, None, Some(3), Some(3)],
-    )?;
-    let (batch, faces) = (shape[0], shape[1]);
-    let (tex, tshape) = checked(
-        "textures",
-        &textures,
-        &[Some(batch), Some(faces), None, Some(3)],
-    )?;
-    let per_face = tshape[2];
-    let s = settings.raster;
-    let res = match s.color_mode {
-        ColorMode::Surface => texture_res(per_face)?,
-        ColorMode::Vertex => 1,
-    };
-    let faces_list: Vec<[u32; 3]> = (0..faces as u32)
-        .map(|j| [3 * j, 3 * j + 1, 3 * j + 2])
-        .collect();
-    let (per_batch_v, per_batch_t) = (9 * faces, 3 * per_face * faces);
+    let inputs = FaceInputs::new(&face_vertices, &textures, settings.raster.color_mode)?;
+    let (batch, s) = (inputs.batch, settings.raster);
+    let meshes = inputs.meshes_f64();
     let images = py.detach(|| -> PyResult<Vec<f64>> {
         let mut out = Vec::with_capacity(batch * (s.width * s.height) as usize * 4);
-        for b in 0..batch {
-            let positions = triples(&fv[b * per_batch_v..(b + 1) * per_batch_v])
-                .into_iter()
-                .map(DVec3::from)
-                .collect();
-            let colors = triples(&tex[b * per_batch_t..(b + 1) * per_batch_t]);
-            let (textures, vertex_colors) = match s.color_mode {
-                ColorMode::Surface => (colors, None),
-                ColorMode::Vertex => (vec![[1.0; 3]; faces], Some(colors)),
-            };
-            let mesh = reference::MeshF64 {
-                positions,
-                faces: faces_list.clone(),
-                texture_res: res,
-                textures,
-                vertex_colors,
-            };
+        for mesh in &meshes {
             let image =
-                reference::render_f64(&mesh, &Camera::screen_space(), &Lighting::unlit(), &s)
+                reference::render_f64(mesh, &Camera::screen_space(), &Lighting::unlit(), &s)
                     .map_err(|e| to_py(e.into()))?;
             out.extend(image.into_iter().flatten());
         }
@@ -875,49 +899,31 @@ fn render_mesh<'py>(
 /// as float32 `[H, W, 4]`, row 0 at the top; missing channels read as 0.
 #[pyfunction]
 fn read_exr<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bound<'py, PyAny>> {
-    use exr::prelude::{ReadChannels, ReadLayers, Vec2, read};
-    let image = py
-        .detach(|| {
-            read()
-                .no_deep_data()
-                .largest_resolution_level()
-                .rgba_channels(
-                    |size, _| (size.width(), vec![[0f32; 4]; size.area()]),
-                    |(w, px): &mut (usize, Vec<[f32; 4]>),
-                     p: Vec2<usize>,
-                     (r, g, b, a): (f32, f32, f32, f32)| {
-                        px[p.y() * *w + p.x()] = [r, g, b, a];
-                    },
-                )
-                .first_valid_layer()
-                .all_attributes()
-                .from_file(&path)
-        })
-        .map_err(|e| value_error(format!("{}: not a readable RGBA EXR: {e}", path.display())))?;
-    let size = image.layer_data.size;
-    let (_, pixels) = image.layer_data.channel_data.pixels;
+    let (width, height, pixels) = py.detach(|| read_rgba(&path)).map_err(to_py)?;
     let flat: Vec<f32> = pixels.into_iter().flatten().collect();
     Ok(flat
         .into_pyarray(py)
-        .reshape([size.height(), size.width(), 4])?
+        .reshape([height as usize, width as usize, 4])?
         .into_any())
 }
 
 /// `write_exr(path, image)`: float32 `[H, W, 4]` RGBA (row 0 at the top) as a lossless EXR, the
-/// format `softvk grad --weights` reads.
+/// format `softvk grad --weights` reads; the file appears whole or not at all.
 #[pyfunction]
 fn write_exr(path: std::path::PathBuf, image: PyReadonlyArrayDyn<'_, f32>) -> PyResult<()> {
-    use exr::prelude::{Encoding, Image, SpecificChannels, Vec2, WritableImage};
     let (data, shape) = checked("image", &image, &[None, None, Some(4)])?;
-    let (height, width) = (shape[0], shape[1]);
-    let channels = SpecificChannels::rgba(|p: Vec2<usize>| {
-        let i = 4 * (p.y() * width + p.x());
-        (data[i], data[i + 1], data[i + 2], data[i + 3])
-    });
-    Image::from_encoded_channels((width, height), Encoding::SMALL_LOSSLESS, channels)
-        .write()
-        .to_file(&path)
-        .map_err(|e| value_error(format!("{}: cannot write EXR: {e}", path.display())))
+    let too_large = || value_error(format!("image of shape {shape:?} is too large"));
+    let width = u32::try_from(shape[1]).map_err(|_| too_large())?;
+    let height = u32::try_from(shape[0]).map_err(|_| too_large())?;
+    let pixels: Vec<[f32; 4]> = data
+        .chunks_exact(4)
+        .map(|c| [c[0], c[1], c[2], c[3]])
+        .collect();
+    let bytes = encode_rgba(&pixels, width, height)
+        .map_err(|e| value_error(format!("{}: {e}", path.display())))?;
+    AtomicFile::create(&path)
+        .and_then(|file| file.commit(&bytes))
+        .map_err(to_py)
 }
 
 /// The name of the Vulkan device softvk renders on (opening it if need be).

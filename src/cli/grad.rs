@@ -57,39 +57,16 @@ pub struct GradArgs {
 /// RGBA f32 pixels of an EXR's first layer (row 0 at the top) and its size. Missing channels
 /// read as 0 (alpha too): a weight map for colour only may omit A.
 pub fn read_weights(path: &Path) -> Result<(u32, u32, Vec<[f32; 4]>)> {
-    use exr::prelude::{ReadChannels, ReadLayers, Vec2, read};
-    let bad = |e: &dyn std::fmt::Display| {
-        Error::Input(format!("{}: not a readable RGBA EXR: {e}", path.display()))
-    };
-    if !path.exists() {
-        return Err(Error::Input(format!("{}: no such file", path.display())));
-    }
-    let image = read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .rgba_channels(
-            |size, _| (size.width(), vec![[0f32; 4]; size.area()]),
-            |(w, px): &mut (usize, Vec<[f32; 4]>),
-             p: Vec2<usize>,
-             (r, g, b, a): (f32, f32, f32, f32)| {
-                px[p.y() * *w + p.x()] = [r, g, b, a];
-            },
-        )
-        .first_valid_layer()
-        .all_attributes()
-        .from_file(path)
-        .map_err(|e| bad(&e))?;
-    let size = image.layer_data.size;
-    let (_, pixels) = image.layer_data.channel_data.pixels;
+    let (width, height, pixels) = softvk::exr_io::read_rgba(path)?;
     if let Some(i) = pixels.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
         return Err(Error::Input(format!(
             "{}: weight at pixel ({}, {}) is not finite",
             path.display(),
-            i % size.width(),
-            i / size.width()
+            i % width as usize,
+            i / width as usize
         )));
     }
-    Ok((size.width() as u32, size.height() as u32, pixels))
+    Ok((width, height, pixels))
 }
 
 /// Runs `softvk grad`.

@@ -6,7 +6,6 @@
 //! 0 at the top. OpenEXR tools assume premultiplied colour; softvk's EXR is data, not a plate to
 //! composite.
 
-use std::io::Cursor;
 use std::path::Path;
 
 use softvk::{Error, Result};
@@ -48,7 +47,7 @@ impl ImageFormat {
         assert_eq!(pixels.len(), width as usize * height as usize);
         match self {
             ImageFormat::Png => encode_png(pixels, width, height),
-            ImageFormat::Exr => encode_exr(pixels, width, height),
+            ImageFormat::Exr => softvk::exr_io::encode_rgba(pixels, width, height),
         }
     }
 }
@@ -89,34 +88,12 @@ fn encode_png(
     Ok(out)
 }
 
-fn encode_exr(
-    pixels: &[[f32; 4]],
-    width: u32,
-    height: u32,
-) -> std::result::Result<Vec<u8>, String> {
-    use exr::prelude::*;
-    let w = width as usize;
-    let channels = SpecificChannels::rgba(|p: Vec2<usize>| {
-        let [r, g, b, a] = pixels[p.y() * w + p.x()];
-        (r, g, b, a)
-    });
-    // ZIP over scan lines: lossless for f32 (unlike PXR24 or B44) and readable by every
-    // OpenEXR reader (some small ones skip tiled files).
-    let image =
-        Image::from_encoded_channels((w, height as usize), Encoding::SMALL_LOSSLESS, channels);
-    let mut out = Cursor::new(Vec::new());
-    image
-        .write()
-        .to_buffered(&mut out)
-        .map_err(|e| format!("cannot encode EXR: {e}"))?;
-    Ok(out.into_inner())
-}
-
 pub use softvk::atomic_file::AtomicFile;
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::io::Cursor;
     use std::path::PathBuf;
 
     /// A fresh folder under the system's temporary directory, removed when dropped.
