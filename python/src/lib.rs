@@ -569,17 +569,14 @@ impl Raster {
                 Some(4),
             ],
         )?;
-        let d_image: Vec<[f32; 4]> = d_image
-            .chunks_exact(4)
-            .map(|c| [c[0], c[1], c[2], c[3]])
-            .collect();
+        let d_image: &[[f32; 4]] = bytemuck::cast_slice(d_image);
         let method = self.method;
         let eyes = eyes && matches!(self.kind, RasterKind::Mesh { .. });
         let grads = with_engine(py, |engine| {
             let binned = scene.binned(method)?;
             let mut gb = GradBuffers::new(&engine.ctx, scene, method)?;
             gb.set_alpha_only(alpha_only);
-            gb.set_d_image(&engine.ctx, scene, &d_image)?;
+            gb.set_d_image(&engine.ctx, scene, d_image)?;
             let kernels = engine.renderer.grad_kernels();
             engine
                 .ctx
@@ -655,7 +652,7 @@ fn forward(
     let s = scene.settings();
     let pixels = (s.width * s.height * scene.view_count()) as usize;
     let images: Vec<[f32; 4]> = engine.ctx.read_buffer(scene.output(), 0, pixels)?;
-    Ok((scene, images.into_iter().flatten().collect()))
+    Ok((scene, images.into_flattened()))
 }
 
 /// Frees the scenes kept for reuse (they hold device memory until the next render of their
@@ -900,7 +897,7 @@ fn render_mesh<'py>(
 #[pyfunction]
 fn read_exr<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bound<'py, PyAny>> {
     let (width, height, pixels) = py.detach(|| read_rgba(&path)).map_err(to_py)?;
-    let flat: Vec<f32> = pixels.into_iter().flatten().collect();
+    let flat = pixels.into_flattened();
     Ok(flat
         .into_pyarray(py)
         .reshape([height as usize, width as usize, 4])?
@@ -915,11 +912,7 @@ fn write_exr(path: std::path::PathBuf, image: PyReadonlyArrayDyn<'_, f32>) -> Py
     let too_large = || value_error(format!("image of shape {shape:?} is too large"));
     let width = u32::try_from(shape[1]).map_err(|_| too_large())?;
     let height = u32::try_from(shape[0]).map_err(|_| too_large())?;
-    let pixels: Vec<[f32; 4]> = data
-        .chunks_exact(4)
-        .map(|c| [c[0], c[1], c[2], c[3]])
-        .collect();
-    let bytes = encode_rgba(&pixels, width, height)
+    let bytes = encode_rgba(bytemuck::cast_slice(data), width, height)
         .map_err(|e| value_error(format!("{}: {e}", path.display())))?;
     AtomicFile::create(&path)
         .and_then(|file| file.commit(&bytes))
