@@ -259,17 +259,22 @@ def test_save_obj_vertex_colours_round_trip(tmp_path):
     assert torch.allclose(loaded, colors) and faces.tolist() == [[0, 1, 2]]
 
 
-def test_png_writer_and_fallback_decoder_round_trip(tmp_path):
+def test_png_writer_and_reader_round_trip(tmp_path):
     rgb = np.random.RandomState(2).randint(0, 256, (7, 5, 3)).astype(np.uint8)
     path = tmp_path / "x.png"
     _image.write_png(str(path), rgb)
-    decoded = _image._decode_png(path.read_bytes(), str(path))
+    decoded = _image.read_rgb(str(path))
+    assert decoded.shape == (7, 5, 3) and decoded.dtype == np.float32
     assert np.array_equal(np.round(decoded * 255).astype(np.uint8), rgb)
+    grey = rgb[..., 0]
+    _image.write_png(str(path), grey)
+    assert np.array_equal(np.round(_image.read_rgb(str(path)) * 255).astype(np.uint8),
+                          np.repeat(grey[..., None], 3, axis=2))
 
 
-def test_png_fallback_decoder_matches_pillow_on_spot_texture():
+def test_png_reader_matches_pillow_on_spot_texture():
     pil = pytest.importorskip("PIL.Image")
     path = assets_dir() / "spot_texture.png"
     with pil.open(str(path)) as image:
         expected = np.asarray(image.convert("RGB"), dtype=np.float32) / 255
-    assert np.array_equal(_image._decode_png(path.read_bytes(), str(path)), expected)
+    assert np.array_equal(_image.read_rgb(str(path)), expected)
