@@ -206,6 +206,36 @@ impl Mesh {
         Ok(mesh)
     }
 
+    /// SoftRas's `load_obj(normalization=True)`: moves the bounding box's lower corner to the
+    /// origin, divides by the largest coordinate then (so the longest side spans [0, 1]),
+    /// doubles, and centres each axis: the longest side spans [-1, 1], the others are centred
+    /// in it. Computed in f64. An error, with the mesh unchanged, when every vertex is at one
+    /// point (nothing to scale) or a coordinate is not finite.
+    pub fn normalize(&mut self) -> crate::Result<()> {
+        check_finite(&self.positions, |_| Location::default())?;
+        let mut lo = DVec3::splat(f64::INFINITY);
+        let mut hi = DVec3::splat(f64::NEG_INFINITY);
+        for p in &self.positions {
+            let p = DVec3::from(p.map(f64::from));
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+        let extent = (hi - lo).max_element();
+        if !(extent > 0.0) {
+            return Err(crate::Error::Input(format!(
+                "cannot normalize a mesh whose {} vertices are all at one point",
+                self.positions.len()
+            )));
+        }
+        let scale = 2.0 / extent;
+        let centre = (hi - lo) * scale / 2.0;
+        for p in &mut self.positions {
+            let q = (DVec3::from(p.map(f64::from)) - lo) * scale - centre;
+            *p = q.to_array().map(|c| c as f32);
+        }
+        Ok(())
+    }
+
     /// Number of triangles.
     pub fn face_count(&self) -> usize {
         self.faces.len()
@@ -1085,6 +1115,33 @@ fn match_tobj_models(
 pub(crate) mod tests {
     use super::*;
     use std::collections::HashSet;
+
+    /// SoftRas's normalization: the longest side spans [-1, 1], every axis is centred, the
+    /// proportions stay; a mesh at one point is an error that leaves it unchanged.
+    #[test]
+    fn normalize_centres_and_scales_the_longest_side_to_two() {
+        let mut mesh = Mesh::cuboid([0.1, 0.05, 0.025]);
+        for p in &mut mesh.positions {
+            *p = [p[0] + 3.0, p[1] - 1.0, p[2] + 0.5];
+        }
+        mesh.normalize().unwrap();
+        let axis = |k: usize| {
+            let c = mesh.positions.iter().map(|p| p[k]);
+            (
+                c.clone().fold(f32::INFINITY, f32::min),
+                c.fold(f32::NEG_INFINITY, f32::max),
+            )
+        };
+        assert_eq!(axis(0), (-1.0, 1.0));
+        assert_eq!(axis(1), (-0.5, 0.5));
+        assert_eq!(axis(2), (-0.25, 0.25));
+
+        let mut point = Mesh::cuboid([0.0, 0.0, 0.0]);
+        let before = point.positions.clone();
+        let err = point.normalize().unwrap_err();
+        assert!(err.to_string().contains("one point"), "{err}");
+        assert_eq!(point.positions, before);
+    }
 
     fn pos(m: &Mesh, i: u32) -> DVec3 {
         DVec3::from(m.positions[i as usize].map(f64::from))

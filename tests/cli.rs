@@ -530,6 +530,52 @@ const TRIANGLE: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
 
 /// The default (tiled) render and `--brute` write the same file, byte for byte, at two tile
 /// sizes; a tile size that is not a multiple of 8 is one error line.
+/// `--normalize` (SoftRas's `load_obj(normalization=True)`): a 81 920-face sphere as a scan is
+/// distributed, 0.15 units across and off the origin, fills the frame at 64², centred, instead
+/// of covering a few pixels.
+#[test]
+fn render_normalize_fills_the_frame_with_a_mesh_in_its_own_units() {
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    let dir = TempDir::new("normalize");
+    let mut sphere = softvk::mesh::Mesh::icosphere(6);
+    assert_eq!(sphere.face_count(), 81_920);
+    for p in &mut sphere.positions {
+        *p = [0.075 * p[0] + 0.3, 0.075 * p[1] - 0.2, 0.075 * p[2] + 0.1];
+    }
+    let mesh = dir.path("small.obj");
+    softvk::fit::io::write_obj(&mesh, &sphere.positions, &sphere.faces).unwrap();
+    let out = dir.path("normalized.exr");
+    let done = render(&mesh, &out, &["--size", "64", "--normalize"]);
+    assert_success("--normalize", &done);
+    let (w, h, px) = read_exr(&out);
+    let inside: Vec<(usize, usize)> = (0..w * h)
+        .filter(|&i| px[i][3] > 0.5)
+        .map(|i| (i % w, i / w))
+        .collect();
+    let span = |k: fn(&(usize, usize)) -> usize| {
+        let (lo, hi) = (
+            inside.iter().map(k).min().unwrap(),
+            inside.iter().map(k).max().unwrap(),
+        );
+        (lo, hi)
+    };
+    // The unit sphere seen from SoftRas's default distance (2.732) through 30° spans
+    // tan(asin(1 / 2.732)) / tan 30° ≈ 0.68 of the view: about 44 of 64 pixels, centred.
+    for (lo, hi) in [span(|p| p.0), span(|p| p.1)] {
+        assert!(
+            hi - lo + 1 >= 40,
+            "normalized sphere spans pixels {lo}..={hi}"
+        );
+        assert!(
+            (lo as i64 - (63 - hi) as i64).abs() <= 1,
+            "not centred: {lo}..={hi}"
+        );
+    }
+}
+
 #[test]
 fn tiled_and_brute_renders_write_the_same_bytes() {
     if common::no_gpu() {

@@ -8,13 +8,13 @@
 //! `RasterSettings::validate`'s. Defaults are SoftRas's `SoftRenderer` ones, the same values as
 //! the library's `Default` impls (a unit test keeps them equal).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::{Args, ValueEnum};
 use glam::DVec3;
 use softvk::camera::{Camera, Projection};
 use softvk::lighting::{Directional, Lighting};
-use softvk::mesh::MAX_TEXTURE_RES;
+use softvk::mesh::{MAX_TEXTURE_RES, Mesh};
 use softvk::raster::reference::{Alpha, ColorMode, Dist, MAX_IMAGE_SIDE, RasterSettings, Rgb};
 use softvk::{Error, Result};
 
@@ -443,6 +443,17 @@ pub fn triple(s: &str) -> std::result::Result<[f64; 3], String> {
         *o = finite(p)?;
     }
     Ok(out)
+}
+
+/// The OBJ at `path` with `texture_res`² texels a face, normalized as SoftRas's
+/// `load_obj(normalization=True)` with `--normalize` ([`Mesh::normalize`]).
+pub fn load_mesh(path: &Path, texture_res: u32, normalize: bool) -> Result<Mesh> {
+    let mut mesh = Mesh::load_obj(path, texture_res)?;
+    if normalize {
+        mesh.normalize()
+            .map_err(|e| Error::Input(format!("{}: {e}", path.display())))?;
+    }
+    Ok(mesh)
 }
 
 #[cfg(test)]

@@ -58,6 +58,11 @@ pub struct FitPoseArgs {
     #[arg(long, value_name = "M.obj")]
     pub mesh: PathBuf,
 
+    /// Centre the mesh and scale its longest side to [-1, 1], as SoftRas's
+    /// `load_obj(normalization=True)` (for meshes as distributed, in their own units).
+    #[arg(long)]
+    pub normalize: bool,
+
     /// The target image: a PNG with an alpha channel (as `softvk render` writes).
     #[arg(long, value_name = "T.png")]
     pub target: PathBuf,
@@ -250,7 +255,7 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
         rotation: DVec3::from(args.init_rotation.unwrap_or([0.0; 3])) * (1f64.to_radians()),
         translation: DVec3::from(args.init_translation.unwrap_or([0.0; 3])),
     };
-    let mesh = Mesh::load_obj(&args.mesh, args.raster.texture_res)?;
+    let mesh = super::args::load_mesh(&args.mesh, args.raster.texture_res, args.normalize)?;
     if args.raster.vertex_colors && mesh.vertex_colors.is_none() {
         return Err(Error::Input(format!(
             "--vertex-colors: {} has no vertex colours (every `v` line needs `x y z r g b`)",

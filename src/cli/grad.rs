@@ -12,7 +12,6 @@ use std::path::{Path, PathBuf};
 
 use clap::Args;
 use softvk::gpu::{Context, ContextOptions};
-use softvk::mesh::Mesh;
 use softvk::raster::gpu::{DEFAULT_TILE, Method, Renderer};
 use softvk::{Error, Result};
 
@@ -25,6 +24,11 @@ pub struct GradArgs {
     /// The mesh (OBJ; all objects merged, polygons fan-triangulated, MTL map_Kd textures).
     #[arg(long, value_name = "M.obj")]
     pub mesh: PathBuf,
+
+    /// Centre the mesh and scale its longest side to [-1, 1], as SoftRas's
+    /// `load_obj(normalization=True)` (for meshes as distributed, in their own units).
+    #[arg(long)]
+    pub normalize: bool,
 
     /// dL/d(image): an RGBA EXR (float channels R, G, B, A) of the rendered size.
     #[arg(long, value_name = "W.exr")]
@@ -86,7 +90,7 @@ pub fn run(args: &GradArgs) -> Result<()> {
     let camera = args.view.camera()?;
     let settings = args.raster.settings(size)?;
     let lighting = args.raster.lighting();
-    let mesh = Mesh::load_obj(&args.mesh, args.raster.texture_res)?;
+    let mesh = super::args::load_mesh(&args.mesh, args.raster.texture_res, args.normalize)?;
     if args.raster.vertex_colors && mesh.vertex_colors.is_none() {
         return Err(Error::Input(format!(
             "--vertex-colors: {} has no vertex colours (every `v` line needs `x y z r g b`)",

@@ -26,6 +26,11 @@ pub struct RenderArgs {
     #[arg(long, value_name = "M.obj")]
     pub mesh: PathBuf,
 
+    /// Centre the mesh and scale its longest side to [-1, 1], as SoftRas's
+    /// `load_obj(normalization=True)` (for meshes as distributed, in their own units).
+    #[arg(long)]
+    pub normalize: bool,
+
     /// The image to write: .png (8-bit RGBA) or .exr (float32 R, G, B, A).
     #[arg(long, value_name = "IMG")]
     pub out: PathBuf,
@@ -65,7 +70,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let settings = args.raster.settings(args.view.size())?;
     let lighting = args.raster.lighting();
 
-    let mesh = Mesh::load_obj(&args.mesh, args.raster.texture_res)?;
+    let mesh = super::args::load_mesh(&args.mesh, args.raster.texture_res, args.normalize)?;
     if args.raster.vertex_colors && mesh.vertex_colors.is_none() {
         return Err(Error::Input(format!(
             "--vertex-colors: {} has no vertex colours (every `v` line needs `x y z r g b`)",
