@@ -221,7 +221,7 @@ impl Mesh {
             hi = hi.max(p);
         }
         let extent = (hi - lo).max_element();
-        if !(extent > 0.0) {
+        if extent.is_nan() || extent <= 0.0 {
             return Err(crate::Error::Input(format!(
                 "cannot normalize a mesh whose {} vertices are all at one point",
                 self.positions.len()
@@ -1120,7 +1120,7 @@ pub(crate) mod tests {
     /// proportions stay; a mesh at one point is an error that leaves it unchanged.
     #[test]
     fn normalize_centres_and_scales_the_longest_side_to_two() {
-        let mut mesh = Mesh::cuboid([0.1, 0.05, 0.025]);
+        let mut mesh = Mesh::cuboid([0.125, 0.0625, 0.03125]);
         for p in &mut mesh.positions {
             *p = [p[0] + 3.0, p[1] - 1.0, p[2] + 0.5];
         }
