@@ -105,8 +105,15 @@ def _images(array, like):
     return images.to(device=like.device, dtype=like.dtype)
 
 
+def _like(tensor):
+    """What a gradient must match of an input: device, dtype and shape (not the tensor itself,
+    which the autograd context should not hold)."""
+    return tensor.device, tensor.dtype, tensor.shape
+
+
 def _grad(array, like):
-    return torch.from_numpy(array).to(device=like.device, dtype=like.dtype)
+    device, dtype, shape = like
+    return torch.from_numpy(array).reshape(shape).to(device=device, dtype=dtype)
 
 
 class SoftRasterizeFunction(torch.autograd.Function):
@@ -116,7 +123,7 @@ class SoftRasterizeFunction(torch.autograd.Function):
     def forward(ctx, face_vertices, textures, settings):
         images, raster = _native.rasterize(_host(face_vertices), _host(textures), settings)
         ctx.raster = raster
-        ctx.like = (face_vertices, textures)
+        ctx.like = (_like(face_vertices), _like(textures))
         return _images(images, face_vertices)
 
     @staticmethod
@@ -193,7 +200,7 @@ class RenderMeshFunction(torch.autograd.Function):
             settings,
         )
         ctx.raster = raster
-        ctx.like = (vertices, textures, eyes)
+        ctx.like = (_like(vertices), _like(textures), _like(eyes))
         return _images(images, vertices)
 
     @staticmethod
@@ -206,7 +213,7 @@ class RenderMeshFunction(torch.autograd.Function):
         vertices, textures, eyes = ctx.like
         return (
             _grad(d_vertices, vertices) if need_vertices else None,
-            _grad(d_textures.reshape(textures.shape), textures) if need_textures else None,
+            _grad(d_textures, textures) if need_textures else None,
             _grad(d_eyes, eyes) if need_eyes else None,
             None,
             None,
