@@ -706,10 +706,7 @@ impl GpuScene {
             .iter()
             .flat_map(|m| m.positions.iter().flatten().copied())
             .collect();
-        let colors: Vec<f32> = meshes
-            .iter()
-            .flat_map(|m| lit_colors(m, &self.lighting, self.settings.color_mode))
-            .collect();
+        let colors = lit_batch(meshes, &self.lighting, self.settings.color_mode);
         ctx.write_buffer(&self.positions, 0, &positions)?;
         ctx.write_buffer(&self.colors, 0, &colors)?;
         self.meshes = meshes.iter().map(MeshF64::from_mesh).collect();
@@ -759,6 +756,29 @@ impl GpuScene {
             first_item: first_view * self.face_count,
         }
     }
+}
+
+/// The lit colours of a batch, mesh after mesh ([`lit_colors`]). A mesh equal to the one before
+/// it (SoftRas renders many views of one mesh as a batch of copies) takes its colours: the same
+/// bits, lit once.
+fn lit_batch(meshes: &[Mesh], lighting: &Lighting, mode: ColorMode) -> Vec<f32> {
+    let mut colors: Vec<f32> = Vec::new();
+    let mut last: Option<(&Mesh, std::ops::Range<usize>)> = None;
+    for mesh in meshes {
+        let start = colors.len();
+        match &last {
+            Some((prev, range))
+                if prev.positions == mesh.positions
+                    && prev.textures == mesh.textures
+                    && prev.vertex_colors == mesh.vertex_colors =>
+            {
+                colors.extend_from_within(range.clone());
+            }
+            _ => colors.extend(lit_colors(mesh, lighting, mode)),
+        }
+        last = Some((mesh, start..colors.len()));
+    }
+    colors
 }
 
 /// Lights on the host in f64 and rounds to the f32 colours the kernels read ([`rgb_padded`]).
@@ -908,10 +928,7 @@ impl Renderer {
             .flat_map(|m| m.positions.iter().flatten().copied())
             .collect();
         let faces: Vec<u32> = mesh.faces.iter().flatten().copied().collect();
-        let colors: Vec<f32> = meshes
-            .iter()
-            .flat_map(|m| lit_colors(m, lighting, settings.color_mode))
-            .collect();
+        let colors = lit_batch(meshes, lighting, settings.color_mode);
         Ok(GpuScene {
             settings: *settings,
             face_count,
