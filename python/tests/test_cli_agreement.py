@@ -50,16 +50,22 @@ def test_render_mesh_gradient_equals_softvk_grad_bit_for_bit(gpu, assets, softvk
     mesh = assets / "sphere_642.obj"
     weights = np.random.default_rng(1).uniform(-1, 1, (24, 24, 4)).astype(np.float32)
     softvk.write_exr(tmp_path / "w.exr", weights)
-    csv = tmp_path / "g.csv"
-    run(softvk_bin, "grad", "--mesh", mesh, "--weights", tmp_path / "w.exr", "--out", csv, *FLAGS)
+    csv, camera_csv = tmp_path / "g.csv", tmp_path / "c.csv"
+    run(softvk_bin, "grad", "--mesh", mesh, "--weights", tmp_path / "w.exr", "--out", csv,
+        "--camera-out", camera_csv, *FLAGS)
     cli = np.loadtxt(csv, delimiter=",", skiprows=1)[:, 1:].astype(np.float32)
+    camera = dict(line.split(",") for line in camera_csv.read_text().split()[1:])
+    cli_eye = np.array([float(camera[k]) for k in ("eye_x", "eye_y", "eye_z")], np.float32)
 
     vertices, faces = load_obj(mesh)
     vertices = vertices[None].clone().requires_grad_(True)
-    image = st.render_mesh(vertices, faces, eyes=torch.tensor(EYE, dtype=torch.float64), image_size=24, **RASTER)
+    eyes = torch.tensor(EYE, dtype=torch.float64, requires_grad=True)
+    image = st.render_mesh(vertices, faces, eyes=eyes, image_size=24, **RASTER)
     (image * torch.from_numpy(weights).permute(2, 0, 1)[None]).sum().backward()
-    assert np.abs(cli).max() > 0.1
+    assert np.abs(cli).max() > 0.1 and np.abs(cli_eye).max() > 0.01
     np.testing.assert_array_equal(vertices.grad[0].numpy(), cli)
+    # The eye's gradient (look_at), as `softvk grad --camera-out` writes it.
+    np.testing.assert_array_equal(eyes.grad.numpy().astype(np.float32), cli_eye)
 
 
 def look_at_project(vertices, eye, viewing_angle=30.0):
