@@ -479,12 +479,7 @@ fn images_array<'py, T: numpy::Element>(
         .into_any())
 }
 
-fn array_of<'py>(
-    py: Python<'py>,
-    values: impl Iterator<Item = f32>,
-    shape: &[usize],
-) -> PyResult<Bound<'py, PyAny>> {
-    let flat: Vec<f32> = values.collect();
+fn array_of<'py>(py: Python<'py>, flat: Vec<f32>, shape: &[usize]) -> PyResult<Bound<'py, PyAny>> {
     Ok(PyArray1::from_vec(py, flat).reshape(shape)?.into_any())
 }
 
@@ -496,7 +491,6 @@ struct Raster {
     scene: Option<ManuallyDrop<GpuScene>>,
     /// What the scene was made for: it goes back to [`SPARES`] under this key when dropped.
     key: SceneKey,
-    method: Method,
     kind: RasterKind,
 }
 
@@ -570,7 +564,7 @@ impl Raster {
             ],
         )?;
         let d_image: &[[f32; 4]] = bytemuck::cast_slice(d_image);
-        let method = self.method;
+        let method = self.key.method;
         let eyes = eyes && matches!(self.kind, RasterKind::Mesh { .. });
         let grads = with_engine(py, |engine| {
             let binned = scene.binned(method)?;
@@ -591,16 +585,8 @@ impl Raster {
                 faces,
                 per_face,
             } => (
-                array_of(
-                    py,
-                    narrow(&grads.positions).into_iter(),
-                    &[batch, faces, 3, 3],
-                )?,
-                array_of(
-                    py,
-                    narrow(&grads.colors).into_iter(),
-                    &[batch, faces, per_face, 3],
-                )?,
+                array_of(py, narrow(&grads.positions), &[batch, faces, 3, 3])?,
+                array_of(py, narrow(&grads.colors), &[batch, faces, per_face, 3])?,
                 py.None().into_bound(py),
             ),
             RasterKind::Mesh {
@@ -615,17 +601,13 @@ impl Raster {
                         .iter()
                         .flat_map(|c| c.eye.map(|x| x as f32))
                         .collect();
-                    array_of(py, e.into_iter(), &[views, 3])?
+                    array_of(py, e, &[views, 3])?
                 } else {
                     py.None().into_bound(py)
                 };
                 (
-                    array_of(
-                        py,
-                        narrow(&grads.positions).into_iter(),
-                        &[batch, vertices, 3],
-                    )?,
-                    array_of(py, narrow(&grads.colors).into_iter(), &[batch, colors, 3])?,
+                    array_of(py, narrow(&grads.positions), &[batch, vertices, 3])?,
+                    array_of(py, narrow(&grads.colors), &[batch, colors, 3])?,
                     d_eyes,
                 )
             }
@@ -640,19 +622,35 @@ impl Raster {
     }
 }
 
-/// Renders `meshes` as `key` says (in a spare scene of that key if there is one) and reads
-/// the images back, `[views, H, W, 4]` flat.
-fn forward(
-    engine: &Engine,
-    key: &SceneKey,
+/// Renders `meshes` through `views` (in a spare scene of their key if there is one) and reads
+/// the images back: `[views, H, W, 4]`, and the [`Raster`] that differentiates them.
+fn render<'py>(
+    py: Python<'py>,
+    settings: &Settings,
     meshes: &[Mesh],
-) -> softvk::Result<(GpuScene, Vec<f32>)> {
-    let mut scene = scene_for(engine, key, meshes)?;
-    engine.renderer.run(&engine.ctx, &mut scene, key.method)?;
-    let s = scene.settings();
-    let pixels = (s.width * s.height * scene.view_count()) as usize;
-    let images: Vec<[f32; 4]> = engine.ctx.read_buffer(scene.output(), 0, pixels)?;
-    Ok((scene, images.into_flattened()))
+    views: &[(usize, Camera)],
+    lighting: &Lighting,
+    kind: RasterKind,
+) -> PyResult<(Bound<'py, PyAny>, Raster)> {
+    let key = SceneKey::new(settings, meshes, views, lighting);
+    let (scene, images) = with_engine(py, |engine| {
+        let mut scene = scene_for(engine, &key, meshes)?;
+        engine.renderer.run(&engine.ctx, &mut scene, key.method)?;
+        let s = scene.settings();
+        let pixels = (s.width * s.height * scene.view_count()) as usize;
+        let images: Vec<[f32; 4]> = engine.ctx.read_buffer(scene.output(), 0, pixels)?;
+        Ok((scene, images.into_flattened()))
+    })?;
+    let s = settings.raster;
+    let dims = (views.len(), s.height as usize, s.width as usize);
+    Ok((
+        images_array(py, images, dims)?,
+        Raster {
+            scene: Some(ManuallyDrop::new(scene)),
+            key,
+            kind,
+        },
+    ))
 }
 
 /// Frees the scenes kept for reuse (they hold device memory until the next render of their
@@ -680,23 +678,12 @@ fn rasterize<'py>(
     let (batch, faces, per_face) = (inputs.batch, inputs.faces, inputs.per_face);
     let meshes = inputs.meshes();
     let views: Vec<(usize, Camera)> = (0..batch).map(|b| (b, Camera::screen_space())).collect();
-    let key = SceneKey::new(settings, &meshes, &views, &Lighting::unlit());
-    let (scene, images) = with_engine(py, |engine| forward(engine, &key, &meshes))?;
-    let raster = settings.raster;
-    let dims = (batch, raster.height as usize, raster.width as usize);
-    Ok((
-        images_array(py, images, dims)?,
-        Raster {
-            scene: Some(ManuallyDrop::new(scene)),
-            method: key.method,
-            key,
-            kind: RasterKind::Faces {
-                batch,
-                faces,
-                per_face,
-            },
-        },
-    ))
+    let kind = RasterKind::Faces {
+        batch,
+        faces,
+        per_face,
+    };
+    render(py, settings, &meshes, &views, &Lighting::unlit(), kind)
 }
 
 /// `reference_rasterize(face_vertices, textures, settings)`: the f64 CPU twin of
@@ -872,24 +859,13 @@ fn render_mesh<'py>(
             "nothing to render: {batch} meshes of {nf} faces, {n_views} views"
         )));
     }
-    let key = SceneKey::new(settings, &meshes, &views, &lighting);
-    let (scene, images) = with_engine(py, |engine| forward(engine, &key, &meshes))?;
-    let raster = settings.raster;
-    let dims = (n_views, raster.height as usize, raster.width as usize);
-    Ok((
-        images_array(py, images, dims)?,
-        Raster {
-            scene: Some(ManuallyDrop::new(scene)),
-            method: key.method,
-            key,
-            kind: RasterKind::Mesh {
-                batch,
-                vertices: nv,
-                colors: colors_per_mesh,
-                views: n_views,
-            },
-        },
-    ))
+    let kind = RasterKind::Mesh {
+        batch,
+        vertices: nv,
+        colors: colors_per_mesh,
+        views: n_views,
+    };
+    render(py, settings, &meshes, &views, &lighting, kind)
 }
 
 /// `read_exr(path)`: the first RGBA layer of an EXR (what `softvk render --out X.exr` writes)
