@@ -18,6 +18,7 @@ from ._native import (
     is_forked_child,
     read_exr,
     reference_rasterize,
+    release_cached_scenes,
     write_exr,
 )
 from ._native import __version__
@@ -28,6 +29,7 @@ __all__ = [
     "is_forked_child",
     "read_exr",
     "reference_rasterize",
+    "release_cached_scenes",
     "write_exr",
     "__version__",
 ]

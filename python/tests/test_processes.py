@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 
+import softvk
 import softvk.torch as st
 from conftest import REPO
 
@@ -59,7 +60,7 @@ def test_a_forked_child_cannot_touch_its_parents_device(gpu):
             st.soft_rasterize(fv, tex, image_size=16)
             message = "rendered"
         except RuntimeError as e:
-            message = str(e)
+            message = str(e) if softvk.is_forked_child() else "is_forked_child() is False"
         os.write(write, message.encode())
         os._exit(0)
     os.close(write)
@@ -67,6 +68,7 @@ def test_a_forked_child_cannot_touch_its_parents_device(gpu):
     os.waitpid(pid, 0)
     assert "was forked from process" in message and "fork()" in message, message
     # The parent carries on.
+    assert not softvk.is_forked_child()
     st.soft_rasterize(fv, tex, image_size=16)
 
 
