@@ -558,6 +558,89 @@ fn updated_meshes_render_and_differentiate_as_a_fresh_scene() {
     assert!(reused.update_meshes(&gpu, &new[..1]).is_err());
 }
 
+/// A loop keeps one set of backward buffers for its scene ([`GradBuffers::fits`]): after
+/// `update_meshes`, the kept buffers give the gradients of new ones bit for bit; they do not
+/// fit another method, a scene of other sizes, or entries that outgrew them.
+#[test]
+fn kept_backward_buffers_differentiate_an_updated_scene_as_new_ones() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let old = [scene(2, 41), scene(2, 42)];
+    let mut new = old.clone();
+    let mut rng = common::rng(43);
+    for mesh in &mut new {
+        for p in &mut mesh.positions {
+            p.iter_mut()
+                .for_each(|c| *c *= 1.0 + rng.random_range(-0.1f32..0.1));
+        }
+    }
+    let views = [
+        (0, Camera::from_angles(2.732, 15.0, 20.0)),
+        (1, Camera::from_angles(2.5, -10.0, 150.0)),
+    ];
+    let s = settings(16, 16);
+    let w = weights(16 * 16 * views.len(), 44);
+    let method = Method::Tiled { tile: 8 };
+    let backward = |scene: &GpuScene, gb: &GradBuffers| {
+        gb.set_d_image(&gpu, scene, &w).unwrap();
+        let binned = scene.binned(method).unwrap();
+        let kernels = r.grad_kernels();
+        gpu.submit_and_wait(|rec| kernels.record(rec, &binned, gb, &gb.io()))
+            .unwrap();
+        kernels.finish(&gpu, scene, gb, &gb.io(), true).unwrap()
+    };
+
+    let mut fresh = r
+        .prepare_batch(&gpu, &new, &views, &lighting(), &s)
+        .unwrap();
+    r.run(&gpu, &mut fresh, method).unwrap();
+    let expected = backward(&fresh, &GradBuffers::new(&gpu, &fresh, method).unwrap());
+
+    let mut kept = r
+        .prepare_batch(&gpu, &old, &views, &lighting(), &s)
+        .unwrap();
+    r.run(&gpu, &mut kept, method).unwrap();
+    let gb = GradBuffers::new(&gpu, &kept, method).unwrap();
+    assert!(
+        backward(&kept, &gb) != expected,
+        "the new meshes must differentiate differently"
+    );
+    kept.update_meshes(&gpu, &new).unwrap();
+    r.run(&gpu, &mut kept, method).unwrap();
+    assert!(gb.fits(&kept, method));
+    assert!(backward(&kept, &gb) == expected);
+
+    assert!(!gb.fits(&kept, Method::Brute));
+    let mut smaller = r
+        .prepare_batch(&gpu, &new, &views, &lighting(), &settings(8, 8))
+        .unwrap();
+    r.run(&gpu, &mut smaller, method).unwrap();
+    assert!(!gb.fits(&smaller, method));
+    // Buffers made for the meshes shrunk to a tenth (most faces in one of 64 tiles, at a small
+    // σ) are too small for the meshes at full size, which cross tiles.
+    let sharp = RasterSettings {
+        sigma: 1e-5,
+        ..settings(64, 64)
+    };
+    let mut shrunk = new.clone();
+    for mesh in &mut shrunk {
+        for p in &mut mesh.positions {
+            // Off the image's centre, which is a corner of four tiles.
+            *p = [0.1 * p[0] + 0.3, 0.1 * p[1] + 0.3, 0.1 * p[2]];
+        }
+    }
+    let mut grows = r
+        .prepare_batch(&gpu, &shrunk, &views, &lighting(), &sharp)
+        .unwrap();
+    r.run(&gpu, &mut grows, method).unwrap();
+    let small = GradBuffers::new(&gpu, &grows, method).unwrap();
+    assert!(small.fits(&grows, method));
+    grows.update_meshes(&gpu, &new).unwrap();
+    r.run(&gpu, &mut grows, method).unwrap();
+    assert!(grows.binned_entries() > small.entry_capacity());
+    assert!(!small.fits(&grows, method));
+}
+
 /// llvmpipe ends a shader invocation's loops after 65 535 iterations in all: every forward kernel
 /// whose loops grow with the input refuses, on such a driver, what would exceed it, instead of
 /// silently skipping work (the backward splits instead: see the tests below). (On drivers

@@ -192,7 +192,8 @@ struct PixelState {
     Softmax soft;
     bool hard_found;
     float hard_depth;
-    vec3 hard_rgb;
+    vec3 hard_wc;   // the winning face's clipped barycentrics and mesh: its colour is sampled
+    uint hard_mesh; // once, by `pixel_finish`, not for every face that covers the pixel
     uint hard_face;
 };
 
@@ -202,7 +203,8 @@ PixelState pixel_init() {
     s.soft = softmax_init(pc.background.rgb, pc.background_depth);
     s.hard_found = false;
     s.hard_depth = 0.0;
-    s.hard_rgb = pc.background.rgb;
+    s.hard_wc = vec3(0.0);
+    s.hard_mesh = 0u;
     s.hard_face = 0xffffffffu;
     return s;
 }
@@ -228,14 +230,15 @@ void shade_face(inout PixelState s, Face f, uint j, vec2 p) {
     float z;
     bool shaded = covered && depth_in_range(f, wc, pc.near, pc.far, z)
                && (DOUBLE_SIDED || (f.flags & FACE_FRONT) != 0u);
-    vec3 color = sample_color(f.mesh, j, wc);
     if (MODE_RGB == RGB_SOFTMAX) {
+        vec3 color = sample_color(f.mesh, j, wc);
         softmax_add_if(s.soft, z, d, color, pc.inv_gamma_range, shaded);
     } else {
         bool wins = shaded && inside_closed(w) && (!s.hard_found || z < s.hard_depth);
         s.hard_found = s.hard_found || wins;
         s.hard_depth = wins ? z : s.hard_depth;
-        s.hard_rgb = wins ? color : s.hard_rgb;
+        s.hard_wc = wins ? wc : s.hard_wc;
+        s.hard_mesh = wins ? f.mesh : s.hard_mesh;
         s.hard_face = wins ? j : s.hard_face;
     }
 }
@@ -243,7 +246,16 @@ void shade_face(inout PixelState s, Face f, uint j, vec2 p) {
 #ifndef FINE_BACKWARD
 // Writes the pixel's colour and aux at index `id` of the image.
 void pixel_finish(PixelState s, uint id) {
-    vec3 rgb = MODE_RGB == RGB_SOFTMAX ? softmax_resolve(s.soft) : s.hard_rgb;
+    vec3 rgb;
+    if (MODE_RGB == RGB_SOFTMAX) {
+        rgb = softmax_resolve(s.soft);
+    } else {
+        // The winner's colour: the bits `shade_face` would have kept had it sampled every face
+        // it saw. Sampled unconditionally (a select, as in `shade_face`), at face 0 where none
+        // won, so the gather stays in bounds.
+        vec3 winner = sample_color(s.hard_mesh, s.hard_found ? s.hard_face : 0u, s.hard_wc);
+        rgb = s.hard_found ? winner : pc.background.rgb;
+    }
     image[id] = vec4(rgb, alpha_resolve(s.alpha, MODE_ALPHA, pc.face_count));
     PixelAux a;
     a.softmax_ref_depth = s.soft.ref_depth;
