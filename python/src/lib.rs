@@ -16,7 +16,9 @@
 //! - A training loop renders the same shapes through the same views every iteration: when a
 //!   render's [`Raster`] is dropped (its backward done), its scene is kept as a spare, and the
 //!   next render of the same key (topology, views, lights, settings) writes its new vertices
-//!   and textures into it ([`GpuScene::update_meshes`]) instead of making every buffer again.
+//!   and textures into it ([`GpuScene::update_meshes`]) instead of making every buffer again;
+//!   the buffers of its backward are kept with it ([`GradBuffers::fits`]), since on a CPU device
+//!   new device memory costs a page fault per page at its first write.
 
 use std::mem::ManuallyDrop;
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -52,7 +54,7 @@ struct Engine {
 
 static ENGINE: Mutex<Option<Engine>> = Mutex::new(None);
 /// Scenes of dropped renders, newest last, for the next render of the same [`SceneKey`].
-static SPARES: Mutex<Vec<(SceneKey, GpuScene)>> = Mutex::new(Vec::new());
+static SPARES: Mutex<Vec<Spare>> = Mutex::new(Vec::new());
 /// How many spare scenes are kept (a loop alternates between at most two of a kind: the one
 /// being differentiated and the next iteration's).
 const MAX_SPARES: usize = 4;
@@ -135,6 +137,13 @@ struct Settings {
     silhouettes: bool,
 }
 
+/// A dropped render's scene and its backward's buffers, kept for the next render of its key.
+struct Spare {
+    key: SceneKey,
+    scene: GpuScene,
+    grads: Option<GradBuffers>,
+}
+
 /// What a scene is made for: renders with equal keys can share one ([`SPARES`]).
 #[derive(Clone, PartialEq)]
 struct SceneKey {
@@ -173,19 +182,23 @@ impl SceneKey {
     }
 }
 
-/// A scene for `meshes` as `key` says: a spare of that key with the meshes written into it,
-/// or a new one.
-fn scene_for(engine: &Engine, key: &SceneKey, meshes: &[Mesh]) -> softvk::Result<GpuScene> {
+/// A scene for `meshes` as `key` says: a spare of that key with the meshes written into it
+/// (and its backward's buffers), or a new one.
+fn scene_for(
+    engine: &Engine,
+    key: &SceneKey,
+    meshes: &[Mesh],
+) -> softvk::Result<(GpuScene, Option<GradBuffers>)> {
     let spare = {
         let mut spares = SPARES.lock().unwrap_or_else(|e| e.into_inner());
         spares
             .iter()
-            .rposition(|(k, _)| k == key)
-            .map(|i| spares.remove(i).1)
+            .rposition(|spare| spare.key == *key)
+            .map(|i| spares.remove(i))
     };
-    if let Some(mut scene) = spare {
-        scene.update_meshes(&engine.ctx, meshes)?;
-        return Ok(scene);
+    if let Some(mut spare) = spare {
+        spare.scene.update_meshes(&engine.ctx, meshes)?;
+        return Ok((spare.scene, spare.grads));
     }
     let mut scene = engine.renderer.prepare_batch(
         &engine.ctx,
@@ -195,7 +208,7 @@ fn scene_for(engine: &Engine, key: &SceneKey, meshes: &[Mesh]) -> softvk::Result
         &key.raster,
     )?;
     scene.set_silhouette_only(key.silhouettes);
-    Ok(scene)
+    Ok((scene, None))
 }
 
 fn parse_choice<T: Copy>(what: &str, value: &str, choices: &[(&str, T)]) -> PyResult<T> {
@@ -491,6 +504,8 @@ struct Raster {
     scene: Option<ManuallyDrop<GpuScene>>,
     /// What the scene was made for: it goes back to [`SPARES`] under this key when dropped.
     key: SceneKey,
+    /// The buffers of the scene's last backward, kept for the next (a spare's come with it).
+    grads: Mutex<Option<GradBuffers>>,
     kind: RasterKind,
 }
 
@@ -513,17 +528,29 @@ enum RasterKind {
 
 impl Drop for Raster {
     fn drop(&mut self) {
+        let grads = self
+            .grads
+            .get_mut()
+            .unwrap_or_else(|e| e.into_inner())
+            .take();
+        if forked().is_some() {
+            // A forked child must not free its parent's device memory: leak it instead (the
+            // scene is a `ManuallyDrop`).
+            std::mem::forget(grads);
+            return;
+        }
         if let Some(scene) = self.scene.take() {
-            // A forked child must not free its parent's device memory: leak it instead.
-            if forked().is_none() {
-                // Kept for the next render of its kind; the oldest spare goes (its buffers
-                // free themselves through the context, which outlives them).
-                let scene = ManuallyDrop::into_inner(scene);
-                let mut spares = SPARES.lock().unwrap_or_else(|e| e.into_inner());
-                spares.push((self.key.clone(), scene));
-                if spares.len() > MAX_SPARES {
-                    spares.remove(0);
-                }
+            // Kept for the next render of its kind; the oldest spare goes (its buffers free
+            // themselves through the context, which outlives them).
+            let spare = Spare {
+                key: self.key.clone(),
+                scene: ManuallyDrop::into_inner(scene),
+                grads,
+            };
+            let mut spares = SPARES.lock().unwrap_or_else(|e| e.into_inner());
+            spares.push(spare);
+            if spares.len() > MAX_SPARES {
+                spares.remove(0);
             }
         }
     }
@@ -568,14 +595,18 @@ impl Raster {
         let eyes = eyes && matches!(self.kind, RasterKind::Mesh { .. });
         let grads = with_engine(py, |engine| {
             let binned = scene.binned(method)?;
-            let mut gb = GradBuffers::new(&engine.ctx, scene, method)?;
+            let mut kept = self.grads.lock().unwrap_or_else(|e| e.into_inner());
+            let gb = match kept.take() {
+                Some(gb) if gb.fits(scene, method) => kept.insert(gb),
+                _ => kept.insert(GradBuffers::new(&engine.ctx, scene, method)?),
+            };
             gb.set_alpha_only(alpha_only);
             gb.set_d_image(&engine.ctx, scene, d_image)?;
             let kernels = engine.renderer.grad_kernels();
             engine
                 .ctx
-                .submit_and_wait(|rec| kernels.record(rec, &binned, &gb, &gb.io()))?;
-            kernels.finish(&engine.ctx, scene, &gb, &gb.io(), eyes)
+                .submit_and_wait(|rec| kernels.record(rec, &binned, gb, &gb.io()))?;
+            kernels.finish(&engine.ctx, scene, gb, &gb.io(), eyes)
         })?;
         let narrow =
             |v: &[[f64; 3]]| -> Vec<f32> { v.iter().flat_map(|g| g.map(|c| c as f32)).collect() };
@@ -618,7 +649,19 @@ impl Raster {
     /// Frees the render's device buffers now (its backward is gone); the garbage collector
     /// would otherwise free them with this object.
     fn release(&mut self) {
-        drop(self.scene.take().map(ManuallyDrop::into_inner));
+        let scene = self.scene.take();
+        let grads = self
+            .grads
+            .get_mut()
+            .unwrap_or_else(|e| e.into_inner())
+            .take();
+        if forked().is_some() {
+            // Not the parent's to free (see `Drop`).
+            std::mem::forget(grads);
+            return;
+        }
+        drop(scene.map(ManuallyDrop::into_inner));
+        drop(grads);
     }
 }
 
@@ -633,13 +676,13 @@ fn render<'py>(
     kind: RasterKind,
 ) -> PyResult<(Bound<'py, PyAny>, Raster)> {
     let key = SceneKey::new(settings, meshes, views, lighting);
-    let (scene, images) = with_engine(py, |engine| {
-        let mut scene = scene_for(engine, &key, meshes)?;
+    let (scene, grads, images) = with_engine(py, |engine| {
+        let (mut scene, grads) = scene_for(engine, &key, meshes)?;
         engine.renderer.run(&engine.ctx, &mut scene, key.method)?;
         let s = scene.settings();
         let pixels = (s.width * s.height * scene.view_count()) as usize;
         let images: Vec<[f32; 4]> = engine.ctx.read_buffer(scene.output(), 0, pixels)?;
-        Ok((scene, images.into_flattened()))
+        Ok((scene, grads, images.into_flattened()))
     })?;
     let s = settings.raster;
     let dims = (views.len(), s.height as usize, s.width as usize);
@@ -648,6 +691,7 @@ fn render<'py>(
         Raster {
             scene: Some(ManuallyDrop::new(scene)),
             key,
+            grads: Mutex::new(grads),
             kind,
         },
     ))
