@@ -1090,6 +1090,71 @@ fn fit_mesh_writes_the_mesh_and_its_report() {
     assert_eq!(ious.lines().count(), 1 + 3 + 1, "{ious}");
 }
 
+/// A UV sphere of `lon` meridians and `rings` bands (`2 lon (rings − 1)` faces) as OBJ text.
+fn uv_sphere_obj(lon: u32, rings: u32) -> String {
+    use std::fmt::Write;
+    let mut obj = String::from("v 0 1 0\n");
+    for r in 1..rings {
+        let th = std::f64::consts::PI * f64::from(r) / f64::from(rings);
+        for k in 0..lon {
+            let ph = std::f64::consts::TAU * f64::from(k) / f64::from(lon);
+            let (x, y, z) = (th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin());
+            writeln!(obj, "v {x:.6} {y:.6} {z:.6}").unwrap();
+        }
+    }
+    obj.push_str("v 0 -1 0\n");
+    // 1-based: the north pole, the rings, the south pole.
+    let at = |r: u32, k: u32| 2 + (r - 1) * lon + k % lon;
+    let south = 2 + (rings - 1) * lon;
+    for k in 0..lon {
+        writeln!(obj, "f 1 {} {}", at(1, k + 1), at(1, k)).unwrap();
+        writeln!(
+            obj,
+            "f {south} {} {}",
+            at(rings - 1, k),
+            at(rings - 1, k + 1)
+        )
+        .unwrap();
+    }
+    for r in 1..rings - 1 {
+        for k in 0..lon {
+            let (a, b, c, d) = (at(r, k), at(r, k + 1), at(r + 1, k), at(r + 1, k + 1));
+            writeln!(obj, "f {a} {b} {d}\nf {a} {d} {c}").unwrap();
+        }
+    }
+    obj
+}
+
+/// A template of 100 000 faces at 64²: some tiles hold more faces than one shader invocation
+/// may loop over on llvmpipe, as far as the guarded binning knows (its bound is the face
+/// count), so the fit's forward folds them in passes, and the report's turntable renders its
+/// 24 frames in as many batches as the face setups need. A few iterations run and write it.
+#[test]
+fn fit_mesh_takes_a_100k_face_template_at_64() {
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    let dir = TempDir::new("fit-mesh-100k");
+    let (sil, cams) = common::write_disc_inputs(&dir, 64);
+    let template = dir.write("sphere_100k.obj", &uv_sphere_obj(250, 201));
+    let out = dir.path("fitted.obj");
+    let o = softvk()
+        .args(["fit-mesh", "--iters", "3", "--quiet", "--template"])
+        .arg(&template)
+        .arg("--silhouettes")
+        .arg(&sil)
+        .arg("--cameras")
+        .arg(&cams)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(Mesh::load_obj(&out, 1).unwrap().face_count(), 100_000);
+    assert!(dir.path("fitted-report").join("turntable.gif").is_file());
+}
+
 #[test]
 fn fit_mesh_errors_are_one_line_and_write_nothing() {
     use softvk::fit::io::{self, CameraRow};

@@ -243,6 +243,7 @@ fn texel_bindings_are_reflected_and_checked() {
             faces: buffer.whole(),
             image: buffer.whole(),
             aux: buffer.whole(),
+            carry: buffer.whole(),
             pairs: buffer.whole(),
             pair_items: buffer.whole(),
             ranges: buffer.whole(),

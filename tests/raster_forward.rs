@@ -736,6 +736,105 @@ fn aux_holds_the_softmax_and_alpha_aggregates() {
     }
 }
 
+/// Icospheres of `subdivisions` shrunk to `radii` about (-0.79, 0.79, 0), one inside the
+/// other: at 16² through the default camera they cover a few pixels in the top-left 8×8 tile,
+/// so every face lands in one tile of any size.
+fn crowded_spheres(subdivisions: u32, radii: &[f32]) -> Mesh {
+    let ico = Mesh::icosphere(subdivisions);
+    let (mut positions, mut faces) = (Vec::new(), Vec::new());
+    for r in radii {
+        let base = positions.len() as u32;
+        positions.extend(
+            ico.positions
+                .iter()
+                .map(|p| [r * p[0] - 0.79, r * p[1] + 0.79, r * p[2]]),
+        );
+        faces.extend(ico.faces.iter().map(|f| f.map(|i| i + base)));
+    }
+    let mut mesh = Mesh::new(positions, faces, 1).unwrap();
+    mesh.textures = random_colors(mesh.face_count(), 61);
+    mesh.vertex_colors = Some(random_colors(mesh.vertex_count(), 62));
+    mesh
+}
+
+/// A tile just past the loop cap: 61 440 faces in one tile (three nested spheres) need more
+/// iterations than one invocation of the tiled forward may run on llvmpipe (about 1.25 or 1.5
+/// per face, with 8 or 4 lanes), so it is folded in two passes, while brute force (one per
+/// face) still takes the face list in one. The split tiled render equals the unsplit brute-force one bit for bit,
+/// images and aux ([`render_all`]), in every colour and alpha mode, and the twin.
+#[test]
+fn a_tile_just_past_the_loop_cap_renders_in_passes_as_brute_force_in_one() {
+    let Some(gpu) = common::gpu() else { return };
+    if let Some(limit) = gpu.info().shader_loop_limit() {
+        assert!(61_440 + 61_440 / 4 > limit && 61_440 + 2 < limit);
+    }
+    let r = Renderer::new(&gpu).unwrap();
+    let mesh = crowded_spheres(5, &[0.3, 0.27, 0.24]);
+    assert_eq!(mesh.face_count(), 61_440);
+    let cam = Camera::default();
+    for (rgb, alpha, mode) in [
+        (Rgb::Softmax, Alpha::Prod, ColorMode::Surface),
+        (Rgb::Hard, Alpha::Sum, ColorMode::Vertex),
+    ] {
+        let s = RasterSettings {
+            width: 16,
+            height: 16,
+            sigma: 1e-5,
+            gamma: 1e-3,
+            rgb,
+            alpha,
+            color_mode: mode,
+            ..RasterSettings::default()
+        };
+        let stats = check(
+            &r,
+            &gpu,
+            "61k faces in a tile",
+            &mesh,
+            &cam,
+            &lighting(),
+            &s,
+        );
+        // (Sum's alpha is the coverage summed over every face of the mesh, divided by their
+        // count: small everywhere here.)
+        assert!(alpha == Alpha::Sum || stats.covered >= 4, "{stats:?}");
+    }
+}
+
+/// One tile holding over 200 000 faces (an icosphere of 327 680, a few pixels wide): the tiled
+/// forward folds it in passes and brute force its face list (more than 150 000 faces), carrying
+/// every pixel's alpha, softmax and hard-colour state between passes; both equal each other
+/// bit for bit and the twin.
+#[test]
+fn a_tile_of_over_200k_faces_renders_by_both_methods_as_the_twin() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let mesh = crowded_spheres(7, &[0.3]);
+    assert!(mesh.face_count() >= 200_000);
+    let cam = Camera::default();
+    for (rgb, alpha) in [(Rgb::Softmax, Alpha::Prod), (Rgb::Hard, Alpha::Hard)] {
+        let s = RasterSettings {
+            width: 16,
+            height: 16,
+            sigma: 1e-5,
+            gamma: 1e-3,
+            rgb,
+            alpha,
+            ..RasterSettings::default()
+        };
+        let stats = check(
+            &r,
+            &gpu,
+            "327k faces in a tile",
+            &mesh,
+            &cam,
+            &lighting(),
+            &s,
+        );
+        assert!(stats.covered >= 4, "{stats:?}");
+    }
+}
+
 #[test]
 fn several_views_render_as_one_view_each() {
     let Some(gpu) = common::gpu() else { return };

@@ -162,7 +162,10 @@ layout(push_constant) uniform Push {
     uint entry_total;      // backward, tiled: (face, tile) entries of the view group
     uint grad_stride;      // backward: floats per partial (vec4 records: 3 corners + colour slots)
     uint first_row;        // tiled only: the window's first tile row (tiles_y rows from it)
-#ifdef FINE_BACKWARD
+#ifndef FINE_BACKWARD
+    uint pass_begin;       // forward with CARRY: this pass's faces, [pass_begin, pass_end) of a
+    uint pass_end;         //   pixel's list (brute: of the view's faces; tiled: of the tile's run)
+#else
     uint chunk_begin;      // backward: the first unit (tiled: entry slot; brute: (item, band))
     uint chunk_end;        //   of this chunk of partials, and one past its last
     uint split;            // backward, tiled: faces of a tile per workgroup; brute: rows per band
@@ -244,6 +247,48 @@ void shade_face(inout PixelState s, Face f, uint j, vec2 p) {
 }
 
 #ifndef FINE_BACKWARD
+// A face list too long for one invocation (llvmpipe ends an invocation's loops after 65 535
+// iterations) is folded in passes over consecutive parts of it, in order: each pass but the
+// last leaves every pixel's running state in `carry`, and the next resumes from it (constant 6,
+// the host's choice when a list needs more than one pass). A pixel folds the same faces in the
+// same order either way, so a split render is the unsplit one bit for bit. Without CARRY the
+// binding is a placeholder and no code touches it. The includer defines CARRY_BINDING.
+layout(constant_id = 6) const uint CARRY = 0u;
+
+// `PixelState`, 64 bytes: alpha and softmax, then the hard colour's winner.
+struct PixelCarry {
+    vec4 a; // alpha.acc, alpha.zeros (bits), soft.ref_depth, soft.sum
+    vec4 b; // soft.rgb, hard_depth
+    vec4 c; // hard_wc, hard_face (bits; 0xffffffff: none yet)
+    uvec4 d; // hard_mesh, unused
+};
+layout(std430, set = 0, binding = CARRY_BINDING) restrict buffer Carry { PixelCarry carry[]; };
+
+void carry_store(PixelState s, uint id) {
+    PixelCarry c;
+    c.a = vec4(s.alpha.acc, uintBitsToFloat(s.alpha.zeros), s.soft.ref_depth, s.soft.sum);
+    c.b = vec4(s.soft.rgb, s.hard_depth);
+    c.c = vec4(s.hard_wc, uintBitsToFloat(s.hard_face));
+    c.d = uvec4(s.hard_mesh, 0u, 0u, 0u);
+    carry[id] = c;
+}
+
+PixelState carry_load(uint id) {
+    PixelCarry c = carry[id];
+    PixelState s;
+    s.alpha.acc = c.a.x;
+    s.alpha.zeros = floatBitsToUint(c.a.y);
+    s.soft.ref_depth = c.a.z;
+    s.soft.sum = c.a.w;
+    s.soft.rgb = c.b.xyz;
+    s.hard_depth = c.b.w;
+    s.hard_wc = c.c.xyz;
+    s.hard_face = floatBitsToUint(c.c.w);
+    s.hard_found = s.hard_face != 0xffffffffu; // a winner's index is a face's, never ~0
+    s.hard_mesh = c.d.x;
+    return s;
+}
+
 // Writes the pixel's colour and aux at index `id` of the image.
 void pixel_finish(PixelState s, uint id) {
     vec3 rgb;

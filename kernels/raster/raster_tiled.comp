@@ -4,7 +4,8 @@
 #extension GL_KHR_shader_subgroup_ballot : require
 #extension GL_KHR_shader_subgroup_shuffle : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
-// Tiled soft rasterization: one workgroup per 8×8 block of pixels (a block is the unit a tile
+// Tiled soft rasterization (in passes over consecutive parts of a crowded tile's run where the
+// driver's loop cap asks: `CARRY` in raster_fine.glsl): one workgroup per 8×8 block of pixels (a block is the unit a tile
 // size must be a multiple of; 64 invocations, one per pixel, or fewer, each shading a pixel of
 // several of the block's segments in turn: `tiled_forward_workgroup` in src/raster/fine.rs says
 // when and why), visiting only the faces binned to the block's tile (`kernels/binning/`), in
@@ -22,6 +23,7 @@
 // construct that skips work (an `if` only narrows the lane mask).
 // The per-lane inputs as texel buffers: branch-free gathers on llvmpipe (raster_fine.glsl).
 #define TEXEL_INPUTS
+#define CARRY_BINDING 8
 #include "common.glsl"
 #include "raster_fine.glsl"
 #include "subgroup_face.glsl"
@@ -57,6 +59,14 @@ void main() {
     uint tile = view * pc.tiles_x * pc.tiles_y + (by / blocks_per_tile) * pc.tiles_x
               + bx / blocks_per_tile;
     uvec2 range = ranges[tile];
+    // This pass's part of the tile's run (all of it without CARRY). A tile whose run ended in
+    // an earlier pass is done: uniform across the workgroup.
+    uint run = range.y - range.x;
+    uint begin = CARRY != 0u ? min(pc.pass_begin, run) : 0u;
+    uint end = CARRY != 0u ? min(pc.pass_end, run) : run;
+    if (begin > 0u && begin == run) {
+        return;
+    }
     uint setup_base = (pc.first_view + view) * pc.face_count;
     uint lanes = subgroup_lanes();
     uint lane = gl_SubgroupInvocationID;
@@ -79,12 +89,13 @@ void main() {
         vec2 lo = lane_min(edge);
         vec2 hi = lane_max(edge);
 
-        PixelState s = pixel_init();
-        for (uint start = range.x; start < range.y; start += lanes) {
+        uint pixel = (pc.first_view + view) * pc.width * pc.height + row * pc.width + col;
+        PixelState s = begin > 0u && valid ? carry_load(pixel) : pixel_init();
+        for (uint start = range.x + begin; start < range.x + end; start += lanes) {
             uint k = start + lane;
             Face f = face_none();
             uint face = 0u;
-            if (k < range.y && lane < lanes) {
+            if (k < range.x + end && lane < lanes) {
                 face = pair_items[pairs[k]];
                 f = load_face(setup_base + face);
             }
@@ -101,8 +112,10 @@ void main() {
                 }
             }
         }
-        if (valid) {
-            pixel_finish(s, (pc.first_view + view) * pc.width * pc.height + row * pc.width + col);
+        if (valid && end < run) {
+            carry_store(s, pixel);
+        } else if (valid) {
+            pixel_finish(s, pixel);
         }
     }
 }

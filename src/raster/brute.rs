@@ -8,9 +8,9 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use crate::error::{Error, LimitKind, Result};
+use crate::error::{Error, Result};
 use crate::gpu::{BufferRange, Context, Kernel, KernelVariants, Recorder, specs};
-use crate::raster::fine::{FineModes, RasterPush};
+use crate::raster::fine::{CARRY_BYTES, FineModes, RasterPush, dispatch_passes, forward_pass_size};
 use crate::raster::reference::RasterSettings;
 
 /// Push constants of `downsample_2x2.comp`.
@@ -47,7 +47,9 @@ impl BruteRaster {
     }
 
     /// Records the fine pass over a `width × height` image per view (the *rendered* size: pass
-    /// 2× the output size with anti-aliasing, then [`BruteRaster::record_downsample`]).
+    /// 2× the output size with anti-aliasing, then [`BruteRaster::record_downsample`]). On a
+    /// driver that caps shader loops, more faces than one invocation may loop over are folded
+    /// in passes (`b.carry` then holds [`CARRY_BYTES`] per pixel).
     ///
     /// `silhouette_only` renders alpha alone ([`crate::raster::gpu::GpuScene::set_silhouette_only`]).
     /// `cull` skips faces whose grown box excludes the pixel, as SoftRas and the reference's
@@ -92,17 +94,15 @@ impl BruteRaster {
                 "raster_brute: {pixels} pixels and {face_count} faces (need 1..2^32 pixels, > 0 faces)"
             )));
         }
-        if let Some(limit) = rec.context().info().shader_loop_limit()
-            && u64::from(face_count) + 2 > limit
-        {
-            return Err(Error::DeviceLimit {
-                kind: LimitKind::LoopIterations,
-                what: format!("the brute-force kernel over all {face_count} faces"),
-                need: u64::from(face_count) + 2,
-                max: limit,
-                device: rec.context().info().name.clone(),
-                hint: "use the tiled method",
-            });
+        // More faces than one invocation may loop over are folded in passes.
+        let per_pass = forward_pass_size(
+            u64::from(face_count),
+            rec.context().info().shader_loop_limit(),
+            |faces| faces + 2,
+        );
+        let passes = u64::from(face_count).div_ceil(per_pass);
+        if passes > 1 {
+            need("carry", &b.carry, CARRY_BYTES * pixels)?;
         }
         let push = RasterPush::new(
             settings,
@@ -113,14 +113,21 @@ impl BruteRaster {
             vertex_count,
             texture_res,
         );
-        let kernel = self.raster.get(
-            rec.context(),
-            &FineModes::new(settings, cull)
-                .alpha_only_if(silhouette_only)
-                .constants(rec.context(), 64),
-        )?;
+        let mut constants = FineModes::new(settings, cull)
+            .alpha_only_if(silhouette_only)
+            .constants(rec.context(), 64)
+            .to_vec();
+        constants.push(u32::from(passes > 1));
+        let kernel = self.raster.get(rec.context(), &constants)?;
         let groups = pixels.div_ceil(u64::from(specs::RASTER_BRUTE.workgroup_size[0]));
-        rec.dispatch(&kernel, &b.for_kernel(&kernel)?, &push, groups as u32)
+        dispatch_passes(
+            rec,
+            &kernel,
+            &b.for_kernel(&kernel)?,
+            push,
+            (passes, per_pass),
+            groups as u32,
+        )
     }
 
     /// Records the 2×2 average of `big` (`2W × 2H` per view) into `small` (`W × H` per view).

@@ -71,6 +71,75 @@ pub(crate) struct RasterPush {
     pub first_row: u32,
 }
 
+/// Push constants of the forward fine kernels: the shared ones, then the pass's part of each
+/// pixel's face list (`CARRY` in `raster_fine.glsl`). Twin of `Push` without `FINE_BACKWARD`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(crate) struct ForwardPush {
+    pub fine: RasterPush,
+    pub pass_begin: u32,
+    pub pass_end: u32,
+}
+
+/// Bytes of one pixel's running state between passes (`PixelCarry` in `raster_fine.glsl`).
+pub(crate) const CARRY_BYTES: u64 = 64;
+
+/// How a forward fine pass folds face lists of up to `run` faces: in passes of at most
+/// `per_pass` faces (`run` itself when one pass stays under the driver's loop cap), as even as
+/// whole passes allow. Each pass but the last leaves every pixel's running state in the carry
+/// buffer ([`CARRY_BYTES`] a pixel), and the next resumes from it: the same faces in the same
+/// order, so the same bits as one pass. `iterations(faces)` is one invocation's loop count for
+/// a pass of `faces` faces.
+pub(crate) fn forward_pass_size(
+    run: u64,
+    limit: Option<u64>,
+    iterations: impl Fn(u64) -> u64,
+) -> u64 {
+    let run = run.max(1);
+    let Some(limit) = limit else {
+        return run;
+    };
+    if iterations(run) <= limit {
+        return run;
+    }
+    // The most faces one pass takes (iterations grow with the faces), then even passes.
+    let (mut lo, mut hi) = (1, run);
+    while lo < hi {
+        let mid = lo + (hi - lo).div_ceil(2);
+        if iterations(mid) <= limit {
+            lo = mid;
+        } else {
+            hi = mid - 1;
+        }
+    }
+    run.div_ceil(run.div_ceil(lo))
+}
+
+/// Records `passes` dispatches of a forward kernel, each over its part of the face lists
+/// (`per_pass` faces) with a barrier between: what [`forward_pass_size`] planned.
+pub(crate) fn dispatch_passes(
+    rec: &mut Recorder<'_>,
+    kernel: &crate::gpu::Kernel,
+    bindings: &[crate::gpu::BufferRange<'_>],
+    fine: RasterPush,
+    (passes, per_pass): (u64, u64),
+    groups: u32,
+) -> Result<()> {
+    for pass in 0..passes {
+        if pass > 0 {
+            rec.barrier();
+        }
+        let bound = |k: u64| u32::try_from(k * per_pass).unwrap_or(u32::MAX);
+        let push = ForwardPush {
+            fine,
+            pass_begin: bound(pass),
+            pass_end: bound(pass + 1),
+        };
+        rec.dispatch(kernel, bindings, &push, groups)?;
+    }
+    Ok(())
+}
+
 const FLAG_DOUBLE_SIDED: u32 = 1;
 const FLAG_VERTEX_COLORS: u32 = 2;
 const FLAG_CULL: u32 = 4;
@@ -321,10 +390,12 @@ impl TiledRaster {
     /// Records the tiled fine pass over views `first_view .. first_view + view_count`, binned on
     /// `grid` (the rendered size) by one binning whose tiles are numbered from the group's first
     /// view, where no tile holds more than `max_run` entries (the binning's
-    /// [`crate::raster::gpu::ViewGroup::max_tile_entries`]). On a CPU device it sizes the
-    /// workgroups: one subgroup shades a whole 8×8 block where the driver's loop cap allows
-    /// for `max_run` faces, more where it does not. An overstated `max_run` costs only speed; an
-    /// understated one lets llvmpipe's loop cap drop faces of the crowded tiles.
+    /// [`crate::raster::gpu::ViewGroup::max_tile_entries`]). On a driver that caps shader loops,
+    /// tiles of more faces than one invocation may loop over are folded in passes
+    /// ([`forward_pass_size`]; `b.carry` then holds [`CARRY_BYTES`] per pixel). On a CPU device
+    /// it sizes the workgroups: one subgroup shades a whole 8×8 block where the driver's loop cap
+    /// allows for a pass's faces, more where it does not. An overstated `max_run` costs only
+    /// speed; an understated one lets llvmpipe's loop cap drop faces of the crowded tiles.
     #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
@@ -368,15 +439,22 @@ impl TiledRaster {
             vertex_count,
             texture_res,
         );
-        let kernel = self.kernel.get(
-            rec.context(),
-            &FineModes::new(settings, true)
-                .alpha_only_if(silhouette_only)
-                .constants(
-                    rec.context(),
-                    tiled_forward_workgroup(rec.context(), max_run),
-                ),
-        )?;
+        // Tiles past the loop cap are folded in passes.
+        let ctx = rec.context();
+        let subgroup = ctx.info().subgroup_size;
+        let per_pass = forward_pass_size(max_run, ctx.info().shader_loop_limit(), |faces| {
+            tiled_forward_iterations(faces, subgroup, 64)
+        });
+        let passes = max_run.max(1).div_ceil(per_pass);
+        if passes > 1 {
+            b.carry.require(CARRY_BYTES * pixels * last, &what)?;
+        }
+        let mut constants = FineModes::new(settings, true)
+            .alpha_only_if(silhouette_only)
+            .constants(ctx, tiled_forward_workgroup(ctx, per_pass))
+            .to_vec();
+        constants.push(u32::from(passes > 1));
+        let kernel = self.kernel.get(ctx, &constants)?;
         push.first_view = first_view;
         push.tile_size = grid.tile_size;
         push.tiles_x = grid.tiles_x;
@@ -387,7 +465,14 @@ impl TiledRaster {
             * u64::from(view_count);
         let groups = u32::try_from(blocks)
             .map_err(|_| Error::Limit(format!("raster_tiled: {blocks} workgroups")))?;
-        rec.dispatch(&kernel, &b.for_kernel(&kernel)?, &push, groups)
+        dispatch_passes(
+            rec,
+            &kernel,
+            &b.for_kernel(&kernel)?,
+            push,
+            (passes, per_pass),
+            groups,
+        )
     }
 }
 
@@ -419,15 +504,36 @@ mod tests {
             }
         }
         assert_eq!(forward_workgroup(true, 8, Some(CAP), 8_000), 16);
-        // Past what even 64 invocations take: 64, and the binning's check refuses the scene.
+        // Past what even 64 invocations take: 64 (and the tile is folded in passes).
         assert_eq!(forward_workgroup(true, 8, Some(CAP), 60_000), 64);
+    }
+
+    #[test]
+    fn passes_split_only_past_the_cap_and_evenly() {
+        const CAP: u64 = 65_535;
+        let tiled = |faces| tiled_forward_iterations(faces, 8, 64);
+        // Under the cap, or with none: one pass of everything.
+        assert_eq!(forward_pass_size(52_000, Some(CAP), tiled), 52_000);
+        assert_eq!(forward_pass_size(1 << 40, None, tiled), 1 << 40);
+        assert_eq!(forward_pass_size(0, Some(CAP), tiled), 1);
+        for run in [52_500, 60_000, 200_000, 327_680, 5_000_000] {
+            let per_pass = forward_pass_size(run, Some(CAP), tiled);
+            let passes = run.div_ceil(per_pass);
+            assert!(passes > 1 && tiled(per_pass) <= CAP, "{run}: {per_pass}");
+            // No fewer passes would do, and they are even: the last is at most one face short.
+            assert!(tiled(run.div_ceil(passes - 1)) > CAP, "{run}: {passes}");
+            assert!(run - (passes - 1) * per_pass + passes >= per_pass, "{run}");
+        }
+        // Brute force: a face an iteration, and two more.
+        assert_eq!(forward_pass_size(65_533, Some(CAP), |f| f + 2), 65_533);
+        assert_eq!(forward_pass_size(150_000, Some(CAP), |f| f + 2), 50_000);
     }
 
     #[test]
     fn shared_structs_match_the_kernels_layout() {
         for spec in [&specs::RASTER_BRUTE, &specs::RASTER_TILED] {
             assert_eq!(
-                std::mem::size_of::<RasterPush>() as u32,
+                std::mem::size_of::<ForwardPush>() as u32,
                 spec.push_constant_size,
                 "{}",
                 spec.name
@@ -435,7 +541,8 @@ mod tests {
         }
         assert_eq!(std::mem::offset_of!(RasterPush, background), 48);
         assert_eq!(std::mem::size_of::<PixelAux>(), 32);
-        assert_eq!(specs::RASTER_TILED.bindings.len(), 8);
+        assert_eq!(specs::RASTER_TILED.bindings.len(), 9);
+        assert_eq!(specs::RASTER_BRUTE.bindings.len(), 6);
     }
 
     #[test]

@@ -41,7 +41,7 @@ use crate::primitives::binning::{self, BinJob, Binner, Bins, ItemLayout, TileGri
 use crate::raster::backward::GradIo;
 use crate::raster::backward::{GradBuffers, GradKernels};
 use crate::raster::brute::{BruteBindings, BruteRaster};
-use crate::raster::fine::{PixelAux, TiledBindings, TiledRaster, check_tile_size};
+use crate::raster::fine::{CARRY_BYTES, PixelAux, TiledBindings, TiledRaster, check_tile_size};
 use crate::raster::reference::{ColorMode, FaceColors, MeshF64, RasterSettings};
 use crate::raster::reference_grad::Gradients;
 use crate::raster::setup::{FACE_FINITE, FaceSetupKernel, GpuFaceSetup, GpuView, VertexLayout};
@@ -131,6 +131,10 @@ pub struct GpuScene {
     pub(crate) setups: Buffer,
     pub(crate) image: Buffer,
     pub(crate) aux: Buffer,
+    /// Every rendered pixel's running state between the passes of a face list too long for
+    /// one (`CARRY` in `raster_fine.glsl`): sized where the scene's face count could need
+    /// passes on this device, a placeholder elsewhere.
+    carry: Buffer,
     small: Option<Buffer>,
     /// Bins per view group: group `i` of the last tiled run used `bins[i]`. They are kept (the
     /// backward pass reuses them: no second binning) and grow, never shrink.
@@ -374,11 +378,11 @@ fn max_tile_run(ctx: &Context, bins: &Bins, tiles: u64) -> Result<u64> {
         .unwrap_or(0))
 }
 
-/// On a driver that caps shader loops, the exact largest tile when the entry count alone does
-/// not show that the tiled forward stays under the cap; the entry count otherwise. An error when
-/// the forward would exceed it. (The tiled backward splits a crowded tile over workgroups, so
-/// any run the forward takes, it takes too.)
-fn checked_tile_runs(
+/// The most entries any tile of the group holds, or an upper bound of it: the entry count
+/// where that alone shows one pass of the tiled forward stays under the driver's loop cap, else
+/// the exact largest tile, read back (past the cap the forward folds that tile in passes, and
+/// more passes than needed would cost time).
+fn tile_run_bound(
     ctx: &Context,
     bins: &Bins,
     grid: &TileGrid,
@@ -391,24 +395,47 @@ fn checked_tile_runs(
     let Some(limit) = ctx.info().shader_loop_limit() else {
         return Ok(total);
     };
-    let subgroup = ctx.info().subgroup_size;
-    let run = if tiled_forward_iterations(total, subgroup, 64) <= limit {
-        total
-    } else {
-        max_tile_run(ctx, bins, grid.tiles_per_view() * u64::from(views))?
-    };
-    let need = tiled_forward_iterations(run, subgroup, 64);
-    if need > limit {
-        return Err(Error::DeviceLimit {
-            kind: LimitKind::LoopIterations,
-            what: format!("the tiled forward of a tile of {run} faces"),
-            need,
-            max: limit,
-            device: ctx.info().name.clone(),
-            hint: "use smaller tiles, a smaller σ or fewer faces",
-        });
+    if tiled_forward_iterations(total, ctx.info().subgroup_size, 64) <= limit {
+        return Ok(total);
     }
-    Ok(run)
+    max_tile_run(ctx, bins, grid.tiles_per_view() * u64::from(views))
+}
+
+/// The most views of a mesh of `faces` faces one scene holds within the device's storage
+/// bindings: each view adds its faces' setups, its image and its pixels' aux (and running
+/// state, where passes may be needed) to one binding each. At least 1 (a view that does not
+/// fit is the scene's own error).
+fn views_per_scene(ctx: &Context, faces: u64, settings: &RasterSettings) -> usize {
+    let scale = if settings.antialias { 4 } else { 1 };
+    let pixels = u64::from(settings.width) * u64::from(settings.height) * scale;
+    let carry = if may_need_passes(ctx, faces.min(u64::from(u32::MAX)) as u32) {
+        CARRY_BYTES
+    } else {
+        0
+    };
+    let per_view = [
+        faces * std::mem::size_of::<GpuFaceSetup>() as u64,
+        16 * pixels,
+        std::mem::size_of::<PixelAux>() as u64 * pixels,
+        carry * pixels,
+    ];
+    let max = u64::from(ctx.info().limits.max_storage_buffer_range);
+    per_view
+        .iter()
+        .filter(|&&bytes| bytes > 0)
+        .map(|bytes| max / bytes)
+        .min()
+        .unwrap_or(u64::MAX)
+        .clamp(1, u64::from(u32::MAX)) as usize
+}
+
+/// Whether a forward over `faces` faces could need more than one pass on this device (brute
+/// force's face list, or a tile holding every face): then the scene keeps a carry buffer.
+fn may_need_passes(ctx: &Context, faces: u32) -> bool {
+    let faces = u64::from(faces);
+    ctx.info().shader_loop_limit().is_some_and(|limit| {
+        faces + 2 > limit || tiled_forward_iterations(faces, ctx.info().subgroup_size, 64) > limit
+    })
 }
 
 impl GpuScene {
@@ -953,6 +980,15 @@ impl Renderer {
                 std::mem::size_of::<PixelAux>() as u64 * rendered,
                 MemoryKind::Device,
             )?,
+            carry: ctx.create_buffer(
+                "pixel carry",
+                if may_need_passes(ctx, face_count) {
+                    CARRY_BYTES * rendered
+                } else {
+                    CARRY_BYTES
+                },
+                MemoryKind::Device,
+            )?,
             small: if settings.antialias {
                 Some(ctx.create_buffer("image (anti-aliased)", 16 * outputs, MemoryKind::Device)?)
             } else {
@@ -995,6 +1031,7 @@ impl Renderer {
                     faces: scene.faces.whole(),
                     image: scene.image.whole(),
                     aux: scene.aux.whole(),
+                    carry: scene.carry.whole(),
                 },
                 &scene.settings,
                 scene.width,
@@ -1055,6 +1092,7 @@ impl Renderer {
                     faces: scene.faces.whole(),
                     image: scene.image.whole(),
                     aux: scene.aux.whole(),
+                    carry: scene.carry.whole(),
                     pairs: bins.entries().whole(),
                     pair_items: bins.entry_items().whole(),
                     ranges: bins.ranges().whole(),
@@ -1201,9 +1239,8 @@ impl Renderer {
                 }
                 Ok(())
             });
-            let max_tile_entries = done.and_then(|()| {
-                checked_tile_runs(ctx, &bins, &grid, views, total, scene.face_count)
-            });
+            let max_tile_entries = done
+                .and_then(|()| tile_run_bound(ctx, &bins, &grid, views, total, scene.face_count));
             scene.bins[index] = bins;
             scene.groups.push(ViewGroup {
                 first,
@@ -1294,10 +1331,11 @@ impl Renderer {
 
     /// For loops that never wait for the count (fitting, a host's frames; see the guarded
     /// binning of [`crate::primitives::binning`]): sizes `scene`'s bins for every view as one
-    /// group on `tile`-pixel tiles with exactly `capacity` entries, and checks the tiled passes
-    /// against the driver's loop cap for any count up to it (a tile holds each face at most once,
-    /// so its run is at most `min(capacity, faces)`). The scene's group then records `capacity`
-    /// as its entries (an upper bound: the count itself stays on the GPU). Record each forward
+    /// group on `tile`-pixel tiles with exactly `capacity` entries; the tiled passes are planned
+    /// for any count up to it (a tile holds each face at most once, so its run is at most
+    /// `min(capacity, faces)`: past the driver's loop cap, the forward folds tiles in passes).
+    /// The scene's group then records `capacity` as its entries (an upper bound: the count
+    /// itself stays on the GPU). Record each forward
     /// with [`Renderer::record_forward_guarded`].
     pub fn reserve_guarded(
         &self,
@@ -1334,20 +1372,8 @@ impl Renderer {
         }
         scene.bins[0].reserve(ctx, &job)?;
         scene.bins[0].reserve_entry_capacity(ctx, capacity.max(1))?;
+        // Past the loop cap, the forward folds a tile this crowded in passes.
         let max_run = capacity.min(u64::from(scene.face_count));
-        if let Some(limit) = ctx.info().shader_loop_limit() {
-            let need = tiled_forward_iterations(max_run, ctx.info().subgroup_size, 64);
-            if need > limit {
-                return Err(Error::DeviceLimit {
-                    kind: LimitKind::LoopIterations,
-                    what: format!("the tiled forward of a tile of up to {max_run} faces"),
-                    need,
-                    max: limit,
-                    device: ctx.info().name.clone(),
-                    hint: "use smaller tiles, fewer faces or a smaller σ",
-                });
-            }
-        }
         scene.tile = Some(tile);
         scene.guarded = true;
         scene.groups = vec![ViewGroup {
@@ -1439,7 +1465,9 @@ impl Renderer {
         })
     }
 
-    /// Renders `mesh` from every camera in one batch and reads back images and aux.
+    /// Renders `mesh` from every camera and reads back images and aux: in one batch, or in as
+    /// many as the device's storage bindings ask for (a batch's face setups, images and aux
+    /// are one binding each).
     pub fn render_views(
         &self,
         ctx: &Context,
@@ -1449,9 +1477,44 @@ impl Renderer {
         settings: &RasterSettings,
         method: Method,
     ) -> Result<Frames> {
-        let mut scene = self.prepare(ctx, mesh, cameras, lighting, settings)?;
-        self.run(ctx, &mut scene, method)?;
-        self.read_frames(ctx, &scene)
+        self.render_in_scenes(ctx, mesh, cameras, lighting, settings, method, false)
+    }
+
+    /// Renders `cameras` in as few scenes as the device's storage bindings allow (a scene
+    /// holds every view's face setups, image and aux in one binding each), and joins their
+    /// frames in camera order.
+    #[allow(clippy::too_many_arguments)]
+    fn render_in_scenes(
+        &self,
+        ctx: &Context,
+        mesh: &Mesh,
+        cameras: &[Camera],
+        lighting: &Lighting,
+        settings: &RasterSettings,
+        method: Method,
+        silhouette_only: bool,
+    ) -> Result<Frames> {
+        let per_scene = views_per_scene(ctx, mesh.face_count() as u64, settings);
+        let mut frames: Option<Frames> = None;
+        // (No cameras: the scene's own error.)
+        let parts: Vec<&[Camera]> = match cameras.len() {
+            0 => vec![cameras],
+            _ => cameras.chunks(per_scene).collect(),
+        };
+        for part in parts {
+            let mut scene = self.prepare(ctx, mesh, part, lighting, settings)?;
+            scene.set_silhouette_only(silhouette_only);
+            self.run(ctx, &mut scene, method)?;
+            let more = self.read_frames(ctx, &scene)?;
+            match &mut frames {
+                None => frames = Some(more),
+                Some(f) => {
+                    f.images.extend(more.images);
+                    f.aux.extend(more.aux);
+                }
+            }
+        }
+        Ok(frames.expect("at least one part"))
     }
 
     /// The silhouettes of `mesh` from every camera: the alpha of every output pixel, view-major,
@@ -1465,15 +1528,16 @@ impl Renderer {
         settings: &RasterSettings,
         method: Method,
     ) -> Result<Vec<f32>> {
-        let mut scene = self.prepare(ctx, mesh, cameras, &Lighting::unlit(), settings)?;
-        scene.set_silhouette_only(true);
-        self.run(ctx, &mut scene, method)?;
-        Ok(self
-            .read_frames(ctx, &scene)?
-            .images
-            .iter()
-            .map(|p| p[3])
-            .collect())
+        let frames = self.render_in_scenes(
+            ctx,
+            mesh,
+            cameras,
+            &Lighting::unlit(),
+            settings,
+            method,
+            true,
+        )?;
+        Ok(frames.images.iter().map(|p| p[3]).collect())
     }
 
     /// Renders `mesh` from every camera with the brute-force kernel and reads back images and aux.
