@@ -35,8 +35,10 @@ pub const SCENES: [&str; 4] = ["spot-256", "sphere-64x120", "dense-1024", "blurr
 /// tiles although its real entries fit one binding (issue #14's large scene); and `blurry-1024`,
 /// blurry-256 at 1024², whose one view holds more (face, tile) entries at 8-pixel tiles than one
 /// storage-buffer binding holds on lavapipe (2^27 bytes: 16.8 million), so it is binned and
-/// rendered in windows of tile rows.
-pub const LARGE_SCENES: [&str; 2] = ["spot3-1024", "blurry-1024"];
+/// rendered in windows of tile rows; `crowded-327k` and `spread-327k`, the same 327 680-face
+/// sphere at 64² shrunk into one 8-pixel tile (past llvmpipe's loop cap: the forward folds the
+/// tile in passes) and filling the frame (no tile near the cap), for the cost of the passes.
+pub const LARGE_SCENES: [&str; 4] = ["spot3-1024", "blurry-1024", "crowded-327k", "spread-327k"];
 
 /// The fitting benchmark's scenes ([`run_fit`]); run only when named (`--scene fit-120`,
 /// `--scene fit-field`).
@@ -215,6 +217,9 @@ impl Scene {
     /// - `spot3-1024` ([`LARGE_SCENES`]): spot (R = 1) subdivided three times, 1024², the spot
     ///   view.
     /// - `blurry-1024` ([`LARGE_SCENES`]): `blurry-256` at 1024².
+    /// - `crowded-327k`, `spread-327k` ([`LARGE_SCENES`]): an icosphere subdivided seven times
+    ///   (327 680 faces), 64², σ 1e-5, the default camera: of radius 0.1 inside the tile of
+    ///   pixels 16..24 (every face in that tile), or of radius 0.9 filling the frame.
     pub fn load(name: &str, assets: &Path) -> Result<Scene> {
         let spot_view = Camera::from_angles(DISTANCE, 30.0, 45.0);
         let spot_texture_res = 5;
@@ -305,6 +310,36 @@ impl Scene {
                 },
                 rows: None,
             },
+            "crowded-327k" | "spread-327k" => {
+                let (radius, centre) = if name == "crowded-327k" {
+                    (0.1, [-0.59, 0.59])
+                } else {
+                    (0.9, [0.0, 0.0])
+                };
+                let mut mesh = Mesh::icosphere(7);
+                for p in &mut mesh.positions {
+                    *p = [
+                        radius * p[0] + centre[0],
+                        radius * p[1] + centre[1],
+                        radius * p[2],
+                    ];
+                }
+                Scene {
+                    name: name.into(),
+                    description: String::new(),
+                    mesh,
+                    cameras: vec![Camera::default()],
+                    lighting: Lighting::default(),
+                    settings: RasterSettings {
+                        width: 64,
+                        height: 64,
+                        sigma: 1e-5,
+                        gamma: 1e-4,
+                        ..base_settings
+                    },
+                    rows: None,
+                }
+            }
             _ => {
                 return Err(Error::Input(format!(
                     "bench: unknown scene `{name}`; the scenes are {}",

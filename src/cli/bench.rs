@@ -21,7 +21,9 @@ pub struct BenchArgs {
     pub json: Option<PathBuf>,
     /// Scene to run (repeatable; default all: spot-256, sphere-64x120, dense-1024, blurry-256).
     /// `spot3-1024` renders spot subdivided three times (374 784 faces) at 1024², `blurry-1024`
-    /// blurry-256 at 1024² (more entries than one binding holds); `fit-120`
+    /// blurry-256 at 1024² (more entries than one binding holds), `crowded-327k` and
+    /// `spread-327k` a 327 680-face sphere at 64² in one tile (folded in passes) and filling
+    /// the frame; `fit-120`
     /// times a mesh-fitting iteration at SoftRas's demo setting, `fit-field` a `softvk
     /// fit-field` iteration at its defaults on spot, `fit-pose` a `softvk fit-pose` iteration
     /// at its defaults on spot (each only when named).

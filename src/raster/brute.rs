@@ -178,7 +178,7 @@ mod tests {
             std::mem::size_of::<DownsamplePush>() as u32,
             specs::DOWNSAMPLE_2X2.push_constant_size
         );
-        assert_eq!(specs::RASTER_BRUTE.bindings.len(), 5);
+        assert_eq!(specs::RASTER_BRUTE.bindings.len(), 6);
         assert_eq!(specs::DOWNSAMPLE_2X2.bindings.len(), 2);
     }
 }
