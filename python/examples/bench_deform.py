@@ -149,7 +149,7 @@ def main(argv=None):
         alpha = renderer.render_mesh(mesh, mode="silhouettes")
         return alpha[:, None].expand(-1, 4, -1, -1)
 
-    ways = {"SoftRenderer": renderer.render_mesh, "render_mesh": direct,
+    ways = {"composed": composed, "SoftRenderer": renderer.render_mesh, "render_mesh": direct,
             "silhouettes": silhouettes}
     print(f"device: {softvk.device_name()}; {args.views} views x {args.size}^2, "
           f"median of {args.iters} iterations after one warm-up")
