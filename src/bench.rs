@@ -32,7 +32,7 @@ pub const SCENES: [&str; 4] = ["spot-256", "sphere-64x120", "dense-1024", "blurr
 
 /// Render scenes run only when named, for their size: `spot3-1024`, spot subdivided three times
 /// (374 784 faces) at 1024², whose worst case (faces × tiles) passes 2^32 entries at 8-pixel
-/// tiles although its real entries fit one binding (issue #14's large scene); and `blurry-1024`,
+/// tiles although its real entries fit one binding; and `blurry-1024`,
 /// blurry-256 at 1024², whose one view holds more (face, tile) entries at 8-pixel tiles than one
 /// storage-buffer binding holds on lavapipe (2^27 bytes: 16.8 million), so it is binned and
 /// rendered in windows of tile rows; `crowded-327k` and `spread-327k`, the same 327 680-face
@@ -1005,7 +1005,7 @@ impl serde_json::ser::Formatter for Spaced {
     }
 }
 
-/// The backward benchmark (issue #4): per scene of `opts` and method (brute force, each tile
+/// The backward benchmark: per scene of `opts` and method (brute force, each tile
 /// size), the backward alone (`pass: "backward"`: per-face gradients, world chain, per-vertex
 /// and per-texel sums; recorded once after a forward sized the bins) and forward + backward in
 /// one recording (`"forward+backward"`), medians over `opts.repeat` submissions. The upstream

@@ -16,7 +16,7 @@
 // invocations takes 1.6 ms), and per (face, texel) there are R² times as many; the loads and
 // stores per texel are the same. On spot-256 (R = 5) this reduction took 4.3 of the backward's
 // 24.5 ms per (face, texel) with storage reads, 3.4 with texel reads, 2.2 per face
-// (BENCHMARKS.md, issue #11). A GPU wants the threads. With masks, an invocation visits only
+// (BENCHMARKS.md). A GPU wants the threads. With masks, an invocation visits only
 // the texels of its group that some unit wrote (grad tiled −1.2 ms on spot-256, where 25 texels
 // a face meet a handful of pixels).
 #include "common.glsl"

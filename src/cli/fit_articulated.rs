@@ -1,6 +1,6 @@
 //! `softvk fit-articulated --out angles.json (--target T.png | --target-angles A,B,...)`: the
 //! joint angles of the built-in skinned figure ([`softvk::fit::rig::Rig::figure`]) that make its
-//! render match a target RGBA image ([`softvk::fit::articulated`], issue #16), with the σ/γ
+//! render match a target RGBA image ([`softvk::fit::articulated`]), with the σ/γ
 //! schedule and a blurred image loss from wide to sharp.
 //!
 //! - `--target T.png`: a PNG with an alpha channel (as `softvk render` writes), the image size

@@ -1,6 +1,6 @@
 //! `softvk fit-pose --mesh M.obj --target T.png --out pose.json [view] [raster]`: the rigid pose
 //! (rotation and translation) of a textured mesh that makes its render match a target RGBA
-//! image ([`softvk::fit::pose`], issue #5), with a σ/γ schedule from blurry to sharp.
+//! image ([`softvk::fit::pose`]), with a σ/γ schedule from blurry to sharp.
 //!
 //! - The target is a PNG with an alpha channel (what `softvk render` writes): the loss is the
 //!   MSE over R, G, B and A, so the alpha carries the silhouette. Its size is the image size;

@@ -1,4 +1,4 @@
-//! Single-view reconstruction learned from silhouettes (issue #15):
+//! Single-view reconstruction learned from silhouettes:
 //!
 //! - `softvk train-recon --dataset DIR --out MODEL [--iters N] [--field]`: trains the network
 //!   on the dataset's train split ([`softvk::recon::train`]; with `--field` the conditioned
@@ -132,7 +132,7 @@ pub struct TrainReconArgs {
 
     /// Train a conditioned implicit field instead of the mesh decoder: the encoder predicts
     /// each hidden layer's bias of a shared occupancy MLP, trained by sphere probing against
-    /// every view's silhouette (issue #16). `--sigma` and `--color` do not apply.
+    /// every view's silhouette. `--sigma` and `--color` do not apply.
     #[arg(long)]
     pub field: bool,
 

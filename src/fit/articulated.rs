@@ -1,4 +1,4 @@
-//! Non-rigid pose estimation (issue #16): the joint angles of a skinned articulated mesh
+//! Non-rigid pose estimation: the joint angles of a skinned articulated mesh
 //! ([`Rig`]) that make its render match a target RGBA image, by Adam on the image MSE with the
 //! pose fit's σ/γ schedule ([`Schedule`]) — the talk's non-rigid pose estimation.
 //!

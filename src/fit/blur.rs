@@ -1,5 +1,5 @@
 //! A Gaussian blur of RGBA images on the GPU, and the image MSE of blurred images: the loss a
-//! fit uses to see mismatches farther than a thin part's width (issue #16's articulated fits).
+//! fit uses to see mismatches farther than a thin part's width (the articulated fits).
 //!
 //! `L = mean((G * render − G * target)²)` with G a Gaussian of `std` pixels, zero outside the
 //! image. Each separable pass is then a symmetric matrix, so `dL/d(render) = G * dL/d(G *

@@ -77,8 +77,8 @@ impl Default for FieldFitOptions {
     /// (`RESULTS.md`, "Sphere probing" and "Thin structures"): a 48³ grid, 512 rays per view,
     /// 4096 anchors of radius τ = 0.045, tiles of 8 pixels, no geometric regularizer (λ = 0:
     /// every λ tried lowered the 3D IoU), Adam lr 0.05 with betas (0.9, 0.99), 1 000
-    /// iterations; the other probe settings are [`ProbeSettings::default`]'s. (Until issue #16
-    /// the grid was 32³ and the fit 150 iterations: enough for spot, not for legs and wings.)
+    /// iterations; the other probe settings are [`ProbeSettings::default`]'s. (The grid was once
+    /// 32³ and the fit 150 iterations: enough for spot, not for legs and wings.)
     fn default() -> Self {
         Self {
             field: FieldKind::Grid {

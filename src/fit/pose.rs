@@ -1,4 +1,4 @@
-//! Rigid pose estimation from one RGB(A) image (issue #5): the rotation and translation of a
+//! Rigid pose estimation from one RGB(A) image: the rotation and translation of a
 //! textured mesh that make its render match a target image, by Adam on the image MSE, with a
 //! σ/γ schedule from blurry to sharp (the talk's smoother energy landscape).
 //!

@@ -12,7 +12,7 @@ use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, spe
 /// Elements per workgroup (mirrors `BLOCK` in `kernels/include/scan_config.glsl`). Each level
 /// past one block costs two more dispatches, and on llvmpipe a dispatch costs about 0.1 ms of
 /// its own: 8 192 (rather than 4 096) makes binning's scan of a mesh's per-face counts one
-/// dispatch up to 8 192 faces (spot-256's bin count 0.85 -> 0.63 ms; BENCHMARKS.md, #11).
+/// dispatch up to 8 192 faces (spot-256's bin count 0.85 -> 0.63 ms; BENCHMARKS.md).
 pub const SCAN_BLOCK: u32 = 8192;
 
 /// Push constants of `kernels/scan/scan_reduce.comp`.

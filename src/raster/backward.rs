@@ -379,7 +379,7 @@ fn tile_faces(
 /// Texels per invocation of `grad_reduce_texels.comp` for a dispatch over `texels` texels: all
 /// of them on a CPU device ([`Context::cpu_workgroups`]), whose driver pays a set-up per
 /// subgroup of invocations (llvmpipe: per (face, texel), the reduction took twice as long on
-/// spot-256; BENCHMARKS.md, issue #11); one on a GPU, which wants the threads.
+/// spot-256; BENCHMARKS.md); one on a GPU, which wants the threads.
 fn texel_reduce_group(ctx: &Context, texels: u32) -> u32 {
     if ctx.cpu_workgroups() {
         texels.max(1)

@@ -240,8 +240,8 @@ impl FineModes {
 /// `64 / workgroup` segments, one after another). llvmpipe runs every subgroup of a workgroup
 /// as a coroutine with a set-up cost of its own: an empty kernel over spot-256's 1 024 blocks
 /// took 1.6 ms with 64 invocations a block and 0.6 ms with 8 (the latter in a phase where every
-/// pass ran 1.7× slower), and spot-256's tiled forward 6.5 % less time (BENCHMARKS.md, issue
-/// #11). A GPU runs the subgroups side by side: one pixel each.
+/// pass ran 1.7× slower), and spot-256's tiled forward 6.5 % less time (BENCHMARKS.md). A GPU
+/// runs the subgroups side by side: one pixel each.
 pub(crate) fn tiled_forward_workgroup(ctx: &Context, run: u64) -> u32 {
     forward_workgroup(
         ctx.cpu_workgroups(),
@@ -273,7 +273,7 @@ fn forward_workgroup(cpu: bool, lanes: u32, limit: Option<u64>, run: u64) -> u32
 /// once. llvmpipe runs them one after another as coroutines with a set-up cost each (an empty
 /// kernel over spot-256's 1 024 blocks of 64 invocations takes 1.6 ms): with one subgroup a
 /// workgroup, a tile's faces go through that subgroup batch after batch, and spot-256's
-/// backward took 5.6 % less time (BENCHMARKS.md, issue #11). Needs the subgroup size known
+/// backward took 5.6 % less time (BENCHMARKS.md). Needs the subgroup size known
 /// ([`known_subgroup_size`]); 64 otherwise.
 pub(crate) fn tiled_backward_workgroup(ctx: &Context) -> u32 {
     let lanes = known_subgroup_size(ctx);

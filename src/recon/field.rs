@@ -1,4 +1,4 @@
-//! Single-view reconstruction as a *conditioned implicit field* (issue #16; Liu et al.,
+//! Single-view reconstruction as a *conditioned implicit field* (Liu et al.,
 //! "Learning to Infer Implicit Surfaces without 3D Supervision", NeurIPS 2019): the image
 //! encoder of [`super::train`] predicts a code per object, an occupancy MLP
 //! ([`crate::field::mlp`]) shared by every object turns (point, code) into φ, and the pair is

@@ -11,7 +11,7 @@
 //! - [`decode`]: the decoder's heads: SoftRas's sphere deformation (per view copies) and the
 //!   per-vertex colours.
 //! - [`train`]: the network, SoftRas's losses and the training loop on the GPU.
-//! - [`field`]: the same encoder conditioning a shared occupancy MLP instead (issue #16),
+//! - [`field`]: the same encoder conditioning a shared occupancy MLP instead,
 //!   trained by sphere probing against each object's silhouettes, and reconstruction with it.
 //! - [`model`]: the model file (mesh or field) and reconstruction with it.
 //! - [`eval`]: 3D IoU against the voxels, and the retrieval and mean-shape baselines.
