@@ -19,8 +19,8 @@ layout(push_constant) uniform Push {
     float inv_t;         // LSE: 1 / T
     uint boundary_aware; // unused: BOUNDARY_AWARE
     float tau2_outside;  // τ² of the rays outside the silhouettes
-    uint pad1;
-    uint pad2;
+    uint pass_begin;     // with CARRY: this pass's anchors, [pass_begin, pass_end) of a ray's
+    uint pass_end;       //   list (brute: of all anchors; tiled: of its tile's run)
 } pc;
 
 // The aggregation (AGG_*) and boundary-aware assignment as specialization constants (the push
@@ -30,6 +30,23 @@ layout(push_constant) uniform Push {
 // for bit.
 layout(constant_id = 0) const uint MODE = AGG_MAX;
 layout(constant_id = 1) const uint BOUNDARY_AWARE = 1u;
+// An anchor list too long for one invocation (llvmpipe ends an invocation's loops after 65 535
+// iterations) is folded in passes over consecutive parts of it: each pass but the last leaves
+// every ray's running aggregate in `carry`, the next resumes from it; the same anchors in the
+// same order, so the same bits as one pass. Without CARRY the binding is a placeholder and no
+// code touches it. The includer defines CARRY_BINDING.
+layout(constant_id = 2) const uint CARRY = 0u;
+
+layout(std430, set = 0, binding = CARRY_BINDING) restrict buffer Carry { uvec4 carry[]; };
+
+void carry_store(Agg g, uint ray) {
+    carry[ray] = uvec4(floatBitsToUint(g.m), floatBitsToUint(g.s), g.aux, g.count);
+}
+
+Agg carry_load(uint ray) {
+    uvec4 c = carry[ray];
+    return Agg(uintBitsToFloat(c.x), uintBitsToFloat(c.y), c.z, c.w);
+}
 
 // Does the boundary-aware assignment let a ray with `label` use an anchor with `flags`?
 bool assigned(float label, uint flags) {

@@ -9,7 +9,8 @@
 // `probe_mask_list.comp`, list its anchors in index order): the same hits in the same order as
 // `probe_forward_brute.comp`, so the same ψ bit for bit. Anchors on the other side of the
 // silhouette from the ray are skipped (boundary-aware assignment). Writes ψ, (ψ − S)² and the
-// state the backward needs. Twin: `probe::prober::cpu::forward`.
+// state the backward needs. A tile whose run is too long for one invocation's loops is folded
+// in passes (`CARRY` in probe_forward.glsl). Twin: `probe::prober::cpu::forward`.
 //
 // For llvmpipe's execution model (and without shared memory or barriers on any device): each
 // subgroup works alone. Its rays, consecutive in tile order, lie in one tile or a few; it takes
@@ -20,6 +21,7 @@
 // dropped); the loop over the ballot's bits, lowest first (anchor order), broadcasts each kept
 // anchor with shuffles and every ray of the tile tests and aggregates it. Nothing assumes a
 // subgroup size; the workgroup is 64 invocations (a few subgroups on every device).
+#define CARRY_BINDING 9
 #include "common.glsl"
 #include "probe.glsl"
 
@@ -85,8 +87,13 @@ void main() {
 
     uint lanes = subgroup_lanes();
     uint lane = gl_SubgroupInvocationID;
-    Agg g = agg_init(MODE);
-    bool todo = live;
+    // This pass's part of each tile's run (all of it without CARRY). A ray whose tile's run
+    // ended in an earlier pass is done: its ψ is written.
+    uint begin = CARRY != 0u ? pc.pass_begin : 0u;
+    uint my_run = offsets[tile + 1u] - offsets[tile];
+    bool done = begin > 0u && begin >= my_run;
+    Agg g = begin > 0u && live && !done ? carry_load(id) : agg_init(MODE);
+    bool todo = live && !done;
     uvec4 pending = subgroupBallot(todo);
     while (pending != uvec4(0u)) {
         uint t = subgroupShuffle(tile, subgroupBallotFindLSB(pending));
@@ -95,6 +102,9 @@ void main() {
         bool any_in = subgroupBallot(mine && inside) != uvec4(0u);
         bool any_out = subgroupBallot(mine && !inside) != uvec4(0u);
         uvec2 range = uvec2(offsets[t], offsets[t + 1u]);
+        uint run = range.y - range.x;
+        range = uvec2(range.x + min(begin, run),
+                      range.x + (CARRY != 0u ? min(pc.pass_end, run) : run));
         uint item_base = (t / tiles_per_view) * pc.anchors;
         for (uint start = range.x; start < range.y; start += lanes) {
             uint k = start + lane;
@@ -127,7 +137,9 @@ void main() {
         }
         pending = subgroupBallot(todo);
     }
-    if (live) {
+    if (live && !done && CARRY != 0u && pc.pass_end < my_run) {
+        carry_store(g, id);
+    } else if (live && !done) {
         outs[id] = agg_finish(g, MODE, pc.temperature, r.label);
     }
 }

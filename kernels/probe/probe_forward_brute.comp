@@ -1,8 +1,10 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 // Sphere probing, forward, brute force: one invocation per ray over every anchor valid in its
-// view, in index order. The baseline the tiled pass (`probe_forward.comp`) must equal bit for
+// view, in index order (in passes over consecutive anchors where the driver's loop cap asks:
+// `CARRY` in probe_forward.glsl). The baseline the tiled pass (`probe_forward.comp`) must equal bit for
 // bit. Twin: `probe::prober::cpu::forward`.
+#define CARRY_BINDING 6
 #include "common.glsl"
 #include "probe.glsl"
 
@@ -29,8 +31,11 @@ void main() {
              pixel_to_screen(r.px, r.py, float(pc.width), float(pc.height), pc.inv_s), o, d);
     float bound = hit_bound(d, ray_tau2(r.label, pc.tau2, pc.tau2_outside));
     uint item_base = r.view * pc.anchors;
-    Agg g = agg_init(MODE);
-    for (uint anchor = 0u; anchor < pc.anchors; ++anchor) {
+    // This pass's anchors (all of them without CARRY).
+    uint begin = CARRY != 0u ? pc.pass_begin : 0u;
+    uint end = CARRY != 0u ? min(pc.pass_end, pc.anchors) : pc.anchors;
+    Agg g = begin > 0u ? carry_load(id) : agg_init(MODE);
+    for (uint anchor = begin; anchor < end; ++anchor) {
         uint flags = items[item_base + anchor].flags;
         if ((flags & FLAG_VALID) == 0u || !assigned(r.label, flags)) {
             continue;
@@ -39,5 +44,9 @@ void main() {
             agg_add(g, MODE, pc.inv_t, phi[anchor], anchor);
         }
     }
-    outs[id] = agg_finish(g, MODE, pc.temperature, r.label);
+    if (end < pc.anchors) {
+        carry_store(g, id);
+    } else {
+        outs[id] = agg_finish(g, MODE, pc.temperature, r.label);
+    }
 }

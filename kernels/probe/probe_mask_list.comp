@@ -21,13 +21,17 @@ layout(std430, set = 0, binding = 4) writeonly buffer ListTiles { uint list_tile
 layout(push_constant) uniform Push {
     uint tiles;
     uint words_per_tile; // W = ⌈anchors / 32⌉
-    uint pad0;
-    uint pad1;
+    uint word_begin;     // with PARTS: this pass's words [word_begin, word_end) of each mask
+    uint word_end;
 } pc;
 
 // Write `list_tiles` and `word_prefix` (the per-entry backward's): a specialization constant,
 // since on llvmpipe a store under a false `if` still costs a masked scalar loop per entry.
 layout(constant_id = 0) const uint WRITE_TILES = 1u;
+// A mask whose words and bits are too many for one invocation's loops (llvmpipe: 65 535
+// iterations) is listed in passes over its words; each pass starts at the entry that the bits of
+// the words before it leave (their bit counts: one iteration a word).
+layout(constant_id = 1) const uint PARTS = 0u;
 
 void main() {
     uint tile = linear_group_id() * 64u + gl_LocalInvocationIndex;
@@ -37,7 +41,12 @@ void main() {
     uint first = offsets[tile];
     uint o = first;
     uint base = tile * pc.words_per_tile;
-    for (uint w = 0u; w < pc.words_per_tile; ++w) {
+    uint begin = PARTS != 0u ? min(pc.word_begin, pc.words_per_tile) : 0u;
+    uint end = PARTS != 0u ? min(pc.word_end, pc.words_per_tile) : pc.words_per_tile;
+    for (uint w = 0u; w < begin; ++w) {
+        o += uint(bitCount(masks[base + w]));
+    }
+    for (uint w = begin; w < end; ++w) {
         uint m = masks[base + w];
         if (WRITE_TILES != 0u) {
             word_prefix[base + w] = o - first;

@@ -5,6 +5,7 @@ mod descriptors;
 pub mod gate;
 mod kernel;
 mod memory;
+mod passes;
 mod record;
 mod texel_views;
 
@@ -16,4 +17,5 @@ pub use kernel::{
     BindingKind, BindingSpec, Kernel, KernelSpec, KernelVariants, TEXEL_BYTES, TEXEL_FORMAT, specs,
 };
 pub use memory::{Buffer, BufferRange, MemoryKind, align_up};
+pub(crate) use passes::pass_size;
 pub use record::{INDIRECT_ARGS_BYTES, PassTime, Recorded, Recorder, Timer};

@@ -53,6 +53,7 @@ use crate::fit::{GradOut, check_binding, check_floats, check_texels, groups};
 use std::sync::Arc;
 
 use crate::gpu::gate::IterationGate;
+use crate::gpu::pass_size;
 use crate::gpu::{
     Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, specs,
 };
@@ -132,7 +133,20 @@ struct ForwardPush {
     inv_t: f32,
     boundary_aware: u32,
     tau2_outside: f32,
-    pad: [u32; 2],
+    /// The pass's anchors of each ray's list (`CARRY` in `probe_forward.glsl`).
+    pass_begin: u32,
+    pass_end: u32,
+}
+
+/// Push constants of `probe_mask_list.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ListPush {
+    tiles: u32,
+    words_per_tile: u32,
+    /// The pass's words of each tile's mask (`PARTS` in the kernel).
+    word_begin: u32,
+    word_end: u32,
 }
 
 /// Push constants of `bin_mask_counts.comp` and `probe_mask_list.comp`.
@@ -290,6 +304,9 @@ pub struct Prober {
     constants: Constants,
     items: Buffer,
     outs: Buffer,
+    /// Every ray's running aggregate between the passes of a list too long for one
+    /// (`CARRY` in `probe_forward.glsl`).
+    carry: Buffer,
     ray_keys: Buffer,
     ray_order: Buffer,
     ray_ranges: Buffer,
@@ -346,6 +363,13 @@ fn words_per_tile(anchors: u32) -> u64 {
 fn lanes(ctx: &Context) -> (u64, u64) {
     let lanes = u64::from(ctx.info().subgroup_size.clamp(1, 64));
     (lanes, lanes.div_ceil(32))
+}
+
+/// Loop iterations of one invocation of `probe_mask_list.comp` at most, for masks of `words`
+/// words listed `per_pass` words a pass: the bit counts of the words before the pass, then per
+/// word of the pass one iteration and one per set bit (at most 32).
+fn list_iterations(words: u64, per_pass: u64) -> u64 {
+    words + 32 * per_pass.min(words) + 2
 }
 
 /// Loop iterations of one invocation of `probe_forward.comp` at most, when the tiles hold
@@ -420,11 +444,12 @@ impl Prober {
         }
         let words = tiles * words_per_tile(settings.anchors);
         check_binding(ctx, "sphere probing: tile anchor masks", 4 * words)?;
-        // A tile's bit count loops over its mask's words (its list: `finish_count`).
+        // A tile's bit count loops over its mask's words, and each pass of its list over them
+        // and one word's bits.
         check_loop(
             ctx,
             &format!("{} anchors (a tile's mask words)", settings.anchors),
-            words_per_tile(settings.anchors),
+            list_iterations(words_per_tile(settings.anchors), 1),
         )?;
         check_binding(ctx, "sphere probing: anchor tile rectangles", 8 * items)?;
         Ok(Self {
@@ -449,6 +474,7 @@ impl Prober {
             constants: Constants::new(settings, gpu.width(), gpu.height()),
             items: ctx.create_buffer("probe anchor items", 32 * items, MemoryKind::Device)?,
             outs: ctx.create_buffer("probe ray outputs", 16 * rays, MemoryKind::Device)?,
+            carry: ctx.create_buffer("probe ray carry", 16 * rays, MemoryKind::Device)?,
             ray_keys: ctx.create_buffer("probe ray tile keys", 8 * rays, MemoryKind::Device)?,
             ray_order: ctx.create_buffer("probe rays by tile", 4 * rays, MemoryKind::Device)?,
             ray_ranges: ctx.create_buffer(
@@ -608,26 +634,46 @@ impl Prober {
         if total == 0 {
             return Ok(());
         }
-        let write_tiles = u32::from(!self.max_by_rays(rec.context()));
-        let kernel = self.mask_list_kernel.get(rec.context(), &[write_tiles])?;
-        rec.dispatch(
-            &kernel,
-            &specs::ProbeMaskListBindings {
-                masks: self.masks.whole(),
-                offsets: self.offsets.whole(),
-                word_prefix: self.word_prefix.whole(),
-                list: self.list.range(0, 4 * total),
-                list_tiles: self.list_tiles.range(0, 4 * total),
+        let ctx = rec.context();
+        let write_tiles = u32::from(!self.max_by_rays(ctx));
+        // One pass over every word where a tile's words and anchors stay under the loop cap,
+        // else passes of as many words as the cap allows.
+        let words = self.words_per_tile();
+        let run = total.min(self.anchors());
+        let limit = ctx.info().shader_loop_limit();
+        let per_pass = if limit.is_none_or(|l| words + run + 2 <= l) {
+            words
+        } else {
+            pass_size(words, limit, |k| list_iterations(words, k))
+        };
+        let passes = words.max(1).div_ceil(per_pass.max(1));
+        let kernel = self
+            .mask_list_kernel
+            .get(ctx, &[write_tiles, u32::from(passes > 1)])?;
+        let bindings = specs::ProbeMaskListBindings {
+            masks: self.masks.whole(),
+            offsets: self.offsets.whole(),
+            word_prefix: self.word_prefix.whole(),
+            list: self.list.range(0, 4 * total),
+            list_tiles: self.list_tiles.range(0, 4 * total),
+        };
+        for pass in 0..passes {
+            if pass > 0 {
+                rec.barrier();
             }
-            .for_kernel(&kernel)?,
-            &WordsPush {
-                tiles: tiles as u32,
-                words_per_tile: self.words_per_tile() as u32,
-                pad: 0,
-                summary_offset: 0,
-            },
-            groups(tiles, 64)?,
-        )
+            rec.dispatch(
+                &kernel,
+                &bindings.for_kernel(&kernel)?,
+                &ListPush {
+                    tiles: tiles as u32,
+                    words_per_tile: words as u32,
+                    word_begin: (pass * per_pass) as u32,
+                    word_end: ((pass + 1) * per_pass).min(words) as u32,
+                },
+                groups(tiles, 64)?,
+            )?;
+        }
+        Ok(())
     }
 
     /// The entry count [`Prober::finish_count`] read, once it fits the entry buffers; guarded,
@@ -735,19 +781,8 @@ impl Prober {
                 hint: "use fewer anchors or views, larger tiles or a smaller τ",
             });
         }
-        // A tile belongs to one view and holds each anchor at most once.
-        let run = total.min(self.anchors());
-        // The list of a tile loops over its mask's words and its anchors.
-        check_loop(
-            ctx,
-            &format!("a tile of up to {run} anchors (binning list)"),
-            self.words_per_tile() + run,
-        )?;
-        check_loop(
-            ctx,
-            &format!("{total} entries, up to {run} anchors in a tile (forward)"),
-            forward_iterations(ctx, total, run),
-        )?;
+        // (A tile's list and the forward over it are folded in passes where the driver's loop
+        // cap asks: `record_list`, `dispatch_forward`.)
         let views = u64::from(self.job.views);
         let per_anchor = total.min(views * self.job.grid.tiles_per_view());
         // Per view, a pass of the row loop per tile row and of the column loop per tile.
@@ -794,7 +829,8 @@ impl Prober {
             inv_t: c.inv_t,
             boundary_aware: u32::from(self.settings.boundary_aware),
             tau2_outside: c.tau2_outside,
-            pad: [0; 2],
+            pass_begin: 0,
+            pass_end: u32::MAX,
         }
     }
 
@@ -863,24 +899,69 @@ impl Prober {
         rays: &BufferRange<'_>,
     ) -> Result<()> {
         let n = self.rays();
-        let kernel = self.variant(rec, &self.forward_kernel)?;
-        rec.dispatch(
+        // A tile holds each anchor at most once: its run is at most min(entries, anchors).
+        let total = self.entry_count()?;
+        let ctx = rec.context();
+        let per_pass = pass_size(
+            total.min(self.anchors()),
+            ctx.info().shader_loop_limit(),
+            |run| forward_iterations(ctx, total, run),
+        );
+        let passes = total.min(self.anchors()).max(1).div_ceil(per_pass);
+        let kernel = self.forward_variant(rec, &self.forward_kernel, passes > 1)?;
+        let bindings = specs::ProbeForwardBindings {
+            rays: rays.sub(0, 16 * n),
+            views: gpu.views().whole(),
+            anchors: anchors.sub(0, 16 * self.anchors()),
+            phi: phi.sub(0, 4 * self.anchors()),
+            items: self.items.whole(),
+            offsets: self.offsets.whole(),
+            list: self.list.whole(),
+            outs: self.outs.whole(),
+            ray_order: self.ray_order.whole(),
+            carry: self.carry.whole(),
+        };
+        self.dispatch_passes(
+            rec,
             &kernel,
-            &specs::ProbeForwardBindings {
-                rays: rays.sub(0, 16 * n),
-                views: gpu.views().whole(),
-                anchors: anchors.sub(0, 16 * self.anchors()),
-                phi: phi.sub(0, 4 * self.anchors()),
-                items: self.items.whole(),
-                offsets: self.offsets.whole(),
-                list: self.list.whole(),
-                outs: self.outs.whole(),
-                ray_order: self.ray_order.whole(),
-            }
-            .for_kernel(&kernel)?,
-            &self.forward_push(),
-            groups(n, 64)?,
+            &bindings.for_kernel(&kernel)?,
+            (passes, per_pass),
         )
+    }
+
+    /// The forward kernel of the modes, with the carry between passes or without.
+    fn forward_variant(
+        &self,
+        rec: &Recorder<'_>,
+        variants: &KernelVariants,
+        carry: bool,
+    ) -> Result<Arc<Kernel>> {
+        let [mode, aware] = self.modes();
+        variants.get(rec.context(), &[mode, aware, u32::from(carry)])
+    }
+
+    /// `passes` dispatches of a forward kernel over every ray, each over its part of the
+    /// anchor lists (`per_pass` anchors), with a barrier between.
+    fn dispatch_passes(
+        &self,
+        rec: &mut Recorder<'_>,
+        kernel: &Kernel,
+        bindings: &[BufferRange<'_>],
+        (passes, per_pass): (u64, u64),
+    ) -> Result<()> {
+        for pass in 0..passes {
+            if pass > 0 {
+                rec.barrier();
+            }
+            let bound = |k: u64| u32::try_from(k * per_pass).unwrap_or(u32::MAX);
+            let push = ForwardPush {
+                pass_begin: bound(pass),
+                pass_end: bound(pass + 1),
+                ..self.forward_push()
+            };
+            rec.dispatch(kernel, bindings, &push, groups(self.rays(), 64)?)?;
+        }
+        Ok(())
     }
 
     /// The brute-force forward (every anchor for every ray), after [`Prober::record_items`]:
@@ -894,11 +975,6 @@ impl Prober {
         rays: BufferRange<'_>,
     ) -> Result<()> {
         self.check_inputs(gpu, &anchors, Some(&phi), Some(&rays))?;
-        check_loop(
-            rec.context(),
-            &format!("{} anchors (brute-force forward)", self.anchors()),
-            self.anchors(),
-        )?;
         let n = self.rays();
         // The backward reads the entries and the rays by tile, which the tiled forward lists
         // and sorts.
@@ -906,20 +982,28 @@ impl Prober {
         rec.pass("  ray sort", |rec| {
             self.record_ray_sort(rec, rays.sub(0, 16 * n))
         })?;
-        let kernel = self.variant(rec, &self.brute_kernel)?;
-        rec.dispatch(
+        // More anchors than one invocation may loop over are folded in passes.
+        let per_pass = pass_size(
+            self.anchors(),
+            rec.context().info().shader_loop_limit(),
+            |anchors| anchors + 2,
+        );
+        let passes = self.anchors().max(1).div_ceil(per_pass);
+        let kernel = self.forward_variant(rec, &self.brute_kernel, passes > 1)?;
+        let bindings = specs::ProbeForwardBruteBindings {
+            rays: rays.sub(0, 16 * n),
+            views: gpu.views().whole(),
+            anchors: anchors.sub(0, 16 * self.anchors()),
+            phi: phi.sub(0, 4 * self.anchors()),
+            items: self.items.whole(),
+            outs: self.outs.whole(),
+            carry: self.carry.whole(),
+        };
+        self.dispatch_passes(
+            rec,
             &kernel,
-            &specs::ProbeForwardBruteBindings {
-                rays: rays.sub(0, 16 * n),
-                views: gpu.views().whole(),
-                anchors: anchors.sub(0, 16 * self.anchors()),
-                phi: phi.sub(0, 4 * self.anchors()),
-                items: self.items.whole(),
-                outs: self.outs.whole(),
-            }
-            .for_kernel(&kernel)?,
-            &self.forward_push(),
-            groups(n, 64)?,
+            &bindings.for_kernel(&kernel)?,
+            (passes, per_pass),
         )?;
         self.record_loss(rec)
     }
@@ -1524,7 +1608,7 @@ mod tests {
             size(&specs::BIN_MASK_COUNTS)
         );
         assert_eq!(
-            std::mem::size_of::<WordsPush>(),
+            std::mem::size_of::<ListPush>(),
             size(&specs::PROBE_MASK_LIST)
         );
         assert_eq!(
@@ -1539,7 +1623,8 @@ mod tests {
         assert_eq!(std::mem::offset_of!(ProbeItem, flags), 16);
         assert_eq!(std::mem::size_of::<RayOut>(), 16);
         assert_eq!(std::mem::size_of::<super::super::ProbeView>(), 160);
-        assert_eq!(specs::PROBE_FORWARD.bindings.len(), 9);
+        assert_eq!(specs::PROBE_FORWARD.bindings.len(), 10);
+        assert_eq!(specs::PROBE_FORWARD_BRUTE.bindings.len(), 7);
         assert_eq!(specs::PROBE_BACKWARD.bindings.len(), 12);
     }
 

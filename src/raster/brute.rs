@@ -9,8 +9,9 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
+use crate::gpu::pass_size;
 use crate::gpu::{BufferRange, Context, Kernel, KernelVariants, Recorder, specs};
-use crate::raster::fine::{CARRY_BYTES, FineModes, RasterPush, dispatch_passes, forward_pass_size};
+use crate::raster::fine::{CARRY_BYTES, FineModes, RasterPush, dispatch_passes};
 use crate::raster::reference::RasterSettings;
 
 /// Push constants of `downsample_2x2.comp`.
@@ -95,7 +96,7 @@ impl BruteRaster {
             )));
         }
         // More faces than one invocation may loop over are folded in passes.
-        let per_pass = forward_pass_size(
+        let per_pass = pass_size(
             u64::from(face_count),
             rec.context().info().shader_loop_limit(),
             |faces| faces + 2,

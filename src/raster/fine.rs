@@ -7,7 +7,7 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
-use crate::gpu::{Context, KernelVariants, Recorder, specs};
+use crate::gpu::{Context, KernelVariants, Recorder, pass_size, specs};
 use crate::primitives::TileGrid;
 use crate::raster::gpu::tiled_forward_iterations;
 use crate::raster::reference::{self, Alpha, ColorMode, RasterSettings, Rgb};
@@ -84,39 +84,8 @@ pub(crate) struct ForwardPush {
 /// Bytes of one pixel's running state between passes (`PixelCarry` in `raster_fine.glsl`).
 pub(crate) const CARRY_BYTES: u64 = 64;
 
-/// How a forward fine pass folds face lists of up to `run` faces: in passes of at most
-/// `per_pass` faces (`run` itself when one pass stays under the driver's loop cap), as even as
-/// whole passes allow. Each pass but the last leaves every pixel's running state in the carry
-/// buffer ([`CARRY_BYTES`] a pixel), and the next resumes from it: the same faces in the same
-/// order, so the same bits as one pass. `iterations(faces)` is one invocation's loop count for
-/// a pass of `faces` faces.
-pub(crate) fn forward_pass_size(
-    run: u64,
-    limit: Option<u64>,
-    iterations: impl Fn(u64) -> u64,
-) -> u64 {
-    let run = run.max(1);
-    let Some(limit) = limit else {
-        return run;
-    };
-    if iterations(run) <= limit {
-        return run;
-    }
-    // The most faces one pass takes (iterations grow with the faces), then even passes.
-    let (mut lo, mut hi) = (1, run);
-    while lo < hi {
-        let mid = lo + (hi - lo).div_ceil(2);
-        if iterations(mid) <= limit {
-            lo = mid;
-        } else {
-            hi = mid - 1;
-        }
-    }
-    run.div_ceil(run.div_ceil(lo))
-}
-
 /// Records `passes` dispatches of a forward kernel, each over its part of the face lists
-/// (`per_pass` faces) with a barrier between: what [`forward_pass_size`] planned.
+/// (`per_pass` faces) with a barrier between: what [`pass_size`] planned.
 pub(crate) fn dispatch_passes(
     rec: &mut Recorder<'_>,
     kernel: &crate::gpu::Kernel,
@@ -392,7 +361,7 @@ impl TiledRaster {
     /// view, where no tile holds more than `max_run` entries (the binning's
     /// [`crate::raster::gpu::ViewGroup::max_tile_entries`]). On a driver that caps shader loops,
     /// tiles of more faces than one invocation may loop over are folded in passes
-    /// ([`forward_pass_size`]; `b.carry` then holds [`CARRY_BYTES`] per pixel). On a CPU device
+    /// ([`pass_size`]; `b.carry` then holds [`CARRY_BYTES`] per pixel). On a CPU device
     /// it sizes the workgroups: one subgroup shades a whole 8×8 block where the driver's loop cap
     /// allows for a pass's faces, more where it does not. An overstated `max_run` costs only
     /// speed; an understated one lets llvmpipe's loop cap drop faces of the crowded tiles.
@@ -442,7 +411,7 @@ impl TiledRaster {
         // Tiles past the loop cap are folded in passes.
         let ctx = rec.context();
         let subgroup = ctx.info().subgroup_size;
-        let per_pass = forward_pass_size(max_run, ctx.info().shader_loop_limit(), |faces| {
+        let per_pass = pass_size(max_run, ctx.info().shader_loop_limit(), |faces| {
             tiled_forward_iterations(faces, subgroup, 64)
         });
         let passes = max_run.max(1).div_ceil(per_pass);
@@ -513,11 +482,11 @@ mod tests {
         const CAP: u64 = 65_535;
         let tiled = |faces| tiled_forward_iterations(faces, 8, 64);
         // Under the cap, or with none: one pass of everything.
-        assert_eq!(forward_pass_size(52_000, Some(CAP), tiled), 52_000);
-        assert_eq!(forward_pass_size(1 << 40, None, tiled), 1 << 40);
-        assert_eq!(forward_pass_size(0, Some(CAP), tiled), 1);
+        assert_eq!(pass_size(52_000, Some(CAP), tiled), 52_000);
+        assert_eq!(pass_size(1 << 40, None, tiled), 1 << 40);
+        assert_eq!(pass_size(0, Some(CAP), tiled), 1);
         for run in [52_500, 60_000, 200_000, 327_680, 5_000_000] {
-            let per_pass = forward_pass_size(run, Some(CAP), tiled);
+            let per_pass = pass_size(run, Some(CAP), tiled);
             let passes = run.div_ceil(per_pass);
             assert!(passes > 1 && tiled(per_pass) <= CAP, "{run}: {per_pass}");
             // No fewer passes would do, and they are even: the last is at most one face short.
@@ -525,8 +494,8 @@ mod tests {
             assert!(run - (passes - 1) * per_pass + passes >= per_pass, "{run}");
         }
         // Brute force: a face an iteration, and two more.
-        assert_eq!(forward_pass_size(65_533, Some(CAP), |f| f + 2), 65_533);
-        assert_eq!(forward_pass_size(150_000, Some(CAP), |f| f + 2), 50_000);
+        assert_eq!(pass_size(65_533, Some(CAP), |f| f + 2), 65_533);
+        assert_eq!(pass_size(150_000, Some(CAP), |f| f + 2), 50_000);
     }
 
     #[test]
