@@ -52,8 +52,11 @@
 //! backward uses no float atomics: per (anchor, tile) partial sums over the tile's rays in ray
 //! order, then a per-anchor sum in a fixed order, so repeated runs are bit-identical. Every loop
 //! whose length depends on the input is bounded on the host against the driver's loop cap
-//! ([`crate::gpu::DeviceInfo::shader_loop_limit`]): too many anchors or rays per view is an
-//! [`Error::Limit`], never a silently truncated loop.
+//! ([`crate::gpu::DeviceInfo::shader_loop_limit`]), never a silently truncated loop: a tile's
+//! (or brute force's) anchor list too long for one invocation is folded in passes, each ray's
+//! aggregate carried between them (the same bits as one pass); more rays per view than the
+//! backward may loop over, or over two million anchors (a tile mask's words), is an
+//! [`Error::DeviceLimit`].
 
 pub mod dense;
 pub mod geo;
