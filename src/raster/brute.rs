@@ -50,7 +50,7 @@ impl BruteRaster {
     /// Records the fine pass over a `width × height` image per view (the *rendered* size: pass
     /// 2× the output size with anti-aliasing, then [`BruteRaster::record_downsample`]). On a
     /// driver that caps shader loops, more faces than one invocation may loop over are folded
-    /// in passes (`b.carry` then holds [`CARRY_BYTES`] per pixel).
+    /// in passes (`b.carry` then holds 64 bytes per pixel).
     ///
     /// `silhouette_only` renders alpha alone ([`crate::raster::gpu::GpuScene::set_silhouette_only`]).
     /// `cull` skips faces whose grown box excludes the pixel, as SoftRas and the reference's

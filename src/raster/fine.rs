@@ -361,7 +361,7 @@ impl TiledRaster {
     /// view, where no tile holds more than `max_run` entries (the binning's
     /// [`crate::raster::gpu::ViewGroup::max_tile_entries`]). On a driver that caps shader loops,
     /// tiles of more faces than one invocation may loop over are folded in passes
-    /// ([`pass_size`]; `b.carry` then holds [`CARRY_BYTES`] per pixel). On a CPU device
+    /// (`b.carry` then holds 64 bytes per pixel). On a CPU device
     /// it sizes the workgroups: one subgroup shades a whole 8×8 block where the driver's loop cap
     /// allows for a pass's faces, more where it does not. An overstated `max_run` costs only
     /// speed; an understated one lets llvmpipe's loop cap drop faces of the crowded tiles.
