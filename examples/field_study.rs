@@ -44,8 +44,8 @@ use softvk::field::voxel::{self, Occupancy};
 use softvk::field::{Cube, Field, FieldKind};
 use softvk::fit::AdamOptions;
 use softvk::fit::field_fit::{FieldFitOptions, FieldFitter, auto_cube, fit_field, scaled_to_cube};
-use softvk::fit::io::Silhouettes;
 use softvk::gpu::{Context, ContextOptions};
+use softvk::io::Silhouettes;
 use softvk::mesh::Mesh;
 use softvk::probe::{Aggregate, ProbeSettings, Targets};
 use softvk::raster::gpu::{Method, Renderer};
@@ -655,7 +655,7 @@ fn main() {
             let dir = std::path::PathBuf::from(args.get(1).expect("write DIR"));
             let keys = parse_keys(&args[2..]);
             let p = problem(&ctx, "spot", &keys);
-            use softvk::fit::io;
+            use softvk::io;
             let rows: Vec<io::CameraRow> = (0..24)
                 .map(|i| io::CameraRow {
                     distance: 2.732,

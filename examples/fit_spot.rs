@@ -11,9 +11,9 @@
 use softvk::camera::{Camera, Projection};
 use softvk::field::Cube;
 use softvk::field::voxel::{iou, visual_hull, voxelize_mesh};
-use softvk::fit::io::{Silhouettes, write_obj};
 use softvk::fit::mesh_fit::{MeshFitOptions, default_template, fit_mesh};
 use softvk::gpu::{Context, ContextOptions};
+use softvk::io::{Silhouettes, write_obj};
 use softvk::mesh::Mesh;
 use softvk::raster::gpu::{Method, Renderer};
 use softvk::raster::reference::{Alpha, Dist, RasterSettings};

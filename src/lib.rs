@@ -45,6 +45,7 @@ pub mod exr_io;
 pub mod field;
 pub mod fit;
 pub mod gpu;
+pub mod io;
 pub mod lighting;
 pub mod mesh;
 pub mod nn;

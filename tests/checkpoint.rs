@@ -11,11 +11,11 @@ use std::time::Duration;
 use common::{TempDir, softvk};
 use softvk::camera::Camera;
 use softvk::fit::checkpoint::{Checkpoint, Fingerprint, FitKind};
-use softvk::fit::io::CameraRow;
 use softvk::fit::mesh_fit::{
     FitLog, MeshFitOptions, MeshFitResult, MeshFitState, fit_mesh, fit_mesh_resumable,
     icosphere_template,
 };
+use softvk::io::CameraRow;
 use softvk::mesh::Mesh;
 use softvk::raster::reference::RasterSettings;
 

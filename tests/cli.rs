@@ -546,7 +546,7 @@ fn render_normalize_fills_the_frame_with_a_mesh_in_its_own_units() {
         *p = [0.075 * p[0] + 0.3, 0.075 * p[1] - 0.2, 0.075 * p[2] + 0.1];
     }
     let mesh = dir.path("small.obj");
-    softvk::fit::io::write_obj(&mesh, &sphere.positions, &sphere.faces).unwrap();
+    softvk::io::write_obj(&mesh, &sphere.positions, &sphere.faces).unwrap();
     let out = dir.path("normalized.exr");
     let done = render(&mesh, &out, &["--size", "64", "--normalize"]);
     assert_success("--normalize", &done);
@@ -1020,7 +1020,7 @@ fn fit_mesh_writes_the_mesh_and_its_report() {
         eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
         return;
     }
-    use softvk::fit::io::{self, CameraRow};
+    use softvk::io::{self, CameraRow};
     let dir = TempDir::new("fit-mesh");
     let sil = dir.path("sil");
     let size = 16u32;
@@ -1157,7 +1157,7 @@ fn fit_mesh_takes_a_100k_face_template_at_64() {
 
 #[test]
 fn fit_mesh_errors_are_one_line_and_write_nothing() {
-    use softvk::fit::io::{self, CameraRow};
+    use softvk::io::{self, CameraRow};
     let dir = TempDir::new("fit-errors");
     let sil = dir.path("sil");
     let disc: Vec<f32> = (0..64)

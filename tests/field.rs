@@ -689,7 +689,7 @@ fn field_occupancy_on_the_gpu_matches_the_twin() {
 }
 
 /// Silhouettes of `mesh` rendered by the project's reference rasterizer (hard coverage).
-fn silhouettes(mesh: &Mesh, cameras: &[Camera], size: u32) -> softvk::fit::io::Silhouettes {
+fn silhouettes(mesh: &Mesh, cameras: &[Camera], size: u32) -> softvk::io::Silhouettes {
     use softvk::lighting::Lighting;
     use softvk::raster::reference::{Alpha, Dist, RasterSettings, render};
     let settings = RasterSettings {
@@ -704,7 +704,7 @@ fn silhouettes(mesh: &Mesh, cameras: &[Camera], size: u32) -> softvk::fit::io::S
         let img = render(mesh, cam, &Lighting::default(), &settings).unwrap();
         masks.extend(img.iter().map(|p| p[3] as f32));
     }
-    softvk::fit::io::Silhouettes {
+    softvk::io::Silhouettes {
         width: size,
         height: size,
         names: (0..cameras.len()).map(|v| format!("{v:03}.png")).collect(),

@@ -532,7 +532,7 @@ fn the_auto_cube_holds_a_sphere_that_the_frames_cut() {
 
 /// Sphere silhouettes (3 views of 24²) and their cameras file, written by the library.
 fn write_sphere_inputs(dir: &TempDir) -> (PathBuf, PathBuf) {
-    use softvk::fit::io::{self, CameraRow};
+    use softvk::io::{self, CameraRow};
     let rows: Vec<CameraRow> = (0..3)
         .map(|i| CameraRow {
             distance: 2.732,
@@ -637,7 +637,7 @@ fn assert_one_error_line(what: &str, out: &std::process::Output, needle: &str) {
 
 #[test]
 fn fit_field_errors_are_one_line_and_write_nothing() {
-    use softvk::fit::io::{self, CameraRow};
+    use softvk::io::{self, CameraRow};
     let dir = TempDir::new("fit-field-errors");
     let (sil, csv) = write_sphere_inputs(&dir);
     let empty = dir.path("empty_sil");

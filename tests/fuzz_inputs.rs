@@ -15,7 +15,7 @@ use proptest::prelude::*;
 use proptest::sample::select;
 use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
 
-use softvk::fit::io::{load_cameras, load_silhouettes};
+use softvk::io::{load_cameras, load_silhouettes};
 use softvk::mesh::Mesh;
 
 /// Cases per parser: the whole file runs in a few seconds in release mode.

@@ -25,9 +25,9 @@ use softvk::fit::field_fit::{
     self, DEFAULT_CUBE_MARGIN, FieldFitLog, FieldFitOptions, FieldFitState, auto_cube,
     check_cameras_outside, fit_field_resumable, scaled_to_cube,
 };
-use softvk::fit::io;
 use softvk::fit::report::{self, Series};
 use softvk::gpu::{Context, ContextOptions};
+use softvk::io;
 use softvk::lighting::Lighting;
 use softvk::probe::{Aggregate, ProbeSettings, Targets};
 use softvk::raster::gpu::{Method, Renderer};

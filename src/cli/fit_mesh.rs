@@ -18,13 +18,13 @@ use indicatif::{ProgressBar, ProgressStyle};
 use softvk::camera::{Camera, Projection};
 use softvk::fit::AdamOptions;
 use softvk::fit::checkpoint::{Checkpoint, FitKind};
-use softvk::fit::io::{self, Silhouettes};
 use softvk::fit::mesh_fit::{
     FitLog, MeshFitOptions, MeshFitSnapshot, MeshFitState, default_template, demo_target,
     fit_mesh_resumable, icosphere_template,
 };
 use softvk::fit::report::{self, GifWriter, Series};
 use softvk::gpu::{Context, ContextOptions};
+use softvk::io::{self, Silhouettes};
 use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
 use softvk::raster::gpu::{DEFAULT_TILE, Method, Renderer};

@@ -252,7 +252,7 @@ impl Isosurface {
         Ok(Mesh::new(self.positions.clone(), self.faces.clone(), 1)?)
     }
 
-    /// Writes the mesh as OBJ ([`crate::fit::io::write_obj`]: atomic, exact `f32`s).
+    /// Writes the mesh as OBJ ([`crate::io::write_obj`]: atomic, exact `f32`s).
     /// [`Error::Input`] when empty.
     pub fn write_obj(&self, path: &std::path::Path) -> Result<()> {
         if self.is_empty() {
@@ -261,7 +261,7 @@ impl Isosurface {
                 path.display()
             )));
         }
-        crate::fit::io::write_obj(path, &self.positions, &self.faces)
+        crate::io::write_obj(path, &self.positions, &self.faces)
     }
 
     /// Signed volume `Σ v0 · (v1 × v2) / 6` (positive for a closed mesh wound outwards).

@@ -19,7 +19,7 @@
 //!     surface) and for checking losses on a field of a handful of parameters.
 //! - [`cpu`]: the f64 twin of every kernel (eval and backward), the oracle of the tests.
 //! - [`mcubes`]: the mesh of φ = 0.5 by marching cubes on the GPU (and its twin), as a
-//!   [`crate::mesh::Mesh`] ready for [`crate::fit::io::write_obj`].
+//!   [`crate::mesh::Mesh`] ready for [`crate::io::write_obj`].
 //! - [`voxel`] (CPU): occupancy grids of a closed mesh (voxelization), of a field (φ > 0.5 at
 //!   voxel centres, evaluated on the GPU or by the twin), and of the visual hull of silhouettes
 //!   and cameras; their 3D IoU.

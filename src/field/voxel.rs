@@ -12,8 +12,8 @@ use glam::DVec3;
 use super::{Cube, EVAL_BATCH, Field};
 use crate::camera::{Camera, Projection};
 use crate::error::{Error, Result};
-use crate::fit::io::Silhouettes;
 use crate::gpu::Context;
+use crate::io::Silhouettes;
 
 /// Which voxels of a `res³` grid over a cube are inside.
 #[derive(Clone, Debug, PartialEq)]

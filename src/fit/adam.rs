@@ -11,9 +11,9 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::{check_binding, check_floats, groups};
 use crate::error::{Error, Result};
 use crate::gpu::{Buffer, BufferRange, Context, Kernel, Recorder, specs};
+use crate::gpu::{check_binding, check_floats, groups};
 
 /// Adam's hyper-parameters; the default is PyTorch's.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -31,12 +31,13 @@ use bytemuck::{Pod, Zeroable};
 
 use super::adam::{Adam, AdamOptions};
 use super::blur::{BlurredMse, MAX_BLUR_STD};
+use super::max_entry_capacity;
 use super::pose::{PoseTarget, Schedule, check_target};
 use super::rig::{Rig, bone_of};
-use super::{groups, max_entry_capacity};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::gate::IterationGate;
+use crate::gpu::groups;
 use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, Timer, specs};
 use crate::lighting::Lighting;
 use crate::raster::backward::GradBuffers;

@@ -10,9 +10,10 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::{GradOut, ImageMse, check_floats, groups};
+use super::ImageMse;
 use crate::error::{Error, Result};
 use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{GradOut, check_floats, groups};
 
 /// The widest blur, in pixels (its taps reach 3 std).
 pub const MAX_BLUR_STD: f64 = 32.0;
@@ -49,7 +50,7 @@ impl ImageBlur {
     /// The pipeline and scratch for `views` images of `width`×`height`.
     pub fn new(ctx: &Context, views: u32, width: u32, height: u32) -> Result<Self> {
         let pixels = u64::from(views) * u64::from(width) * u64::from(height);
-        let bytes = super::check_binding(ctx, "a blurred image", 16 * pixels)?;
+        let bytes = crate::gpu::check_binding(ctx, "a blurred image", 16 * pixels)?;
         Ok(Self {
             kernel: Kernel::new(ctx, &specs::IMAGE_BLUR)?,
             width,

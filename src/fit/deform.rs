@@ -21,10 +21,10 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::reduce::{Sum, SumPush};
-use super::{check_binding, check_floats, groups};
 use crate::error::{Error, Result};
 use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{check_binding, check_floats, groups};
+use crate::primitives::sum::{Sum, SumPush};
 
 /// Push constants of `deform_forward.comp` and `deform_backward.comp`.
 #[repr(C)]

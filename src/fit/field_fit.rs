@@ -42,10 +42,11 @@ use super::checkpoint::{
     Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, read_log, read_optimizer,
     restore_optimizer, write_log, write_optimizer,
 };
-use super::{Adam, AdamOptions, GradOut};
+use super::{Adam, AdamOptions};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::field::{Cube, Field, FieldKind};
+use crate::gpu::GradOut;
 use crate::gpu::gate::IterationGate;
 use crate::gpu::{Buffer, Context, MemoryKind, Recorder, Timer};
 use crate::probe::{GeoRegularizer, GpuTargets, ProbeSettings, Prober, Sampler, Targets};
@@ -438,7 +439,7 @@ impl FieldFitter {
                 "field fit: {total} points per iteration (at most 2^32 − 1)"
             ))
         })?;
-        super::check_binding(ctx, "field fit: points", 16 * u64::from(total))?;
+        crate::gpu::check_binding(ctx, "field fit: points", 16 * u64::from(total))?;
         let points = ctx.create_buffer(
             "field fit points",
             16 * u64::from(total),

@@ -32,9 +32,10 @@ use super::checkpoint::{
     Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, read_log, read_optimizer,
     restore_optimizer, write_log, write_optimizer,
 };
-use super::{Adam, AdamOptions, Deform, GradOut, Regularizers, SilhouetteLoss, with_headroom};
+use super::{Adam, AdamOptions, Deform, Regularizers, SilhouetteLoss, with_headroom};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
+use crate::gpu::GradOut;
 use crate::gpu::gate::IterationGate;
 use crate::gpu::{Buffer, Context, MemoryKind, Recorder, Timer};
 use crate::lighting::Lighting;

@@ -59,16 +59,18 @@ use glam::{DMat3, DQuat, DVec3};
 
 use bytemuck::{Pod, Zeroable};
 
+use super::ImageMse;
 use super::adam::{Adam, AdamOptions};
 use super::checkpoint::{
     Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, check_state, read_log,
     write_log,
 };
-use super::{GradOut, ImageMse};
-use super::{groups, max_entry_capacity};
+use super::max_entry_capacity;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
+use crate::gpu::GradOut;
 use crate::gpu::gate::IterationGate;
+use crate::gpu::groups;
 use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, Timer, specs};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;

@@ -3,10 +3,10 @@
 
 use super::flatten::{EdgesPush, FlattenEdges};
 use super::laplacian::{Adjacency, ApplyPush, WeightedPush};
-use super::reduce::{Sum, SumPush};
-use super::{GradOut, check_binding, check_floats, groups};
 use crate::error::{Error, Result};
 use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{GradOut, check_binding, check_floats, groups};
+use crate::primitives::sum::{Sum, SumPush};
 
 /// The regularizers' last values, as read back.
 #[derive(Clone, Copy, Debug, PartialEq)]

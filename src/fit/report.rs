@@ -18,8 +18,8 @@ use std::path::Path;
 use image::{DynamicImage, RgbImage};
 use image::{EncodableLayout, ImageBuffer, PixelWithColorType, Rgb, Rgba, RgbaImage};
 
-use super::io::AtomicFile;
 use crate::error::{Error, Result};
+use crate::io::AtomicFile;
 
 /// Contact sheet: a pixel inside both the prediction and the target.
 pub const BOTH: Rgba<u8> = Rgba([255, 255, 255, 255]);
@@ -425,7 +425,7 @@ where
     [P::Subpixel]: EncodableLayout,
 {
     let file = AtomicFile::create(path)?;
-    let bytes = super::io::encode_png(
+    let bytes = crate::io::encode_png(
         image.as_raw().as_bytes(),
         image.width(),
         image.height(),
@@ -556,8 +556,8 @@ impl std::fmt::Debug for GifWriter {
 
 #[cfg(test)]
 mod tests {
-    use super::super::io::test_support::TempDir;
     use super::*;
+    use crate::io::test_support::TempDir;
 
     #[test]
     fn contact_sheet_colours_each_pixel_by_prediction_and_target() {

@@ -12,10 +12,10 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::reduce::{Sum, SumPush};
-use super::{GradOut, check_binding, check_floats, groups};
 use crate::error::{Error, Result};
 use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{GradOut, check_binding, check_floats, groups};
+use crate::primitives::sum::{Sum, SumPush};
 
 /// SoftRas's union epsilon.
 pub const IOU_EPS: f64 = 1e-6;

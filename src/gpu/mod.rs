@@ -2,6 +2,7 @@
 
 mod context;
 mod descriptors;
+mod dispatch;
 pub mod gate;
 mod kernel;
 mod memory;
@@ -13,6 +14,8 @@ pub use context::{
     Context, ContextOptions, Counters, DescriptorMode, DeviceInfo, PUSH_DESCRIPTOR_EXTENSION,
     PhysicalDeviceEntry, REQUIRED_DEVICE_EXTENSIONS, RawHandles, list_devices,
 };
+pub use dispatch::GradOut;
+pub(crate) use dispatch::{check_binding, check_floats, check_texels, groups};
 pub use kernel::{
     BindingKind, BindingSpec, Kernel, KernelSpec, KernelVariants, TEXEL_BYTES, TEXEL_FORMAT, specs,
 };

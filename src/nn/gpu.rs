@@ -7,10 +7,10 @@ use bytemuck::{Pod, Zeroable};
 
 use super::{Activation, Conv2d, Layer, param_offsets, validate_chain};
 use crate::error::{Error, LimitKind, Result};
-use crate::fit::{check_binding, groups};
 use crate::gpu::{
     Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, specs,
 };
+use crate::gpu::{check_binding, groups};
 
 /// Push constants of the conv kernels (`NN_CONV_PUSH` in `nn.glsl`).
 #[repr(C)]

@@ -4,6 +4,7 @@
 pub mod binning;
 pub mod scan;
 pub mod sort;
+pub(crate) mod sum;
 
 pub use binning::{BinJob, Binner, Bins, ItemLayout, TileGrid};
 pub use scan::{SCAN_BLOCK, Scan, ScanScratch};

@@ -22,9 +22,9 @@ use bytemuck::{Pod, Zeroable};
 
 use super::ProbeSettings;
 use crate::error::Result;
-use crate::fit::reduce::{Sum, SumPush};
-use crate::fit::{GradOut, check_binding, check_floats, groups};
 use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{GradOut, check_binding, check_floats, groups};
+use crate::primitives::sum::{Sum, SumPush};
 
 /// Points evaluated per surface candidate: 7 centres × (the centre + 6 stencil points).
 pub const POINTS_PER_CANDIDATE: u32 = 49;

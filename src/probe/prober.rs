@@ -48,8 +48,8 @@ use bytemuck::{Pod, Zeroable};
 use super::ProbeSettings;
 use super::targets::GpuTargets;
 use crate::error::{Error, LimitKind, Result};
-use crate::fit::reduce::{Sum, SumPush};
-use crate::fit::{GradOut, check_binding, check_floats, check_texels, groups};
+use crate::gpu::{GradOut, check_binding, check_floats, check_texels, groups};
+use crate::primitives::sum::{Sum, SumPush};
 use std::sync::Arc;
 
 use crate::gpu::gate::IterationGate;

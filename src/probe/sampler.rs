@@ -30,8 +30,8 @@ use super::rng::{STREAM_RAYS, stream_key};
 use super::targets::{GpuTargets, Targets};
 use super::{ProbeSettings, hull};
 use crate::error::{Error, Result};
-use crate::fit::{check_binding, groups};
 use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{check_binding, groups};
 use crate::primitives::{Scan, ScanScratch};
 
 /// One probing ray. Twin of `Ray` in `kernels/include/probe.glsl`; 16 bytes.

@@ -10,8 +10,8 @@ use glam::DVec3;
 
 use crate::camera::{Camera, Projection, look_at};
 use crate::error::{Error, Result};
-use crate::fit::io::Silhouettes;
 use crate::gpu::{Buffer, Context};
+use crate::io::Silhouettes;
 
 /// One view as the probing kernels read it. Twin of `ProbeView` in `kernels/include/probe.glsl`;
 /// std430, 160 bytes, every member a `vec4`.
@@ -384,7 +384,7 @@ pub struct GpuTargets {
 impl GpuTargets {
     /// Uploads `targets`.
     pub fn new(ctx: &Context, targets: &Targets) -> Result<Self> {
-        crate::fit::check_binding(
+        crate::gpu::check_binding(
             ctx,
             "sphere probing: the silhouettes",
             4 * targets.masks.len() as u64,

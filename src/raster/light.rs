@@ -24,8 +24,8 @@ use super::reference::ColorMode;
 use super::reference_grad::VertexFaces;
 use super::setup::VertexLayout;
 use crate::error::{Error, Result};
-use crate::fit::{check_binding, groups};
 use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{check_binding, groups};
 use crate::lighting::Lighting;
 
 /// Push constants of the lighting kernels (`kernels/include/light_io.glsl`).

@@ -79,7 +79,7 @@ impl BatchGather {
         if n == 0 || px == 0 || shape.views == 0 {
             return Err(Error::Input(format!("an empty batch shape {shape:?}")));
         }
-        let check = crate::fit::check_floats;
+        let check = crate::gpu::check_floats;
         check(
             "batch: schedule",
             &b.schedule,
@@ -118,7 +118,7 @@ impl BatchGather {
                 views: shape.views,
                 iteration,
             },
-            crate::fit::groups(n * px, 64)?,
+            crate::gpu::groups(n * px, 64)?,
         )
     }
 }

@@ -154,10 +154,10 @@ impl MeshDecoder {
         if objects == 0 {
             return Err(Error::Input("the decoder needs at least one object".into()));
         }
-        crate::fit::check_floats("decoder: outputs", outputs, b * self.outputs_per_object())?;
-        crate::fit::check_floats("decoder: rotations", rotations, 2 * b * c)?;
-        crate::fit::check_floats("decoder: meshes", canonical, 3 * b * v)?;
-        crate::fit::check_floats("decoder: copy positions", positions, 3 * b * c * v)
+        crate::gpu::check_floats("decoder: outputs", outputs, b * self.outputs_per_object())?;
+        crate::gpu::check_floats("decoder: rotations", rotations, 2 * b * c)?;
+        crate::gpu::check_floats("decoder: meshes", canonical, 3 * b * v)?;
+        crate::gpu::check_floats("decoder: copy positions", positions, 3 * b * c * v)
     }
 
     /// Records the forward for `objects` objects of `copies` copies each: `outputs`
@@ -190,7 +190,7 @@ impl MeshDecoder {
             }
             .for_kernel(&self.forward)?,
             &self.push(objects, copies),
-            crate::fit::groups(u64::from(self.vertex_count) * u64::from(objects), 64)?,
+            crate::gpu::groups(u64::from(self.vertex_count) * u64::from(objects), 64)?,
         )
     }
 
@@ -218,7 +218,7 @@ impl MeshDecoder {
             &d_canonical,
             &d_positions,
         )?;
-        crate::fit::check_floats(
+        crate::gpu::check_floats(
             "decoder: d_outputs",
             &d_outputs,
             u64::from(objects) * self.outputs_per_object(),
@@ -246,7 +246,7 @@ impl MeshDecoder {
             }
             .for_kernel(&self.backward)?,
             &push,
-            crate::fit::groups(u64::from(self.vertex_count) * u64::from(objects), 64)?,
+            crate::gpu::groups(u64::from(self.vertex_count) * u64::from(objects), 64)?,
         )?;
         rec.dispatch(
             &self.centroid,
@@ -257,7 +257,7 @@ impl MeshDecoder {
             }
             .for_kernel(&self.centroid)?,
             &push,
-            crate::fit::groups(3 * u64::from(objects), 64)?,
+            crate::gpu::groups(3 * u64::from(objects), 64)?,
         )
     }
 }
@@ -275,13 +275,13 @@ impl MeshDecoder {
         colors: BufferRange<'_>,
     ) -> Result<()> {
         let (b, v) = (u64::from(objects), u64::from(self.vertex_count));
-        crate::fit::check_floats("decoder: outputs", &outputs, b * self.outputs_per_object())?;
-        crate::fit::check_floats("decoder: colours", &colors, 4 * b * u64::from(copies) * v)?;
+        crate::gpu::check_floats("decoder: outputs", &outputs, b * self.outputs_per_object())?;
+        crate::gpu::check_floats("decoder: colours", &colors, 4 * b * u64::from(copies) * v)?;
         rec.dispatch(
             &self.colors,
             &specs::ReconColorsBindings { outputs, colors }.for_kernel(&self.colors)?,
             &self.push(objects, copies),
-            crate::fit::groups(v * b, 64)?,
+            crate::gpu::groups(v * b, 64)?,
         )
     }
 
@@ -299,13 +299,13 @@ impl MeshDecoder {
     ) -> Result<()> {
         let (b, v) = (u64::from(objects), u64::from(self.vertex_count));
         let n = b * self.outputs_per_object();
-        crate::fit::check_floats("decoder: outputs", &outputs, n)?;
-        crate::fit::check_floats(
+        crate::gpu::check_floats("decoder: outputs", &outputs, n)?;
+        crate::gpu::check_floats(
             "decoder: d_colours",
             &d_colors,
             3 * b * u64::from(copies) * v,
         )?;
-        crate::fit::check_floats("decoder: d_outputs", &d_outputs, n)?;
+        crate::gpu::check_floats("decoder: d_outputs", &d_outputs, n)?;
         rec.dispatch(
             &self.colors_backward,
             &specs::ReconColorsBackwardBindings {
@@ -315,7 +315,7 @@ impl MeshDecoder {
             }
             .for_kernel(&self.colors_backward)?,
             &self.push(objects, copies),
-            crate::fit::groups(v * b, 64)?,
+            crate::gpu::groups(v * b, 64)?,
         )
     }
 }

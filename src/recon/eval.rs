@@ -187,7 +187,7 @@ pub fn visual_hull_voxels(class: &super::dataset::ClassData, n: usize) -> Result
         .flat_map(|v| class.image(n, v)[3 * px..].iter())
         .map(|&a| if a >= 128 { 1.0 } else { 0.0 })
         .collect();
-    let silhouettes = crate::fit::io::Silhouettes {
+    let silhouettes = crate::io::Silhouettes {
         width: IMAGE_SIZE as u32,
         height: IMAGE_SIZE as u32,
         names: (0..VIEWS).map(|v| format!("view {v}")).collect(),

@@ -34,7 +34,8 @@ use std::ops::Range;
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
-use crate::fit::{Adam, AdamOptions, GradOut, ImageMse, Regularizers, SilhouetteLoss};
+use crate::fit::{Adam, AdamOptions, ImageMse, Regularizers, SilhouetteLoss};
+use crate::gpu::GradOut;
 use crate::gpu::gate::IterationGate;
 use crate::gpu::{Buffer, Context, MemoryKind, Recorder};
 use crate::lighting::Lighting;

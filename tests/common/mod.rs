@@ -144,7 +144,7 @@ impl Drop for TempDir {
 /// a `size`² image: the silhouettes (`sil/`) and cameras (`cameras.csv`) of a tiny fit, written
 /// into `dir` by the library's own writers. Returns their paths.
 pub fn write_disc_inputs(dir: &TempDir, size: u32) -> (std::path::PathBuf, std::path::PathBuf) {
-    use softvk::fit::io;
+    use softvk::io;
     let sil = dir.path("sil");
     io::write_silhouettes(
         &sil,
@@ -173,9 +173,9 @@ pub fn disc_masks(size: u32) -> Vec<f32> {
 }
 
 /// The cameras of [`write_disc_inputs`].
-pub fn disc_camera_rows() -> Vec<softvk::fit::io::CameraRow> {
+pub fn disc_camera_rows() -> Vec<softvk::io::CameraRow> {
     (0..3)
-        .map(|i| softvk::fit::io::CameraRow {
+        .map(|i| softvk::io::CameraRow {
             distance: 2.732,
             elevation: 30.0,
             azimuth: 120.0 * f64::from(i),
