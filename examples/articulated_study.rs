@@ -177,7 +177,7 @@ fn main() {
     let renderer = Renderer::new(&ctx).unwrap();
     let s = args.opts.settings;
     let render_at = |angles: &[f64], sigma: f64, gamma: f64| -> Vec<[f32; 4]> {
-        let s = softvk::raster::reference::RasterSettings { sigma, gamma, ..s };
+        let s = softvk::raster::settings::RasterSettings { sigma, gamma, ..s };
         renderer
             .render_views(
                 &ctx,

@@ -49,7 +49,7 @@ use softvk::io::Silhouettes;
 use softvk::mesh::Mesh;
 use softvk::probe::{Aggregate, ProbeSettings, Targets};
 use softvk::raster::gpu::{Method, Renderer};
-use softvk::raster::reference::{Alpha, Dist, RasterSettings};
+use softvk::raster::settings::{Alpha, Dist, RasterSettings};
 use softvk::recon::shapes::{self, Category};
 
 type Keys = BTreeMap<String, String>;

@@ -16,7 +16,7 @@ use softvk::gpu::{Context, ContextOptions};
 use softvk::io::{Silhouettes, write_obj};
 use softvk::mesh::Mesh;
 use softvk::raster::gpu::{Method, Renderer};
-use softvk::raster::reference::{Alpha, Dist, RasterSettings};
+use softvk::raster::settings::{Alpha, Dist, RasterSettings};
 
 fn cameras(elevation: f64, offset: f64) -> Vec<Camera> {
     (0..24)

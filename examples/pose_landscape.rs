@@ -20,7 +20,8 @@ use softvk::camera::Camera;
 use softvk::fit::pose::{self, Pose};
 use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
-use softvk::raster::reference::{MeshF64, RasterSettings, render_f64};
+use softvk::raster::reference::{MeshF64, render_f64};
+use softvk::raster::settings::RasterSettings;
 
 fn main() {
     let (mut size, mut target_kind, mut blur_k) = (24u32, String::from("sharp"), 1.0f64);

@@ -16,7 +16,7 @@ use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
 use softvk::raster::backward::GradBuffers;
 use softvk::raster::gpu::{Method, Renderer};
-use softvk::raster::reference::{Alpha, Dist, RasterSettings};
+use softvk::raster::settings::{Alpha, Dist, RasterSettings};
 
 /// Iterations per submission, and submissions.
 const K: u32 = 10;

@@ -25,7 +25,7 @@ use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::raster::fine::check_tile_size;
 use crate::raster::gpu::{Frames, GpuScene, Method, PairCounts, Renderer, ViewGroup};
-use crate::raster::reference::{Dist, RasterSettings, Rgb};
+use crate::raster::settings::{Dist, RasterSettings, Rgb};
 
 /// The scenes of SPEC §6, in the order a plain `softvk bench` runs them.
 pub const SCENES: [&str; 4] = ["spot-256", "sphere-64x120", "dense-1024", "blurry-256"];
@@ -1168,7 +1168,7 @@ fn run_field_fit(
         width: size,
         height: size,
         dist: Dist::Hard,
-        alpha: crate::raster::reference::Alpha::Hard,
+        alpha: crate::raster::settings::Alpha::Hard,
         ..RasterSettings::default()
     };
     let masks: Vec<f32> =
@@ -1596,7 +1596,7 @@ pub fn run_fit(
             .collect();
         let hard = RasterSettings {
             dist: Dist::Hard,
-            alpha: crate::raster::reference::Alpha::Hard,
+            alpha: crate::raster::settings::Alpha::Hard,
             rgb: Rgb::Hard,
             ..s
         };

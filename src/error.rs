@@ -146,7 +146,7 @@ pub enum Error {
 
     /// Rendering settings or inputs are out of their domain.
     #[error(transparent)]
-    Render(#[from] crate::raster::reference::RenderError),
+    Render(#[from] crate::raster::settings::RenderError),
 
     /// A self-check failed: two computations that must agree bit for bit did not (the
     /// benchmark checks every tiled render against brute force before timing it).

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 pub(crate) use crate::atomic_file::AtomicFile;
 use crate::camera::Camera;
 use crate::error::{Error, Result, one_line};
-use crate::raster::reference::MAX_IMAGE_SIDE;
+use crate::raster::settings::MAX_IMAGE_SIDE;
 
 /// Target silhouettes, one per view, all of one size.
 #[derive(Clone, Debug, PartialEq)]

@@ -17,7 +17,7 @@ use softvk::fit::mesh_fit::{
 };
 use softvk::io::CameraRow;
 use softvk::mesh::Mesh;
-use softvk::raster::reference::RasterSettings;
+use softvk::raster::settings::RasterSettings;
 
 const SIZE: u32 = 16;
 

@@ -12,10 +12,8 @@ use softvk::camera::{Camera, Projection, pixel_center};
 use softvk::fit::mesh_fit::default_template;
 use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
-use softvk::raster::reference::{
-    self, Alpha, ColorMode, Dist, FaceColors, RasterSettings, Rgb, project_faces, setup_face,
-    shade_pixel,
-};
+use softvk::raster::reference::{self, FaceColors, project_faces, setup_face, shade_pixel};
+use softvk::raster::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
 
 #[test]
 fn info_names_the_device_and_the_validation_state() {

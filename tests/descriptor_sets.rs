@@ -19,8 +19,8 @@ use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
 use softvk::primitives::{Scan, ScanScratch, scan};
 use softvk::raster::gpu::{Frames, Method, Renderer};
-use softvk::raster::reference::RasterSettings;
 use softvk::raster::reference_grad::Gradients;
+use softvk::raster::settings::RasterSettings;
 
 fn lighting() -> Lighting {
     Lighting {

@@ -691,7 +691,8 @@ fn field_occupancy_on_the_gpu_matches_the_twin() {
 /// Silhouettes of `mesh` rendered by the project's reference rasterizer (hard coverage).
 fn silhouettes(mesh: &Mesh, cameras: &[Camera], size: u32) -> softvk::io::Silhouettes {
     use softvk::lighting::Lighting;
-    use softvk::raster::reference::{Alpha, Dist, RasterSettings, render};
+    use softvk::raster::reference::render;
+    use softvk::raster::settings::{Alpha, Dist, RasterSettings};
     let settings = RasterSettings {
         width: size,
         height: size,

@@ -16,7 +16,7 @@ use softvk::fit::pose::{PoseTarget, Schedule};
 use softvk::fit::rig::Rig;
 use softvk::lighting::Lighting;
 use softvk::raster::gpu::{Method, Renderer};
-use softvk::raster::reference::{ColorMode, RasterSettings};
+use softvk::raster::settings::{ColorMode, RasterSettings};
 
 fn camera() -> Camera {
     Camera::default()

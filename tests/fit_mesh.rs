@@ -12,8 +12,9 @@ use softvk::fit::{adam, deform, silhouette};
 use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
 use softvk::raster::gpu::{Method, Renderer};
-use softvk::raster::reference::{self, Alpha, Dist, RasterSettings, Rgb};
+use softvk::raster::reference::{self};
 use softvk::raster::reference_grad;
+use softvk::raster::settings::{Alpha, Dist, RasterSettings, Rgb};
 
 /// An icosphere(1) of radius 0.5, turned so no coordinate is zero.
 fn template() -> Mesh {

@@ -19,7 +19,8 @@ use softvk::fit::pose::{
 use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
 use softvk::raster::gpu::{Method, Renderer};
-use softvk::raster::reference::{self, ColorMode, MeshF64, RasterSettings};
+use softvk::raster::reference::{self, MeshF64};
+use softvk::raster::settings::{ColorMode, RasterSettings};
 
 fn lighting() -> Lighting {
     Lighting {

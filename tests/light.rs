@@ -12,8 +12,8 @@ use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
 use softvk::raster::gpu::Renderer;
 use softvk::raster::light::SceneLight;
-use softvk::raster::reference::{ColorMode, RasterSettings};
 use softvk::raster::reference_grad::{VertexFaces, lighting_grad_surface, lighting_grad_vertex};
+use softvk::raster::settings::{ColorMode, RasterSettings};
 use softvk::raster::setup::VertexLayout;
 
 /// Two directional lights, one of them behind many faces (so max(0, n · d) clips), coloured.

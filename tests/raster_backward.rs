@@ -18,8 +18,8 @@ use softvk::mesh::Mesh;
 use softvk::primitives::binning::MASK_MAX_TILES_PER_VIEW;
 use softvk::raster::backward::{GradBuffers, GradSplit};
 use softvk::raster::gpu::{GpuScene, Method, Renderer};
-use softvk::raster::reference::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
 use softvk::raster::reference_grad::{self, Gradients};
+use softvk::raster::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
 
 const REL: f64 = 1e-3;
 const METHODS: [Method; 4] = [

@@ -21,10 +21,8 @@ use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
 use softvk::primitives::binning::{self, TileGrid};
 use softvk::raster::gpu::{Frames, Method, Renderer};
-use softvk::raster::reference::{
-    self, Alpha, ColorMode, Dist, FaceColors, RasterSettings, Rgb, project_faces, setup_face,
-    shade_pixel,
-};
+use softvk::raster::reference::{self, FaceColors, project_faces, setup_face, shade_pixel};
+use softvk::raster::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
 use softvk::raster::setup::{FACE_DEGENERATE, FACE_FINITE, FACE_FRONT};
 
 /// Absolute tolerance per channel.

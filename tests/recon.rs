@@ -11,7 +11,7 @@ use softvk::fit::deform::cpu::template_terms;
 use softvk::gpu::MemoryKind;
 use softvk::mesh::Mesh;
 use softvk::raster::gpu::{Method, Renderer};
-use softvk::raster::reference::RasterSettings;
+use softvk::raster::settings::RasterSettings;
 use softvk::recon::batch::{self, BatchBuffers, BatchGather, BatchShape};
 use softvk::recon::decode::{self, MeshDecoder, view_rotation};
 

@@ -14,7 +14,7 @@ use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
 use softvk::raster::backward::{GradBuffers, GradIo};
 use softvk::raster::gpu::{GpuScene, Method, Renderer};
-use softvk::raster::reference::{RasterSettings, Rgb};
+use softvk::raster::settings::{RasterSettings, Rgb};
 use softvk::raster::setup::VertexLayout;
 
 const TILE: u32 = 8;

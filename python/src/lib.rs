@@ -41,7 +41,8 @@ use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
 use softvk::raster::backward::GradBuffers;
 use softvk::raster::gpu::{GpuScene, Method, Renderer};
-use softvk::raster::reference::{self, Alpha, ColorMode, Dist, RasterSettings, Rgb};
+use softvk::raster::reference::{self};
+use softvk::raster::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
 
 /// Lights from Python: `(ambient intensity, ambient colour, [(intensity, colour, direction)])`.
 type PyLighting = (f64, [f64; 3], Vec<(f64, [f64; 3], [f64; 3])>);

@@ -15,7 +15,7 @@ use glam::DVec3;
 use softvk::camera::{Camera, Projection};
 use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::{MAX_TEXTURE_RES, Mesh};
-use softvk::raster::reference::{Alpha, ColorMode, Dist, MAX_IMAGE_SIDE, RasterSettings, Rgb};
+use softvk::raster::settings::{Alpha, ColorMode, Dist, MAX_IMAGE_SIDE, RasterSettings, Rgb};
 use softvk::{Error, Result};
 
 /// Default image side (SoftRas `image_size`).

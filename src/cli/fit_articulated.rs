@@ -31,7 +31,7 @@ use softvk::fit::rig::Rig;
 use softvk::gpu::{Context, ContextOptions};
 use softvk::io;
 use softvk::raster::gpu::{Method, Renderer};
-use softvk::raster::reference::RasterSettings;
+use softvk::raster::settings::RasterSettings;
 use softvk::{Error, Result};
 
 use super::args::{RasterArgs, ViewArgs, non_negative, positive};

@@ -31,7 +31,7 @@ use softvk::io;
 use softvk::lighting::Lighting;
 use softvk::probe::{Aggregate, ProbeSettings, Targets};
 use softvk::raster::gpu::{Method, Renderer};
-use softvk::raster::reference::RasterSettings;
+use softvk::raster::settings::RasterSettings;
 use softvk::{Error, Result};
 
 use super::args::{CheckpointArgs, finite, non_negative, positive, viewing_angle};

@@ -28,7 +28,7 @@ use softvk::io::{self, Silhouettes};
 use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
 use softvk::raster::gpu::{DEFAULT_TILE, Method, Renderer};
-use softvk::raster::reference::{Alpha, Dist, RasterSettings, Rgb};
+use softvk::raster::settings::{Alpha, Dist, RasterSettings, Rgb};
 use softvk::{Error, Result};
 
 use super::args::{AlphaArg, CheckpointArgs, DistArg, finite, positive};

@@ -25,7 +25,7 @@ use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
 use softvk::probe::ProbeSettings;
 use softvk::raster::gpu::{Method, Renderer};
-use softvk::raster::reference::{ColorMode, RasterSettings};
+use softvk::raster::settings::{ColorMode, RasterSettings};
 use softvk::recon::dataset::{self, ClassData, Dataset, Split};
 use softvk::recon::eval::{self, Mask, ScoreRow};
 use softvk::recon::field::{

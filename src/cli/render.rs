@@ -13,7 +13,7 @@ use softvk::gpu::{Context, ContextOptions};
 use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
 use softvk::raster::gpu::{DEFAULT_TILE, Frames, Method, Renderer};
-use softvk::raster::reference::RasterSettings;
+use softvk::raster::settings::RasterSettings;
 use softvk::{Error, Result};
 
 use super::args::{RasterArgs, ViewArgs};

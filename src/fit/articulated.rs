@@ -43,7 +43,7 @@ use crate::lighting::Lighting;
 use crate::raster::backward::GradBuffers;
 use crate::raster::gpu::{GpuScene, Method, Renderer};
 use crate::raster::light::SceneLight;
-use crate::raster::reference::RasterSettings;
+use crate::raster::settings::RasterSettings;
 
 /// Everything settable about an articulated fit.
 #[derive(Clone, Debug, PartialEq)]
@@ -811,8 +811,9 @@ pub mod cpu {
     use crate::error::Result;
     use crate::fit::blur::cpu::blurred_mse;
     use crate::lighting::Lighting;
-    use crate::raster::reference::{MeshF64, RasterSettings, render_f64};
+    use crate::raster::reference::{MeshF64, render_f64};
     use crate::raster::reference_grad::grad_f64;
+    use crate::raster::settings::RasterSettings;
 
     /// The rig's mesh posed at `angles`, in f64.
     pub fn posed(rig: &Rig, angles: &[f64]) -> MeshF64 {

@@ -42,7 +42,7 @@ use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::raster::backward::GradBuffers;
 use crate::raster::gpu::{GpuScene, Renderer};
-use crate::raster::reference::{Alpha, RasterSettings, Rgb};
+use crate::raster::settings::{Alpha, RasterSettings, Rgb};
 
 /// Entry capacity reserved over a count seen: `count × 3 / 2`.
 pub const ENTRY_HEADROOM: (u64, u64) = (3, 2);

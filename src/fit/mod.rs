@@ -26,7 +26,7 @@
 //!   the GPU), each fitted to one image.
 //! - [`crate::gpu::gate`]: the check that lets whole fitting iterations run on the GPU without the host
 //!   reading the binning's entry count ([`mesh_fit`] uses it).
-//! - [`io`]: the fitting commands' files (CPU): target silhouettes, the cameras CSV, the fitted
+//! - [`crate::io`]: the fitting commands' files (CPU): target silhouettes, the cameras CSV, the fitted
 //!   OBJ, all checked on load and written atomically.
 //! - [`report`]: what a fit shows a person (CPU): a contact sheet of predicted against target
 //!   silhouettes, a loss plot, an animated GIF of the progress, PNG writing.

@@ -77,7 +77,7 @@ use crate::mesh::Mesh;
 use crate::raster::backward::GradBuffers;
 use crate::raster::gpu::{GpuScene, Method, Renderer};
 use crate::raster::light::SceneLight;
-use crate::raster::reference::{ColorMode, RasterSettings};
+use crate::raster::settings::{ColorMode, RasterSettings};
 
 /// A rigid pose: `p' = R(rotation) (p − c) + c + translation` (see the [module docs](self)).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -1514,8 +1514,9 @@ pub mod cpu {
     use crate::error::Result;
     use crate::fit::silhouette;
     use crate::lighting::Lighting;
-    use crate::raster::reference::{MeshF64, RasterSettings, render_f64};
+    use crate::raster::reference::{MeshF64, render_f64};
     use crate::raster::reference_grad::grad_f64;
+    use crate::raster::settings::RasterSettings;
 
     /// `mesh` (at rest) moved to `pose` about `centre`.
     pub fn posed(mesh: &MeshF64, centre: DVec3, pose: &Pose) -> MeshF64 {

@@ -43,10 +43,10 @@ use super::gpu::{
     Binned, ColorWork, GpuScene, Method, brute_backward_iterations, reduce_iterations,
     texel_reduce_iterations, tiled_backward_iterations,
 };
-use super::reference::ColorMode;
 use super::reference_grad::{
     self, Gradients, VertexFaces, camera_grad, lighting_grad_surface, lighting_grad_vertex,
 };
+use super::settings::ColorMode;
 use crate::error::{Error, LimitKind, Result};
 use crate::gpu::{
     Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, TEXEL_BYTES, specs,

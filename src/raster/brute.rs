@@ -12,7 +12,7 @@ use crate::error::{Error, Result};
 use crate::gpu::pass_size;
 use crate::gpu::{BufferRange, Context, Kernel, KernelVariants, Recorder, specs};
 use crate::raster::fine::{CARRY_BYTES, FineModes, RasterPush, dispatch_passes};
-use crate::raster::reference::RasterSettings;
+use crate::raster::settings::RasterSettings;
 
 /// Push constants of `downsample_2x2.comp`.
 #[repr(C)]

@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 use crate::gpu::{Context, KernelVariants, Recorder, pass_size, specs};
 use crate::primitives::TileGrid;
 use crate::raster::gpu::tiled_forward_iterations;
-use crate::raster::reference::{self, Alpha, ColorMode, RasterSettings, Rgb};
+use crate::raster::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
 use crate::raster::setup::dist_code;
 
 /// Per-pixel forward state kept for the backward pass. Twin of `PixelAux` in
@@ -285,7 +285,7 @@ impl RasterPush {
         } else {
             0.0
         };
-        let hard = s.dist == reference::Dist::Hard;
+        let hard = s.dist == Dist::Hard;
         RasterPush {
             width,
             height,

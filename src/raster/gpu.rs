@@ -42,8 +42,9 @@ use crate::raster::backward::GradIo;
 use crate::raster::backward::{GradBuffers, GradKernels};
 use crate::raster::brute::{BruteBindings, BruteRaster};
 use crate::raster::fine::{CARRY_BYTES, PixelAux, TiledBindings, TiledRaster, check_tile_size};
-use crate::raster::reference::{ColorMode, FaceColors, MeshF64, RasterSettings};
+use crate::raster::reference::{FaceColors, MeshF64};
 use crate::raster::reference_grad::Gradients;
+use crate::raster::settings::{ColorMode, RasterSettings};
 use crate::raster::setup::{FACE_FINITE, FaceSetupKernel, GpuFaceSetup, GpuView, VertexLayout};
 
 /// Tile edge (pixels) of [`Method::default`]. Chosen by `softvk bench` on lavapipe; see

@@ -20,8 +20,8 @@
 use bytemuck::{Pod, Zeroable};
 
 use super::gpu::GpuScene;
-use super::reference::ColorMode;
 use super::reference_grad::VertexFaces;
+use super::settings::ColorMode;
 use super::setup::VertexLayout;
 use crate::error::{Error, Result};
 use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};

@@ -63,10 +63,10 @@ use crate::camera::{Camera, Projection, look_at, pixel_center};
 use crate::lighting::{Lighting, NORMAL_EPS, face_normal_raw, vertex_normal_sums};
 use crate::mesh::Mesh;
 use crate::raster::reference::{
-    self, Alpha, ColorMode, Dist, FaceColors, FaceSetup, MeshF64, PixelAux, RasterSettings,
-    RenderError, Rgb, barycentric, clip_barycentric, coverage, depth, dist2_point_segment,
-    outside_bbox, setup_view, shade_pixel_aux, surface_texel_index,
+    self, FaceColors, FaceSetup, MeshF64, PixelAux, barycentric, clip_barycentric, coverage, depth,
+    dist2_point_segment, outside_bbox, setup_view, shade_pixel_aux, surface_texel_index,
 };
+use crate::raster::settings::{Alpha, ColorMode, Dist, RasterSettings, RenderError, Rgb};
 
 /// `look_at` normalizes with this eps (SoftRas's).
 const LOOK_AT_EPS: f64 = 1e-5;

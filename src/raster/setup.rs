@@ -14,7 +14,7 @@ use crate::error::{Error, Result};
 use crate::gpu::{BufferRange, Context, Kernel, Recorder, specs};
 #[cfg(doc)]
 use crate::raster::reference;
-use crate::raster::reference::{Dist, RasterSettings};
+use crate::raster::settings::{Dist, RasterSettings};
 
 /// `Projection::Perspective` in [`GpuView::projection`] (`PROJ_PERSPECTIVE` in the kernel).
 pub const PROJ_PERSPECTIVE: u32 = 0;

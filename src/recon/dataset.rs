@@ -45,7 +45,7 @@ use crate::field::voxel::Occupancy;
 use crate::gpu::Context;
 use crate::lighting::Lighting;
 use crate::raster::gpu::{Method, Renderer};
-use crate::raster::reference::RasterSettings;
+use crate::raster::settings::RasterSettings;
 use crate::rng::SplitMix64;
 
 /// Views per object.

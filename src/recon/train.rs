@@ -43,7 +43,7 @@ use crate::mesh::Mesh;
 use crate::nn::{Activation, Conv2d, Layer, Linear, Sequential};
 use crate::raster::backward::GradBuffers;
 use crate::raster::gpu::{GpuScene, Renderer};
-use crate::raster::reference::{ColorMode, RasterSettings};
+use crate::raster::settings::{ColorMode, RasterSettings};
 use crate::rng::SplitMix64;
 
 use super::batch::{BatchBuffers, BatchGather, BatchShape};

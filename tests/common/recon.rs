@@ -4,7 +4,7 @@ use softvk::camera::Camera;
 use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
 use softvk::raster::gpu::{Method, Renderer};
-use softvk::raster::reference::RasterSettings;
+use softvk::raster::settings::RasterSettings;
 use softvk::recon::train::{TrainImages, VIEWS};
 use softvk::recon::view_camera;
 

@@ -46,7 +46,7 @@ pub use stage::SoftvkStage;
 use softvk::camera::{Camera, Projection};
 use softvk::gpu::{Context, Counters, Recorder};
 use softvk::mesh::Mesh;
-use softvk::raster::reference::RasterSettings;
+use softvk::raster::settings::RasterSettings;
 use wgpu::hal::api::Vulkan;
 
 /// The mesh the application deforms: an icosphere(2) of radius 0.5 (162 vertices, 320 faces).

@@ -16,7 +16,7 @@ use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
 use softvk::raster::backward::{GradBuffers, GradIo};
 use softvk::raster::gpu::{GpuScene, Method, Renderer};
-use softvk::raster::reference::RasterSettings;
+use softvk::raster::settings::RasterSettings;
 use softvk::raster::setup::VertexLayout;
 
 use crate::HostError;
