@@ -384,9 +384,18 @@ fn fit_and_report(
     write_interrupted(report_dir, its, opts.iterations)?;
     gif.finish()?;
     io::write_obj(out, &result.mesh.positions, &result.mesh.faces)?;
+    // Resumed: which iterations ran now (the rest after the checkpoint's).
+    let resumed = match result.first_iteration {
+        1 => String::new(),
+        first if first > its => format!("resumed after iteration {its}: nothing left to run; "),
+        first => format!(
+            "resumed after iteration {}: ran iterations {first}..{its}; ",
+            first - 1
+        ),
+    };
     println!(
-        "{its} iterations in {:.1} s ({:.1} ms per iteration); mean IoU {mean:.4} over {views} \
-         views; wrote {} and {}",
+        "{resumed}{its} iterations in {:.1} s ({:.1} ms per iteration); mean IoU {mean:.4} over \
+         {views} views; wrote {} and {}",
         result.seconds,
         1e3 * result.seconds / f64::from(its.max(1)),
         out.display(),

@@ -129,6 +129,8 @@ pub struct MeshFitResult {
     pub mesh: Mesh,
     /// The logged losses.
     pub log: Vec<FitLog>,
+    /// The first iteration this call ran: 1, or resumed, the one after the state's.
+    pub first_iteration: u32,
     /// Wall time of the iterations.
     pub seconds: f64,
     /// Submissions stopped because the entries outgrew their capacity (each grew it and re-ran
@@ -371,6 +373,7 @@ pub fn fit_mesh_resumable(
         it = state.iteration + 1;
         earlier = state.seconds;
     }
+    let first_iteration = it;
     let every = u64::from(opts.log_every);
     while it <= opts.iterations {
         // Up to the next logged iteration in one submission.
@@ -399,6 +402,7 @@ pub fn fit_mesh_resumable(
     Ok(MeshFitResult {
         mesh: fitter.mesh(template)?,
         log,
+        first_iteration,
         seconds,
         regrowths: fitter.regrowths(),
         entry_capacity: fitter.capacity(),
