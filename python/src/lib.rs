@@ -41,7 +41,7 @@ use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
 use softvk::raster::backward::GradBuffers;
 use softvk::raster::gpu::{GpuScene, Method, Renderer};
-use softvk::raster::reference::{self};
+use softvk::raster::reference;
 use softvk::raster::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
 
 /// Lights from Python: `(ambient intensity, ambient colour, [(intensity, colour, direction)])`.
