@@ -527,25 +527,33 @@ enum RasterKind {
     },
 }
 
-impl Drop for Raster {
-    fn drop(&mut self) {
+impl Raster {
+    /// The render's scene and backward buffers, taken out of it; `None` in a forked child,
+    /// which must not free its parent's device memory and leaks them instead (the scene is a
+    /// `ManuallyDrop`).
+    fn take_buffers(&mut self) -> Option<(Option<GpuScene>, Option<GradBuffers>)> {
+        let scene = self.scene.take();
         let grads = self
             .grads
             .get_mut()
             .unwrap_or_else(|e| e.into_inner())
             .take();
         if forked().is_some() {
-            // A forked child must not free its parent's device memory: leak it instead (the
-            // scene is a `ManuallyDrop`).
             std::mem::forget(grads);
-            return;
+            return None;
         }
-        if let Some(scene) = self.scene.take() {
+        Some((scene.map(ManuallyDrop::into_inner), grads))
+    }
+}
+
+impl Drop for Raster {
+    fn drop(&mut self) {
+        if let Some((Some(scene), grads)) = self.take_buffers() {
             // Kept for the next render of its kind; the oldest spare goes (its buffers free
             // themselves through the context, which outlives them).
             let spare = Spare {
                 key: self.key.clone(),
-                scene: ManuallyDrop::into_inner(scene),
+                scene,
                 grads,
             };
             let mut spares = SPARES.lock().unwrap_or_else(|e| e.into_inner());
@@ -650,19 +658,7 @@ impl Raster {
     /// Frees the render's device buffers now (its backward is gone); the garbage collector
     /// would otherwise free them with this object.
     fn release(&mut self) {
-        let scene = self.scene.take();
-        let grads = self
-            .grads
-            .get_mut()
-            .unwrap_or_else(|e| e.into_inner())
-            .take();
-        if forked().is_some() {
-            // Not the parent's to free (see `Drop`).
-            std::mem::forget(grads);
-            return;
-        }
-        drop(scene.map(ManuallyDrop::into_inner));
-        drop(grads);
+        drop(self.take_buffers());
     }
 }
 
