@@ -62,11 +62,11 @@ void main() {
     // This pass's part of the tile's run (all of it without CARRY). A tile whose run ended in
     // an earlier pass is done: uniform across the workgroup.
     uint run = range.y - range.x;
-    uint begin = CARRY != 0u ? min(pc.pass_begin, run) : 0u;
-    uint end = CARRY != 0u ? min(pc.pass_end, run) : run;
-    if (begin > 0u && begin == run) {
+    if (CARRY != 0u && pc.pass_begin > 0u && pc.pass_begin >= run) {
         return;
     }
+    uint begin = CARRY != 0u ? pc.pass_begin : 0u;
+    uint end = CARRY != 0u ? min(pc.pass_end, run) : run;
     uint setup_base = (pc.first_view + view) * pc.face_count;
     uint lanes = subgroup_lanes();
     uint lane = gl_SubgroupInvocationID;
