@@ -2,8 +2,8 @@
 #extension GL_GOOGLE_include_directive : require
 // Brute-force soft rasterization (SoftRas's own method): one invocation per pixel, every face of
 // its view in index order (in passes over consecutive faces where the driver's loop cap asks:
-// `CARRY` in raster_fine.glsl). Twin: `reference::shade_pixel`, step for step. The baseline that the
-// tiled kernel is compared against bit for bit, and benchmarked against.
+// `CARRY` in raster_fine.glsl). Twin: `reference::shade_pixel`, step for step. The baseline
+// that the tiled kernel is compared against bit for bit, and benchmarked against.
 #define CARRY_BINDING 5
 #include "common.glsl"
 #include "raster_fine.glsl"
