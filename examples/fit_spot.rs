@@ -12,6 +12,7 @@ use softvk::camera::{Camera, Projection};
 use softvk::field::Cube;
 use softvk::field::voxel::{iou, visual_hull, voxelize_mesh};
 use softvk::fit::mesh_fit::{MeshFitOptions, default_template, fit_mesh};
+use softvk::fit::silhouette::hard_ious;
 use softvk::gpu::{Context, ContextOptions};
 use softvk::io::{Silhouettes, write_obj};
 use softvk::mesh::Mesh;
@@ -44,22 +45,7 @@ fn silhouettes(ctx: &Context, mesh: &Mesh, cams: &[Camera], size: u32) -> Vec<f3
 }
 
 fn ious(a: &[f32], b: &[f32], px: usize) -> Vec<f64> {
-    a.chunks(px)
-        .zip(b.chunks(px))
-        .map(|(x, y)| {
-            let i = x
-                .iter()
-                .zip(y)
-                .filter(|(p, q)| **p > 0.5 && **q > 0.5)
-                .count();
-            let u = x
-                .iter()
-                .zip(y)
-                .filter(|(p, q)| **p > 0.5 || **q > 0.5)
-                .count();
-            i as f64 / u.max(1) as f64
-        })
-        .collect()
+    hard_ious(a, b, px).into_iter().map(f64::from).collect()
 }
 
 fn main() {

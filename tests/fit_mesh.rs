@@ -235,24 +235,8 @@ fn hard_iou(gpu: &common::Gpu, mesh: &Mesh, cams: &[Camera], targets: &[f32], si
         .unwrap()
         .render_silhouettes(gpu, mesh, cams, &hard, Method::default())
         .unwrap();
-    let px = (size * size) as usize;
-    let ious: Vec<f64> = (0..cams.len())
-        .map(|v| {
-            let (a, t) = (&masks[v * px..(v + 1) * px], &targets[v * px..(v + 1) * px]);
-            let both = a
-                .iter()
-                .zip(t)
-                .filter(|(a, t)| **a > 0.5 && **t > 0.5)
-                .count();
-            let any = a
-                .iter()
-                .zip(t)
-                .filter(|(a, t)| **a > 0.5 || **t > 0.5)
-                .count();
-            both as f64 / any.max(1) as f64
-        })
-        .collect();
-    ious.iter().sum::<f64>() / ious.len() as f64
+    let ious = silhouette::hard_ious(&masks, targets, (size * size) as usize);
+    ious.iter().map(|&x| f64::from(x)).sum::<f64>() / ious.len() as f64
 }
 
 /// The fit converges: on the small problem (a box's silhouettes from two views at 20²), the

@@ -314,23 +314,7 @@ fn fit_and_report(
         &hard,
         Method::default(),
     )?;
-    let px = sil.pixels();
-    let ious: Vec<f32> = (0..views)
-        .map(|v| {
-            let (p, t) = (&pred[v * px..(v + 1) * px], sil.mask(v));
-            let i = p
-                .iter()
-                .zip(t)
-                .filter(|(a, b)| **a > 0.5 && **b > 0.5)
-                .count();
-            let u = p
-                .iter()
-                .zip(t)
-                .filter(|(a, b)| **a > 0.5 || **b > 0.5)
-                .count();
-            i as f32 / u.max(1) as f32
-        })
-        .collect();
+    let ious = softvk::fit::silhouette::hard_ious(&pred, &sil.masks, sil.pixels());
     let mut csv = String::from("view,name,iou\n");
     for (v, iou) in ious.iter().enumerate() {
         csv.push_str(&format!("{v},{},{iou}\n", sil.names[v]));

@@ -305,6 +305,24 @@ impl ImageMse {
     }
 }
 
+/// Per view, the IoU of two sets of hard silhouettes (`pixels` values a view, view after view,
+/// inside where > 0.5): `|a ∩ b| / |a ∪ b|`, 0 for two empty masks. What a fit's report calls
+/// its final IoU.
+pub fn hard_ious(predicted: &[f32], targets: &[f32], pixels: usize) -> Vec<f32> {
+    predicted
+        .chunks(pixels.max(1))
+        .zip(targets.chunks(pixels.max(1)))
+        .map(|(p, t)| {
+            let (mut both, mut any) = (0usize, 0usize);
+            for (a, b) in p.iter().zip(t) {
+                both += usize::from(*a > 0.5 && *b > 0.5);
+                any += usize::from(*a > 0.5 || *b > 0.5);
+            }
+            both as f32 / any.max(1) as f32
+        })
+        .collect()
+}
+
 /// CPU twins, in f64.
 pub mod cpu {
     use super::IOU_EPS;

@@ -489,7 +489,8 @@ mod tests {
             let per_pass = pass_size(run, Some(CAP), tiled);
             let passes = run.div_ceil(per_pass);
             assert!(passes > 1 && tiled(per_pass) <= CAP, "{run}: {per_pass}");
-            // No fewer passes would do, and they are even: the last is at most one face short.
+            // No fewer passes would do, and they are even: the last is short of the others by
+            // fewer faces than there are passes.
             assert!(tiled(run.div_ceil(passes - 1)) > CAP, "{run}: {passes}");
             assert!(run - (passes - 1) * per_pass + passes >= per_pass, "{run}");
         }
