@@ -373,7 +373,7 @@ fn staged_fit(
         while first <= done + n {
             let last = (first + 49).min(done + n);
             // `Some(i)`: the entry buffers grew at iteration i, run again from there.
-            first = f.run(ctx, first, last, None).unwrap().unwrap_or(last + 1);
+            first = f.run(first, last, None).unwrap().unwrap_or(last + 1);
         }
         done += n;
         field = Some(f.into_field());

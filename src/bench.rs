@@ -20,6 +20,7 @@ use std::time::Instant;
 
 use crate::camera::{Camera, Projection};
 use crate::error::{Error, Result};
+use crate::fit::driver::{Fit, Fitter};
 use crate::gpu::{Context, Recorded, Timer};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
@@ -1195,7 +1196,7 @@ fn run_field_fit(
         cube.half
     ));
     let mut it = 1u32;
-    fit_iterations(ctx, &mut fitter, &mut it, 1, None, progress, name)?;
+    fit_iterations(&mut fitter, &mut it, 1, None, progress, name)?;
     let mut timer = if ctx.info().timestamp_valid_bits > 0 {
         Some(Timer::new(ctx, 24)?)
     } else {
@@ -1205,7 +1206,6 @@ fn run_field_fit(
     let mut passes: Vec<(String, Vec<f64>)> = Vec::new();
     for _ in 0..opts.repeat {
         wall.push(fit_iterations(
-            ctx,
             &mut fitter,
             &mut it,
             1,
@@ -1305,7 +1305,7 @@ fn run_pose_fit(
         fitter.capacity()
     ));
     let mut it = 1u32;
-    fit_iterations(ctx, &mut fitter, &mut it, 1, None, progress, name)?;
+    fit_iterations(&mut fitter, &mut it, 1, None, progress, name)?;
     let mut timer = if ctx.info().timestamp_valid_bits > 0 {
         Some(Timer::new(ctx, 32)?)
     } else {
@@ -1315,7 +1315,6 @@ fn run_pose_fit(
     let mut passes: Vec<(String, Vec<f64>)> = Vec::new();
     for _ in 0..opts.repeat {
         wall.push(fit_iterations(
-            ctx,
             &mut fitter,
             &mut it,
             1,
@@ -1396,7 +1395,7 @@ fn run_pose_fit(
 /// shared CPU device the GPU time itself moves with the load. Says so through `progress`.
 fn time_fit_loop(
     ctx: &Context,
-    fitter: &mut impl SpanFitter,
+    fitter: &mut Fitter<'_, impl Fit>,
     it: &mut u32,
     k: u32,
     progress: &mut impl FnMut(&str),
@@ -1410,7 +1409,7 @@ fn time_fit_loop(
     };
     let (mut wall, mut gpu) = (0.0, 0.0);
     for _ in 0..FIT_BATCH / k {
-        wall += fit_iterations(ctx, fitter, it, k, timer.as_mut(), progress, name)?;
+        wall += fit_iterations(fitter, it, k, timer.as_mut(), progress, name)?;
         if let Some(timer) = &timer {
             gpu += timer.results(ctx)?.iter().map(|t| t.ms).sum::<f64>();
         }
@@ -1443,69 +1442,10 @@ struct LoopTiming {
     passes: Vec<(String, f64)>,
 }
 
-/// A fitter that runs a span of iterations in one submission and says which one its gate
-/// stopped (the mesh, field and pose fitters), for [`fit_iterations`].
-trait SpanFitter {
-    fn run_span(
-        &mut self,
-        ctx: &Context,
-        first: u32,
-        last: u32,
-        timer: Option<&mut Timer>,
-    ) -> Result<Option<u32>>;
-    fn entry_capacity(&self) -> u64;
-}
-
-impl SpanFitter for crate::fit::mesh_fit::MeshFitter<'_> {
-    fn run_span(
-        &mut self,
-        _: &Context,
-        a: u32,
-        b: u32,
-        t: Option<&mut Timer>,
-    ) -> Result<Option<u32>> {
-        self.run(a, b, t)
-    }
-    fn entry_capacity(&self) -> u64 {
-        self.capacity()
-    }
-}
-
-impl SpanFitter for crate::fit::field_fit::FieldFitter {
-    fn run_span(
-        &mut self,
-        ctx: &Context,
-        a: u32,
-        b: u32,
-        t: Option<&mut Timer>,
-    ) -> Result<Option<u32>> {
-        self.run(ctx, a, b, t)
-    }
-    fn entry_capacity(&self) -> u64 {
-        self.capacity()
-    }
-}
-
-impl SpanFitter for crate::fit::pose::PoseFitter<'_> {
-    fn run_span(
-        &mut self,
-        _: &Context,
-        a: u32,
-        b: u32,
-        t: Option<&mut Timer>,
-    ) -> Result<Option<u32>> {
-        self.run(a, b, t)
-    }
-    fn entry_capacity(&self) -> u64 {
-        self.capacity()
-    }
-}
-
 /// Runs iterations `it .. it + k` of `fitter` in one submission (again from a stopped one, until
 /// all ran) and advances `it`; the wall time of the submission that ran them all, ms.
 fn fit_iterations(
-    ctx: &Context,
-    fitter: &mut impl SpanFitter,
+    fitter: &mut Fitter<'_, impl Fit>,
     it: &mut u32,
     k: u32,
     mut timer: Option<&mut Timer>,
@@ -1514,7 +1454,7 @@ fn fit_iterations(
 ) -> Result<f64> {
     loop {
         let start = Instant::now();
-        let stopped = fitter.run_span(ctx, *it, *it + k - 1, timer.as_deref_mut())?;
+        let stopped = fitter.run(*it, *it + k - 1, timer.as_deref_mut())?;
         let wall = start.elapsed().as_secs_f64() * 1e3;
         match stopped {
             None => {
@@ -1525,7 +1465,7 @@ fn fit_iterations(
                 progress(&format!(
                     "{name}: iteration {again} outgrew the entry capacity; now {} (re-run, not \
                      timed)",
-                    fitter.entry_capacity()
+                    Fit::capacity(&**fitter)
                 ));
                 *it = again;
             }
@@ -1624,7 +1564,7 @@ pub fn run_fit(
             fitter.capacity()
         ));
         let mut it = 1u32;
-        fit_iterations(ctx, &mut fitter, &mut it, 1, None, &mut progress, name)?;
+        fit_iterations(&mut fitter, &mut it, 1, None, &mut progress, name)?;
         progress(&format!(
             "{name}: warm-up done, {} entries; timing {} iterations",
             fitter.last_entries(),
@@ -1640,7 +1580,6 @@ pub fn run_fit(
         let mut passes: Vec<(String, Vec<f64>)> = Vec::new();
         for _ in 0..opts.repeat {
             wall.push(fit_iterations(
-                ctx,
                 &mut fitter,
                 &mut it,
                 1,

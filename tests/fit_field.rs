@@ -110,7 +110,7 @@ fn one_gpu_iteration_equals_the_iteration_of_the_cpu_twins() {
             .map(|_| (4.0 * rng.unit() - 2.0) as f32)
             .collect();
         fitter.field().set_params(&ctx, &p0).unwrap();
-        assert_eq!(fitter.run(&ctx, 1, 1, None).unwrap(), None);
+        assert_eq!(fitter.run(1, 1, None).unwrap(), None);
         let (l_sil, l_geo) = fitter.read_losses(&ctx).unwrap();
 
         // The samples: the GPU's, checked against the sampler's twin.
@@ -315,7 +315,7 @@ fn a_field_fit_that_outgrows_its_entry_capacity_equals_one_that_never_did() {
         p.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
     };
     let mut ample = FieldFitter::new(&ctx, &targets, &opts).unwrap();
-    assert_eq!(ample.run(&ctx, 1, 3, None).unwrap(), None);
+    assert_eq!(ample.run(1, 3, None).unwrap(), None);
     assert_eq!(ample.regrowths(), 0);
     let entries = ample.last_entries();
     assert!(entries > 1);
@@ -325,12 +325,12 @@ fn a_field_fit_that_outgrows_its_entry_capacity_equals_one_that_never_did() {
     assert_eq!(tight.capacity(), 1);
     // Iteration 1 does not fit: it and the later ones change nothing, and the capacity grows.
     let before = params(&tight);
-    assert_eq!(tight.run(&ctx, 1, 3, None).unwrap(), Some(1));
+    assert_eq!(tight.run(1, 3, None).unwrap(), Some(1));
     assert_eq!(params(&tight), before);
     assert_eq!(tight.regrowths(), 1);
     assert!(tight.capacity() > 1);
     let mut it = 1;
-    while let Some(stopped) = tight.run(&ctx, it, 3, None).unwrap() {
+    while let Some(stopped) = tight.run(it, 3, None).unwrap() {
         it = stopped;
     }
     assert_eq!(params(&tight), params(&ample));

@@ -59,7 +59,7 @@ fn options() -> FieldTrainOptions {
 /// its loss, at `params`.
 fn loss_at(trainer: &mut FieldReconTrainer<'_>, params: &[f32]) -> f64 {
     trainer.write_params(params).unwrap();
-    assert_eq!(trainer.run(1, 1).unwrap(), None);
+    assert_eq!(trainer.run(1, 1, None).unwrap(), None);
     f64::from(trainer.read_log(1).unwrap().silhouette)
 }
 
@@ -141,7 +141,7 @@ fn train_run(
     let mut it = 1;
     while it <= iterations {
         let last = (it + k - 1).min(iterations);
-        match trainer.run(it, last).unwrap() {
+        match trainer.run(it, last, None).unwrap() {
             Some(stopped) => it = stopped,
             None => {
                 losses.push(trainer.read_log(last).unwrap().silhouette);
@@ -183,7 +183,7 @@ fn reconstruction_is_the_twins_field_and_the_model_round_trips() {
     let data = data(&gpu);
     let opts = options();
     let mut trainer = FieldReconTrainer::new(&gpu, &data, &opts, None).unwrap();
-    assert_eq!(trainer.run(1, 30).unwrap(), None);
+    assert_eq!(trainer.run(1, 30, None).unwrap(), None);
     let model = ReconModel {
         net: opts.net.net,
         field: Some(opts.net.mlp),
@@ -280,7 +280,7 @@ fn the_largest_batch_runs_and_one_more_is_an_input_error() {
         ..options()
     };
     let mut trainer = FieldReconTrainer::new(&gpu, &data, &opts, None).unwrap();
-    assert_eq!(trainer.run(1, 1).unwrap(), None);
+    assert_eq!(trainer.run(1, 1, None).unwrap(), None);
     for bad in [
         FieldTrainOptions {
             batch: MAX_BATCH + 1,

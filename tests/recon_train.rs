@@ -59,7 +59,7 @@ fn one_training_iteration_equals_the_chain_of_twins() {
         .iter()
         .map(|&p| f64::from(p))
         .collect();
-    assert_eq!(trainer.run(1, 1).unwrap(), None);
+    assert_eq!(trainer.run(1, 1, None).unwrap(), None);
     let log = trainer.read_log(1).unwrap();
     let got = trainer.read_gradient().unwrap();
     assert!(log.color > 0.0, "the colour loss is on");
@@ -179,7 +179,7 @@ fn train_run(
     let mut it = 1;
     while it <= iterations {
         let last = (it + k - 1).min(iterations);
-        match trainer.run(it, last).unwrap() {
+        match trainer.run(it, last, None).unwrap() {
             Some(stopped) => it = stopped,
             None => {
                 losses.push(trainer.read_log(last).unwrap().silhouette);
@@ -221,7 +221,7 @@ fn the_learning_rate_step_applies_from_its_iteration_on() {
     let data = data(&gpu);
     let params = |opts: &TrainOptions, iterations: u32| {
         let mut trainer = ReconTrainer::new(&gpu, &data, opts, None).unwrap();
-        assert_eq!(trainer.run(1, iterations).unwrap(), None);
+        assert_eq!(trainer.run(1, iterations, None).unwrap(), None);
         trainer.read_params().unwrap()
     };
     // A factor of 0 from iteration 3 on: iterations 3 and 4 change nothing.

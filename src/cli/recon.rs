@@ -18,6 +18,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use softvk::camera::Camera;
 use softvk::field::MlpLayout;
 use softvk::fit::AdamOptions;
+use softvk::fit::driver::{Fit, Fitter};
 use softvk::fit::report::{self, GifWriter, Series};
 use softvk::gpu::{Context, ContextOptions};
 use softvk::io::write_obj_colored;
@@ -29,10 +30,12 @@ use softvk::raster::settings::{ColorMode, RasterSettings};
 use softvk::recon::dataset::{self, ClassData, Dataset, Split};
 use softvk::recon::eval::{self, Mask, ScoreRow};
 use softvk::recon::field::{
-    self, FieldNet, FieldReconTrainer, FieldReconstructor, FieldTrainOptions,
+    self, FieldNet, FieldReconTrainer, FieldReconTraining, FieldReconstructor, FieldTrainOptions,
 };
 use softvk::recon::model::{ReconModel, Reconstruction, Reconstructor, SETTINGS, TrainState};
-use softvk::recon::train::{self, LrStep, NetShape, ReconTrainer, TrainImages, TrainOptions};
+use softvk::recon::train::{
+    self, LrStep, NetShape, ReconTrainer, ReconTraining, TrainImages, TrainOptions,
+};
 use softvk::{Error, Result};
 
 use super::args::{non_negative, positive};
@@ -327,10 +330,8 @@ fn validate(ctx: &Context, model: &ReconModel, val: &Dataset, views: &[usize]) -
     Ok(all.iter().sum::<f64>() / all.len().max(1) as f64)
 }
 
-/// What the training loop needs of either trainer.
-trait Training {
-    /// Runs iterations `first ..= last`; `Some(i)` when iteration `i` must run again.
-    fn run(&mut self, first: u32, last: u32) -> Result<Option<u32>>;
+/// What the training loop needs of either trainer beside its iterations.
+trait Training: Fit {
     /// The log row of the last iteration: iteration, L_sil, L_col, L_lap, L_flat, total.
     fn log(&self, iteration: u32) -> Result<[f64; 6]>;
     fn params(&self) -> Result<Vec<f32>>;
@@ -338,10 +339,7 @@ trait Training {
     fn set_moments(&self, m: &[f32], v: &[f32]) -> Result<()>;
 }
 
-impl Training for ReconTrainer<'_> {
-    fn run(&mut self, first: u32, last: u32) -> Result<Option<u32>> {
-        ReconTrainer::run(self, first, last)
-    }
+impl Training for ReconTraining<'_> {
     fn log(&self, iteration: u32) -> Result<[f64; 6]> {
         let l = self.read_log(iteration)?;
         Ok([
@@ -364,10 +362,7 @@ impl Training for ReconTrainer<'_> {
     }
 }
 
-impl Training for FieldReconTrainer<'_> {
-    fn run(&mut self, first: u32, last: u32) -> Result<Option<u32>> {
-        FieldReconTrainer::run(self, first, last)
-    }
+impl Training for FieldReconTraining<'_> {
     fn log(&self, iteration: u32) -> Result<[f64; 6]> {
         let l = f64::from(self.read_log(iteration)?.silhouette);
         Ok([f64::from(iteration), l, 0.0, 0.0, 0.0, l])
@@ -504,122 +499,152 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
     };
     let ctx = Context::new(&ContextOptions::from_env())?;
     let images = train_images(&data);
-    let resume_params = resumed.as_ref().map(|m| &m.params[..]);
-    let mut trainer: Box<dyn Training> = if args.field {
-        Box::new(FieldReconTrainer::new(
-            &ctx,
-            &images,
-            &field_opts,
-            resume_params,
-        )?)
+    let resume_params = resumed.as_ref().map(|m| m.params.clone());
+    let resume_params = resume_params.as_deref();
+    let run = TrainingRun {
+        args,
+        ctx: &ctx,
+        val,
+        dir,
+        ckpt_path,
+        resumed,
+        model_of: |params: Vec<f32>, iteration: u32, train: Option<TrainState>| ReconModel {
+            net,
+            field: field_layout,
+            params,
+            iteration,
+            train,
+        },
+        settings,
+    };
+    if args.field {
+        let trainer = FieldReconTrainer::new(&ctx, &images, &field_opts, resume_params)?;
+        run.go(trainer)
     } else {
-        Box::new(ReconTrainer::new(&ctx, &images, &mesh_opts, resume_params)?)
-    };
-    let (mut log, mut vals, start) = match &resumed {
-        Some(m) => {
-            let t = m.train.as_ref().expect("checked above");
-            trainer.set_moments(&t.adam_m, &t.adam_v)?;
-            (t.log.clone(), t.val.clone(), m.iteration)
-        }
-        None => (Vec::new(), Vec::new(), 0),
-    };
-    std::fs::create_dir_all(&dir)
-        .map_err(|e| Error::Input(format!("cannot create {}: {e}", dir.display())))?;
-    let val_views = spread_views(args.val_views);
-    let bar = ProgressBar::new(u64::from(args.iters));
-    bar.set_style(
-        ProgressStyle::with_template("{bar:30} {pos}/{len} it {elapsed} eta {eta} {msg}")
-            .expect("a valid template"),
-    );
-    bar.set_position(u64::from(start));
-    let model_of = |params: Vec<f32>, iteration: u32, train: Option<TrainState>| ReconModel {
-        net,
-        field: field_layout,
-        params,
-        iteration,
-        train,
-    };
-    let save = |trainer: &dyn Training, it: u32, log: &[[f64; 6]], vals: &[[f64; 2]]| {
-        let (adam_m, adam_v) = trainer.moments()?;
-        model_of(
-            trainer.params()?,
-            it,
-            Some(TrainState {
-                adam_m,
-                adam_v,
-                settings,
-                log: log.to_vec(),
-                val: vals.to_vec(),
-            }),
-        )
-        .save(&ckpt_path)
-    };
-    let mut it = start + 1;
-    let mut done = start;
-    while it <= args.iters {
-        let boundary = (it - 1) / args.val_every * args.val_every + args.val_every;
-        let last = (it + args.log_every - 1).min(args.iters).min(boundary);
-        if let Some(stopped) = trainer.run(it, last)? {
-            it = stopped;
-            continue;
-        }
-        let row = trainer.log(last)?;
-        if !row[5].is_finite() {
-            return Err(Error::Input(format!(
-                "training diverged at iteration {last} (loss {}); try a smaller --lr",
-                row[5]
-            )));
-        }
-        log.push(row);
-        done = last;
-        bar.set_position(u64::from(last));
-        bar.set_message(format!("L_sil {:.4}", row[1]));
-        let interrupted = interrupt::requested().is_some();
-        if last == boundary || last == args.iters {
-            if let Some(val) = &val {
-                let model = model_of(trainer.params()?, last, None);
-                let iou = validate(&ctx, &model, val, &val_views)?;
-                vals.push([f64::from(last), iou]);
-                let line = format!(
-                    "iteration {last}: L_sil {:.4}, validation 3D IoU {iou:.4}",
-                    row[1]
-                );
-                if bar.is_hidden() {
-                    eprintln!("{line}");
-                } else {
-                    bar.println(line);
-                }
+        run.go(ReconTrainer::new(&ctx, &images, &mesh_opts, resume_params)?)
+    }
+}
+
+/// A training run's inputs beside its trainer.
+struct TrainingRun<'a, M> {
+    args: &'a TrainReconArgs,
+    ctx: &'a Context,
+    val: Option<Dataset>,
+    dir: PathBuf,
+    ckpt_path: PathBuf,
+    resumed: Option<ReconModel>,
+    /// The model of parameters after an iteration, with the training state of a checkpoint.
+    model_of: M,
+    settings: [f64; SETTINGS],
+}
+
+impl<M: Fn(Vec<f32>, u32, Option<TrainState>) -> ReconModel> TrainingRun<'_, M> {
+    /// Trains to `--iters` (validating and checkpointing every `--val-every`, stopping at an
+    /// interrupt with a checkpoint) and writes the model.
+    fn go<T: Training>(self, mut trainer: Fitter<'_, T>) -> Result<()> {
+        let Self {
+            args,
+            ctx,
+            val,
+            dir,
+            ckpt_path,
+            resumed,
+            model_of,
+            settings,
+        } = self;
+        let (mut log, mut vals, start) = match &resumed {
+            Some(m) => {
+                let t = m.train.as_ref().expect("checked above");
+                trainer.set_moments(&t.adam_m, &t.adam_v)?;
+                (t.log.clone(), t.val.clone(), m.iteration)
             }
-        }
-        if last == boundary || last == args.iters || interrupted {
-            save(trainer.as_ref(), last, &log, &vals)?;
-            write_train_report(&dir, &log, &vals)?;
-        }
-        if interrupted {
-            break;
-        }
-        it = last + 1;
-    }
-    bar.finish_and_clear();
-    if done < args.iters {
-        eprintln!(
-            "softvk: stopped after iteration {done} of {}; `--resume` goes on from {}",
-            args.iters,
-            ckpt_path.display()
+            None => (Vec::new(), Vec::new(), 0),
+        };
+        std::fs::create_dir_all(&dir)
+            .map_err(|e| Error::Input(format!("cannot create {}: {e}", dir.display())))?;
+        let val_views = spread_views(args.val_views);
+        let bar = ProgressBar::new(u64::from(args.iters));
+        bar.set_style(
+            ProgressStyle::with_template("{bar:30} {pos}/{len} it {elapsed} eta {eta} {msg}")
+                .expect("a valid template"),
         );
-        return Ok(());
+        bar.set_position(u64::from(start));
+        let save = |trainer: &T, it: u32, log: &[[f64; 6]], vals: &[[f64; 2]]| {
+            let (adam_m, adam_v) = trainer.moments()?;
+            model_of(
+                trainer.params()?,
+                it,
+                Some(TrainState {
+                    adam_m,
+                    adam_v,
+                    settings,
+                    log: log.to_vec(),
+                    val: vals.to_vec(),
+                }),
+            )
+            .save(&ckpt_path)
+        };
+        // Submissions of `--log-every` iterations, ending at each validation.
+        let boundary = |it: u32| (it - 1) / args.val_every * args.val_every + args.val_every;
+        let done = trainer.drive(
+            start + 1,
+            args.iters,
+            |_, it| Ok((it + args.log_every - 1).min(boundary(it))),
+            |trainer, first, last| {
+                let row = trainer.log(last)?;
+                if !row[5].is_finite() {
+                    return Err(Error::Input(format!(
+                        "training diverged at iteration {last} (loss {}); try a smaller --lr",
+                        row[5]
+                    )));
+                }
+                log.push(row);
+                bar.set_position(u64::from(last));
+                bar.set_message(format!("L_sil {:.4}", row[1]));
+                let interrupted = interrupt::requested().is_some();
+                let at_boundary = last == boundary(first) || last == args.iters;
+                if at_boundary && let Some(val) = &val {
+                    let model = model_of(trainer.params()?, last, None);
+                    let iou = validate(ctx, &model, val, &val_views)?;
+                    vals.push([f64::from(last), iou]);
+                    let line = format!(
+                        "iteration {last}: L_sil {:.4}, validation 3D IoU {iou:.4}",
+                        row[1]
+                    );
+                    if bar.is_hidden() {
+                        eprintln!("{line}");
+                    } else {
+                        bar.println(line);
+                    }
+                }
+                if at_boundary || interrupted {
+                    save(trainer, last, &log, &vals)?;
+                    write_train_report(&dir, &log, &vals)?;
+                }
+                Ok(!interrupted)
+            },
+        )?;
+        bar.finish_and_clear();
+        if done < args.iters {
+            eprintln!(
+                "softvk: stopped after iteration {done} of {}; `--resume` goes on from {}",
+                args.iters,
+                ckpt_path.display()
+            );
+            return Ok(());
+        }
+        model_of(trainer.params()?, done, None).save(&args.out)?;
+        let last = log.last().copied().unwrap_or([0.0; 6]);
+        println!(
+            "trained {done} iterations: L_sil {:.4}{}; model {}",
+            last[1],
+            vals.last()
+                .map(|v| format!(", validation 3D IoU {:.4}", v[1]))
+                .unwrap_or_default(),
+            args.out.display()
+        );
+        Ok(())
     }
-    model_of(trainer.params()?, done, None).save(&args.out)?;
-    let last = log.last().copied().unwrap_or([0.0; 6]);
-    println!(
-        "trained {done} iterations: L_sil {:.4}{}; model {}",
-        last[1],
-        vals.last()
-            .map(|v| format!(", validation 3D IoU {:.4}", v[1]))
-            .unwrap_or_default(),
-        args.out.display()
-    );
-    Ok(())
 }
 
 /// Whether a run with `now`'s settings would have run a checkpoint's first `done` iterations

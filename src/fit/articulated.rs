@@ -31,6 +31,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::adam::{Adam, AdamOptions};
 use super::blur::{BlurredMse, MAX_BLUR_STD};
+use super::driver::{self, Fit, Fitter};
 use super::max_entry_capacity;
 use super::pose::{PoseTarget, Schedule, check_target};
 use super::rig::{Rig, bone_of};
@@ -38,7 +39,7 @@ use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::gate::IterationGate;
 use crate::gpu::groups;
-use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, Timer, specs};
+use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, specs};
 use crate::lighting::Lighting;
 use crate::raster::backward::GradBuffers;
 use crate::raster::gpu::{GpuScene, Method, Renderer};
@@ -277,7 +278,7 @@ pub struct ArticulatedLog {
 /// An articulated fit's GPU state: the scene with its guarded bins, the lighting, the loss, the
 /// skeleton and skin, the angles and their Adam optimizer, ready to run iterations
 /// ([`ArticulatedFitter::run`]) with no read-back.
-pub struct ArticulatedFitter<'c> {
+pub struct ArticulatedFit<'c> {
     ctx: &'c Context,
     opts: ArticulatedFitOptions,
     renderer: Renderer,
@@ -286,7 +287,6 @@ pub struct ArticulatedFitter<'c> {
     mse: BlurredMse,
     target: Buffer,
     grads: GradBuffers,
-    gate: IterationGate,
     fk: Kernel,
     apply: Kernel,
     grad: Kernel,
@@ -309,10 +309,12 @@ pub struct ArticulatedFitter<'c> {
     push: SkinPush,
     capacity: u64,
     max_capacity: u64,
-    regrowths: u32,
 }
 
-impl<'c> ArticulatedFitter<'c> {
+/// An articulated fit ready to run iterations ([`Fitter::run`]).
+pub type ArticulatedFitter<'c> = Fitter<'c, ArticulatedFit<'c>>;
+
+impl<'c> Fitter<'c, ArticulatedFit<'c>> {
     /// The fit of `rig`'s angles seen from `camera` to `target` (RGBA per pixel, row 0 at the
     /// top, the settings' size) from `init` (radians, one per joint): uploads everything,
     /// counts the entries of the first pose once and sizes the guarded bins with the mesh fit's
@@ -362,7 +364,7 @@ impl<'c> ArticulatedFitter<'c> {
             .collect();
         let angles: Vec<f32> = init.iter().map(|&a| a as f32).collect();
         let max_capacity = max_entry_capacity(ctx, &renderer, &scene);
-        let mut fitter = Self {
+        let mut fit = ArticulatedFit {
             ctx,
             mse: BlurredMse::new(ctx, 1, opts.settings.width, opts.settings.height)?,
             target: ctx.upload_buffer("articulated target", target)?,
@@ -372,7 +374,6 @@ impl<'c> ArticulatedFitter<'c> {
                 Method::Tiled { tile: opts.tile },
                 1,
             )?,
-            gate: IterationGate::new(ctx)?,
             fk: Kernel::new(ctx, &specs::SKIN_FK)?,
             apply: Kernel::new(ctx, &specs::SKIN_APPLY)?,
             grad: Kernel::new(ctx, &specs::SKIN_GRAD)?,
@@ -406,17 +407,44 @@ impl<'c> ArticulatedFitter<'c> {
             },
             capacity: 1,
             max_capacity,
-            regrowths: 0,
             light,
             opts: opts.clone(),
             renderer,
             scene,
         };
         let (sigma, gamma) = opts.sigma_gamma(0);
-        fitter.fit_capacity(sigma, gamma)?;
-        Ok(fitter)
+        fit.fit_capacity(sigma, gamma)?;
+        Fitter::from_fit(ctx, fit)
     }
 
+    /// The MSE (of images blurred by `blur` pixels) and the render at the current angles with σ
+    /// and γ (no step), re-run until the entries fit.
+    pub fn evaluate(&mut self, sigma: f64, gamma: f64, blur: f64) -> Result<(f64, Vec<[f32; 4]>)> {
+        self.scene.set_blur(sigma, gamma)?;
+        self.submit_guarded(|fit, rec, gate| {
+            fit.record_pose(rec)?;
+            let ArticulatedFit {
+                scene,
+                renderer,
+                mse,
+                target,
+                ..
+            } = fit;
+            renderer.record_forward_guarded(rec, scene, gate, 0, |rec, binned| {
+                let scene = binned.scene();
+                mse.record(rec, scene.output().whole(), target.whole(), None, blur)
+            })
+        })?;
+        let s = &self.opts.settings;
+        Ok((
+            f64::from(self.mse.read_loss(self.ctx)?),
+            self.ctx
+                .read_buffer(self.scene.output(), 0, (s.width * s.height) as usize)?,
+        ))
+    }
+}
+
+impl ArticulatedFit<'_> {
     /// Sizes the guarded bins for the angles now at σ and γ (one counting submission); the fit
     /// does it at the start of every σ/γ stage. It changes no result.
     pub fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()> {
@@ -467,10 +495,111 @@ impl<'c> ArticulatedFitter<'c> {
         })
     }
 
-    /// Records iteration `it` (from 1): the pose and its lighting, then the guarded forward
-    /// with the rest gated on the count: the MSE, the backward, the lighting's backward, the
-    /// angle gradient (and the log row) and the Adam step.
-    fn record_iteration(&mut self, rec: &mut Recorder<'_>, it: u32) -> Result<()> {
+    /// Sizes the bins and the backward's buffers for `total` entries with the headroom.
+    fn resize(&mut self, total: u64) -> Result<()> {
+        let capacity = super::with_headroom(
+            self.ctx,
+            "an articulated fit's binning (with the backward's partials)",
+            total,
+            self.max_capacity,
+            "use larger tiles or a smaller σ",
+        )?;
+        self.grads = super::reserve_guarded(
+            self.ctx,
+            &self.renderer,
+            &mut self.scene,
+            self.opts.tile,
+            capacity,
+            false,
+        )?;
+        self.capacity = capacity;
+        Ok(())
+    }
+
+    /// The log of iterations `first ..= last` that ran: each one's loss, σ, γ and the angles
+    /// it evaluated (`seconds` as given).
+    pub fn log(&self, first: u32, last: u32, seconds: f64) -> Result<Vec<ArticulatedLog>> {
+        if first == 0 || first > last || last > self.opts.iterations {
+            return Err(Error::Misuse(format!(
+                "articulated fit: the log of {first}..={last} of 1..={}",
+                self.opts.iterations
+            )));
+        }
+        let row = self.push.joint_count as usize + 1;
+        let floats: Vec<f32> = self.ctx.read_buffer(
+            &self.log,
+            4 * (row as u64) * u64::from(first - 1),
+            row * (last - first + 1) as usize,
+        )?;
+        Ok(floats
+            .chunks_exact(row)
+            .zip(first..=last)
+            .map(|(r, it)| {
+                let (sigma, gamma, blur) = self.opts.stage(it - 1);
+                ArticulatedLog {
+                    iteration: it,
+                    loss: f64::from(r[0]),
+                    sigma,
+                    gamma,
+                    blur,
+                    angles: r[1..].iter().map(|&a| f64::from(a)).collect(),
+                    seconds,
+                }
+            })
+            .collect())
+    }
+
+    /// Replaces the target (same size, finite).
+    pub fn set_target(&mut self, target: &[[f32; 4]]) -> Result<()> {
+        check_target(target, &self.opts.settings)?;
+        self.ctx.write_buffer(&self.target, 0, target)
+    }
+
+    /// dL/dθ of the last iteration that ran (the gradient its Adam step took).
+    pub fn gradient(&self) -> Result<Vec<f64>> {
+        let g: Vec<f32> =
+            self.ctx
+                .read_buffer(&self.d_params, 0, self.push.joint_count as usize)?;
+        Ok(g.into_iter().map(f64::from).collect())
+    }
+
+    /// The angles now (radians).
+    pub fn angles(&self) -> Result<Vec<f64>> {
+        let a: Vec<f32> = self
+            .ctx
+            .read_buffer(&self.params, 0, self.push.joint_count as usize)?;
+        Ok(a.into_iter().map(f64::from).collect())
+    }
+
+    /// The skinned positions the last pose recorded (packed xyz), read back.
+    pub fn posed_positions(&self) -> Result<Vec<[f32; 3]>> {
+        self.ctx
+            .read_buffer(self.scene.positions(), 0, self.push.vertex_count as usize)
+    }
+
+    /// Entries the bins and the backward's partials hold now.
+    pub fn capacity(&self) -> u64 {
+        self.capacity
+    }
+}
+
+impl Fit for ArticulatedFit<'_> {
+    const NAME: &'static str = "articulated fit";
+
+    fn last_iteration(&self) -> u32 {
+        self.opts.iterations
+    }
+
+    /// The pose and its lighting, then the guarded forward with the rest gated on the count:
+    /// the MSE, the backward, the lighting's backward, the angle gradient (and the log row) and
+    /// the Adam step.
+    fn record_iteration(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        gate: &mut IterationGate,
+        it: u32,
+        _row: u32,
+    ) -> Result<()> {
         let (sigma, gamma, blur) = self.opts.stage(it - 1);
         self.scene.set_blur(sigma, gamma)?;
         self.adam.set_options(self.opts.adam(it - 1))?;
@@ -481,7 +610,6 @@ impl<'c> ArticulatedFitter<'c> {
         };
         let Self {
             scene,
-            gate,
             renderer,
             mse,
             target,
@@ -547,169 +675,12 @@ impl<'c> ArticulatedFitter<'c> {
         })
     }
 
-    /// Runs iterations `first ..= last` (from 1) in one submission (GPU timestamps into
-    /// `timer`). `None` when all ran; `Some(i)` when iteration `i` outgrew the entry capacity:
-    /// it and the later ones changed nothing, the capacity has grown, and they are to be run
-    /// again.
-    pub fn run(&mut self, first: u32, last: u32, timer: Option<&mut Timer>) -> Result<Option<u32>> {
-        if first == 0 || first > last || last > self.opts.iterations {
-            return Err(Error::Misuse(format!(
-                "articulated fit: iterations {first}..={last} of 1..={}",
-                self.opts.iterations
-            )));
-        }
-        let ctx = self.ctx;
-        ctx.submit_and_wait_timed(timer, |rec| {
-            self.gate.reset();
-            for it in first..=last {
-                self.record_iteration(rec, it)?;
-            }
-            Ok(())
-        })?;
-        let status = self.gate.read(ctx)?;
-        if let Some((stopped, total)) = status.stopped {
-            if stopped < first || stopped > last || total <= self.capacity {
-                return Err(Error::Limit(format!(
-                    "articulated fit: the gate stopped iteration {stopped} of {first}..={last} \
-                     with {total} entries for a capacity of {}",
-                    self.capacity
-                )));
-            }
-            self.regrowths += 1;
-            self.resize(total)?;
-            return Ok(Some(stopped));
-        }
-        Ok(None)
-    }
-
-    /// Sizes the bins and the backward's buffers for `total` entries with the headroom.
-    fn resize(&mut self, total: u64) -> Result<()> {
-        let capacity = super::with_headroom(
-            self.ctx,
-            "an articulated fit's binning (with the backward's partials)",
-            total,
-            self.max_capacity,
-            "use larger tiles or a smaller σ",
-        )?;
-        self.grads = super::reserve_guarded(
-            self.ctx,
-            &self.renderer,
-            &mut self.scene,
-            self.opts.tile,
-            capacity,
-            false,
-        )?;
-        self.capacity = capacity;
-        Ok(())
-    }
-
-    /// The log of iterations `first ..= last` that ran: each one's loss, σ, γ and the angles
-    /// it evaluated (`seconds` as given).
-    pub fn log(&self, first: u32, last: u32, seconds: f64) -> Result<Vec<ArticulatedLog>> {
-        if first == 0 || first > last || last > self.opts.iterations {
-            return Err(Error::Misuse(format!(
-                "articulated fit: the log of {first}..={last} of 1..={}",
-                self.opts.iterations
-            )));
-        }
-        let row = self.push.joint_count as usize + 1;
-        let floats: Vec<f32> = self.ctx.read_buffer(
-            &self.log,
-            4 * (row as u64) * u64::from(first - 1),
-            row * (last - first + 1) as usize,
-        )?;
-        Ok(floats
-            .chunks_exact(row)
-            .zip(first..=last)
-            .map(|(r, it)| {
-                let (sigma, gamma, blur) = self.opts.stage(it - 1);
-                ArticulatedLog {
-                    iteration: it,
-                    loss: f64::from(r[0]),
-                    sigma,
-                    gamma,
-                    blur,
-                    angles: r[1..].iter().map(|&a| f64::from(a)).collect(),
-                    seconds,
-                }
-            })
-            .collect())
-    }
-
-    /// Replaces the target (same size, finite).
-    pub fn set_target(&mut self, target: &[[f32; 4]]) -> Result<()> {
-        check_target(target, &self.opts.settings)?;
-        self.ctx.write_buffer(&self.target, 0, target)
-    }
-
-    /// The MSE (of images blurred by `blur` pixels) and the render at the current angles with σ
-    /// and γ (no step), re-run until the entries fit.
-    pub fn evaluate(&mut self, sigma: f64, gamma: f64, blur: f64) -> Result<(f64, Vec<[f32; 4]>)> {
-        self.scene.set_blur(sigma, gamma)?;
-        loop {
-            let ctx = self.ctx;
-            ctx.submit_and_wait(|rec| {
-                self.gate.reset();
-                self.record_pose(rec)?;
-                let Self {
-                    scene,
-                    gate,
-                    renderer,
-                    mse,
-                    target,
-                    ..
-                } = self;
-                renderer.record_forward_guarded(rec, scene, gate, 0, |rec, binned| {
-                    let scene = binned.scene();
-                    mse.record(rec, scene.output().whole(), target.whole(), None, blur)
-                })
-            })?;
-            match self.gate.read(ctx)?.stopped {
-                None => break,
-                Some((_, total)) => {
-                    self.regrowths += 1;
-                    self.resize(total)?;
-                }
-            }
-        }
-        let s = &self.opts.settings;
-        Ok((
-            f64::from(self.mse.read_loss(self.ctx)?),
-            self.ctx
-                .read_buffer(self.scene.output(), 0, (s.width * s.height) as usize)?,
-        ))
-    }
-
-    /// dL/dθ of the last iteration that ran (the gradient its Adam step took).
-    pub fn gradient(&self) -> Result<Vec<f64>> {
-        let g: Vec<f32> =
-            self.ctx
-                .read_buffer(&self.d_params, 0, self.push.joint_count as usize)?;
-        Ok(g.into_iter().map(f64::from).collect())
-    }
-
-    /// The angles now (radians).
-    pub fn angles(&self) -> Result<Vec<f64>> {
-        let a: Vec<f32> = self
-            .ctx
-            .read_buffer(&self.params, 0, self.push.joint_count as usize)?;
-        Ok(a.into_iter().map(f64::from).collect())
-    }
-
-    /// The skinned positions the last pose recorded (packed xyz), read back.
-    pub fn posed_positions(&self) -> Result<Vec<[f32; 3]>> {
-        self.ctx
-            .read_buffer(self.scene.positions(), 0, self.push.vertex_count as usize)
-    }
-
-    /// Entries the bins and the backward's partials hold now.
-    pub fn capacity(&self) -> u64 {
+    fn capacity(&self) -> u64 {
         self.capacity
     }
 
-    /// Submissions the gate stopped (each grew the capacity and re-ran).
-    pub fn regrowths(&self) -> u32 {
-        self.regrowths
+    fn grow(&mut self, _: &Context, total: u64) -> Result<()> {
+        self.resize(total)
     }
 }
 
@@ -755,36 +726,31 @@ pub fn fit_articulated(
     let mut fitter = ArticulatedFitter::new(ctx, rig, camera, lighting, &first_target, init, opts)?;
     let mut log = Vec::with_capacity(opts.iterations as usize);
     let start = Instant::now();
-    let mut done = 0;
     let every = opts.log_every;
-    let mut it = 1;
-    while it <= opts.iterations {
-        // Up to the next logged iteration, within one σ/γ stage, in one submission.
-        let mut last = ((it - 1) / every + 1)
-            .saturating_mul(every)
-            .min(opts.iterations);
-        let here = opts.stage(it - 1);
-        if let Some(end) = (it..=last).find(|&i| opts.stage(i - 1) != here) {
-            last = end - 1;
-        }
-        if (here.0, here.1) != (stage.0, stage.1) {
-            if let PoseTarget::PerStage(f) = &mut target {
-                fitter.set_target(&f(here.0, here.1)?)?;
+    let done = fitter.drive(
+        1,
+        opts.iterations,
+        |fitter, it| {
+            // Up to the next logged iteration, within one σ/γ stage, in one submission.
+            let here = opts.stage(it - 1);
+            let last = driver::to_next_log(it, every).min(opts.iterations);
+            let last = (it..=last)
+                .find(|&i| opts.stage(i - 1) != here)
+                .map_or(last, |end| end - 1);
+            if (here.0, here.1) != (stage.0, stage.1) {
+                if let PoseTarget::PerStage(f) = &mut target {
+                    fitter.set_target(&f(here.0, here.1)?)?;
+                }
+                fitter.fit_capacity(here.0, here.1)?;
             }
-            fitter.fit_capacity(here.0, here.1)?;
-        }
-        stage = here;
-        if let Some(stopped) = fitter.run(it, last, None)? {
-            it = stopped;
-            continue;
-        }
-        log.extend(fitter.log(it, last, start.elapsed().as_secs_f64())?);
-        done = last;
-        if !progress(&log[log.len() - 1]) {
-            break;
-        }
-        it = last + 1;
-    }
+            stage = here;
+            Ok(last)
+        },
+        |fitter, first, last| {
+            log.extend(fitter.log(first, last, start.elapsed().as_secs_f64())?);
+            Ok(progress(&log[log.len() - 1]))
+        },
+    )?;
     let seconds = start.elapsed().as_secs_f64();
     let s = &opts.settings;
     if let PoseTarget::PerStage(f) = &mut target

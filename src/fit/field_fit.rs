@@ -33,7 +33,6 @@
 //! [`FieldFitter`] runs any span of iterations in one submission (for tests and tools);
 //! [`fit_field`] runs the whole fit and logs the losses every `log_every` iterations.
 
-use std::cell::RefCell;
 use std::time::Instant;
 
 use glam::DVec3;
@@ -42,13 +41,14 @@ use super::checkpoint::{
     Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, read_log, read_optimizer,
     restore_optimizer, write_log, write_optimizer,
 };
+use super::driver::{self, Fit, Fitter};
 use super::{Adam, AdamOptions};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::field::{Cube, Field, FieldKind};
 use crate::gpu::GradOut;
 use crate::gpu::gate::IterationGate;
-use crate::gpu::{Buffer, Context, MemoryKind, Recorder, Timer};
+use crate::gpu::{Buffer, Context, MemoryKind, Recorder};
 use crate::probe::{GeoRegularizer, GpuTargets, ProbeSettings, Prober, Sampler, Targets};
 
 /// Everything settable about a field fit. The cube and the seed live in [`ProbeSettings`]
@@ -354,8 +354,8 @@ pub struct FieldFitResult {
     pub timings: FieldFitTimings,
 }
 
-/// A field fit's state on the GPU, one iteration at a time.
-pub struct FieldFitter {
+/// A field fit's state on the GPU; [`FieldFitter`] runs its iterations.
+pub struct FieldFit {
     opts: FieldFitOptions,
     field: Field,
     gpu: GpuTargets,
@@ -371,26 +371,24 @@ pub struct FieldFitter {
     anchors: u32,
     geo_start: u32,
     geo_count: u32,
-    /// The gate of the prober's guarded binning (a cell: recording an iteration reads the
-    /// fitter and moves the gate on).
-    gate: RefCell<IterationGate>,
-    regrowths: u32,
-    last_entries: u64,
 }
+
+/// A field fit ready to run iterations ([`Fitter::run`]).
+pub type FieldFitter<'c> = Fitter<'c, FieldFit>;
 
 /// `n` rounded up to a multiple of `align`.
 fn round_up(n: u64, align: u64) -> u64 {
     n.div_ceil(align) * align
 }
 
-impl FieldFitter {
+impl<'c> Fitter<'c, FieldFit> {
     /// The field (initialized as [`FieldFitOptions::init_logit`] says), the sampler (the visual
     /// hull's boundary and the contour densities, on the host), the prober, the regularizer and
     /// Adam, for `targets`.
     ///
     /// [`Error::Input`] for invalid options or a camera inside the cube; [`Error::Limit`] for
     /// counts the device cannot hold or loop over.
-    pub fn new(ctx: &Context, targets: &Targets, opts: &FieldFitOptions) -> Result<Self> {
+    pub fn new(ctx: &'c Context, targets: &Targets, opts: &FieldFitOptions) -> Result<Self> {
         opts.validate()?;
         let cube = opts.cube();
         check_cameras_outside(targets, &cube)?;
@@ -458,7 +456,7 @@ impl FieldFitter {
             rec.fill(d_phi.whole(), 0);
             Ok(())
         })?;
-        Ok(Self {
+        let fit = FieldFit {
             opts: *opts,
             field,
             gpu,
@@ -473,20 +471,27 @@ impl FieldFitter {
             anchors,
             geo_start: geo_start as u32,
             geo_count: geo_count as u32,
-            gate: RefCell::new(IterationGate::new(ctx)?),
-            regrowths: 0,
-            last_entries: counted,
-        })
+        };
+        Fitter::from_fit(ctx, fit)
     }
 
-    /// Records iteration `iteration` (see the [module docs](self)): sampling and the geo
-    /// points, then the prober's guarded count and — gated on it — φ, probing, the losses,
-    /// the backward and the Adam step.
+    /// The field, giving up the rest.
+    pub fn into_field(self) -> Field {
+        self.into_fit().field
+    }
+}
+
+impl Fit for FieldFit {
+    const NAME: &'static str = "field fit";
+
+    /// Sampling and the geo points (see the [module docs](self)), then the prober's guarded
+    /// count and — gated on it — φ, probing, the losses, the backward and the Adam step.
     fn record_iteration(
-        &self,
+        &mut self,
         rec: &mut Recorder<'_>,
         gate: &mut IterationGate,
         iteration: u32,
+        _row: u32,
     ) -> Result<()> {
         let na = u64::from(self.anchors);
         let (gs, gc) = (u64::from(self.geo_start), u64::from(self.geo_count));
@@ -553,47 +558,17 @@ impl FieldFitter {
             })
     }
 
-    /// Runs iterations `first ..= last` in one submission (GPU timestamps of every pass into
-    /// `timer`: `sample`, `probe count` (with its parts indented), `gate`, `field eval`, `probe
-    /// forward`, `probe backward`, `geo loss`, `field backward`, `adam`, per iteration). `None`
-    /// when all ran; `Some(i)` when iteration `i` outgrew the entry capacity: it and the later
-    /// ones changed nothing, the capacity has grown to fit it, and they are to be run again.
-    pub fn run(
-        &mut self,
-        ctx: &Context,
-        first: u32,
-        last: u32,
-        timer: Option<&mut Timer>,
-    ) -> Result<Option<u32>> {
-        {
-            // Recording reads the fitter while it moves the gate on.
-            let mut gate = self.gate.borrow_mut();
-            ctx.submit_and_wait_timed(timer, |rec| {
-                gate.reset();
-                for it in first..=last {
-                    self.record_iteration(rec, &mut gate, it)?;
-                }
-                Ok(())
-            })?;
-        }
-        let status = self.gate.get_mut().read(ctx)?;
-        if let Some((stopped, total)) = status.stopped {
-            let capacity = self.prober.entry_capacity();
-            if stopped < first || stopped > last || total <= capacity {
-                return Err(Error::Limit(format!(
-                    "field fit: the gate stopped iteration {stopped} of {first}..={last} with \
-                     {total} entries for a capacity of {capacity}"
-                )));
-            }
-            self.prober
-                .reserve_guarded(ctx, field_capacity(ctx, total)?)?;
-            self.regrowths += 1;
-            return Ok(Some(stopped));
-        }
-        self.last_entries = status.last_total;
-        Ok(None)
+    fn capacity(&self) -> u64 {
+        self.prober.entry_capacity()
     }
 
+    fn grow(&mut self, ctx: &Context, total: u64) -> Result<()> {
+        self.prober
+            .reserve_guarded(ctx, field_capacity(ctx, total)?)
+    }
+}
+
+impl FieldFit {
     /// Sizes the prober's entry buffers for `capacity` (anchor, tile) entries per iteration
     /// (at least 1). [`FieldFitter::new`] sizes them from the first iteration's count with
     /// headroom; more spares the re-runs of a fit whose counts grow, less saves memory, and
@@ -605,16 +580,6 @@ impl FieldFitter {
     /// Entries the prober's buffers hold now.
     pub fn capacity(&self) -> u64 {
         self.prober.entry_capacity()
-    }
-
-    /// Submissions the gate stopped (each grew the capacity and re-ran).
-    pub fn regrowths(&self) -> u32 {
-        self.regrowths
-    }
-
-    /// The (anchor, tile) entry count of the last iteration that ran.
-    pub fn last_entries(&self) -> u64 {
-        self.last_entries
     }
 
     /// `(L_sil, L_geo)` of the last iteration (L_geo 0 when λ = 0).
@@ -667,11 +632,6 @@ impl FieldFitter {
     pub fn options(&self) -> &FieldFitOptions {
         &self.opts
     }
-
-    /// The field, giving up the rest.
-    pub fn into_field(self) -> Field {
-        self.field
-    }
 }
 
 /// Fits a field to `targets` (silhouettes and their cameras). `progress` is called after every
@@ -709,7 +669,7 @@ pub struct FieldFitState {
 /// state from the GPU when asked: checkpoints).
 pub struct FieldFitSnapshot<'a> {
     ctx: &'a Context,
-    fitter: &'a FieldFitter,
+    fitter: &'a FieldFit,
     iteration: u32,
     log: &'a [FieldFitLog],
     seconds: f64,
@@ -813,7 +773,6 @@ pub fn fit_field_resumable(
     };
     let start = Instant::now();
     let mut log = Vec::new();
-    let mut done = 0;
     let mut first = 1;
     let mut earlier = 0.0;
     if let Some(state) = resume {
@@ -828,45 +787,36 @@ pub fn fit_field_resumable(
         )?;
         log = state.log.clone();
         first = state.iteration + 1;
-        done = state.iteration;
         earlier = state.seconds;
     }
     let every = opts.log_every;
-    let mut it = first;
-    while it <= opts.iterations {
-        // Up to the next logged iteration in one submission.
-        let last = ((it - 1) / every + 1)
-            .saturating_mul(every)
-            .min(opts.iterations);
-        if let Some(stopped) = fitter.run(ctx, it, last, None)? {
-            it = stopped;
-            continue;
-        }
-        done = last;
-        let t = Instant::now();
-        let (silhouette, geo) = fitter.read_losses(ctx)?;
-        let entry = FieldFitLog {
-            iteration: last,
-            silhouette,
-            geo,
-            total: opts.probe.total_loss(f64::from(silhouette), f64::from(geo)) as f32,
-            seconds: earlier + start.elapsed().as_secs_f64(),
-        };
-        log.push(entry);
-        let snapshot = FieldFitSnapshot {
-            ctx,
-            fitter: &fitter,
-            iteration: last,
-            log: &log,
-            seconds: entry.seconds,
-        };
-        let go_on = progress(&entry, &snapshot)?;
-        timings.log_s += t.elapsed().as_secs_f64();
-        if !go_on {
-            break;
-        }
-        it = last + 1;
-    }
+    let done = fitter.drive(
+        first,
+        opts.iterations,
+        |_, it| Ok(driver::to_next_log(it, every)),
+        |fitter, _, last| {
+            let t = Instant::now();
+            let (silhouette, geo) = fitter.read_losses(ctx)?;
+            let entry = FieldFitLog {
+                iteration: last,
+                silhouette,
+                geo,
+                total: opts.probe.total_loss(f64::from(silhouette), f64::from(geo)) as f32,
+                seconds: earlier + start.elapsed().as_secs_f64(),
+            };
+            log.push(entry);
+            let snapshot = FieldFitSnapshot {
+                ctx,
+                fitter,
+                iteration: last,
+                log: &log,
+                seconds: entry.seconds,
+            };
+            let go_on = progress(&entry, &snapshot)?;
+            timings.log_s += t.elapsed().as_secs_f64();
+            Ok(go_on)
+        },
+    )?;
     timings.regrowths = fitter.regrowths();
     timings.iterations_s = earlier + start.elapsed().as_secs_f64();
     Ok(FieldFitResult {

@@ -32,20 +32,20 @@ use super::checkpoint::{
     Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, read_log, read_optimizer,
     restore_optimizer, write_log, write_optimizer,
 };
+use super::driver::{self, Fit, Fitter};
 use super::{Adam, AdamOptions, Deform, Regularizers, SilhouetteLoss, with_headroom};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::GradOut;
 use crate::gpu::gate::IterationGate;
-use crate::gpu::{Buffer, Context, MemoryKind, Recorder, Timer};
+use crate::gpu::{Buffer, Context, MemoryKind, Recorder};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::raster::backward::GradBuffers;
 use crate::raster::gpu::{GpuScene, Renderer};
 use crate::raster::settings::{Alpha, RasterSettings, Rgb};
 
-/// Entry capacity reserved over a count seen: `count × 3 / 2`.
-pub const ENTRY_HEADROOM: (u64, u64) = (3, 2);
+pub use super::driver::ENTRY_HEADROOM;
 
 /// Everything settable about a mesh fit; the default is SoftRas's deformation demo.
 #[derive(Clone, Debug, PartialEq)]
@@ -374,30 +374,25 @@ pub fn fit_mesh_resumable(
         earlier = state.seconds;
     }
     let first_iteration = it;
-    let every = u64::from(opts.log_every);
-    while it <= opts.iterations {
-        // Up to the next logged iteration in one submission.
-        let next_log = (u64::from(it - 1) / every + 1) * every;
-        let last = next_log.min(u64::from(opts.iterations)) as u32;
-        if let Some(stopped) = fitter.run(it, last, None)? {
-            it = stopped;
-            continue;
-        }
-        let seconds = earlier + start.elapsed().as_secs_f64();
-        let (entry, ious, alphas) = fitter.read_progress(last, seconds)?;
-        log.push(entry);
-        let snapshot = MeshFitSnapshot {
-            fitter: &fitter,
-            iteration: last,
-            log: &log,
-            seconds,
-        };
-        let go_on = progress(&log[log.len() - 1], &ious, alphas.as_deref(), &snapshot)?;
-        if !go_on {
-            break;
-        }
-        it = last + 1;
-    }
+    let every = opts.log_every;
+    fitter.drive(
+        it,
+        opts.iterations,
+        |_, it| Ok(driver::to_next_log(it, every)),
+        |fitter, _, last| {
+            let seconds = earlier + start.elapsed().as_secs_f64();
+            let (entry, ious, alphas) =
+                fitter.read_progress(fitter.last_entries(), last, seconds)?;
+            log.push(entry);
+            let snapshot = MeshFitSnapshot {
+                fitter,
+                iteration: last,
+                log: &log,
+                seconds,
+            };
+            progress(&log[log.len() - 1], &ious, alphas.as_deref(), &snapshot)
+        },
+    )?;
     let seconds = earlier + start.elapsed().as_secs_f64();
     Ok(MeshFitResult {
         mesh: fitter.mesh(template)?,
@@ -410,23 +405,9 @@ pub fn fit_mesh_resumable(
     })
 }
 
-/// The parts of a fit an iteration records, borrowed apart from the scene and the gate.
-#[derive(Clone, Copy)]
-struct FitParts<'a> {
-    opts: &'a MeshFitOptions,
-    deform: &'a Deform,
-    regs: &'a Regularizers,
-    sil: &'a SilhouetteLoss,
-    adam: &'a Adam,
-    params: &'a Buffer,
-    d_params: &'a Buffer,
-    targets: &'a Buffer,
-    grads: &'a GradBuffers,
-}
-
-/// A fit's GPU state: the scene, the losses, the optimizer, the parameters and the guarded
-/// bins, ready to run iterations ([`MeshFitter::run`]). Also what the fitting benchmark times.
-pub struct MeshFitter<'c> {
+/// A mesh fit's GPU state: the scene, the losses, the optimizer, the parameters and the guarded
+/// bins; [`MeshFitter`] runs its iterations.
+pub struct MeshFit<'c> {
     ctx: &'c Context,
     opts: MeshFitOptions,
     renderer: Renderer,
@@ -439,18 +420,16 @@ pub struct MeshFitter<'c> {
     d_params: Buffer,
     targets: Buffer,
     grads: GradBuffers,
-    gate: IterationGate,
     /// Entries the bins and the partials hold.
     capacity: u64,
     /// The most they may hold (one binding, the u32 count).
     max_capacity: u64,
-    /// Submissions stopped by the gate.
-    regrowths: u32,
-    /// The entry count of the last iteration that ran.
-    last_entries: u64,
 }
 
-impl<'c> MeshFitter<'c> {
+/// A mesh fit ready to run iterations ([`Fitter::run`]); also what the fitting benchmark times.
+pub type MeshFitter<'c> = Fitter<'c, MeshFit<'c>>;
+
+impl<'c> Fitter<'c, MeshFit<'c>> {
     /// Checks the inputs, uploads everything, zeroes the parameters and Adam's moments, and
     /// reserves the entries (see [`MeshFitOptions::entry_capacity`]).
     pub fn new(
@@ -517,7 +496,7 @@ impl<'c> MeshFitter<'c> {
         };
         // The silhouette loss differentiates alpha only (as the scene renders it).
         let grads = super::reserve_guarded(ctx, &renderer, &mut scene, opts.tile, capacity, true)?;
-        Ok(Self {
+        let fit = MeshFit {
             ctx,
             opts: opts.clone(),
             renderer,
@@ -530,26 +509,29 @@ impl<'c> MeshFitter<'c> {
             d_params,
             targets: target_buf,
             grads,
-            gate: IterationGate::new(ctx)?,
             capacity,
             max_capacity,
-            regrowths: 0,
-            last_entries: 0,
-        })
+        };
+        Fitter::from_fit(ctx, fit)
     }
+}
 
-    /// Records iteration `it`: the deformation, then the guarded forward with the rest of the
-    /// iteration (loss, backward, regularizers, deformation backward, Adam) gated on the count.
+impl Fit for MeshFit<'_> {
+    const NAME: &'static str = "fit";
+
+    /// The deformation, then the guarded forward with the rest of the iteration (loss,
+    /// backward, regularizers, deformation backward, Adam) gated on the count.
     fn record_iteration(
-        renderer: &Renderer,
-        scene: &GpuScene,
-        gate: &mut IterationGate,
-        parts: &FitParts,
+        &mut self,
         rec: &mut Recorder<'_>,
+        gate: &mut IterationGate,
         it: u32,
+        _row: u32,
     ) -> Result<()> {
-        let FitParts {
+        let Self {
             opts: o,
+            renderer,
+            scene,
             deform,
             regs,
             sil,
@@ -558,7 +540,8 @@ impl<'c> MeshFitter<'c> {
             d_params,
             targets,
             grads: g,
-        } = *parts;
+            ..
+        } = self;
         rec.pass("deform", |rec| {
             deform.record_forward(rec, params.whole(), scene.positions().whole())
         })?;
@@ -594,57 +577,22 @@ impl<'c> MeshFitter<'c> {
         })
     }
 
-    /// Runs iterations `first ..= last` in one submission (GPU timestamps into `timer`). `None`
-    /// when all ran; `Some(i)` when iteration `i` outgrew the entry capacity: it and the later
-    /// ones changed nothing, the capacity has grown to fit it, and they are to be run again.
-    pub fn run(&mut self, first: u32, last: u32, timer: Option<&mut Timer>) -> Result<Option<u32>> {
-        let parts = FitParts {
-            opts: &self.opts,
-            deform: &self.deform,
-            regs: &self.regs,
-            sil: &self.sil,
-            adam: &self.adam,
-            params: &self.params,
-            d_params: &self.d_params,
-            targets: &self.targets,
-            grads: &self.grads,
-        };
-        let (renderer, scene, gate) = (&self.renderer, &self.scene, &mut self.gate);
-        self.ctx.submit_and_wait_timed(timer, |rec| {
-            gate.reset();
-            for it in first..=last {
-                Self::record_iteration(renderer, scene, gate, &parts, rec, it)?;
-            }
-            Ok(())
-        })?;
-        let status = self.gate.read(self.ctx)?;
-        if let Some((stopped, total)) = status.stopped {
-            if stopped < first || stopped > last || total <= self.capacity {
-                return Err(Error::Limit(format!(
-                    "fit: the gate stopped iteration {stopped} of {first}..={last} with {total} \
-                     entries for a capacity of {}",
-                    self.capacity
-                )));
-            }
-            self.grow(total)?;
-            return Ok(Some(stopped));
-        }
-        self.last_entries = status.last_total;
-        Ok(None)
+    fn capacity(&self) -> u64 {
+        self.capacity
     }
 
     /// Grows the bins and the partials to `total` entries with the headroom.
-    fn grow(&mut self, total: u64) -> Result<()> {
+    fn grow(&mut self, ctx: &Context, total: u64) -> Result<()> {
         let views = self.scene.view_count() as usize;
         let capacity = with_headroom(
-            self.ctx,
+            ctx,
             &mesh_entries(views),
             total,
             self.max_capacity,
             MESH_HINT,
         )?;
         self.grads = super::reserve_guarded(
-            self.ctx,
+            ctx,
             &self.renderer,
             &mut self.scene,
             self.opts.tile,
@@ -652,13 +600,19 @@ impl<'c> MeshFitter<'c> {
             true,
         )?;
         self.capacity = capacity;
-        self.regrowths += 1;
         Ok(())
     }
+}
 
-    /// The losses of iteration `it` (the last one run), the per-view IoUs and, with snapshots,
-    /// the predicted alphas.
-    fn read_progress(&self, it: u32, seconds: f64) -> Result<(FitLog, Vec<f32>, Option<Vec<f32>>)> {
+impl MeshFit<'_> {
+    /// The losses of iteration `it` (the last one run, of `entries` entries), the per-view IoUs
+    /// and, with snapshots, the predicted alphas.
+    fn read_progress(
+        &self,
+        entries: u64,
+        it: u32,
+        seconds: f64,
+    ) -> Result<(FitLog, Vec<f32>, Option<Vec<f32>>)> {
         let o = &self.opts;
         let silhouette = self.sil.read_loss(self.ctx)?;
         let r = self.regs.read_losses(self.ctx)?;
@@ -668,7 +622,7 @@ impl<'c> MeshFitter<'c> {
             laplacian: r.laplacian,
             flatten: r.flatten,
             total: silhouette + o.laplacian * r.laplacian + o.flatten * r.flatten,
-            entries: self.last_entries,
+            entries,
             seconds,
         };
         let ious = self.sil.read_ious(self.ctx)?;
@@ -703,16 +657,6 @@ impl<'c> MeshFitter<'c> {
     /// Entries the bins and the backward's partials hold now.
     pub fn capacity(&self) -> u64 {
         self.capacity
-    }
-
-    /// Submissions the gate stopped (each grew the capacity and re-ran).
-    pub fn regrowths(&self) -> u32 {
-        self.regrowths
-    }
-
-    /// The entry count of the last iteration that ran.
-    pub fn last_entries(&self) -> u64 {
-        self.last_entries
     }
 
     /// The parameters (`3 V` displacements, then the centre).

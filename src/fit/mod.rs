@@ -53,6 +53,7 @@ pub mod articulated;
 pub mod blur;
 pub mod checkpoint;
 pub mod deform;
+pub mod driver;
 pub mod field_fit;
 pub mod flatten;
 pub mod laplacian;
@@ -67,75 +68,9 @@ pub mod silhouette;
 pub use crate::gpu::GradOut;
 pub use adam::{Adam, AdamOptions};
 pub use deform::Deform;
+pub use driver::{max_entry_capacity, reserve_guarded, with_headroom};
 pub use regularizers::{RegularizerLosses, Regularizers};
 pub use silhouette::{ImageMse, SilhouetteLoss};
-
-use crate::error::{Error, LimitKind, Result};
-use crate::gpu::Context;
-
-/// The entry capacity of a fit's guarded binning for a count of `total`: with
-/// [`mesh_fit::ENTRY_HEADROOM`], at most `max` (what the device holds); [`Error::DeviceLimit`]
-/// naming `what` and `hint` when even `total` is over it. The mesh, field and pose fits share it.
-pub(crate) fn with_headroom(
-    ctx: &Context,
-    what: &str,
-    total: u64,
-    max: u64,
-    hint: &'static str,
-) -> Result<u64> {
-    if total > max {
-        return Err(Error::DeviceLimit {
-            kind: LimitKind::BinEntries,
-            what: what.to_string(),
-            need: total,
-            max,
-            device: ctx.info().name.clone(),
-            hint,
-        });
-    }
-    let (num, den) = mesh_fit::ENTRY_HEADROOM;
-    Ok((total * num / den).clamp(total.max(1), max))
-}
-
-/// The most (face, tile) entries a fit's guarded binning of `scene` may reserve: what one
-/// binning holds, and what one binding of the backward's partials holds.
-pub(crate) fn max_entry_capacity(
-    ctx: &Context,
-    renderer: &crate::raster::gpu::Renderer,
-    scene: &crate::raster::gpu::GpuScene,
-) -> u64 {
-    let s = scene.settings();
-    let stride = crate::raster::backward::grad_stride(s.color_mode, scene.texture_res());
-    renderer
-        .max_entries(ctx)
-        .min(u64::from(ctx.info().limits.max_storage_buffer_range) / (4 * u64::from(stride)))
-        .min(u64::from(u32::MAX))
-}
-
-/// The guarded fits' sizing step: `scene`'s bins reserved for `capacity` entries on
-/// `tile`-pixel tiles ([`Renderer::reserve_guarded`]) and the backward's buffers for them,
-/// differentiating alpha only when `alpha_only` ([`GradBuffers::set_alpha_only`]).
-///
-/// [`Renderer::reserve_guarded`]: crate::raster::gpu::Renderer::reserve_guarded
-/// [`GradBuffers::set_alpha_only`]: crate::raster::backward::GradBuffers::set_alpha_only
-pub(crate) fn reserve_guarded(
-    ctx: &Context,
-    renderer: &crate::raster::gpu::Renderer,
-    scene: &mut crate::raster::gpu::GpuScene,
-    tile: u32,
-    capacity: u64,
-    alpha_only: bool,
-) -> Result<crate::raster::backward::GradBuffers> {
-    renderer.reserve_guarded(ctx, scene, tile, capacity)?;
-    let mut grads = crate::raster::backward::GradBuffers::with_entry_capacity(
-        ctx,
-        scene,
-        crate::raster::gpu::Method::Tiled { tile },
-        capacity,
-    )?;
-    grads.set_alpha_only(alpha_only);
-    Ok(grads)
-}
 
 /// Test data and the finite-difference check shared by the twins' tests.
 #[cfg(test)]

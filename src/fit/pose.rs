@@ -65,13 +65,14 @@ use super::checkpoint::{
     Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, check_state, read_log,
     write_log,
 };
+use super::driver::{self, Fit, Fitter};
 use super::max_entry_capacity;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::GradOut;
 use crate::gpu::gate::IterationGate;
 use crate::gpu::groups;
-use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, Timer, specs};
+use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, specs};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::raster::backward::GradBuffers;
@@ -525,198 +526,23 @@ impl PoseProblem {
     }
 }
 
-/// Push constants of `pose_apply.comp` and `pose_grad.comp`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-struct PosePush {
-    centre: [f32; 3],
-    vertex_count: u32,
-    translation_at: u32,
-    log_index: u32,
-    pad: [u32; 2],
-}
+impl Fit for PoseFit<'_> {
+    const NAME: &'static str = "pose fit";
 
-/// A pose fit's GPU state: the scene with its guarded bins, the lighting, the loss, the pose's
-/// parameters and their two Adam optimizers, ready to run iterations ([`PoseFitter::run`]):
-/// every iteration is recorded with no read-back (see the [module docs](self)), as many per
-/// submission as asked.
-pub struct PoseFitter<'c> {
-    ctx: &'c Context,
-    opts: PoseFitOptions,
-    renderer: Renderer,
-    scene: GpuScene,
-    light: SceneLight,
-    mse: ImageMse,
-    target: Buffer,
-    grads: GradBuffers,
-    gate: IterationGate,
-    apply: Kernel,
-    grad: Kernel,
-    /// The rest positions, packed xyz.
-    rest: Buffer,
-    /// ω at floats [0, 3), t at [`PosePush::translation_at`, + 3): two bindable ranges.
-    params: Buffer,
-    d_params: Buffer,
-    /// dL/d(unlit colour), which the pose does not need (the lighting's backward writes it).
-    d_base: Buffer,
-    adam_rotation: Adam,
-    adam_translation: Adam,
-    /// Two vec4 per iteration of the fit: the loss and ω, then t.
-    log: Buffer,
-    push: PosePush,
-    capacity: u64,
-    max_capacity: u64,
-    regrowths: u32,
-    last_entries: u64,
-}
-
-impl<'c> PoseFitter<'c> {
-    /// The fit of `mesh`'s pose seen from `camera` to `target` from `init` (see
-    /// [`fit_pose`]): uploads everything, counts the entries of the first pose once and sizes
-    /// the guarded bins with the mesh fit's headroom.
-    #[allow(clippy::too_many_arguments)]
-    pub fn new(
-        ctx: &'c Context,
-        mesh: &Mesh,
-        camera: &Camera,
-        lighting: &Lighting,
-        target: &[[f32; 4]],
-        init: &Pose,
-        opts: &PoseFitOptions,
-    ) -> Result<Self> {
-        opts.validate()?;
-        mesh.validate()?;
-        check_target(target, &opts.settings)?;
-        if !init.is_finite() {
-            return Err(Error::Input(format!(
-                "the initial pose {init:?} is not finite"
-            )));
-        }
-        let renderer = Renderer::new(ctx)?;
-        let mut scene = renderer.prepare(
-            ctx,
-            mesh,
-            std::slice::from_ref(camera),
-            lighting,
-            &opts.settings,
-        )?;
-        // Sized for real once the first pose's entries are counted (below).
-        renderer.reserve_guarded(ctx, &mut scene, opts.tile, 1)?;
-        let light = SceneLight::new(ctx, &scene)?;
-        let rest_f64 = &scene.host_meshes()[0].positions;
-        let centre = centroid(rest_f64);
-        let rest: Vec<f32> = mesh.positions.as_flattened().to_vec();
-        let translation_at = (ctx.info().buffer_alignment() / 4).max(4);
-        let push = PosePush {
-            centre: centre.to_array().map(|c| c as f32),
-            vertex_count: mesh.vertex_count() as u32,
-            translation_at: translation_at as u32,
-            log_index: 0,
-            pad: [0; 2],
-        };
-        let param_floats = (translation_at + 3) as usize;
-        let mut p0 = vec![0f32; param_floats];
-        let a = init.to_array();
-        for k in 0..3 {
-            p0[k] = a[k] as f32;
-            p0[translation_at as usize + k] = a[3 + k] as f32;
-        }
-        let first = opts.adam(0);
-        let max_capacity = max_entry_capacity(ctx, &renderer, &scene);
-        let mut fitter = Self {
-            ctx,
-            mse: ImageMse::new(ctx, 1, opts.settings.width, opts.settings.height)?,
-            target: ctx.upload_buffer("pose target", target)?,
-            grads: GradBuffers::with_entry_capacity(
-                ctx,
-                &scene,
-                Method::Tiled { tile: opts.tile },
-                1,
-            )?,
-            gate: IterationGate::new(ctx)?,
-            apply: Kernel::new(ctx, &specs::POSE_APPLY)?,
-            grad: Kernel::new(ctx, &specs::POSE_GRAD)?,
-            rest: ctx.upload_buffer("pose rest positions", &rest)?,
-            params: ctx.upload_buffer("pose parameters", &p0)?,
-            d_params: ctx.upload_buffer("pose gradient", &vec![0f32; param_floats])?,
-            d_base: ctx.create_buffer(
-                "pose unlit colour gradients",
-                12 * light.color_count().max(1),
-                MemoryKind::Device,
-            )?,
-            adam_rotation: Adam::new(ctx, 3, first)?,
-            adam_translation: Adam::new(
-                ctx,
-                3,
-                AdamOptions {
-                    lr: opts.lr_translation * opts.lr_factor(0),
-                    ..first
-                },
-            )?,
-            log: ctx.create_buffer(
-                "pose log",
-                32 * u64::from(opts.iterations),
-                MemoryKind::Device,
-            )?,
-            push,
-            capacity: 1,
-            max_capacity,
-            regrowths: 0,
-            last_entries: 0,
-            light,
-            opts: opts.clone(),
-            renderer,
-            scene,
-        };
-        let (sigma, gamma) = opts.sigma_gamma(0);
-        fitter.fit_capacity(sigma, gamma)?;
-        Ok(fitter)
+    fn last_iteration(&self) -> u32 {
+        self.opts.iterations
     }
 
-    /// Sizes the guarded bins for the pose now at σ and γ: one counting submission, then the
-    /// count with the headroom. The fit does it at the start of every σ/γ stage (a blurry
-    /// stage bins several times the entries of a sharp one, and the backward's texel
-    /// partials, cleared over the whole capacity every iteration, are the larger cost at
-    /// these image sizes); it changes no result.
-    pub fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()> {
-        self.scene.set_blur(sigma, gamma)?;
-        self.ctx.submit_and_wait(|rec| self.record_pose(rec))?;
-        let total = self
-            .renderer
-            .count_entries(self.ctx, &mut self.scene, self.opts.tile)?;
-        self.resize(total)
-    }
-
-    /// Records the posed positions and their lit colours into the scene.
-    fn record_pose(&self, rec: &mut Recorder<'_>) -> Result<()> {
-        let nv = u64::from(self.push.vertex_count);
-        rec.pass("pose", |rec| {
-            rec.dispatch(
-                &self.apply,
-                &specs::PoseApplyBindings {
-                    params: self.params.whole(),
-                    rest: self.rest.whole(),
-                    posed: self.scene.positions().whole(),
-                }
-                .for_kernel(&self.apply)?,
-                &self.push,
-                groups(nv, 64)?,
-            )
-        })?;
-        rec.pass("lighting", |rec| {
-            self.light.record_forward(
-                rec,
-                self.scene.positions().whole(),
-                self.scene.position_layout(),
-                self.scene.colors().whole(),
-            )
-        })
-    }
-
-    /// Records iteration `it` (from 1): the pose and its lighting, then the guarded forward
-    /// with the rest gated on the count: the MSE, the backward, the lighting's backward, the
-    /// pose gradient (and the log row) and the two Adam steps.
-    fn record_iteration(&mut self, rec: &mut Recorder<'_>, it: u32) -> Result<()> {
+    /// The pose and its lighting, then the guarded forward with the rest gated on the count:
+    /// the MSE, the backward, the lighting's backward, the pose gradient (and the log row) and
+    /// the two Adam steps.
+    fn record_iteration(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        gate: &mut IterationGate,
+        it: u32,
+        _row: u32,
+    ) -> Result<()> {
         let o = &self.opts;
         let (sigma, gamma) = o.sigma_gamma(it - 1);
         self.scene.set_blur(sigma, gamma)?;
@@ -734,7 +560,6 @@ impl<'c> PoseFitter<'c> {
         };
         let Self {
             scene,
-            gate,
             renderer,
             mse,
             target,
@@ -795,39 +620,225 @@ impl<'c> PoseFitter<'c> {
         })
     }
 
-    /// Runs iterations `first ..= last` (from 1) in one submission (GPU timestamps into
-    /// `timer`). `None` when all ran; `Some(i)` when iteration `i` outgrew the entry capacity:
-    /// it and the later ones changed nothing, the capacity has grown, and they are to be run
-    /// again.
-    pub fn run(&mut self, first: u32, last: u32, timer: Option<&mut Timer>) -> Result<Option<u32>> {
-        if first == 0 || last > self.opts.iterations {
-            return Err(Error::Misuse(format!(
-                "pose fit: iterations {first}..={last} of 1..={}",
-                self.opts.iterations
+    fn capacity(&self) -> u64 {
+        self.capacity
+    }
+
+    fn grow(&mut self, _: &Context, total: u64) -> Result<()> {
+        self.resize(total)
+    }
+}
+
+/// Push constants of `pose_apply.comp` and `pose_grad.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct PosePush {
+    centre: [f32; 3],
+    vertex_count: u32,
+    translation_at: u32,
+    log_index: u32,
+    pad: [u32; 2],
+}
+
+/// A pose fit's GPU state: the scene with its guarded bins, the lighting, the loss, the pose's
+/// parameters and their two Adam optimizers. Every iteration is recorded with no read-back (see
+/// the [module docs](self)), as many per submission as asked ([`PoseFitter`] runs them).
+pub struct PoseFit<'c> {
+    ctx: &'c Context,
+    opts: PoseFitOptions,
+    renderer: Renderer,
+    scene: GpuScene,
+    light: SceneLight,
+    mse: ImageMse,
+    target: Buffer,
+    grads: GradBuffers,
+    apply: Kernel,
+    grad: Kernel,
+    /// The rest positions, packed xyz.
+    rest: Buffer,
+    /// ω at floats [0, 3), t at [`PosePush::translation_at`, + 3): two bindable ranges.
+    params: Buffer,
+    d_params: Buffer,
+    /// dL/d(unlit colour), which the pose does not need (the lighting's backward writes it).
+    d_base: Buffer,
+    adam_rotation: Adam,
+    adam_translation: Adam,
+    /// Two vec4 per iteration of the fit: the loss and ω, then t.
+    log: Buffer,
+    push: PosePush,
+    capacity: u64,
+    max_capacity: u64,
+}
+
+/// A pose fit ready to run iterations ([`Fitter::run`]).
+pub type PoseFitter<'c> = Fitter<'c, PoseFit<'c>>;
+
+impl<'c> Fitter<'c, PoseFit<'c>> {
+    /// The fit of `mesh`'s pose seen from `camera` to `target` from `init` (see
+    /// [`fit_pose`]): uploads everything, counts the entries of the first pose once and sizes
+    /// the guarded bins with the mesh fit's headroom.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        ctx: &'c Context,
+        mesh: &Mesh,
+        camera: &Camera,
+        lighting: &Lighting,
+        target: &[[f32; 4]],
+        init: &Pose,
+        opts: &PoseFitOptions,
+    ) -> Result<Self> {
+        opts.validate()?;
+        mesh.validate()?;
+        check_target(target, &opts.settings)?;
+        if !init.is_finite() {
+            return Err(Error::Input(format!(
+                "the initial pose {init:?} is not finite"
             )));
         }
-        let ctx = self.ctx;
-        ctx.submit_and_wait_timed(timer, |rec| {
-            self.gate.reset();
-            for it in first..=last {
-                self.record_iteration(rec, it)?;
-            }
-            Ok(())
-        })?;
-        let status = self.gate.read(ctx)?;
-        if let Some((stopped, total)) = status.stopped {
-            if stopped < first || stopped > last || total <= self.capacity {
-                return Err(Error::Limit(format!(
-                    "pose fit: the gate stopped iteration {stopped} of {first}..={last} with \
-                     {total} entries for a capacity of {}",
-                    self.capacity
-                )));
-            }
-            self.grow(total)?;
-            return Ok(Some(stopped));
+        let renderer = Renderer::new(ctx)?;
+        let mut scene = renderer.prepare(
+            ctx,
+            mesh,
+            std::slice::from_ref(camera),
+            lighting,
+            &opts.settings,
+        )?;
+        // Sized for real once the first pose's entries are counted (below).
+        renderer.reserve_guarded(ctx, &mut scene, opts.tile, 1)?;
+        let light = SceneLight::new(ctx, &scene)?;
+        let rest_f64 = &scene.host_meshes()[0].positions;
+        let centre = centroid(rest_f64);
+        let rest: Vec<f32> = mesh.positions.as_flattened().to_vec();
+        let translation_at = (ctx.info().buffer_alignment() / 4).max(4);
+        let push = PosePush {
+            centre: centre.to_array().map(|c| c as f32),
+            vertex_count: mesh.vertex_count() as u32,
+            translation_at: translation_at as u32,
+            log_index: 0,
+            pad: [0; 2],
+        };
+        let param_floats = (translation_at + 3) as usize;
+        let mut p0 = vec![0f32; param_floats];
+        let a = init.to_array();
+        for k in 0..3 {
+            p0[k] = a[k] as f32;
+            p0[translation_at as usize + k] = a[3 + k] as f32;
         }
-        self.last_entries = status.last_total;
-        Ok(None)
+        let first = opts.adam(0);
+        let max_capacity = max_entry_capacity(ctx, &renderer, &scene);
+        let mut fit = PoseFit {
+            ctx,
+            mse: ImageMse::new(ctx, 1, opts.settings.width, opts.settings.height)?,
+            target: ctx.upload_buffer("pose target", target)?,
+            grads: GradBuffers::with_entry_capacity(
+                ctx,
+                &scene,
+                Method::Tiled { tile: opts.tile },
+                1,
+            )?,
+            apply: Kernel::new(ctx, &specs::POSE_APPLY)?,
+            grad: Kernel::new(ctx, &specs::POSE_GRAD)?,
+            rest: ctx.upload_buffer("pose rest positions", &rest)?,
+            params: ctx.upload_buffer("pose parameters", &p0)?,
+            d_params: ctx.upload_buffer("pose gradient", &vec![0f32; param_floats])?,
+            d_base: ctx.create_buffer(
+                "pose unlit colour gradients",
+                12 * light.color_count().max(1),
+                MemoryKind::Device,
+            )?,
+            adam_rotation: Adam::new(ctx, 3, first)?,
+            adam_translation: Adam::new(
+                ctx,
+                3,
+                AdamOptions {
+                    lr: opts.lr_translation * opts.lr_factor(0),
+                    ..first
+                },
+            )?,
+            log: ctx.create_buffer(
+                "pose log",
+                32 * u64::from(opts.iterations),
+                MemoryKind::Device,
+            )?,
+            push,
+            capacity: 1,
+            max_capacity,
+            light,
+            opts: opts.clone(),
+            renderer,
+            scene,
+        };
+        let (sigma, gamma) = opts.sigma_gamma(0);
+        fit.fit_capacity(sigma, gamma)?;
+        Fitter::from_fit(ctx, fit)
+    }
+
+    /// The MSE and the render at the current pose with σ and γ (no step), re-run until the
+    /// entries fit.
+    pub fn evaluate(&mut self, sigma: f64, gamma: f64) -> Result<(f64, Vec<[f32; 4]>)> {
+        self.scene.set_blur(sigma, gamma)?;
+        self.submit_guarded(|fit, rec, gate| {
+            fit.record_pose(rec)?;
+            let PoseFit {
+                scene,
+                renderer,
+                mse,
+                target,
+                ..
+            } = fit;
+            renderer.record_forward_guarded(rec, scene, gate, 0, |rec, binned| {
+                let scene = binned.scene();
+                mse.record(rec, scene.output().whole(), target.whole(), None)
+            })
+        })?;
+        let s = &self.opts.settings;
+        Ok((
+            f64::from(self.mse.read_loss(self.ctx)?),
+            self.ctx
+                .read_buffer(self.scene.output(), 0, (s.width * s.height) as usize)?,
+        ))
+    }
+}
+
+impl PoseFit<'_> {
+    /// Sizes the guarded bins for the pose now at σ and γ: one counting submission, then the
+    /// count with the headroom. The fit does it at the start of every σ/γ stage (a blurry
+    /// stage bins several times the entries of a sharp one, and the backward's texel
+    /// partials, cleared over the whole capacity every iteration, are the larger cost at
+    /// these image sizes); it changes no result.
+    pub fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()> {
+        self.scene.set_blur(sigma, gamma)?;
+        self.ctx.submit_and_wait(|rec| self.record_pose(rec))?;
+        let total = self
+            .renderer
+            .count_entries(self.ctx, &mut self.scene, self.opts.tile)?;
+        self.resize(total)
+    }
+
+    /// Records the posed positions and their lit colours into the scene.
+    fn record_pose(&self, rec: &mut Recorder<'_>) -> Result<()> {
+        let nv = u64::from(self.push.vertex_count);
+        rec.pass("pose", |rec| {
+            rec.dispatch(
+                &self.apply,
+                &specs::PoseApplyBindings {
+                    params: self.params.whole(),
+                    rest: self.rest.whole(),
+                    posed: self.scene.positions().whole(),
+                }
+                .for_kernel(&self.apply)?,
+                &self.push,
+                groups(nv, 64)?,
+            )
+        })?;
+        rec.pass("lighting", |rec| {
+            self.light.record_forward(
+                rec,
+                self.scene.positions().whole(),
+                self.scene.position_layout(),
+                self.scene.colors().whole(),
+            )
+        })
     }
 
     /// Sizes the bins and the backward's buffers for `total` entries with the headroom.
@@ -849,12 +860,6 @@ impl<'c> PoseFitter<'c> {
         )?;
         self.capacity = capacity;
         Ok(())
-    }
-
-    /// [`PoseFitter::resize`] after the gate stopped an iteration (a regrowth).
-    fn grow(&mut self, total: u64) -> Result<()> {
-        self.regrowths += 1;
-        self.resize(total)
     }
 
     /// The log of iterations `first ..= last` (their losses and poses), read back.
@@ -919,41 +924,6 @@ impl<'c> PoseFitter<'c> {
         self.ctx.write_buffer(&self.target, 0, target)
     }
 
-    /// The MSE and the render at the current pose with σ and γ (no step), re-run until the
-    /// entries fit.
-    pub fn evaluate(&mut self, sigma: f64, gamma: f64) -> Result<(f64, Vec<[f32; 4]>)> {
-        self.scene.set_blur(sigma, gamma)?;
-        loop {
-            let ctx = self.ctx;
-            ctx.submit_and_wait(|rec| {
-                self.gate.reset();
-                self.record_pose(rec)?;
-                let Self {
-                    scene,
-                    gate,
-                    renderer,
-                    mse,
-                    target,
-                    ..
-                } = self;
-                renderer.record_forward_guarded(rec, scene, gate, 0, |rec, binned| {
-                    let scene = binned.scene();
-                    mse.record(rec, scene.output().whole(), target.whole(), None)
-                })
-            })?;
-            match self.gate.read(ctx)?.stopped {
-                None => break,
-                Some((_, total)) => self.grow(total)?,
-            }
-        }
-        let s = &self.opts.settings;
-        Ok((
-            f64::from(self.mse.read_loss(self.ctx)?),
-            self.ctx
-                .read_buffer(self.scene.output(), 0, (s.width * s.height) as usize)?,
-        ))
-    }
-
     /// dL/d(ω, t) of the last iteration that ran (the gradient its Adam steps took).
     pub fn gradient(&self) -> Result<[f64; 6]> {
         let ti = 4 * u64::from(self.push.translation_at);
@@ -984,16 +954,6 @@ impl<'c> PoseFitter<'c> {
     /// Entries the bins and the backward's partials hold now.
     pub fn capacity(&self) -> u64 {
         self.capacity
-    }
-
-    /// Submissions the gate stopped (each grew the capacity and re-ran).
-    pub fn regrowths(&self) -> u32 {
-        self.regrowths
-    }
-
-    /// The entry count of the last iteration that ran.
-    pub fn last_entries(&self) -> u64 {
-        self.last_entries
     }
 
     /// The point rotations turn about.
@@ -1265,41 +1225,37 @@ pub fn fit_pose_resumable(
         earlier = state.seconds;
     }
     let every = opts.log_every;
-    let mut it = done + 1;
-    while it <= opts.iterations {
-        // Up to the next logged iteration, within one σ/γ stage, in one submission.
-        let mut last = ((it - 1) / every + 1)
-            .saturating_mul(every)
-            .min(opts.iterations);
-        let here = opts.sigma_gamma(it - 1);
-        if let Some(end) = (it..=last).find(|&i| opts.sigma_gamma(i - 1) != here) {
-            last = end - 1;
-        }
-        if here != stage {
-            if let PoseTarget::PerStage(f) = &mut target {
-                fitter.set_target(&f(here.0, here.1)?)?;
+    let done = fitter.drive(
+        done + 1,
+        opts.iterations,
+        |fitter, it| {
+            // Up to the next logged iteration, within one σ/γ stage, in one submission.
+            let here = opts.sigma_gamma(it - 1);
+            let last = driver::to_next_log(it, every).min(opts.iterations);
+            let last = (it..=last)
+                .find(|&i| opts.sigma_gamma(i - 1) != here)
+                .map_or(last, |end| end - 1);
+            if here != stage {
+                if let PoseTarget::PerStage(f) = &mut target {
+                    fitter.set_target(&f(here.0, here.1)?)?;
+                }
+                fitter.fit_capacity(here.0, here.1)?;
             }
-            fitter.fit_capacity(here.0, here.1)?;
-        }
-        stage = here;
-        if let Some(stopped) = fitter.run(it, last, None)? {
-            it = stopped;
-            continue;
-        }
-        let seconds = earlier + start.elapsed().as_secs_f64();
-        log.extend(fitter.read_log(it, last, seconds)?);
-        done = last;
-        let snapshot = PoseFitSnapshot {
-            fitter: &fitter,
-            iteration: done,
-            log: &log,
-            seconds,
-        };
-        if !progress(&log[log.len() - 1], &snapshot)? {
-            break;
-        }
-        it = last + 1;
-    }
+            stage = here;
+            Ok(last)
+        },
+        |fitter, first, last| {
+            let seconds = earlier + start.elapsed().as_secs_f64();
+            log.extend(fitter.read_log(first, last, seconds)?);
+            let snapshot = PoseFitSnapshot {
+                fitter,
+                iteration: last,
+                log: &log,
+                seconds,
+            };
+            progress(&log[log.len() - 1], &snapshot)
+        },
+    )?;
     let seconds = earlier + start.elapsed().as_secs_f64();
     let s = &opts.settings;
     if let PoseTarget::PerStage(f) = &mut target

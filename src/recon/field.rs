@@ -36,7 +36,6 @@
 //! layout), then the field's ([`crate::field::mlp`]'s layout). On the GPU the field's part
 //! starts at the device's binding alignment; files and the host API hold it packed.
 
-use std::cell::RefCell;
 use std::ops::Range;
 
 use crate::camera::Camera;
@@ -44,6 +43,7 @@ use crate::error::{Error, Result};
 use crate::field::mcubes::{Isosurface, MarchingCubes};
 use crate::field::mlp::MlpLayout;
 use crate::field::{Cube, Field, FieldKind, SumChunks};
+use crate::fit::driver::{Fit, Fitter};
 use crate::fit::field_fit::scaled_to_cube;
 use crate::fit::{Adam, AdamOptions};
 use crate::gpu::GradOut;
@@ -297,7 +297,7 @@ pub struct FieldTrainLog {
 }
 
 /// Training a conditioned field on the GPU ([`FieldReconTrainer::run`]).
-pub struct FieldReconTrainer<'c> {
+pub struct FieldReconTraining<'c> {
     ctx: &'c Context,
     opts: FieldTrainOptions,
     classes: Vec<(String, Range<u32>)>,
@@ -328,14 +328,17 @@ pub struct FieldReconTrainer<'c> {
     targets: Buffer,
     rotations: Buffer,
     target_images: Buffer,
-    gate: RefCell<IterationGate>,
+    /// The staged rows' objects (`batch` per row), for recording them.
+    staged: Vec<u32>,
     capacity: u64,
-    regrowths: u32,
 }
+
+/// The conditioned field's training, ready to run iterations ([`Fitter::run`]).
+pub type FieldReconTrainer<'c> = Fitter<'c, FieldReconTraining<'c>>;
 
 const HINT: &str = "use fewer anchors, larger tiles or a smaller τ";
 
-impl<'c> FieldReconTrainer<'c> {
+impl<'c> Fitter<'c, FieldReconTraining<'c>> {
     /// Uploads the training images, prepares every object's probing (its visual hull's
     /// boundary and contour densities, on the host), builds the network with `params`
     /// (packed, [`FieldNet::param_count`]) or the seeded init, and sizes the probers' entries
@@ -429,7 +432,7 @@ impl<'c> FieldReconTrainer<'c> {
         padded[..encoder_count as usize].copy_from_slice(&packed[..encoder_count as usize]);
         padded[field_offset as usize..(field_offset + field_count) as usize]
             .copy_from_slice(&packed[encoder_count as usize..]);
-        let trainer = Self {
+        let trainer = FieldReconTraining {
             ctx,
             opts: opts.clone(),
             classes: data.classes.clone(),
@@ -457,9 +460,8 @@ impl<'c> FieldReconTrainer<'c> {
             targets: device("recon targets", 2 * b * px)?,
             rotations: device("recon rotations", 4 * b)?,
             target_images: device("recon target images", 8 * b * px)?,
-            gate: RefCell::new(IterationGate::new(ctx)?),
+            staged: Vec::new(),
             capacity,
-            regrowths: 0,
             net,
             field,
             objects,
@@ -472,18 +474,39 @@ impl<'c> FieldReconTrainer<'c> {
             trainer.adam.record_reset(rec);
             Ok(())
         })?;
-        Ok(trainer)
+        Fitter::from_fit(ctx, trainer)
+    }
+}
+
+impl Fit for FieldReconTraining<'_> {
+    const NAME: &'static str = "training";
+
+    /// Stages the iterations' batches (their schedule rows) and keeps each row's objects.
+    fn prepare(&mut self, ctx: &Context, first: u32, last: u32) -> Result<()> {
+        let entries = self.schedule.stage(
+            ctx,
+            self.opts.seed,
+            &self.classes,
+            self.opts.batch,
+            first..=last,
+        )?;
+        self.staged = entries.iter().map(|e| e[0]).collect();
+        Ok(())
     }
 
-    /// Records iteration `it` at schedule row `row`, whose slots hold `objects`.
+    /// Iteration `it` at schedule row `row` (the staged rows copied in first).
     fn record_iteration(
-        &self,
+        &mut self,
         rec: &mut Recorder<'_>,
         gate: &mut IterationGate,
         it: u32,
         row: u32,
-        objects: &[u32],
     ) -> Result<()> {
+        if row == 0 {
+            self.schedule.record_copy(rec);
+        }
+        let b = self.opts.batch as usize;
+        let objects = &self.staged[row as usize * b..(row as usize + 1) * b];
         let o = &self.opts;
         let b = o.batch;
         let px = o.net.net.image * o.net.net.image;
@@ -626,53 +649,21 @@ impl<'c> FieldReconTrainer<'c> {
         })
     }
 
-    /// Runs iterations `first ..= last` (from 1) in one submission. `None` when all ran;
-    /// `Some(i)` when iteration `i` outgrew the entry capacity: it and the later ones changed
-    /// nothing, the capacity has grown, and they are to be run again.
-    pub fn run(&mut self, first: u32, last: u32) -> Result<Option<u32>> {
-        if first == 0 || last < first {
-            return Err(Error::Input(format!(
-                "iterations {first}..={last}: they count from 1"
-            )));
-        }
-        let b = self.opts.batch;
-        let entries =
-            self.schedule
-                .stage(self.ctx, self.opts.seed, &self.classes, b, first..=last)?;
-        self.ctx.submit_and_wait(|rec| {
-            self.schedule.record_copy(rec);
-            let mut gate = self.gate.borrow_mut();
-            gate.reset();
-            for it in first..=last {
-                let row = it - first;
-                let objects: Vec<u32> = entries[(row * b) as usize..((row + 1) * b) as usize]
-                    .iter()
-                    .map(|e| e[0])
-                    .collect();
-                self.record_iteration(rec, &mut gate, it, row, &objects)?;
-            }
-            Ok(())
-        })?;
-        let status = self.gate.borrow().read(self.ctx)?;
-        if let Some((stopped, total)) = status.stopped {
-            if stopped < first || stopped > last || total <= self.capacity {
-                return Err(Error::Limit(format!(
-                    "training: the gate stopped iteration {stopped} of {first}..={last} with \
-                     {total} entries for a capacity of {}",
-                    self.capacity
-                )));
-            }
-            let capacity = capacity_for(self.ctx, total)?;
-            for p in &mut self.probers {
-                p.reserve_guarded(self.ctx, capacity)?;
-            }
-            self.capacity = capacity;
-            self.regrowths += 1;
-            return Ok(Some(stopped));
-        }
-        Ok(None)
+    fn capacity(&self) -> u64 {
+        self.capacity
     }
 
+    fn grow(&mut self, ctx: &Context, total: u64) -> Result<()> {
+        let capacity = capacity_for(ctx, total)?;
+        for p in &mut self.probers {
+            p.reserve_guarded(ctx, capacity)?;
+        }
+        self.capacity = capacity;
+        Ok(())
+    }
+}
+
+impl FieldReconTraining<'_> {
     /// The losses of the last iteration run (`iteration` names it in the log).
     pub fn read_log(&self, iteration: u32) -> Result<FieldTrainLog> {
         let l: Vec<f32> = self
@@ -743,11 +734,6 @@ impl<'c> FieldReconTrainer<'c> {
     /// Entries each prober holds now.
     pub fn capacity(&self) -> u64 {
         self.capacity
-    }
-
-    /// Submissions the gate stopped.
-    pub fn regrowths(&self) -> u32 {
-        self.regrowths
     }
 
     /// The options.

@@ -29,11 +29,11 @@
 //! iterations); the binning is guarded ([`crate::gpu::gate`]), and an iteration that outgrows
 //! the entry capacity stops the rest, which grow the capacity and run again.
 
-use std::cell::RefCell;
 use std::ops::Range;
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
+use crate::fit::driver::{Fit, Fitter};
 use crate::fit::{Adam, AdamOptions, ImageMse, Regularizers, SilhouetteLoss};
 use crate::gpu::GradOut;
 use crate::gpu::gate::IterationGate;
@@ -370,7 +370,7 @@ pub fn template() -> Mesh {
 
 /// Training on the GPU: the network, its optimizer, the decoder, the batch scene and the
 /// losses ([`ReconTrainer::run`]).
-pub struct ReconTrainer<'c> {
+pub struct ReconTraining<'c> {
     ctx: &'c Context,
     opts: TrainOptions,
     classes: Vec<(String, Range<u32>)>,
@@ -396,20 +396,20 @@ pub struct ReconTrainer<'c> {
     renderer: Renderer,
     scene: GpuScene,
     grads: GradBuffers,
-    /// In a cell: recording borrows the trainer, the gate is the one thing it changes.
-    gate: RefCell<IterationGate>,
     sil: SilhouetteLoss,
     mse: ImageMse,
     regs: Regularizers,
     capacity: u64,
     max_capacity: u64,
-    regrowths: u32,
 }
+
+/// The reconstruction network's training, ready to run iterations ([`Fitter::run`]).
+pub type ReconTrainer<'c> = Fitter<'c, ReconTraining<'c>>;
 
 /// Copies of each object the renderer sees (views a and b).
 const COPIES: u32 = 2;
 
-impl<'c> ReconTrainer<'c> {
+impl<'c> Fitter<'c, ReconTraining<'c>> {
     /// Uploads the training images, builds the network with `params` (or an initialization
     /// from the seed), zeroes Adam's moments, and sizes the binning on the template.
     pub fn new(
@@ -493,7 +493,7 @@ impl<'c> ReconTrainer<'c> {
             ctx, &renderer, &mut scene, opts.tile, capacity, alpha_only,
         )?;
         let table: Vec<[f32; 2]> = (0..VIEWS).map(|v| view_rotation(view_azimuth(v))).collect();
-        let trainer = Self {
+        let trainer = ReconTraining {
             ctx,
             opts: opts.clone(),
             classes: data.classes.clone(),
@@ -529,28 +529,45 @@ impl<'c> ReconTrainer<'c> {
             renderer,
             scene,
             grads,
-            gate: RefCell::new(IterationGate::new(ctx)?),
             decoder,
             net,
             capacity,
             max_capacity,
-            regrowths: 0,
         };
         ctx.submit_and_wait(|rec| {
             trainer.adam.record_reset(rec);
             Ok(())
         })?;
-        Ok(trainer)
+        Fitter::from_fit(ctx, trainer)
+    }
+}
+
+impl Fit for ReconTraining<'_> {
+    const NAME: &'static str = "training";
+
+    /// Stages the iterations' batches (their schedule rows).
+    fn prepare(&mut self, ctx: &Context, first: u32, last: u32) -> Result<()> {
+        self.schedule.stage(
+            ctx,
+            self.opts.seed,
+            &self.classes,
+            self.opts.batch,
+            first..=last,
+        )?;
+        Ok(())
     }
 
-    /// Records iteration `it` (from 1) at schedule row `row`.
+    /// Iteration `it` at schedule row `row` (the staged rows copied in first).
     fn record_iteration(
-        &self,
+        &mut self,
         rec: &mut Recorder<'_>,
         gate: &mut IterationGate,
         it: u32,
         row: u32,
     ) -> Result<()> {
+        if row == 0 {
+            self.schedule.record_copy(rec);
+        }
         let o = &self.opts;
         let shape = BatchShape {
             batch: o.batch,
@@ -689,56 +706,20 @@ impl<'c> ReconTrainer<'c> {
             })
     }
 
-    /// Runs iterations `first ..= last` (from 1) in one submission. `None` when all ran;
-    /// `Some(i)` when iteration `i` outgrew the entry capacity: it and the later ones changed
-    /// nothing, the capacity has grown, and they are to be run again.
-    pub fn run(&mut self, first: u32, last: u32) -> Result<Option<u32>> {
-        if first == 0 || last < first {
-            return Err(Error::Input(format!(
-                "iterations {first}..={last}: they count from 1"
-            )));
-        }
-        self.schedule.stage(
-            self.ctx,
-            self.opts.seed,
-            &self.classes,
-            self.opts.batch,
-            first..=last,
-        )?;
-        self.ctx.submit_and_wait(|rec| {
-            self.schedule.record_copy(rec);
-            let mut gate = self.gate.borrow_mut();
-            gate.reset();
-            for it in first..=last {
-                self.record_iteration(rec, &mut gate, it, it - first)?;
-            }
-            Ok(())
-        })?;
-        let status = self.gate.borrow().read(self.ctx)?;
-        if let Some((stopped, total)) = status.stopped {
-            if stopped < first || stopped > last || total <= self.capacity {
-                return Err(Error::Limit(format!(
-                    "training: the gate stopped iteration {stopped} of {first}..={last} with \
-                     {total} entries for a capacity of {}",
-                    self.capacity
-                )));
-            }
-            self.grow(total)?;
-            return Ok(Some(stopped));
-        }
-        Ok(None)
+    fn capacity(&self) -> u64 {
+        self.capacity
     }
 
-    fn grow(&mut self, total: u64) -> Result<()> {
+    fn grow(&mut self, ctx: &Context, total: u64) -> Result<()> {
         let capacity = crate::fit::with_headroom(
-            self.ctx,
+            ctx,
             "the reconstruction batch's binning",
             total,
             self.max_capacity,
             HINT,
         )?;
         self.grads = crate::fit::reserve_guarded(
-            self.ctx,
+            ctx,
             &self.renderer,
             &mut self.scene,
             self.opts.tile,
@@ -746,10 +727,11 @@ impl<'c> ReconTrainer<'c> {
             self.opts.color == 0.0,
         )?;
         self.capacity = capacity;
-        self.regrowths += 1;
         Ok(())
     }
+}
 
+impl ReconTraining<'_> {
     /// The losses of the last iteration run (`iteration` names it in the log).
     pub fn read_log(&self, iteration: u32) -> Result<TrainLog> {
         let silhouette = COPIES as f32 * self.sil.read_loss(self.ctx)?;
@@ -819,11 +801,6 @@ impl<'c> ReconTrainer<'c> {
     /// Entries the binning holds now.
     pub fn capacity(&self) -> u64 {
         self.capacity
-    }
-
-    /// Submissions the gate stopped.
-    pub fn regrowths(&self) -> u32 {
-        self.regrowths
     }
 }
 
