@@ -113,6 +113,9 @@ fn a_mesh_fit_resumed_from_any_checkpoint_ends_bit_for_bit_as_the_uninterrupted_
         let read = Checkpoint::read(&path, FitKind::Mesh, fingerprint).unwrap();
         let back = MeshFitState::from_checkpoint(&read, &template).unwrap();
         assert_eq!(back, state, "the checkpoint file round trip");
+        // The resumed fit runs only the iterations after the checkpoint's (a fit that started
+        // again from 1 would end the same, deterministic as it is, but not log these).
+        let mut logged = Vec::new();
         let resumed = fit_mesh_resumable(
             &gpu,
             &template,
@@ -120,9 +123,16 @@ fn a_mesh_fit_resumed_from_any_checkpoint_ends_bit_for_bit_as_the_uninterrupted_
             &targets,
             &options(8),
             Some(&back),
-            |_, _, _, _| Ok(true),
+            |l, _, _, _| {
+                logged.push(l.iteration);
+                Ok(true)
+            },
         )
         .unwrap();
+        assert_eq!(resumed.first_iteration, stop + 1);
+        // Logged every 2: the submissions after the checkpoint, not from 1.
+        let rest: Vec<u32> = (stop + 2..=8).step_by(2).collect();
+        assert_eq!(logged, rest, "stopped at {stop}");
         assert_same_fit(&format!("stopped at {stop}"), &whole, &resumed);
     }
 }
@@ -444,7 +454,14 @@ fn a_field_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_f
     let c = Checkpoint::read(&path, FitKind::Field, fp).unwrap();
     let back = FieldFitState::from_checkpoint(&c, &opts).unwrap();
     assert_eq!(back.iteration, 4);
-    let resumed = fit_field_resumable(&gpu, &targets, &opts, Some(&back), |_, _| Ok(true)).unwrap();
+    // Only the rest runs: iterations 5 and 6, logged at 6.
+    let mut logged = Vec::new();
+    let resumed = fit_field_resumable(&gpu, &targets, &opts, Some(&back), |l, _| {
+        logged.push(l.iteration);
+        Ok(true)
+    })
+    .unwrap();
+    assert_eq!(logged, [6], "a resumed fit logs only what it runs");
     assert_eq!(resumed.iterations, 6);
     assert_eq!(
         params(&whole.field),
@@ -558,6 +575,7 @@ fn a_pose_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_fi
     let c = Checkpoint::read(&path, FitKind::Pose, fp).unwrap();
     let back = PoseFitState::from_checkpoint(&c).unwrap();
     assert_eq!(back.iteration, 5);
+    let mut logged = Vec::new();
     let resumed = fit_pose_resumable(
         &gpu,
         &mesh,
@@ -567,9 +585,17 @@ fn a_pose_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_fi
         &init,
         &opts,
         Some(&back),
-        |_, _| Ok(true),
+        |l, _| {
+            logged.push(l.iteration);
+            Ok(true)
+        },
     )
     .unwrap();
+    assert_eq!(
+        logged,
+        (6..=12).collect::<Vec<_>>(),
+        "a resumed fit runs only the rest"
+    );
     assert_eq!(resumed.iterations, 12);
     assert_eq!(pose_bits(&whole.pose), pose_bits(&resumed.pose), "pose");
     assert_eq!(whole.loss.to_bits(), resumed.loss.to_bits(), "final loss");

@@ -70,8 +70,22 @@ fn train_twice_resume_evaluate_and_reconstruct() {
     assert!(bytes(&a) == bytes(&b), "a second run wrote other bytes");
     // Stopped after 2 (a finished run of 2), then resumed to 4: the same model.
     train(&data, &c, 2, &[]);
-    train(&data, &c, 4, &["--resume"]);
+    let said = train(&data, &c, 4, &["--resume"]);
+    assert!(
+        said.contains("resumed after iteration 2: ran iterations 3..4;"),
+        "a resumed run runs only the rest: {said}"
+    );
     assert!(bytes(&a) == bytes(&c), "a resumed run differs");
+    // Its log is the uninterrupted run's: the checkpoint's rows, then the rest's (a run that
+    // started again from 1 would log iterations 2 twice).
+    let log_of = |m: &Path| {
+        let dir = m.with_file_name(format!(
+            "{}-train",
+            m.file_stem().unwrap().to_str().unwrap()
+        ));
+        std::fs::read_to_string(dir.join("loss.csv")).unwrap()
+    };
+    assert_eq!(log_of(&c), log_of(&a));
     let report = dir.path("a-train");
     let log = std::fs::read_to_string(report.join("loss.csv")).unwrap();
     assert_eq!(
@@ -213,7 +227,11 @@ fn a_conditioned_field_trains_resumes_and_sits_beside_the_mesh_in_the_table() {
     assert!(said.contains("trained 4 iterations"), "{said}");
     // Stopped after 2, resumed to 4: the same model, bit for bit.
     train(&data, &g, 2, &FIELD);
-    train(&data, &g, 4, &[&FIELD[..], &["--resume"]].concat());
+    let said = train(&data, &g, 4, &[&FIELD[..], &["--resume"]].concat());
+    assert!(
+        said.contains("resumed after iteration 2: ran iterations 3..4;"),
+        "a resumed field run runs only the rest: {said}"
+    );
     let bytes = |p: &Path| std::fs::read(p).unwrap();
     assert!(bytes(&f) == bytes(&g), "a resumed field run differs");
     // A field checkpoint does not resume as a mesh run.

@@ -369,14 +369,7 @@ fn fit_and_report(
     gif.finish()?;
     io::write_obj(out, &result.mesh.positions, &result.mesh.faces)?;
     // Resumed: which iterations ran now (the rest after the checkpoint's).
-    let resumed = match result.first_iteration {
-        1 => String::new(),
-        first if first > its => format!("resumed after iteration {its}: nothing left to run; "),
-        first => format!(
-            "resumed after iteration {}: ran iterations {first}..{its}; ",
-            first - 1
-        ),
-    };
+    let resumed = super::interrupt::resumed_note(result.first_iteration, its);
     println!(
         "{resumed}{its} iterations in {:.1} s ({:.1} ms per iteration); mean IoU {mean:.4} over \
          {views} views; wrote {} and {}",

@@ -86,3 +86,16 @@ pub fn name(signal: i32) -> &'static str {
 pub fn status(signal: i32) -> i32 {
     128 + signal
 }
+
+/// What a resumed run says before its summary: `first` is the first iteration it ran (1 when it
+/// did not resume, and nothing is said), `done` the last.
+pub fn resumed_note(first: u32, done: u32) -> String {
+    match first {
+        1 => String::new(),
+        first if first > done => format!("resumed after iteration {done}: nothing left to run; "),
+        first => format!(
+            "resumed after iteration {}: ran iterations {first}..{done}; ",
+            first - 1
+        ),
+    }
+}

@@ -636,7 +636,8 @@ impl<M: Fn(Vec<f32>, u32, Option<TrainState>) -> ReconModel> TrainingRun<'_, M> 
         model_of(trainer.params()?, done, None).save(&args.out)?;
         let last = log.last().copied().unwrap_or([0.0; 6]);
         println!(
-            "trained {done} iterations: L_sil {:.4}{}; model {}",
+            "{}trained {done} iterations: L_sil {:.4}{}; model {}",
+            interrupt::resumed_note(start + 1, done),
             last[1],
             vals.last()
                 .map(|v| format!(", validation 3D IoU {:.4}", v[1]))
