@@ -603,12 +603,12 @@ impl FieldFit {
     }
 
     /// The points of the last iteration: anchors at `[0, N_a)`, zeros up to
-    /// [`FieldFitter::geo_start`], then the regularizer's points.
+    /// [`FieldFit::geo_start`], then the regularizer's points.
     pub fn points(&self) -> &Buffer {
         &self.points
     }
 
-    /// dL/dφ per point of the last iteration (the layout of [`FieldFitter::points`]).
+    /// dL/dφ per point of the last iteration (the layout of [`FieldFit::points`]).
     pub fn d_phi(&self) -> &Buffer {
         &self.d_phi
     }

@@ -72,7 +72,7 @@ pub struct MeshFitOptions {
     /// count, read back once, with [`ENTRY_HEADROOM`]. More spares the re-runs of a fit whose
     /// shape grows; less saves memory (the bins and the backward's partials scale with it). An
     /// iteration that does not fit grows the capacity and runs again either way, with the same
-    /// result (as [`FieldFitter::reserve`](super::field_fit::FieldFitter::reserve)).
+    /// result (as [`FieldFit::reserve`](super::field_fit::FieldFit::reserve)).
     pub entry_capacity: Option<u64>,
 }
 

@@ -44,8 +44,8 @@
 //!   Repeated runs on one device are bit-identical.
 //! - Loss values land in small device buffers the structs own, read back only when asked
 //!   (`read_*`).
-//! - A range that holds fewer values than the problem needs is [`Error::Input`]; a problem too
-//!   large for one storage-buffer binding is [`Error::Limit`]. Larger ranges are fine (only the
+//! - A range that holds fewer values than the problem needs is [`Error::Input`](crate::Error::Input); a problem too
+//!   large for one storage-buffer binding is [`Error::Limit`](crate::Error::Limit). Larger ranges are fine (only the
 //!   leading values are used), so whole, alignment-rounded buffers can be passed.
 
 pub mod adam;

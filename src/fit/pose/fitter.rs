@@ -1,0 +1,460 @@
+//! The pose fit on the GPU: every iteration recorded with no read-back, as many per submission
+//! as asked ([`PoseFitter`]).
+
+use glam::DVec3;
+
+use bytemuck::{Pod, Zeroable};
+
+use super::{Pose, PoseFitOptions, PoseLog, centroid, check_target};
+
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::fit::ImageMse;
+use crate::fit::adam::{Adam, AdamOptions};
+use crate::fit::driver::{Fit, Fitter};
+use crate::fit::max_entry_capacity;
+use crate::gpu::GradOut;
+use crate::gpu::gate::IterationGate;
+use crate::gpu::groups;
+use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::lighting::Lighting;
+use crate::mesh::Mesh;
+use crate::raster::backward::GradBuffers;
+use crate::raster::gpu::{GpuScene, Method, Renderer};
+use crate::raster::light::SceneLight;
+
+/// Push constants of `pose_apply.comp` and `pose_grad.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct PosePush {
+    centre: [f32; 3],
+    vertex_count: u32,
+    translation_at: u32,
+    log_index: u32,
+    pad: [u32; 2],
+}
+
+/// A pose fit's GPU state: the scene with its guarded bins, the lighting, the loss, the pose's
+/// parameters and their two Adam optimizers. Every iteration is recorded with no read-back (see
+/// the [module docs](super)), as many per submission as asked ([`PoseFitter`] runs them).
+pub struct PoseFit<'c> {
+    ctx: &'c Context,
+    opts: PoseFitOptions,
+    renderer: Renderer,
+    scene: GpuScene,
+    light: SceneLight,
+    mse: ImageMse,
+    target: Buffer,
+    grads: GradBuffers,
+    apply: Kernel,
+    grad: Kernel,
+    /// The rest positions, packed xyz.
+    rest: Buffer,
+    /// ω at floats [0, 3), t at [`PosePush::translation_at`, + 3): two bindable ranges.
+    params: Buffer,
+    d_params: Buffer,
+    /// dL/d(unlit colour), which the pose does not need (the lighting's backward writes it).
+    d_base: Buffer,
+    adam_rotation: Adam,
+    adam_translation: Adam,
+    /// Two vec4 per iteration of the fit: the loss and ω, then t.
+    log: Buffer,
+    push: PosePush,
+    capacity: u64,
+    max_capacity: u64,
+}
+
+/// A pose fit ready to run iterations ([`Fitter::run`]).
+pub type PoseFitter<'c> = Fitter<'c, PoseFit<'c>>;
+
+impl<'c> Fitter<'c, PoseFit<'c>> {
+    /// The fit of `mesh`'s pose seen from `camera` to `target` from `init` (see
+    /// [`fit_pose`](super::fit_pose)): uploads everything, counts the entries of the first pose once and sizes
+    /// the guarded bins with the mesh fit's headroom.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        ctx: &'c Context,
+        mesh: &Mesh,
+        camera: &Camera,
+        lighting: &Lighting,
+        target: &[[f32; 4]],
+        init: &Pose,
+        opts: &PoseFitOptions,
+    ) -> Result<Self> {
+        opts.validate()?;
+        mesh.validate()?;
+        check_target(target, &opts.settings)?;
+        if !init.is_finite() {
+            return Err(Error::Input(format!(
+                "the initial pose {init:?} is not finite"
+            )));
+        }
+        let renderer = Renderer::new(ctx)?;
+        let mut scene = renderer.prepare(
+            ctx,
+            mesh,
+            std::slice::from_ref(camera),
+            lighting,
+            &opts.settings,
+        )?;
+        // Sized for real once the first pose's entries are counted (below).
+        renderer.reserve_guarded(ctx, &mut scene, opts.tile, 1)?;
+        let light = SceneLight::new(ctx, &scene)?;
+        let rest_f64 = &scene.host_meshes()[0].positions;
+        let centre = centroid(rest_f64);
+        let rest: Vec<f32> = mesh.positions.as_flattened().to_vec();
+        let translation_at = (ctx.info().buffer_alignment() / 4).max(4);
+        let push = PosePush {
+            centre: centre.to_array().map(|c| c as f32),
+            vertex_count: mesh.vertex_count() as u32,
+            translation_at: translation_at as u32,
+            log_index: 0,
+            pad: [0; 2],
+        };
+        let param_floats = (translation_at + 3) as usize;
+        let mut p0 = vec![0f32; param_floats];
+        let a = init.to_array();
+        for k in 0..3 {
+            p0[k] = a[k] as f32;
+            p0[translation_at as usize + k] = a[3 + k] as f32;
+        }
+        let first = opts.adam(0);
+        let max_capacity = max_entry_capacity(ctx, &renderer, &scene);
+        let mut fit = PoseFit {
+            ctx,
+            mse: ImageMse::new(ctx, 1, opts.settings.width, opts.settings.height)?,
+            target: ctx.upload_buffer("pose target", target)?,
+            grads: GradBuffers::with_entry_capacity(
+                ctx,
+                &scene,
+                Method::Tiled { tile: opts.tile },
+                1,
+            )?,
+            apply: Kernel::new(ctx, &specs::POSE_APPLY)?,
+            grad: Kernel::new(ctx, &specs::POSE_GRAD)?,
+            rest: ctx.upload_buffer("pose rest positions", &rest)?,
+            params: ctx.upload_buffer("pose parameters", &p0)?,
+            d_params: ctx.upload_buffer("pose gradient", &vec![0f32; param_floats])?,
+            d_base: ctx.create_buffer(
+                "pose unlit colour gradients",
+                12 * light.color_count().max(1),
+                MemoryKind::Device,
+            )?,
+            adam_rotation: Adam::new(ctx, 3, first)?,
+            adam_translation: Adam::new(
+                ctx,
+                3,
+                AdamOptions {
+                    lr: opts.lr_translation * opts.lr_factor(0),
+                    ..first
+                },
+            )?,
+            log: ctx.create_buffer(
+                "pose log",
+                32 * u64::from(opts.iterations),
+                MemoryKind::Device,
+            )?,
+            push,
+            capacity: 1,
+            max_capacity,
+            light,
+            opts: opts.clone(),
+            renderer,
+            scene,
+        };
+        let (sigma, gamma) = opts.sigma_gamma(0);
+        fit.fit_capacity(sigma, gamma)?;
+        Fitter::from_fit(ctx, fit)
+    }
+
+    /// The MSE and the render at the current pose with σ and γ (no step), re-run until the
+    /// entries fit.
+    pub fn evaluate(&mut self, sigma: f64, gamma: f64) -> Result<(f64, Vec<[f32; 4]>)> {
+        self.scene.set_blur(sigma, gamma)?;
+        self.submit_guarded(|fit, rec, gate| {
+            fit.record_pose(rec)?;
+            let PoseFit {
+                scene,
+                renderer,
+                mse,
+                target,
+                ..
+            } = fit;
+            renderer.record_forward_guarded(rec, scene, gate, 0, |rec, binned| {
+                let scene = binned.scene();
+                mse.record(rec, scene.output().whole(), target.whole(), None)
+            })
+        })?;
+        let s = &self.opts.settings;
+        Ok((
+            f64::from(self.mse.read_loss(self.ctx)?),
+            self.ctx
+                .read_buffer(self.scene.output(), 0, (s.width * s.height) as usize)?,
+        ))
+    }
+}
+
+impl PoseFit<'_> {
+    /// Sizes the guarded bins for the pose now at σ and γ: one counting submission, then the
+    /// count with the headroom. The fit does it at the start of every σ/γ stage (a blurry
+    /// stage bins several times the entries of a sharp one, and the backward's texel
+    /// partials, cleared over the whole capacity every iteration, are the larger cost at
+    /// these image sizes); it changes no result.
+    pub fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()> {
+        self.scene.set_blur(sigma, gamma)?;
+        self.ctx.submit_and_wait(|rec| self.record_pose(rec))?;
+        let total = self
+            .renderer
+            .count_entries(self.ctx, &mut self.scene, self.opts.tile)?;
+        self.resize(total)
+    }
+
+    /// Records the posed positions and their lit colours into the scene.
+    fn record_pose(&self, rec: &mut Recorder<'_>) -> Result<()> {
+        let nv = u64::from(self.push.vertex_count);
+        rec.pass("pose", |rec| {
+            rec.dispatch(
+                &self.apply,
+                &specs::PoseApplyBindings {
+                    params: self.params.whole(),
+                    rest: self.rest.whole(),
+                    posed: self.scene.positions().whole(),
+                }
+                .for_kernel(&self.apply)?,
+                &self.push,
+                groups(nv, 64)?,
+            )
+        })?;
+        rec.pass("lighting", |rec| {
+            self.light.record_forward(
+                rec,
+                self.scene.positions().whole(),
+                self.scene.position_layout(),
+                self.scene.colors().whole(),
+            )
+        })
+    }
+
+    /// Sizes the bins and the backward's buffers for `total` entries with the headroom.
+    fn resize(&mut self, total: u64) -> Result<()> {
+        let capacity = crate::fit::with_headroom(
+            self.ctx,
+            "a pose fit's binning (with the backward's partials)",
+            total,
+            self.max_capacity,
+            "use larger tiles or a smaller σ",
+        )?;
+        self.grads = crate::fit::reserve_guarded(
+            self.ctx,
+            &self.renderer,
+            &mut self.scene,
+            self.opts.tile,
+            capacity,
+            false,
+        )?;
+        self.capacity = capacity;
+        Ok(())
+    }
+
+    /// The log of iterations `first ..= last` (their losses and poses), read back.
+    pub(super) fn read_log(&self, first: u32, last: u32, seconds: f64) -> Result<Vec<PoseLog>> {
+        let rows: Vec<[f32; 4]> = self.ctx.read_buffer(
+            &self.log,
+            32 * u64::from(first - 1),
+            2 * (last - first + 1) as usize,
+        )?;
+        Ok(rows
+            .chunks_exact(2)
+            .zip(first..=last)
+            .map(|(r, it)| {
+                let (sigma, gamma) = self.opts.sigma_gamma(it - 1);
+                PoseLog {
+                    iteration: it,
+                    loss: f64::from(r[0][0]),
+                    sigma,
+                    gamma,
+                    pose: Pose::from_array(
+                        [r[0][1], r[0][2], r[0][3], r[1][0], r[1][1], r[1][2]].map(f64::from),
+                    ),
+                    seconds,
+                }
+            })
+            .collect())
+    }
+
+    /// The parameters and Adam's moments now (each `[rotation; translation]`).
+    pub(super) fn read_state(&self) -> Result<[[f64; 6]; 3]> {
+        let ti = 4 * u64::from(self.push.translation_at);
+        let read = |b: &Buffer, at: u64| -> Result<Vec<f32>> { self.ctx.read_buffer(b, at, 3) };
+        let (mr, vr) = self.adam_rotation.moments();
+        let (mt, vt) = self.adam_translation.moments();
+        let join = |a: Vec<f32>, b: Vec<f32>| -> [f64; 6] {
+            std::array::from_fn(|k| f64::from(if k < 3 { a[k] } else { b[k - 3] }))
+        };
+        Ok([
+            join(read(&self.params, 0)?, read(&self.params, ti)?),
+            join(read(mr, 0)?, read(mt, 0)?),
+            join(read(vr, 0)?, read(vt, 0)?),
+        ])
+    }
+
+    /// Sets the parameters and Adam's moments (each `[rotation; translation]`).
+    pub(super) fn write_state(&self, state: [&[f64; 6]; 3]) -> Result<()> {
+        let ti = 4 * u64::from(self.push.translation_at);
+        let f = |a: &[f64; 6], k: usize| -> [f32; 3] { std::array::from_fn(|i| a[k + i] as f32) };
+        let (mr, vr) = self.adam_rotation.moments();
+        let (mt, vt) = self.adam_translation.moments();
+        self.ctx.write_buffer(&self.params, 0, &f(state[0], 0))?;
+        self.ctx.write_buffer(&self.params, ti, &f(state[0], 3))?;
+        self.ctx.write_buffer(mr, 0, &f(state[1], 0))?;
+        self.ctx.write_buffer(mt, 0, &f(state[1], 3))?;
+        self.ctx.write_buffer(vr, 0, &f(state[2], 0))?;
+        self.ctx.write_buffer(vt, 0, &f(state[2], 3))
+    }
+
+    /// Replaces the target (same size, finite).
+    pub fn set_target(&mut self, target: &[[f32; 4]]) -> Result<()> {
+        check_target(target, &self.opts.settings)?;
+        self.ctx.write_buffer(&self.target, 0, target)
+    }
+
+    /// dL/d(ω, t) of the last iteration that ran (the gradient its Adam steps took).
+    pub fn gradient(&self) -> Result<[f64; 6]> {
+        let ti = 4 * u64::from(self.push.translation_at);
+        let r: Vec<f32> = self.ctx.read_buffer(&self.d_params, 0, 3)?;
+        let t: Vec<f32> = self.ctx.read_buffer(&self.d_params, ti, 3)?;
+        Ok(std::array::from_fn(|k| {
+            f64::from(if k < 3 { r[k] } else { t[k - 3] })
+        }))
+    }
+
+    /// The log of iterations `first ..= last` that ran: each one's loss, σ, γ and the pose it
+    /// evaluated (`seconds` as given).
+    pub fn log(&self, first: u32, last: u32, seconds: f64) -> Result<Vec<PoseLog>> {
+        if first == 0 || first > last || last > self.opts.iterations {
+            return Err(Error::Misuse(format!(
+                "pose fit: the log of {first}..={last} of 1..={}",
+                self.opts.iterations
+            )));
+        }
+        self.read_log(first, last, seconds)
+    }
+
+    /// The pose now.
+    pub fn pose(&self) -> Result<Pose> {
+        Ok(Pose::from_array(self.read_state()?[0]))
+    }
+
+    /// Entries the bins and the backward's partials hold now.
+    pub fn capacity(&self) -> u64 {
+        self.capacity
+    }
+
+    /// The point rotations turn about.
+    pub fn centre(&self) -> DVec3 {
+        DVec3::from(self.push.centre.map(f64::from))
+    }
+}
+
+impl Fit for PoseFit<'_> {
+    const NAME: &'static str = "pose fit";
+
+    fn last_iteration(&self) -> u32 {
+        self.opts.iterations
+    }
+
+    /// The pose and its lighting, then the guarded forward with the rest gated on the count:
+    /// the MSE, the backward, the lighting's backward, the pose gradient (and the log row) and
+    /// the two Adam steps.
+    fn record_iteration(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        gate: &mut IterationGate,
+        it: u32,
+        _row: u32,
+    ) -> Result<()> {
+        let o = &self.opts;
+        let (sigma, gamma) = o.sigma_gamma(it - 1);
+        self.scene.set_blur(sigma, gamma)?;
+        let rot = o.adam(it - 1);
+        self.adam_rotation.set_options(rot)?;
+        self.adam_translation.set_options(AdamOptions {
+            lr: o.lr_translation * o.lr_factor(it - 1),
+            ..rot
+        })?;
+        self.record_pose(rec)?;
+        let ti = 4 * u64::from(self.push.translation_at);
+        let push = PosePush {
+            log_index: it - 1,
+            ..self.push
+        };
+        let Self {
+            scene,
+            renderer,
+            mse,
+            target,
+            grads,
+            light,
+            grad,
+            params,
+            d_params,
+            d_base,
+            rest,
+            log,
+            adam_rotation,
+            adam_translation,
+            ..
+        } = self;
+        renderer.record_forward_guarded(rec, scene, gate, it, |rec, binned| {
+            let scene = binned.scene();
+            let io = grads.io();
+            rec.pass("image loss", |rec| {
+                mse.record(
+                    rec,
+                    scene.output().whole(),
+                    target.whole(),
+                    Some(GradOut::write(io.upstream)),
+                )
+            })?;
+            renderer.grad_kernels().record(rec, &binned, grads, &io)?;
+            rec.pass("lighting backward", |rec| {
+                light.record_backward(
+                    rec,
+                    scene.positions().whole(),
+                    scene.position_layout(),
+                    io.colors,
+                    d_base.whole(),
+                    io.positions,
+                )
+            })?;
+            rec.pass("pose gradient", |rec| {
+                rec.dispatch(
+                    grad,
+                    &specs::PoseGradBindings {
+                        params: params.whole(),
+                        rest: rest.whole(),
+                        d_posed: io.positions,
+                        d_params: d_params.whole(),
+                        loss: mse.loss_buffer().whole(),
+                        log: log.whole(),
+                    }
+                    .for_kernel(grad)?,
+                    &push,
+                    1,
+                )
+            })?;
+            rec.pass("adam", |rec| {
+                adam_rotation.record_step(rec, params.range(0, 12), d_params.range(0, 12), it)?;
+                adam_translation.record_step(rec, params.range(ti, 12), d_params.range(ti, 12), it)
+            })
+        })
+    }
+
+    fn capacity(&self) -> u64 {
+        self.capacity
+    }
+
+    fn grow(&mut self, _: &Context, total: u64) -> Result<()> {
+        self.resize(total)
+    }
+}
