@@ -11,7 +11,7 @@
 //!
 //! 1. `skin_fk.comp`: every bone's transform from the angles (one invocation walking the joint
 //!    tree); `skin_apply.comp`: the skinned positions (linear blend skinning, one invocation
-//!    per vertex); [`SceneLight`]: the mesh lit again with its posed normals.
+//!    per vertex); [`SceneLight`](crate::raster::light::SceneLight): the mesh lit again with its posed normals.
 //! 2. The guarded tiled forward, [`BlurredMse`] (loss and dL/d(image) of
 //!    render and target blurred alike), the tiled backward.
 //! 3. The lighting's backward (dL/dp' through the normals, added to the geometric share),
@@ -32,8 +32,8 @@ use bytemuck::{Pod, Zeroable};
 use super::adam::{Adam, AdamOptions};
 use super::blur::{BlurredMse, MAX_BLUR_STD};
 use super::driver::{self, Fit, Fitter};
-use super::max_entry_capacity;
-use super::pose::{PoseTarget, Schedule, check_target};
+use super::pose::{PoseTarget, Schedule};
+use super::posed::PosedView;
 use super::rig::{Rig, bone_of};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -41,9 +41,6 @@ use crate::gpu::gate::IterationGate;
 use crate::gpu::groups;
 use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, specs};
 use crate::lighting::Lighting;
-use crate::raster::backward::GradBuffers;
-use crate::raster::gpu::{GpuScene, Method, Renderer};
-use crate::raster::light::SceneLight;
 use crate::raster::settings::RasterSettings;
 
 /// Everything settable about an articulated fit.
@@ -281,12 +278,8 @@ pub struct ArticulatedLog {
 pub struct ArticulatedFit<'c> {
     ctx: &'c Context,
     opts: ArticulatedFitOptions,
-    renderer: Renderer,
-    scene: GpuScene,
-    light: SceneLight,
+    view: PosedView,
     mse: BlurredMse,
-    target: Buffer,
-    grads: GradBuffers,
     fk: Kernel,
     apply: Kernel,
     grad: Kernel,
@@ -301,14 +294,10 @@ pub struct ArticulatedFit<'c> {
     /// The angles, one float per joint.
     params: Buffer,
     d_params: Buffer,
-    /// dL/d(unlit colour), which the angles do not need (the lighting's backward writes it).
-    d_base: Buffer,
     adam: Adam,
     /// `joint_count + 1` floats per iteration: the loss and the angles.
     log: Buffer,
     push: SkinPush,
-    capacity: u64,
-    max_capacity: u64,
 }
 
 /// An articulated fit ready to run iterations ([`Fitter::run`]).
@@ -332,17 +321,16 @@ impl<'c> Fitter<'c, ArticulatedFit<'c>> {
         opts.validate()?;
         rig.validate()?;
         rig.check_angles(init)?;
-        check_target(target, &opts.settings)?;
-        let renderer = Renderer::new(ctx)?;
-        let mut scene = renderer.prepare(
+        let view = PosedView::new(
             ctx,
             &rig.mesh,
-            std::slice::from_ref(camera),
+            camera,
             lighting,
+            target,
             &opts.settings,
+            opts.tile,
+            "an articulated fit's binning (with the backward's partials)",
         )?;
-        renderer.reserve_guarded(ctx, &mut scene, opts.tile, 1)?;
-        let light = SceneLight::new(ctx, &scene)?;
         let joints = rig.joint_count();
         let defs: Vec<JointDef> = rig
             .joints
@@ -363,17 +351,9 @@ impl<'c> Fitter<'c, ArticulatedFit<'c>> {
             })
             .collect();
         let angles: Vec<f32> = init.iter().map(|&a| a as f32).collect();
-        let max_capacity = max_entry_capacity(ctx, &renderer, &scene);
         let mut fit = ArticulatedFit {
             ctx,
             mse: BlurredMse::new(ctx, 1, opts.settings.width, opts.settings.height)?,
-            target: ctx.upload_buffer("articulated target", target)?,
-            grads: GradBuffers::with_entry_capacity(
-                ctx,
-                &scene,
-                Method::Tiled { tile: opts.tile },
-                1,
-            )?,
             fk: Kernel::new(ctx, &specs::SKIN_FK)?,
             apply: Kernel::new(ctx, &specs::SKIN_APPLY)?,
             grad: Kernel::new(ctx, &specs::SKIN_GRAD)?,
@@ -388,11 +368,6 @@ impl<'c> Fitter<'c, ArticulatedFit<'c>> {
             )?,
             params: ctx.upload_buffer("joint angles", &angles)?,
             d_params: ctx.upload_buffer("joint angle gradient", &vec![0f32; joints])?,
-            d_base: ctx.create_buffer(
-                "rig unlit colour gradients",
-                12 * light.color_count().max(1),
-                MemoryKind::Device,
-            )?,
             adam: Adam::new(ctx, joints as u64, opts.adam(0))?,
             log: ctx.create_buffer(
                 "articulated log",
@@ -405,12 +380,8 @@ impl<'c> Fitter<'c, ArticulatedFit<'c>> {
                 log_index: 0,
                 pad: 0,
             },
-            capacity: 1,
-            max_capacity,
-            light,
             opts: opts.clone(),
-            renderer,
-            scene,
+            view,
         };
         let (sigma, gamma) = opts.sigma_gamma(0);
         fit.fit_capacity(sigma, gamma)?;
@@ -420,26 +391,17 @@ impl<'c> Fitter<'c, ArticulatedFit<'c>> {
     /// The MSE (of images blurred by `blur` pixels) and the render at the current angles with σ
     /// and γ (no step), re-run until the entries fit.
     pub fn evaluate(&mut self, sigma: f64, gamma: f64, blur: f64) -> Result<(f64, Vec<[f32; 4]>)> {
-        self.scene.set_blur(sigma, gamma)?;
+        self.view.scene.set_blur(sigma, gamma)?;
         self.submit_guarded(|fit, rec, gate| {
             fit.record_pose(rec)?;
-            let ArticulatedFit {
-                scene,
-                renderer,
-                mse,
-                target,
-                ..
-            } = fit;
-            renderer.record_forward_guarded(rec, scene, gate, 0, |rec, binned| {
-                let scene = binned.scene();
-                mse.record(rec, scene.output().whole(), target.whole(), None, blur)
-            })
+            fit.view
+                .record_evaluation(rec, gate, |rec, images, target| {
+                    fit.mse.record(rec, images, target, None, blur)
+                })
         })?;
-        let s = &self.opts.settings;
         Ok((
             f64::from(self.mse.read_loss(self.ctx)?),
-            self.ctx
-                .read_buffer(self.scene.output(), 0, (s.width * s.height) as usize)?,
+            self.view.read_render(self.ctx)?,
         ))
     }
 }
@@ -448,12 +410,9 @@ impl ArticulatedFit<'_> {
     /// Sizes the guarded bins for the angles now at σ and γ (one counting submission); the fit
     /// does it at the start of every σ/γ stage. It changes no result.
     pub fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()> {
-        self.scene.set_blur(sigma, gamma)?;
+        self.view.scene.set_blur(sigma, gamma)?;
         self.ctx.submit_and_wait(|rec| self.record_pose(rec))?;
-        let total = self
-            .renderer
-            .count_entries(self.ctx, &mut self.scene, self.opts.tile)?;
-        self.resize(total)
+        self.view.fit_capacity(self.ctx)
     }
 
     /// Records the bones, the skinned positions and their lit colours into the scene.
@@ -478,42 +437,14 @@ impl ArticulatedFit<'_> {
                     bones: self.bones.whole(),
                     rest: self.rest.whole(),
                     skins: self.skins.whole(),
-                    posed: self.scene.positions().whole(),
+                    posed: self.view.scene.positions().whole(),
                 }
                 .for_kernel(&self.apply)?,
                 &self.push,
                 groups(u64::from(self.push.vertex_count), 64)?,
             )
         })?;
-        rec.pass("lighting", |rec| {
-            self.light.record_forward(
-                rec,
-                self.scene.positions().whole(),
-                self.scene.position_layout(),
-                self.scene.colors().whole(),
-            )
-        })
-    }
-
-    /// Sizes the bins and the backward's buffers for `total` entries with the headroom.
-    fn resize(&mut self, total: u64) -> Result<()> {
-        let capacity = super::with_headroom(
-            self.ctx,
-            "an articulated fit's binning (with the backward's partials)",
-            total,
-            self.max_capacity,
-            "use larger tiles or a smaller σ",
-        )?;
-        self.grads = super::reserve_guarded(
-            self.ctx,
-            &self.renderer,
-            &mut self.scene,
-            self.opts.tile,
-            capacity,
-            false,
-        )?;
-        self.capacity = capacity;
-        Ok(())
+        self.view.record_light(rec)
     }
 
     /// The log of iterations `first ..= last` that ran: each one's loss, σ, γ and the angles
@@ -551,8 +482,7 @@ impl ArticulatedFit<'_> {
 
     /// Replaces the target (same size, finite).
     pub fn set_target(&mut self, target: &[[f32; 4]]) -> Result<()> {
-        check_target(target, &self.opts.settings)?;
-        self.ctx.write_buffer(&self.target, 0, target)
+        self.view.set_target(self.ctx, target)
     }
 
     /// dL/dθ of the last iteration that ran (the gradient its Adam step took).
@@ -573,13 +503,16 @@ impl ArticulatedFit<'_> {
 
     /// The skinned positions the last pose recorded (packed xyz), read back.
     pub fn posed_positions(&self) -> Result<Vec<[f32; 3]>> {
-        self.ctx
-            .read_buffer(self.scene.positions(), 0, self.push.vertex_count as usize)
+        self.ctx.read_buffer(
+            self.view.scene.positions(),
+            0,
+            self.push.vertex_count as usize,
+        )
     }
 
     /// Entries the bins and the backward's partials hold now.
     pub fn capacity(&self) -> u64 {
-        self.capacity
+        self.view.capacity()
     }
 }
 
@@ -601,7 +534,7 @@ impl Fit for ArticulatedFit<'_> {
         _row: u32,
     ) -> Result<()> {
         let (sigma, gamma, blur) = self.opts.stage(it - 1);
-        self.scene.set_blur(sigma, gamma)?;
+        self.view.scene.set_blur(sigma, gamma)?;
         self.adam.set_options(self.opts.adam(it - 1))?;
         self.record_pose(rec)?;
         let push = SkinPush {
@@ -609,16 +542,11 @@ impl Fit for ArticulatedFit<'_> {
             ..self.push
         };
         let Self {
-            scene,
-            renderer,
+            view,
             mse,
-            target,
-            grads,
-            light,
             grad,
             params,
             d_params,
-            d_base,
             rest,
             skins,
             below,
@@ -627,60 +555,44 @@ impl Fit for ArticulatedFit<'_> {
             adam,
             ..
         } = self;
-        renderer.record_forward_guarded(rec, scene, gate, it, |rec, binned| {
-            let scene = binned.scene();
-            let io = grads.io();
-            rec.pass("image loss", |rec| {
-                mse.record(
-                    rec,
-                    scene.output().whole(),
-                    target.whole(),
-                    Some(io.upstream),
-                    blur,
-                )
-            })?;
-            renderer.grad_kernels().record(rec, &binned, grads, &io)?;
-            rec.pass("lighting backward", |rec| {
-                light.record_backward(
-                    rec,
-                    scene.positions().whole(),
-                    scene.position_layout(),
-                    io.colors,
-                    d_base.whole(),
-                    io.positions,
-                )
-            })?;
-            rec.pass("angle gradient", |rec| {
-                rec.dispatch(
-                    grad,
-                    &specs::SkinGradBindings {
-                        params: params.whole(),
-                        bones: bones.whole(),
-                        rest: rest.whole(),
-                        skins: skins.whole(),
-                        below: below.whole(),
-                        d_posed: io.positions,
-                        d_params: d_params.whole(),
-                        loss: mse.loss_buffer().whole(),
-                        log: log.whole(),
-                    }
-                    .for_kernel(grad)?,
-                    &push,
-                    push.joint_count,
-                )
-            })?;
-            rec.pass("adam", |rec| {
-                adam.record_step(rec, params.whole(), d_params.whole(), it)
-            })
-        })
+        view.record_guarded(
+            rec,
+            gate,
+            it,
+            |rec, images, target, d_image| mse.record(rec, images, target, Some(d_image), blur),
+            |rec, io| {
+                rec.pass("angle gradient", |rec| {
+                    rec.dispatch(
+                        grad,
+                        &specs::SkinGradBindings {
+                            params: params.whole(),
+                            bones: bones.whole(),
+                            rest: rest.whole(),
+                            skins: skins.whole(),
+                            below: below.whole(),
+                            d_posed: io.positions,
+                            d_params: d_params.whole(),
+                            loss: mse.loss_buffer().whole(),
+                            log: log.whole(),
+                        }
+                        .for_kernel(grad)?,
+                        &push,
+                        push.joint_count,
+                    )
+                })?;
+                rec.pass("adam", |rec| {
+                    adam.record_step(rec, params.whole(), d_params.whole(), it)
+                })
+            },
+        )
     }
 
     fn capacity(&self) -> u64 {
-        self.capacity
+        self.view.capacity()
     }
 
-    fn grow(&mut self, _: &Context, total: u64) -> Result<()> {
-        self.resize(total)
+    fn grow(&mut self, ctx: &Context, total: u64) -> Result<()> {
+        self.view.resize(ctx, total)
     }
 }
 

@@ -59,6 +59,7 @@ pub mod flatten;
 pub mod laplacian;
 pub mod mesh_fit;
 pub mod pose;
+mod posed;
 mod regularizers;
 #[cfg(feature = "plots")]
 pub mod report;

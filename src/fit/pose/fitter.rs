@@ -5,23 +5,20 @@ use glam::DVec3;
 
 use bytemuck::{Pod, Zeroable};
 
-use super::{Pose, PoseFitOptions, PoseLog, centroid, check_target};
+use super::{Pose, PoseFitOptions, PoseLog, centroid};
+use crate::fit::posed::{PosedView, check_target};
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::fit::ImageMse;
 use crate::fit::adam::{Adam, AdamOptions};
 use crate::fit::driver::{Fit, Fitter};
-use crate::fit::max_entry_capacity;
 use crate::gpu::GradOut;
 use crate::gpu::gate::IterationGate;
 use crate::gpu::groups;
 use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, specs};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
-use crate::raster::backward::GradBuffers;
-use crate::raster::gpu::{GpuScene, Method, Renderer};
-use crate::raster::light::SceneLight;
 
 /// Push constants of `pose_apply.comp` and `pose_grad.comp`.
 #[repr(C)]
@@ -40,12 +37,8 @@ struct PosePush {
 pub struct PoseFit<'c> {
     ctx: &'c Context,
     opts: PoseFitOptions,
-    renderer: Renderer,
-    scene: GpuScene,
-    light: SceneLight,
+    view: PosedView,
     mse: ImageMse,
-    target: Buffer,
-    grads: GradBuffers,
     apply: Kernel,
     grad: Kernel,
     /// The rest positions, packed xyz.
@@ -53,15 +46,11 @@ pub struct PoseFit<'c> {
     /// ω at floats [0, 3), t at [`PosePush::translation_at`, + 3): two bindable ranges.
     params: Buffer,
     d_params: Buffer,
-    /// dL/d(unlit colour), which the pose does not need (the lighting's backward writes it).
-    d_base: Buffer,
     adam_rotation: Adam,
     adam_translation: Adam,
     /// Two vec4 per iteration of the fit: the loss and ω, then t.
     log: Buffer,
     push: PosePush,
-    capacity: u64,
-    max_capacity: u64,
 }
 
 /// A pose fit ready to run iterations ([`Fitter::run`]).
@@ -89,18 +78,18 @@ impl<'c> Fitter<'c, PoseFit<'c>> {
                 "the initial pose {init:?} is not finite"
             )));
         }
-        let renderer = Renderer::new(ctx)?;
-        let mut scene = renderer.prepare(
+        // Sized for real once the first pose's entries are counted (below).
+        let view = PosedView::new(
             ctx,
             mesh,
-            std::slice::from_ref(camera),
+            camera,
             lighting,
+            target,
             &opts.settings,
+            opts.tile,
+            "a pose fit's binning (with the backward's partials)",
         )?;
-        // Sized for real once the first pose's entries are counted (below).
-        renderer.reserve_guarded(ctx, &mut scene, opts.tile, 1)?;
-        let light = SceneLight::new(ctx, &scene)?;
-        let rest_f64 = &scene.host_meshes()[0].positions;
+        let rest_f64 = &view.scene.host_meshes()[0].positions;
         let centre = centroid(rest_f64);
         let rest: Vec<f32> = mesh.positions.as_flattened().to_vec();
         let translation_at = (ctx.info().buffer_alignment() / 4).max(4);
@@ -119,27 +108,14 @@ impl<'c> Fitter<'c, PoseFit<'c>> {
             p0[translation_at as usize + k] = a[3 + k] as f32;
         }
         let first = opts.adam(0);
-        let max_capacity = max_entry_capacity(ctx, &renderer, &scene);
         let mut fit = PoseFit {
             ctx,
             mse: ImageMse::new(ctx, 1, opts.settings.width, opts.settings.height)?,
-            target: ctx.upload_buffer("pose target", target)?,
-            grads: GradBuffers::with_entry_capacity(
-                ctx,
-                &scene,
-                Method::Tiled { tile: opts.tile },
-                1,
-            )?,
             apply: Kernel::new(ctx, &specs::POSE_APPLY)?,
             grad: Kernel::new(ctx, &specs::POSE_GRAD)?,
             rest: ctx.upload_buffer("pose rest positions", &rest)?,
             params: ctx.upload_buffer("pose parameters", &p0)?,
             d_params: ctx.upload_buffer("pose gradient", &vec![0f32; param_floats])?,
-            d_base: ctx.create_buffer(
-                "pose unlit colour gradients",
-                12 * light.color_count().max(1),
-                MemoryKind::Device,
-            )?,
             adam_rotation: Adam::new(ctx, 3, first)?,
             adam_translation: Adam::new(
                 ctx,
@@ -155,12 +131,8 @@ impl<'c> Fitter<'c, PoseFit<'c>> {
                 MemoryKind::Device,
             )?,
             push,
-            capacity: 1,
-            max_capacity,
-            light,
             opts: opts.clone(),
-            renderer,
-            scene,
+            view,
         };
         let (sigma, gamma) = opts.sigma_gamma(0);
         fit.fit_capacity(sigma, gamma)?;
@@ -170,90 +142,47 @@ impl<'c> Fitter<'c, PoseFit<'c>> {
     /// The MSE and the render at the current pose with σ and γ (no step), re-run until the
     /// entries fit.
     pub fn evaluate(&mut self, sigma: f64, gamma: f64) -> Result<(f64, Vec<[f32; 4]>)> {
-        self.scene.set_blur(sigma, gamma)?;
+        self.view.scene.set_blur(sigma, gamma)?;
         self.submit_guarded(|fit, rec, gate| {
             fit.record_pose(rec)?;
-            let PoseFit {
-                scene,
-                renderer,
-                mse,
-                target,
-                ..
-            } = fit;
-            renderer.record_forward_guarded(rec, scene, gate, 0, |rec, binned| {
-                let scene = binned.scene();
-                mse.record(rec, scene.output().whole(), target.whole(), None)
-            })
+            fit.view
+                .record_evaluation(rec, gate, |rec, images, target| {
+                    fit.mse.record(rec, images, target, None)
+                })
         })?;
-        let s = &self.opts.settings;
         Ok((
             f64::from(self.mse.read_loss(self.ctx)?),
-            self.ctx
-                .read_buffer(self.scene.output(), 0, (s.width * s.height) as usize)?,
+            self.view.read_render(self.ctx)?,
         ))
     }
 }
 
 impl PoseFit<'_> {
     /// Sizes the guarded bins for the pose now at σ and γ: one counting submission, then the
-    /// count with the headroom. The fit does it at the start of every σ/γ stage (a blurry
-    /// stage bins several times the entries of a sharp one, and the backward's texel
-    /// partials, cleared over the whole capacity every iteration, are the larger cost at
-    /// these image sizes); it changes no result.
+    /// count with the headroom. The fit does it at the start of every σ/γ stage (a blurry stage
+    /// bins several times the entries of a sharp one); it changes no result.
     pub fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()> {
-        self.scene.set_blur(sigma, gamma)?;
+        self.view.scene.set_blur(sigma, gamma)?;
         self.ctx.submit_and_wait(|rec| self.record_pose(rec))?;
-        let total = self
-            .renderer
-            .count_entries(self.ctx, &mut self.scene, self.opts.tile)?;
-        self.resize(total)
+        self.view.fit_capacity(self.ctx)
     }
 
     /// Records the posed positions and their lit colours into the scene.
     fn record_pose(&self, rec: &mut Recorder<'_>) -> Result<()> {
-        let nv = u64::from(self.push.vertex_count);
         rec.pass("pose", |rec| {
             rec.dispatch(
                 &self.apply,
                 &specs::PoseApplyBindings {
                     params: self.params.whole(),
                     rest: self.rest.whole(),
-                    posed: self.scene.positions().whole(),
+                    posed: self.view.scene.positions().whole(),
                 }
                 .for_kernel(&self.apply)?,
                 &self.push,
-                groups(nv, 64)?,
+                groups(u64::from(self.push.vertex_count), 64)?,
             )
         })?;
-        rec.pass("lighting", |rec| {
-            self.light.record_forward(
-                rec,
-                self.scene.positions().whole(),
-                self.scene.position_layout(),
-                self.scene.colors().whole(),
-            )
-        })
-    }
-
-    /// Sizes the bins and the backward's buffers for `total` entries with the headroom.
-    fn resize(&mut self, total: u64) -> Result<()> {
-        let capacity = crate::fit::with_headroom(
-            self.ctx,
-            "a pose fit's binning (with the backward's partials)",
-            total,
-            self.max_capacity,
-            "use larger tiles or a smaller σ",
-        )?;
-        self.grads = crate::fit::reserve_guarded(
-            self.ctx,
-            &self.renderer,
-            &mut self.scene,
-            self.opts.tile,
-            capacity,
-            false,
-        )?;
-        self.capacity = capacity;
-        Ok(())
+        self.view.record_light(rec)
     }
 
     /// The log of iterations `first ..= last` (their losses and poses), read back.
@@ -314,8 +243,7 @@ impl PoseFit<'_> {
 
     /// Replaces the target (same size, finite).
     pub fn set_target(&mut self, target: &[[f32; 4]]) -> Result<()> {
-        check_target(target, &self.opts.settings)?;
-        self.ctx.write_buffer(&self.target, 0, target)
+        self.view.set_target(self.ctx, target)
     }
 
     /// dL/d(ω, t) of the last iteration that ran (the gradient its Adam steps took).
@@ -347,7 +275,7 @@ impl PoseFit<'_> {
 
     /// Entries the bins and the backward's partials hold now.
     pub fn capacity(&self) -> u64 {
-        self.capacity
+        self.view.capacity()
     }
 
     /// The point rotations turn about.
@@ -375,7 +303,7 @@ impl Fit for PoseFit<'_> {
     ) -> Result<()> {
         let o = &self.opts;
         let (sigma, gamma) = o.sigma_gamma(it - 1);
-        self.scene.set_blur(sigma, gamma)?;
+        self.view.scene.set_blur(sigma, gamma)?;
         let rot = o.adam(it - 1);
         self.adam_rotation.set_options(rot)?;
         self.adam_translation.set_options(AdamOptions {
@@ -389,72 +317,64 @@ impl Fit for PoseFit<'_> {
             ..self.push
         };
         let Self {
-            scene,
-            renderer,
+            view,
             mse,
-            target,
-            grads,
-            light,
             grad,
             params,
             d_params,
-            d_base,
             rest,
             log,
             adam_rotation,
             adam_translation,
             ..
         } = self;
-        renderer.record_forward_guarded(rec, scene, gate, it, |rec, binned| {
-            let scene = binned.scene();
-            let io = grads.io();
-            rec.pass("image loss", |rec| {
-                mse.record(
-                    rec,
-                    scene.output().whole(),
-                    target.whole(),
-                    Some(GradOut::write(io.upstream)),
-                )
-            })?;
-            renderer.grad_kernels().record(rec, &binned, grads, &io)?;
-            rec.pass("lighting backward", |rec| {
-                light.record_backward(
-                    rec,
-                    scene.positions().whole(),
-                    scene.position_layout(),
-                    io.colors,
-                    d_base.whole(),
-                    io.positions,
-                )
-            })?;
-            rec.pass("pose gradient", |rec| {
-                rec.dispatch(
-                    grad,
-                    &specs::PoseGradBindings {
-                        params: params.whole(),
-                        rest: rest.whole(),
-                        d_posed: io.positions,
-                        d_params: d_params.whole(),
-                        loss: mse.loss_buffer().whole(),
-                        log: log.whole(),
-                    }
-                    .for_kernel(grad)?,
-                    &push,
-                    1,
-                )
-            })?;
-            rec.pass("adam", |rec| {
-                adam_rotation.record_step(rec, params.range(0, 12), d_params.range(0, 12), it)?;
-                adam_translation.record_step(rec, params.range(ti, 12), d_params.range(ti, 12), it)
-            })
-        })
+        view.record_guarded(
+            rec,
+            gate,
+            it,
+            |rec, images, target, d_image| {
+                mse.record(rec, images, target, Some(GradOut::write(d_image)))
+            },
+            |rec, io| {
+                rec.pass("pose gradient", |rec| {
+                    rec.dispatch(
+                        grad,
+                        &specs::PoseGradBindings {
+                            params: params.whole(),
+                            rest: rest.whole(),
+                            d_posed: io.positions,
+                            d_params: d_params.whole(),
+                            loss: mse.loss_buffer().whole(),
+                            log: log.whole(),
+                        }
+                        .for_kernel(grad)?,
+                        &push,
+                        1,
+                    )
+                })?;
+                rec.pass("adam", |rec| {
+                    adam_rotation.record_step(
+                        rec,
+                        params.range(0, 12),
+                        d_params.range(0, 12),
+                        it,
+                    )?;
+                    adam_translation.record_step(
+                        rec,
+                        params.range(ti, 12),
+                        d_params.range(ti, 12),
+                        it,
+                    )
+                })
+            },
+        )
     }
 
     fn capacity(&self) -> u64 {
-        self.capacity
+        self.view.capacity()
     }
 
-    fn grow(&mut self, _: &Context, total: u64) -> Result<()> {
-        self.resize(total)
+    fn grow(&mut self, ctx: &Context, total: u64) -> Result<()> {
+        self.view.resize(ctx, total)
     }
 }

@@ -349,27 +349,6 @@ impl PoseFitOptions {
     }
 }
 
-/// [`Error::Input`] unless `target` has one finite RGBA value per pixel of `settings`.
-pub(crate) fn check_target(target: &[[f32; 4]], settings: &RasterSettings) -> Result<()> {
-    let px = settings.width as usize * settings.height as usize;
-    if target.len() != px {
-        return Err(Error::Input(format!(
-            "the target has {} pixels; {}x{} needs {px}",
-            target.len(),
-            settings.width,
-            settings.height
-        )));
-    }
-    if let Some(i) = target.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
-        return Err(Error::Input(format!(
-            "the target is not finite at pixel ({}, {})",
-            i % settings.width as usize,
-            i / settings.width as usize
-        )));
-    }
-    Ok(())
-}
-
 /// What the render is compared with.
 pub enum PoseTarget<'a> {
     /// One image for every iteration: a photograph, or any given render (`softvk fit-pose`).

@@ -3,7 +3,8 @@
 
 use glam::DVec3;
 
-use super::{Pose, centroid, check_target, pose_gradient};
+use super::{Pose, centroid, pose_gradient};
+use crate::fit::posed::check_target;
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};

@@ -1,0 +1,218 @@
+//! What the rigid pose fit ([`super::pose`]) and the articulated fit ([`super::articulated`])
+//! share: one view of a lit mesh whose positions a kernel of the fit writes every iteration,
+//! rendered through guarded bins against one target image, and differentiated back to those
+//! positions through the lighting. Each fit adds its parameters, the kernels that pose the mesh
+//! from them and take the gradient back to them, its image loss and its optimizer.
+
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::gpu::gate::IterationGate;
+use crate::gpu::{Buffer, BufferRange, Context, MemoryKind, Recorder};
+use crate::lighting::Lighting;
+use crate::mesh::Mesh;
+use crate::raster::backward::{GradBuffers, GradIo};
+use crate::raster::gpu::{GpuScene, Method, Renderer};
+use crate::raster::light::SceneLight;
+use crate::raster::settings::RasterSettings;
+
+use super::driver::{max_entry_capacity, reserve_guarded, with_headroom};
+
+/// The posed mesh's view: the scene with its guarded bins and the backward's buffers, the
+/// lighting and the target.
+pub(crate) struct PosedView {
+    pub(crate) renderer: Renderer,
+    pub(crate) scene: GpuScene,
+    pub(crate) light: SceneLight,
+    pub(crate) target: Buffer,
+    pub(crate) grads: GradBuffers,
+    /// dL/d(unlit colour), which the fits do not need (the lighting's backward writes it).
+    d_base: Buffer,
+    tile: u32,
+    capacity: u64,
+    max_capacity: u64,
+    /// The fit's binning, for [`Error::DeviceLimit`].
+    what: &'static str,
+}
+
+impl PosedView {
+    /// `mesh` seen from `camera` with `settings`, against `target`; its bins hold one entry
+    /// until [`PosedView::fit_capacity`] counts the first pose's. `name` labels the buffers
+    /// and the errors ("pose").
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn new(
+        ctx: &Context,
+        mesh: &Mesh,
+        camera: &Camera,
+        lighting: &Lighting,
+        target: &[[f32; 4]],
+        settings: &RasterSettings,
+        tile: u32,
+        what: &'static str,
+    ) -> Result<Self> {
+        check_target(target, settings)?;
+        let renderer = Renderer::new(ctx)?;
+        let mut scene =
+            renderer.prepare(ctx, mesh, std::slice::from_ref(camera), lighting, settings)?;
+        renderer.reserve_guarded(ctx, &mut scene, tile, 1)?;
+        let light = SceneLight::new(ctx, &scene)?;
+        Ok(Self {
+            target: ctx.upload_buffer("posed target", target)?,
+            grads: GradBuffers::with_entry_capacity(ctx, &scene, Method::Tiled { tile }, 1)?,
+            d_base: ctx.create_buffer(
+                "posed unlit colour gradients",
+                12 * light.color_count().max(1),
+                MemoryKind::Device,
+            )?,
+            tile,
+            capacity: 1,
+            max_capacity: max_entry_capacity(ctx, &renderer, &scene),
+            what,
+            renderer,
+            scene,
+            light,
+        })
+    }
+
+    /// Records the lighting of the positions the fit wrote into the scene.
+    pub(crate) fn record_light(&self, rec: &mut Recorder<'_>) -> Result<()> {
+        rec.pass("lighting", |rec| {
+            self.light.record_forward(
+                rec,
+                self.scene.positions().whole(),
+                self.scene.position_layout(),
+                self.scene.colors().whole(),
+            )
+        })
+    }
+
+    /// Sizes the guarded bins for the pose the fit recorded last (positions and lighting, at
+    /// the σ and γ set): one counting submission, then the count with the headroom. The fits do
+    /// it at the start of every σ/γ stage (a blurry stage bins several times the entries of a
+    /// sharp one, and the backward's texel partials, cleared over the whole capacity every
+    /// iteration, are the larger cost at these image sizes); it changes no result.
+    pub(crate) fn fit_capacity(&mut self, ctx: &Context) -> Result<()> {
+        let total = self
+            .renderer
+            .count_entries(ctx, &mut self.scene, self.tile)?;
+        self.resize(ctx, total)
+    }
+
+    /// Sizes the bins and the backward's buffers for `total` entries with the headroom.
+    pub(crate) fn resize(&mut self, ctx: &Context, total: u64) -> Result<()> {
+        let capacity = with_headroom(
+            ctx,
+            self.what,
+            total,
+            self.max_capacity,
+            "use larger tiles or a smaller σ",
+        )?;
+        self.grads = reserve_guarded(
+            ctx,
+            &self.renderer,
+            &mut self.scene,
+            self.tile,
+            capacity,
+            false,
+        )?;
+        self.capacity = capacity;
+        Ok(())
+    }
+
+    /// Entries the bins and the backward's partials hold now.
+    pub(crate) fn capacity(&self) -> u64 {
+        self.capacity
+    }
+
+    /// Replaces the target (same size, finite).
+    pub(crate) fn set_target(&self, ctx: &Context, target: &[[f32; 4]]) -> Result<()> {
+        check_target(target, self.scene.settings())?;
+        ctx.write_buffer(&self.target, 0, target)
+    }
+
+    /// Records iteration `it` after the pose: the guarded forward, then gated on its count the
+    /// image loss (`loss`: the render and the target to dL/d(image) into the given range), the
+    /// backward, the lighting's backward (dL/d(lit colour) to dL/d(positions), added to the
+    /// geometric share), and `step` (the gradient to the parameters and the optimizer).
+    pub(crate) fn record_guarded(
+        &self,
+        rec: &mut Recorder<'_>,
+        gate: &mut IterationGate,
+        it: u32,
+        loss: impl FnOnce(
+            &mut Recorder<'_>,
+            BufferRange<'_>,
+            BufferRange<'_>,
+            BufferRange<'_>,
+        ) -> Result<()>,
+        step: impl FnOnce(&mut Recorder<'_>, &GradIo<'_>) -> Result<()>,
+    ) -> Result<()> {
+        let Self {
+            renderer,
+            scene,
+            light,
+            target,
+            grads,
+            d_base,
+            ..
+        } = self;
+        renderer.record_forward_guarded(rec, scene, gate, it, |rec, binned| {
+            let scene = binned.scene();
+            let io = grads.io();
+            rec.pass("image loss", |rec| {
+                loss(rec, scene.output().whole(), target.whole(), io.upstream)
+            })?;
+            renderer.grad_kernels().record(rec, &binned, grads, &io)?;
+            rec.pass("lighting backward", |rec| {
+                light.record_backward(
+                    rec,
+                    scene.positions().whole(),
+                    scene.position_layout(),
+                    io.colors,
+                    d_base.whole(),
+                    io.positions,
+                )
+            })?;
+            step(rec, &io)
+        })
+    }
+
+    /// An evaluation's guarded forward (iteration 0) with the image loss only.
+    pub(crate) fn record_evaluation(
+        &self,
+        rec: &mut Recorder<'_>,
+        gate: &mut IterationGate,
+        loss: impl FnOnce(&mut Recorder<'_>, BufferRange<'_>, BufferRange<'_>) -> Result<()>,
+    ) -> Result<()> {
+        let (renderer, target) = (&self.renderer, &self.target);
+        renderer.record_forward_guarded(rec, &self.scene, gate, 0, |rec, binned| {
+            loss(rec, binned.scene().output().whole(), target.whole())
+        })
+    }
+
+    /// The last render, read back (RGBA per pixel).
+    pub(crate) fn read_render(&self, ctx: &Context) -> Result<Vec<[f32; 4]>> {
+        let s = self.scene.settings();
+        ctx.read_buffer(self.scene.output(), 0, (s.width * s.height) as usize)
+    }
+}
+
+/// [`Error::Input`] unless `target` has one finite RGBA value per pixel of `settings`.
+pub(crate) fn check_target(target: &[[f32; 4]], settings: &RasterSettings) -> Result<()> {
+    let px = settings.width as usize * settings.height as usize;
+    if target.len() != px {
+        return Err(Error::Input(format!(
+            "the target has {} pixels; {}x{} needs {px}",
+            target.len(),
+            settings.width,
+            settings.height
+        )));
+    }
+    if let Some(i) = target.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+        return Err(Error::Input(format!(
+            "the target is not finite at pixel ({}, {})",
+            i % settings.width as usize,
+            i / settings.width as usize
+        )));
+    }
+    Ok(())
+}
