@@ -3,7 +3,9 @@
 //! with validation on; determinism; and gradient descent on one triangle's silhouette.
 //!
 //! Bound (issue #4): every component within 1e-3 of the largest component's magnitude, for
-//! positions, colours and cameras separately; tiled and brute agree to the same bound. The split
+//! positions, colours and cameras separately; tiled and brute agree to the same bound. That
+//! bound alone lets a component a thousand times smaller than the largest be wholly wrong, so
+//! every component is also held to its own size ([`Bars`], set from measurement). The split
 //! paths (partials in several chunks, brute-force bands, crowded tiles over several workgroups)
 //! are checked against the twin and, where splitting must not change a single sum, against the
 //! unsplit run bit for bit.
@@ -90,27 +92,96 @@ fn rel_err(a: &[[f64; 3]], b: &[[f64; 3]]) -> (f64, f64) {
     common::rel_err3(a, b)
 }
 
+/// Per-component bars: `|got − want| ≤ rel·|want| + abs·scale`, `scale` the family's largest
+/// |want|. Above `abs / rel` of the largest a component is held to `rel` of itself; below that
+/// `abs` is the floor, where an error is judged against the largest instead.
+#[derive(Clone, Copy, Debug)]
+struct Bars {
+    rel: f64,
+    abs: f64,
+}
+
+/// Faces a few pixels wide or more, Euclidean or hard distance: what is left is f32 rounding in
+/// the GPU's sums against the twin's f64. Measured over this file's scenes (every method), the
+/// worst component uses a fifth of these bars, e.g. 1.3e-6 of the largest on a component of
+/// 3e-3 of it; the floor is about 8 f32 ulps of the largest, under which a sum of terms as large
+/// as the largest cannot resolve a component. Tiled against brute force (both f32) uses these
+/// too, with a margin over 60.
+const SMOOTH: Bars = Bars {
+    rel: 2e-3,
+    abs: 1e-6,
+};
+
+/// Where the distance's kinks matter: the barycentric clip, and sub-pixel faces (most pixels lie
+/// near a vertex, where the nearest point leaves an edge for its end). A pixel near a kink gives
+/// its term to one vertex in f32 and to another in f64, so a component fed by few pixels is off
+/// by about one pixel's term, whatever its own size: moving the positions by one f32 ulp moves
+/// the twin itself by 2.8e-4 of the largest (barycentric scene #10), as much as the GPU differs
+/// from it there (2 % of a component of 1.3e-2 of the largest). These bars leave a margin of 3
+/// over that, and of 7 over the 4 624 tiny faces, where the GPU gives 0 for two components of
+/// 2.8e-5 of the largest.
+const KINKED: Bars = Bars {
+    rel: 5e-2,
+    abs: 2e-4,
+};
+
+/// The largest share of its bar any component uses (≤ 1 passes), with where and how.
+fn worst_component(a: &[[f64; 3]], b: &[[f64; 3]], bars: Bars) -> (f64, String) {
+    let scale = b.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+    let mut worst = (0.0, String::new());
+    for (i, (x, y)) in a.iter().flatten().zip(b.iter().flatten()).enumerate() {
+        let share = (x - y).abs() / (bars.rel * y.abs() + bars.abs * scale);
+        if share > worst.0 {
+            worst = (
+                share,
+                format!(
+                    "component [{}][{}]: {x:.6e} against {y:.6e}, {:.2e} of itself, \
+                     {:.2e} of the largest ({scale:.3e})",
+                    i / 3,
+                    i % 3,
+                    (x - y).abs() / y.abs(),
+                    (x - y).abs() / scale
+                ),
+            );
+        }
+    }
+    worst
+}
+
 fn camera_rows(g: &Gradients) -> Vec<[f64; 3]> {
     g.cameras.iter().flat_map(|c| [c.eye, c.at, c.up]).collect()
 }
 
-/// Asserts `got` within [`REL`] of `want`, per family; returns the worst relative error.
-fn assert_close(what: &str, got: &Gradients, want: &Gradients, cameras: bool) -> f64 {
-    let mut worst = 0.0f64;
+/// Asserts `got` within [`REL`] of `want` per family, and every component within `bars`;
+/// returns the worst relative error and the largest share of its bar a component used.
+fn assert_close(
+    what: &str,
+    got: &Gradients,
+    want: &Gradients,
+    cameras: bool,
+    bars: Bars,
+) -> (f64, f64) {
+    let mut worst = (0.0f64, 0.0f64);
     let mut families = vec![
-        ("positions", rel_err(&got.positions, &want.positions)),
-        ("colours", rel_err(&got.colors, &want.colors)),
+        ("positions", got.positions.clone(), want.positions.clone()),
+        ("colours", got.colors.clone(), want.colors.clone()),
     ];
     if cameras {
-        families.push(("cameras", rel_err(&camera_rows(got), &camera_rows(want))));
+        families.push(("cameras", camera_rows(got), camera_rows(want)));
     }
-    for (family, (err, scale)) in families {
+    for (family, got, want) in families {
+        let (err, scale) = rel_err(&got, &want);
         assert!(scale > 0.0, "{what}: {family} gradient is all zero");
         assert!(
             err <= REL,
             "{what}: {family} differ by {err:.2e} of the largest ({scale:.3e})"
         );
-        worst = worst.max(err);
+        let (share, at) = worst_component(&got, &want, bars);
+        assert!(
+            share <= 1.0,
+            "{what}: {family} {at}: {share:.2} times {bars:?}"
+        );
+        worst = (worst.0.max(err), worst.1.max(share));
     }
     worst
 }
@@ -136,7 +207,8 @@ fn check(
     mesh: &Mesh,
     cams: &[Camera],
     s: &RasterSettings,
-) -> f64 {
+    bars: Bars,
+) -> (f64, f64) {
     let n = (s.width * s.height) as usize * cams.len();
     let w = weights(n, 99);
     let w64: Vec<[f64; 4]> = w.iter().map(|g| g.map(f64::from)).collect();
@@ -144,23 +216,26 @@ fn check(
     let cameras = cams
         .iter()
         .all(|c| !matches!(c.projection, Projection::Matrix { .. }));
-    let mut worst = 0.0f64;
+    let mut worst = (0.0f64, 0.0f64);
     let mut brute: Option<Gradients> = None;
     for method in METHODS {
         let scene = forward(r, gpu, mesh, cams, s, method);
         let got = r
             .backward(gpu, &scene.binned(method).unwrap(), &w, cameras)
             .unwrap_or_else(|e| panic!("{what} {method:?}: {e}"));
-        worst = worst.max(assert_close(
+        let (err, share) = assert_close(
             &format!("{what} {method:?} vs twin"),
             &got,
             &want,
             cameras,
-        ));
+            bars,
+        );
+        worst = (worst.0.max(err), worst.1.max(share));
         match &brute {
             None => brute = Some(got),
             Some(b) => {
-                assert_close(&format!("{what} {method:?} vs brute"), &got, b, cameras);
+                let what = format!("{what} {method:?} vs brute");
+                assert_close(&what, &got, b, cameras, SMOOTH);
             }
         }
     }
@@ -191,7 +266,7 @@ fn gpu_gradients_match_the_twin_in_every_differentiable_mode() {
         projection: Projection::Orthographic { scale: 0.9 },
         ..Camera::from_angles(2.732, 25.0, -40.0)
     }];
-    let mut worst = 0.0f64;
+    let mut worst = (0.0f64, 0.0f64);
     let mut i = 0;
     for dist in [Dist::Euclidean, Dist::Barycentric] {
         for alpha in [Alpha::Prod, Alpha::Sum] {
@@ -214,12 +289,21 @@ fn gpu_gradients_match_the_twin_in_every_differentiable_mode() {
                 };
                 let views: &[Camera] = if i % 4 == 3 { &ortho } else { &cams };
                 let what = format!("#{i} {dist:?} {alpha:?} {color_mode:?} R={res}");
-                worst = worst.max(check(&r, &gpu, &what, &mesh, views, &s));
+                let bars = if dist == Dist::Barycentric {
+                    KINKED
+                } else {
+                    SMOOTH
+                };
+                let (err, share) = check(&r, &gpu, &what, &mesh, views, &s, bars);
+                worst = (worst.0.max(err), worst.1.max(share));
                 i += 1;
             }
         }
     }
-    eprintln!("worst relative difference to the twin: {worst:.2e}");
+    eprintln!(
+        "worst difference to the twin: {:.2e} of the largest; {:.2} of a component's bar",
+        worst.0, worst.1
+    );
 }
 
 /// Hard colour, hard coverage and the matrix projection: the a.e. derivative, same bound.
@@ -234,14 +318,14 @@ fn hard_modes_and_the_matrix_projection_match_the_twin() {
         color_mode: ColorMode::Vertex,
         ..settings(16, 16)
     };
-    check(&r, &gpu, "hard rgb", &mesh, &cams, &hard_rgb);
+    check(&r, &gpu, "hard rgb", &mesh, &cams, &hard_rgb, SMOOTH);
     let hard_dist = RasterSettings {
         dist: Dist::Hard,
         alpha: Alpha::Sum,
         color_mode: ColorMode::Vertex,
         ..settings(16, 16)
     };
-    check(&r, &gpu, "hard dist", &mesh, &cams, &hard_dist);
+    check(&r, &gpu, "hard dist", &mesh, &cams, &hard_dist, SMOOTH);
     let cam = Camera::from_angles(2.732, 20.0, 35.0);
     let rot = softvk::camera::look_at(cam.eye, DVec3::ZERO, DVec3::Y);
     let t: Vec<f64> = rot
@@ -266,7 +350,8 @@ fn hard_modes_and_the_matrix_projection_match_the_twin() {
         },
         ..cam
     }];
-    check(&r, &gpu, "matrix", &mesh, &matrix, &settings(16, 16));
+    let s = settings(16, 16);
+    check(&r, &gpu, "matrix", &mesh, &matrix, &s, SMOOTH);
 }
 
 #[test]
@@ -681,8 +766,9 @@ fn a_tile_of_over_200k_faces_differentiates_as_the_twin() {
         sigma: 1e-5,
         ..settings(16, 16)
     };
-    let worst = check(&r, &gpu, "crowded tile", &mesh, &[Camera::default()], &s);
-    eprintln!("crowded tile: worst relative error {worst:.2e}");
+    let cams = [Camera::default()];
+    let (err, share) = check(&r, &gpu, "crowded tile", &mesh, &cams, &s, KINKED);
+    eprintln!("crowded tile: worst difference {err:.2e} of the largest; {share:.2} of a bar");
 }
 
 /// The backward of a scene already rendered, with its work split at most as `split` says;
@@ -762,7 +848,13 @@ fn partials_in_many_chunks_match_the_twin_and_one_chunk_bit_for_bit() {
             let (many, chunk, _) = backward_split(&r, &gpu, &fwd, &w, method, chunked);
             assert_eq!(chunk, 7, "{what}");
             assert!(units > 3 * chunk, "{what}: only {units} units");
-            assert_close(&format!("{what} chunked vs twin"), &many, &want, true);
+            assert_close(
+                &format!("{what} chunked vs twin"),
+                &many,
+                &want,
+                true,
+                SMOOTH,
+            );
             assert!(bits(&many) == bits(&one), "{what}: chunking changed a sum");
             let (again, _, _) = backward_split(&r, &gpu, &fwd, &w, method, chunked);
             assert!(bits(&again) == bits(&many), "{what}: not deterministic");
@@ -826,7 +918,7 @@ fn brute_bands_and_split_tiles_match_the_twin() {
     };
     let (got, _, bands) = backward_split(&r, &gpu, &fwd, &w, Method::Brute, banded);
     assert_eq!(bands, 6);
-    assert_close("brute in bands of 3 rows", &got, &want, true);
+    assert_close("brute in bands of 3 rows", &got, &want, true, SMOOTH);
     let (again, _, _) = backward_split(&r, &gpu, &fwd, &w, Method::Brute, banded);
     assert!(
         bits(&again) == bits(&got),
@@ -843,7 +935,7 @@ fn brute_bands_and_split_tiles_match_the_twin() {
     };
     let (split, _, _) = backward_split(&r, &gpu, &fwd, &w, tile, parts);
     let (whole, _, _) = backward_split(&r, &gpu, &fwd, &w, tile, GradSplit::default());
-    assert_close("tile split in 64-face parts", &split, &want, true);
+    assert_close("tile split in 64-face parts", &split, &want, true, SMOOTH);
     assert!(
         bits(&split) == bits(&whole),
         "splitting the tile changed a sum"
@@ -868,7 +960,7 @@ fn the_backward_splits_work_past_the_drivers_loop_cap() {
     let fwd = forward(&r, &gpu, &mesh, &cams, &s, Method::Tiled { tile: 8 });
     let (got, _, bands) = backward_split(&r, &gpu, &fwd, &w, Method::Brute, GradSplit::default());
     assert_eq!(bands, if capped { 2 } else { 1 });
-    assert_close("brute 256²", &got, &want, true);
+    assert_close("brute 256²", &got, &want, true, SMOOTH);
 
     // 68 × 68 small triangles over a 32×32 image: one tile of 32 holds them all.
     let n = 68;
@@ -894,7 +986,13 @@ fn the_backward_splits_work_past_the_drivers_loop_cap() {
     let fwd = forward(&r, &gpu, &crowded, &cams, &s, tile);
     assert_eq!(fwd.binned_entries(), (n * n) as u64);
     let (got, _, _) = backward_split(&r, &gpu, &fwd, &w, tile, GradSplit::default());
-    assert_close("4 624 faces in one 32-pixel tile", &got, &want, true);
+    assert_close(
+        "4 624 faces in one 32-pixel tile",
+        &got,
+        &want,
+        true,
+        KINKED,
+    );
 }
 
 /// An alpha-only backward (a silhouette scene, or one declared alpha-only) gives the full
@@ -1039,11 +1137,17 @@ fn one_view_past_the_entry_budget_renders_and_differentiates_window_by_window() 
         let (many, _, _) = backward_split(&windowed, &gpu, &win, &w, tile, GradSplit::default());
         assert!(bits(&many) == bits(&one), "{what}: windows changed a sum");
         let (b, _, _) = backward_split(&r, &gpu, &brute, &w, Method::Brute, GradSplit::default());
-        assert_close(&format!("{what} windows vs brute"), &many, &b, true);
+        assert_close(&format!("{what} windows vs brute"), &many, &b, true, SMOOTH);
         if w_px * h_px < 4096 {
             let w64: Vec<[f64; 4]> = w.iter().map(|g| g.map(f64::from)).collect();
             let twin = reference_grad::grad(&mesh, &cams, &lighting(), &s, &w64).unwrap();
-            assert_close(&format!("{what} windows vs twin"), &many, &twin, true);
+            assert_close(
+                &format!("{what} windows vs twin"),
+                &many,
+                &twin,
+                true,
+                SMOOTH,
+            );
         }
     }
 }

@@ -282,28 +282,129 @@ fn a_conditioned_field_trains_resumes_and_sits_beside_the_mesh_in_the_table() {
         assert!(cols.iter().all(|v| (0.0..=1.0).contains(v)), "{r}");
     }
     assert!(eval_dir.join("examples.png").exists());
-    let input = eval_dir.join("input-03001627-0.png");
-    let obj = dir.path("out/field.obj");
-    let run = softvk()
-        .args(["recon", "--model", f.to_str().unwrap()])
-        .args(["--image", input.to_str().unwrap()])
+}
+
+/// A conditioned-field model whose field is known whatever the image: the encoder's parameters
+/// are zero, so every code (the hidden biases it predicts) is zero, and the MLP (one hidden
+/// layer of 4 units, no encoding frequencies) passes the normalised `u_x` through one softplus
+/// unit to the logit `slope · softplus(u_x) − 1`. With a slope of 10, φ = 0.5 on the plane
+/// `u_x = 0.1` (softplus at β = 100 is within 5e-7 of `u_x` there; x = 0.055 in the field's
+/// cube of half-edge 0.55); with a slope of 0, φ = σ(−1) everywhere, and there is no surface.
+/// Returns the model's file and a 16×16 input image.
+fn plane_field(dir: &TempDir, slope: f32) -> (std::path::PathBuf, std::path::PathBuf) {
+    use softvk::field::MlpLayout;
+    use softvk::recon::field::FieldNet;
+    let shape = FieldNet {
+        net: NetShape {
+            image: 16,
+            channels: [2, 2, 2],
+            latent: 4,
+            hidden: 4,
+        },
+        mlp: MlpLayout {
+            hidden_layers: 1,
+            width: 4,
+            frequencies: 0,
+        },
+    };
+    let encoder = shape.encoder_param_count().unwrap() as usize;
+    let mut params = vec![0.0f32; shape.param_count().unwrap() as usize];
+    let mlp = &mut params[encoder..];
+    mlp[0] = 1.0; // hidden unit 0 ← u_x (layer 0's weights are row-major [unit][input])
+    let (out, width, _) = shape.mlp.layer(1);
+    mlp[out] = slope; // the logit ← hidden unit 0
+    mlp[out + width] = -1.0; // the logit's bias
+    let model = ReconModel {
+        net: shape.net,
+        field: Some(shape.mlp),
+        params,
+        iteration: 0,
+        train: None,
+    };
+    let path = dir.path(&format!("plane-{slope}.npz"));
+    model.save(&path).unwrap();
+    let image = dir.path("input.png");
+    image::RgbaImage::from_pixel(16, 16, image::Rgba([200, 120, 40, 255]))
+        .save(&image)
+        .unwrap();
+    (path, image)
+}
+
+fn recon(model: &Path, image: &Path, obj: &Path) -> Output {
+    softvk()
+        .args(["recon", "--model", model.to_str().unwrap()])
+        .args(["--image", image.to_str().unwrap()])
         .args(["--out", obj.to_str().unwrap()])
         .env("SOFTVK_VALIDATION", "1")
         .output()
-        .unwrap();
-    // Four iterations may leave the field without a surface: then one clear error, no file.
-    if run.status.success() {
-        let text = std::fs::read_to_string(&obj).unwrap();
-        assert!(text.lines().any(|l| l.starts_with("f ")), "no faces");
-        assert!(dir.path("out/field-turntable.gif").exists());
-    } else {
-        let err = String::from_utf8_lossy(&run.stderr);
-        assert!(
-            err.contains("no φ = 0.5 surface") && err.lines().count() == 1,
-            "{err}"
-        );
-        assert!(!obj.exists());
+        .unwrap()
+}
+
+/// `recon` meshes a field that crosses φ = 0.5: the OBJ holds the plane x = 0.055 across the
+/// field's cube, and the turntable is written beside it.
+#[test]
+fn recon_meshes_a_field_with_a_surface() {
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
     }
+    let dir = TempDir::new("recon-cli-plane");
+    let (model, image) = plane_field(&dir, 10.0);
+    let obj = dir.path("out/plane.obj");
+    let said = ok(recon(&model, &image, &obj), "softvk recon");
+    assert!(said.starts_with("wrote"), "{said}");
+    let text = std::fs::read_to_string(&obj).unwrap();
+    assert!(text.lines().any(|l| l.starts_with("f ")), "no faces");
+    let vertices: Vec<[f64; 3]> = text
+        .lines()
+        .filter_map(|l| l.strip_prefix("v "))
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|c| c.parse().unwrap()).collect();
+            [v[0], v[1], v[2]]
+        })
+        .collect();
+    assert!(!vertices.is_empty(), "no vertices");
+    // Marching cubes interpolates φ linearly along the lattice's edges (0.55 / 32 apart);
+    // σ of a logit linear in x is nearly linear over one edge: 1.1e-5 off at most, measured.
+    for v in &vertices {
+        assert!(
+            (v[0] - 0.055).abs() < 1e-4,
+            "a vertex off the plane x = 0.055: {v:?}"
+        );
+    }
+    for axis in [1, 2] {
+        let (lo, hi) = vertices.iter().fold((f64::MAX, f64::MIN), |(lo, hi), v| {
+            (lo.min(v[axis]), hi.max(v[axis]))
+        });
+        assert!(lo < -0.5 && hi > 0.5, "axis {axis} spans only {lo}..{hi}");
+    }
+    assert!(dir.path("out/plane-turntable.gif").exists());
+}
+
+/// `recon` on a field that never reaches φ = 0.5 is one error line, exit status 1, and writes
+/// neither the mesh nor the turntable.
+#[test]
+fn recon_of_a_field_without_a_surface_is_one_error_and_writes_nothing() {
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    let dir = TempDir::new("recon-cli-empty");
+    let (model, image) = plane_field(&dir, 0.0);
+    let obj = dir.path("out/empty.obj");
+    let run = recon(&model, &image, &obj);
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{err}");
+    assert_eq!(
+        err.lines().collect::<Vec<_>>(),
+        [format!(
+            "softvk: error: {}: the field is empty for this image (no φ = 0.5 surface)",
+            image.display()
+        )],
+        "{err}"
+    );
+    assert!(run.stdout.is_empty());
+    assert!(!obj.exists() && !dir.path("out/empty-turntable.gif").exists());
 }
 
 #[test]
