@@ -5,7 +5,7 @@ use std::collections::HashMap;
 
 use glam::DVec3;
 
-use super::{MAX_ICOSPHERE_SUBDIVISIONS, Mesh};
+use super::{MAX_ICOSPHERE_SUBDIVISIONS, Mesh, MeshError};
 
 impl Mesh {
     /// Unit-radius icosphere: the icosahedron subdivided `subdivisions` times (clamped to
@@ -71,13 +71,12 @@ impl Mesh {
     /// appended in order of first use), so a watertight mesh stays watertight. Midpoints are
     /// correctly rounded; per-vertex colours are averaged at them. Children copy their parent's
     /// texels (exact for R = 1; for R > 1 each child shows the whole parent texture).
-    pub fn subdivided(&self) -> crate::Result<Mesh> {
+    pub fn subdivided(&self) -> Result<Mesh, MeshError> {
         self.validate()?;
         let mut positions = self.positions.clone();
         let mut colors = self.vertex_colors.clone();
         let faces = subdivide_faces(&self.faces, |a, b| {
-            let m = u32::try_from(positions.len())
-                .map_err(|_| crate::Error::Limit("subdivision: more than 2^32 vertices".into()))?;
+            let m = u32::try_from(positions.len()).map_err(|_| MeshError::TooManyVertices)?;
             let mid = |p: &[[f32; 3]]| {
                 let (p, q) = (p[a as usize], p[b as usize]);
                 // f32 + f32 is exact in f64, so this is the correctly rounded midpoint.
@@ -87,7 +86,7 @@ impl Mesh {
             if let Some(c) = colors.as_mut() {
                 c.push(mid(c));
             }
-            Ok::<u32, crate::Error>(m)
+            Ok::<u32, MeshError>(m)
         })?;
         let r2 = (self.texture_res * self.texture_res) as usize;
         let textures = self

@@ -9,6 +9,9 @@
 //! - `texture`: `map_Kd` images sampled into per-face texels ([`texel_center_barycentric`]);
 //! - `generate`: meshes made in memory ([`Mesh::icosphere`], [`Mesh::cuboid`]) and midpoint
 //!   subdivision ([`Mesh::subdivided`], [`subdivide_faces`]).
+//!
+//! A bottom layer: this module imports nothing of softvk but its one-line text helper, and its
+//! failures are [`MeshError`]s, which [`crate::Error`] wraps from above.
 
 mod generate;
 mod mtl;
@@ -20,7 +23,7 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
-use crate::error::one_line;
+use crate::text::one_line;
 
 pub use generate::subdivide_faces;
 pub use texture::texel_center_barycentric;
@@ -185,6 +188,15 @@ pub enum MeshError {
         /// Vertices.
         expected: usize,
     },
+    /// Every vertex is at one point: there is no extent to normalize.
+    #[error("cannot normalize a mesh whose {vertices} vertices are all at one point")]
+    NoExtent {
+        /// How many vertices there are.
+        vertices: usize,
+    },
+    /// Subdivision would number vertices past `u32`.
+    #[error("subdivision: more than 2^32 vertices")]
+    TooManyVertices,
 }
 
 impl Mesh {
@@ -212,7 +224,7 @@ impl Mesh {
     /// doubles, and centres each axis: the longest side spans [-1, 1], the others are centred
     /// in it. Computed in f64. An error, with the mesh unchanged, when every vertex is at one
     /// point (nothing to scale) or a coordinate is not finite.
-    pub fn normalize(&mut self) -> crate::Result<()> {
+    pub fn normalize(&mut self) -> Result<(), MeshError> {
         check_finite(&self.positions, |_| Location::default())?;
         let mut lo = DVec3::splat(f64::INFINITY);
         let mut hi = DVec3::splat(f64::NEG_INFINITY);
@@ -223,10 +235,9 @@ impl Mesh {
         }
         let extent = (hi - lo).max_element();
         if extent.is_nan() || extent <= 0.0 {
-            return Err(crate::Error::Input(format!(
-                "cannot normalize a mesh whose {} vertices are all at one point",
-                self.positions.len()
-            )));
+            return Err(MeshError::NoExtent {
+                vertices: self.positions.len(),
+            });
         }
         let scale = 2.0 / extent;
         let centre = (hi - lo) * scale / 2.0;
