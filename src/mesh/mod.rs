@@ -261,42 +261,13 @@ impl Mesh {
     /// Checks every invariant the renderers rely on, so that bad input is an error and never a
     /// panic or a NaN image.
     pub fn validate(&self) -> Result<(), MeshError> {
-        check_texture_res(self.texture_res)?;
-        check_finite(&self.positions, |_| Location::default())?;
-        if self.faces.is_empty() {
-            return Err(MeshError::NoFaces {
-                at: Location::default(),
-            });
-        }
-        let n = self.positions.len();
-        for (face, f) in self.faces.iter().enumerate() {
-            if let Some(&bad) = f.iter().find(|&&i| i as usize >= n) {
-                return Err(MeshError::FaceIndexOutOfRange {
-                    face,
-                    index: i64::from(bad),
-                    vertex_count: n,
-                    at: Location::default(),
-                });
-            }
-        }
-        let r2 = (self.texture_res * self.texture_res) as usize;
-        if self.textures.len() != self.faces.len() * r2 {
-            return Err(MeshError::TextureCount {
-                actual: self.textures.len(),
-                expected: self.faces.len() * r2,
-                faces: self.faces.len(),
-                res: self.texture_res,
-            });
-        }
-        if let Some(colors) = &self.vertex_colors
-            && colors.len() != n
-        {
-            return Err(MeshError::VertexColorCount {
-                actual: colors.len(),
-                expected: n,
-            });
-        }
-        Ok(())
+        validate_parts(
+            &self.positions,
+            &self.faces,
+            self.texture_res,
+            self.textures.len(),
+            self.vertex_colors.as_ref().map(Vec::len),
+        )
     }
 
     /// Loads an OBJ (and its MTL and `map_Kd` texture) as SoftRas's `load_obj(load_texture=True)`
@@ -322,11 +293,78 @@ pub(crate) fn check_texture_res(res: u32) -> Result<(), MeshError> {
     Ok(())
 }
 
-fn check_finite(positions: &[[f32; 3]], at: impl Fn(usize) -> Location) -> Result<(), MeshError> {
-    match positions
-        .iter()
-        .position(|p| p.iter().any(|c| !c.is_finite()))
+/// A vertex position in whichever precision a mesh holds it: f32 in a [`Mesh`], f64 in the
+/// copy the f64 twins compute in. What [`validate_parts`] asks of it.
+pub(crate) trait Position {
+    /// Every coordinate is finite.
+    fn is_finite(&self) -> bool;
+}
+
+impl Position for [f32; 3] {
+    fn is_finite(&self) -> bool {
+        self.iter().all(|c| c.is_finite())
+    }
+}
+
+impl Position for DVec3 {
+    fn is_finite(&self) -> bool {
+        DVec3::is_finite(*self)
+    }
+}
+
+/// The checks of [`Mesh::validate`], on a mesh's parts: one implementation for a mesh in any
+/// precision, so that every copy of a mesh fails on the same input with the same message.
+/// `texels` and `vertex_colors` are the lengths of the texel and vertex colour arrays.
+pub(crate) fn validate_parts<P: Position>(
+    positions: &[P],
+    faces: &[[u32; 3]],
+    texture_res: u32,
+    texels: usize,
+    vertex_colors: Option<usize>,
+) -> Result<(), MeshError> {
+    check_texture_res(texture_res)?;
+    check_finite(positions, |_| Location::default())?;
+    if faces.is_empty() {
+        return Err(MeshError::NoFaces {
+            at: Location::default(),
+        });
+    }
+    let n = positions.len();
+    for (face, f) in faces.iter().enumerate() {
+        if let Some(&bad) = f.iter().find(|&&i| i as usize >= n) {
+            return Err(MeshError::FaceIndexOutOfRange {
+                face,
+                index: i64::from(bad),
+                vertex_count: n,
+                at: Location::default(),
+            });
+        }
+    }
+    let r2 = (texture_res * texture_res) as usize;
+    if texels != faces.len() * r2 {
+        return Err(MeshError::TextureCount {
+            actual: texels,
+            expected: faces.len() * r2,
+            faces: faces.len(),
+            res: texture_res,
+        });
+    }
+    if let Some(colors) = vertex_colors
+        && colors != n
     {
+        return Err(MeshError::VertexColorCount {
+            actual: colors,
+            expected: n,
+        });
+    }
+    Ok(())
+}
+
+fn check_finite<P: Position>(
+    positions: &[P],
+    at: impl Fn(usize) -> Location,
+) -> Result<(), MeshError> {
+    match positions.iter().position(|p| !p.is_finite()) {
         Some(vertex) => Err(MeshError::NonFiniteVertex {
             vertex,
             at: at(vertex),

@@ -16,7 +16,7 @@ use glam::DVec3;
 
 use crate::camera::{Camera, pixel_center};
 use crate::lighting::{Lighting, positions_f64};
-use crate::mesh::{Location, Mesh, MeshError, check_texture_res};
+use crate::mesh::{Mesh, MeshError, validate_parts};
 
 /// SoftRas clamps the barycentric determinant away from 0 to ±1e-10.
 pub const MIN_DET: f64 = 1e-10;
@@ -72,49 +72,15 @@ impl MeshF64 {
         }
     }
 
-    /// [`Mesh::validate`]'s checks.
+    /// [`Mesh::validate`]'s checks, by the same code.
     pub fn validate(&self) -> Result<(), MeshError> {
-        check_texture_res(self.texture_res)?;
-        if let Some(vertex) = self.positions.iter().position(|p| !p.is_finite()) {
-            return Err(MeshError::NonFiniteVertex {
-                vertex,
-                at: Location::default(),
-            });
-        }
-        if self.faces.is_empty() {
-            return Err(MeshError::NoFaces {
-                at: Location::default(),
-            });
-        }
-        let n = self.positions.len();
-        for (face, f) in self.faces.iter().enumerate() {
-            if let Some(&bad) = f.iter().find(|&&i| i as usize >= n) {
-                return Err(MeshError::FaceIndexOutOfRange {
-                    face,
-                    index: i64::from(bad),
-                    vertex_count: n,
-                    at: Location::default(),
-                });
-            }
-        }
-        let r2 = (self.texture_res * self.texture_res) as usize;
-        if self.textures.len() != self.faces.len() * r2 {
-            return Err(MeshError::TextureCount {
-                actual: self.textures.len(),
-                expected: self.faces.len() * r2,
-                faces: self.faces.len(),
-                res: self.texture_res,
-            });
-        }
-        if let Some(colors) = &self.vertex_colors
-            && colors.len() != n
-        {
-            return Err(MeshError::VertexColorCount {
-                actual: colors.len(),
-                expected: n,
-            });
-        }
-        Ok(())
+        validate_parts(
+            &self.positions,
+            &self.faces,
+            self.texture_res,
+            self.textures.len(),
+            self.vertex_colors.as_ref().map(Vec::len),
+        )
     }
 }
 
