@@ -1,7 +1,16 @@
 //! The one error type of softvk. Every variant carries enough context (which call, buffer, kernel
 //! or input) for its `Display` to be the single line a user sees.
+//!
+//! Layering: a low module that can fail on its own keeps its error type beside it
+//! ([`MeshError`](crate::mesh::MeshError) in `mesh`,
+//! [`RenderError`](crate::raster::settings::RenderError) in `raster::settings`) and imports
+//! nothing from here; [`Error`] sits above them and only wraps them, so no import leads back
+//! down into this module.
 
 use ash::vk;
+
+// The modules above take it from here together with `Error` and `Result`.
+pub(crate) use crate::text::one_line;
 
 /// Everything that can go wrong in softvk.
 #[derive(Debug, thiserror::Error)]
@@ -206,20 +215,6 @@ impl<T> VkContext<T> for std::result::Result<T, vk::Result> {
     }
 }
 
-/// `text` as it may appear inside a one-line message: control characters (line breaks, carriage
-/// returns, tabs, …) are written as escapes (`\n`, `\r`, `\u{1b}`), everything else as is.
-pub(crate) fn one_line(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    for c in text.chars() {
-        if c.is_control() {
-            out.extend(c.escape_debug());
-        } else {
-            out.push(c);
-        }
-    }
-    out
-}
-
 /// A byte count for people: `512 B`, `1.5 KiB`, `2.00 GiB`, `1024.00 TiB`.
 pub(crate) fn human_bytes(bytes: u64) -> String {
     const UNITS: [&str; 5] = ["KiB", "MiB", "GiB", "TiB", "PiB"];
@@ -266,11 +261,6 @@ mod tests {
             e.to_string(),
             "points needs 8 bytes in one storage-buffer binding, over the 4 that d allows"
         );
-    }
-
-    #[test]
-    fn one_line_escapes_control_characters_only() {
-        assert_eq!(one_line("a\nb\r\tc é"), "a\\nb\\r\\tc é");
     }
 
     #[test]

@@ -54,5 +54,6 @@ pub mod probe;
 pub mod raster;
 pub mod recon;
 mod rng;
+mod text;
 
 pub use error::{Error, LimitKind, Result};
