@@ -33,7 +33,7 @@ use super::adam::{Adam, AdamOptions};
 use super::blur::{BlurredMse, MAX_BLUR_STD};
 use super::driver::{self, Fit, Fitter};
 use super::pose::{PoseTarget, Schedule};
-use super::posed::PosedView;
+use super::posed::{PosedView, Staged, Stages};
 use super::rig::{Rig, bone_of};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -596,6 +596,15 @@ impl Fit for ArticulatedFit<'_> {
     }
 }
 
+impl Staged for ArticulatedFit<'_> {
+    fn set_target(&mut self, target: &[[f32; 4]]) -> Result<()> {
+        ArticulatedFit::set_target(self, target)
+    }
+    fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()> {
+        ArticulatedFit::fit_capacity(self, sigma, gamma)
+    }
+}
+
 /// A finished articulated fit.
 #[derive(Clone, Debug)]
 pub struct ArticulatedFitResult {
@@ -630,11 +639,7 @@ pub fn fit_articulated(
     mut progress: impl FnMut(&ArticulatedLog) -> bool,
 ) -> Result<ArticulatedFitResult> {
     opts.validate()?;
-    let mut stage = opts.stage(0);
-    let first_target = match &mut target {
-        PoseTarget::Fixed(t) => t.to_vec(),
-        PoseTarget::PerStage(f) => f(stage.0, stage.1)?,
-    };
+    let (mut stages, first_target) = Stages::new(&mut target, opts.sigma_gamma(0))?;
     let mut fitter = ArticulatedFitter::new(ctx, rig, camera, lighting, &first_target, init, opts)?;
     let mut log = Vec::with_capacity(opts.iterations as usize);
     let start = Instant::now();
@@ -643,20 +648,9 @@ pub fn fit_articulated(
         1,
         opts.iterations,
         |fitter, it| {
-            // Up to the next logged iteration, within one σ/γ stage, in one submission.
-            let here = opts.stage(it - 1);
             let last = driver::to_next_log(it, every).min(opts.iterations);
-            let last = (it..=last)
-                .find(|&i| opts.stage(i - 1) != here)
-                .map_or(last, |end| end - 1);
-            if (here.0, here.1) != (stage.0, stage.1) {
-                if let PoseTarget::PerStage(f) = &mut target {
-                    fitter.set_target(&f(here.0, here.1)?)?;
-                }
-                fitter.fit_capacity(here.0, here.1)?;
-            }
-            stage = here;
-            Ok(last)
+            stages.enter(&mut **fitter, opts.sigma_gamma(it - 1))?;
+            Ok(driver::to_stage_end(it, last, |i| opts.stage(i)))
         },
         |fitter, first, last| {
             log.extend(fitter.log(first, last, start.elapsed().as_secs_f64())?);
@@ -665,11 +659,7 @@ pub fn fit_articulated(
     )?;
     let seconds = start.elapsed().as_secs_f64();
     let s = &opts.settings;
-    if let PoseTarget::PerStage(f) = &mut target
-        && (s.sigma, s.gamma) != (stage.0, stage.1)
-    {
-        fitter.set_target(&f(s.sigma, s.gamma)?)?;
-    }
+    stages.finish(&mut *fitter, (s.sigma, s.gamma))?;
     let (loss, image) = fitter.evaluate(s.sigma, s.gamma, 0.0)?;
     Ok(ArticulatedFitResult {
         angles: fitter.angles()?,

@@ -210,6 +210,15 @@ impl<F> DerefMut for Fitter<'_, F> {
     }
 }
 
+/// `last` cut where the stage (`stage` of the 0-based iteration) changes after `it`'s: a
+/// submission within one stage.
+pub fn to_stage_end<S: PartialEq>(it: u32, last: u32, stage: impl Fn(u32) -> S) -> u32 {
+    let here = stage(it - 1);
+    (it..=last)
+        .find(|&i| stage(i - 1) != here)
+        .map_or(last, |end| end - 1)
+}
+
 /// The submission plan most loops use: from iteration `it`, up to the next multiple of `every`
 /// (the next logged iteration).
 pub fn to_next_log(it: u32, every: u32) -> u32 {

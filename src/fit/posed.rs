@@ -196,6 +196,74 @@ impl PosedView {
     }
 }
 
+/// What the render is compared with.
+pub enum PoseTarget<'a> {
+    /// One image for every iteration: a photograph, or any given render (`softvk fit-pose`).
+    Fixed(&'a [[f32; 4]]),
+    /// An image per (σ, γ), asked for whenever the schedule changes them and for the final
+    /// sharp evaluation: for synthetic studies, where the target pose is known and the target
+    /// can be rendered with the same σ and γ as the fit (the loss landscape of the talk).
+    PerStage(&'a mut dyn FnMut(f64, f64) -> Result<Vec<[f32; 4]>>),
+}
+
+/// The σ/γ stages of a posed fit's loop: at a new σ and γ, the target of the stage (a
+/// [`PoseTarget::PerStage`]) and the capacity are set before its first submission.
+pub(crate) struct Stages<'t, 'a> {
+    target: &'t mut PoseTarget<'a>,
+    sigma_gamma: (f64, f64),
+}
+
+/// What [`Stages`] sets in a fit.
+pub(crate) trait Staged {
+    fn set_target(&mut self, target: &[[f32; 4]]) -> Result<()>;
+    fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()>;
+}
+
+impl<'t, 'a> Stages<'t, 'a> {
+    /// The stages from the first σ and γ, and the target there.
+    pub(crate) fn new(
+        target: &'t mut PoseTarget<'a>,
+        sigma_gamma: (f64, f64),
+    ) -> Result<(Self, Vec<[f32; 4]>)> {
+        let first = match target {
+            PoseTarget::Fixed(t) => t.to_vec(),
+            PoseTarget::PerStage(f) => f(sigma_gamma.0, sigma_gamma.1)?,
+        };
+        Ok((
+            Self {
+                target,
+                sigma_gamma,
+            },
+            first,
+        ))
+    }
+
+    /// Before a submission at σ and γ: a new stage's target and capacity.
+    pub(crate) fn enter(&mut self, fit: &mut impl Staged, sigma_gamma: (f64, f64)) -> Result<()> {
+        if sigma_gamma != self.sigma_gamma {
+            self.set_target(fit, sigma_gamma)?;
+            fit.fit_capacity(sigma_gamma.0, sigma_gamma.1)?;
+            self.sigma_gamma = sigma_gamma;
+        }
+        Ok(())
+    }
+
+    /// After the loop: the target of the sharp σ and γ the fit is evaluated at.
+    pub(crate) fn finish(mut self, fit: &mut impl Staged, sharp: (f64, f64)) -> Result<()> {
+        if sharp != self.sigma_gamma {
+            self.set_target(fit, sharp)?;
+        }
+        Ok(())
+    }
+
+    fn set_target(&mut self, fit: &mut impl Staged, (sigma, gamma): (f64, f64)) -> Result<()> {
+        match self.target {
+            PoseTarget::Fixed(_) => Ok(()),
+            PoseTarget::PerStage(f) => fit.set_target(&f(sigma, gamma)?),
+        }
+    }
+}
+
 /// [`Error::Input`] unless `target` has one finite RGBA value per pixel of `settings`.
 pub(crate) fn check_target(target: &[[f32; 4]], settings: &RasterSettings) -> Result<()> {
     let px = settings.width as usize * settings.height as usize;

@@ -6,7 +6,7 @@ use glam::DVec3;
 use bytemuck::{Pod, Zeroable};
 
 use super::{Pose, PoseFitOptions, PoseLog, centroid};
-use crate::fit::posed::{PosedView, check_target};
+use crate::fit::posed::{PosedView, Staged, check_target};
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -376,5 +376,14 @@ impl Fit for PoseFit<'_> {
 
     fn grow(&mut self, ctx: &Context, total: u64) -> Result<()> {
         self.view.resize(ctx, total)
+    }
+}
+
+impl Staged for PoseFit<'_> {
+    fn set_target(&mut self, target: &[[f32; 4]]) -> Result<()> {
+        PoseFit::set_target(self, target)
+    }
+    fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()> {
+        PoseFit::fit_capacity(self, sigma, gamma)
     }
 }

@@ -63,6 +63,7 @@ use super::checkpoint::{
     write_log,
 };
 use super::driver;
+use super::posed::Stages;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::Context;
@@ -76,6 +77,7 @@ mod problem;
 
 pub mod cpu;
 
+pub use super::posed::PoseTarget;
 pub use fitter::{PoseFit, PoseFitter};
 pub use multistart::{
     MultiStartResult, StartOutcome, fit_pose_multistart, screened_starts, spread_rotations,
@@ -349,16 +351,6 @@ impl PoseFitOptions {
     }
 }
 
-/// What the render is compared with.
-pub enum PoseTarget<'a> {
-    /// One image for every iteration: a photograph, or any given render (`softvk fit-pose`).
-    Fixed(&'a [[f32; 4]]),
-    /// An image per (σ, γ), asked for whenever the schedule changes them and for the final
-    /// sharp evaluation: for synthetic studies, where the target pose is known and the target
-    /// can be rendered with the same σ and γ as the fit (the loss landscape of the talk).
-    PerStage(&'a mut dyn FnMut(f64, f64) -> Result<Vec<[f32; 4]>>),
-}
-
 /// One logged iteration.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PoseLog {
@@ -573,11 +565,7 @@ pub fn fit_pose_resumable(
 ) -> Result<PoseFitResult> {
     // Before the schedule is read (PoseFitter::new checks the rest).
     opts.validate()?;
-    let mut stage = opts.sigma_gamma(0);
-    let first_target = match &mut target {
-        PoseTarget::Fixed(t) => t.to_vec(),
-        PoseTarget::PerStage(f) => f(stage.0, stage.1)?,
-    };
+    let (mut stages, first_target) = Stages::new(&mut target, opts.sigma_gamma(0))?;
     let mut fitter = PoseFitter::new(ctx, mesh, camera, lighting, &first_target, init, opts)?;
     let mut log = Vec::with_capacity(opts.iterations as usize);
     let start = Instant::now();
@@ -595,20 +583,9 @@ pub fn fit_pose_resumable(
         done + 1,
         opts.iterations,
         |fitter, it| {
-            // Up to the next logged iteration, within one σ/γ stage, in one submission.
-            let here = opts.sigma_gamma(it - 1);
             let last = driver::to_next_log(it, every).min(opts.iterations);
-            let last = (it..=last)
-                .find(|&i| opts.sigma_gamma(i - 1) != here)
-                .map_or(last, |end| end - 1);
-            if here != stage {
-                if let PoseTarget::PerStage(f) = &mut target {
-                    fitter.set_target(&f(here.0, here.1)?)?;
-                }
-                fitter.fit_capacity(here.0, here.1)?;
-            }
-            stage = here;
-            Ok(last)
+            stages.enter(&mut **fitter, opts.sigma_gamma(it - 1))?;
+            Ok(driver::to_stage_end(it, last, |i| opts.sigma_gamma(i)))
         },
         |fitter, first, last| {
             let seconds = earlier + start.elapsed().as_secs_f64();
@@ -624,11 +601,7 @@ pub fn fit_pose_resumable(
     )?;
     let seconds = earlier + start.elapsed().as_secs_f64();
     let s = &opts.settings;
-    if let PoseTarget::PerStage(f) = &mut target
-        && (s.sigma, s.gamma) != stage
-    {
-        fitter.set_target(&f(s.sigma, s.gamma)?)?;
-    }
+    stages.finish(&mut *fitter, (s.sigma, s.gamma))?;
     let (loss, image) = fitter.evaluate(s.sigma, s.gamma)?;
     Ok(PoseFitResult {
         pose: fitter.pose()?,
