@@ -365,3 +365,64 @@ pub(crate) fn restore_optimizer(
     ctx.write_buffer(m, 0, state[1])?;
     ctx.write_buffer(v, 0, state[2])
 }
+
+/// A log row a checkpoint carries.
+pub trait LogRow: Sized {
+    /// Appends the row.
+    fn write(&self, w: &mut Writer);
+    /// Reads a row [`LogRow::write`] wrote.
+    fn read(r: &mut Reader<'_>) -> Result<Self>;
+}
+
+/// The complete state of a fit whose optimizer is one Adam over a flat parameter vector, after
+/// an iteration: the parameters, Adam's moments, the iterations done (Adam's step), the log and
+/// the time spent. What else a fit needs to resume is keyed by the iteration (the samplers'
+/// random numbers) or has none (the deformation fit), so a fit resumed from it ends bit for bit
+/// as the fit that never stopped.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FitState<L> {
+    /// Iterations done.
+    pub iteration: u32,
+    /// The parameters.
+    pub params: Vec<f32>,
+    /// Adam's first moments.
+    pub adam_m: Vec<f32>,
+    /// Adam's second moments.
+    pub adam_v: Vec<f32>,
+    /// The logged losses so far.
+    pub log: Vec<L>,
+    /// Seconds the iterations took so far.
+    pub seconds: f64,
+}
+
+impl<L: LogRow> FitState<L> {
+    /// As a checkpoint of a `kind` fit for inputs of `fingerprint`.
+    pub fn to_kind_checkpoint(&self, kind: FitKind, fingerprint: u64) -> Checkpoint {
+        let mut w = Writer::default();
+        write_optimizer(&mut w, &self.params, &self.adam_m, &self.adam_v);
+        write_log(&mut w, &self.log, |w, l| l.write(w));
+        Checkpoint {
+            kind,
+            fingerprint,
+            iteration: self.iteration,
+            seconds: self.seconds,
+            payload: w.0,
+        }
+    }
+
+    /// From a checkpoint ([`Checkpoint::read`] checked its kind and inputs) of a fit of
+    /// `params` parameters.
+    pub fn from_payload(c: &Checkpoint, params: usize) -> Result<Self> {
+        let mut r = Reader::new(&c.payload);
+        let (params, adam_m, adam_v) = read_optimizer(&mut r, params)?;
+        let log = read_log(&mut r, c.iteration, L::read)?;
+        Ok(Self {
+            iteration: c.iteration,
+            params,
+            adam_m,
+            adam_v,
+            log,
+            seconds: c.seconds,
+        })
+    }
+}

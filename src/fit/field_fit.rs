@@ -38,8 +38,8 @@ use std::time::Instant;
 use glam::DVec3;
 
 use super::checkpoint::{
-    Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, read_log, read_optimizer,
-    restore_optimizer, write_log, write_optimizer,
+    Checkpoint, Fingerprint, FitKind, FitState, LogRow, Reader, Writer, check_resume,
+    restore_optimizer,
 };
 use super::driver::{self, Fit, Fitter};
 use super::{Adam, AdamOptions};
@@ -645,24 +645,27 @@ pub fn fit_field(
     fit_field_resumable(ctx, targets, opts, None, |l, _| Ok(progress(l)))
 }
 
-/// A field fit's complete state after an iteration: the field's parameters, Adam's moments, the
-/// iterations done (Adam's step) and the log. The samplers need nothing else: their random
-/// numbers are keyed by (seed, iteration), so a fit resumed from it ([`fit_field_resumable`])
-/// ends bit for bit as the fit that never stopped.
-#[derive(Clone, Debug, PartialEq)]
-pub struct FieldFitState {
-    /// Iterations done.
-    pub iteration: u32,
-    /// The field's parameters.
-    pub params: Vec<f32>,
-    /// Adam's first moments.
-    pub adam_m: Vec<f32>,
-    /// Adam's second moments.
-    pub adam_v: Vec<f32>,
-    /// The logged losses so far.
-    pub log: Vec<FieldFitLog>,
-    /// Seconds the iterations took so far.
-    pub seconds: f64,
+/// A field fit's complete state after an iteration ([`FitState`]): the field's parameters. The
+/// samplers need nothing else: their random numbers are keyed by (seed, iteration).
+pub type FieldFitState = FitState<FieldFitLog>;
+
+impl LogRow for FieldFitLog {
+    fn write(&self, w: &mut Writer) {
+        w.u32(self.iteration);
+        w.f32(self.silhouette);
+        w.f32(self.geo);
+        w.f32(self.total);
+        w.f64(self.seconds);
+    }
+    fn read(r: &mut Reader<'_>) -> Result<Self> {
+        Ok(Self {
+            iteration: r.u32()?,
+            silhouette: r.f32()?,
+            geo: r.f32()?,
+            total: r.f32()?,
+            seconds: r.f64()?,
+        })
+    }
 }
 
 /// A logged iteration's view of the running field fit ([`FieldFitSnapshot::state`] reads its
@@ -691,7 +694,7 @@ impl FieldFitSnapshot<'_> {
     }
 }
 
-impl FieldFitState {
+impl FitState<FieldFitLog> {
     /// The fingerprint of a fit's inputs that a checkpoint of it must carry: the silhouettes,
     /// the cameras and every option (the field type among them) but the iteration count and
     /// the logging.
@@ -711,46 +714,13 @@ impl FieldFitState {
 
     /// As a checkpoint for inputs of `fingerprint`.
     pub fn to_checkpoint(&self, fingerprint: u64) -> Checkpoint {
-        let mut w = Writer::default();
-        write_optimizer(&mut w, &self.params, &self.adam_m, &self.adam_v);
-        write_log(&mut w, &self.log, |w, l| {
-            w.u32(l.iteration);
-            w.f32(l.silhouette);
-            w.f32(l.geo);
-            w.f32(l.total);
-            w.f64(l.seconds);
-        });
-        Checkpoint {
-            kind: FitKind::Field,
-            fingerprint,
-            iteration: self.iteration,
-            seconds: self.seconds,
-            payload: w.0,
-        }
+        self.to_kind_checkpoint(FitKind::Field, fingerprint)
     }
 
     /// From a checkpoint ([`Checkpoint::read`] checked its kind and inputs) of a fit with
     /// `opts` (its field's parameter count).
     pub fn from_checkpoint(c: &Checkpoint, opts: &FieldFitOptions) -> Result<Self> {
-        let mut r = Reader::new(&c.payload);
-        let (params, adam_m, adam_v) = read_optimizer(&mut r, opts.field.param_count())?;
-        let log = read_log(&mut r, c.iteration, |r| {
-            Ok(FieldFitLog {
-                iteration: r.u32()?,
-                silhouette: r.f32()?,
-                geo: r.f32()?,
-                total: r.f32()?,
-                seconds: r.f64()?,
-            })
-        })?;
-        Ok(Self {
-            iteration: c.iteration,
-            params,
-            adam_m,
-            adam_v,
-            log,
-            seconds: c.seconds,
-        })
+        Self::from_payload(c, opts.field.param_count())
     }
 }
 

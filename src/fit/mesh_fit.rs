@@ -29,8 +29,8 @@ use std::time::Instant;
 use glam::{DMat3, DVec3};
 
 use super::checkpoint::{
-    Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, read_log, read_optimizer,
-    restore_optimizer, write_log, write_optimizer,
+    Checkpoint, Fingerprint, FitKind, FitState, LogRow, Reader, Writer, check_resume,
+    restore_optimizer,
 };
 use super::driver::{self, Fit, Fitter};
 use super::{Adam, AdamOptions, Deform, Regularizers, SilhouetteLoss, with_headroom};
@@ -221,24 +221,32 @@ pub fn fit_mesh(
     )
 }
 
-/// A mesh fit's complete state after an iteration: the parameters, Adam's moments, the
-/// iterations done (Adam's step), the log and the time spent. A fit resumed from it
-/// ([`fit_mesh_resumable`]) ends bit for bit as the fit that never stopped (the deformation
-/// fit has no other state: no sampler, no schedule).
-#[derive(Clone, Debug, PartialEq)]
-pub struct MeshFitState {
-    /// Iterations done.
-    pub iteration: u32,
-    /// The parameters (`3 V` displacements, then the centre).
-    pub params: Vec<f32>,
-    /// Adam's first moments.
-    pub adam_m: Vec<f32>,
-    /// Adam's second moments.
-    pub adam_v: Vec<f32>,
-    /// The logged losses so far.
-    pub log: Vec<FitLog>,
-    /// Seconds the iterations took so far.
-    pub seconds: f64,
+/// A mesh fit's complete state after an iteration ([`FitState`]): the parameters are `3 V`
+/// displacements, then the centre (the deformation fit has no other state: no sampler, no
+/// schedule).
+pub type MeshFitState = FitState<FitLog>;
+
+impl LogRow for FitLog {
+    fn write(&self, w: &mut Writer) {
+        w.u32(self.iteration);
+        w.f32(self.silhouette);
+        w.f32(self.laplacian);
+        w.f32(self.flatten);
+        w.f32(self.total);
+        w.u64(self.entries);
+        w.f64(self.seconds);
+    }
+    fn read(r: &mut Reader<'_>) -> Result<Self> {
+        Ok(Self {
+            iteration: r.u32()?,
+            silhouette: r.f32()?,
+            laplacian: r.f32()?,
+            flatten: r.f32()?,
+            total: r.f32()?,
+            entries: r.u64()?,
+            seconds: r.f64()?,
+        })
+    }
 }
 
 /// A logged iteration's view of the running fit, for a progress callback that wants its state
@@ -266,7 +274,7 @@ impl MeshFitSnapshot<'_> {
     }
 }
 
-impl MeshFitState {
+impl FitState<FitLog> {
     /// The fingerprint of a fit's inputs that a checkpoint of it must carry: the template, the
     /// targets, the cameras and every option but the iteration count, the logging and the entry
     /// capacity (which change no result: a fit may be resumed for more iterations).
@@ -293,51 +301,13 @@ impl MeshFitState {
 
     /// As a checkpoint for inputs of `fingerprint`.
     pub fn to_checkpoint(&self, fingerprint: u64) -> Checkpoint {
-        let mut w = Writer::default();
-        write_optimizer(&mut w, &self.params, &self.adam_m, &self.adam_v);
-        write_log(&mut w, &self.log, |w, l| {
-            w.u32(l.iteration);
-            w.f32(l.silhouette);
-            w.f32(l.laplacian);
-            w.f32(l.flatten);
-            w.f32(l.total);
-            w.u64(l.entries);
-            w.f64(l.seconds);
-        });
-        Checkpoint {
-            kind: FitKind::Mesh,
-            fingerprint,
-            iteration: self.iteration,
-            seconds: self.seconds,
-            payload: w.0,
-        }
+        self.to_kind_checkpoint(FitKind::Mesh, fingerprint)
     }
 
     /// From a checkpoint ([`Checkpoint::read`] checked its kind and inputs) of a fit of
     /// `template`.
     pub fn from_checkpoint(c: &Checkpoint, template: &Mesh) -> Result<Self> {
-        let params = 3 * template.vertex_count() + 3;
-        let mut r = Reader::new(&c.payload);
-        let (p, m, v) = read_optimizer(&mut r, params)?;
-        let log = read_log(&mut r, c.iteration, |r| {
-            Ok(FitLog {
-                iteration: r.u32()?,
-                silhouette: r.f32()?,
-                laplacian: r.f32()?,
-                flatten: r.f32()?,
-                total: r.f32()?,
-                entries: r.u64()?,
-                seconds: r.f64()?,
-            })
-        })?;
-        Ok(Self {
-            iteration: c.iteration,
-            params: p,
-            adam_m: m,
-            adam_v: v,
-            log,
-            seconds: c.seconds,
-        })
+        Self::from_payload(c, 3 * template.vertex_count() + 3)
     }
 }
 
