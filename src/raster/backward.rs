@@ -32,20 +32,22 @@
 //! Each value has one writer and a fixed summation order: no float atomics, and repeated runs
 //! are bit-identical. On a driver that caps shader loops
 //! ([`crate::gpu::DeviceInfo::shader_loop_limit`]) every dispatch's loop count is bounded on the
-//! host from the real iteration counts (`raster::gpu::*_iterations`); work is split (bands,
+//! host from the real iteration counts (`raster::loops`); work is split (bands,
 //! tile parts, reduction windows and view ranges) rather than refused.
 
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 
 use super::fine::{FineModes, MAX_MASKED_TEXELS, RasterPush, tiled_backward_workgroup};
-use super::gpu::{
-    Binned, ColorWork, GpuScene, Method, brute_backward_iterations, reduce_iterations,
-    texel_reduce_iterations, tiled_backward_iterations,
+use super::loops::{
+    ColorWork, brute_backward_iterations, reduce_iterations, texel_reduce_iterations,
+    tiled_backward_iterations,
 };
+use super::method::Method;
 use super::reference_grad::{
     self, Gradients, VertexFaces, camera_grad, lighting_grad_surface, lighting_grad_vertex,
 };
+use super::scene::{Binned, GpuScene};
 use super::settings::ColorMode;
 use crate::error::{Error, LimitKind, Result};
 use crate::gpu::{

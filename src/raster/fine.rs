@@ -9,7 +9,7 @@ use bytemuck::{Pod, Zeroable};
 use crate::error::{Error, Result};
 use crate::gpu::{Context, KernelVariants, Recorder, pass_size, specs};
 use crate::primitives::TileGrid;
-use crate::raster::gpu::tiled_forward_iterations;
+use crate::raster::loops::tiled_forward_iterations;
 use crate::raster::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
 use crate::raster::setup::dist_code;
 
