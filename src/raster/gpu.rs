@@ -41,7 +41,7 @@ use crate::primitives::binning::{self, Binner, Bins, TileGrid};
 use crate::raster::backward::GradIo;
 use crate::raster::backward::{GradBuffers, GradKernels};
 use crate::raster::brute::{BruteBindings, BruteRaster};
-use crate::raster::fine::{CARRY_BYTES, PixelAux, TiledBindings, TiledRaster, check_tile_size};
+use crate::raster::fine::{CARRY_BYTES, PixelAux, TiledBindings, TiledRaster};
 use crate::raster::loops::tiled_forward_iterations;
 pub use crate::raster::method::{DEFAULT_TILE, Method};
 use crate::raster::reference::MeshF64;
@@ -493,7 +493,7 @@ impl Renderer {
             }
             Method::Tiled { tile } => tile,
         };
-        check_tile_size(tile)?;
+        Method::check_tile(tile)?;
         let grid = scene.grid(tile)?;
         // Every view at once, as far as the kernels' 32-bit item indices allow: the count is
         // exact (64-bit where it could wrap), and the groups halve only where the real entries
@@ -664,7 +664,7 @@ impl Renderer {
         tile: u32,
         capacity: u64,
     ) -> Result<()> {
-        check_tile_size(tile)?;
+        Method::check_tile(tile)?;
         let grid = scene.grid(tile)?;
         let job = scene.job(grid, 0, scene.view_count);
         let max = self.max_entries(ctx);
