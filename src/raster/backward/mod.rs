@@ -6,8 +6,9 @@
 //! 1. **Per (pixel, face)** (`kernels/include/raster_grad.glsl`, the twin's `pixel_face_grad`):
 //!    from the pixel's upstream gradient and the forward's [`PixelAux`](super::fine::PixelAux),
 //!    one face's contribution, independently of the other faces.
-//! 2. **Per unit of work** (`partials.rs`), a partial gradient (vec4 records: the 3 screen corners, then the
-//!    colour slots, 3 vertex colours or R² texels, RGB each; [`grad_stride`]), either
+//! 2. **Per unit of work** (`partials.rs`), a partial gradient (vec4 records: the 3 screen
+//!    corners, then the colour slots, 3 vertex colours or R² texels, RGB each; [`grad_stride`]),
+//!    either
 //!    - tiled (`grad_tiled.comp`): a unit is a (face, tile) entry of the forward's binning (no
 //!      second binning), summed over the tile's pixels; a tile crowded past the driver's loop
 //!      cap is split over several workgroups; or
@@ -18,22 +19,24 @@
 //!    **chunk** of units at a time into one buffer of at most one storage binding (or a smaller
 //!    `GradSplit::chunk_units`, a test knob), so memory stays bounded whatever the texture
 //!    resolution.
-//! 3. **Per face** (`reduce.rs`), after each chunk: `grad_reduce.comp` adds each item's partials to its screen
-//!    (and vertex-colour) gradient, and `grad_reduce_texels.comp` adds the texel slots to the
-//!    face's dL/d(lit texel) of the view's mesh. Both keep running sums in unit order, so the
-//!    result is bit for bit the same however the units are chunked.
-//! 4. **Per (view, face)** (`world.rs`: `grad_world.comp`, the twin's `face_screen_to_world_grad`): screen →
-//!    camera → world, through perspective, orthographic or the matrix projection.
-//! 5. **Per vertex** (`world.rs`: `grad_gather.comp`, the twin's `VertexFaces::gather`): summed over views
-//!    and incident corners in a fixed order.
-//! 6. **On the host, in f64** (`host.rs`), where the forward lights: the lighting's backward (raw colours,
-//!    and normals → positions) with the twin's own functions, and the camera gradient (look-at).
+//! 3. **Per face** (`reduce.rs`), after each chunk: `grad_reduce.comp` adds each item's partials
+//!    to its screen (and vertex-colour) gradient, and `grad_reduce_texels.comp` adds the texel
+//!    slots to the face's dL/d(lit texel) of the view's mesh. Both keep running sums in unit order,
+//!    so the result is bit for bit the same however the units are chunked.
+//! 4. **Per (view, face)** (`world.rs`: `grad_world.comp`, the twin's
+//!    `face_screen_to_world_grad`): screen → camera → world, through perspective, orthographic or
+//!    the matrix projection.
+//! 5. **Per vertex** (`world.rs`: `grad_gather.comp`, the twin's `VertexFaces::gather`): summed
+//!    over views and incident corners in a fixed order.
+//! 6. **On the host, in f64** (`host.rs`), where the forward lights: the lighting's backward
+//!    (raw colours, and normals → positions) with the twin's own functions, and the camera gradient
+//!    (look-at).
 //!
 //! Each value has one writer and a fixed summation order: no float atomics, and repeated runs
 //! are bit-identical. On a driver that caps shader loops
 //! ([`crate::gpu::DeviceInfo::shader_loop_limit`]) every dispatch's loop count is bounded on the
-//! host from the real iteration counts (`raster::loops`); work is split (bands,
-//! tile parts, reduction windows and view ranges) rather than refused.
+//! host from the real iteration counts (`raster::loops`); work is split (bands, tile parts,
+//! reduction windows and view ranges) rather than refused.
 //!
 //! The buffers a backward keeps between runs are [`GradBuffers`] (`buffers.rs`); how its work is
 //! split to stay under a driver's loop cap, `plan.rs`.
