@@ -4,8 +4,7 @@
 
 #[cfg(doc)]
 use super::Binner;
-use super::job::{BinJob, BinStrategy, mask_layout};
-use super::passes::COUNTS_PER_SUM;
+use super::job::{BinJob, BinStrategy, COUNTS_PER_SUM, mask_layout};
 use crate::error::{Error, Result};
 use crate::gpu::{Buffer, Context, MemoryKind};
 use crate::primitives::scan::ScanScratch;

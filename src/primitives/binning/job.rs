@@ -1,6 +1,7 @@
 //! What one binning covers and how it is planned: the tile grid ([`TileGrid`], or a window of
-//! its rows), where the items' boxes sit ([`ItemLayout`]), the job ([`BinJob`]) and the strategy
-//! its entries are put in tile order by ([`BinStrategy`]).
+//! its rows), where the items' boxes sit ([`ItemLayout`]), the job ([`BinJob`]), the strategy
+//! its entries are put in tile order by ([`BinStrategy`]), and the sizes of the masks and the
+//! count's 64-bit sums, which the buffers and the passes both follow.
 
 #[cfg(doc)]
 use super::Binner;
@@ -142,6 +143,9 @@ pub(super) fn mask_layout(words_per_tile: u32, tiles: u64) -> (u64, u64) {
     let w = u64::from(words_per_tile);
     ((w + w.div_ceil(32)) * tiles, w * tiles)
 }
+
+/// Counts each invocation of `bin_count_sum.comp` adds (its loop's length).
+pub(super) const COUNTS_PER_SUM: u64 = 256;
 
 /// How a binning puts its entries in tile order (see the module docs). Either way the entries
 /// are the same, bit for bit.

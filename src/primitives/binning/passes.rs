@@ -8,7 +8,7 @@ use bytemuck::{Pod, Zeroable};
 use super::TileGrid;
 use super::bins::Bins;
 use super::cpu;
-use super::job::{BinJob, BinStrategy, mask_layout};
+use super::job::{BinJob, BinStrategy, COUNTS_PER_SUM, mask_layout};
 use crate::error::{Error, Result};
 use crate::gpu::{Buffer, BufferRange, Context, Kernel, Recorder, specs};
 use crate::primitives::scan::Scan;
@@ -71,9 +71,6 @@ struct CountSumPush {
     per_sum: u32,
     pad: [u32; 2],
 }
-
-/// Counts each invocation of `bin_count_sum.comp` adds (its loop's length).
-pub(super) const COUNTS_PER_SUM: u64 = 256;
 
 /// Push constants of `bin_ranges.comp`.
 #[repr(C)]
