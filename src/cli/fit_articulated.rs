@@ -174,7 +174,7 @@ pub fn run(args: &FitArticulatedArgs) -> Result<()> {
         ArticulatedFitOptions::default()
     };
     let tile = args.tile.unwrap_or(d.tile);
-    softvk::raster::fine::check_tile_size(tile)?;
+    Method::check_tile(tile)?;
     let rig = Rig::figure();
     let init = match &args.init_angles {
         Some(a) => joint_angles(&rig, "--init-angles", &a.0)?,

@@ -130,7 +130,7 @@ pub struct FitMeshArgs {
 
 impl FitArgs {
     fn options(&self, width: u32, height: u32, iterations: u32) -> Result<MeshFitOptions> {
-        softvk::raster::fine::check_tile_size(self.tile)?;
+        Method::check_tile(self.tile)?;
         let iterations = self.iterations.unwrap_or(iterations);
         if iterations == 0 || self.log_every == 0 {
             return Err(Error::Input(

@@ -217,7 +217,7 @@ pub fn error_map(render: &[[f32; 4]], target: &[[f32; 4]]) -> Vec<[f32; 4]> {
 pub fn run(args: &FitPoseArgs) -> Result<()> {
     let d = defaults();
     let tile = args.tile.unwrap_or(d.tile);
-    softvk::raster::fine::check_tile_size(tile)?;
+    Method::check_tile(tile)?;
     let (tw, th, target) = load_target(&args.target)?;
     let explicit = args.view.size.is_some() || args.view.width.is_some();
     let size = if explicit { args.view.size() } else { (tw, th) };

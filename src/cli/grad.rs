@@ -75,7 +75,7 @@ pub fn read_weights(path: &Path) -> Result<(u32, u32, Vec<[f32; 4]>)> {
 
 /// Runs `softvk grad`.
 pub fn run(args: &GradArgs) -> Result<()> {
-    softvk::raster::fine::check_tile_size(args.tile)?;
+    Method::check_tile(args.tile)?;
     let (ww, wh, weights) = read_weights(&args.weights)?;
     let explicit = args.view.size.is_some() || args.view.width.is_some();
     let size = if explicit { args.view.size() } else { (ww, wh) };

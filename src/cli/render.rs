@@ -65,7 +65,7 @@ impl RenderArgs {
 /// Runs `softvk render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
     let format = ImageFormat::from_path(&args.out)?;
-    softvk::raster::fine::check_tile_size(args.tile)?;
+    Method::check_tile(args.tile)?;
     let camera = args.view.camera()?;
     let settings = args.raster.settings(args.view.size())?;
     let lighting = args.raster.lighting();

@@ -2,8 +2,8 @@
 //! allocator. Either owned (headless, for the CLI, tests and benches) or adopted from a host engine
 //! with [`Context::from_raw`], in which case softvk destroys only what it created itself.
 
-use std::ffi::{CStr, CString, c_void};
-use std::path::{Path, PathBuf};
+use std::ffi::{CStr, c_void};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
@@ -11,6 +11,7 @@ use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 
 use super::descriptors::DescriptorCache;
+use super::shared::{Shared, ValidationLog, create_pipeline_cache, on_validation_message};
 use super::texel_views::TexelViews;
 use crate::error::{Error, Result, VkContext};
 
@@ -201,125 +202,6 @@ impl DeviceInfo {
     }
 }
 
-/// Validation messages collected by the debug messenger. Boxed so its address is stable for the
-/// callback's user-data pointer.
-#[derive(Default)]
-pub(crate) struct ValidationLog {
-    messages: Mutex<Vec<String>>,
-}
-
-/// State shared by the context and every object it creates, so a buffer can free itself on drop
-/// and the device outlives all of them.
-pub(crate) struct Shared {
-    pub(crate) instance: ash::Instance,
-    pub(crate) device: ash::Device,
-    pub(crate) allocator: std::mem::ManuallyDrop<Arc<Mutex<Allocator>>>,
-    pub(crate) debug_device: Option<ash::ext::debug_utils::Device>,
-    messenger: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
-    validation_log: Option<Box<ValidationLog>>,
-    /// True when softvk created the instance and device (and so destroys them).
-    owns_device: bool,
-    /// Every pipeline softvk builds goes through this cache; saved to `cache_path`, if any, on
-    /// drop.
-    pub(crate) pipeline_cache: vk::PipelineCache,
-    cache_path: Option<PathBuf>,
-    /// The descriptor sets dispatches bind in [`DescriptorMode::Sets`]; `None` in
-    /// [`DescriptorMode::Push`]. Here rather than in [`Context`] because a dropped [`Buffer`]
-    /// or [`Kernel`] (which hold only this state) must evict the sets that name it.
-    ///
-    /// [`Buffer`]: super::Buffer
-    /// [`Kernel`]: super::Kernel
-    pub(crate) descriptor_sets: Option<DescriptorCache>,
-    /// The buffer views of texel bindings, made on first use and kept until their buffer
-    /// drops (here for the same reason as `descriptor_sets`).
-    pub(crate) texel_views: TexelViews,
-    _entry: ash::Entry,
-}
-
-/// A pipeline cache primed from `path` when it holds one (the driver ignores a foreign header).
-fn create_pipeline_cache(device: &ash::Device, path: Option<&Path>) -> vk::PipelineCache {
-    let data = path.and_then(|p| std::fs::read(p).ok()).unwrap_or_default();
-    let primed = vk::PipelineCacheCreateInfo::default().initial_data(&data);
-    // SAFETY: valid device; the initial data is only read during the call.
-    let cache = unsafe { device.create_pipeline_cache(&primed, None) };
-    cache
-        .or_else(|_| {
-            // SAFETY: as above, with no initial data.
-            unsafe { device.create_pipeline_cache(&vk::PipelineCacheCreateInfo::default(), None) }
-        })
-        .unwrap_or(vk::PipelineCache::null())
-}
-
-/// Writes the cache's data to `path` through a temporary file and a rename, so a reader never
-/// sees half a file. Best effort: a cache that cannot be saved is only slower next time.
-fn save_pipeline_cache(device: &ash::Device, cache: vk::PipelineCache, path: &Path) {
-    // SAFETY: `cache` is a live cache of `device`.
-    let Ok(data) = (unsafe { device.get_pipeline_cache_data(cache) }) else {
-        return;
-    };
-    if data.is_empty() || std::fs::read(path).is_ok_and(|old| old == data) {
-        return;
-    }
-    if let Some(dir) = path.parent() {
-        let _ = std::fs::create_dir_all(dir);
-    }
-    // Unique per write: several contexts of one process may save at once.
-    static WRITES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let n = WRITES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let tmp = path.with_extension(format!("tmp{}-{n}", std::process::id()));
-    if std::fs::write(&tmp, &data).is_ok() && std::fs::rename(&tmp, path).is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-}
-
-impl Shared {
-    /// Gives a Vulkan object a debug name (no-op without `VK_EXT_debug_utils`).
-    pub(crate) fn name<H: vk::Handle>(&self, handle: H, name: &str) {
-        let Some(debug) = &self.debug_device else {
-            return;
-        };
-        let Ok(name) = CString::new(name) else {
-            return;
-        };
-        let info = vk::DebugUtilsObjectNameInfoEXT::default()
-            .object_handle(handle)
-            .object_name(&name);
-        // SAFETY: `handle` is a live object of `self.device`; naming has no other effect.
-        // A failure to name is harmless, so the result is ignored.
-        let _ = unsafe { debug.set_debug_utils_object_name(&info) };
-    }
-}
-
-impl Drop for Shared {
-    fn drop(&mut self) {
-        // SAFETY: this runs when the last context, buffer or kernel is gone, so nothing of ours is
-        // still in use on the GPU (every submit path waits). The descriptor pools go first
-        // (every buffer and kernel has evicted its sets by now; destroying a pool frees whatever
-        // is left), then the allocator, before the device they belong to; instance and device
-        // are destroyed only if we created them.
-        unsafe {
-            if let Some(cache) = &mut self.descriptor_sets {
-                cache.destroy(&self.device);
-            }
-            self.texel_views.destroy(&self.device);
-            if let Some(path) = &self.cache_path {
-                save_pipeline_cache(&self.device, self.pipeline_cache, path);
-            }
-            self.device
-                .destroy_pipeline_cache(self.pipeline_cache, None);
-            std::mem::ManuallyDrop::drop(&mut self.allocator);
-            if self.owns_device {
-                let _ = self.device.device_wait_idle();
-                self.device.destroy_device(None);
-                if let Some((loader, messenger)) = self.messenger.take() {
-                    loader.destroy_debug_utils_messenger(messenger, None);
-                }
-                self.instance.destroy_instance(None);
-            }
-        }
-    }
-}
-
 /// A Vulkan device and compute queue that softvk records and (optionally) submits work on.
 pub struct Context {
     pub(crate) shared: Arc<Shared>,
@@ -358,38 +240,6 @@ pub struct Counters {
     /// Descriptor sets allocated by recording ([`DescriptorMode::Sets`] only): a recording whose
     /// kernel and buffer ranges were all recorded before reuses the cached sets and adds none.
     pub descriptor_sets: u64,
-}
-
-unsafe extern "system" fn on_validation_message(
-    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
-    _types: vk::DebugUtilsMessageTypeFlagsEXT,
-    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
-    user: *mut c_void,
-) -> vk::Bool32 {
-    if severity.intersects(
-        vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
-            | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
-    ) && !user.is_null()
-        && !data.is_null()
-    {
-        // SAFETY: `user` is the `ValidationLog` boxed in `Shared`, alive as long as the messenger;
-        // `data` and its message pointer are valid for the duration of the callback.
-        let (log, message) = unsafe {
-            let data = &*data;
-            let message = if data.p_message.is_null() {
-                String::from("(no message)")
-            } else {
-                CStr::from_ptr(data.p_message)
-                    .to_string_lossy()
-                    .into_owned()
-            };
-            (&*(user as *const ValidationLog), message)
-        };
-        if let Ok(mut messages) = log.messages.lock() {
-            messages.push(message);
-        }
-    }
-    vk::FALSE
 }
 
 impl Context {
@@ -803,7 +653,7 @@ impl Context {
         self.shared
             .validation_log
             .as_ref()
-            .and_then(|l| l.messages.lock().ok().map(|mut m| std::mem::take(&mut *m)))
+            .map(|l| l.take())
             .unwrap_or_default()
     }
 

@@ -19,10 +19,7 @@ use std::sync::Mutex;
 
 use ash::vk;
 
-use super::context::Shared;
-use super::kernel::Kernel;
-use super::memory::BufferRange;
-use crate::error::{Error, Result, VkContext};
+use crate::error::{Result, VkContext};
 
 /// Sets one pool holds. Pools are made as needed, so this only trades the number of pools
 /// against the memory of one that stays mostly empty.
@@ -77,6 +74,8 @@ struct State {
 /// The cache of one context's descriptor sets (in [`Shared`], where buffer and kernel drops can
 /// reach it). One lock covers the map and the pools, which Vulkan requires to be externally
 /// synchronized for allocating and freeing; binding a set needs no lock.
+///
+/// [`Shared`]: super::shared::Shared
 #[derive(Default)]
 pub(crate) struct DescriptorCache {
     state: Mutex<State>,
@@ -144,11 +143,11 @@ impl State {
     /// new pool.
     fn allocate(
         &mut self,
-        shared: &Shared,
+        device: &ash::Device,
+        name: impl Fn(vk::DescriptorPool, &str),
         layout: vk::DescriptorSetLayout,
         buffers: u32,
     ) -> Result<(vk::DescriptorSet, usize)> {
-        let device = &shared.device;
         let layouts = [layout];
         let try_pool = |pool: &Pool| {
             let info = vk::DescriptorSetAllocateInfo::default()
@@ -193,7 +192,7 @@ impl State {
         // SAFETY: valid device; the pool is destroyed with the cache.
         let raw =
             unsafe { device.create_descriptor_pool(&info, None) }.vk("vkCreateDescriptorPool")?;
-        shared.name(raw, "softvk descriptor sets");
+        name(raw, "softvk descriptor sets");
         self.pools.push(Pool {
             raw,
             sets_left: SETS_PER_POOL,
@@ -208,45 +207,35 @@ impl State {
     }
 }
 
-impl Shared {
-    /// The set that binds `ranges` to `kernel`'s bindings, in binding order: the cached one, or
-    /// a new one allocated now and written with `writes` (those of `ranges`, with no set
-    /// named). Only in [`super::DescriptorMode::Sets`] (a context that pushes its descriptors
-    /// keeps no cache, and says so).
+impl DescriptorCache {
+    /// The set that binds `ranges` (buffer, offset, size) to the bindings of set layout
+    /// `layout`, in binding order: the cached one, or a new one allocated on `device` now
+    /// (its pool named by `name` where a new pool is made) and written with `writes` (those of
+    /// `ranges`, with no set named).
     ///
     /// The ranges were checked against the kernel's interface and the device's limits.
-    pub(crate) fn descriptor_set(
+    pub(crate) fn set(
         &self,
-        kernel: &Kernel,
-        ranges: &[BufferRange<'_>],
+        device: &ash::Device,
+        name: impl Fn(vk::DescriptorPool, &str),
+        layout: vk::DescriptorSetLayout,
+        ranges: Vec<(vk::Buffer, u64, u64)>,
         writes: &[vk::WriteDescriptorSet<'_>],
     ) -> Result<vk::DescriptorSet> {
-        let Some(cache) = &self.descriptor_sets else {
-            return Err(Error::Limit(
-                "descriptor sets asked of a context that pushes its descriptors".into(),
-            ));
-        };
-        let key = SetKey {
-            layout: kernel.set_layout,
-            ranges: ranges
-                .iter()
-                .map(|r| (r.buffer.raw, r.offset, r.size))
-                .collect(),
-        };
-        let mut state = cache.lock();
+        let key = SetKey { layout, ranges };
+        let mut state = self.lock();
         if let Some(set) = state.sets.get(&key) {
             return Ok(set.raw);
         }
-        let buffers = ranges.len() as u32;
-        let (raw, pool) = state.allocate(self, kernel.set_layout, buffers)?;
-        cache
-            .allocated
+        let buffers = key.ranges.len() as u32;
+        let (raw, pool) = state.allocate(device, name, layout, buffers)?;
+        self.allocated
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let writes: Vec<_> = writes.iter().map(|w| w.dst_set(raw)).collect();
         // SAFETY: a fresh set of this device, not yet bound anywhere (so no command buffer
         // sees the update); the writes match its layout (the kernel's reflected bindings); the
-        // buffers are alive (borrowed by `ranges`) and the ranges valid.
-        unsafe { self.device.update_descriptor_sets(&writes, &[]) };
+        // buffers are alive (borrowed by the caller's ranges) and the ranges valid.
+        unsafe { device.update_descriptor_sets(&writes, &[]) };
         for buffer in key.buffers() {
             state.by_buffer.entry(buffer).or_default().push(key.clone());
         }
@@ -256,31 +245,19 @@ impl Shared {
 
     /// Frees the cached sets that name `buffer`, which is being dropped (its handle value may
     /// come back with a new buffer, which must not find them).
-    pub(crate) fn evict_buffer(&self, buffer: vk::Buffer) {
-        // The sets first: they may name the buffer's texel views.
-        self.evict_buffer_sets(buffer);
-        self.texel_views.evict_buffer(&self.device, buffer);
-    }
-
-    fn evict_buffer_sets(&self, buffer: vk::Buffer) {
-        let Some(cache) = &self.descriptor_sets else {
-            return;
-        };
-        let mut state = cache.lock();
+    pub(crate) fn evict_buffer(&self, device: &ash::Device, buffer: vk::Buffer) {
+        let mut state = self.lock();
         let Some(keys) = state.by_buffer.remove(&buffer) else {
             return;
         };
         for key in keys {
-            state.free(&self.device, &key, Some(buffer));
+            state.free(device, &key, Some(buffer));
         }
     }
 
     /// Frees the cached sets of set layout `layout`, whose kernel is being dropped.
-    pub(crate) fn evict_layout(&self, layout: vk::DescriptorSetLayout) {
-        let Some(cache) = &self.descriptor_sets else {
-            return;
-        };
-        let mut state = cache.lock();
+    pub(crate) fn evict_layout(&self, device: &ash::Device, layout: vk::DescriptorSetLayout) {
+        let mut state = self.lock();
         let keys: Vec<SetKey> = state
             .sets
             .keys()
@@ -288,7 +265,7 @@ impl Shared {
             .cloned()
             .collect();
         for key in keys {
-            state.free(&self.device, &key, None);
+            state.free(device, &key, None);
         }
     }
 }

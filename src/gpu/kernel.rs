@@ -11,7 +11,10 @@ use std::sync::{Arc, Mutex};
 
 use ash::vk;
 
-use super::context::{Context, DescriptorMode, Shared};
+use super::context::{Context, DescriptorMode};
+use super::shared::Shared;
+#[cfg(doc)]
+use super::texel_views::TEXEL_FORMAT;
 use crate::error::{Error, Result, VkContext};
 
 /// How a kernel reads a bound buffer range.
@@ -28,14 +31,6 @@ pub enum BindingKind {
     /// passes read their per-lane inputs this way.
     Texels,
 }
-
-/// The format of every [`BindingKind::Texels`] binding: four 32-bit words a texel, read as
-/// `uvec4` and reinterpreted by the kernel (`uintBitsToFloat`), so no device converts or flushes
-/// a float on the way.
-pub const TEXEL_FORMAT: vk::Format = vk::Format::R32G32B32A32_UINT;
-
-/// Bytes of one [`TEXEL_FORMAT`] texel.
-pub const TEXEL_BYTES: u64 = 16;
 
 /// A buffer binding of a kernel, reflected from its SPIR-V.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

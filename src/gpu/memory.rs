@@ -8,7 +8,8 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 
-use super::context::{Context, Shared};
+use super::context::Context;
+use super::shared::Shared;
 use crate::error::{Error, Result, VkContext};
 
 /// Where a buffer lives and what it is for.

@@ -1,4 +1,9 @@
 //! The Vulkan compute core: context, memory, kernels and recording.
+//!
+//! Bottom up, none importing from above: the caches that a dropped buffer or kernel evicts from
+//! (descriptor sets, texel views); the device state the context shares with everything it makes
+//! (`shared`, which holds those caches); the context; buffers and kernels, which hold that state
+//! to free themselves; recording and dispatch.
 
 mod context;
 mod descriptors;
@@ -8,6 +13,7 @@ mod kernel;
 mod memory;
 mod passes;
 mod record;
+mod shared;
 mod texel_views;
 
 pub use context::{
@@ -16,9 +22,8 @@ pub use context::{
 };
 pub use dispatch::GradOut;
 pub(crate) use dispatch::{check_binding, check_floats, check_texels, groups};
-pub use kernel::{
-    BindingKind, BindingSpec, Kernel, KernelSpec, KernelVariants, TEXEL_BYTES, TEXEL_FORMAT, specs,
-};
+pub use kernel::{BindingKind, BindingSpec, Kernel, KernelSpec, KernelVariants, specs};
 pub use memory::{Buffer, BufferRange, MemoryKind, align_up};
 pub(crate) use passes::pass_size;
 pub use record::{INDIRECT_ARGS_BYTES, PassTime, Recorded, Recorder, Timer};
+pub use texel_views::{TEXEL_BYTES, TEXEL_FORMAT};

@@ -6,9 +6,11 @@ use std::sync::Arc;
 
 use ash::vk;
 
-use super::context::{Context, Shared};
-use super::kernel::{BindingKind, Kernel, TEXEL_BYTES};
+use super::context::Context;
+use super::kernel::{BindingKind, Kernel};
 use super::memory::{Buffer, BufferRange};
+use super::shared::Shared;
+use super::texel_views::TEXEL_BYTES;
 use crate::error::{Error, Result, VkContext};
 
 /// Records softvk work into a command buffer in the recording state.
@@ -329,7 +331,14 @@ impl<'a> Recorder<'a> {
         // `cmd`.
         let set = match self.ctx.push_descriptor {
             Some(_) => vk::DescriptorSet::null(),
-            None => self.ctx.shared.descriptor_set(kernel, bindings, &writes)?,
+            None => self.ctx.shared.descriptor_set(
+                kernel.set_layout,
+                bindings
+                    .iter()
+                    .map(|r| (r.buffer.raw, r.offset, r.size))
+                    .collect(),
+                &writes,
+            )?,
         };
         let device = self.ctx.device();
         // SAFETY: the command buffer is recording (constructor contract); pipeline, layout and

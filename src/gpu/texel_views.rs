@@ -16,8 +16,15 @@ use std::sync::Mutex;
 
 use ash::vk;
 
-use super::kernel::TEXEL_FORMAT;
 use crate::error::{Result, VkContext};
+
+/// The format of every [`BindingKind::Texels`](super::BindingKind::Texels) binding, and so of
+/// every view made here: four 32-bit words a texel, read as `uvec4` and reinterpreted by the
+/// kernel (`uintBitsToFloat`), so no device converts or flushes a float on the way.
+pub const TEXEL_FORMAT: vk::Format = vk::Format::R32G32B32A32_UINT;
+
+/// Bytes of one [`TEXEL_FORMAT`] texel.
+pub const TEXEL_BYTES: u64 = 16;
 
 /// The views made so far, by (buffer, offset, size).
 #[derive(Default)]

@@ -41,39 +41,15 @@ use crate::primitives::binning::{self, Binner, Bins, TileGrid};
 use crate::raster::backward::GradIo;
 use crate::raster::backward::{GradBuffers, GradKernels};
 use crate::raster::brute::{BruteBindings, BruteRaster};
-use crate::raster::fine::{CARRY_BYTES, PixelAux, TiledBindings, TiledRaster, check_tile_size};
-pub(crate) use crate::raster::loops::{
-    ColorWork, brute_backward_iterations, reduce_iterations, texel_reduce_iterations,
-    tiled_backward_iterations, tiled_forward_iterations,
-};
+use crate::raster::fine::{CARRY_BYTES, PixelAux, TiledBindings, TiledRaster};
+use crate::raster::loops::tiled_forward_iterations;
+pub use crate::raster::method::{DEFAULT_TILE, Method};
 use crate::raster::reference::MeshF64;
 use crate::raster::reference_grad::Gradients;
 pub use crate::raster::scene::{Binned, GpuScene, PairCounts, ViewGroup};
 use crate::raster::scene::{lit_batch, upload_geometry};
 use crate::raster::settings::{ColorMode, RasterSettings};
 use crate::raster::setup::{FaceSetupKernel, GpuFaceSetup, GpuView, VertexLayout};
-
-/// Tile edge (pixels) of [`Method::default`]. Chosen by `softvk bench` on lavapipe; see
-/// BENCHMARKS.md.
-pub const DEFAULT_TILE: u32 = 8;
-
-/// How the fine pass finds the faces of a pixel.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Method {
-    /// SoftRas's own loop: every face for every pixel (the baseline).
-    Brute,
-    /// Faces binned to `tile × tile`-pixel tiles (a multiple of 8); each pixel visits its tile's.
-    Tiled {
-        /// Tile edge in pixels.
-        tile: u32,
-    },
-}
-
-impl Default for Method {
-    fn default() -> Self {
-        Method::Tiled { tile: DEFAULT_TILE }
-    }
-}
 
 /// One GPU render's results, for every view.
 #[derive(Clone, Debug, PartialEq)]
@@ -517,7 +493,7 @@ impl Renderer {
             }
             Method::Tiled { tile } => tile,
         };
-        check_tile_size(tile)?;
+        Method::check_tile(tile)?;
         let grid = scene.grid(tile)?;
         // Every view at once, as far as the kernels' 32-bit item indices allow: the count is
         // exact (64-bit where it could wrap), and the groups halve only where the real entries
@@ -688,7 +664,7 @@ impl Renderer {
         tile: u32,
         capacity: u64,
     ) -> Result<()> {
-        check_tile_size(tile)?;
+        Method::check_tile(tile)?;
         let grid = scene.grid(tile)?;
         let job = scene.job(grid, 0, scene.view_count);
         let max = self.max_entries(ctx);

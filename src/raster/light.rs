@@ -19,8 +19,8 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::gpu::GpuScene;
 use super::reference_grad::VertexFaces;
+use super::scene::GpuScene;
 use super::settings::ColorMode;
 use super::setup::VertexLayout;
 use crate::error::{Error, Result};

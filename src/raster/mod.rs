@@ -1,9 +1,13 @@
 //! Soft rasterization (SPEC §2–§3), stage by stage: the render settings ([`settings`]), read
 //! by everything below; the f64 CPU twins of the forward
 //! ([`reference`](mod@reference)) and of the backward ([`reference_grad`]), and on the GPU the
-//! face setup ([`setup`]), binning ([`crate::primitives::binning`]) and the fine passes — tiled
-//! ([`fine`]) and the brute-force baseline ([`brute`]), bit for bit the same — driven by
-//! [`gpu`].
+//! face setup ([`setup`]), binning ([`crate::primitives::binning`]), the fine passes — tiled
+//! ([`fine`]) and the brute-force baseline ([`brute`]), bit for bit the same — and the backward
+//! ([`backward`]), driven by [`gpu`].
+//!
+//! The layers, none importing from one above it: the settings; the state every stage reads —
+//! the [`method`], the [`scene`] and the kernels' loop counts; the stages; the driver [`gpu`],
+//! which re-exports the state its callers name.
 
 pub mod backward;
 pub mod brute;
@@ -11,6 +15,7 @@ pub mod fine;
 pub mod gpu;
 pub mod light;
 pub(crate) mod loops;
+pub mod method;
 pub mod reference;
 pub mod reference_grad;
 pub mod scene;

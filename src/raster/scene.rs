@@ -9,12 +9,10 @@ use crate::gpu::{Buffer, BufferRange, Context};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::primitives::binning::{BinJob, Bins, ItemLayout, TileGrid};
-use crate::raster::gpu::Method;
+use crate::raster::method::Method;
 use crate::raster::reference::{FaceColors, MeshF64};
 use crate::raster::settings::{ColorMode, RasterSettings};
 use crate::raster::setup::{FACE_FINITE, GpuFaceSetup, VertexLayout};
-#[cfg(doc)]
-use crate::raster::{backward::GradIo, gpu::Renderer};
 
 /// Where the face setup's box and flags sit, for binning.
 pub(crate) const SETUP_LAYOUT: ItemLayout = ItemLayout {
@@ -56,8 +54,9 @@ pub struct GpuScene {
     pub(crate) groups: Vec<ViewGroup>,
     /// The tile size of the last tiled render.
     pub(crate) tile: Option<u32>,
-    /// The bins were sized by [`Renderer::reserve_guarded`] (one group of every view, a
-    /// capacity), not by an exact run: what a guarded forward needs.
+    /// The bins were sized by
+    /// [`Renderer::reserve_guarded`](crate::raster::gpu::Renderer::reserve_guarded) (one group of
+    /// every view, a capacity), not by an exact run: what a guarded forward needs.
     pub(crate) guarded: bool,
     /// Render alpha only ([`GpuScene::set_silhouette_only`]).
     pub(crate) silhouette_only: bool,
@@ -109,8 +108,9 @@ pub struct ViewGroup {
     /// the image unless one view held more entries than one binding and was binned window by
     /// window.
     pub tile_rows: (u32, u32),
-    /// (face, tile) entries binned; for a guarded binning ([`Renderer::reserve_guarded`], whose
-    /// count stays on the GPU), the entry capacity, an upper bound.
+    /// (face, tile) entries binned; for a guarded binning
+    /// ([`Renderer::reserve_guarded`](crate::raster::gpu::Renderer::reserve_guarded), whose count
+    /// stays on the GPU), the entry capacity, an upper bound.
     pub entries: u64,
     /// The most entries one tile holds, or an upper bound of it (the entry count) where that
     /// already satisfies the driver's loop cap ([`crate::gpu::DeviceInfo::shader_loop_limit`]).
@@ -382,12 +382,12 @@ impl GpuScene {
 
     /// Renders from `buffer`'s vertices from now on, laid out as `layout` says: a host's vertex
     /// buffer ([`Context::import_buffer`]), interleaved or not, written by the host's own passes
-    /// before each forward. The scene's own position buffer is dropped. The vertex count (per
-    /// mesh of the batch, meshes one after another) stays the scene's; the faces, colours and
-    /// views too. The backward's host share (lighting, cameras) keeps reading the meshes given to
-    /// [`Renderer::prepare`]: for lit scenes whose vertices move, use an unlit or silhouette
-    /// render, relight on the host ([`GpuScene::relight`]), or record the lighting and its
-    /// backward on the GPU ([`crate::raster::light::SceneLight`]).
+    /// before each forward. The scene's own position buffer is dropped. The vertex count (per mesh
+    /// of the batch, meshes one after another) stays the scene's; the faces, colours and views too.
+    /// The backward's host share (lighting, cameras) keeps reading the meshes given to
+    /// [`Renderer::prepare`](crate::raster::gpu::Renderer::prepare): for lit scenes whose vertices
+    /// move, use an unlit or silhouette render, relight on the host ([`GpuScene::relight`]), or
+    /// record the lighting and its backward on the GPU ([`crate::raster::light::SceneLight`]).
     pub fn bind_positions(&mut self, buffer: Buffer, layout: VertexLayout) -> Result<()> {
         let vertices = u64::from(self.vertex_count) * self.meshes.len() as u64;
         let need = layout.bytes(vertices)?;
@@ -460,13 +460,14 @@ impl GpuScene {
         )
     }
 
-    /// Replaces the batch's meshes by `meshes` of the same topology (faces, vertex count,
-    /// texture resolution and colour source), for the next forward: their positions and
-    /// colours, lit anew with the scene's lighting, are written into the scene's buffers, and
-    /// the backward's host share reads them. What a loop that renders new vertices or textures
-    /// every iteration through the same views calls instead of [`Renderer::prepare_batch`]:
-    /// no buffer is made again, and the bins keep their size. An error, with nothing changed,
-    /// when a mesh does not fit.
+    /// Replaces the batch's meshes by `meshes` of the same topology (faces, vertex count, texture
+    /// resolution and colour source), for the next forward: their positions and colours, lit anew
+    /// with the scene's lighting, are written into the scene's buffers, and the backward's host
+    /// share reads them. What a loop that renders new vertices or textures every iteration through
+    /// the same views calls instead of
+    /// [`Renderer::prepare_batch`](crate::raster::gpu::Renderer::prepare_batch): no buffer is made
+    /// again, and the bins keep their size. An error, with nothing changed, when a mesh does not
+    /// fit.
     pub fn update_meshes(&mut self, ctx: &Context, meshes: &[Mesh]) -> Result<()> {
         if meshes.len() != self.meshes.len() {
             return Err(Error::Input(format!(
