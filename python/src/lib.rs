@@ -309,7 +309,7 @@ impl Settings {
         let method = if brute {
             Method::Brute
         } else {
-            softvk::raster::fine::check_tile_size(tile).map_err(to_py)?;
+            softvk::raster::gpu::Method::check_tile(tile).map_err(to_py)?;
             Method::Tiled { tile }
         };
         Ok(Settings {

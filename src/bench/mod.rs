@@ -18,7 +18,6 @@
 use std::path::PathBuf;
 
 use crate::error::{Error, Result};
-use crate::raster::fine::check_tile_size;
 use crate::raster::gpu::{Method, PairCounts};
 
 mod backward;
@@ -100,7 +99,7 @@ impl BenchOptions {
             return Err(Error::Input("bench: --repeat must be at least 1".into()));
         }
         for &tile in &self.tiles {
-            check_tile_size(tile)?;
+            Method::check_tile(tile)?;
         }
         if self.band == Some(0) {
             return Err(Error::Input("bench: a band needs at least one row".into()));

@@ -179,7 +179,7 @@ impl ArticulatedFitOptions {
         if let Some(b) = &self.blur {
             b.validate()?;
         }
-        crate::raster::fine::check_tile_size(self.tile)?;
+        crate::raster::gpu::Method::check_tile(self.tile)?;
         self.settings.validate()?;
         Ok(())
     }

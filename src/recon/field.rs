@@ -41,7 +41,7 @@ use std::ops::Range;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::field::mcubes::{Isosurface, MarchingCubes};
-use crate::field::mlp::MlpLayout;
+
 use crate::field::{Cube, Field, FieldKind, SumChunks};
 use crate::fit::driver::{Fit, Fitter};
 use crate::fit::field_fit::scaled_to_cube;
@@ -49,14 +49,15 @@ use crate::fit::{Adam, AdamOptions};
 use crate::gpu::GradOut;
 use crate::gpu::gate::IterationGate;
 use crate::gpu::{Buffer, Context, MemoryKind, Recorder};
-use crate::nn::{Layer, Sequential};
+use crate::nn::Sequential;
 use crate::probe::{GpuTargets, ProbeSettings, Prober, Sampler, Targets};
 
 use super::batch::{BatchBuffers, BatchGather, BatchShape};
 use super::dataset::view_camera;
 use super::decode::view_rotation;
+pub use super::model::FieldNet;
 use super::model::ReconModel;
-use super::train::{LrStep, NetShape, Schedule, TrainImages, VIEWS, schedule_entry, view_azimuth};
+use super::train::{LrStep, Schedule, TrainImages, VIEWS, schedule_entry, view_azimuth};
 
 /// The cube the conditioned field lives in: the dataset's objects fill `[−0.5, 0.5]³`, its
 /// voxel centres reach ±0.5 ([`super::dataset::voxel_cube`]); a margin keeps the uniform anchors
@@ -65,93 +66,6 @@ pub fn field_cube() -> Cube {
     Cube {
         center: [0.0; 3],
         half: 0.55,
-    }
-}
-
-/// The shape of a conditioned-field network: the encoder ([`NetShape`], whose head predicts the
-/// codes) and the occupancy MLP.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct FieldNet {
-    /// The encoder (its `hidden` layer feeds the code head).
-    pub net: NetShape,
-    /// The shared occupancy MLP.
-    pub mlp: MlpLayout,
-}
-
-impl Default for FieldNet {
-    /// The default encoder and a 3 × 32 MLP with 3 encoding frequencies (RESULTS.md: a wider
-    /// MLP's per-point loops cost llvmpipe 2.5× the iteration at 3 × 64).
-    fn default() -> Self {
-        Self {
-            net: NetShape::default(),
-            mlp: MlpLayout {
-                hidden_layers: 3,
-                width: 32,
-                frequencies: 3,
-            },
-        }
-    }
-}
-
-impl FieldNet {
-    /// Floats of one object's code: every hidden layer's bias, `L · W`.
-    pub fn code_len(&self) -> u64 {
-        u64::from(self.mlp.hidden_layers) * u64::from(self.mlp.width)
-    }
-
-    /// The encoder's layers, its head giving [`FieldNet::code_len`] values.
-    pub fn encoder_layers(&self) -> Result<Vec<Layer>> {
-        self.mlp.validate()?;
-        self.net.layers(self.code_len())
-    }
-
-    /// The encoder's parameter count.
-    pub fn encoder_param_count(&self) -> Result<u64> {
-        Ok(crate::nn::param_offsets(&self.encoder_layers()?).1)
-    }
-
-    /// All parameters: the encoder's, then the field's.
-    pub fn param_count(&self) -> Result<u64> {
-        Ok(self.encoder_param_count()? + self.mlp.param_count() as u64)
-    }
-
-    /// The seeded initial parameters: the encoder's PyTorch-like init, then the MLP's.
-    pub fn init(&self, seed: u64) -> Result<Vec<f32>> {
-        let mut p = crate::nn::init(&self.encoder_layers()?, seed);
-        p.extend(self.mlp.initial_params(seed));
-        Ok(p)
-    }
-
-    /// The field-parameter ranges the code replaces: hidden layer l's bias is
-    /// `code[l W .. (l + 1) W]`.
-    pub fn code_ranges(&self) -> Vec<Range<usize>> {
-        (0..self.mlp.hidden_layers as usize)
-            .map(|l| {
-                let (offset, inputs, outputs) = self.mlp.layer(l);
-                let start = offset + inputs * outputs;
-                start..start + outputs
-            })
-            .collect()
-    }
-
-    /// One object's field parameters: the shared ones (`field`, [`MlpLayout::param_count`]
-    /// floats) with its code copied into the hidden biases.
-    pub fn object_field(&self, field: &[f32], code: &[f32]) -> Result<Vec<f32>> {
-        let w = self.mlp.width as usize;
-        if field.len() != self.mlp.param_count() || code.len() as u64 != self.code_len() {
-            return Err(Error::Input(format!(
-                "a conditioned field of {} shared parameters and a code of {}: need {} and {}",
-                field.len(),
-                code.len(),
-                self.mlp.param_count(),
-                self.code_len()
-            )));
-        }
-        let mut p = field.to_vec();
-        for (l, r) in self.code_ranges().into_iter().enumerate() {
-            p[r].copy_from_slice(&code[l * w..(l + 1) * w]);
-        }
-        Ok(p)
     }
 }
 
@@ -885,6 +799,8 @@ impl FieldReconstructor {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::field::MlpLayout;
+    use crate::recon::NetShape;
 
     #[test]
     fn codes_replace_exactly_the_hidden_biases() {

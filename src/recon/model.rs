@@ -17,17 +17,17 @@
 //! A checkpoint is a model that also carries what resuming needs; [`ReconModel::load`] reads
 //! either and checks every shape.
 
+use std::ops::Range;
 use std::path::Path;
 
 use super::decode::MeshDecoder;
-use super::field::FieldNet;
 use super::npz::{NpyArray, NpyData, Npz, npz_bytes};
 use super::train::NetShape;
 use crate::atomic_file::AtomicFile;
 use crate::error::{Error, Result};
 use crate::field::MlpLayout;
 use crate::gpu::{Buffer, Context, MemoryKind};
-use crate::nn::Sequential;
+use crate::nn::{Layer, Sequential};
 
 /// The file format's version.
 pub const FORMAT: i32 = 1;
@@ -51,6 +51,93 @@ pub struct TrainState {
     pub log: Vec<[f64; 6]>,
     /// The validation IoUs so far: `[iteration, mean 3D IoU]` per row.
     pub val: Vec<[f64; 2]>,
+}
+
+/// The shape of a conditioned-field network: the encoder ([`NetShape`], whose head predicts the
+/// codes) and the occupancy MLP.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FieldNet {
+    /// The encoder (its `hidden` layer feeds the code head).
+    pub net: NetShape,
+    /// The shared occupancy MLP.
+    pub mlp: MlpLayout,
+}
+
+impl Default for FieldNet {
+    /// The default encoder and a 3 × 32 MLP with 3 encoding frequencies (RESULTS.md: a wider
+    /// MLP's per-point loops cost llvmpipe 2.5× the iteration at 3 × 64).
+    fn default() -> Self {
+        Self {
+            net: NetShape::default(),
+            mlp: MlpLayout {
+                hidden_layers: 3,
+                width: 32,
+                frequencies: 3,
+            },
+        }
+    }
+}
+
+impl FieldNet {
+    /// Floats of one object's code: every hidden layer's bias, `L · W`.
+    pub fn code_len(&self) -> u64 {
+        u64::from(self.mlp.hidden_layers) * u64::from(self.mlp.width)
+    }
+
+    /// The encoder's layers, its head giving [`FieldNet::code_len`] values.
+    pub fn encoder_layers(&self) -> Result<Vec<Layer>> {
+        self.mlp.validate()?;
+        self.net.layers(self.code_len())
+    }
+
+    /// The encoder's parameter count.
+    pub fn encoder_param_count(&self) -> Result<u64> {
+        Ok(crate::nn::param_offsets(&self.encoder_layers()?).1)
+    }
+
+    /// All parameters: the encoder's, then the field's.
+    pub fn param_count(&self) -> Result<u64> {
+        Ok(self.encoder_param_count()? + self.mlp.param_count() as u64)
+    }
+
+    /// The seeded initial parameters: the encoder's PyTorch-like init, then the MLP's.
+    pub fn init(&self, seed: u64) -> Result<Vec<f32>> {
+        let mut p = crate::nn::init(&self.encoder_layers()?, seed);
+        p.extend(self.mlp.initial_params(seed));
+        Ok(p)
+    }
+
+    /// The field-parameter ranges the code replaces: hidden layer l's bias is
+    /// `code[l W .. (l + 1) W]`.
+    pub fn code_ranges(&self) -> Vec<Range<usize>> {
+        (0..self.mlp.hidden_layers as usize)
+            .map(|l| {
+                let (offset, inputs, outputs) = self.mlp.layer(l);
+                let start = offset + inputs * outputs;
+                start..start + outputs
+            })
+            .collect()
+    }
+
+    /// One object's field parameters: the shared ones (`field`, [`MlpLayout::param_count`]
+    /// floats) with its code copied into the hidden biases.
+    pub fn object_field(&self, field: &[f32], code: &[f32]) -> Result<Vec<f32>> {
+        let w = self.mlp.width as usize;
+        if field.len() != self.mlp.param_count() || code.len() as u64 != self.code_len() {
+            return Err(Error::Input(format!(
+                "a conditioned field of {} shared parameters and a code of {}: need {} and {}",
+                field.len(),
+                code.len(),
+                self.mlp.param_count(),
+                self.code_len()
+            )));
+        }
+        let mut p = field.to_vec();
+        for (l, r) in self.code_ranges().into_iter().enumerate() {
+            p[r].copy_from_slice(&code[l * w..(l + 1) * w]);
+        }
+        Ok(p)
+    }
 }
 
 /// A reconstruction network: its shape, its parameters, how long it trained.

@@ -318,7 +318,7 @@ impl PoseFitOptions {
         if let Some(s) = &self.schedule {
             s.validate()?;
         }
-        crate::raster::fine::check_tile_size(self.tile)?;
+        crate::raster::gpu::Method::check_tile(self.tile)?;
         self.settings.validate()?;
         Ok(())
     }

@@ -57,7 +57,7 @@ impl PoseProblem {
         settings: &RasterSettings,
         tile: u32,
     ) -> Result<Self> {
-        crate::raster::fine::check_tile_size(tile)?;
+        crate::raster::gpu::Method::check_tile(tile)?;
         mesh.validate()?;
         settings.validate()?;
         check_target(target, settings)?;
