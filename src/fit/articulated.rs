@@ -33,13 +33,13 @@ use super::adam::{Adam, AdamOptions};
 use super::blur::{BlurredMse, MAX_BLUR_STD};
 use super::driver::{self, Fit, Fitter};
 use super::pose::{PoseTarget, Schedule};
-use super::posed::{PosedView, Staged, Stages};
+use super::posed::{self, Posed, PosedView, Stages};
 use super::rig::{Rig, bone_of};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::gate::IterationGate;
 use crate::gpu::groups;
-use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
 use crate::lighting::Lighting;
 use crate::raster::settings::RasterSettings;
 
@@ -391,62 +391,11 @@ impl<'c> Fitter<'c, ArticulatedFit<'c>> {
     /// The MSE (of images blurred by `blur` pixels) and the render at the current angles with σ
     /// and γ (no step), re-run until the entries fit.
     pub fn evaluate(&mut self, sigma: f64, gamma: f64, blur: f64) -> Result<(f64, Vec<[f32; 4]>)> {
-        self.view.scene.set_blur(sigma, gamma)?;
-        self.submit_guarded(|fit, rec, gate| {
-            fit.record_pose(rec)?;
-            fit.view
-                .record_evaluation(rec, gate, |rec, images, target| {
-                    fit.mse.record(rec, images, target, None, blur)
-                })
-        })?;
-        Ok((
-            f64::from(self.mse.read_loss(self.ctx)?),
-            self.view.read_render(self.ctx)?,
-        ))
+        posed::evaluate(self, sigma, gamma, blur)
     }
 }
 
 impl ArticulatedFit<'_> {
-    /// Sizes the guarded bins for the angles now at σ and γ (one counting submission); the fit
-    /// does it at the start of every σ/γ stage. It changes no result.
-    pub fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()> {
-        self.view.scene.set_blur(sigma, gamma)?;
-        self.ctx.submit_and_wait(|rec| self.record_pose(rec))?;
-        self.view.fit_capacity(self.ctx)
-    }
-
-    /// Records the bones, the skinned positions and their lit colours into the scene.
-    fn record_pose(&self, rec: &mut Recorder<'_>) -> Result<()> {
-        rec.pass("kinematics", |rec| {
-            rec.dispatch(
-                &self.fk,
-                &specs::SkinFkBindings {
-                    params: self.params.whole(),
-                    joints: self.joint_defs.whole(),
-                    bones: self.bones.whole(),
-                }
-                .for_kernel(&self.fk)?,
-                &self.push,
-                1,
-            )
-        })?;
-        rec.pass("skinning", |rec| {
-            rec.dispatch(
-                &self.apply,
-                &specs::SkinApplyBindings {
-                    bones: self.bones.whole(),
-                    rest: self.rest.whole(),
-                    skins: self.skins.whole(),
-                    posed: self.view.scene.positions().whole(),
-                }
-                .for_kernel(&self.apply)?,
-                &self.push,
-                groups(u64::from(self.push.vertex_count), 64)?,
-            )
-        })?;
-        self.view.record_light(rec)
-    }
-
     /// The log of iterations `first ..= last` that ran: each one's loss, σ, γ and the angles
     /// it evaluated (`seconds` as given).
     pub fn log(&self, first: u32, last: u32, seconds: f64) -> Result<Vec<ArticulatedLog>> {
@@ -478,11 +427,6 @@ impl ArticulatedFit<'_> {
                 }
             })
             .collect())
-    }
-
-    /// Replaces the target (same size, finite).
-    pub fn set_target(&mut self, target: &[[f32; 4]]) -> Result<()> {
-        self.view.set_target(self.ctx, target)
     }
 
     /// dL/dθ of the last iteration that ran (the gradient its Adam step took).
@@ -596,12 +540,61 @@ impl Fit for ArticulatedFit<'_> {
     }
 }
 
-impl Staged for ArticulatedFit<'_> {
-    fn set_target(&mut self, target: &[[f32; 4]]) -> Result<()> {
-        ArticulatedFit::set_target(self, target)
+impl<'c> Posed<'c> for ArticulatedFit<'c> {
+    fn ctx(&self) -> &'c Context {
+        self.ctx
     }
-    fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()> {
-        ArticulatedFit::fit_capacity(self, sigma, gamma)
+    fn view(&self) -> &PosedView {
+        &self.view
+    }
+    fn view_mut(&mut self) -> &mut PosedView {
+        &mut self.view
+    }
+
+    /// Records the bones, the skinned positions and their lit colours into the scene.
+    fn record_pose(&self, rec: &mut Recorder<'_>) -> Result<()> {
+        rec.pass("kinematics", |rec| {
+            rec.dispatch(
+                &self.fk,
+                &specs::SkinFkBindings {
+                    params: self.params.whole(),
+                    joints: self.joint_defs.whole(),
+                    bones: self.bones.whole(),
+                }
+                .for_kernel(&self.fk)?,
+                &self.push,
+                1,
+            )
+        })?;
+        rec.pass("skinning", |rec| {
+            rec.dispatch(
+                &self.apply,
+                &specs::SkinApplyBindings {
+                    bones: self.bones.whole(),
+                    rest: self.rest.whole(),
+                    skins: self.skins.whole(),
+                    posed: self.view.scene.positions().whole(),
+                }
+                .for_kernel(&self.apply)?,
+                &self.push,
+                groups(u64::from(self.push.vertex_count), 64)?,
+            )
+        })?;
+        self.view.record_light(rec)
+    }
+
+    fn record_loss(
+        &self,
+        rec: &mut Recorder<'_>,
+        images: BufferRange<'_>,
+        target: BufferRange<'_>,
+        blur: f64,
+    ) -> Result<()> {
+        self.mse.record(rec, images, target, None, blur)
+    }
+
+    fn read_loss(&self) -> Result<f32> {
+        self.mse.read_loss(self.ctx)
     }
 }
 

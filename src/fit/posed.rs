@@ -15,7 +15,7 @@ use crate::raster::gpu::{GpuScene, Method, Renderer};
 use crate::raster::light::SceneLight;
 use crate::raster::settings::RasterSettings;
 
-use super::driver::{max_entry_capacity, reserve_guarded, with_headroom};
+use super::driver::{Fit, Fitter, max_entry_capacity, reserve_guarded, with_headroom};
 
 /// The posed mesh's view: the scene with its guarded bins and the backward's buffers, the
 /// lighting and the target.
@@ -213,10 +213,63 @@ pub(crate) struct Stages<'t, 'a> {
     sigma_gamma: (f64, f64),
 }
 
-/// What [`Stages`] sets in a fit.
-pub(crate) trait Staged {
-    fn set_target(&mut self, target: &[[f32; 4]]) -> Result<()>;
-    fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()>;
+/// A fit of a posed view: what it adds to [`PosedView`] to be sized, retargeted and evaluated.
+pub(crate) trait Posed<'c>: Fit {
+    /// The context the fit runs on.
+    fn ctx(&self) -> &'c Context;
+    /// The view.
+    fn view(&self) -> &PosedView;
+    /// The view, to resize.
+    fn view_mut(&mut self) -> &mut PosedView;
+    /// Records the posed positions and their lit colours into the scene.
+    fn record_pose(&self, rec: &mut Recorder<'_>) -> Result<()>;
+    /// Records the image loss of an evaluation (no gradient) of the render against the target,
+    /// of images blurred by `blur` pixels where the fit's loss blurs.
+    fn record_loss(
+        &self,
+        rec: &mut Recorder<'_>,
+        images: BufferRange<'_>,
+        target: BufferRange<'_>,
+        blur: f64,
+    ) -> Result<()>;
+    /// The loss [`Posed::record_loss`] left.
+    fn read_loss(&self) -> Result<f32>;
+
+    /// Replaces the target (same size, finite).
+    fn set_target(&mut self, target: &[[f32; 4]]) -> Result<()> {
+        self.view().set_target(self.ctx(), target)
+    }
+
+    /// Sizes the guarded bins for the pose now at σ and γ ([`PosedView::fit_capacity`]).
+    fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()> {
+        let ctx = self.ctx();
+        self.view_mut().scene.set_blur(sigma, gamma)?;
+        ctx.submit_and_wait(|rec| self.record_pose(rec))?;
+        self.view_mut().fit_capacity(ctx)
+    }
+}
+
+/// The loss (of images blurred by `blur` pixels, where the fit blurs) and the render of
+/// `fitter`'s pose now with σ and γ (no step), re-run until the entries fit.
+pub(crate) fn evaluate<'c, F: Posed<'c>>(
+    fitter: &mut Fitter<'c, F>,
+    sigma: f64,
+    gamma: f64,
+    blur: f64,
+) -> Result<(f64, Vec<[f32; 4]>)> {
+    fitter.view_mut().scene.set_blur(sigma, gamma)?;
+    fitter.submit_guarded(|fit, rec, gate| {
+        fit.record_pose(rec)?;
+        fit.view()
+            .record_evaluation(rec, gate, |rec, images, target| {
+                fit.record_loss(rec, images, target, blur)
+            })
+    })?;
+    let ctx = fitter.ctx();
+    Ok((
+        f64::from(fitter.read_loss()?),
+        fitter.view().read_render(ctx)?,
+    ))
 }
 
 impl<'t, 'a> Stages<'t, 'a> {
@@ -239,7 +292,11 @@ impl<'t, 'a> Stages<'t, 'a> {
     }
 
     /// Before a submission at σ and γ: a new stage's target and capacity.
-    pub(crate) fn enter(&mut self, fit: &mut impl Staged, sigma_gamma: (f64, f64)) -> Result<()> {
+    pub(crate) fn enter<'c>(
+        &mut self,
+        fit: &mut impl Posed<'c>,
+        sigma_gamma: (f64, f64),
+    ) -> Result<()> {
         if sigma_gamma != self.sigma_gamma {
             self.set_target(fit, sigma_gamma)?;
             fit.fit_capacity(sigma_gamma.0, sigma_gamma.1)?;
@@ -249,14 +306,18 @@ impl<'t, 'a> Stages<'t, 'a> {
     }
 
     /// After the loop: the target of the sharp σ and γ the fit is evaluated at.
-    pub(crate) fn finish(mut self, fit: &mut impl Staged, sharp: (f64, f64)) -> Result<()> {
+    pub(crate) fn finish<'c>(mut self, fit: &mut impl Posed<'c>, sharp: (f64, f64)) -> Result<()> {
         if sharp != self.sigma_gamma {
             self.set_target(fit, sharp)?;
         }
         Ok(())
     }
 
-    fn set_target(&mut self, fit: &mut impl Staged, (sigma, gamma): (f64, f64)) -> Result<()> {
+    fn set_target<'c>(
+        &mut self,
+        fit: &mut impl Posed<'c>,
+        (sigma, gamma): (f64, f64),
+    ) -> Result<()> {
         match self.target {
             PoseTarget::Fixed(_) => Ok(()),
             PoseTarget::PerStage(f) => fit.set_target(&f(sigma, gamma)?),

@@ -6,7 +6,7 @@ use glam::DVec3;
 use bytemuck::{Pod, Zeroable};
 
 use super::{Pose, PoseFitOptions, PoseLog, centroid};
-use crate::fit::posed::{PosedView, Staged, check_target};
+use crate::fit::posed::{self, Posed, PosedView, check_target};
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -16,7 +16,7 @@ use crate::fit::driver::{Fit, Fitter};
 use crate::gpu::GradOut;
 use crate::gpu::gate::IterationGate;
 use crate::gpu::groups;
-use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 
@@ -142,49 +142,11 @@ impl<'c> Fitter<'c, PoseFit<'c>> {
     /// The MSE and the render at the current pose with σ and γ (no step), re-run until the
     /// entries fit.
     pub fn evaluate(&mut self, sigma: f64, gamma: f64) -> Result<(f64, Vec<[f32; 4]>)> {
-        self.view.scene.set_blur(sigma, gamma)?;
-        self.submit_guarded(|fit, rec, gate| {
-            fit.record_pose(rec)?;
-            fit.view
-                .record_evaluation(rec, gate, |rec, images, target| {
-                    fit.mse.record(rec, images, target, None)
-                })
-        })?;
-        Ok((
-            f64::from(self.mse.read_loss(self.ctx)?),
-            self.view.read_render(self.ctx)?,
-        ))
+        posed::evaluate(self, sigma, gamma, 0.0)
     }
 }
 
 impl PoseFit<'_> {
-    /// Sizes the guarded bins for the pose now at σ and γ: one counting submission, then the
-    /// count with the headroom. The fit does it at the start of every σ/γ stage (a blurry stage
-    /// bins several times the entries of a sharp one); it changes no result.
-    pub fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()> {
-        self.view.scene.set_blur(sigma, gamma)?;
-        self.ctx.submit_and_wait(|rec| self.record_pose(rec))?;
-        self.view.fit_capacity(self.ctx)
-    }
-
-    /// Records the posed positions and their lit colours into the scene.
-    fn record_pose(&self, rec: &mut Recorder<'_>) -> Result<()> {
-        rec.pass("pose", |rec| {
-            rec.dispatch(
-                &self.apply,
-                &specs::PoseApplyBindings {
-                    params: self.params.whole(),
-                    rest: self.rest.whole(),
-                    posed: self.view.scene.positions().whole(),
-                }
-                .for_kernel(&self.apply)?,
-                &self.push,
-                groups(u64::from(self.push.vertex_count), 64)?,
-            )
-        })?;
-        self.view.record_light(rec)
-    }
-
     /// The log of iterations `first ..= last` (their losses and poses), read back.
     pub(super) fn read_log(&self, first: u32, last: u32, seconds: f64) -> Result<Vec<PoseLog>> {
         let rows: Vec<[f32; 4]> = self.ctx.read_buffer(
@@ -239,11 +201,6 @@ impl PoseFit<'_> {
         self.ctx.write_buffer(mt, 0, &f(state[1], 3))?;
         self.ctx.write_buffer(vr, 0, &f(state[2], 0))?;
         self.ctx.write_buffer(vt, 0, &f(state[2], 3))
-    }
-
-    /// Replaces the target (same size, finite).
-    pub fn set_target(&mut self, target: &[[f32; 4]]) -> Result<()> {
-        self.view.set_target(self.ctx, target)
     }
 
     /// dL/d(ω, t) of the last iteration that ran (the gradient its Adam steps took).
@@ -379,11 +336,46 @@ impl Fit for PoseFit<'_> {
     }
 }
 
-impl Staged for PoseFit<'_> {
-    fn set_target(&mut self, target: &[[f32; 4]]) -> Result<()> {
-        PoseFit::set_target(self, target)
+impl<'c> Posed<'c> for PoseFit<'c> {
+    fn ctx(&self) -> &'c Context {
+        self.ctx
     }
-    fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()> {
-        PoseFit::fit_capacity(self, sigma, gamma)
+    fn view(&self) -> &PosedView {
+        &self.view
+    }
+    fn view_mut(&mut self) -> &mut PosedView {
+        &mut self.view
+    }
+
+    /// Records the posed positions and their lit colours into the scene.
+    fn record_pose(&self, rec: &mut Recorder<'_>) -> Result<()> {
+        rec.pass("pose", |rec| {
+            rec.dispatch(
+                &self.apply,
+                &specs::PoseApplyBindings {
+                    params: self.params.whole(),
+                    rest: self.rest.whole(),
+                    posed: self.view.scene.positions().whole(),
+                }
+                .for_kernel(&self.apply)?,
+                &self.push,
+                groups(u64::from(self.push.vertex_count), 64)?,
+            )
+        })?;
+        self.view.record_light(rec)
+    }
+
+    fn record_loss(
+        &self,
+        rec: &mut Recorder<'_>,
+        images: BufferRange<'_>,
+        target: BufferRange<'_>,
+        _blur: f64,
+    ) -> Result<()> {
+        self.mse.record(rec, images, target, None)
+    }
+
+    fn read_loss(&self) -> Result<f32> {
+        self.mse.read_loss(self.ctx)
     }
 }
