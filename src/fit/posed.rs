@@ -36,8 +36,8 @@ pub(crate) struct PosedView {
 
 impl PosedView {
     /// `mesh` seen from `camera` with `settings`, against `target`; its bins hold one entry
-    /// until [`PosedView::fit_capacity`] counts the first pose's. `name` labels the buffers
-    /// and the errors ("pose").
+    /// until [`PosedView::fit_capacity`] counts the first pose's. `what` names the fit's binning
+    /// in the device-limit error ("a pose fit's binning ...").
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn new(
         ctx: &Context,
