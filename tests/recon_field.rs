@@ -58,7 +58,10 @@ fn options() -> FieldTrainOptions {
 /// Parameters and gradient of iteration 1 with the learning rate 0 (Adam moves nothing), and
 /// its loss, at `params`.
 fn loss_at(trainer: &mut FieldReconTrainer<'_>, params: &[f32]) -> f64 {
-    trainer.write_params(params).unwrap();
+    trainer
+        .trained()
+        .write_params(trainer.ctx(), params)
+        .unwrap();
     assert_eq!(trainer.run(1, 1, None).unwrap(), None);
     f64::from(trainer.read_log(1).unwrap().silhouette)
 }
@@ -72,10 +75,13 @@ fn an_iterations_gradient_through_the_codes_matches_central_differences() {
         ..options()
     };
     let mut trainer = FieldReconTrainer::new(&gpu, &data, &opts, None).unwrap();
-    let params = trainer.read_params().unwrap();
+    let params = trainer.trained().read_params(&gpu).unwrap();
     let l0 = loss_at(&mut trainer, &params);
-    assert!(trainer.read_params().unwrap() == params, "lr 0 moved them");
-    let grad = trainer.read_gradient().unwrap();
+    assert!(
+        trainer.trained().read_params(&gpu).unwrap() == params,
+        "lr 0 moved them"
+    );
+    let grad = trainer.trained().read_gradient(&gpu).unwrap();
     let e = opts.net.encoder_param_count().unwrap() as usize;
     let mlp = opts.net.mlp;
     // The shared hidden biases are replaced by the codes: their gradient is zero.
@@ -150,7 +156,8 @@ fn train_run(
         }
     }
     let bits = trainer
-        .read_params()
+        .trained()
+        .read_params(gpu)
         .unwrap()
         .iter()
         .map(|p| p.to_bits())
@@ -187,7 +194,7 @@ fn reconstruction_is_the_twins_field_and_the_model_round_trips() {
     let model = ReconModel {
         net: opts.net.net,
         field: Some(opts.net.mlp),
-        params: trainer.read_params().unwrap(),
+        params: trainer.trained().read_params(&gpu).unwrap(),
         iteration: 30,
         train: None,
     };

@@ -54,14 +54,15 @@ fn one_training_iteration_equals_the_chain_of_twins() {
     let opts = options();
     let mut trainer = ReconTrainer::new(&gpu, &data, &opts, None).unwrap();
     let params: Vec<f64> = trainer
-        .read_params()
+        .trained()
+        .read_params(&gpu)
         .unwrap()
         .iter()
         .map(|&p| f64::from(p))
         .collect();
     assert_eq!(trainer.run(1, 1, None).unwrap(), None);
     let log = trainer.read_log(1).unwrap();
-    let got = trainer.read_gradient().unwrap();
+    let got = trainer.trained().read_gradient(&gpu).unwrap();
     assert!(log.color > 0.0, "the colour loss is on");
 
     // The twins.
@@ -188,7 +189,8 @@ fn train_run(
         }
     }
     let bits = trainer
-        .read_params()
+        .trained()
+        .read_params(gpu)
         .unwrap()
         .iter()
         .map(|p| p.to_bits())
@@ -222,7 +224,7 @@ fn the_learning_rate_step_applies_from_its_iteration_on() {
     let params = |opts: &TrainOptions, iterations: u32| {
         let mut trainer = ReconTrainer::new(&gpu, &data, opts, None).unwrap();
         assert_eq!(trainer.run(1, iterations, None).unwrap(), None);
-        trainer.read_params().unwrap()
+        trainer.trained().read_params(&gpu).unwrap()
     };
     // A factor of 0 from iteration 3 on: iterations 3 and 4 change nothing.
     let frozen = TrainOptions {

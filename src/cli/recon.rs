@@ -34,7 +34,7 @@ use softvk::recon::field::{
 };
 use softvk::recon::model::{ReconModel, Reconstruction, Reconstructor, SETTINGS, TrainState};
 use softvk::recon::train::{
-    self, LrStep, NetShape, ReconTrainer, ReconTraining, TrainImages, TrainOptions,
+    self, LrStep, NetShape, ReconTrainer, ReconTraining, TrainImages, TrainOptions, TrainedParams,
 };
 use softvk::{Error, Result};
 
@@ -334,9 +334,8 @@ fn validate(ctx: &Context, model: &ReconModel, val: &Dataset, views: &[usize]) -
 trait Training: Fit {
     /// The log row of the last iteration: iteration, L_sil, L_col, L_lap, L_flat, total.
     fn log(&self, iteration: u32) -> Result<[f64; 6]>;
-    fn params(&self) -> Result<Vec<f32>>;
-    fn moments(&self) -> Result<(Vec<f32>, Vec<f32>)>;
-    fn set_moments(&self, m: &[f32], v: &[f32]) -> Result<()>;
+    /// The parameters, their gradient and Adam's moments.
+    fn trained(&self) -> &TrainedParams;
 }
 
 impl Training for ReconTraining<'_> {
@@ -351,14 +350,8 @@ impl Training for ReconTraining<'_> {
             f64::from(l.total),
         ])
     }
-    fn params(&self) -> Result<Vec<f32>> {
-        self.read_params()
-    }
-    fn moments(&self) -> Result<(Vec<f32>, Vec<f32>)> {
-        self.read_moments()
-    }
-    fn set_moments(&self, m: &[f32], v: &[f32]) -> Result<()> {
-        self.write_moments(m, v)
+    fn trained(&self) -> &TrainedParams {
+        ReconTraining::trained(self)
     }
 }
 
@@ -367,14 +360,8 @@ impl Training for FieldReconTraining<'_> {
         let l = f64::from(self.read_log(iteration)?.silhouette);
         Ok([f64::from(iteration), l, 0.0, 0.0, 0.0, l])
     }
-    fn params(&self) -> Result<Vec<f32>> {
-        self.read_params()
-    }
-    fn moments(&self) -> Result<(Vec<f32>, Vec<f32>)> {
-        self.read_moments()
-    }
-    fn set_moments(&self, m: &[f32], v: &[f32]) -> Result<()> {
-        self.write_moments(m, v)
+    fn trained(&self) -> &TrainedParams {
+        FieldReconTraining::trained(self)
     }
 }
 
@@ -555,7 +542,7 @@ impl<M: Fn(Vec<f32>, u32, Option<TrainState>) -> ReconModel> TrainingRun<'_, M> 
         let (mut log, mut vals, start) = match &resumed {
             Some(m) => {
                 let t = m.train.as_ref().expect("checked above");
-                trainer.set_moments(&t.adam_m, &t.adam_v)?;
+                trainer.trained().write_moments(ctx, &t.adam_m, &t.adam_v)?;
                 (t.log.clone(), t.val.clone(), m.iteration)
             }
             None => (Vec::new(), Vec::new(), 0),
@@ -570,9 +557,9 @@ impl<M: Fn(Vec<f32>, u32, Option<TrainState>) -> ReconModel> TrainingRun<'_, M> 
         );
         bar.set_position(u64::from(start));
         let save = |trainer: &T, it: u32, log: &[[f64; 6]], vals: &[[f64; 2]]| {
-            let (adam_m, adam_v) = trainer.moments()?;
+            let (adam_m, adam_v) = trainer.trained().read_moments(ctx)?;
             model_of(
-                trainer.params()?,
+                trainer.trained().read_params(ctx)?,
                 it,
                 Some(TrainState {
                     adam_m,
@@ -604,7 +591,7 @@ impl<M: Fn(Vec<f32>, u32, Option<TrainState>) -> ReconModel> TrainingRun<'_, M> 
                 let interrupted = interrupt::requested().is_some();
                 let at_boundary = last == boundary(first) || last == args.iters;
                 if at_boundary && let Some(val) = &val {
-                    let model = model_of(trainer.params()?, last, None);
+                    let model = model_of(trainer.trained().read_params(ctx)?, last, None);
                     let iou = validate(ctx, &model, val, &val_views)?;
                     vals.push([f64::from(last), iou]);
                     let line = format!(
@@ -633,7 +620,7 @@ impl<M: Fn(Vec<f32>, u32, Option<TrainState>) -> ReconModel> TrainingRun<'_, M> 
             );
             return Ok(());
         }
-        model_of(trainer.params()?, done, None).save(&args.out)?;
+        model_of(trainer.trained().read_params(ctx)?, done, None).save(&args.out)?;
         let last = log.last().copied().unwrap_or([0.0; 6]);
         println!(
             "{}trained {done} iterations: L_sil {:.4}{}; model {}",

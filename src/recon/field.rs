@@ -43,9 +43,9 @@ use crate::error::{Error, Result};
 use crate::field::mcubes::{Isosurface, MarchingCubes};
 
 use crate::field::{Cube, Field, FieldKind, SumChunks};
+use crate::fit::AdamOptions;
 use crate::fit::driver::{Fit, Fitter};
 use crate::fit::field_fit::scaled_to_cube;
-use crate::fit::{Adam, AdamOptions};
 use crate::gpu::GradOut;
 use crate::gpu::gate::IterationGate;
 use crate::gpu::{Buffer, Context, MemoryKind, Recorder};
@@ -57,7 +57,9 @@ use super::dataset::view_camera;
 use super::decode::view_rotation;
 pub use super::model::FieldNet;
 use super::model::ReconModel;
-use super::train::{LrStep, Schedule, TrainImages, VIEWS, schedule_entry, view_azimuth};
+use super::train::{
+    LrStep, Schedule, TrainImages, TrainedParams, VIEWS, schedule_entry, view_azimuth,
+};
 
 /// The cube the conditioned field lives in: the dataset's objects fill `[−0.5, 0.5]³`, its
 /// voxel centres reach ±0.5 ([`super::dataset::voxel_cube`]); a margin keeps the uniform anchors
@@ -220,9 +222,7 @@ pub struct FieldReconTraining<'c> {
     objects: Vec<ObjectProbe>,
     probers: Vec<Prober>,
     /// `[encoder | pad | field | pad]`: the field's part at `field_offset` floats.
-    params: Buffer,
-    d_params: Buffer,
-    adam: Adam,
+    trained: TrainedParams,
     encoder_count: u64,
     field_count: u64,
     field_offset: u64,
@@ -350,9 +350,13 @@ impl<'c> Fitter<'c, FieldReconTraining<'c>> {
             ctx,
             opts: opts.clone(),
             classes: data.classes.clone(),
-            params: ctx.upload_buffer("recon field params", &padded)?,
-            d_params: device("recon field d_params", n)?,
-            adam: Adam::new(ctx, n, opts.adam)?,
+            trained: TrainedParams::new(
+                ctx,
+                "recon field",
+                &padded,
+                vec![(0, encoder_count), (field_offset, field_count)],
+                opts.adam,
+            )?,
             encoder_count,
             field_count,
             field_offset,
@@ -382,10 +386,9 @@ impl<'c> Fitter<'c, FieldReconTraining<'c>> {
             probers,
         };
         ctx.submit_and_wait(|rec| {
-            // The padding of the per-object gradients and parameters stays zero.
+            // The padding of the per-object gradients stays zero (the parameters' gradient is
+            // zeroed with it by TrainedParams).
             rec.fill(trainer.d_fields.whole(), 0);
-            rec.fill(trainer.d_params.whole(), 0);
-            trainer.adam.record_reset(rec);
             Ok(())
         })?;
         Fitter::from_fit(ctx, trainer)
@@ -430,8 +433,8 @@ impl Fit for FieldReconTraining<'_> {
             views: VIEWS,
         };
         let f4 = |floats: u64| 4 * floats;
-        let encoder = self.params.range(0, f4(self.encoder_count));
-        let d_encoder = self.d_params.range(0, f4(self.encoder_count));
+        let encoder = self.trained.params.range(0, f4(self.encoder_count));
+        let d_encoder = self.trained.d_params.range(0, f4(self.encoder_count));
         rec.pass("recon batch", |rec| {
             self.gather.record(
                 rec,
@@ -470,7 +473,7 @@ impl Fit for FieldReconTraining<'_> {
                 let anchors = obj.sampler.anchors().whole();
                 let rays = obj.sampler.rays().whole();
                 rec.copy(
-                    &self.params,
+                    &self.trained.params,
                     f4(self.field_offset),
                     self.field.params(),
                     0,
@@ -520,6 +523,7 @@ impl Fit for FieldReconTraining<'_> {
                 }
             }
             let d_shared = self
+                .trained
                 .d_params
                 .range(f4(self.field_offset), f4(self.field_stride));
             rec.pass("field gradient sum", |rec| {
@@ -535,7 +539,8 @@ impl Fit for FieldReconTraining<'_> {
             // The shared hidden biases are never read (the codes replace them).
             for r in &ranges {
                 rec.fill(
-                    self.d_params
+                    self.trained
+                        .d_params
                         .range(f4(self.field_offset + r.start as u64), f4(r.len() as u64)),
                     0,
                 );
@@ -551,15 +556,7 @@ impl Fit for FieldReconTraining<'_> {
                     b,
                 )
             })?;
-            rec.pass("adam", |rec| {
-                self.adam.record_step_lr(
-                    rec,
-                    self.params.whole(),
-                    self.d_params.whole(),
-                    it,
-                    o.lr_at(it),
-                )
-            })
+            self.trained.record_step(rec, it, o.lr_at(it))
         })
     }
 
@@ -589,60 +586,9 @@ impl FieldReconTraining<'_> {
         })
     }
 
-    /// The packed `[encoder | field]` values of a padded buffer.
-    fn read_packed(&self, buffer: &Buffer) -> Result<Vec<f32>> {
-        let all: Vec<f32> =
-            self.ctx
-                .read_buffer(buffer, 0, (self.field_offset + self.field_count) as usize)?;
-        let mut p = all[..self.encoder_count as usize].to_vec();
-        p.extend_from_slice(&all[self.field_offset as usize..]);
-        Ok(p)
-    }
-
-    /// Writes packed `[encoder | field]` values into a padded buffer.
-    fn write_packed(&self, buffer: &Buffer, packed: &[f32]) -> Result<()> {
-        let e = self.encoder_count as usize;
-        if packed.len() != e + self.field_count as usize {
-            return Err(Error::Input(format!(
-                "{} values for a network of {}",
-                packed.len(),
-                e + self.field_count as usize
-            )));
-        }
-        self.ctx.write_buffer(buffer, 0, &packed[..e])?;
-        self.ctx
-            .write_buffer(buffer, 4 * self.field_offset, &packed[e..])
-    }
-
-    /// The network's parameters now (packed: encoder, then field).
-    pub fn read_params(&self) -> Result<Vec<f32>> {
-        self.read_packed(&self.params)
-    }
-
-    /// Replaces the parameters (packed).
-    pub fn write_params(&self, params: &[f32]) -> Result<()> {
-        if let Some(i) = params.iter().position(|p| !p.is_finite()) {
-            return Err(Error::Input(format!("parameter {i} is not finite")));
-        }
-        self.write_packed(&self.params, params)
-    }
-
-    /// dL/d(params) of the last iteration run (packed).
-    pub fn read_gradient(&self) -> Result<Vec<f32>> {
-        self.read_packed(&self.d_params)
-    }
-
-    /// Adam's moments now (first, second; packed).
-    pub fn read_moments(&self) -> Result<(Vec<f32>, Vec<f32>)> {
-        let (m, v) = self.adam.moments();
-        Ok((self.read_packed(m)?, self.read_packed(v)?))
-    }
-
-    /// Sets Adam's moments (a resumed run; packed).
-    pub fn write_moments(&self, m: &[f32], v: &[f32]) -> Result<()> {
-        let (mb, vb) = self.adam.moments();
-        self.write_packed(mb, m)?;
-        self.write_packed(vb, v)
+    /// The parameters (packed `[encoder | field]`), their gradient and Adam's moments.
+    pub fn trained(&self) -> &TrainedParams {
+        &self.trained
     }
 
     /// Entries each prober holds now.

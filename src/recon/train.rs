@@ -375,9 +375,7 @@ pub struct ReconTraining<'c> {
     opts: TrainOptions,
     classes: Vec<(String, Range<u32>)>,
     net: Sequential,
-    params: Buffer,
-    d_params: Buffer,
-    adam: Adam,
+    trained: TrainedParams,
     decoder: MeshDecoder,
     d_outputs: Buffer,
     partials: Buffer,
@@ -405,6 +403,118 @@ pub struct ReconTraining<'c> {
 
 /// The reconstruction network's training, ready to run iterations ([`Fitter::run`]).
 pub type ReconTrainer<'c> = Fitter<'c, ReconTraining<'c>>;
+
+/// A trainer's parameters, their gradient and Adam over them, in buffers that may pad between
+/// packed ranges (the conditioned field keeps its field's part at a bindable offset): the values
+/// as a model file holds them are the ranges, one after another.
+pub struct TrainedParams {
+    pub(crate) params: Buffer,
+    pub(crate) d_params: Buffer,
+    pub(crate) adam: Adam,
+    /// `(offset, count)` in floats of each packed range, in order.
+    ranges: Vec<(u64, u64)>,
+}
+
+impl TrainedParams {
+    /// `padded` (the buffers' layout) uploaded, the gradient zeroed, Adam's moments reset.
+    pub(crate) fn new(
+        ctx: &Context,
+        name: &str,
+        padded: &[f32],
+        ranges: Vec<(u64, u64)>,
+        adam: AdamOptions,
+    ) -> Result<Self> {
+        let n = padded.len() as u64;
+        let trained = Self {
+            params: ctx.upload_buffer(&format!("{name} params"), padded)?,
+            d_params: ctx.create_buffer(
+                &format!("{name} d_params"),
+                4 * n.max(1),
+                MemoryKind::Device,
+            )?,
+            adam: Adam::new(ctx, n, adam)?,
+            ranges,
+        };
+        ctx.submit_and_wait(|rec| {
+            rec.fill(trained.d_params.whole(), 0);
+            trained.adam.record_reset(rec);
+            Ok(())
+        })?;
+        Ok(trained)
+    }
+
+    /// Packed values in all.
+    fn len(&self) -> usize {
+        self.ranges.iter().map(|r| r.1 as usize).sum()
+    }
+
+    /// The packed values of one of the buffers.
+    fn read(&self, ctx: &Context, buffer: &Buffer) -> Result<Vec<f32>> {
+        let end = self.ranges.iter().map(|r| r.0 + r.1).max().unwrap_or(0);
+        let all: Vec<f32> = ctx.read_buffer(buffer, 0, end as usize)?;
+        Ok(self
+            .ranges
+            .iter()
+            .flat_map(|&(at, n)| all[at as usize..(at + n) as usize].iter().copied())
+            .collect())
+    }
+
+    /// Writes packed values into one of the buffers.
+    fn write(&self, ctx: &Context, buffer: &Buffer, packed: &[f32]) -> Result<()> {
+        if packed.len() != self.len() {
+            return Err(Error::Input(format!(
+                "{} values for a network of {}",
+                packed.len(),
+                self.len()
+            )));
+        }
+        let mut from = 0;
+        for &(at, n) in &self.ranges {
+            ctx.write_buffer(buffer, 4 * at, &packed[from..from + n as usize])?;
+            from += n as usize;
+        }
+        Ok(())
+    }
+
+    /// The parameters now (packed).
+    pub fn read_params(&self, ctx: &Context) -> Result<Vec<f32>> {
+        self.read(ctx, &self.params)
+    }
+
+    /// Replaces the parameters (packed, finite).
+    pub fn write_params(&self, ctx: &Context, params: &[f32]) -> Result<()> {
+        if let Some(i) = params.iter().position(|p| !p.is_finite()) {
+            return Err(Error::Input(format!("parameter {i} is not finite")));
+        }
+        self.write(ctx, &self.params, params)
+    }
+
+    /// dL/d(params) of the last iteration run (packed).
+    pub fn read_gradient(&self, ctx: &Context) -> Result<Vec<f32>> {
+        self.read(ctx, &self.d_params)
+    }
+
+    /// Adam's moments now (first, second; packed).
+    pub fn read_moments(&self, ctx: &Context) -> Result<(Vec<f32>, Vec<f32>)> {
+        let (m, v) = self.adam.moments();
+        Ok((self.read(ctx, m)?, self.read(ctx, v)?))
+    }
+
+    /// Sets Adam's moments (a resumed run; packed).
+    pub fn write_moments(&self, ctx: &Context, m: &[f32], v: &[f32]) -> Result<()> {
+        let (mb, vb) = self.adam.moments();
+        self.write(ctx, mb, m)?;
+        self.write(ctx, vb, v)
+    }
+
+    /// Records iteration `it`'s Adam step at learning rate `lr`.
+    pub(crate) fn record_step(&self, rec: &mut Recorder<'_>, it: u32, lr: f64) -> Result<()> {
+        rec.pass("adam", |rec| {
+            self.adam
+                .record_step_lr(rec, self.params.whole(), self.d_params.whole(), it, lr)
+        })
+    }
+}
 
 /// Copies of each object the renderer sees (views a and b).
 const COPIES: u32 = 2;
@@ -463,8 +573,7 @@ impl<'c> Fitter<'c, ReconTraining<'c>> {
         let device = |name: &str, floats: u64| {
             ctx.create_buffer(name, 4 * floats.max(1), MemoryKind::Device)
         };
-        let params_buf = ctx.upload_buffer("recon params", params)?;
-        let adam = Adam::new(ctx, n, opts.adam)?;
+        let trained = TrainedParams::new(ctx, "recon", params, vec![(0, n)], opts.adam)?;
         let renderer = Renderer::new(ctx)?;
         let copies = vec![t.clone(); (b * u64::from(COPIES)) as usize];
         let views: Vec<(usize, Camera)> = (0..copies.len()).map(|c| (c, view_camera(0))).collect();
@@ -497,9 +606,7 @@ impl<'c> Fitter<'c, ReconTraining<'c>> {
             ctx,
             opts: opts.clone(),
             classes: data.classes.clone(),
-            params: params_buf,
-            d_params: device("recon d_params", n)?,
-            adam,
+            trained,
             d_outputs: device("recon d_outputs", b * decoder.outputs_per_object())?,
             partials: decoder.create_partials(ctx, opts.batch)?,
             gather: BatchGather::new(ctx)?,
@@ -534,10 +641,6 @@ impl<'c> Fitter<'c, ReconTraining<'c>> {
             capacity,
             max_capacity,
         };
-        ctx.submit_and_wait(|rec| {
-            trainer.adam.record_reset(rec);
-            Ok(())
-        })?;
         Fitter::from_fit(ctx, trainer)
     }
 }
@@ -591,8 +694,12 @@ impl Fit for ReconTraining<'_> {
             )
         })?;
         rec.pass("recon network", |rec| {
-            self.net
-                .record_forward(rec, self.params.whole(), self.input.whole(), o.batch)
+            self.net.record_forward(
+                rec,
+                self.trained.params.whole(),
+                self.input.whole(),
+                o.batch,
+            )
         })?;
         rec.pass("recon decoder", |rec| {
             self.decoder.record_forward(
@@ -686,23 +793,15 @@ impl Fit for ReconTraining<'_> {
                 rec.pass("recon network backward", |rec| {
                     self.net.record_backward(
                         rec,
-                        self.params.whole(),
+                        self.trained.params.whole(),
                         self.input.whole(),
                         self.d_outputs.whole(),
-                        self.d_params.whole(),
+                        self.trained.d_params.whole(),
                         None,
                         o.batch,
                     )
                 })?;
-                rec.pass("adam", |rec| {
-                    self.adam.record_step_lr(
-                        rec,
-                        self.params.whole(),
-                        self.d_params.whole(),
-                        it,
-                        o.lr_at(it),
-                    )
-                })
+                self.trained.record_step(rec, it, o.lr_at(it))
             })
     }
 
@@ -756,41 +855,9 @@ impl ReconTraining<'_> {
         })
     }
 
-    /// The network's parameters now.
-    pub fn read_params(&self) -> Result<Vec<f32>> {
-        self.ctx
-            .read_buffer(&self.params, 0, self.net.param_count() as usize)
-    }
-
-    /// dL/d(params) of the last iteration run.
-    pub fn read_gradient(&self) -> Result<Vec<f32>> {
-        self.ctx
-            .read_buffer(&self.d_params, 0, self.net.param_count() as usize)
-    }
-
-    /// Adam's moments now (first, second).
-    pub fn read_moments(&self) -> Result<(Vec<f32>, Vec<f32>)> {
-        let n = self.net.param_count() as usize;
-        let (m, v) = self.adam.moments();
-        Ok((
-            self.ctx.read_buffer(m, 0, n)?,
-            self.ctx.read_buffer(v, 0, n)?,
-        ))
-    }
-
-    /// Sets Adam's moments (a resumed run).
-    pub fn write_moments(&self, m: &[f32], v: &[f32]) -> Result<()> {
-        let n = self.net.param_count() as usize;
-        if m.len() != n || v.len() != n {
-            return Err(Error::Input(format!(
-                "Adam moments of {} and {} values for {n} parameters",
-                m.len(),
-                v.len()
-            )));
-        }
-        let (mb, vb) = self.adam.moments();
-        self.ctx.write_buffer(mb, 0, m)?;
-        self.ctx.write_buffer(vb, 0, v)
+    /// The parameters, their gradient and Adam's moments.
+    pub fn trained(&self) -> &TrainedParams {
+        &self.trained
     }
 
     /// The network.
