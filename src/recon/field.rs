@@ -36,8 +36,6 @@
 //! layout), then the field's ([`crate::field::mlp`]'s layout). On the GPU the field's part
 //! starts at the device's binding alignment; files and the host API hold it packed.
 
-use std::ops::Range;
-
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::field::mcubes::{Isosurface, MarchingCubes};
@@ -52,14 +50,10 @@ use crate::gpu::{Buffer, Context, MemoryKind, Recorder};
 use crate::nn::Sequential;
 use crate::probe::{GpuTargets, ProbeSettings, Prober, Sampler, Targets};
 
-use super::batch::{BatchBuffers, BatchGather, BatchShape};
 use super::dataset::view_camera;
-use super::decode::view_rotation;
 pub use super::model::FieldNet;
 use super::model::ReconModel;
-use super::train::{
-    LrStep, Schedule, TrainImages, TrainedParams, VIEWS, schedule_entry, view_azimuth,
-};
+use super::train::{Batches, LrStep, TrainImages, TrainedParams, VIEWS, schedule_entry};
 
 /// The cube the conditioned field lives in: the dataset's objects fill `[−0.5, 0.5]³`, its
 /// voxel centres reach ±0.5 ([`super::dataset::voxel_cube`]); a margin keeps the uniform anchors
@@ -216,7 +210,6 @@ pub struct FieldTrainLog {
 pub struct FieldReconTraining<'c> {
     ctx: &'c Context,
     opts: FieldTrainOptions,
-    classes: Vec<(String, Range<u32>)>,
     net: Sequential,
     field: Field,
     objects: Vec<ObjectProbe>,
@@ -234,14 +227,7 @@ pub struct FieldReconTraining<'c> {
     d_phi: Buffer,
     losses: Buffer,
     sum: SumChunks,
-    gather: BatchGather,
-    images: Buffer,
-    view_table: Buffer,
-    schedule: Schedule,
-    input: Buffer,
-    targets: Buffer,
-    rotations: Buffer,
-    target_images: Buffer,
+    batches: Batches,
     /// The staged rows' objects (`batch` per row), for recording them.
     staged: Vec<u32>,
     capacity: u64,
@@ -305,7 +291,6 @@ impl<'c> Fitter<'c, FieldReconTraining<'c>> {
         let field_stride = field_count.next_multiple_of(align);
         let n = field_offset + field_stride;
         let b = u64::from(opts.batch);
-        let px = u64::from(data.size) * u64::from(data.size);
         let device = |name: &str, floats: u64| {
             ctx.create_buffer(name, 4 * floats.max(1), MemoryKind::Device)
         };
@@ -340,7 +325,6 @@ impl<'c> Fitter<'c, FieldReconTraining<'c>> {
         for p in &mut probers {
             p.reserve_guarded(ctx, capacity)?;
         }
-        let table: Vec<[f32; 2]> = (0..VIEWS).map(|v| view_rotation(view_azimuth(v))).collect();
         let anchors = u64::from(probe.anchors);
         let mut padded = vec![0f32; n as usize];
         padded[..encoder_count as usize].copy_from_slice(&packed[..encoder_count as usize]);
@@ -349,7 +333,6 @@ impl<'c> Fitter<'c, FieldReconTraining<'c>> {
         let trainer = FieldReconTraining {
             ctx,
             opts: opts.clone(),
-            classes: data.classes.clone(),
             trained: TrainedParams::new(
                 ctx,
                 "recon field",
@@ -367,17 +350,7 @@ impl<'c> Fitter<'c, FieldReconTraining<'c>> {
             d_phi: device("recon field d_phi", anchors)?,
             losses: device("recon field losses", b)?,
             sum: SumChunks::new(ctx)?,
-            gather: BatchGather::new(ctx)?,
-            images: ctx.upload_buffer(
-                "recon training images",
-                &super::batch::cpu::pack_bytes(&data.images),
-            )?,
-            view_table: ctx.upload_buffer("recon view rotations", &table)?,
-            schedule: Schedule::new(ctx, opts.batch)?,
-            input: device("recon input", 4 * b * px)?,
-            targets: device("recon targets", 2 * b * px)?,
-            rotations: device("recon rotations", 4 * b)?,
-            target_images: device("recon target images", 8 * b * px)?,
+            batches: Batches::new(ctx, data, opts.batch, opts.seed)?,
             staged: Vec::new(),
             capacity,
             net,
@@ -400,13 +373,7 @@ impl Fit for FieldReconTraining<'_> {
 
     /// Stages the iterations' batches (their schedule rows) and keeps each row's objects.
     fn prepare(&mut self, ctx: &Context, first: u32, last: u32) -> Result<()> {
-        let entries = self.schedule.stage(
-            ctx,
-            self.opts.seed,
-            &self.classes,
-            self.opts.batch,
-            first..=last,
-        )?;
+        let entries = self.batches.stage(ctx, first, last)?;
         self.staged = entries.iter().map(|e| e[0]).collect();
         Ok(())
     }
@@ -419,40 +386,17 @@ impl Fit for FieldReconTraining<'_> {
         it: u32,
         row: u32,
     ) -> Result<()> {
-        if row == 0 {
-            self.schedule.record_copy(rec);
-        }
         let b = self.opts.batch as usize;
         let objects = &self.staged[row as usize * b..(row as usize + 1) * b];
         let o = &self.opts;
         let b = o.batch;
-        let px = o.net.net.image * o.net.net.image;
-        let shape = BatchShape {
-            batch: b,
-            pixels: px,
-            views: VIEWS,
-        };
         let f4 = |floats: u64| 4 * floats;
         let encoder = self.trained.params.range(0, f4(self.encoder_count));
         let d_encoder = self.trained.d_params.range(0, f4(self.encoder_count));
-        rec.pass("recon batch", |rec| {
-            self.gather.record(
-                rec,
-                shape,
-                row,
-                BatchBuffers {
-                    images: self.images.whole(),
-                    schedule: self.schedule.buffer().whole(),
-                    view_rotations: self.view_table.whole(),
-                    input: self.input.whole(),
-                    targets: self.targets.whole(),
-                    rotations: self.rotations.whole(),
-                    target_images: self.target_images.whole(),
-                },
-            )
-        })?;
+        self.batches.record(rec, row)?;
         rec.pass("recon encoder", |rec| {
-            self.net.record_forward(rec, encoder, self.input.whole(), b)
+            self.net
+                .record_forward(rec, encoder, self.batches.input.whole(), b)
         })?;
         for (prober, &j) in self.probers.iter().zip(objects) {
             let obj = &self.objects[j as usize];
@@ -549,7 +493,7 @@ impl Fit for FieldReconTraining<'_> {
                 self.net.record_backward(
                     rec,
                     encoder,
-                    self.input.whole(),
+                    self.batches.input.whole(),
                     self.d_codes.whole(),
                     d_encoder,
                     None,

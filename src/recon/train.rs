@@ -373,20 +373,12 @@ pub fn template() -> Mesh {
 pub struct ReconTraining<'c> {
     ctx: &'c Context,
     opts: TrainOptions,
-    classes: Vec<(String, Range<u32>)>,
     net: Sequential,
     trained: TrainedParams,
     decoder: MeshDecoder,
     d_outputs: Buffer,
     partials: Buffer,
-    gather: BatchGather,
-    images: Buffer,
-    view_table: Buffer,
-    schedule: Schedule,
-    input: Buffer,
-    targets: Buffer,
-    target_images: Buffer,
-    rotations: Buffer,
+    batches: Batches,
     /// Zeros standing for dL/d(colours) when the colour loss is off.
     zero_colors: Buffer,
     meshes: Buffer,
@@ -403,6 +395,86 @@ pub struct ReconTraining<'c> {
 
 /// The reconstruction network's training, ready to run iterations ([`Fitter::run`]).
 pub type ReconTrainer<'c> = Fitter<'c, ReconTraining<'c>>;
+
+/// A trainer's batches on the GPU: the training images, the schedule's rows staged per
+/// submission, and each iteration's gathered input, targets, view rotations and target images.
+/// Both trainers use it.
+pub(crate) struct Batches {
+    classes: Vec<(String, Range<u32>)>,
+    seed: u64,
+    batch: u32,
+    shape: BatchShape,
+    gather: BatchGather,
+    images: Buffer,
+    view_table: Buffer,
+    schedule: Schedule,
+    pub(crate) input: Buffer,
+    pub(crate) targets: Buffer,
+    pub(crate) target_images: Buffer,
+    pub(crate) rotations: Buffer,
+}
+
+impl Batches {
+    /// `data` uploaded, for batches of `batch` objects drawn from `seed`.
+    pub(crate) fn new(ctx: &Context, data: &TrainImages, batch: u32, seed: u64) -> Result<Self> {
+        let b = u64::from(batch);
+        let px = u64::from(data.size) * u64::from(data.size);
+        let device = |name: &str, floats: u64| {
+            ctx.create_buffer(name, 4 * floats.max(1), MemoryKind::Device)
+        };
+        let table: Vec<[f32; 2]> = (0..VIEWS).map(|v| view_rotation(view_azimuth(v))).collect();
+        Ok(Self {
+            classes: data.classes.clone(),
+            seed,
+            batch,
+            shape: BatchShape {
+                batch,
+                pixels: data.size * data.size,
+                views: VIEWS,
+            },
+            gather: BatchGather::new(ctx)?,
+            images: ctx.upload_buffer(
+                "recon training images",
+                &super::batch::cpu::pack_bytes(&data.images),
+            )?,
+            view_table: ctx.upload_buffer("recon view rotations", &table)?,
+            schedule: Schedule::new(ctx, batch)?,
+            input: device("recon input", 4 * b * px)?,
+            targets: device("recon targets", u64::from(COPIES) * b * px)?,
+            target_images: device("recon target images", 4 * u64::from(COPIES) * b * px)?,
+            rotations: device("recon rotations", 2 * u64::from(COPIES) * b)?,
+        })
+    }
+
+    /// Stages the rows of iterations `first ..= last` and returns them (`batch` per iteration).
+    pub(crate) fn stage(&mut self, ctx: &Context, first: u32, last: u32) -> Result<Vec<[u32; 4]>> {
+        self.schedule
+            .stage(ctx, self.seed, &self.classes, self.batch, first..=last)
+    }
+
+    /// Records the gather of schedule row `row` (the staged rows copied in before row 0's).
+    pub(crate) fn record(&self, rec: &mut Recorder<'_>, row: u32) -> Result<()> {
+        if row == 0 {
+            self.schedule.record_copy(rec);
+        }
+        rec.pass("recon batch", |rec| {
+            self.gather.record(
+                rec,
+                self.shape,
+                row,
+                BatchBuffers {
+                    images: self.images.whole(),
+                    schedule: self.schedule.buffer().whole(),
+                    view_rotations: self.view_table.whole(),
+                    input: self.input.whole(),
+                    targets: self.targets.whole(),
+                    rotations: self.rotations.whole(),
+                    target_images: self.target_images.whole(),
+                },
+            )
+        })
+    }
+}
 
 /// A trainer's parameters, their gradient and Adam over them, in buffers that may pad between
 /// packed ranges (the conditioned field keeps its field's part at a bindable offset): the values
@@ -568,7 +640,6 @@ impl<'c> Fitter<'c, ReconTraining<'c>> {
         };
         let n = net.param_count();
         let b = u64::from(opts.batch);
-        let px = u64::from(opts.net.image) * u64::from(opts.net.image);
         let v = u64::from(decoder.vertex_count());
         let device = |name: &str, floats: u64| {
             ctx.create_buffer(name, 4 * floats.max(1), MemoryKind::Device)
@@ -601,24 +672,13 @@ impl<'c> Fitter<'c, ReconTraining<'c>> {
         let grads = crate::fit::reserve_guarded(
             ctx, &renderer, &mut scene, opts.tile, capacity, alpha_only,
         )?;
-        let table: Vec<[f32; 2]> = (0..VIEWS).map(|v| view_rotation(view_azimuth(v))).collect();
         let trainer = ReconTraining {
             ctx,
             opts: opts.clone(),
-            classes: data.classes.clone(),
+            batches: Batches::new(ctx, data, opts.batch, opts.seed)?,
             trained,
             d_outputs: device("recon d_outputs", b * decoder.outputs_per_object())?,
             partials: decoder.create_partials(ctx, opts.batch)?,
-            gather: BatchGather::new(ctx)?,
-            images: ctx.upload_buffer(
-                "recon training images",
-                &super::batch::cpu::pack_bytes(&data.images),
-            )?,
-            view_table: ctx.upload_buffer("recon view rotations", &table)?,
-            schedule: Schedule::new(ctx, opts.batch)?,
-            input: device("recon input", 4 * b * px)?,
-            targets: device("recon targets", u64::from(COPIES) * b * px)?,
-            target_images: device("recon target images", 4 * u64::from(COPIES) * b * px)?,
             zero_colors: {
                 let z = device("recon zero colour gradients", 3 * u64::from(COPIES) * b * v)?;
                 ctx.submit_and_wait(|rec| {
@@ -627,7 +687,6 @@ impl<'c> Fitter<'c, ReconTraining<'c>> {
                 })?;
                 z
             },
-            rotations: device("recon rotations", 2 * u64::from(COPIES) * b)?,
             meshes: device("recon meshes", 3 * b * v)?,
             d_meshes: device("recon d_meshes", 3 * b * v)?,
             sil: SilhouetteLoss::new(ctx, COPIES * opts.batch, opts.net.image, opts.net.image)?,
@@ -650,13 +709,7 @@ impl Fit for ReconTraining<'_> {
 
     /// Stages the iterations' batches (their schedule rows).
     fn prepare(&mut self, ctx: &Context, first: u32, last: u32) -> Result<()> {
-        self.schedule.stage(
-            ctx,
-            self.opts.seed,
-            &self.classes,
-            self.opts.batch,
-            first..=last,
-        )?;
+        self.batches.stage(ctx, first, last)?;
         Ok(())
     }
 
@@ -668,36 +721,13 @@ impl Fit for ReconTraining<'_> {
         it: u32,
         row: u32,
     ) -> Result<()> {
-        if row == 0 {
-            self.schedule.record_copy(rec);
-        }
+        self.batches.record(rec, row)?;
         let o = &self.opts;
-        let shape = BatchShape {
-            batch: o.batch,
-            pixels: o.net.image * o.net.image,
-            views: VIEWS,
-        };
-        rec.pass("recon batch", |rec| {
-            self.gather.record(
-                rec,
-                shape,
-                row,
-                BatchBuffers {
-                    images: self.images.whole(),
-                    schedule: self.schedule.buffer().whole(),
-                    view_rotations: self.view_table.whole(),
-                    input: self.input.whole(),
-                    targets: self.targets.whole(),
-                    rotations: self.rotations.whole(),
-                    target_images: self.target_images.whole(),
-                },
-            )
-        })?;
         rec.pass("recon network", |rec| {
             self.net.record_forward(
                 rec,
                 self.trained.params.whole(),
-                self.input.whole(),
+                self.batches.input.whole(),
                 o.batch,
             )
         })?;
@@ -707,7 +737,7 @@ impl Fit for ReconTraining<'_> {
                 o.batch,
                 COPIES,
                 self.net.output().whole(),
-                self.rotations.whole(),
+                self.batches.rotations.whole(),
                 self.meshes.whole(),
                 self.scene.positions().whole(),
             )?;
@@ -731,14 +761,14 @@ impl Fit for ReconTraining<'_> {
                     self.sil.record(
                         rec,
                         scene.output().whole(),
-                        self.targets.whole(),
+                        self.batches.targets.whole(),
                         Some(GradOut::write(io.upstream).weighted(COPIES as f32)),
                     )?;
                     if o.color > 0.0 {
                         self.mse.record(
                             rec,
                             scene.output().whole(),
-                            self.target_images.whole(),
+                            self.batches.target_images.whole(),
                             Some(GradOut::accumulate(io.upstream, o.color)),
                         )?;
                     }
@@ -770,7 +800,7 @@ impl Fit for ReconTraining<'_> {
                         o.batch,
                         COPIES,
                         self.net.output().whole(),
-                        self.rotations.whole(),
+                        self.batches.rotations.whole(),
                         self.d_meshes.whole(),
                         io.positions,
                         self.d_outputs.whole(),
@@ -794,7 +824,7 @@ impl Fit for ReconTraining<'_> {
                     self.net.record_backward(
                         rec,
                         self.trained.params.whole(),
-                        self.input.whole(),
+                        self.batches.input.whole(),
                         self.d_outputs.whole(),
                         self.trained.d_params.whole(),
                         None,
