@@ -213,6 +213,59 @@ pub(crate) struct Stages<'t, 'a> {
     sigma_gamma: (f64, f64),
 }
 
+impl<'t, 'a> Stages<'t, 'a> {
+    /// The stages from the first σ and γ, and the target there.
+    pub(crate) fn new(
+        target: &'t mut PoseTarget<'a>,
+        sigma_gamma: (f64, f64),
+    ) -> Result<(Self, Vec<[f32; 4]>)> {
+        let first = match target {
+            PoseTarget::Fixed(t) => t.to_vec(),
+            PoseTarget::PerStage(f) => f(sigma_gamma.0, sigma_gamma.1)?,
+        };
+        Ok((
+            Self {
+                target,
+                sigma_gamma,
+            },
+            first,
+        ))
+    }
+
+    /// Before a submission at σ and γ: a new stage's target and capacity.
+    pub(crate) fn enter<'c>(
+        &mut self,
+        fit: &mut impl Posed<'c>,
+        sigma_gamma: (f64, f64),
+    ) -> Result<()> {
+        if sigma_gamma != self.sigma_gamma {
+            self.set_target(fit, sigma_gamma)?;
+            fit.fit_capacity(sigma_gamma.0, sigma_gamma.1)?;
+            self.sigma_gamma = sigma_gamma;
+        }
+        Ok(())
+    }
+
+    /// After the loop: the target of the sharp σ and γ the fit is evaluated at.
+    pub(crate) fn finish<'c>(mut self, fit: &mut impl Posed<'c>, sharp: (f64, f64)) -> Result<()> {
+        if sharp != self.sigma_gamma {
+            self.set_target(fit, sharp)?;
+        }
+        Ok(())
+    }
+
+    fn set_target<'c>(
+        &mut self,
+        fit: &mut impl Posed<'c>,
+        (sigma, gamma): (f64, f64),
+    ) -> Result<()> {
+        match self.target {
+            PoseTarget::Fixed(_) => Ok(()),
+            PoseTarget::PerStage(f) => fit.set_target(&f(sigma, gamma)?),
+        }
+    }
+}
+
 /// A fit of a posed view: what it adds to [`PosedView`] to be sized, retargeted and evaluated.
 pub(crate) trait Posed<'c>: Fit {
     /// The context the fit runs on.
@@ -270,59 +323,6 @@ pub(crate) fn evaluate<'c, F: Posed<'c>>(
         f64::from(fitter.read_loss()?),
         fitter.view().read_render(ctx)?,
     ))
-}
-
-impl<'t, 'a> Stages<'t, 'a> {
-    /// The stages from the first σ and γ, and the target there.
-    pub(crate) fn new(
-        target: &'t mut PoseTarget<'a>,
-        sigma_gamma: (f64, f64),
-    ) -> Result<(Self, Vec<[f32; 4]>)> {
-        let first = match target {
-            PoseTarget::Fixed(t) => t.to_vec(),
-            PoseTarget::PerStage(f) => f(sigma_gamma.0, sigma_gamma.1)?,
-        };
-        Ok((
-            Self {
-                target,
-                sigma_gamma,
-            },
-            first,
-        ))
-    }
-
-    /// Before a submission at σ and γ: a new stage's target and capacity.
-    pub(crate) fn enter<'c>(
-        &mut self,
-        fit: &mut impl Posed<'c>,
-        sigma_gamma: (f64, f64),
-    ) -> Result<()> {
-        if sigma_gamma != self.sigma_gamma {
-            self.set_target(fit, sigma_gamma)?;
-            fit.fit_capacity(sigma_gamma.0, sigma_gamma.1)?;
-            self.sigma_gamma = sigma_gamma;
-        }
-        Ok(())
-    }
-
-    /// After the loop: the target of the sharp σ and γ the fit is evaluated at.
-    pub(crate) fn finish<'c>(mut self, fit: &mut impl Posed<'c>, sharp: (f64, f64)) -> Result<()> {
-        if sharp != self.sigma_gamma {
-            self.set_target(fit, sharp)?;
-        }
-        Ok(())
-    }
-
-    fn set_target<'c>(
-        &mut self,
-        fit: &mut impl Posed<'c>,
-        (sigma, gamma): (f64, f64),
-    ) -> Result<()> {
-        match self.target {
-            PoseTarget::Fixed(_) => Ok(()),
-            PoseTarget::PerStage(f) => fit.set_target(&f(sigma, gamma)?),
-        }
-    }
 }
 
 /// [`Error::Input`] unless `target` has one finite RGBA value per pixel of `settings`.
