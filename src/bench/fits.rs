@@ -78,42 +78,17 @@ fn run_field_fit(
     ));
     let mut it = 1u32;
     fit_iterations(&mut fitter, &mut it, 1, None, progress, name)?;
-    let mut timer = if ctx.info().timestamp_valid_bits > 0 {
-        Some(Timer::new(ctx, 24)?)
-    } else {
-        None
-    };
-    let (mut wall, mut gpu) = (Vec::new(), Vec::new());
-    let mut passes: Vec<(String, Vec<f64>)> = Vec::new();
-    for _ in 0..opts.repeat {
-        wall.push(fit_iterations(
-            &mut fitter,
-            &mut it,
-            1,
-            timer.as_mut(),
-            progress,
-            name,
-        )?);
-        if let Some(timer) = &timer {
-            let times = timer.results(ctx)?;
-            // Parts of a pass (indented names) are inside it: not summed again.
-            gpu.push(
-                times
-                    .iter()
-                    .filter(|t| !t.name.starts_with(' '))
-                    .map(|t| t.ms)
-                    .sum(),
-            );
-            for t in times {
-                match passes.iter_mut().find(|(n, _)| *n == t.name) {
-                    Some((_, series)) => series.push(t.ms),
-                    None => passes.push((t.name.clone(), vec![t.ms])),
-                }
-            }
-        }
-    }
+    let timing = time_iterations(
+        ctx,
+        &mut fitter,
+        &mut it,
+        opts.repeat,
+        24,
+        false,
+        progress,
+        name,
+    )?;
     let entries = fitter.last_entries();
-    let timing = Timing::medians(&gpu, &wall, &passes);
     progress(&format!(
         "{name} fit-iteration: {entries} entries; {}",
         summary(&timing, opts.repeat)
@@ -187,34 +162,16 @@ fn run_pose_fit(
     ));
     let mut it = 1u32;
     fit_iterations(&mut fitter, &mut it, 1, None, progress, name)?;
-    let mut timer = if ctx.info().timestamp_valid_bits > 0 {
-        Some(Timer::new(ctx, 32)?)
-    } else {
-        None
-    };
-    let (mut wall, mut gpu) = (Vec::new(), Vec::new());
-    let mut passes: Vec<(String, Vec<f64>)> = Vec::new();
-    for _ in 0..opts.repeat {
-        wall.push(fit_iterations(
-            &mut fitter,
-            &mut it,
-            1,
-            timer.as_mut(),
-            progress,
-            name,
-        )?);
-        if let Some(timer) = &timer {
-            let times = timer.results(ctx)?;
-            gpu.push(times.iter().map(|t| t.ms).sum());
-            for t in times {
-                match passes.iter_mut().find(|(n, _)| *n == t.name) {
-                    Some((_, series)) => series.push(t.ms),
-                    None => passes.push((t.name.clone(), vec![t.ms])),
-                }
-            }
-        }
-    }
-    let timing = Timing::medians(&gpu, &wall, &passes);
+    let timing = time_iterations(
+        ctx,
+        &mut fitter,
+        &mut it,
+        opts.repeat,
+        32,
+        false,
+        progress,
+        name,
+    )?;
     progress(&format!(
         "{name} fit-iteration: {} entries; {}",
         fitter.last_entries(),
@@ -321,6 +278,69 @@ struct LoopTiming {
     wall_ms: f64,
     /// The host overhead (wall minus GPU), where the GPU was timed.
     passes: Vec<(String, f64)>,
+}
+
+/// `repeat` iterations of `fitter` from `*it`, one per submission, with GPU timestamps (room for
+/// `timer_passes` passes): per iteration the wall time, the GPU time (the top-level passes:
+/// an indented name is a part of the pass above it) and every pass; with `shares`, the
+/// `render`, `backward` and `rest` sums of [`fit_pass_share`] first. Medians.
+#[allow(clippy::too_many_arguments)]
+fn time_iterations(
+    ctx: &Context,
+    fitter: &mut Fitter<'_, impl Fit>,
+    it: &mut u32,
+    repeat: u32,
+    timer_passes: u32,
+    shares: bool,
+    progress: &mut impl FnMut(&str),
+    name: &str,
+) -> Result<Timing> {
+    let mut timer = if ctx.info().timestamp_valid_bits > 0 {
+        Some(Timer::new(ctx, timer_passes)?)
+    } else {
+        None
+    };
+    let (mut wall, mut gpu) = (Vec::new(), Vec::new());
+    let mut passes: Vec<(String, Vec<f64>)> = Vec::new();
+    for _ in 0..repeat {
+        wall.push(fit_iterations(
+            fitter,
+            it,
+            1,
+            timer.as_mut(),
+            progress,
+            name,
+        )?);
+        let Some(timer) = &timer else { continue };
+        let times = timer.results(ctx)?;
+        gpu.push(
+            times
+                .iter()
+                .filter(|t| !t.name.starts_with(' '))
+                .map(|t| t.ms)
+                .sum(),
+        );
+        let mut row: Vec<(String, f64)> = Vec::new();
+        if shares {
+            row.extend(["render", "backward", "rest"].iter().map(|share| {
+                let ms = times
+                    .iter()
+                    .filter(|t| fit_pass_share(&t.name) == *share)
+                    .map(|t| t.ms)
+                    .sum();
+                (share.to_string(), ms)
+            }));
+        }
+        row.extend(times.iter().map(|t| (t.name.clone(), t.ms)));
+        if passes.is_empty() {
+            passes = row.iter().map(|(n, _)| (n.clone(), Vec::new())).collect();
+        }
+        // Every iteration records the same passes in the same order.
+        for ((_, series), (_, ms)) in passes.iter_mut().zip(&row) {
+            series.push(*ms);
+        }
+    }
+    Ok(Timing::medians(&gpu, &wall, &passes))
 }
 
 /// Runs iterations `it .. it + k` of `fitter` in one submission (again from a stopped one, until
@@ -451,47 +471,16 @@ pub fn run_fit(
             fitter.last_entries(),
             opts.repeat
         ));
-        let mut timer = if ctx.info().timestamp_valid_bits > 0 {
-            Some(Timer::new(ctx, 32)?)
-        } else {
-            None
-        };
-        let mut wall = Vec::new();
-        let mut gpu = Vec::new();
-        let mut passes: Vec<(String, Vec<f64>)> = Vec::new();
-        for _ in 0..opts.repeat {
-            wall.push(fit_iterations(
-                &mut fitter,
-                &mut it,
-                1,
-                timer.as_mut(),
-                &mut progress,
-                name,
-            )?);
-            if let Some(timer) = &timer {
-                let times = timer.results(ctx)?;
-                gpu.push(times.iter().map(|t| t.ms).sum());
-                let mut row: Vec<(String, f64)> = ["render", "backward", "rest"]
-                    .iter()
-                    .map(|share| {
-                        let ms = times
-                            .iter()
-                            .filter(|t| fit_pass_share(&t.name) == *share)
-                            .map(|t| t.ms)
-                            .sum();
-                        (share.to_string(), ms)
-                    })
-                    .collect();
-                row.extend(times.iter().map(|t| (t.name.clone(), t.ms)));
-                if passes.is_empty() {
-                    passes = row.iter().map(|(n, _)| (n.clone(), Vec::new())).collect();
-                }
-                for ((_, series), (_, ms)) in passes.iter_mut().zip(&row) {
-                    series.push(*ms);
-                }
-            }
-        }
-        let timing = Timing::medians(&gpu, &wall, &passes);
+        let timing = time_iterations(
+            ctx,
+            &mut fitter,
+            &mut it,
+            opts.repeat,
+            32,
+            true,
+            &mut progress,
+            name,
+        )?;
         progress(&format!(
             "{name} fit-iteration: {}",
             summary(&timing, opts.repeat)
