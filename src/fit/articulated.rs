@@ -31,9 +31,9 @@ use bytemuck::{Pod, Zeroable};
 
 use super::adam::{Adam, AdamOptions};
 use super::blur::{BlurredMse, MAX_BLUR_STD};
-use super::driver::{self, Fit, Fitter};
+use super::driver::{self, Fitter};
 use super::pose::{PoseTarget, Schedule};
-use super::posed::{self, Posed, PosedView, Stages};
+use super::posed::{self, PoseModel, PosedFit, PosedView, Stages};
 use super::rig::{Rig, bone_of};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -272,13 +272,16 @@ pub struct ArticulatedLog {
     pub seconds: f64,
 }
 
-/// An articulated fit's GPU state: the scene with its guarded bins, the lighting, the loss, the
-/// skeleton and skin, the angles and their Adam optimizer, ready to run iterations
+/// An articulated fit's GPU state: the scene with its guarded bins and the lighting, and the
+/// skinned model, ready to run iterations
 /// ([`ArticulatedFitter::run`]) with no read-back.
-pub struct ArticulatedFit<'c> {
-    ctx: &'c Context,
+pub type ArticulatedFit<'c> = PosedFit<'c, Skinned>;
+
+/// What an articulated fit adds to its view: the loss, the skeleton and skin, the angles, the
+/// kernels that pose the mesh from them and take the gradient back to them, and their Adam
+/// optimizer.
+pub struct Skinned {
     opts: ArticulatedFitOptions,
-    view: PosedView,
     mse: BlurredMse,
     fk: Kernel,
     apply: Kernel,
@@ -351,8 +354,7 @@ impl<'c> Fitter<'c, ArticulatedFit<'c>> {
             })
             .collect();
         let angles: Vec<f32> = init.iter().map(|&a| a as f32).collect();
-        let mut fit = ArticulatedFit {
-            ctx,
+        let model = Skinned {
             mse: BlurredMse::new(ctx, 1, opts.settings.width, opts.settings.height)?,
             fk: Kernel::new(ctx, &specs::SKIN_FK)?,
             apply: Kernel::new(ctx, &specs::SKIN_APPLY)?,
@@ -381,10 +383,8 @@ impl<'c> Fitter<'c, ArticulatedFit<'c>> {
                 pad: 0,
             },
             opts: opts.clone(),
-            view,
         };
-        let (sigma, gamma) = opts.sigma_gamma(0);
-        fit.fit_capacity(sigma, gamma)?;
+        let fit = PosedFit::new(ctx, view, model, opts.sigma_gamma(0))?;
         Fitter::from_fit(ctx, fit)
     }
 
@@ -399,15 +399,15 @@ impl ArticulatedFit<'_> {
     /// The log of iterations `first ..= last` that ran: each one's loss, σ, γ and the angles
     /// it evaluated (`seconds` as given).
     pub fn log(&self, first: u32, last: u32, seconds: f64) -> Result<Vec<ArticulatedLog>> {
-        if first == 0 || first > last || last > self.opts.iterations {
+        if first == 0 || first > last || last > self.model.opts.iterations {
             return Err(Error::Misuse(format!(
                 "articulated fit: the log of {first}..={last} of 1..={}",
-                self.opts.iterations
+                self.model.opts.iterations
             )));
         }
-        let row = self.push.joint_count as usize + 1;
+        let row = self.model.push.joint_count as usize + 1;
         let floats: Vec<f32> = self.ctx.read_buffer(
-            &self.log,
+            &self.model.log,
             4 * (row as u64) * u64::from(first - 1),
             row * (last - first + 1) as usize,
         )?;
@@ -415,7 +415,7 @@ impl ArticulatedFit<'_> {
             .chunks_exact(row)
             .zip(first..=last)
             .map(|(r, it)| {
-                let (sigma, gamma, blur) = self.opts.stage(it - 1);
+                let (sigma, gamma, blur) = self.model.opts.stage(it - 1);
                 ArticulatedLog {
                     iteration: it,
                     loss: f64::from(r[0]),
@@ -431,17 +431,19 @@ impl ArticulatedFit<'_> {
 
     /// dL/dθ of the last iteration that ran (the gradient its Adam step took).
     pub fn gradient(&self) -> Result<Vec<f64>> {
-        let g: Vec<f32> =
-            self.ctx
-                .read_buffer(&self.d_params, 0, self.push.joint_count as usize)?;
+        let g: Vec<f32> = self.ctx.read_buffer(
+            &self.model.d_params,
+            0,
+            self.model.push.joint_count as usize,
+        )?;
         Ok(g.into_iter().map(f64::from).collect())
     }
 
     /// The angles now (radians).
     pub fn angles(&self) -> Result<Vec<f64>> {
-        let a: Vec<f32> = self
-            .ctx
-            .read_buffer(&self.params, 0, self.push.joint_count as usize)?;
+        let a: Vec<f32> =
+            self.ctx
+                .read_buffer(&self.model.params, 0, self.model.push.joint_count as usize)?;
         Ok(a.into_iter().map(f64::from).collect())
     }
 
@@ -450,17 +452,12 @@ impl ArticulatedFit<'_> {
         self.ctx.read_buffer(
             self.view.scene.positions(),
             0,
-            self.push.vertex_count as usize,
+            self.model.push.vertex_count as usize,
         )
-    }
-
-    /// Entries the bins and the backward's partials hold now.
-    pub fn capacity(&self) -> u64 {
-        self.view.capacity()
     }
 }
 
-impl Fit for ArticulatedFit<'_> {
+impl PoseModel for Skinned {
     const NAME: &'static str = "articulated fit";
 
     fn last_iteration(&self) -> u32 {
@@ -475,18 +472,17 @@ impl Fit for ArticulatedFit<'_> {
         rec: &mut Recorder<'_>,
         gate: &mut IterationGate,
         it: u32,
-        _row: u32,
+        view: &mut PosedView,
     ) -> Result<()> {
         let (sigma, gamma, blur) = self.opts.stage(it - 1);
-        self.view.scene.set_blur(sigma, gamma)?;
+        view.scene.set_blur(sigma, gamma)?;
         self.adam.set_options(self.opts.adam(it - 1))?;
-        self.record_pose(rec)?;
+        self.record_pose(rec, view)?;
         let push = SkinPush {
             log_index: it - 1,
             ..self.push
         };
         let Self {
-            view,
             mse,
             grad,
             params,
@@ -531,28 +527,8 @@ impl Fit for ArticulatedFit<'_> {
         )
     }
 
-    fn capacity(&self) -> u64 {
-        self.view.capacity()
-    }
-
-    fn grow(&mut self, ctx: &Context, total: u64) -> Result<()> {
-        self.view.resize(ctx, total)
-    }
-}
-
-impl<'c> Posed<'c> for ArticulatedFit<'c> {
-    fn ctx(&self) -> &'c Context {
-        self.ctx
-    }
-    fn view(&self) -> &PosedView {
-        &self.view
-    }
-    fn view_mut(&mut self) -> &mut PosedView {
-        &mut self.view
-    }
-
     /// Records the bones, the skinned positions and their lit colours into the scene.
-    fn record_pose(&self, rec: &mut Recorder<'_>) -> Result<()> {
+    fn record_pose(&self, rec: &mut Recorder<'_>, view: &PosedView) -> Result<()> {
         rec.pass("kinematics", |rec| {
             rec.dispatch(
                 &self.fk,
@@ -573,14 +549,14 @@ impl<'c> Posed<'c> for ArticulatedFit<'c> {
                     bones: self.bones.whole(),
                     rest: self.rest.whole(),
                     skins: self.skins.whole(),
-                    posed: self.view.scene.positions().whole(),
+                    posed: view.scene.positions().whole(),
                 }
                 .for_kernel(&self.apply)?,
                 &self.push,
                 groups(u64::from(self.push.vertex_count), 64)?,
             )
         })?;
-        self.view.record_light(rec)
+        view.record_light(rec)
     }
 
     fn record_loss(
@@ -593,8 +569,8 @@ impl<'c> Posed<'c> for ArticulatedFit<'c> {
         self.mse.record(rec, images, target, None, blur)
     }
 
-    fn read_loss(&self) -> Result<f32> {
-        self.mse.read_loss(self.ctx)
+    fn read_loss(&self, ctx: &Context) -> Result<f32> {
+        self.mse.read_loss(ctx)
     }
 }
 

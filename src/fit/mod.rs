@@ -70,6 +70,7 @@ pub use crate::gpu::GradOut;
 pub use adam::{Adam, AdamOptions};
 pub use deform::Deform;
 pub use driver::{max_entry_capacity, reserve_guarded, with_headroom};
+pub use posed::PosedFit;
 pub use regularizers::{RegularizerLosses, Regularizers};
 pub use silhouette::{ImageMse, SilhouetteLoss};
 

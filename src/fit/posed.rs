@@ -19,7 +19,7 @@ use super::driver::{Fit, Fitter, max_entry_capacity, reserve_guarded, with_headr
 
 /// The posed mesh's view: the scene with its guarded bins and the backward's buffers, the
 /// lighting and the target.
-pub(crate) struct PosedView {
+pub struct PosedView {
     pub(crate) renderer: Renderer,
     pub(crate) scene: GpuScene,
     pub(crate) light: SceneLight,
@@ -233,9 +233,9 @@ impl<'t, 'a> Stages<'t, 'a> {
     }
 
     /// Before a submission at σ and γ: a new stage's target and capacity.
-    pub(crate) fn enter<'c>(
+    pub(crate) fn enter(
         &mut self,
-        fit: &mut impl Posed<'c>,
+        fit: &mut PosedFit<'_, impl PoseModel>,
         sigma_gamma: (f64, f64),
     ) -> Result<()> {
         if sigma_gamma != self.sigma_gamma {
@@ -247,16 +247,20 @@ impl<'t, 'a> Stages<'t, 'a> {
     }
 
     /// After the loop: the target of the sharp σ and γ the fit is evaluated at.
-    pub(crate) fn finish<'c>(mut self, fit: &mut impl Posed<'c>, sharp: (f64, f64)) -> Result<()> {
+    pub(crate) fn finish(
+        mut self,
+        fit: &mut PosedFit<'_, impl PoseModel>,
+        sharp: (f64, f64),
+    ) -> Result<()> {
         if sharp != self.sigma_gamma {
             self.set_target(fit, sharp)?;
         }
         Ok(())
     }
 
-    fn set_target<'c>(
+    fn set_target(
         &mut self,
-        fit: &mut impl Posed<'c>,
+        fit: &mut PosedFit<'_, impl PoseModel>,
         (sigma, gamma): (f64, f64),
     ) -> Result<()> {
         match self.target {
@@ -266,16 +270,26 @@ impl<'t, 'a> Stages<'t, 'a> {
     }
 }
 
-/// A fit of a posed view: what it adds to [`PosedView`] to be sized, retargeted and evaluated.
-pub(crate) trait Posed<'c>: Fit {
-    /// The context the fit runs on.
-    fn ctx(&self) -> &'c Context;
-    /// The view.
-    fn view(&self) -> &PosedView;
-    /// The view, to resize.
-    fn view_mut(&mut self) -> &mut PosedView;
-    /// Records the posed positions and their lit colours into the scene.
-    fn record_pose(&self, rec: &mut Recorder<'_>) -> Result<()>;
+/// What a posed fit adds to its [`PosedView`]: its parameters, the kernels that pose the mesh
+/// from them and take the gradient back to them, its image loss and its optimizer.
+///
+/// Public only to be named in [`PosedFit`]'s bounds; this module is private to the crate.
+pub trait PoseModel {
+    /// The fit's name in messages.
+    const NAME: &'static str;
+    /// The last iteration the fit runs ([`Fit::last_iteration`]).
+    fn last_iteration(&self) -> u32;
+    /// Records the posed positions and their lit colours into `view`'s scene.
+    fn record_pose(&self, rec: &mut Recorder<'_>, view: &PosedView) -> Result<()>;
+    /// Records iteration `it` ([`Fit::record_iteration`]): its σ and γ set in `view`, the pose,
+    /// then [`PosedView::record_guarded`] with the fit's loss and step.
+    fn record_iteration(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        gate: &mut IterationGate,
+        it: u32,
+        view: &mut PosedView,
+    ) -> Result<()>;
     /// Records the image loss of an evaluation (no gradient) of the render against the target,
     /// of images blurred by `blur` pixels where the fit's loss blurs.
     fn record_loss(
@@ -285,43 +299,102 @@ pub(crate) trait Posed<'c>: Fit {
         target: BufferRange<'_>,
         blur: f64,
     ) -> Result<()>;
-    /// The loss [`Posed::record_loss`] left.
-    fn read_loss(&self) -> Result<f32>;
+    /// The loss [`PoseModel::record_loss`] left.
+    fn read_loss(&self, ctx: &Context) -> Result<f32>;
+}
+
+/// A fit of a posed view: the scene with its guarded bins, the lighting, the target and the
+/// backward's buffers, and the fit's model of the pose ([`super::pose::Rigid`],
+/// [`super::articulated::Skinned`]), run by a [`Fitter`] ([`super::pose::PoseFit`],
+/// [`super::articulated::ArticulatedFit`]).
+pub struct PosedFit<'c, M> {
+    pub(crate) ctx: &'c Context,
+    pub(crate) view: PosedView,
+    pub(crate) model: M,
+}
+
+impl<'c, M: PoseModel> PosedFit<'c, M> {
+    /// `model` on `view`, its bins sized for the pose it records at the first iteration's σ and
+    /// γ.
+    pub(crate) fn new(
+        ctx: &'c Context,
+        view: PosedView,
+        model: M,
+        (sigma, gamma): (f64, f64),
+    ) -> Result<Self> {
+        let mut fit = Self { ctx, view, model };
+        fit.fit_capacity(sigma, gamma)?;
+        Ok(fit)
+    }
 
     /// Replaces the target (same size, finite).
-    fn set_target(&mut self, target: &[[f32; 4]]) -> Result<()> {
-        self.view().set_target(self.ctx(), target)
+    pub(crate) fn set_target(&mut self, target: &[[f32; 4]]) -> Result<()> {
+        self.view.set_target(self.ctx, target)
     }
 
     /// Sizes the guarded bins for the pose now at σ and γ ([`PosedView::fit_capacity`]).
-    fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()> {
-        let ctx = self.ctx();
-        self.view_mut().scene.set_blur(sigma, gamma)?;
-        ctx.submit_and_wait(|rec| self.record_pose(rec))?;
-        self.view_mut().fit_capacity(ctx)
+    pub(crate) fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()> {
+        self.view.scene.set_blur(sigma, gamma)?;
+        let (model, view) = (&self.model, &self.view);
+        self.ctx
+            .submit_and_wait(|rec| model.record_pose(rec, view))?;
+        self.view.fit_capacity(self.ctx)
+    }
+}
+
+impl<M> PosedFit<'_, M> {
+    /// Entries the bins and the backward's partials hold now.
+    pub fn capacity(&self) -> u64 {
+        self.view.capacity()
+    }
+}
+
+impl<M: PoseModel> Fit for PosedFit<'_, M> {
+    const NAME: &'static str = M::NAME;
+
+    fn last_iteration(&self) -> u32 {
+        self.model.last_iteration()
+    }
+
+    fn record_iteration(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        gate: &mut IterationGate,
+        it: u32,
+        _row: u32,
+    ) -> Result<()> {
+        self.model.record_iteration(rec, gate, it, &mut self.view)
+    }
+
+    fn capacity(&self) -> u64 {
+        self.view.capacity()
+    }
+
+    fn grow(&mut self, ctx: &Context, total: u64) -> Result<()> {
+        self.view.resize(ctx, total)
     }
 }
 
 /// The loss (of images blurred by `blur` pixels, where the fit blurs) and the render of
 /// `fitter`'s pose now with σ and γ (no step), re-run until the entries fit.
-pub(crate) fn evaluate<'c, F: Posed<'c>>(
-    fitter: &mut Fitter<'c, F>,
+pub(crate) fn evaluate<M: PoseModel>(
+    fitter: &mut Fitter<'_, PosedFit<'_, M>>,
     sigma: f64,
     gamma: f64,
     blur: f64,
 ) -> Result<(f64, Vec<[f32; 4]>)> {
-    fitter.view_mut().scene.set_blur(sigma, gamma)?;
+    fitter.view.scene.set_blur(sigma, gamma)?;
     fitter.submit_guarded(|fit, rec, gate| {
-        fit.record_pose(rec)?;
-        fit.view()
+        fit.model.record_pose(rec, &fit.view)?;
+        fit.view
             .record_evaluation(rec, gate, |rec, images, target| {
-                fit.record_loss(rec, images, target, blur)
+                fit.model.record_loss(rec, images, target, blur)
             })
     })?;
-    let ctx = fitter.ctx();
+    let ctx = fitter.ctx;
     Ok((
-        f64::from(fitter.read_loss()?),
-        fitter.view().read_render(ctx)?,
+        f64::from(fitter.model.read_loss(ctx)?),
+        fitter.view.read_render(ctx)?,
     ))
 }
 

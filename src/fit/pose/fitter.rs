@@ -6,13 +6,13 @@ use glam::DVec3;
 use bytemuck::{Pod, Zeroable};
 
 use super::{Pose, PoseFitOptions, PoseLog, centroid};
-use crate::fit::posed::{self, Posed, PosedView, check_target};
+use crate::fit::posed::{self, PoseModel, PosedFit, PosedView, check_target};
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::fit::ImageMse;
 use crate::fit::adam::{Adam, AdamOptions};
-use crate::fit::driver::{Fit, Fitter};
+use crate::fit::driver::Fitter;
 use crate::gpu::GradOut;
 use crate::gpu::gate::IterationGate;
 use crate::gpu::groups;
@@ -31,13 +31,15 @@ struct PosePush {
     pad: [u32; 2],
 }
 
-/// A pose fit's GPU state: the scene with its guarded bins, the lighting, the loss, the pose's
-/// parameters and their two Adam optimizers. Every iteration is recorded with no read-back (see
-/// the [module docs](super)), as many per submission as asked ([`PoseFitter`] runs them).
-pub struct PoseFit<'c> {
-    ctx: &'c Context,
+/// A pose fit's GPU state: the scene with its guarded bins and the lighting, and the rigid
+/// model. Every iteration is recorded with no read-back (see the
+/// [module docs](super)), as many per submission as asked ([`PoseFitter`] runs them).
+pub type PoseFit<'c> = PosedFit<'c, Rigid>;
+
+/// What a pose fit adds to its view: the loss, the pose's parameters, the kernels that apply
+/// them and take the gradient back to them, and their two Adam optimizers.
+pub struct Rigid {
     opts: PoseFitOptions,
-    view: PosedView,
     mse: ImageMse,
     apply: Kernel,
     grad: Kernel,
@@ -108,8 +110,7 @@ impl<'c> Fitter<'c, PoseFit<'c>> {
             p0[translation_at as usize + k] = a[3 + k] as f32;
         }
         let first = opts.adam(0);
-        let mut fit = PoseFit {
-            ctx,
+        let model = Rigid {
             mse: ImageMse::new(ctx, 1, opts.settings.width, opts.settings.height)?,
             apply: Kernel::new(ctx, &specs::POSE_APPLY)?,
             grad: Kernel::new(ctx, &specs::POSE_GRAD)?,
@@ -132,10 +133,8 @@ impl<'c> Fitter<'c, PoseFit<'c>> {
             )?,
             push,
             opts: opts.clone(),
-            view,
         };
-        let (sigma, gamma) = opts.sigma_gamma(0);
-        fit.fit_capacity(sigma, gamma)?;
+        let fit = PosedFit::new(ctx, view, model, opts.sigma_gamma(0))?;
         Fitter::from_fit(ctx, fit)
     }
 
@@ -150,7 +149,7 @@ impl PoseFit<'_> {
     /// The log of iterations `first ..= last` (their losses and poses), read back.
     pub(super) fn read_log(&self, first: u32, last: u32, seconds: f64) -> Result<Vec<PoseLog>> {
         let rows: Vec<[f32; 4]> = self.ctx.read_buffer(
-            &self.log,
+            &self.model.log,
             32 * u64::from(first - 1),
             2 * (last - first + 1) as usize,
         )?;
@@ -158,7 +157,7 @@ impl PoseFit<'_> {
             .chunks_exact(2)
             .zip(first..=last)
             .map(|(r, it)| {
-                let (sigma, gamma) = self.opts.sigma_gamma(it - 1);
+                let (sigma, gamma) = self.model.opts.sigma_gamma(it - 1);
                 PoseLog {
                     iteration: it,
                     loss: f64::from(r[0][0]),
@@ -175,15 +174,15 @@ impl PoseFit<'_> {
 
     /// The parameters and Adam's moments now (each `[rotation; translation]`).
     pub(super) fn read_state(&self) -> Result<[[f64; 6]; 3]> {
-        let ti = 4 * u64::from(self.push.translation_at);
+        let ti = 4 * u64::from(self.model.push.translation_at);
         let read = |b: &Buffer, at: u64| -> Result<Vec<f32>> { self.ctx.read_buffer(b, at, 3) };
-        let (mr, vr) = self.adam_rotation.moments();
-        let (mt, vt) = self.adam_translation.moments();
+        let (mr, vr) = self.model.adam_rotation.moments();
+        let (mt, vt) = self.model.adam_translation.moments();
         let join = |a: Vec<f32>, b: Vec<f32>| -> [f64; 6] {
             std::array::from_fn(|k| f64::from(if k < 3 { a[k] } else { b[k - 3] }))
         };
         Ok([
-            join(read(&self.params, 0)?, read(&self.params, ti)?),
+            join(read(&self.model.params, 0)?, read(&self.model.params, ti)?),
             join(read(mr, 0)?, read(mt, 0)?),
             join(read(vr, 0)?, read(vt, 0)?),
         ])
@@ -191,12 +190,14 @@ impl PoseFit<'_> {
 
     /// Sets the parameters and Adam's moments (each `[rotation; translation]`).
     pub(super) fn write_state(&self, state: [&[f64; 6]; 3]) -> Result<()> {
-        let ti = 4 * u64::from(self.push.translation_at);
+        let ti = 4 * u64::from(self.model.push.translation_at);
         let f = |a: &[f64; 6], k: usize| -> [f32; 3] { std::array::from_fn(|i| a[k + i] as f32) };
-        let (mr, vr) = self.adam_rotation.moments();
-        let (mt, vt) = self.adam_translation.moments();
-        self.ctx.write_buffer(&self.params, 0, &f(state[0], 0))?;
-        self.ctx.write_buffer(&self.params, ti, &f(state[0], 3))?;
+        let (mr, vr) = self.model.adam_rotation.moments();
+        let (mt, vt) = self.model.adam_translation.moments();
+        self.ctx
+            .write_buffer(&self.model.params, 0, &f(state[0], 0))?;
+        self.ctx
+            .write_buffer(&self.model.params, ti, &f(state[0], 3))?;
         self.ctx.write_buffer(mr, 0, &f(state[1], 0))?;
         self.ctx.write_buffer(mt, 0, &f(state[1], 3))?;
         self.ctx.write_buffer(vr, 0, &f(state[2], 0))?;
@@ -205,9 +206,9 @@ impl PoseFit<'_> {
 
     /// dL/d(ω, t) of the last iteration that ran (the gradient its Adam steps took).
     pub fn gradient(&self) -> Result<[f64; 6]> {
-        let ti = 4 * u64::from(self.push.translation_at);
-        let r: Vec<f32> = self.ctx.read_buffer(&self.d_params, 0, 3)?;
-        let t: Vec<f32> = self.ctx.read_buffer(&self.d_params, ti, 3)?;
+        let ti = 4 * u64::from(self.model.push.translation_at);
+        let r: Vec<f32> = self.ctx.read_buffer(&self.model.d_params, 0, 3)?;
+        let t: Vec<f32> = self.ctx.read_buffer(&self.model.d_params, ti, 3)?;
         Ok(std::array::from_fn(|k| {
             f64::from(if k < 3 { r[k] } else { t[k - 3] })
         }))
@@ -216,10 +217,10 @@ impl PoseFit<'_> {
     /// The log of iterations `first ..= last` that ran: each one's loss, σ, γ and the pose it
     /// evaluated (`seconds` as given).
     pub fn log(&self, first: u32, last: u32, seconds: f64) -> Result<Vec<PoseLog>> {
-        if first == 0 || first > last || last > self.opts.iterations {
+        if first == 0 || first > last || last > self.model.opts.iterations {
             return Err(Error::Misuse(format!(
                 "pose fit: the log of {first}..={last} of 1..={}",
-                self.opts.iterations
+                self.model.opts.iterations
             )));
         }
         self.read_log(first, last, seconds)
@@ -230,18 +231,13 @@ impl PoseFit<'_> {
         Ok(Pose::from_array(self.read_state()?[0]))
     }
 
-    /// Entries the bins and the backward's partials hold now.
-    pub fn capacity(&self) -> u64 {
-        self.view.capacity()
-    }
-
     /// The point rotations turn about.
     pub fn centre(&self) -> DVec3 {
-        DVec3::from(self.push.centre.map(f64::from))
+        DVec3::from(self.model.push.centre.map(f64::from))
     }
 }
 
-impl Fit for PoseFit<'_> {
+impl PoseModel for Rigid {
     const NAME: &'static str = "pose fit";
 
     fn last_iteration(&self) -> u32 {
@@ -256,25 +252,24 @@ impl Fit for PoseFit<'_> {
         rec: &mut Recorder<'_>,
         gate: &mut IterationGate,
         it: u32,
-        _row: u32,
+        view: &mut PosedView,
     ) -> Result<()> {
         let o = &self.opts;
         let (sigma, gamma) = o.sigma_gamma(it - 1);
-        self.view.scene.set_blur(sigma, gamma)?;
+        view.scene.set_blur(sigma, gamma)?;
         let rot = o.adam(it - 1);
         self.adam_rotation.set_options(rot)?;
         self.adam_translation.set_options(AdamOptions {
             lr: o.lr_translation * o.lr_factor(it - 1),
             ..rot
         })?;
-        self.record_pose(rec)?;
+        self.record_pose(rec, view)?;
         let ti = 4 * u64::from(self.push.translation_at);
         let push = PosePush {
             log_index: it - 1,
             ..self.push
         };
         let Self {
-            view,
             mse,
             grad,
             params,
@@ -327,42 +322,22 @@ impl Fit for PoseFit<'_> {
         )
     }
 
-    fn capacity(&self) -> u64 {
-        self.view.capacity()
-    }
-
-    fn grow(&mut self, ctx: &Context, total: u64) -> Result<()> {
-        self.view.resize(ctx, total)
-    }
-}
-
-impl<'c> Posed<'c> for PoseFit<'c> {
-    fn ctx(&self) -> &'c Context {
-        self.ctx
-    }
-    fn view(&self) -> &PosedView {
-        &self.view
-    }
-    fn view_mut(&mut self) -> &mut PosedView {
-        &mut self.view
-    }
-
     /// Records the posed positions and their lit colours into the scene.
-    fn record_pose(&self, rec: &mut Recorder<'_>) -> Result<()> {
+    fn record_pose(&self, rec: &mut Recorder<'_>, view: &PosedView) -> Result<()> {
         rec.pass("pose", |rec| {
             rec.dispatch(
                 &self.apply,
                 &specs::PoseApplyBindings {
                     params: self.params.whole(),
                     rest: self.rest.whole(),
-                    posed: self.view.scene.positions().whole(),
+                    posed: view.scene.positions().whole(),
                 }
                 .for_kernel(&self.apply)?,
                 &self.push,
                 groups(u64::from(self.push.vertex_count), 64)?,
             )
         })?;
-        self.view.record_light(rec)
+        view.record_light(rec)
     }
 
     fn record_loss(
@@ -375,7 +350,7 @@ impl<'c> Posed<'c> for PoseFit<'c> {
         self.mse.record(rec, images, target, None)
     }
 
-    fn read_loss(&self) -> Result<f32> {
-        self.mse.read_loss(self.ctx)
+    fn read_loss(&self, ctx: &Context) -> Result<f32> {
+        self.mse.read_loss(ctx)
     }
 }

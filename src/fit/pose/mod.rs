@@ -78,7 +78,7 @@ mod problem;
 pub mod cpu;
 
 pub use super::posed::PoseTarget;
-pub use fitter::{PoseFit, PoseFitter};
+pub use fitter::{PoseFit, PoseFitter, Rigid};
 pub use multistart::{
     MultiStartResult, StartOutcome, fit_pose_multistart, screened_starts, spread_rotations,
     spread_starts,
