@@ -464,20 +464,22 @@ impl PoseModel for Skinned {
         self.opts.iterations
     }
 
-    /// The pose and its lighting, then the guarded forward with the rest gated on the count:
-    /// the MSE, the backward, the lighting's backward, the angle gradient (and the log row) and
-    /// the Adam step.
-    fn record_iteration(
+    fn set_iteration(&mut self, it: u32) -> Result<(f64, f64)> {
+        self.adam.set_options(self.opts.adam(it - 1))?;
+        Ok(self.opts.sigma_gamma(it - 1))
+    }
+
+    /// The guarded forward with the rest gated on the count: the MSE of the images blurred
+    /// as the iteration's stage says, the backward, the lighting's backward, the angle
+    /// gradient (and the log row) and the Adam step.
+    fn record_step(
         &mut self,
         rec: &mut Recorder<'_>,
         gate: &mut IterationGate,
         it: u32,
-        view: &mut PosedView,
+        view: &PosedView,
     ) -> Result<()> {
-        let (sigma, gamma, blur) = self.opts.stage(it - 1);
-        view.scene.set_blur(sigma, gamma)?;
-        self.adam.set_options(self.opts.adam(it - 1))?;
-        self.record_pose(rec, view)?;
+        let blur = self.opts.blur_at(it - 1);
         let push = SkinPush {
             log_index: it - 1,
             ..self.push
@@ -527,8 +529,8 @@ impl PoseModel for Skinned {
         )
     }
 
-    /// Records the bones, the skinned positions and their lit colours into the scene.
-    fn record_pose(&self, rec: &mut Recorder<'_>, view: &PosedView) -> Result<()> {
+    /// Records the bones, then the skinned positions.
+    fn record_positions(&self, rec: &mut Recorder<'_>, positions: BufferRange<'_>) -> Result<()> {
         rec.pass("kinematics", |rec| {
             rec.dispatch(
                 &self.fk,
@@ -549,14 +551,13 @@ impl PoseModel for Skinned {
                     bones: self.bones.whole(),
                     rest: self.rest.whole(),
                     skins: self.skins.whole(),
-                    posed: view.scene.positions().whole(),
+                    posed: positions,
                 }
                 .for_kernel(&self.apply)?,
                 &self.push,
                 groups(u64::from(self.push.vertex_count), 64)?,
             )
-        })?;
-        view.record_light(rec)
+        })
     }
 
     fn record_loss(

@@ -279,16 +279,18 @@ pub trait PoseModel {
     const NAME: &'static str;
     /// The last iteration the fit runs ([`Fit::last_iteration`]).
     fn last_iteration(&self) -> u32;
-    /// Records the posed positions and their lit colours into `view`'s scene.
-    fn record_pose(&self, rec: &mut Recorder<'_>, view: &PosedView) -> Result<()>;
-    /// Records iteration `it` ([`Fit::record_iteration`]): its σ and γ set in `view`, the pose,
-    /// then [`PosedView::record_guarded`] with the fit's loss and step.
-    fn record_iteration(
+    /// Sets iteration `it`'s optimizer options; its σ and γ.
+    fn set_iteration(&mut self, it: u32) -> Result<(f64, f64)>;
+    /// Records the posed positions (packed xyz) into `positions`.
+    fn record_positions(&self, rec: &mut Recorder<'_>, positions: BufferRange<'_>) -> Result<()>;
+    /// Records iteration `it`'s step after the pose: [`PosedView::record_guarded`] with the
+    /// fit's image loss, its gradient to the parameters and the optimizer.
+    fn record_step(
         &mut self,
         rec: &mut Recorder<'_>,
         gate: &mut IterationGate,
         it: u32,
-        view: &mut PosedView,
+        view: &PosedView,
     ) -> Result<()>;
     /// Records the image loss of an evaluation (no gradient) of the render against the target,
     /// of images blurred by `blur` pixels where the fit's loss blurs.
@@ -335,10 +337,15 @@ impl<'c, M: PoseModel> PosedFit<'c, M> {
     /// Sizes the guarded bins for the pose now at σ and γ ([`PosedView::fit_capacity`]).
     pub(crate) fn fit_capacity(&mut self, sigma: f64, gamma: f64) -> Result<()> {
         self.view.scene.set_blur(sigma, gamma)?;
-        let (model, view) = (&self.model, &self.view);
-        self.ctx
-            .submit_and_wait(|rec| model.record_pose(rec, view))?;
+        self.ctx.submit_and_wait(|rec| self.record_pose(rec))?;
         self.view.fit_capacity(self.ctx)
+    }
+
+    /// Records the posed positions and their lit colours into the scene.
+    fn record_pose(&self, rec: &mut Recorder<'_>) -> Result<()> {
+        self.model
+            .record_positions(rec, self.view.scene.positions().whole())?;
+        self.view.record_light(rec)
     }
 }
 
@@ -363,7 +370,10 @@ impl<M: PoseModel> Fit for PosedFit<'_, M> {
         it: u32,
         _row: u32,
     ) -> Result<()> {
-        self.model.record_iteration(rec, gate, it, &mut self.view)
+        let (sigma, gamma) = self.model.set_iteration(it)?;
+        self.view.scene.set_blur(sigma, gamma)?;
+        self.record_pose(rec)?;
+        self.model.record_step(rec, gate, it, &self.view)
     }
 
     fn capacity(&self) -> u64 {
@@ -385,7 +395,7 @@ pub(crate) fn evaluate<M: PoseModel>(
 ) -> Result<(f64, Vec<[f32; 4]>)> {
     fitter.view.scene.set_blur(sigma, gamma)?;
     fitter.submit_guarded(|fit, rec, gate| {
-        fit.model.record_pose(rec, &fit.view)?;
+        fit.record_pose(rec)?;
         fit.view
             .record_evaluation(rec, gate, |rec, images, target| {
                 fit.model.record_loss(rec, images, target, blur)

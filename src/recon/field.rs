@@ -378,7 +378,9 @@ impl Fit for FieldReconTraining<'_> {
         Ok(())
     }
 
-    /// Iteration `it` at schedule row `row` (the staged rows copied in first).
+    /// Iteration `it` on the batch staged at row `row`: the encoder's codes; per object its
+    /// anchors sampled and probed, the count gated; then the conditioned field's loss and
+    /// gradient per object, the encoder's backward and the Adam step.
     fn record_iteration(
         &mut self,
         rec: &mut Recorder<'_>,

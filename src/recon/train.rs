@@ -713,7 +713,10 @@ impl Fit for ReconTraining<'_> {
         Ok(())
     }
 
-    /// Iteration `it` at schedule row `row` (the staged rows copied in first).
+    /// Iteration `it` on the batch staged at row `row`: the network and the decoder, the
+    /// guarded render of the batch's views, then gated on its count the silhouette (and
+    /// colour) loss, the backward, the regularizers, the decoder's and the network's backward
+    /// and the Adam step.
     fn record_iteration(
         &mut self,
         rec: &mut Recorder<'_>,

@@ -244,26 +244,26 @@ impl PoseModel for Rigid {
         self.opts.iterations
     }
 
-    /// The pose and its lighting, then the guarded forward with the rest gated on the count:
-    /// the MSE, the backward, the lighting's backward, the pose gradient (and the log row) and
-    /// the two Adam steps.
-    fn record_iteration(
-        &mut self,
-        rec: &mut Recorder<'_>,
-        gate: &mut IterationGate,
-        it: u32,
-        view: &mut PosedView,
-    ) -> Result<()> {
+    fn set_iteration(&mut self, it: u32) -> Result<(f64, f64)> {
         let o = &self.opts;
-        let (sigma, gamma) = o.sigma_gamma(it - 1);
-        view.scene.set_blur(sigma, gamma)?;
         let rot = o.adam(it - 1);
         self.adam_rotation.set_options(rot)?;
         self.adam_translation.set_options(AdamOptions {
             lr: o.lr_translation * o.lr_factor(it - 1),
             ..rot
         })?;
-        self.record_pose(rec, view)?;
+        Ok(o.sigma_gamma(it - 1))
+    }
+
+    /// The guarded forward with the rest gated on the count: the MSE, the backward, the
+    /// lighting's backward, the pose gradient (and the log row) and the two Adam steps.
+    fn record_step(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        gate: &mut IterationGate,
+        it: u32,
+        view: &PosedView,
+    ) -> Result<()> {
         let ti = 4 * u64::from(self.push.translation_at);
         let push = PosePush {
             log_index: it - 1,
@@ -322,22 +322,20 @@ impl PoseModel for Rigid {
         )
     }
 
-    /// Records the posed positions and their lit colours into the scene.
-    fn record_pose(&self, rec: &mut Recorder<'_>, view: &PosedView) -> Result<()> {
+    fn record_positions(&self, rec: &mut Recorder<'_>, positions: BufferRange<'_>) -> Result<()> {
         rec.pass("pose", |rec| {
             rec.dispatch(
                 &self.apply,
                 &specs::PoseApplyBindings {
                     params: self.params.whole(),
                     rest: self.rest.whole(),
-                    posed: view.scene.positions().whole(),
+                    posed: positions,
                 }
                 .for_kernel(&self.apply)?,
                 &self.push,
                 groups(u64::from(self.push.vertex_count), 64)?,
             )
-        })?;
-        view.record_light(rec)
+        })
     }
 
     fn record_loss(
