@@ -478,7 +478,8 @@ impl GpuScene {
         }
         if self.position_layout != VertexLayout::default() {
             return Err(Error::Misuse(
-                "update_meshes writes the scene's own positions; this scene renders a host's                  (bind_positions)"
+                "update_meshes writes the scene's own positions; this scene renders a host's positions \
+                 (bind_positions)"
                     .into(),
             ));
         }
@@ -494,7 +495,8 @@ impl GpuScene {
                 || !same_colors
             {
                 return Err(Error::Input(format!(
-                    "mesh {i} does not share the scene's topology (faces, vertex count, texture                      resolution and colour source must be equal)"
+                    "mesh {i} does not share the scene's topology (faces, vertex count, texture \
+                     resolution and colour source must be equal)"
                 )));
             }
         }
