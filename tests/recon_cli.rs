@@ -117,6 +117,17 @@ fn train_twice_resume_evaluate_and_reconstruct() {
         err.contains("other options") && err.lines().count() == 1,
         "{err}"
     );
+    // So is a resume with the other recipe (c was trained with SoftRas's, the default).
+    let refused = softvk()
+        .args(["train-recon", "--dataset", data.to_str().unwrap()])
+        .args(["--out", c.to_str().unwrap(), "--iters", "6", "--batch", "2"])
+        .args(["--channels", "2,3,4", "--latent", "8", "--hidden", "8"])
+        .args(["--lr", "1e-3", "--recipe", "one-view", "--resume"])
+        .output()
+        .unwrap();
+    assert!(!refused.status.success());
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(err.contains("other options"), "{err}");
     // The learning rate's step may be added on resume where it changes no iteration already
     // run (c's checkpoint is at 4: a step at 5 is fine), not where it would have (at 3).
     train(&data, &c, 6, &["--resume", "--lr-step", "5"]);
@@ -438,7 +449,7 @@ fn a_model_round_trips_through_its_file_and_bad_files_are_refused() {
             adam_m: model.params.iter().map(|p| p * 0.5).collect(),
             adam_v: model.params.iter().map(|p| p * p).collect(),
             settings: [
-                1.0, 2.0, 1e-3, 0.9, 0.999, 5e-3, 5e-4, 1.0, 1e-4, 300.0, 0.3,
+                1.0, 2.0, 1e-3, 0.9, 0.999, 5e-3, 5e-4, 1.0, 1e-4, 300.0, 0.3, 1.0,
             ],
             log: vec![
                 [10.0, 0.5, 0.01, 0.2, 3.0, 0.6],
@@ -450,7 +461,8 @@ fn a_model_round_trips_through_its_file_and_bad_files_are_refused() {
     };
     ckpt.save(&dir.path("ckpt.npz")).unwrap();
     assert_eq!(ReconModel::load(&dir.path("ckpt.npz")).unwrap(), ckpt);
-    // A checkpoint from before the learning-rate step (nine settings) reads as one without.
+    // A file of format 1 (whose mesh decoder squashed the centroid twice) is refused, by its
+    // format.
     {
         use softvk::recon::npz::{self, NpyArray, NpyData, Npz};
         let mut file = Npz::open(&dir.path("ckpt.npz")).unwrap();
@@ -460,19 +472,17 @@ fn a_model_round_trips_through_its_file_and_bad_files_are_refused() {
             .map(|n| (n.clone(), file.array(n).unwrap()))
             .collect();
         for (name, a) in &mut arrays {
-            if name == "train" {
-                let NpyData::F64(v) = &a.data else {
-                    panic!("settings are float64")
-                };
-                *a = NpyArray::new(vec![9], NpyData::F64(v[..9].to_vec())).unwrap();
+            if name == "format" {
+                *a = NpyArray::new(vec![1], NpyData::I32(vec![1])).unwrap();
             }
         }
         let refs: Vec<(&str, &NpyArray)> = arrays.iter().map(|(n, a)| (n.as_str(), a)).collect();
         npz::write_npz(&dir.path("old.npz"), &refs, false).unwrap();
-        let old = ReconModel::load(&dir.path("old.npz")).unwrap();
-        let settings = old.train.unwrap().settings;
-        assert_eq!(settings[..9], ckpt.train.as_ref().unwrap().settings[..9]);
-        assert_eq!(settings[9..], [0.0, 1.0]);
+        let e = ReconModel::load(&dir.path("old.npz")).unwrap_err();
+        assert!(
+            matches!(e, softvk::Error::Input(ref m) if m.contains("model format [1]")),
+            "{e}"
+        );
     }
     // The loaded model reconstructs what the saved one does.
     let image: Vec<u8> = (0..4 * 16 * 16).map(|i| (i * 37 % 251) as u8).collect();

@@ -14,7 +14,7 @@ use softvk::raster::reference_grad;
 use softvk::recon::batch::{self, BatchShape};
 use softvk::recon::decode;
 use softvk::recon::train::{
-    self, LrStep, NetShape, ReconTrainer, TrainImages, TrainOptions, VIEWS, schedule_entry,
+    self, LrStep, NetShape, Recipe, ReconTrainer, TrainImages, TrainOptions, VIEWS, schedule_entry,
     view_azimuth,
 };
 use softvk::recon::view_camera;
@@ -48,10 +48,27 @@ fn options() -> TrainOptions {
 }
 
 #[test]
-fn one_training_iteration_equals_the_chain_of_twins() {
+fn one_training_iteration_equals_the_chain_of_twins_softras_recipe() {
+    // With the step at iteration 1, σ is stepped from the first iteration on.
+    one_iteration_against_twins(TrainOptions {
+        lr_step: Some(LrStep { at: 1, factor: 0.5 }),
+        ..options()
+    });
+}
+
+#[test]
+fn one_training_iteration_equals_the_chain_of_twins_one_view_recipe() {
+    one_iteration_against_twins(TrainOptions {
+        recipe: Recipe::OneView,
+        ..options()
+    });
+}
+
+/// One iteration of `opts` on the GPU against the chain of twins, from the schedule's rows to
+/// the parameters' gradient.
+fn one_iteration_against_twins(opts: TrainOptions) {
     let Some(gpu) = common::gpu() else { return };
     let data = data(&gpu);
-    let opts = options();
     let mut trainer = ReconTrainer::new(&gpu, &data, &opts, None).unwrap();
     let params: Vec<f64> = trainer
         .trained()
@@ -65,15 +82,26 @@ fn one_training_iteration_equals_the_chain_of_twins() {
     let got = trainer.trained().read_gradient(&gpu).unwrap();
     assert!(log.color > 0.0, "the colour loss is on");
 
-    // The twins.
-    let b = opts.batch as usize;
+    // The twins. SoftRas's recipe: each object's row, then its views swapped, all inputs; the
+    // mean of the 4b IoU losses. One view: the sum of the two per object.
+    let both = opts.recipe == Recipe::SoftRas;
+    let b = opts.inputs() as usize;
+    assert_eq!(b, opts.batch as usize * if both { 2 } else { 1 });
     let px = (SIZE * SIZE) as usize;
     let schedule: Vec<[u32; 4]> = (0..opts.batch)
         .map(|s| schedule_entry(opts.seed, 1, s, &data.classes))
+        .flat_map(|[o, a, v, _]| {
+            let swapped = [o, v, a, 0];
+            if both {
+                vec![[o, a, v, 0], swapped]
+            } else {
+                vec![[o, a, v, 0]]
+            }
+        })
         .collect();
     let table: Vec<[f32; 2]> = (0..VIEWS).map(|v| view_rotation(view_azimuth(v))).collect();
     let shape = BatchShape {
-        batch: opts.batch,
+        batch: b as u32,
         pixels: px as u32,
         views: VIEWS,
     };
@@ -91,7 +119,16 @@ fn one_training_iteration_equals_the_chain_of_twins() {
     let (meshes, copies) = decode::cpu::forward(&base, &signs, head, &rot64, 2);
     let colors = decode::cpu::colors(head, vc, 2);
     let n = 3 * t.vertex_count();
-    let s = opts.raster_settings();
+    let mut s = opts.raster_settings();
+    s.sigma = opts.sigma_at(1);
+    if both {
+        assert_eq!(
+            s.dist_eps, 1e-10,
+            "SoftRas's recipe renders with its dist_eps"
+        );
+        assert_eq!(s.sigma, 0.5 * opts.sigma, "σ steps with the learning rate");
+    }
+    let w_sil = if both { 1.0 } else { 2.0 };
     let cam = view_camera(0);
     let mut images = Vec::new();
     let mut copy_meshes = Vec::new();
@@ -125,7 +162,7 @@ fn one_training_iteration_equals_the_chain_of_twins() {
     let mut d_colors = Vec::with_capacity(2 * b * vc);
     for (c, m) in copy_meshes.iter().enumerate() {
         let d_image: Vec<[f64; 4]> = (c * px..(c + 1) * px)
-            .map(|p| [0, 1, 2, 3].map(|k| 2.0 * iou.d_image[p][k] + lambda * d_mse[p][k]))
+            .map(|p| [0, 1, 2, 3].map(|k| w_sil * iou.d_image[p][k] + lambda * d_mse[p][k]))
             .collect();
         let g = reference_grad::grad(m, &[cam], &Lighting::unlit(), &s, &d_image).unwrap();
         d_copies.extend(g.positions.iter().flatten());
@@ -147,7 +184,7 @@ fn one_training_iteration_equals_the_chain_of_twins() {
                 / b as f64;
         }
     }
-    let loss = 2.0 * iou.loss
+    let loss = w_sil * iou.loss
         + lambda * mse
         + (f64::from(opts.laplacian) * lap_sum + f64::from(opts.flatten) * flat_sum) / b as f64;
     let mut d_head = decode::cpu::backward(&base, &signs, head, &rot64, 2, &d_meshes, &d_copies);
@@ -156,7 +193,7 @@ fn one_training_iteration_equals_the_chain_of_twins() {
 
     eprintln!("loss GPU {} vs twins {loss}", log.total);
     assert!((f64::from(log.total) - loss).abs() <= 1e-4 * loss.abs().max(1e-3));
-    assert!((f64::from(log.silhouette) - 2.0 * iou.loss).abs() <= 1e-4);
+    assert!((f64::from(log.silhouette) - w_sil * iou.loss).abs() <= 1e-4);
     let scale = want.iter().fold(0.0f64, |m, g| m.max(g.abs()));
     let err = got
         .iter()
@@ -172,10 +209,11 @@ fn one_training_iteration_equals_the_chain_of_twins() {
 fn train_run(
     gpu: &softvk::gpu::Context,
     data: &TrainImages,
+    opts: &TrainOptions,
     iterations: u32,
     k: u32,
 ) -> (Vec<u32>, Vec<f32>) {
-    let mut trainer = ReconTrainer::new(gpu, data, &options(), None).unwrap();
+    let mut trainer = ReconTrainer::new(gpu, data, opts, None).unwrap();
     let mut losses = Vec::new();
     let mut it = 1;
     while it <= iterations {
@@ -202,14 +240,15 @@ fn train_run(
 fn training_lowers_the_loss_and_is_the_same_bits_at_any_k() {
     let Some(gpu) = common::gpu() else { return };
     let data = data(&gpu);
-    let iterations = 40;
-    let (params1, losses) = train_run(&gpu, &data, iterations, 1);
+    let iterations = 80;
+    let opts = options();
+    let (params1, losses) = train_run(&gpu, &data, &opts, iterations, 1);
     let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
     let (early, late) = (mean(&losses[..8]), mean(&losses[losses.len() - 8..]));
     eprintln!("silhouette loss: first 8 iterations {early:.4}, last 8 {late:.4}");
     assert!(late < 0.8 * early, "the loss did not fall: {losses:?}");
-    for k in [7, 40] {
-        let (params_k, _) = train_run(&gpu, &data, iterations, k);
+    for k in [7, 80] {
+        let (params_k, _) = train_run(&gpu, &data, &opts, iterations, k);
         assert!(
             params_k == params1,
             "{k} iterations per submission changed the bits"
@@ -226,16 +265,34 @@ fn the_learning_rate_step_applies_from_its_iteration_on() {
         assert_eq!(trainer.run(1, iterations, None).unwrap(), None);
         trainer.trained().read_params(&gpu).unwrap()
     };
-    // A factor of 0 from iteration 3 on: iterations 3 and 4 change nothing.
+    // A factor of 0 from iteration 3 on: iterations 3 and 4 change nothing (the one-view
+    // recipe, where σ does not step: SoftRas's would step σ to 0, which it refuses).
     let frozen = TrainOptions {
+        recipe: Recipe::OneView,
         lr_step: Some(LrStep { at: 3, factor: 0.0 }),
         ..options()
     };
+    assert!(matches!(
+        ReconTrainer::new(
+            &gpu,
+            &data,
+            &TrainOptions {
+                recipe: Recipe::SoftRas,
+                ..frozen.clone()
+            },
+            None
+        ),
+        Err(softvk::Error::Input(_))
+    ));
     assert_eq!(frozen.lr_at(2), options().adam.lr);
     assert_eq!(frozen.lr_at(3), 0.0);
-    let two = params(&options(), 2);
+    let one_view = TrainOptions {
+        recipe: Recipe::OneView,
+        ..options()
+    };
+    let two = params(&one_view, 2);
     assert!(params(&frozen, 4) == two, "iterations after the step moved");
-    assert!(params(&options(), 4) != two, "without the step they move");
+    assert!(params(&one_view, 4) != two, "without the step they move");
     assert!(matches!(
         ReconTrainer::new(
             &gpu,

@@ -1,8 +1,8 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 // dL/d r_c for object b and axis k: the vertices' shares of dL/dc (`recon_decode_backward.comp`)
-// summed in vertex order, times dc/d r_c = (1 − c²) · 0.1 (1 − tanh²(r_c)) for
-// c = tanh(0.1 tanh(r_c)). One invocation per (b, k). Twin: `crate::recon::decode::cpu::backward`.
+// summed in vertex order, times dc/d r_c = (1 − c²) · 0.1 for
+// c = tanh(0.1 r_c). One invocation per (b, k). Twin: `crate::recon::decode::cpu::backward`.
 #include "common.glsl"
 
 layout(local_size_x = 64) in;
@@ -30,7 +30,6 @@ void main() {
         sum += partials[3u * (b * pc.vertex_count + i) + k];
     }
     uint slot = b * pc.stride + 3u * pc.vertex_count + k;
-    float th = tanh(outputs[slot]);
-    float c = tanh(0.1 * th);
-    d_outputs[slot] = sum * ((1.0 - c * c) * (0.1 * (1.0 - th * th)));
+    float c = tanh(0.1 * outputs[slot]);
+    d_outputs[slot] = sum * ((1.0 - c * c) * 0.1);
 }

@@ -3,7 +3,7 @@
 // The reconstruction decoder's mesh (SoftRas `models.py` Decoder), per object b and vertex i,
 // from the network's outputs r = [displacement (3 V), centroid (3)] of object b and the sphere
 // template's base = log(|t| / (1 − |t|)) and sign(t) (template already scaled by obj_scale):
-//   c = tanh(0.1 tanh(r_c));  s = sigmoid(base + r_d);  v = s sign(t)
+//   c = tanh(0.1 r_c);  s = sigmoid(base + r_d);  v = s sign(t)
 //   v = relu(v) (1 − c) − relu(−v) (c + 1) + c;   p = 0.5 v
 // p goes to `canonical` (the object's mesh) and, turned about y by each of its copies'
 // rotations (cos φ, sin φ): x' = cos φ x + sin φ z, z' = −sin φ x + cos φ z, to the renderer's
@@ -38,7 +38,7 @@ void main() {
     vec3 p;
     for (uint k = 0u; k < 3u; ++k) {
         uint t = 3u * i + k;
-        float c = tanh(0.1 * tanh(outputs[r0 + 3u * pc.vertex_count + k]));
+        float c = tanh(0.1 * outputs[r0 + 3u * pc.vertex_count + k]);
         float s = 1.0 / (1.0 + exp(-(base[t] + outputs[r0 + t])));
         float v = s * signs[t];
         p[k] = 0.5 * ((max(v, 0.0) * (1.0 - c) - max(-v, 0.0) * (c + 1.0)) + c);

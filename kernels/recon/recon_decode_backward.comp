@@ -6,7 +6,7 @@
 //   dL/d r_d = 0.5 g (v > 0 ? 1 − c : c + 1) s (1 − s) sign(t)
 // and the vertex's share of dL/dc, 0.5 g (1 − |v|), at its slot of `partials`;
 // `recon_centroid_grad.comp` sums the shares over the vertices in order and chains through
-// c = tanh(0.1 tanh(r_c)). Twin: `crate::recon::decode::cpu::backward`.
+// c = tanh(0.1 r_c). Twin: `crate::recon::decode::cpu::backward`.
 #include "common.glsl"
 
 layout(local_size_x = 64) in;
@@ -46,7 +46,7 @@ void main() {
     uint r0 = b * pc.stride;
     for (uint k = 0u; k < 3u; ++k) {
         uint t = 3u * i + k;
-        float c = tanh(0.1 * tanh(outputs[r0 + 3u * pc.vertex_count + k]));
+        float c = tanh(0.1 * outputs[r0 + 3u * pc.vertex_count + k]);
         float s = 1.0 / (1.0 + exp(-(base[t] + outputs[r0 + t])));
         float sign_t = signs[t];
         float v = s * sign_t;

@@ -34,7 +34,8 @@ use softvk::recon::field::{
 };
 use softvk::recon::model::{ReconModel, Reconstruction, Reconstructor, SETTINGS, TrainState};
 use softvk::recon::train::{
-    self, LrStep, NetShape, ReconTrainer, ReconTraining, TrainImages, TrainOptions, TrainedParams,
+    self, LrStep, NetShape, Recipe, ReconTrainer, ReconTraining, TrainImages, TrainOptions,
+    TrainedParams,
 };
 use softvk::{Error, Result};
 
@@ -73,9 +74,16 @@ pub struct TrainReconArgs {
     #[arg(long, value_name = "N", default_value_t = 2000, value_parser = clap::value_parser!(u32).range(1..))]
     pub iters: u32,
 
-    /// Objects per batch (two views each).
-    #[arg(long, value_name = "B", default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..))]
-    pub batch: u32,
+    /// Objects per batch, two views each [default: 64 (SoftRas's), 16 with --field].
+    #[arg(long, value_name = "B", value_parser = clap::value_parser!(u32).range(1..))]
+    pub batch: Option<u32>,
+
+    /// How the mesh decoder's batches are seen and scored: `softras` (SoftRas's: both views
+    /// of an object are inputs, each prediction rendered from both, the mean of the four IoU
+    /// losses, `dist_eps` 1e-10, σ stepped with the learning rate) or `one-view` (view a is the
+    /// input, rendered from both views, the sum of the two IoU losses).
+    #[arg(long, value_enum, default_value_t = RecipeArg::Softras)]
+    pub recipe: RecipeArg,
 
     /// Adam's learning rate [default: 1e-4 (SoftRas's), 1e-3 with --field].
     #[arg(long, value_parser = positive)]
@@ -206,6 +214,24 @@ pub struct EvalReconArgs {
     /// and what they enclose).
     #[arg(long, value_enum, default_value_t = VoxelizeArg::Parity)]
     pub voxelize: VoxelizeArg,
+}
+
+/// `--recipe` of `softvk train-recon`: [`Recipe`]'s two.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RecipeArg {
+    /// SoftRas's: both views encoded, four renders per object, the mean of the IoU losses.
+    Softras,
+    /// View a encoded, two renders per object, the sum of the IoU losses.
+    OneView,
+}
+
+impl From<RecipeArg> for Recipe {
+    fn from(r: RecipeArg) -> Self {
+        match r {
+            RecipeArg::Softras => Recipe::SoftRas,
+            RecipeArg::OneView => Recipe::OneView,
+        }
+    }
 }
 
 /// `--voxelize` of `softvk eval-recon`: [`eval::Voxelizer`]'s two ways.
@@ -388,7 +414,8 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
     ];
     let mesh_opts = TrainOptions {
         net,
-        batch: args.batch,
+        recipe: args.recipe.into(),
+        batch: args.batch.unwrap_or(TrainOptions::default().batch),
         adam: AdamOptions {
             lr: args.lr.unwrap_or(1e-4),
             ..AdamOptions::default()
@@ -408,7 +435,7 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
                 frequencies: args.field_freqs,
             },
         },
-        batch: args.batch,
+        batch: args.batch.unwrap_or(FieldTrainOptions::default().batch),
         adam: AdamOptions {
             lr: args.lr.unwrap_or(1e-3),
             ..AdamOptions::default()
@@ -456,6 +483,11 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
         specific[3],
         step[0],
         step[1],
+        if args.field {
+            0.0
+        } else {
+            mesh_opts.recipe.code()
+        },
     ];
     let dir = report_dir(&args.out);
     let ckpt_path = dir.join("checkpoint.npz");
@@ -640,7 +672,9 @@ impl<M: Fn(Vec<f32>, u32, Option<TrainState>) -> ReconModel> TrainingRun<'_, M> 
 /// has not acted yet (both steps later than `done`, or none).
 fn same_past(then: &[f64; SETTINGS], now: &[f64; SETTINGS], done: u32) -> bool {
     let unacted = |s: &[f64; SETTINGS]| s[9] == 0.0 || s[9] > f64::from(done);
-    then[..9] == now[..9] && (then[9..] == now[9..] || (unacted(then) && unacted(now)))
+    then[..9] == now[..9]
+        && then[11] == now[11]
+        && (then[9..11] == now[9..11] || (unacted(then) && unacted(now)))
 }
 
 fn write_train_report(dir: &Path, log: &[[f64; 6]], vals: &[[f64; 2]]) -> Result<()> {

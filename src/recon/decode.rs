@@ -7,14 +7,15 @@
 //! `r = [r_d (3 V), r_c (3)]` and (`kernels/recon/recon_decode.comp`):
 //!
 //! ```text
-//! base = log(|t| / (1 − |t|));   c = tanh(0.1 · tanh(r_c))
+//! base = log(|t| / (1 − |t|));   c = tanh(0.1 · r_c)
 //! v = sigmoid(base + r_d) · sign(t);   v = relu(v) (1 − c) − relu(−v) (c + 1) + c
 //! p = 0.5 v                                                  (the object's mesh)
 //! p'_k = R_y(φ_k) p                                          (its copy k, for the renderer)
 //! ```
 //!
-//! SoftRas writes `centroid = tanh(fc_centroid(x)) · 0.1` then applies `tanh` again inside the
-//! deformation, and halves the result: the same chain. Views of the NMR dataset share their
+//! SoftRas's `Decoder.forward` writes `centroid = fc_centroid(x) · centroid_scale` (0.1), then
+//! `centroid = tanh(centroid)` inside the deformation, and halves the result: the same chain,
+//! one `tanh` (the centroid moves up to ±0.5 after the halving). Views of the NMR dataset share their
 //! elevation and distance and differ only in azimuth, so view j of an object is the view of
 //! the scene's single camera of the object turned by `φ_j` about y (see
 //! [`view_rotation`]): a batch renders its copies as a batch of meshes with one camera, and the
@@ -344,7 +345,7 @@ pub mod cpu {
         for b in 0..objects {
             let r = &outputs[b * stride..(b + 1) * stride];
             for o in 0..n {
-                let c = (0.1 * r[n + o % 3].tanh()).tanh();
+                let c = (0.1 * r[n + o % 3]).tanh();
                 let v = sigmoid(base[o] + r[o]) * signs[o];
                 canonical[b * n + o] =
                     0.5 * ((v.max(0.0) * (1.0 - c) - (-v).max(0.0) * (c + 1.0)) + c);
@@ -394,7 +395,7 @@ pub mod cpu {
                 }
                 for (k, gk) in g.iter().enumerate() {
                     let o = 3 * i + k;
-                    let c = (0.1 * r[n + k].tanh()).tanh();
+                    let c = (0.1 * r[n + k]).tanh();
                     let s = sigmoid(base[o] + r[o]);
                     let v = s * signs[o];
                     let gk = 0.5 * gk;
@@ -404,9 +405,8 @@ pub mod cpu {
                 }
             }
             for (k, dc) in d_c.iter().enumerate() {
-                let th = r[n + k].tanh();
-                let c = (0.1 * th).tanh();
-                d[b * stride + n + k] = dc * ((1.0 - c * c) * (0.1 * (1.0 - th * th)));
+                let c = (0.1 * r[n + k]).tanh();
+                d[b * stride + n + k] = dc * ((1.0 - c * c) * 0.1);
             }
         }
         d
@@ -519,6 +519,17 @@ mod tests {
         let (c, _) = cpu::forward(&base, &signs, &zero, &[[1.0, 0.0]], 1);
         for (a, t) in c.iter().zip(template.iter().flatten()) {
             assert!((a - 0.5 * f64::from(*t)).abs() < 1e-12);
+        }
+        // SoftRas's centroid: with the displacements far negative every vertex collapses onto
+        // it, 0.5 tanh(0.1 r_c) (a second tanh would cap it at 0.5 tanh(0.1) ≈ 0.05).
+        let mut collapsed = vec![-40.0; 2 * base.len() + 3];
+        collapsed[base.len()..base.len() + 3].copy_from_slice(&[10.0, -10.0, 3.0]);
+        let (c, _) = cpu::forward(&base, &signs, &collapsed, &[[1.0, 0.0]], 1);
+        let want = [1.0f64, -1.0, 0.3].map(|x| 0.5 * x.tanh());
+        for p in c.chunks(3) {
+            for k in 0..3 {
+                assert!((p[k] - want[k]).abs() < 1e-9, "{p:?} vs {want:?}");
+            }
         }
     }
 

@@ -350,7 +350,7 @@ impl<'c> Fitter<'c, FieldReconTraining<'c>> {
             d_phi: device("recon field d_phi", anchors)?,
             losses: device("recon field losses", b)?,
             sum: SumChunks::new(ctx)?,
-            batches: Batches::new(ctx, data, opts.batch, opts.seed)?,
+            batches: Batches::new(ctx, data, opts.batch, false, opts.seed)?,
             staged: Vec::new(),
             capacity,
             net,

@@ -10,7 +10,7 @@
 //! | `params` | float32 (P) | the network's parameters, [`crate::nn::Sequential`]'s layout (a field model: then the MLP's) |
 //! | `iteration` | int32 (1) | iterations trained |
 //! | `adam_m`, `adam_v` | float32 (P) | Adam's moments (a checkpoint; absent from a final model) |
-//! | `train` | float64 (11) | [`TrainState::settings`] (a checkpoint) |
+//! | `train` | float64 (12) | [`TrainState::settings`] (a checkpoint) |
 //! | `log` | float64 (R, 6) | iteration, L_sil, L_col, L_lap, L_flat, total (a checkpoint) |
 //! | `val` | float64 (S, 2) | iteration, validation 3D IoU (a checkpoint) |
 //!
@@ -29,11 +29,13 @@ use crate::field::MlpLayout;
 use crate::gpu::{Buffer, Context, MemoryKind};
 use crate::nn::{Layer, Sequential};
 
-/// The file format's version.
-pub const FORMAT: i32 = 1;
+/// The file format's version: 2 since the mesh decoder's centroid is SoftRas's `tanh(0.1 r)`
+/// (format 1 squashed it twice, so its mesh models decode differently) and the settings name
+/// the recipe.
+pub const FORMAT: i32 = 2;
 
 /// The length of [`TrainState::settings`].
-pub const SETTINGS: usize = 11;
+pub const SETTINGS: usize = 12;
 
 /// What resuming a run needs besides the parameters.
 #[derive(Clone, Debug, PartialEq)]
@@ -43,9 +45,9 @@ pub struct TrainState {
     /// Adam's second moments.
     pub adam_v: Vec<f32>,
     /// `[seed, batch, lr, β1, β2, λ_lap, λ_flat, λ_col, σ, lr step's iteration (0: none),
-    /// lr step's factor]` of the run, checked on resume; a field model's hold rays per view,
-    /// anchors, τ and the tile size where the mesh's hold λ_lap, λ_flat, λ_col and σ. (Files written before the step
-    /// existed hold the first nine; they read as no step.)
+    /// lr step's factor, recipe]` of the run, checked on resume; a field model's hold rays per
+    /// view, anchors, τ and the tile size where the mesh's hold λ_lap, λ_flat, λ_col and σ, and
+    /// recipe 0; a mesh model's recipe is [`super::train::Recipe::code`].
     pub settings: [f64; SETTINGS],
     /// The loss log so far: `[iteration, L_sil, L_col, L_lap, L_flat, total]` per row.
     pub log: Vec<[f64; 6]>,
@@ -301,12 +303,9 @@ impl ReconModel {
             let adam_m = floats(npz.array("adam_m")?, "adam_m")?;
             let adam_v = floats(npz.array("adam_v")?, "adam_v")?;
             let settings = match npz.array("train")?.data {
-                NpyData::F64(v) if v.len() == SETTINGS || v.len() == 9 => {
+                NpyData::F64(v) if v.len() == SETTINGS => {
                     let mut a = [0.0; SETTINGS];
-                    a[..v.len()].copy_from_slice(&v);
-                    if v.len() == 9 {
-                        a[10] = 1.0; // no step
-                    }
+                    a.copy_from_slice(&v);
                     a
                 }
                 _ => return Err(bad(format!("`train` is not {SETTINGS} float64"))),

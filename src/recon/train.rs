@@ -2,8 +2,8 @@
 //! (`examples/recon/train.py`, `models.py`), every iteration on the GPU:
 //!
 //! ```text
-//! schedule row ─[BatchGather]→ input (view a), targets (alphas of views a, b), rotations
-//! input ─[Sequential]→ outputs ─[MeshDecoder]→ meshes, 2 copies per object (turned per view)
+//! schedule rows ─[BatchGather]→ inputs, targets (alphas of views a, b), rotations
+//! inputs ─[Sequential]→ outputs ─[MeshDecoder]→ meshes, 2 copies each (turned per view)
 //! outputs ─[MeshDecoder colour head]→ vertex colours of the copies (with a colour loss)
 //! copies ─(guarded soft rasterizer, one camera)→ images ─[SilhouetteLoss, ImageMse]→ L, d_image
 //! d_image ─(render backward)→ d_copies, d_colours;  meshes ─[Regularizers]→ L_lap, L_flat
@@ -11,18 +11,25 @@
 //!   → d_params ─[Adam]
 //! ```
 //!
-//! **Loss**, as SoftRas's: `L = L_iou(a) + L_iou(b) + λ_col L_col + λ_lap mean_b L_lap +
-//! λ_flat mean_b L_flat` with `L_iou` SoftRas's `neg_iou_loss` over the batch and `L_col` the
-//! mean squared error of the rendered RGBA against the views' (unlit vertex colours: the
+//! **Recipes** ([`Recipe`]). SoftRas's (the default): each of the batch's B objects gives two
+//! inputs, its views a and b, so the network sees 2B images; each prediction is rendered from
+//! both views (SoftRas's `predict_multiview`: 4B renders), and
+//! `L = mean of the four IoU losses + λ_col L_col + λ_lap mean L_lap + λ_flat mean L_flat`
+//! over the 2B predicted meshes (`multiview_iou_loss`), with `dist_eps` 1e-10 and σ stepped
+//! with the learning rate (`adjust_sigma`). The one-view recipe encodes view a only and sums
+//! its two IoU losses (`L_iou(a) + L_iou(b)`), so its regularizers weigh half as much
+//! relative to the silhouettes. `L_iou` is SoftRas's `iou_loss` over its renders and `L_col`
+//! the mean squared error of the rendered RGBA against the views' (unlit vertex colours: the
 //! colour head learns the images' shaded colours; with `λ_col = 0` the copies render as
-//! silhouettes only, which is cheaper, and the colour head is not trained). [`SilhouetteLoss`] averages over all
-//! `2B` copies, which is half of SoftRas's sum of two, so its gradient is taken with weight 2;
-//! the regularizers sum over the batch's meshes (one block-diagonal mesh of `B` templates), so
-//! theirs are taken with weight `λ / B`.
+//! silhouettes only, which is cheaper, and the colour head is not trained). [`SilhouetteLoss`]
+//! averages over all renders (SoftRas's mean; the one-view recipe takes it with weight 2); the
+//! regularizers sum over the batch's meshes (one block-diagonal mesh of templates), so theirs
+//! are taken with weight `λ / meshes`.
 //!
 //! **Batches** come from a schedule computed from the seed and the iteration number alone
 //! ([`schedule_entry`]): SoftRas's sampler (a class uniformly, an object of it uniformly, two
-//! views uniformly), so a run resumed at iteration `i` sees what an uninterrupted one saw.
+//! views uniformly; in SoftRas's recipe each row is followed by its views swapped), so a run
+//! resumed at iteration `i` sees what an uninterrupted one saw.
 //!
 //! **k iterations per submission**: [`ReconTrainer::run`] records iterations `first ..= last`
 //! into one command buffer (the schedule rows uploaded before it, nothing read back between
@@ -140,25 +147,72 @@ pub fn param_count(net: &NetShape) -> Result<u64> {
     Ok(crate::nn::param_offsets(&net.layers(outputs)?).1)
 }
 
+/// How a batch's objects are seen and scored. Both render every prediction from its object's
+/// two sampled views a and b and score the renders against those views' silhouettes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Recipe {
+    /// SoftRas's (`examples/recon`): both views of an object are inputs, each prediction is
+    /// rendered from both views (four renders per object), the silhouette loss is the mean of
+    /// the four IoU losses, and the regularizers are the mean over the 2B predicted meshes.
+    /// The renderer's `dist_eps` is SoftRas's 1e-10, and σ steps with the learning rate
+    /// (SoftRas's `adjust_sigma`).
+    #[default]
+    SoftRas,
+    /// View a only is the input (two renders per object), the silhouette loss is the sum of the
+    /// two IoU losses, and the renderer keeps its defaults.
+    OneView,
+}
+
+impl Recipe {
+    /// Inputs (and predictions) per object of a batch.
+    pub fn inputs_per_object(self) -> u32 {
+        match self {
+            Recipe::SoftRas => 2,
+            Recipe::OneView => 1,
+        }
+    }
+
+    /// The silhouette loss's weight on [`SilhouetteLoss`]'s mean over all renders: SoftRas
+    /// averages its four IoU losses (1); the one-view recipe sums its two.
+    fn silhouette_weight(self) -> f32 {
+        match self {
+            Recipe::SoftRas => 1.0,
+            Recipe::OneView => COPIES as f32,
+        }
+    }
+
+    /// The number a checkpoint stores for the recipe.
+    pub fn code(self) -> f64 {
+        match self {
+            Recipe::SoftRas => 1.0,
+            Recipe::OneView => 2.0,
+        }
+    }
+}
+
 /// What training needs besides the data.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TrainOptions {
     /// The network.
     pub net: NetShape,
-    /// Objects per batch (SoftRas: 64).
+    /// How objects are seen and scored.
+    pub recipe: Recipe,
+    /// Objects per batch (SoftRas: 64); the network sees
+    /// [`Recipe::inputs_per_object`] times as many images.
     pub batch: u32,
     /// Adam (SoftRas: lr 1e-4, β = (0.9, 0.999)).
     pub adam: AdamOptions,
     /// The learning rate's step, if any (SoftRas's `step` method: × 0.3 from iteration
     /// 150 000 on).
     pub lr_step: Option<LrStep>,
-    /// λ of the Laplacian regularizer (SoftRas: 5e-3).
+    /// λ of the Laplacian regularizer (SoftRas: 5e-3), on the mean over predicted meshes.
     pub laplacian: f32,
     /// λ of the flatten regularizer (SoftRas: 5e-4).
     pub flatten: f32,
     /// λ of the colour loss (0: silhouettes only).
     pub color: f32,
-    /// The renderer's σ (SoftRas: 1e-4).
+    /// The renderer's σ (SoftRas: 1e-4); SoftRas's recipe multiplies it by the learning
+    /// rate's step factor from the step on.
     pub sigma: f64,
     /// Tile side of the guarded binning.
     pub tile: u32,
@@ -170,7 +224,8 @@ impl Default for TrainOptions {
     fn default() -> Self {
         Self {
             net: NetShape::default(),
-            batch: 16,
+            recipe: Recipe::SoftRas,
+            batch: 64,
             adam: AdamOptions {
                 lr: 1e-4,
                 ..AdamOptions::default()
@@ -204,14 +259,34 @@ impl TrainOptions {
         }
     }
 
-    /// The renderer's settings: the image size, the options' σ, vertex colours.
+    /// The renderer's σ at iteration `it` (from 1): stepped with the learning rate in
+    /// SoftRas's recipe.
+    pub fn sigma_at(&self, it: u32) -> f64 {
+        match (self.recipe, self.lr_step) {
+            (Recipe::SoftRas, Some(s)) if it >= s.at => self.sigma * s.factor,
+            _ => self.sigma,
+        }
+    }
+
+    /// Images the network sees per iteration (its batch).
+    pub fn inputs(&self) -> u32 {
+        self.batch * self.recipe.inputs_per_object()
+    }
+
+    /// The renderer's settings: the image size, the options' σ, vertex colours, and SoftRas's
+    /// `dist_eps` in its recipe.
     pub fn raster_settings(&self) -> RasterSettings {
+        let defaults = RasterSettings::default();
         RasterSettings {
             width: self.net.image,
             height: self.net.image,
             sigma: self.sigma,
             color_mode: ColorMode::Vertex,
-            ..RasterSettings::default()
+            dist_eps: match self.recipe {
+                Recipe::SoftRas => 1e-10,
+                Recipe::OneView => defaults.dist_eps,
+            },
+            ..defaults
         }
     }
 }
@@ -305,18 +380,25 @@ impl Schedule {
         })
     }
 
-    /// Stages the rows of `iterations` (`batch` slots each, iteration-major) and returns them.
+    /// Stages the rows of `iterations` (`batch` objects each, iteration-major) and returns
+    /// them; with `both_views`, each object's row is followed by its views swapped (the second
+    /// view as an input too).
     pub(crate) fn stage(
         &mut self,
         ctx: &Context,
         seed: u64,
         classes: &[(String, Range<u32>)],
         batch: u32,
+        both_views: bool,
         iterations: std::ops::RangeInclusive<u32>,
     ) -> Result<Vec<[u32; 4]>> {
         let entries: Vec<[u32; 4]> = iterations
             .flat_map(|it| (0..batch).map(move |s| (it, s)))
             .map(|(it, s)| schedule_entry(seed, it, s, classes))
+            .flat_map(|[o, a, b, _]| {
+                let swapped = both_views.then_some([o, b, a, 0]);
+                std::iter::once([o, a, b, 0]).chain(swapped)
+            })
             .collect();
         let bytes: &[u8] = bytemuck::cast_slice(&entries);
         let size = bytes.len() as u64;
@@ -402,7 +484,9 @@ pub type ReconTrainer<'c> = Fitter<'c, ReconTraining<'c>>;
 pub(crate) struct Batches {
     classes: Vec<(String, Range<u32>)>,
     seed: u64,
-    batch: u32,
+    /// Objects per batch.
+    objects: u32,
+    both_views: bool,
     shape: BatchShape,
     gather: BatchGather,
     images: Buffer,
@@ -415,8 +499,16 @@ pub(crate) struct Batches {
 }
 
 impl Batches {
-    /// `data` uploaded, for batches of `batch` objects drawn from `seed`.
-    pub(crate) fn new(ctx: &Context, data: &TrainImages, batch: u32, seed: u64) -> Result<Self> {
+    /// `data` uploaded, for batches of `objects` objects drawn from `seed`, each seen from its
+    /// view a or, with `both_views`, from a and from b (two inputs).
+    pub(crate) fn new(
+        ctx: &Context,
+        data: &TrainImages,
+        objects: u32,
+        both_views: bool,
+        seed: u64,
+    ) -> Result<Self> {
+        let batch = objects * (1 + u32::from(both_views));
         let b = u64::from(batch);
         let px = u64::from(data.size) * u64::from(data.size);
         let device = |name: &str, floats: u64| {
@@ -426,7 +518,8 @@ impl Batches {
         Ok(Self {
             classes: data.classes.clone(),
             seed,
-            batch,
+            objects,
+            both_views,
             shape: BatchShape {
                 batch,
                 pixels: data.size * data.size,
@@ -446,10 +539,17 @@ impl Batches {
         })
     }
 
-    /// Stages the rows of iterations `first ..= last` and returns them (`batch` per iteration).
+    /// Stages the rows of iterations `first ..= last` and returns them (one per input, in the
+    /// iteration's batch order).
     pub(crate) fn stage(&mut self, ctx: &Context, first: u32, last: u32) -> Result<Vec<[u32; 4]>> {
-        self.schedule
-            .stage(ctx, self.seed, &self.classes, self.batch, first..=last)
+        self.schedule.stage(
+            ctx,
+            self.seed,
+            &self.classes,
+            self.objects,
+            self.both_views,
+            first..=last,
+        )
     }
 
     /// Records the gather of schedule row `row` (the staged rows copied in before row 0's).
@@ -616,11 +716,18 @@ impl<'c> Fitter<'c, ReconTraining<'c>> {
                     "learning-rate step {s:?}: need an iteration from 1 and a factor >= 0"
                 )));
             }
+            if opts.recipe == Recipe::SoftRas && s.factor == 0.0 {
+                return Err(Error::Input(
+                    "a learning-rate step factor of 0 would step σ to 0 in SoftRas's recipe".into(),
+                ));
+            }
         }
         let t = template();
         let decoder = MeshDecoder::new(ctx, &t.positions)?;
         let layers = opts.net.layers(decoder.outputs_per_object())?;
-        let net = Sequential::new(ctx, &layers, opts.batch)?;
+        // Per iteration: `inputs` images in, as many meshes, each rendered in COPIES views.
+        let inputs = opts.inputs();
+        let net = Sequential::new(ctx, &layers, inputs)?;
         let init;
         let params = match params {
             Some(p) => {
@@ -639,7 +746,7 @@ impl<'c> Fitter<'c, ReconTraining<'c>> {
             }
         };
         let n = net.param_count();
-        let b = u64::from(opts.batch);
+        let b = u64::from(inputs);
         let v = u64::from(decoder.vertex_count());
         let device = |name: &str, floats: u64| {
             ctx.create_buffer(name, 4 * floats.max(1), MemoryKind::Device)
@@ -654,7 +761,7 @@ impl<'c> Fitter<'c, ReconTraining<'c>> {
         scene.set_silhouette_only(opts.color == 0.0);
         // The batch's meshes as one mesh of B disjoint templates, for the regularizers.
         let vc = t.vertex_count() as u32;
-        let faces: Vec<[u32; 3]> = (0..opts.batch)
+        let faces: Vec<[u32; 3]> = (0..inputs)
             .flat_map(|o| t.faces.iter().map(move |f| f.map(|i| i + o * vc)))
             .collect();
         let regs = Regularizers::new(ctx, &faces, (b * v) as usize)?;
@@ -675,10 +782,16 @@ impl<'c> Fitter<'c, ReconTraining<'c>> {
         let trainer = ReconTraining {
             ctx,
             opts: opts.clone(),
-            batches: Batches::new(ctx, data, opts.batch, opts.seed)?,
+            batches: Batches::new(
+                ctx,
+                data,
+                opts.batch,
+                opts.recipe == Recipe::SoftRas,
+                opts.seed,
+            )?,
             trained,
             d_outputs: device("recon d_outputs", b * decoder.outputs_per_object())?,
-            partials: decoder.create_partials(ctx, opts.batch)?,
+            partials: decoder.create_partials(ctx, inputs)?,
             zero_colors: {
                 let z = device("recon zero colour gradients", 3 * u64::from(COPIES) * b * v)?;
                 ctx.submit_and_wait(|rec| {
@@ -689,8 +802,8 @@ impl<'c> Fitter<'c, ReconTraining<'c>> {
             },
             meshes: device("recon meshes", 3 * b * v)?,
             d_meshes: device("recon d_meshes", 3 * b * v)?,
-            sil: SilhouetteLoss::new(ctx, COPIES * opts.batch, opts.net.image, opts.net.image)?,
-            mse: ImageMse::new(ctx, COPIES * opts.batch, opts.net.image, opts.net.image)?,
+            sil: SilhouetteLoss::new(ctx, COPIES * inputs, opts.net.image, opts.net.image)?,
+            mse: ImageMse::new(ctx, COPIES * inputs, opts.net.image, opts.net.image)?,
             regs,
             renderer,
             scene,
@@ -724,20 +837,26 @@ impl Fit for ReconTraining<'_> {
         it: u32,
         row: u32,
     ) -> Result<()> {
+        let sigma = self.opts.sigma_at(it);
+        if sigma != self.scene.settings().sigma {
+            let gamma = self.scene.settings().gamma;
+            self.scene.set_blur(sigma, gamma)?;
+        }
         self.batches.record(rec, row)?;
         let o = &self.opts;
+        let inputs = o.inputs();
         rec.pass("recon network", |rec| {
             self.net.record_forward(
                 rec,
                 self.trained.params.whole(),
                 self.batches.input.whole(),
-                o.batch,
+                inputs,
             )
         })?;
         rec.pass("recon decoder", |rec| {
             self.decoder.record_forward(
                 rec,
-                o.batch,
+                inputs,
                 COPIES,
                 self.net.output().whole(),
                 self.batches.rotations.whole(),
@@ -747,7 +866,7 @@ impl Fit for ReconTraining<'_> {
             if o.color > 0.0 {
                 self.decoder.record_colors(
                     rec,
-                    o.batch,
+                    inputs,
                     COPIES,
                     self.net.output().whole(),
                     self.scene.colors().whole(),
@@ -765,7 +884,7 @@ impl Fit for ReconTraining<'_> {
                         rec,
                         scene.output().whole(),
                         self.batches.targets.whole(),
-                        Some(GradOut::write(io.upstream).weighted(COPIES as f32)),
+                        Some(GradOut::write(io.upstream).weighted(o.recipe.silhouette_weight())),
                     )?;
                     if o.color > 0.0 {
                         self.mse.record(
@@ -778,7 +897,7 @@ impl Fit for ReconTraining<'_> {
                     Ok(())
                 })?;
                 self.renderer.grad_kernels().record(rec, &binned, g, &io)?;
-                let per_object = 1.0 / o.batch as f32;
+                let per_object = 1.0 / inputs as f32;
                 rec.pass("regularizers", |rec| {
                     self.regs.record_laplacian(
                         rec,
@@ -800,7 +919,7 @@ impl Fit for ReconTraining<'_> {
                 rec.pass("recon decoder backward", |rec| {
                     self.decoder.record_backward(
                         rec,
-                        o.batch,
+                        inputs,
                         COPIES,
                         self.net.output().whole(),
                         self.batches.rotations.whole(),
@@ -816,7 +935,7 @@ impl Fit for ReconTraining<'_> {
                     };
                     self.decoder.record_colors_backward(
                         rec,
-                        o.batch,
+                        inputs,
                         COPIES,
                         self.net.output().whole(),
                         d_colors,
@@ -831,7 +950,7 @@ impl Fit for ReconTraining<'_> {
                         self.d_outputs.whole(),
                         self.trained.d_params.whole(),
                         None,
-                        o.batch,
+                        inputs,
                     )
                 })?;
                 self.trained.record_step(rec, it, o.lr_at(it))
@@ -866,9 +985,9 @@ impl Fit for ReconTraining<'_> {
 impl ReconTraining<'_> {
     /// The losses of the last iteration run (`iteration` names it in the log).
     pub fn read_log(&self, iteration: u32) -> Result<TrainLog> {
-        let silhouette = COPIES as f32 * self.sil.read_loss(self.ctx)?;
+        let silhouette = self.opts.recipe.silhouette_weight() * self.sil.read_loss(self.ctx)?;
         let r = self.regs.read_losses(self.ctx)?;
-        let per_object = 1.0 / self.opts.batch as f32;
+        let per_object = 1.0 / self.opts.inputs() as f32;
         let (laplacian, flatten) = (r.laplacian * per_object, r.flatten * per_object);
         let color = if self.opts.color > 0.0 {
             self.mse.read_loss(self.ctx)?
