@@ -195,7 +195,7 @@ def predict(args):
             # Our voxels scored against the dataset's the way SoftRas does give its IoU back.
             truth = voxels.numpy()
             again = (truth * vox).sum((1, 2, 3)) / (0 < (truth + vox)).sum((1, 2, 3))
-            if not np.allclose(again, iou, atol=1e-6):
+            if not np.allclose(again, iou, atol=1e-6, equal_nan=True):
                 raise RuntimeError("the exported voxels do not give SoftRas's IoU back")
             ious.append(iou)
             predicted.append(vox)
