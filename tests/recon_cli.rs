@@ -128,6 +128,25 @@ fn train_twice_resume_evaluate_and_reconstruct() {
     assert!(!refused.status.success());
     let err = String::from_utf8_lossy(&refused.stderr);
     assert!(err.contains("other options"), "{err}");
+    // A budget in input images: 9 images at 2 objects × 2 views per iteration (SoftRas's
+    // recipe) are 3 iterations; with the one-view recipe, 5.
+    for (recipe, said_want) in [
+        ("softras", "trained 3 iterations (12 input images)"),
+        ("one-view", "trained 5 iterations (10 input images)"),
+    ] {
+        let said = ok(
+            softvk()
+                .args(["train-recon", "--dataset", data.to_str().unwrap()])
+                .args(["--out", dir.path("img.npz").to_str().unwrap()])
+                .args(["--images", "9", "--batch", "2", "--recipe", recipe])
+                .args(["--channels", "2,3,4", "--latent", "8", "--hidden", "8"])
+                .args(["--val-every", "100"])
+                .output()
+                .unwrap(),
+            "softvk train-recon --images",
+        );
+        assert!(said.contains(said_want), "{said}");
+    }
     // The learning rate's step may be added on resume where it changes no iteration already
     // run (c's checkpoint is at 4: a step at 5 is fine), not where it would have (at 3).
     train(&data, &c, 6, &["--resume", "--lr-step", "5"]);

@@ -74,6 +74,13 @@ pub struct TrainReconArgs {
     #[arg(long, value_name = "N", default_value_t = 2000, value_parser = clap::value_parser!(u32).range(1..))]
     pub iters: u32,
 
+    /// Instead of `--iters`: train until the network has seen N input images, rounded up to
+    /// whole iterations (a mesh iteration sees the batch's objects from one view or, in
+    /// SoftRas's recipe, two; a field iteration one view of each object), so that models
+    /// trained by different recipes can be given the same budget.
+    #[arg(long, value_name = "N", conflicts_with = "iters", value_parser = clap::value_parser!(u64).range(1..))]
+    pub images: Option<u64>,
+
     /// Objects per batch, two views each [default: 64 (SoftRas's), 16 with --field].
     #[arg(long, value_name = "B", value_parser = clap::value_parser!(u32).range(1..))]
     pub batch: Option<u32>,
@@ -489,6 +496,16 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
             mesh_opts.recipe.code()
         },
     ];
+    let per_iteration = if args.field {
+        field_opts.batch
+    } else {
+        mesh_opts.inputs()
+    };
+    let iterations = match args.images {
+        None => args.iters,
+        Some(images) => u32::try_from(images.div_ceil(u64::from(per_iteration)))
+            .map_err(|_| Error::Input(format!("--images {images}: over 2^32 iterations")))?,
+    };
     let dir = report_dir(&args.out);
     let ckpt_path = dir.join("checkpoint.npz");
     let resumed = if args.resume {
@@ -535,6 +552,8 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
             train,
         },
         settings,
+        iterations,
+        per_iteration,
     };
     if args.field {
         let trainer = FieldReconTrainer::new(&ctx, &images, &field_opts, resume_params)?;
@@ -555,10 +574,14 @@ struct TrainingRun<'a, M> {
     /// The model of parameters after an iteration, with the training state of a checkpoint.
     model_of: M,
     settings: [f64; SETTINGS],
+    /// The last iteration (`--iters`, or `--images` over `per_iteration`).
+    iterations: u32,
+    /// Input images per iteration.
+    per_iteration: u32,
 }
 
 impl<M: Fn(Vec<f32>, u32, Option<TrainState>) -> ReconModel> TrainingRun<'_, M> {
-    /// Trains to `--iters` (validating and checkpointing every `--val-every`, stopping at an
+    /// Trains to the last iteration (validating and checkpointing every `--val-every`, stopping at an
     /// interrupt with a checkpoint) and writes the model.
     fn go<T: Training>(self, mut trainer: Fitter<'_, T>) -> Result<()> {
         let Self {
@@ -570,6 +593,8 @@ impl<M: Fn(Vec<f32>, u32, Option<TrainState>) -> ReconModel> TrainingRun<'_, M> 
             resumed,
             model_of,
             settings,
+            iterations,
+            per_iteration,
         } = self;
         let (mut log, mut vals, start) = match &resumed {
             Some(m) => {
@@ -582,7 +607,7 @@ impl<M: Fn(Vec<f32>, u32, Option<TrainState>) -> ReconModel> TrainingRun<'_, M> 
         std::fs::create_dir_all(&dir)
             .map_err(|e| Error::Input(format!("cannot create {}: {e}", dir.display())))?;
         let val_views = spread_views(args.val_views);
-        let bar = ProgressBar::new(u64::from(args.iters));
+        let bar = ProgressBar::new(u64::from(iterations));
         bar.set_style(
             ProgressStyle::with_template("{bar:30} {pos}/{len} it {elapsed} eta {eta} {msg}")
                 .expect("a valid template"),
@@ -607,7 +632,7 @@ impl<M: Fn(Vec<f32>, u32, Option<TrainState>) -> ReconModel> TrainingRun<'_, M> 
         let boundary = |it: u32| (it - 1) / args.val_every * args.val_every + args.val_every;
         let done = trainer.drive(
             start + 1,
-            args.iters,
+            iterations,
             |_, it| Ok((it + args.log_every - 1).min(boundary(it))),
             |trainer, first, last| {
                 let row = trainer.log(last)?;
@@ -621,7 +646,7 @@ impl<M: Fn(Vec<f32>, u32, Option<TrainState>) -> ReconModel> TrainingRun<'_, M> 
                 bar.set_position(u64::from(last));
                 bar.set_message(format!("L_sil {:.4}", row[1]));
                 let interrupted = interrupt::requested().is_some();
-                let at_boundary = last == boundary(first) || last == args.iters;
+                let at_boundary = last == boundary(first) || last == iterations;
                 if at_boundary && let Some(val) = &val {
                     let model = model_of(trainer.trained().read_params(ctx)?, last, None);
                     let iou = validate(ctx, &model, val, &val_views)?;
@@ -644,10 +669,10 @@ impl<M: Fn(Vec<f32>, u32, Option<TrainState>) -> ReconModel> TrainingRun<'_, M> 
             },
         )?;
         bar.finish_and_clear();
-        if done < args.iters {
+        if done < iterations {
             eprintln!(
                 "softvk: stopped after iteration {done} of {}; `--resume` goes on from {}",
-                args.iters,
+                iterations,
                 ckpt_path.display()
             );
             return Ok(());
@@ -655,8 +680,9 @@ impl<M: Fn(Vec<f32>, u32, Option<TrainState>) -> ReconModel> TrainingRun<'_, M> 
         model_of(trainer.trained().read_params(ctx)?, done, None).save(&args.out)?;
         let last = log.last().copied().unwrap_or([0.0; 6]);
         println!(
-            "{}trained {done} iterations: L_sil {:.4}{}; model {}",
+            "{}trained {done} iterations ({} input images): L_sil {:.4}{}; model {}",
             interrupt::resumed_note(start + 1, done),
+            u64::from(done) * u64::from(per_iteration),
             last[1],
             vals.last()
                 .map(|v| format!(", validation 3D IoU {:.4}", v[1]))
