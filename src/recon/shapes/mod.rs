@@ -11,9 +11,12 @@
 //!
 //! Every part is a closed, outward-wound triangle mesh on its own; parts overlap (a leg enters
 //! the seat), so the object as a whole is a union of shells, not one closed surface: voxelize
-//! per part and OR the occupancies ([`Shape::voxelize`]). Parts are at least [`MIN_THICKNESS`]
-//! thick, more than the 1/31 spacing of the dataset's voxel centres, so no part falls between
-//! voxel centres.
+//! per part and OR the occupancies ([`Shape::voxelize`]). Every part of a normalized object is
+//! at least [`MIN_THICKNESS`] thick everywhere (a wing at its tip, a cone at its narrow end, a
+//! leaning slab measured square to its faces), more than the 1/31 spacing of the dataset's
+//! voxel centres, so no part falls between voxel centres. The recipes draw thin parts from a
+//! minimum above it that allows for normalization shrinking the object (their objects are at
+//! most 1.2 long before it, which building checks) and for a slab's lean.
 //!
 //! Each category is a recipe in the file of its family (`seating`, `tables`, `vehicles`,
 //! `lamps`), built with the primitives of `builder`.
@@ -40,7 +43,8 @@ use crate::rng::SplitMix64;
 /// on the voxel centres at ±0.5).
 pub const NORMALIZED_EXTENT: f64 = 0.98;
 
-/// The thinnest a part is made (before normalization, which scales by at most a little).
+/// The thinnest any part of a generated (normalized) object is, in any direction: 1.4 voxel
+/// spacings of the dataset's 32³ lattice.
 pub const MIN_THICKNESS: f64 = 0.045;
 
 /// An object category, with its ShapeNet synset id (the class id of the NMR/SoftRas files).

@@ -3,8 +3,7 @@
 
 use glam::DVec3;
 
-use super::MIN_THICKNESS;
-use super::builder::{Builder, hexahedron, sheared_box, style, v};
+use super::builder::{Builder, THIN, hexahedron, sheared_box, style, v};
 
 pub(super) fn airplane(b: &mut Builder) {
     match style(b, 3) {
@@ -38,7 +37,7 @@ fn airliner(b: &mut Builder) {
     let taper = b.u(0.3, 0.7);
     let sweep = b.u(0.0, 0.25);
     let wz = b.u(-0.12, 0.05);
-    let wt = MIN_THICKNESS;
+    let wt = THIN;
     let wy = b.u(-r * 0.6, r * 0.3);
     let dihedral = b.u(0.0, 0.06);
     for sx in [-1.0f64, 1.0] {
@@ -63,7 +62,7 @@ fn airliner(b: &mut Builder) {
         v(-wt / 2.0, 0.0, tz - fc * 0.2),
         v(wt / 2.0, r + fin_h, tz + fc * 0.8),
         v(0.0, 0.0, fc * 0.35),
-        [1.0, 0.55],
+        [1.0, (wt / fc).max(0.55)],
     );
     b.push(hexahedron(fin), wing_color);
     if b.chance(0.5) {
@@ -84,7 +83,10 @@ fn airliner(b: &mut Builder) {
 }
 
 /// A wing on side `sx` (±1): root at x = 0 from z = `z` over `chord`, tip at x = `sx span`,
-/// swept back by `sweep`, tapered to `taper × chord`, raised by `dihedral`, `t` thick.
+/// swept back by `sweep`, tapered to `taper × chord`, raised by `dihedral`. The tip is `t`
+/// thick (at least [`THIN`]: the wing's thinnest spot) and the root thicker by the taper (up to
+/// 1.25 t); the tip's chord is at least `t` too, measured square to the swept leading and
+/// trailing edges (a delta's tip is a sliver otherwise).
 #[allow(clippy::too_many_arguments)]
 fn wing(
     sx: f64,
@@ -97,16 +99,24 @@ fn wing(
     dihedral: f64,
     t: f64,
 ) -> [DVec3; 8] {
+    // An edge swept by dz over the span meets the tip at cos φ = 1 / sec: the tip's chord
+    // square to it is the chord over sec. The trailing edge's sweep grows with the chord, so
+    // a few passes settle it.
+    let sec = |dz: f64| (1.0 + (dz / span).powi(2)).sqrt();
+    let mut tip_chord = (chord * taper).max(t);
+    for _ in 0..8 {
+        tip_chord = tip_chord.max(t * sec(sweep).max(sec(sweep + tip_chord - chord)));
+    }
     std::array::from_fn(|i| {
         let tip = (i & 1 != 0) == (sx > 0.0);
         let top = i & 2 != 0;
         let back = i & 4 != 0;
         let (x, zs, c, yy) = if tip {
-            (sx * span, z + sweep, chord * taper, y + dihedral)
+            (sx * span, z + sweep, tip_chord, y + dihedral)
         } else {
             (0.0, z, chord, y)
         };
-        let thick = if tip { t * 0.8_f64.max(taper) } else { t };
+        let thick = if tip { t } else { t / taper.clamp(0.8, 1.0) };
         v(
             x,
             yy + if top { thick / 2.0 } else { -thick / 2.0 },
@@ -132,17 +142,7 @@ fn fighter(b: &mut Builder) {
     let sweep = chord * (1.0 - taper) * b.u(0.8, 1.0);
     for sx in [-1.0f64, 1.0] {
         b.push(
-            hexahedron(wing(
-                sx,
-                wz,
-                0.0,
-                span,
-                chord,
-                taper,
-                sweep,
-                0.0,
-                MIN_THICKNESS,
-            )),
+            hexahedron(wing(sx, wz, 0.0, span, chord, taper, sweep, 0.0, THIN)),
             wing_color,
         );
     }
@@ -153,10 +153,10 @@ fn fighter(b: &mut Builder) {
     for &sx in xs {
         let x = sx * r * 0.7;
         let fin = sheared_box(
-            v(x - MIN_THICKNESS / 2.0, 0.0, -z0 - fc),
-            v(x + MIN_THICKNESS / 2.0, r + fin_h, -z0),
+            v(x - THIN / 2.0, 0.0, -z0 - fc),
+            v(x + THIN / 2.0, r + fin_h, -z0),
             v(sx * 0.03, 0.0, fc * 0.4),
-            [1.0, 0.5],
+            [1.0, (THIN / fc).max(0.5)],
         );
         b.push(hexahedron(fin), wing_color);
     }
@@ -176,12 +176,12 @@ fn propeller_plane(b: &mut Builder) {
         r * 0.35,
         body,
     );
-    b.frustum(v(0.0, 0.0, z0 + 0.05), v(0.0, 0.0, z0), r, r * 0.6, body);
+    b.frustum(v(0.0, 0.0, z0 + 0.07), v(0.0, 0.0, z0), r, r * 0.6, body);
     let prop = b.u(0.1, 0.16);
     let prop_color = b.dark().map(|c| c * 2.0);
     b.frustum(
         v(0.0, 0.0, z0 - 0.005),
-        v(0.0, 0.0, z0 - 0.005 - MIN_THICKNESS),
+        v(0.0, 0.0, z0 - 0.005 - THIN),
         prop,
         prop,
         prop_color,
@@ -195,17 +195,7 @@ fn propeller_plane(b: &mut Builder) {
     let dihedral = b.u(0.0, 0.03);
     for sx in [-1.0f64, 1.0] {
         b.push(
-            hexahedron(wing(
-                sx,
-                wz,
-                wy,
-                span,
-                chord,
-                taper,
-                0.0,
-                dihedral,
-                MIN_THICKNESS,
-            )),
+            hexahedron(wing(sx, wz, wy, span, chord, taper, 0.0, dihedral, THIN)),
             wing_color,
         );
     }
@@ -214,26 +204,16 @@ fn propeller_plane(b: &mut Builder) {
     let tz = -z0 - tchord;
     for sx in [-1.0f64, 1.0] {
         b.push(
-            hexahedron(wing(
-                sx,
-                tz,
-                r * 0.4,
-                tspan,
-                tchord,
-                0.8,
-                0.02,
-                0.0,
-                MIN_THICKNESS,
-            )),
+            hexahedron(wing(sx, tz, r * 0.4, tspan, tchord, 0.8, 0.02, 0.0, THIN)),
             wing_color,
         );
     }
     let fin_h = b.u(0.1, 0.16);
     let fin = sheared_box(
-        v(-MIN_THICKNESS / 2.0, r * 0.3, tz),
-        v(MIN_THICKNESS / 2.0, r + fin_h, -z0),
+        v(-THIN / 2.0, r * 0.3, tz),
+        v(THIN / 2.0, r + fin_h, -z0),
         v(0.0, 0.0, tchord * 0.4),
-        [1.0, 0.6],
+        [1.0, (THIN / tchord).max(0.6)],
     );
     b.push(hexahedron(fin), wing_color);
 }
@@ -267,7 +247,7 @@ fn sedan(b: &mut Builder) {
         [b.u(0.8, 0.95), b.u(0.55, 0.8)],
     );
     b.push(hexahedron(cabin), glass);
-    let ww = b.u(MIN_THICKNESS, 0.08);
+    let ww = b.u(THIN, 0.1);
     let wz = l * b.u(0.6, 0.75);
     for sx in [-1.0, 1.0] {
         for sz in [-1.0, 1.0] {
@@ -303,7 +283,7 @@ fn van(b: &mut Builder) {
         [b.u(0.9, 1.0), b.u(0.85, 0.98)],
     );
     b.push(hexahedron(cabin), glass);
-    let ww = b.u(MIN_THICKNESS, 0.08);
+    let ww = b.u(THIN, 0.1);
     let wz = l * b.u(0.6, 0.75);
     wheels(b, w, wr, ww, [-wz, wz], tyre);
 }
@@ -329,8 +309,8 @@ fn pickup(b: &mut Builder) {
         [0.95, b.u(0.7, 0.9)],
     );
     b.push(hexahedron(cabin), glass);
-    let bed_h = b.u(0.05, 0.1);
-    let t = MIN_THICKNESS;
+    let bed_h = b.u(THIN, 0.1);
+    let t = THIN;
     let y1 = y0 + body_h - 0.01;
     for sx in [-1.0, 1.0] {
         let x0 = sx * w;
@@ -342,7 +322,7 @@ fn pickup(b: &mut Builder) {
         );
     }
     b.cuboid(v(-w, y1, l - t), v(w, y1 + bed_h, l), paint);
-    let ww = b.u(MIN_THICKNESS, 0.08);
+    let ww = b.u(THIN, 0.1);
     let wz = [-l * b.u(0.6, 0.72), l * b.u(0.55, 0.7)];
     wheels(b, w, wr, ww, wz, tyre);
 }
@@ -375,7 +355,7 @@ fn sports_car(b: &mut Builder) {
     );
     b.push(hexahedron(cabin), glass);
     if b.chance(0.4) {
-        let sp = MIN_THICKNESS;
+        let sp = THIN;
         b.cuboid(
             v(-w * 0.9, y0 + body_h + 0.04, l - 0.08),
             v(w * 0.9, y0 + body_h + 0.04 + sp, l - 0.01),
@@ -385,12 +365,12 @@ fn sports_car(b: &mut Builder) {
             let x = sx * w * 0.6;
             b.cuboid(
                 v(x - sp / 2.0, y0 + body_h - 0.01, l - 0.03 - sp),
-                v(x + sp / 2.0, y0 + body_h + 0.045, l - 0.03),
+                v(x + sp / 2.0, y0 + body_h + 0.04 + sp / 2.0, l - 0.03),
                 paint,
             );
         }
     }
-    let ww = b.u(0.05, 0.09);
+    let ww = b.u(THIN, 0.1);
     let wz = l * b.u(0.6, 0.72);
     wheels(b, w, wr, ww, [-wz, wz], tyre);
 }
