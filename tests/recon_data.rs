@@ -223,9 +223,9 @@ fn rust_written_npz_reads_back_the_same_and_the_same_arrays_give_the_same_bytes(
 
 #[test]
 fn every_category_gives_closed_outward_non_degenerate_meshes_in_the_unit_cube() {
-    // 24 seeds: every style of every category (at most four per category) several times.
+    // 60 seeds: every style of every category (at most five per category) several times.
     for category in Category::ALL {
-        for seed in 0..24u64 {
+        for seed in 0..60u64 {
             let shape = generate(category, seed);
             let what = format!("{category} seed {seed}");
             let faces = shape.face_count();
@@ -377,10 +377,16 @@ fn seeds_change_the_shapes_and_the_same_seed_repeats_them_bit_for_bit() {
         );
     }
     // The object of a split does not depend on the other splits' counts.
-    let o = DatasetOptions::default();
+    let o = DatasetOptions {
+        train: 3,
+        val: 8,
+        test: 1,
+        ..DatasetOptions::default()
+    };
     let more = DatasetOptions {
         train: 2,
         val: 5,
+        test: 0,
         ..DatasetOptions::default()
     };
     assert_eq!(
@@ -553,12 +559,17 @@ fn dataset_round_trips_and_the_same_seed_writes_the_same_bytes() {
         ]
     );
     assert_eq!(files.len(), 8);
-    let files_b = dataset::write_dataset(&gpu, &b, &options, &mut |_, _, _| true).unwrap();
+    // The bytes do not depend on how many objects render together.
+    let batched = DatasetOptions {
+        batch: 3,
+        ..options.clone()
+    };
+    let files_b = dataset::write_dataset(&gpu, &b, &batched, &mut |_, _, _| true).unwrap();
     for (fa, fb) in files.iter().zip(&files_b) {
         assert_eq!(fa.file_name(), fb.file_name());
         assert!(
             std::fs::read(fa).unwrap() == std::fs::read(fb).unwrap(),
-            "{} differs between two runs of the same options",
+            "{} differs between two runs of the same objects",
             fa.display()
         );
     }
@@ -592,8 +603,10 @@ fn dataset_round_trips_and_the_same_seed_writes_the_same_bytes() {
         assert_eq!(class.image(1, 5).len(), 4 * IMAGE_SIZE * IMAGE_SIZE);
     }
     // The visual hull of an object's own 24 silhouettes: a car's is close (only the hollow
-    // under its body between the wheels is left uncarved), a table's is not (every view looks
-    // down on its top). Wrong cameras or a wrong voxel order would carve the objects away.
+    // under its body between the wheels is left uncarved), a legged table's is not (every view
+    // looks down on its top; a low table on a pedestal or slab ends comes closer, so one of the
+    // two tables is asked to stay far). Wrong cameras or a wrong voxel order would carve the
+    // objects away.
     let hull = |c: usize| -> Vec<f64> {
         (0..2)
             .map(|n| eval::visual_hull_iou(&train.classes[c], n).unwrap())
@@ -601,7 +614,7 @@ fn dataset_round_trips_and_the_same_seed_writes_the_same_bytes() {
     };
     let (car, table) = (hull(0), hull(1));
     assert!(car.iter().all(|&h| h > 0.6), "car hulls {car:?}");
-    assert!(table.iter().all(|&h| h < 0.55), "table hulls {table:?}");
+    assert!(table.iter().any(|&h| h < 0.55), "table hulls {table:?}");
     assert_eq!(Dataset::open(&a, Split::Val).unwrap().classes[0].count, 1);
     let m = input_error(Dataset::open(&a, Split::Test));
     assert!(m.contains("no *_test_images.npz"), "{m}");

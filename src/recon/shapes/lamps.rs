@@ -1,15 +1,44 @@
-//! Recipes for lamps (desk, floor, arc, vase) and displays: a base, a pole or neck, and what it
-//! holds up (a shade, a screen).
+//! Recipes for lamps (desk, floor, arc, vase, tripod) and displays: a base, a pole or neck, and
+//! what it holds up (a shade, a screen).
 
 use super::builder::{Builder, THIN, style, v};
 
 pub(super) fn lamp(b: &mut Builder) {
-    match style(b, 4) {
+    match style(b, 5) {
         0 => desk_lamp(b),
         1 => floor_lamp(b),
         2 => arc_lamp(b),
-        _ => vase_lamp(b),
+        3 => vase_lamp(b),
+        _ => tripod_lamp(b),
     }
+}
+
+/// Tripod lamp: three splayed legs meeting under a drum or cone shade, with a short stem from
+/// where they meet.
+fn tripod_lamp(b: &mut Builder) {
+    let wood = b.color();
+    let shade_color = b.color();
+    let h = b.u(0.45, 0.85);
+    let spread = h * b.u(0.25, 0.45);
+    let meet = h * b.u(0.7, 0.85);
+    let lr = THIN / 2.0 * b.u(1.0, 1.4);
+    let turn = b.u(0.0, 1.0);
+    for k in 0..3 {
+        let a = std::f64::consts::TAU * (f64::from(k) + turn) / 3.0;
+        let foot = v(spread * a.cos(), 0.0, spread * a.sin());
+        b.frustum(foot, v(0.0, meet, 0.0), lr, lr, wood);
+    }
+    b.frustum(v(0.0, meet - 0.02, 0.0), v(0.0, h, 0.0), lr, lr, wood);
+    let sh = b.u(0.14, 0.3);
+    let r = b.u(0.12, 0.25);
+    let r_top = r * b.u(0.5, 1.0);
+    b.frustum(
+        v(0.0, h - sh * 0.5, 0.0),
+        v(0.0, h + sh * 0.5, 0.0),
+        r,
+        r_top,
+        shade_color,
+    );
 }
 
 fn desk_lamp(b: &mut Builder) {

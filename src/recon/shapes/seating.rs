@@ -1,14 +1,54 @@
-//! Recipes for the things one sits on: chairs (four-legged, office, stool, armchair), benches
-//! (legged, picnic, ottoman) and sofas.
+//! Recipes for the things one sits on: chairs (four-legged, office, stool, armchair, sled),
+//! benches (legged, picnic, ottoman, slab-ended) and sofas.
 
 use super::builder::{Builder, THIN, hexahedron, sheared_box, style, v};
 
 pub(super) fn chair(b: &mut Builder) {
-    match style(b, 4) {
+    match style(b, 5) {
         0 => four_leg_chair(b),
         1 => office_chair(b),
         2 => stool(b),
-        _ => armchair(b),
+        3 => armchair(b),
+        _ => sled_chair(b),
+    }
+}
+
+/// Sled chair: seat and back on a bent-tube frame: a runner on the floor each side, rising at
+/// the front to the seat and at the back up the backrest.
+fn sled_chair(b: &mut Builder) {
+    let shell = b.color();
+    let metal = if b.chance(0.5) { b.dark() } else { b.color() };
+    let w = b.u(0.4, 0.56) / 2.0;
+    let d = b.u(0.38, 0.52) / 2.0;
+    let h = b.u(0.38, 0.5);
+    let t = b.u(THIN, 0.09);
+    b.cuboid(v(-w, h, -d), v(w, h + t, d), shell);
+    let bh = b.u(0.3, 0.5);
+    let bt = b.u(THIN, 0.08);
+    let lean = b.u(0.0, 0.1);
+    let back = sheared_box(
+        v(-w, h + t * 0.5, d - bt),
+        v(w, h + t + bh, d),
+        v(0.0, 0.0, lean),
+        [b.u(0.85, 1.0), 1.0],
+    );
+    b.push(hexahedron(back), shell);
+    let tr = b.u(THIN / 2.0, 0.035);
+    let reach = b.u(0.0, 0.08);
+    let x = w * b.u(0.75, 0.95);
+    for sx in [-1.0, 1.0] {
+        let x = sx * x;
+        let front = v(x, tr, -d - reach);
+        let rear = v(x, tr, d + reach * 0.5);
+        b.frustum(front, rear, tr, tr, metal);
+        b.frustum(front, v(x, h + t / 2.0, -d + 0.03), tr, tr, metal);
+        b.frustum(
+            rear,
+            v(x, h + t + bh * 0.8, d - bt / 2.0 + lean * 0.8),
+            tr,
+            tr,
+            metal,
+        );
     }
 }
 
@@ -16,10 +56,10 @@ fn four_leg_chair(b: &mut Builder) {
     let seat_color = b.color();
     let back_color = if b.chance(0.6) { seat_color } else { b.color() };
     let leg_color = b.color();
-    let w = b.u(0.42, 0.6) / 2.0;
-    let d = b.u(0.4, 0.58) / 2.0;
+    let w = b.u(0.38, 0.64) / 2.0;
+    let d = b.u(0.36, 0.6) / 2.0;
     let t = b.u(THIN, 0.1);
-    let h = b.u(0.36, 0.5);
+    let h = b.u(0.32, 0.5);
     b.cuboid(v(-w, h, -d), v(w, h + t, d), seat_color);
     // Legs: square posts, round posts, or splayed posts.
     let style = (b.rng.unit() * 3.0) as u32;
@@ -194,10 +234,41 @@ fn armchair(b: &mut Builder) {
 }
 
 pub(super) fn bench(b: &mut Builder) {
-    match style(b, 3) {
+    match style(b, 4) {
         0 => leg_bench(b),
         1 => picnic_bench(b),
-        _ => ottoman_bench(b),
+        2 => ottoman_bench(b),
+        _ => slab_bench(b),
+    }
+}
+
+/// Slab-ended bench: a seat between two solid end panels that rise above it as arms, often a
+/// leaning back between the arms.
+fn slab_bench(b: &mut Builder) {
+    let wood = b.color();
+    let ends = if b.chance(0.5) { wood } else { b.color() };
+    let l = b.u(0.75, 1.0) / 2.0;
+    let d = b.u(0.28, 0.45) / 2.0;
+    let h = b.u(0.3, 0.45);
+    let t = b.u(THIN, 0.1);
+    let et = b.u(THIN, 0.12);
+    let arm = b.u(0.0, 0.2);
+    b.cuboid(v(-l + et, h, -d), v(l - et, h + t, d), wood);
+    for sx in [-1.0, 1.0] {
+        let x0 = sx * l;
+        let x1 = x0 - sx * et;
+        b.cuboid(v(x0.min(x1), 0.0, -d), v(x0.max(x1), h + t + arm, d), ends);
+    }
+    if b.chance(0.6) {
+        let bt = b.u(THIN, 0.08);
+        let bh = b.u(0.2, 0.4);
+        let back = sheared_box(
+            v(-l + et, h + t * 0.5, d - bt),
+            v(l - et, h + t + bh, d),
+            v(0.0, 0.0, b.u(0.0, 0.08)),
+            [1.0, 1.0],
+        );
+        b.push(hexahedron(back), wood);
     }
 }
 

@@ -1,21 +1,59 @@
-//! Recipes for tables (legged, coffee, desk, trestle) and cabinets: a top or a body on legs,
-//! panels or feet.
+//! Recipes for tables (legged, coffee, desk, trestle, pedestal on a cross foot) and cabinets: a
+//! top or a body on legs, panels or feet.
 
-use super::builder::{Builder, THIN, style, v};
+use super::builder::{Builder, THIN, hexahedron, style, v};
 
 pub(super) fn table(b: &mut Builder) {
-    match style(b, 4) {
+    match style(b, 5) {
         0 => leg_table(b),
         1 => coffee_table(b),
         2 => desk(b),
-        _ => trestle_table(b),
+        3 => trestle_table(b),
+        _ => cross_foot_table(b),
+    }
+}
+
+/// Pedestal table on a cross foot: a square or round top, from bistro to bar height, on a
+/// column standing on two crossed feet (turned by any angle).
+fn cross_foot_table(b: &mut Builder) {
+    let top_color = b.color();
+    let metal = if b.chance(0.5) { b.dark() } else { b.color() };
+    let h = b.u(0.45, 0.95);
+    let t = b.u(THIN, 0.08);
+    let r = b.u(0.25, 0.5);
+    if b.chance(0.5) {
+        b.frustum(v(0.0, h, 0.0), v(0.0, h + t, 0.0), r, r, top_color);
+    } else {
+        let q = r * b.u(0.8, 1.0);
+        b.cuboid(v(-q, h, -q), v(q, h + t, q), top_color);
+    }
+    let pr = b.u(THIN / 2.0, 0.05);
+    b.frustum(v(0.0, 0.0, 0.0), v(0.0, h + t / 2.0, 0.0), pr, pr, metal);
+    let reach = r * b.u(0.6, 0.95);
+    let fh = b.u(THIN, 0.07);
+    let turn = b.u(0.0, std::f64::consts::FRAC_PI_2);
+    for k in 0..2 {
+        let a = turn + std::f64::consts::FRAC_PI_2 * f64::from(k);
+        let (c, sn) = (a.cos() * reach, a.sin() * reach);
+        // A foot is a flat bar: a cylinder of width fh would roll; a box turned by `a`.
+        let half = fh / 2.0;
+        let (px, pz) = (-a.sin() * half, a.cos() * half);
+        b.push(
+            hexahedron(std::array::from_fn(|i| {
+                let end = if i & 1 != 0 { 1.0 } else { -1.0 };
+                let side = if i & 4 != 0 { 1.0 } else { -1.0 };
+                let y = if i & 2 != 0 { fh } else { 0.0 };
+                v(end * c + side * px, y, end * sn + side * pz)
+            })),
+            metal,
+        );
     }
 }
 
 fn leg_table(b: &mut Builder) {
     let top_color = b.color();
     let leg_color = if b.chance(0.5) { top_color } else { b.color() };
-    let h = b.u(0.5, 0.75);
+    let h = b.u(0.45, 0.8);
     let t = b.u(THIN, 0.095);
     let round = b.chance(0.3);
     if round {
@@ -43,8 +81,8 @@ fn leg_table(b: &mut Builder) {
             }
         }
     } else {
-        let w = b.u(0.6, 1.0) / 2.0;
-        let d = b.u(0.4, 0.7) / 2.0;
+        let w = b.u(0.5, 1.0) / 2.0;
+        let d = b.u(0.35, 0.75) / 2.0;
         b.cuboid(v(-w, h, -d), v(w, h + t, d), top_color);
         let s = b.u(THIN, 0.1) / 2.0;
         let inset = b.u(0.0, 0.06) + s;

@@ -1,23 +1,24 @@
-//! Recipes for vehicles: airplanes (airliner, fighter, propeller plane) and cars (sedan, van,
-//! pickup, sports car).
+//! Recipes for vehicles: airplanes (airliner, fighter, propeller plane, biplane) and cars
+//! (sedan, van, pickup, sports car, hatchback).
 
 use glam::DVec3;
 
 use super::builder::{Builder, THIN, hexahedron, sheared_box, style, v};
 
 pub(super) fn airplane(b: &mut Builder) {
-    match style(b, 3) {
+    match style(b, 4) {
         0 => airliner(b),
         1 => fighter(b),
-        _ => propeller_plane(b),
+        2 => propeller_plane(b),
+        _ => biplane(b),
     }
 }
 
 fn airliner(b: &mut Builder) {
     let body = b.color();
     let wing_color = if b.chance(0.5) { body } else { b.color() };
-    let len = b.u(0.8, 1.0);
-    let r = b.u(0.045, 0.08);
+    let len = b.u(0.7, 1.0);
+    let r = b.u(0.04, 0.085);
     let z0 = -len / 2.0;
     let nose = b.u(0.08, 0.15);
     let tail = b.u(0.12, 0.22);
@@ -32,10 +33,10 @@ fn airliner(b: &mut Builder) {
         body,
     );
     // Wings: swept, tapered slabs from the fuselage's axis outwards.
-    let span = b.u(0.35, 0.5);
-    let chord = b.u(0.18, 0.32);
-    let taper = b.u(0.3, 0.7);
-    let sweep = b.u(0.0, 0.25);
+    let span = b.u(0.3, 0.55);
+    let chord = b.u(0.15, 0.32);
+    let taper = b.u(0.25, 0.75);
+    let sweep = b.u(0.0, 0.3);
     let wz = b.u(-0.12, 0.05);
     let wt = THIN;
     let wy = b.u(-r * 0.6, r * 0.3);
@@ -50,13 +51,20 @@ fn airliner(b: &mut Builder) {
     let tspan = span * b.u(0.3, 0.45);
     let tchord = chord * b.u(0.45, 0.7);
     let tz = -z0 - tchord * 1.1;
+    let fin_h = b.u(0.12, 0.22);
+    // A T-tail sits on top of the fin, swept back with it.
+    let t_tail = b.chance(0.3);
+    let (ty, tsweep) = if t_tail {
+        (r + fin_h - wt / 2.0, fin_h * 0.3)
+    } else {
+        (r * 0.3, 0.0)
+    };
     for sx in [-1.0f64, 1.0] {
         b.push(
-            hexahedron(wing(sx, tz, r * 0.3, tspan, tchord, 0.6, 0.06, 0.0, wt)),
+            hexahedron(wing(sx, tz + tsweep, ty, tspan, tchord, 0.6, 0.06, 0.0, wt)),
             wing_color,
         );
     }
-    let fin_h = b.u(0.12, 0.22);
     let fc = tchord * 1.1;
     let fin = sheared_box(
         v(-wt / 2.0, 0.0, tz - fc * 0.2),
@@ -65,12 +73,18 @@ fn airliner(b: &mut Builder) {
         [1.0, (wt / fc).max(0.55)],
     );
     b.push(hexahedron(fin), wing_color);
-    if b.chance(0.5) {
-        let er = b.u(0.03, 0.045);
-        let el = b.u(0.12, 0.2);
+    // No engines, two, or four under the wings.
+    let engines: &[f64] = match style(b, 3) {
+        0 => &[],
+        1 => &[0.45],
+        _ => &[0.33, 0.66],
+    };
+    let er = b.u(0.03, 0.05);
+    let el = b.u(0.12, 0.2);
+    for &at in engines {
         for sx in [-1.0, 1.0] {
-            let x = sx * span * 0.45;
-            let z = wz + sweep * 0.45 - el * 0.4;
+            let x = sx * span * at;
+            let z = wz + sweep * at - el * 0.4;
             b.frustum(
                 v(x, wy - er * 1.2, z),
                 v(x, wy - er * 1.2, z + el),
@@ -218,23 +232,124 @@ fn propeller_plane(b: &mut Builder) {
     b.push(hexahedron(fin), wing_color);
 }
 
+/// Biplane: a short fuselage, two straight wings one above the other joined by struts near
+/// their tips, a tail plane, a fin and a propeller disc.
+fn biplane(b: &mut Builder) {
+    let body = b.color();
+    let wing_color = if b.chance(0.4) { body } else { b.color() };
+    let len = b.u(0.55, 0.75);
+    let r = b.u(0.05, 0.08);
+    let z0 = -len / 2.0;
+    b.frustum(
+        v(0.0, 0.0, z0 + 0.08),
+        v(0.0, r * 0.3, -z0),
+        r,
+        r * 0.3,
+        body,
+    );
+    b.frustum(v(0.0, 0.0, z0 + 0.08), v(0.0, 0.0, z0), r, r * 0.7, body);
+    let prop = b.u(0.09, 0.15);
+    let prop_color = b.dark().map(|c| c * 2.0);
+    b.frustum(
+        v(0.0, 0.0, z0 - 0.005),
+        v(0.0, 0.0, z0 - 0.005 - THIN),
+        prop,
+        prop,
+        prop_color,
+    );
+    let span = b.u(0.35, 0.5);
+    let chord = b.u(0.1, 0.16);
+    let gap = b.u(0.12, 0.22);
+    let wz = z0 + len * b.u(0.12, 0.25);
+    let lower = -r * 0.6;
+    let stagger = b.u(-0.03, 0.05);
+    let upper_span = span * b.u(1.0, 1.15);
+    for (y, z, sp) in [(lower, wz, span), (lower + gap, wz - stagger, upper_span)] {
+        for sx in [-1.0f64, 1.0] {
+            b.push(
+                hexahedron(wing(sx, z, y, sp, chord, 1.0, 0.0, 0.0, THIN)),
+                wing_color,
+            );
+        }
+    }
+    let strut = THIN / 2.0;
+    for sx in [-1.0, 1.0] {
+        let x = sx * span * 0.75;
+        let z = wz + chord * 0.5;
+        b.frustum(
+            v(x, lower, z),
+            v(x, lower + gap, z - stagger),
+            strut,
+            strut,
+            wing_color,
+        );
+    }
+    let tspan = span * b.u(0.3, 0.4);
+    let tchord = chord * b.u(0.7, 1.0);
+    let tz = -z0 - tchord;
+    for sx in [-1.0f64, 1.0] {
+        b.push(
+            hexahedron(wing(sx, tz, r * 0.3, tspan, tchord, 0.8, 0.02, 0.0, THIN)),
+            wing_color,
+        );
+    }
+    let fin_h = b.u(0.08, 0.14);
+    let fin = sheared_box(
+        v(-THIN / 2.0, r * 0.2, tz),
+        v(THIN / 2.0, r + fin_h, -z0),
+        v(0.0, 0.0, tchord * 0.3),
+        [1.0, (THIN / tchord).max(0.6)],
+    );
+    b.push(hexahedron(fin), wing_color);
+}
+
 pub(super) fn car(b: &mut Builder) {
-    match style(b, 4) {
+    match style(b, 5) {
         0 => sedan(b),
         1 => van(b),
         2 => pickup(b),
-        _ => sports_car(b),
+        3 => sports_car(b),
+        _ => hatchback(b),
     }
+}
+
+/// Hatchback: short, a cabin from the windscreen to the tail whose back slopes down.
+fn hatchback(b: &mut Builder) {
+    let paint = b.color();
+    let glass = if b.chance(0.5) { b.dark() } else { paint };
+    let tyre = b.dark();
+    let l = b.u(0.7, 0.9) / 2.0;
+    let w = b.u(0.38, 0.48) / 2.0;
+    let wr = b.u(0.07, 0.1);
+    let body_h = b.u(0.12, 0.2);
+    let y0 = wr * 0.7;
+    b.cuboid(v(-w, y0, -l), v(w, y0 + body_h, l), paint);
+    let front = b.u(0.3, 0.55) * l;
+    let cab_h = b.u(0.12, 0.2);
+    let back = l - b.u(0.0, 0.05);
+    let slope = b.u(0.55, 0.85);
+    let cab_len = back - (-l + front);
+    // The roof ends short of the tail: the cabin's top is narrower along z and shifted forward.
+    let cabin = sheared_box(
+        v(-w * 0.93, y0 + body_h - 0.01, -l + front),
+        v(w * 0.93, y0 + body_h + cab_h, back),
+        v(0.0, 0.0, -cab_len * (1.0 - slope) / 2.0 + b.u(0.0, 0.04)),
+        [b.u(0.85, 0.97), slope],
+    );
+    b.push(hexahedron(cabin), glass);
+    let ww = b.u(THIN, 0.09);
+    let wz = l * b.u(0.55, 0.72);
+    wheels(b, w, wr, ww, [-wz, wz], tyre);
 }
 
 fn sedan(b: &mut Builder) {
     let paint = b.color();
     let glass = if b.chance(0.5) { b.dark() } else { paint };
     let tyre = b.dark();
-    let l = b.u(0.85, 1.0) / 2.0;
-    let w = b.u(0.36, 0.46) / 2.0;
-    let wr = b.u(0.07, 0.1);
-    let body_h = b.u(0.12, 0.2);
+    let l = b.u(0.8, 1.0) / 2.0;
+    let w = b.u(0.34, 0.48) / 2.0;
+    let wr = b.u(0.06, 0.1);
+    let body_h = b.u(0.1, 0.2);
     let y0 = wr * 0.7;
     b.cuboid(v(-w, y0, -l), v(w, y0 + body_h, l), paint);
     let cab_l = b.u(0.45, 0.65) * l;
