@@ -16,7 +16,7 @@ use softvk::recon::dataset::{
 };
 use softvk::recon::eval;
 use softvk::recon::npz::{self, NpyArray, NpyData, Npz};
-use softvk::recon::shapes::{Category, generate};
+use softvk::recon::shapes::{Category, MIN_THICKNESS, Part, generate};
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -223,9 +223,9 @@ fn rust_written_npz_reads_back_the_same_and_the_same_arrays_give_the_same_bytes(
 
 #[test]
 fn every_category_gives_closed_outward_non_degenerate_meshes_in_the_unit_cube() {
-    // 24 seeds: every style of every category (at most four per category) several times.
+    // 60 seeds: every style of every category (at most five per category) several times.
     for category in Category::ALL {
-        for seed in 0..24u64 {
+        for seed in 0..60u64 {
             let shape = generate(category, seed);
             let what = format!("{category} seed {seed}");
             let faces = shape.face_count();
@@ -278,6 +278,89 @@ fn every_category_gives_closed_outward_non_degenerate_meshes_in_the_unit_cube() 
     }
 }
 
+/// The plane through `a`, `b`, `c` (unit normal n, offset n · a).
+fn plane(a: DVec3, b: DVec3, c: DVec3) -> (DVec3, f64) {
+    let n = (b - a).cross(c - a).normalize();
+    (n, n.dot(a))
+}
+
+/// The thinnest a part is, between opposite faces: the least distance from a corner of a face
+/// to the plane of the face across from it. A part is one of the generator's two primitives,
+/// told apart by their corner counts: a hexahedron (8 corners, corner i at bits x, y, z of i, as
+/// the generator's boxes number them; faces across from each other differ in one bit), or a
+/// cylinder or cone of n sides (two rings of n, then the two end centres; side quad k is across
+/// from side quad k + n/2, one end from the other). So a box gives its shortest side, a wing
+/// its thickness and its chord at the tip, a cylinder its width across flats, a cone that width
+/// at its narrow end, square to its side, and a leaning slab its thickness square to its faces.
+fn thinnest(part: &Part) -> f64 {
+    let p: Vec<DVec3> = part
+        .positions
+        .iter()
+        .map(|v| DVec3::from(v.map(f64::from)))
+        .collect();
+    let dist = |(n, d): (DVec3, f64), i: usize| (d - n.dot(p[i])).abs();
+    let mut thinnest = f64::INFINITY;
+    if p.len() == 8 {
+        for bit in [1, 2, 4] {
+            let side =
+                |set: bool| -> Vec<usize> { (0..8).filter(|i| (i & bit != 0) == set).collect() };
+            for (from, to) in [(side(false), side(true)), (side(true), side(false))] {
+                let pl = plane(p[to[0]], p[to[1]], p[to[3]]);
+                for &i in &from {
+                    thinnest = thinnest.min(dist(pl, i));
+                }
+            }
+        }
+    } else {
+        assert!(p.len() % 2 == 0 && p.len() >= 8, "{} corners", p.len());
+        let n = (p.len() - 2) / 2;
+        let (c0, c1) = (2 * n, 2 * n + 1);
+        // The ends' centres lie on their rings' planes, so the length is theirs apart.
+        thinnest = thinnest.min((p[c1] - p[c0]).length());
+        let quad = |k: usize| [k % n, (k + 1) % n, n + (k + 1) % n, n + k % n];
+        for k in 0..n {
+            let across = quad(k + n / 2);
+            let pl = plane(p[across[0]], p[across[1]], p[across[2]]);
+            for i in quad(k) {
+                thinnest = thinnest.min(dist(pl, i));
+            }
+        }
+    }
+    thinnest
+}
+
+#[test]
+fn every_part_of_every_category_is_at_least_min_thickness_thick() {
+    // 300 seeds a category: every style, and the extremes of the continuous parameters
+    // (tapers, radii, thicknesses drawn at their minimum) often enough to meet them.
+    let mut failures = Vec::new();
+    for category in Category::ALL {
+        // The thinnest hexahedron (slabs, legs, wings) and the thinnest cylinder or cone apart,
+        // so that a failure names both kinds.
+        let mut worst: [Option<(f64, u64, usize)>; 2] = [None; 2];
+        for seed in 0..300u64 {
+            for (i, part) in generate(category, seed).parts.iter().enumerate() {
+                let t = thinnest(part);
+                let w = &mut worst[usize::from(part.positions.len() != 8)];
+                if w.is_none_or(|w| t < w.0) {
+                    *w = Some((t, seed, i));
+                }
+            }
+        }
+        for (kind, w) in ["hexahedron", "cylinder or cone"].iter().zip(worst) {
+            if let Some((t, seed, i)) = w
+                && t < MIN_THICKNESS
+            {
+                failures.push(format!("{category} seed {seed} part {i} ({kind}): {t:.4}"));
+            }
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "thinner than {MIN_THICKNESS}: {failures:?}"
+    );
+}
+
 #[test]
 fn seeds_change_the_shapes_and_the_same_seed_repeats_them_bit_for_bit() {
     for category in Category::ALL {
@@ -294,10 +377,16 @@ fn seeds_change_the_shapes_and_the_same_seed_repeats_them_bit_for_bit() {
         );
     }
     // The object of a split does not depend on the other splits' counts.
-    let o = DatasetOptions::default();
+    let o = DatasetOptions {
+        train: 3,
+        val: 8,
+        test: 1,
+        ..DatasetOptions::default()
+    };
     let more = DatasetOptions {
         train: 2,
         val: 5,
+        test: 0,
         ..DatasetOptions::default()
     };
     assert_eq!(
@@ -470,12 +559,17 @@ fn dataset_round_trips_and_the_same_seed_writes_the_same_bytes() {
         ]
     );
     assert_eq!(files.len(), 8);
-    let files_b = dataset::write_dataset(&gpu, &b, &options, &mut |_, _, _| true).unwrap();
+    // The bytes do not depend on how many objects render together.
+    let batched = DatasetOptions {
+        batch: 3,
+        ..options.clone()
+    };
+    let files_b = dataset::write_dataset(&gpu, &b, &batched, &mut |_, _, _| true).unwrap();
     for (fa, fb) in files.iter().zip(&files_b) {
         assert_eq!(fa.file_name(), fb.file_name());
         assert!(
             std::fs::read(fa).unwrap() == std::fs::read(fb).unwrap(),
-            "{} differs between two runs of the same options",
+            "{} differs between two runs of the same objects",
             fa.display()
         );
     }
@@ -509,8 +603,10 @@ fn dataset_round_trips_and_the_same_seed_writes_the_same_bytes() {
         assert_eq!(class.image(1, 5).len(), 4 * IMAGE_SIZE * IMAGE_SIZE);
     }
     // The visual hull of an object's own 24 silhouettes: a car's is close (only the hollow
-    // under its body between the wheels is left uncarved), a table's is not (every view looks
-    // down on its top). Wrong cameras or a wrong voxel order would carve the objects away.
+    // under its body between the wheels is left uncarved), a legged table's is not (every view
+    // looks down on its top; a low table on a pedestal or slab ends comes closer, so one of the
+    // two tables is asked to stay far). Wrong cameras or a wrong voxel order would carve the
+    // objects away.
     let hull = |c: usize| -> Vec<f64> {
         (0..2)
             .map(|n| eval::visual_hull_iou(&train.classes[c], n).unwrap())
@@ -518,7 +614,7 @@ fn dataset_round_trips_and_the_same_seed_writes_the_same_bytes() {
     };
     let (car, table) = (hull(0), hull(1));
     assert!(car.iter().all(|&h| h > 0.6), "car hulls {car:?}");
-    assert!(table.iter().all(|&h| h < 0.55), "table hulls {table:?}");
+    assert!(table.iter().any(|&h| h < 0.55), "table hulls {table:?}");
     assert_eq!(Dataset::open(&a, Split::Val).unwrap().classes[0].count, 1);
     let m = input_error(Dataset::open(&a, Split::Test));
     assert!(m.contains("no *_test_images.npz"), "{m}");

@@ -36,24 +36,26 @@ pub struct DatasetArgs {
     )]
     pub categories: Vec<String>,
 
-    /// Training objects per category.
-    #[arg(long, value_name = "N", default_value_t = 48)]
+    /// Training objects per category (the defaults, 6 classes × 500 / 32 / 32, take about 4
+    /// minutes on 2 cores with lavapipe and 132 MB of disk).
+    #[arg(long, value_name = "N", default_value_t = 500)]
     pub train: usize,
 
     /// Validation objects per category.
-    #[arg(long, value_name = "N", default_value_t = 8)]
+    #[arg(long, value_name = "N", default_value_t = 32)]
     pub val: usize,
 
     /// Test objects per category.
-    #[arg(long, value_name = "N", default_value_t = 8)]
+    #[arg(long, value_name = "N", default_value_t = 32)]
     pub test: usize,
 
     /// Seed of the objects: the same flags give the same bytes.
     #[arg(long, value_name = "S", default_value_t = 0)]
     pub seed: u64,
 
-    /// Objects rendered in one GPU batch (24 views each).
-    #[arg(long, value_name = "N", default_value_t = 8)]
+    /// Objects rendered in one GPU batch (24 views each; the same bytes whatever N). One at a
+    /// time is fastest on lavapipe; a GPU may prefer more.
+    #[arg(long, value_name = "N", default_value_t = 1)]
     pub batch: usize,
 
     /// σ of the coverage sigmoid (small: crisp silhouettes).

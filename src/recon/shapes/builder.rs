@@ -4,11 +4,22 @@
 
 use glam::DVec3;
 
-use super::{Category, NORMALIZED_EXTENT, Part, Shape};
+use super::{Category, MIN_THICKNESS, NORMALIZED_EXTENT, Part, Shape};
 use crate::rng::SplitMix64;
 
 /// Segments around a cylinder or cone.
 const SEGMENTS: u32 = 12;
+
+/// The longest side a recipe may build before normalization ([`Builder::finish`] checks it):
+/// normalization then shrinks a part by at most `NORMALIZED_EXTENT / MAX_RAW_EXTENT`.
+const MAX_RAW_EXTENT: f64 = 1.2;
+
+/// The thinnest a recipe makes a part, before normalization: [`MIN_THICKNESS`] divided by the
+/// most that normalization shrinks (0.98 / 1.2) and by the most that a leaning slab's
+/// perpendicular thickness falls short of the thickness it was drawn with (cos 20°), so that
+/// every part of a normalized object is at least [`MIN_THICKNESS`] thick. Tapers (wings,
+/// cones) end at it, never below.
+pub(super) const THIN: f64 = MIN_THICKNESS * MAX_RAW_EXTENT / NORMALIZED_EXTENT / 0.94;
 
 /// Parts in f64 while an object is built.
 pub(super) struct RawPart {
@@ -77,11 +88,26 @@ impl Builder {
         self.push(hexahedron(box_corners(lo2, hi)), color);
     }
 
+    /// A cylinder or truncated cone whose narrow end is no thinner than any other part: a
+    /// cone of half-angle θ is `2 r cos θ` thick at an end of radius r, measured square to its
+    /// side, so each radius is raised to at least `THIN / (2 cos θ)` (a nose, a shade's top).
     pub(super) fn frustum(&mut self, p0: DVec3, p1: DVec3, r0: f64, r1: f64, color: [f32; 3]) {
+        let len = (p1 - p0).length();
+        let (mut r0, mut r1) = (r0, r1);
+        // Raising the narrow end narrows θ, so each pass asks less; a few passes settle.
+        for _ in 0..4 {
+            let sec = (1.0 + ((r0 - r1) / len).powi(2)).sqrt();
+            r0 = r0.max(THIN / 2.0 * sec);
+            r1 = r1.max(THIN / 2.0 * sec);
+        }
         self.push(frustum(p0, p1, r0, r1, SEGMENTS), color);
     }
 
     /// Centres and scales every part together into the unit cube.
+    ///
+    /// # Panics
+    /// When the recipe built an object longer than [`MAX_RAW_EXTENT`]: normalization would
+    /// shrink its thinnest parts below [`MIN_THICKNESS`] (a recipe's bug, whatever the seed).
     pub(super) fn finish(self, category: Category) -> Shape {
         let mut lo = DVec3::splat(f64::INFINITY);
         let mut hi = DVec3::splat(f64::NEG_INFINITY);
@@ -90,7 +116,12 @@ impl Builder {
             hi = hi.max(*p);
         }
         let centre = (lo + hi) / 2.0;
-        let scale = NORMALIZED_EXTENT / (hi - lo).max_element();
+        let longest = (hi - lo).max_element();
+        assert!(
+            longest <= MAX_RAW_EXTENT,
+            "a {category} recipe built an object {longest} long, over {MAX_RAW_EXTENT}"
+        );
+        let scale = NORMALIZED_EXTENT / longest;
         let parts = self
             .parts
             .into_iter()

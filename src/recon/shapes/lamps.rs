@@ -1,23 +1,51 @@
-//! Recipes for lamps (desk, floor, arc, vase) and displays: a base, a pole or neck, and what it
-//! holds up (a shade, a screen).
+//! Recipes for lamps (desk, floor, arc, vase, tripod) and displays: a base, a pole or neck, and
+//! what it holds up (a shade, a screen).
 
-use super::MIN_THICKNESS;
-use super::builder::{Builder, style, v};
+use super::builder::{Builder, THIN, style, v};
 
 pub(super) fn lamp(b: &mut Builder) {
-    match style(b, 4) {
+    match style(b, 5) {
         0 => desk_lamp(b),
         1 => floor_lamp(b),
         2 => arc_lamp(b),
-        _ => vase_lamp(b),
+        3 => vase_lamp(b),
+        _ => tripod_lamp(b),
     }
+}
+
+/// Tripod lamp: three splayed legs meeting under a drum or cone shade, with a short stem from
+/// where they meet.
+fn tripod_lamp(b: &mut Builder) {
+    let wood = b.color();
+    let shade_color = b.color();
+    let h = b.u(0.45, 0.85);
+    let spread = h * b.u(0.25, 0.45);
+    let meet = h * b.u(0.7, 0.85);
+    let lr = THIN / 2.0 * b.u(1.0, 1.4);
+    let turn = b.u(0.0, 1.0);
+    for k in 0..3 {
+        let a = std::f64::consts::TAU * (f64::from(k) + turn) / 3.0;
+        let foot = v(spread * a.cos(), 0.0, spread * a.sin());
+        b.frustum(foot, v(0.0, meet, 0.0), lr, lr, wood);
+    }
+    b.frustum(v(0.0, meet - 0.02, 0.0), v(0.0, h, 0.0), lr, lr, wood);
+    let sh = b.u(0.14, 0.3);
+    let r = b.u(0.12, 0.25);
+    let r_top = r * b.u(0.5, 1.0);
+    b.frustum(
+        v(0.0, h - sh * 0.5, 0.0),
+        v(0.0, h + sh * 0.5, 0.0),
+        r,
+        r_top,
+        shade_color,
+    );
 }
 
 fn desk_lamp(b: &mut Builder) {
     let metal = b.color();
     let shade_color = b.color();
     let base_r = b.u(0.1, 0.18);
-    let base_t = b.u(MIN_THICKNESS, 0.06);
+    let base_t = b.u(THIN, 0.085);
     let round_base = b.chance(0.6);
     if round_base {
         b.frustum(
@@ -30,7 +58,7 @@ fn desk_lamp(b: &mut Builder) {
     } else {
         b.cuboid(v(-base_r, 0.0, -base_r), v(base_r, base_t, base_r), metal);
     }
-    let pr = MIN_THICKNESS / 2.0 * b.u(1.0, 1.3);
+    let pr = THIN / 2.0 * b.u(1.0, 1.3);
     let h = b.u(0.5, 0.8);
     let bent = b.chance(0.45);
     let top = if bent {
@@ -63,7 +91,7 @@ fn floor_lamp(b: &mut Builder) {
     let metal = b.color();
     let shade_color = b.color();
     let base_r = b.u(0.12, 0.2);
-    let base_t = b.u(MIN_THICKNESS, 0.05);
+    let base_t = b.u(THIN, 0.075);
     b.frustum(
         v(0.0, 0.0, 0.0),
         v(0.0, base_t, 0.0),
@@ -71,7 +99,7 @@ fn floor_lamp(b: &mut Builder) {
         base_r * 0.9,
         metal,
     );
-    let pr = MIN_THICKNESS / 2.0 * b.u(1.0, 1.3);
+    let pr = THIN / 2.0 * b.u(1.0, 1.3);
     let h = b.u(0.75, 0.9);
     b.frustum(v(0.0, 0.0, 0.0), v(0.0, h, 0.0), pr, pr, metal);
     let sh = b.u(0.14, 0.22);
@@ -91,9 +119,9 @@ fn arc_lamp(b: &mut Builder) {
     let metal = b.color();
     let shade_color = b.color();
     let bs = b.u(0.08, 0.14);
-    let bt = b.u(0.04, 0.08);
+    let bt = b.u(THIN, 0.1);
     b.cuboid(v(-bs, 0.0, -bs), v(bs, bt, bs), metal);
-    let pr = MIN_THICKNESS / 2.0 * b.u(1.0, 1.3);
+    let pr = THIN / 2.0 * b.u(1.0, 1.3);
     let h = b.u(0.6, 0.85);
     let reach = b.u(0.3, 0.5);
     let rise = b.u(0.0, 0.12);
@@ -126,7 +154,7 @@ fn vase_lamp(b: &mut Builder) {
     let shoulder = r * b.u(0.3, 0.6);
     b.frustum(v(0.0, 0.0, 0.0), v(0.0, belly, 0.0), foot, r, body);
     b.frustum(v(0.0, belly, 0.0), v(0.0, bh, 0.0), r, shoulder, body);
-    let pr = MIN_THICKNESS / 2.0 * 1.2;
+    let pr = THIN / 2.0 * 1.2;
     let neck = b.u(0.05, 0.15);
     b.frustum(v(0.0, bh - 0.01, 0.0), v(0.0, bh + neck, 0.0), pr, pr, body);
     let sh = b.u(0.15, 0.28);
@@ -146,16 +174,16 @@ pub(super) fn display(b: &mut Builder) {
     let screen = b.dark();
     let w = b.u(0.75, 1.0) / 2.0;
     let sh = b.u(0.45, 0.65);
-    let t = b.u(MIN_THICKNESS, 0.07);
+    let t = b.u(THIN, 0.095);
     let neck_h = b.u(0.12, 0.25);
     let foot_w = b.u(0.25, 0.5) / 2.0;
     let foot_d = b.u(0.15, 0.25) / 2.0;
-    let foot_t = b.u(MIN_THICKNESS, 0.06);
+    let foot_t = b.u(THIN, 0.085);
     b.cuboid(v(-foot_w, 0.0, -foot_d), v(foot_w, foot_t, foot_d), frame);
-    let nw = b.u(0.05, 0.12) / 2.0;
+    let nw = b.u(THIN, 0.12) / 2.0;
     b.cuboid(
-        v(-nw, foot_t - 0.01, -MIN_THICKNESS / 2.0 + t),
-        v(nw, foot_t + neck_h + 0.1, MIN_THICKNESS / 2.0 + t),
+        v(-nw, foot_t - 0.01, -THIN / 2.0 + t),
+        v(nw, foot_t + neck_h + 0.1, THIN / 2.0 + t),
         frame,
     );
     let y = foot_t + neck_h;
@@ -164,7 +192,7 @@ pub(super) fn display(b: &mut Builder) {
     let bezel = b.u(0.015, 0.04);
     b.cuboid(
         v(-w + bezel, y + bezel, -t / 2.0 - 0.01),
-        v(w - bezel, y + sh - bezel, -t / 2.0 + 0.02),
+        v(w - bezel, y + sh - bezel, -t / 2.0 - 0.01 + THIN),
         screen,
     );
 }

@@ -11,9 +11,12 @@
 //!
 //! Every part is a closed, outward-wound triangle mesh on its own; parts overlap (a leg enters
 //! the seat), so the object as a whole is a union of shells, not one closed surface: voxelize
-//! per part and OR the occupancies ([`Shape::voxelize`]). Parts are at least [`MIN_THICKNESS`]
-//! thick, more than the 1/31 spacing of the dataset's voxel centres, so no part falls between
-//! voxel centres.
+//! per part and OR the occupancies ([`Shape::voxelize`]). Every part of a normalized object is
+//! at least [`MIN_THICKNESS`] thick everywhere (a wing at its tip, a cone at its narrow end, a
+//! leaning slab measured square to its faces), more than the 1/31 spacing of the dataset's
+//! voxel centres, so no part falls between voxel centres. The recipes draw thin parts from a
+//! minimum above it that allows for normalization shrinking the object (their objects are at
+//! most 1.2 long before it, which building checks) and for a slab's lean.
 //!
 //! Each category is a recipe in the file of its family (`seating`, `tables`, `vehicles`,
 //! `lamps`), built with the primitives of `builder`.
@@ -40,34 +43,39 @@ use crate::rng::SplitMix64;
 /// on the voxel centres at ±0.5).
 pub const NORMALIZED_EXTENT: f64 = 0.98;
 
-/// The thinnest a part is made (before normalization, which scales by at most a little).
+/// The thinnest any part of a generated (normalized) object is, in any direction: 1.4 voxel
+/// spacings of the dataset's 32³ lattice.
 pub const MIN_THICKNESS: f64 = 0.045;
 
 /// An object category, with its ShapeNet synset id (the class id of the NMR/SoftRas files).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Category {
-    /// Airplane (`02691156`): airliner (swept wings, tail, optional engines), fighter (delta
-    /// wings, one or two fins) or propeller plane (straight high or low wings).
+    /// Airplane (`02691156`): airliner (swept wings, low or T tail, no, two or four engines),
+    /// fighter (delta wings, one or two fins), propeller plane (straight high or low wings) or
+    /// biplane (two staggered wings on struts).
     Airplane,
     /// Bench (`02828884`): long seat on slab or post legs with an optional slatted back, a
-    /// picnic bench on A-frames, or an ottoman block.
+    /// picnic bench on A-frames, an ottoman block, or a seat between solid end panels (arms,
+    /// optional back).
     Bench,
     /// Cabinet (`02933112`): a body with doors or drawers and handles, optional feet.
     Cabinet,
-    /// Car (`02958343`): sedan, van, pickup or sports car: body, cabin, four wheels.
+    /// Car (`02958343`): sedan, van, pickup, sports car or hatchback: body, cabin, four wheels.
     Car,
     /// Chair (`03001627`): four-legged (posts, round, splayed; tilted back, optional arms),
-    /// office chair (column and five spokes), stool, or armchair with solid sides.
+    /// office chair (column and five spokes), stool, armchair with solid sides, or sled chair
+    /// on a bent-tube frame.
     Chair,
     /// Display (`03211117`): thin screen on a neck and a foot.
     Display,
     /// Lamp (`03636649`): desk lamp (straight or bent pole, conical shade), floor lamp, arc
-    /// lamp, or table lamp on a vase.
+    /// lamp, table lamp on a vase, or tripod lamp.
     Lamp,
     /// Sofa (`04256520`): base, back, arms, cushions.
     Sofa,
     /// Table (`04379243`): rectangular or round top on four legs or a pedestal (optional
-    /// shelf), coffee table, desk on side panels, or trestle table.
+    /// shelf), coffee table, desk on side panels, trestle table, or a bistro-to-bar-height top
+    /// on a column and a cross foot.
     Table,
 }
 
@@ -218,8 +226,9 @@ impl Shape {
 }
 
 // Each category draws one of several styles (ShapeNet's categories hold many kinds of object:
-// stools and office chairs are chairs, pickups and vans are cars), so that a test object rarely
-// has a near twin among a few dozen training objects.
+// stools and office chairs are chairs, pickups and vans are cars), each with continuous
+// proportions and optional parts, so that a test object rarely has a near twin among the
+// training objects.
 
 /// The object of `category` drawn from `seed`: the same seed gives the same object, bit for bit.
 pub fn generate(category: Category, seed: u64) -> Shape {

@@ -1,15 +1,54 @@
-//! Recipes for the things one sits on: chairs (four-legged, office, stool, armchair), benches
-//! (legged, picnic, ottoman) and sofas.
+//! Recipes for the things one sits on: chairs (four-legged, office, stool, armchair, sled),
+//! benches (legged, picnic, ottoman, slab-ended) and sofas.
 
-use super::MIN_THICKNESS;
-use super::builder::{Builder, hexahedron, sheared_box, style, v};
+use super::builder::{Builder, THIN, hexahedron, sheared_box, style, v};
 
 pub(super) fn chair(b: &mut Builder) {
-    match style(b, 4) {
+    match style(b, 5) {
         0 => four_leg_chair(b),
         1 => office_chair(b),
         2 => stool(b),
-        _ => armchair(b),
+        3 => armchair(b),
+        _ => sled_chair(b),
+    }
+}
+
+/// Sled chair: seat and back on a bent-tube frame: a runner on the floor each side, rising at
+/// the front to the seat and at the back up the backrest.
+fn sled_chair(b: &mut Builder) {
+    let shell = b.color();
+    let metal = if b.chance(0.5) { b.dark() } else { b.color() };
+    let w = b.u(0.4, 0.56) / 2.0;
+    let d = b.u(0.38, 0.52) / 2.0;
+    let h = b.u(0.38, 0.5);
+    let t = b.u(THIN, 0.09);
+    b.cuboid(v(-w, h, -d), v(w, h + t, d), shell);
+    let bh = b.u(0.3, 0.5);
+    let bt = b.u(THIN, 0.08);
+    let lean = b.u(0.0, 0.1);
+    let back = sheared_box(
+        v(-w, h + t * 0.5, d - bt),
+        v(w, h + t + bh, d),
+        v(0.0, 0.0, lean),
+        [b.u(0.85, 1.0), 1.0],
+    );
+    b.push(hexahedron(back), shell);
+    let tr = b.u(THIN / 2.0, 0.035);
+    let reach = b.u(0.0, 0.08);
+    let x = w * b.u(0.75, 0.95);
+    for sx in [-1.0, 1.0] {
+        let x = sx * x;
+        let front = v(x, tr, -d - reach);
+        let rear = v(x, tr, d + reach * 0.5);
+        b.frustum(front, rear, tr, tr, metal);
+        b.frustum(front, v(x, h + t / 2.0, -d + 0.03), tr, tr, metal);
+        b.frustum(
+            rear,
+            v(x, h + t + bh * 0.8, d - bt / 2.0 + lean * 0.8),
+            tr,
+            tr,
+            metal,
+        );
     }
 }
 
@@ -17,14 +56,14 @@ fn four_leg_chair(b: &mut Builder) {
     let seat_color = b.color();
     let back_color = if b.chance(0.6) { seat_color } else { b.color() };
     let leg_color = b.color();
-    let w = b.u(0.42, 0.6) / 2.0;
-    let d = b.u(0.4, 0.58) / 2.0;
-    let t = b.u(MIN_THICKNESS, 0.08);
-    let h = b.u(0.36, 0.5);
+    let w = b.u(0.38, 0.64) / 2.0;
+    let d = b.u(0.36, 0.6) / 2.0;
+    let t = b.u(THIN, 0.1);
+    let h = b.u(0.32, 0.5);
     b.cuboid(v(-w, h, -d), v(w, h + t, d), seat_color);
     // Legs: square posts, round posts, or splayed posts.
     let style = (b.rng.unit() * 3.0) as u32;
-    let s = b.u(MIN_THICKNESS, 0.065) / 2.0;
+    let s = b.u(THIN, 0.09) / 2.0;
     let splay = if style == 2 { b.u(0.03, 0.07) } else { 0.0 };
     let inset = b.u(0.0, 0.04) + s;
     for (sx, sz) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
@@ -41,7 +80,7 @@ fn four_leg_chair(b: &mut Builder) {
     }
     // Back at the rear (+z), tilted backwards.
     let bh = b.u(0.35, 0.6);
-    let bt = b.u(MIN_THICKNESS, 0.07);
+    let bt = b.u(THIN, 0.095);
     let tilt = b.u(0.0, 0.1);
     let taper = b.u(0.8, 1.05);
     let back = sheared_box(
@@ -53,7 +92,7 @@ fn four_leg_chair(b: &mut Builder) {
     b.push(hexahedron(back), back_color);
     if b.chance(0.35) {
         let ah = b.u(0.16, 0.26);
-        let aw = b.u(MIN_THICKNESS, 0.07);
+        let aw = b.u(THIN, 0.095);
         for sx in [-1.0, 1.0] {
             let x0 = sx * w;
             let x1 = x0 - sx * aw;
@@ -81,10 +120,10 @@ fn office_chair(b: &mut Builder) {
     let h = b.u(0.4, 0.55);
     let t = b.u(0.06, 0.1);
     b.cuboid(v(-w, h, -d), v(w, h + t, d), shell);
-    let cr = b.u(0.025, 0.04);
+    let cr = b.u(THIN / 2.0, 0.045);
     b.frustum(v(0.0, 0.06, 0.0), v(0.0, h + 0.01, 0.0), cr, cr, metal);
     let spoke = b.u(0.22, 0.3);
-    let sr = MIN_THICKNESS / 2.0 * b.u(1.0, 1.4);
+    let sr = THIN / 2.0 * b.u(1.0, 1.4);
     let turn = b.u(0.0, 1.0);
     for k in 0..5 {
         let a = std::f64::consts::TAU * (f64::from(k) + turn) / 5.0;
@@ -93,7 +132,7 @@ fn office_chair(b: &mut Builder) {
         b.frustum(end - v(0.0, 0.06, 0.0), end, sr * 1.2, sr * 1.2, metal);
     }
     let bh = b.u(0.3, 0.55);
-    let bt = b.u(0.05, 0.09);
+    let bt = b.u(THIN, 0.1);
     let back = sheared_box(
         v(-w * 0.9, h + t, d - bt),
         v(w * 0.9, h + t + bh, d),
@@ -103,7 +142,7 @@ fn office_chair(b: &mut Builder) {
     b.push(hexahedron(back), shell);
     if b.chance(0.5) {
         let ah = b.u(0.15, 0.22);
-        let aw = MIN_THICKNESS * 1.2;
+        let aw = THIN * 1.2;
         for sx in [-1.0, 1.0] {
             let x = sx * (w - aw / 2.0);
             b.cuboid(
@@ -126,14 +165,14 @@ fn stool(b: &mut Builder) {
     let wood = if b.chance(0.5) { seat } else { b.color() };
     let r = b.u(0.14, 0.22);
     let h = b.u(0.45, 0.8);
-    let t = b.u(MIN_THICKNESS, 0.08);
+    let t = b.u(THIN, 0.1);
     if b.chance(0.6) {
         b.frustum(v(0.0, h, 0.0), v(0.0, h + t, 0.0), r, r, seat);
     } else {
         b.cuboid(v(-r, h, -r), v(r, h + t, r), seat);
     }
     let n = 3 + style(b, 2);
-    let s = b.u(MIN_THICKNESS, 0.06) / 2.0;
+    let s = b.u(THIN, 0.085) / 2.0;
     let splay = b.u(0.02, 0.12);
     let turn = b.u(0.0, 1.0);
     let ring = b.chance(0.5);
@@ -195,10 +234,41 @@ fn armchair(b: &mut Builder) {
 }
 
 pub(super) fn bench(b: &mut Builder) {
-    match style(b, 3) {
+    match style(b, 4) {
         0 => leg_bench(b),
         1 => picnic_bench(b),
-        _ => ottoman_bench(b),
+        2 => ottoman_bench(b),
+        _ => slab_bench(b),
+    }
+}
+
+/// Slab-ended bench: a seat between two solid end panels that rise above it as arms, often a
+/// leaning back between the arms.
+fn slab_bench(b: &mut Builder) {
+    let wood = b.color();
+    let ends = if b.chance(0.5) { wood } else { b.color() };
+    let l = b.u(0.75, 1.0) / 2.0;
+    let d = b.u(0.28, 0.45) / 2.0;
+    let h = b.u(0.3, 0.45);
+    let t = b.u(THIN, 0.1);
+    let et = b.u(THIN, 0.12);
+    let arm = b.u(0.0, 0.2);
+    b.cuboid(v(-l + et, h, -d), v(l - et, h + t, d), wood);
+    for sx in [-1.0, 1.0] {
+        let x0 = sx * l;
+        let x1 = x0 - sx * et;
+        b.cuboid(v(x0.min(x1), 0.0, -d), v(x0.max(x1), h + t + arm, d), ends);
+    }
+    if b.chance(0.6) {
+        let bt = b.u(THIN, 0.08);
+        let bh = b.u(0.2, 0.4);
+        let back = sheared_box(
+            v(-l + et, h + t * 0.5, d - bt),
+            v(l - et, h + t + bh, d),
+            v(0.0, 0.0, b.u(0.0, 0.08)),
+            [1.0, 1.0],
+        );
+        b.push(hexahedron(back), wood);
     }
 }
 
@@ -208,10 +278,10 @@ fn leg_bench(b: &mut Builder) {
     let l = b.u(0.85, 1.0) / 2.0;
     let d = b.u(0.24, 0.4) / 2.0;
     let h = b.u(0.32, 0.45);
-    let t = b.u(MIN_THICKNESS, 0.07);
+    let t = b.u(THIN, 0.095);
     b.cuboid(v(-l, h, -d), v(l, h + t, d), wood);
     let slab_legs = b.chance(0.5);
-    let s = b.u(MIN_THICKNESS, 0.07) / 2.0;
+    let s = b.u(THIN, 0.095) / 2.0;
     let inset = b.u(0.02, 0.1) + s;
     for sx in [-1.0, 1.0] {
         let x = sx * (l - inset);
@@ -228,10 +298,10 @@ fn leg_bench(b: &mut Builder) {
         let slats = 1 + (b.rng.unit() * 3.0) as u32;
         let bh = b.u(0.2, 0.35);
         let gap = bh / f64::from(slats);
-        let st = MIN_THICKNESS;
+        let st = THIN;
         for k in 0..slats {
             let y = h + t + gap * f64::from(k) + gap * 0.3;
-            b.cuboid(v(-l, y, d - st), v(l, y + gap * 0.7, d), wood);
+            b.cuboid(v(-l, y, d - st), v(l, y + (gap * 0.7).max(st), d), wood);
         }
         for sx in [-1.0, 1.0] {
             let x = sx * (l - inset);
@@ -250,9 +320,9 @@ fn picnic_bench(b: &mut Builder) {
     let l = b.u(0.85, 1.0) / 2.0;
     let d = b.u(0.22, 0.34) / 2.0;
     let h = b.u(0.35, 0.45);
-    let t = b.u(MIN_THICKNESS, 0.07);
+    let t = b.u(THIN, 0.095);
     b.cuboid(v(-l, h, -d), v(l, h + t, d), wood);
-    let s = b.u(MIN_THICKNESS, 0.06) / 2.0;
+    let s = b.u(THIN, 0.085) / 2.0;
     let inset = b.u(0.08, 0.2);
     let spread = b.u(0.1, 0.2);
     for sx in [-1.0, 1.0] {
@@ -282,7 +352,7 @@ fn ottoman_bench(b: &mut Builder) {
     b.cuboid(v(-l, y0, -d), v(l, h, d), cloth);
     if feet {
         let wood = b.color();
-        let f = b.u(MIN_THICKNESS, 0.06) / 2.0;
+        let f = b.u(THIN, 0.085) / 2.0;
         for (sx, sz) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
             let c = v(sx * (l - f - 0.03), 0.0, sz * (d - f - 0.03));
             b.cuboid(c - v(f, 0.0, f), c + v(f, y0 + 0.01, f), wood);
@@ -290,7 +360,7 @@ fn ottoman_bench(b: &mut Builder) {
     }
     if b.chance(0.5) {
         let top = b.color();
-        let th = b.u(0.04, 0.08);
+        let th = b.u(THIN, 0.09);
         b.cuboid(
             v(-l + 0.01, h - 0.01, -d + 0.01),
             v(l - 0.01, h + th, d - 0.01),
@@ -308,10 +378,14 @@ pub(super) fn sofa(b: &mut Builder) {
     let base_h = b.u(0.16, 0.26);
     b.cuboid(v(-w, y0, -d), v(w, y0 + base_h, d), cloth);
     if y0 > 0.02 {
-        let f = MIN_THICKNESS / 2.0;
+        let f = THIN / 2.0;
         for (sx, sz) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
             let c = v(sx * (w - 0.05), 0.0, sz * (d - 0.05));
-            b.cuboid(c - v(f, 0.0, f), c + v(f, y0 + 0.01, f), cushion);
+            b.cuboid(
+                c - v(f, 0.0, f),
+                c + v(f, (y0 + 0.01).max(THIN), f),
+                cushion,
+            );
         }
     }
     let bt = b.u(0.08, 0.14);
@@ -335,7 +409,7 @@ pub(super) fn sofa(b: &mut Builder) {
         );
     }
     let n = 1 + (b.rng.unit() * 3.0) as u32;
-    let ct = b.u(MIN_THICKNESS, 0.08);
+    let ct = b.u(THIN, 0.1);
     let inner = w - at;
     let cw = 2.0 * inner / f64::from(n);
     for k in 0..n {

@@ -1,23 +1,60 @@
-//! Recipes for tables (legged, coffee, desk, trestle) and cabinets: a top or a body on legs,
-//! panels or feet.
+//! Recipes for tables (legged, coffee, desk, trestle, pedestal on a cross foot) and cabinets: a
+//! top or a body on legs, panels or feet.
 
-use super::MIN_THICKNESS;
-use super::builder::{Builder, style, v};
+use super::builder::{Builder, THIN, hexahedron, style, v};
 
 pub(super) fn table(b: &mut Builder) {
-    match style(b, 4) {
+    match style(b, 5) {
         0 => leg_table(b),
         1 => coffee_table(b),
         2 => desk(b),
-        _ => trestle_table(b),
+        3 => trestle_table(b),
+        _ => cross_foot_table(b),
+    }
+}
+
+/// Pedestal table on a cross foot: a square or round top, from bistro to bar height, on a
+/// column standing on two crossed feet (turned by any angle).
+fn cross_foot_table(b: &mut Builder) {
+    let top_color = b.color();
+    let metal = if b.chance(0.5) { b.dark() } else { b.color() };
+    let h = b.u(0.45, 0.95);
+    let t = b.u(THIN, 0.08);
+    let r = b.u(0.25, 0.5);
+    if b.chance(0.5) {
+        b.frustum(v(0.0, h, 0.0), v(0.0, h + t, 0.0), r, r, top_color);
+    } else {
+        let q = r * b.u(0.8, 1.0);
+        b.cuboid(v(-q, h, -q), v(q, h + t, q), top_color);
+    }
+    let pr = b.u(THIN / 2.0, 0.05);
+    b.frustum(v(0.0, 0.0, 0.0), v(0.0, h + t / 2.0, 0.0), pr, pr, metal);
+    let reach = r * b.u(0.6, 0.95);
+    let fh = b.u(THIN, 0.07);
+    let turn = b.u(0.0, std::f64::consts::FRAC_PI_2);
+    for k in 0..2 {
+        let a = turn + std::f64::consts::FRAC_PI_2 * f64::from(k);
+        let (c, sn) = (a.cos() * reach, a.sin() * reach);
+        // A foot is a flat bar: a cylinder of width fh would roll; a box turned by `a`.
+        let half = fh / 2.0;
+        let (px, pz) = (-a.sin() * half, a.cos() * half);
+        b.push(
+            hexahedron(std::array::from_fn(|i| {
+                let end = if i & 1 != 0 { 1.0 } else { -1.0 };
+                let side = if i & 4 != 0 { 1.0 } else { -1.0 };
+                let y = if i & 2 != 0 { fh } else { 0.0 };
+                v(end * c + side * px, y, end * sn + side * pz)
+            })),
+            metal,
+        );
     }
 }
 
 fn leg_table(b: &mut Builder) {
     let top_color = b.color();
     let leg_color = if b.chance(0.5) { top_color } else { b.color() };
-    let h = b.u(0.5, 0.75);
-    let t = b.u(MIN_THICKNESS, 0.07);
+    let h = b.u(0.45, 0.8);
+    let t = b.u(THIN, 0.095);
     let round = b.chance(0.3);
     if round {
         let r = b.u(0.3, 0.5);
@@ -33,10 +70,10 @@ fn leg_table(b: &mut Builder) {
                 leg_color,
             );
             let fr = b.u(0.18, 0.3);
-            let ft = b.u(MIN_THICKNESS, 0.06);
+            let ft = b.u(THIN, 0.085);
             b.frustum(v(0.0, 0.0, 0.0), v(0.0, ft, 0.0), fr, fr * 0.8, leg_color);
         } else {
-            let s = b.u(MIN_THICKNESS, 0.06) / 2.0;
+            let s = b.u(THIN, 0.085) / 2.0;
             let q = r * 0.6;
             for (sx, sz) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
                 let c = v(sx * q * 0.707, 0.0, sz * q * 0.707);
@@ -44,10 +81,10 @@ fn leg_table(b: &mut Builder) {
             }
         }
     } else {
-        let w = b.u(0.6, 1.0) / 2.0;
-        let d = b.u(0.4, 0.7) / 2.0;
+        let w = b.u(0.5, 1.0) / 2.0;
+        let d = b.u(0.35, 0.75) / 2.0;
         b.cuboid(v(-w, h, -d), v(w, h + t, d), top_color);
-        let s = b.u(MIN_THICKNESS, 0.08) / 2.0;
+        let s = b.u(THIN, 0.1) / 2.0;
         let inset = b.u(0.0, 0.06) + s;
         let round_legs = b.chance(0.4);
         for (sx, sz) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
@@ -62,7 +99,7 @@ fn leg_table(b: &mut Builder) {
             let sh = b.u(0.08, 0.2);
             b.cuboid(
                 v(-w + inset, sh, -d + inset),
-                v(w - inset, sh + MIN_THICKNESS, d - inset),
+                v(w - inset, sh + THIN, d - inset),
                 leg_color,
             );
         }
@@ -76,9 +113,9 @@ fn coffee_table(b: &mut Builder) {
     let w = b.u(0.75, 1.0) / 2.0;
     let d = b.u(0.4, 0.75) / 2.0;
     let h = b.u(0.22, 0.38);
-    let t = b.u(MIN_THICKNESS, 0.09);
+    let t = b.u(THIN, 0.11);
     b.cuboid(v(-w, h, -d), v(w, h + t, d), top_color);
-    let s = b.u(MIN_THICKNESS, 0.09) / 2.0;
+    let s = b.u(THIN, 0.11) / 2.0;
     let inset = b.u(0.0, 0.08) + s;
     if b.chance(0.5) {
         for (sx, sz) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
@@ -95,7 +132,7 @@ fn coffee_table(b: &mut Builder) {
         let sh = b.u(0.04, h * 0.5);
         b.cuboid(
             v(-w + inset, sh, -d + inset * 0.5),
-            v(w - inset, sh + MIN_THICKNESS, d - inset * 0.5),
+            v(w - inset, sh + THIN, d - inset * 0.5),
             leg_color,
         );
     }
@@ -108,9 +145,9 @@ fn desk(b: &mut Builder) {
     let w = b.u(0.8, 1.0) / 2.0;
     let d = b.u(0.4, 0.6) / 2.0;
     let h = b.u(0.55, 0.75);
-    let t = b.u(MIN_THICKNESS, 0.06);
+    let t = b.u(THIN, 0.085);
     b.cuboid(v(-w, h, -d), v(w, h + t, d), top_color);
-    let pt = b.u(MIN_THICKNESS, 0.07);
+    let pt = b.u(THIN, 0.095);
     let side = if b.chance(0.5) { -1.0 } else { 1.0 };
     let pedestal = b.chance(0.6);
     let pw = b.u(0.25, 0.4);
@@ -136,10 +173,10 @@ fn trestle_table(b: &mut Builder) {
     let w = b.u(0.8, 1.0) / 2.0;
     let d = b.u(0.35, 0.6) / 2.0;
     let h = b.u(0.5, 0.75);
-    let t = b.u(MIN_THICKNESS, 0.08);
+    let t = b.u(THIN, 0.1);
     b.cuboid(v(-w, h, -d), v(w, h + t, d), top_color);
-    let s = b.u(0.05, 0.1) / 2.0;
-    let ft = b.u(MIN_THICKNESS, 0.07);
+    let s = b.u(THIN, 0.1) / 2.0;
+    let ft = b.u(THIN, 0.095);
     let inset = b.u(0.08, 0.2);
     for sx in [-1.0, 1.0] {
         let x = sx * (w - inset);
@@ -152,7 +189,7 @@ fn trestle_table(b: &mut Builder) {
         );
     }
     let sy = h * b.u(0.3, 0.6);
-    let st = MIN_THICKNESS / 2.0 * 1.2;
+    let st = THIN / 2.0 * 1.2;
     b.cuboid(v(-w + inset, sy - st, -st), v(w - inset, sy + st, st), wood);
 }
 
@@ -167,10 +204,10 @@ pub(super) fn cabinet(b: &mut Builder) {
     let y0 = if feet { b.u(0.04, 0.1) } else { 0.0 };
     b.cuboid(v(-w, y0, -d), v(w, y0 + h, d), wood);
     if feet {
-        let f = b.u(MIN_THICKNESS, 0.06) / 2.0;
+        let f = b.u(THIN, 0.085) / 2.0;
         for (sx, sz) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
             let c = v(sx * (w - f - 0.02), 0.0, sz * (d - f - 0.02));
-            b.cuboid(c - v(f, 0.0, f), c + v(f, y0 + 0.01, f), wood);
+            b.cuboid(c - v(f, 0.0, f), c + v(f, (y0 + 0.01).max(THIN), f), wood);
         }
     }
     // Doors (side by side) or drawers (stacked), proud of the front by a little.
@@ -184,21 +221,25 @@ pub(super) fn cabinet(b: &mut Builder) {
             let step = (h - 2.0 * m) / f64::from(n);
             (
                 v(-w + m, y0 + m + step * f + 0.005, -d - proud),
-                v(w - m, y0 + m + step * (f + 1.0) - 0.005, -d + 0.01),
+                v(w - m, y0 + m + step * (f + 1.0) - 0.005, -d - proud + THIN),
             )
         } else {
             let step = (2.0 * w - 2.0 * m) / f64::from(n);
             (
                 v(-w + m + step * f + 0.005, y0 + m, -d - proud),
-                v(-w + m + step * (f + 1.0) - 0.005, y0 + h - m, -d + 0.01),
+                v(
+                    -w + m + step * (f + 1.0) - 0.005,
+                    y0 + h - m,
+                    -d - proud + THIN,
+                ),
             )
         };
         b.cuboid(lo, hi, front);
         let c = (lo + hi) / 2.0;
-        let hs = MIN_THICKNESS / 2.0;
+        let hs = THIN / 2.0;
         b.cuboid(
             v(c.x - 2.0 * hs, c.y - hs, lo.z - proud),
-            v(c.x + 2.0 * hs, c.y + hs, lo.z + 0.005),
+            v(c.x + 2.0 * hs, c.y + hs, lo.z - proud + THIN),
             handle,
         );
     }

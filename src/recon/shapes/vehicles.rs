@@ -1,24 +1,24 @@
-//! Recipes for vehicles: airplanes (airliner, fighter, propeller plane) and cars (sedan, van,
-//! pickup, sports car).
+//! Recipes for vehicles: airplanes (airliner, fighter, propeller plane, biplane) and cars
+//! (sedan, van, pickup, sports car, hatchback).
 
 use glam::DVec3;
 
-use super::MIN_THICKNESS;
-use super::builder::{Builder, hexahedron, sheared_box, style, v};
+use super::builder::{Builder, THIN, hexahedron, sheared_box, style, v};
 
 pub(super) fn airplane(b: &mut Builder) {
-    match style(b, 3) {
+    match style(b, 4) {
         0 => airliner(b),
         1 => fighter(b),
-        _ => propeller_plane(b),
+        2 => propeller_plane(b),
+        _ => biplane(b),
     }
 }
 
 fn airliner(b: &mut Builder) {
     let body = b.color();
     let wing_color = if b.chance(0.5) { body } else { b.color() };
-    let len = b.u(0.8, 1.0);
-    let r = b.u(0.045, 0.08);
+    let len = b.u(0.7, 1.0);
+    let r = b.u(0.04, 0.085);
     let z0 = -len / 2.0;
     let nose = b.u(0.08, 0.15);
     let tail = b.u(0.12, 0.22);
@@ -33,12 +33,12 @@ fn airliner(b: &mut Builder) {
         body,
     );
     // Wings: swept, tapered slabs from the fuselage's axis outwards.
-    let span = b.u(0.35, 0.5);
-    let chord = b.u(0.18, 0.32);
-    let taper = b.u(0.3, 0.7);
-    let sweep = b.u(0.0, 0.25);
+    let span = b.u(0.3, 0.55);
+    let chord = b.u(0.15, 0.32);
+    let taper = b.u(0.25, 0.75);
+    let sweep = b.u(0.0, 0.3);
     let wz = b.u(-0.12, 0.05);
-    let wt = MIN_THICKNESS;
+    let wt = THIN;
     let wy = b.u(-r * 0.6, r * 0.3);
     let dihedral = b.u(0.0, 0.06);
     for sx in [-1.0f64, 1.0] {
@@ -51,27 +51,40 @@ fn airliner(b: &mut Builder) {
     let tspan = span * b.u(0.3, 0.45);
     let tchord = chord * b.u(0.45, 0.7);
     let tz = -z0 - tchord * 1.1;
+    let fin_h = b.u(0.12, 0.22);
+    // A T-tail sits on top of the fin, swept back with it.
+    let t_tail = b.chance(0.3);
+    let (ty, tsweep) = if t_tail {
+        (r + fin_h - wt / 2.0, fin_h * 0.3)
+    } else {
+        (r * 0.3, 0.0)
+    };
     for sx in [-1.0f64, 1.0] {
         b.push(
-            hexahedron(wing(sx, tz, r * 0.3, tspan, tchord, 0.6, 0.06, 0.0, wt)),
+            hexahedron(wing(sx, tz + tsweep, ty, tspan, tchord, 0.6, 0.06, 0.0, wt)),
             wing_color,
         );
     }
-    let fin_h = b.u(0.12, 0.22);
     let fc = tchord * 1.1;
     let fin = sheared_box(
         v(-wt / 2.0, 0.0, tz - fc * 0.2),
         v(wt / 2.0, r + fin_h, tz + fc * 0.8),
         v(0.0, 0.0, fc * 0.35),
-        [1.0, 0.55],
+        [1.0, (wt / fc).max(0.55)],
     );
     b.push(hexahedron(fin), wing_color);
-    if b.chance(0.5) {
-        let er = b.u(0.03, 0.045);
-        let el = b.u(0.12, 0.2);
+    // No engines, two, or four under the wings.
+    let engines: &[f64] = match style(b, 3) {
+        0 => &[],
+        1 => &[0.45],
+        _ => &[0.33, 0.66],
+    };
+    let er = b.u(0.03, 0.05);
+    let el = b.u(0.12, 0.2);
+    for &at in engines {
         for sx in [-1.0, 1.0] {
-            let x = sx * span * 0.45;
-            let z = wz + sweep * 0.45 - el * 0.4;
+            let x = sx * span * at;
+            let z = wz + sweep * at - el * 0.4;
             b.frustum(
                 v(x, wy - er * 1.2, z),
                 v(x, wy - er * 1.2, z + el),
@@ -84,7 +97,10 @@ fn airliner(b: &mut Builder) {
 }
 
 /// A wing on side `sx` (±1): root at x = 0 from z = `z` over `chord`, tip at x = `sx span`,
-/// swept back by `sweep`, tapered to `taper × chord`, raised by `dihedral`, `t` thick.
+/// swept back by `sweep`, tapered to `taper × chord`, raised by `dihedral`. The tip is `t`
+/// thick (at least [`THIN`]: the wing's thinnest spot) and the root thicker by the taper (up to
+/// 1.25 t); the tip's chord is at least `t` too, measured square to the swept leading and
+/// trailing edges (a delta's tip is a sliver otherwise).
 #[allow(clippy::too_many_arguments)]
 fn wing(
     sx: f64,
@@ -97,16 +113,24 @@ fn wing(
     dihedral: f64,
     t: f64,
 ) -> [DVec3; 8] {
+    // An edge swept by dz over the span meets the tip at cos φ = 1 / sec: the tip's chord
+    // square to it is the chord over sec. The trailing edge's sweep grows with the chord, so
+    // a few passes settle it.
+    let sec = |dz: f64| (1.0 + (dz / span).powi(2)).sqrt();
+    let mut tip_chord = (chord * taper).max(t);
+    for _ in 0..8 {
+        tip_chord = tip_chord.max(t * sec(sweep).max(sec(sweep + tip_chord - chord)));
+    }
     std::array::from_fn(|i| {
         let tip = (i & 1 != 0) == (sx > 0.0);
         let top = i & 2 != 0;
         let back = i & 4 != 0;
         let (x, zs, c, yy) = if tip {
-            (sx * span, z + sweep, chord * taper, y + dihedral)
+            (sx * span, z + sweep, tip_chord, y + dihedral)
         } else {
             (0.0, z, chord, y)
         };
-        let thick = if tip { t * 0.8_f64.max(taper) } else { t };
+        let thick = if tip { t } else { t / taper.clamp(0.8, 1.0) };
         v(
             x,
             yy + if top { thick / 2.0 } else { -thick / 2.0 },
@@ -132,17 +156,7 @@ fn fighter(b: &mut Builder) {
     let sweep = chord * (1.0 - taper) * b.u(0.8, 1.0);
     for sx in [-1.0f64, 1.0] {
         b.push(
-            hexahedron(wing(
-                sx,
-                wz,
-                0.0,
-                span,
-                chord,
-                taper,
-                sweep,
-                0.0,
-                MIN_THICKNESS,
-            )),
+            hexahedron(wing(sx, wz, 0.0, span, chord, taper, sweep, 0.0, THIN)),
             wing_color,
         );
     }
@@ -153,10 +167,10 @@ fn fighter(b: &mut Builder) {
     for &sx in xs {
         let x = sx * r * 0.7;
         let fin = sheared_box(
-            v(x - MIN_THICKNESS / 2.0, 0.0, -z0 - fc),
-            v(x + MIN_THICKNESS / 2.0, r + fin_h, -z0),
+            v(x - THIN / 2.0, 0.0, -z0 - fc),
+            v(x + THIN / 2.0, r + fin_h, -z0),
             v(sx * 0.03, 0.0, fc * 0.4),
-            [1.0, 0.5],
+            [1.0, (THIN / fc).max(0.5)],
         );
         b.push(hexahedron(fin), wing_color);
     }
@@ -176,12 +190,12 @@ fn propeller_plane(b: &mut Builder) {
         r * 0.35,
         body,
     );
-    b.frustum(v(0.0, 0.0, z0 + 0.05), v(0.0, 0.0, z0), r, r * 0.6, body);
+    b.frustum(v(0.0, 0.0, z0 + 0.07), v(0.0, 0.0, z0), r, r * 0.6, body);
     let prop = b.u(0.1, 0.16);
     let prop_color = b.dark().map(|c| c * 2.0);
     b.frustum(
         v(0.0, 0.0, z0 - 0.005),
-        v(0.0, 0.0, z0 - 0.005 - MIN_THICKNESS),
+        v(0.0, 0.0, z0 - 0.005 - THIN),
         prop,
         prop,
         prop_color,
@@ -195,17 +209,7 @@ fn propeller_plane(b: &mut Builder) {
     let dihedral = b.u(0.0, 0.03);
     for sx in [-1.0f64, 1.0] {
         b.push(
-            hexahedron(wing(
-                sx,
-                wz,
-                wy,
-                span,
-                chord,
-                taper,
-                0.0,
-                dihedral,
-                MIN_THICKNESS,
-            )),
+            hexahedron(wing(sx, wz, wy, span, chord, taper, 0.0, dihedral, THIN)),
             wing_color,
         );
     }
@@ -214,47 +218,138 @@ fn propeller_plane(b: &mut Builder) {
     let tz = -z0 - tchord;
     for sx in [-1.0f64, 1.0] {
         b.push(
-            hexahedron(wing(
-                sx,
-                tz,
-                r * 0.4,
-                tspan,
-                tchord,
-                0.8,
-                0.02,
-                0.0,
-                MIN_THICKNESS,
-            )),
+            hexahedron(wing(sx, tz, r * 0.4, tspan, tchord, 0.8, 0.02, 0.0, THIN)),
             wing_color,
         );
     }
     let fin_h = b.u(0.1, 0.16);
     let fin = sheared_box(
-        v(-MIN_THICKNESS / 2.0, r * 0.3, tz),
-        v(MIN_THICKNESS / 2.0, r + fin_h, -z0),
+        v(-THIN / 2.0, r * 0.3, tz),
+        v(THIN / 2.0, r + fin_h, -z0),
         v(0.0, 0.0, tchord * 0.4),
-        [1.0, 0.6],
+        [1.0, (THIN / tchord).max(0.6)],
+    );
+    b.push(hexahedron(fin), wing_color);
+}
+
+/// Biplane: a short fuselage, two straight wings one above the other joined by struts near
+/// their tips, a tail plane, a fin and a propeller disc.
+fn biplane(b: &mut Builder) {
+    let body = b.color();
+    let wing_color = if b.chance(0.4) { body } else { b.color() };
+    let len = b.u(0.55, 0.75);
+    let r = b.u(0.05, 0.08);
+    let z0 = -len / 2.0;
+    b.frustum(
+        v(0.0, 0.0, z0 + 0.08),
+        v(0.0, r * 0.3, -z0),
+        r,
+        r * 0.3,
+        body,
+    );
+    b.frustum(v(0.0, 0.0, z0 + 0.08), v(0.0, 0.0, z0), r, r * 0.7, body);
+    let prop = b.u(0.09, 0.15);
+    let prop_color = b.dark().map(|c| c * 2.0);
+    b.frustum(
+        v(0.0, 0.0, z0 - 0.005),
+        v(0.0, 0.0, z0 - 0.005 - THIN),
+        prop,
+        prop,
+        prop_color,
+    );
+    let span = b.u(0.35, 0.5);
+    let chord = b.u(0.1, 0.16);
+    let gap = b.u(0.12, 0.22);
+    let wz = z0 + len * b.u(0.12, 0.25);
+    let lower = -r * 0.6;
+    let stagger = b.u(-0.03, 0.05);
+    let upper_span = span * b.u(1.0, 1.15);
+    for (y, z, sp) in [(lower, wz, span), (lower + gap, wz - stagger, upper_span)] {
+        for sx in [-1.0f64, 1.0] {
+            b.push(
+                hexahedron(wing(sx, z, y, sp, chord, 1.0, 0.0, 0.0, THIN)),
+                wing_color,
+            );
+        }
+    }
+    let strut = THIN / 2.0;
+    for sx in [-1.0, 1.0] {
+        let x = sx * span * 0.75;
+        let z = wz + chord * 0.5;
+        b.frustum(
+            v(x, lower, z),
+            v(x, lower + gap, z - stagger),
+            strut,
+            strut,
+            wing_color,
+        );
+    }
+    let tspan = span * b.u(0.3, 0.4);
+    let tchord = chord * b.u(0.7, 1.0);
+    let tz = -z0 - tchord;
+    for sx in [-1.0f64, 1.0] {
+        b.push(
+            hexahedron(wing(sx, tz, r * 0.3, tspan, tchord, 0.8, 0.02, 0.0, THIN)),
+            wing_color,
+        );
+    }
+    let fin_h = b.u(0.08, 0.14);
+    let fin = sheared_box(
+        v(-THIN / 2.0, r * 0.2, tz),
+        v(THIN / 2.0, r + fin_h, -z0),
+        v(0.0, 0.0, tchord * 0.3),
+        [1.0, (THIN / tchord).max(0.6)],
     );
     b.push(hexahedron(fin), wing_color);
 }
 
 pub(super) fn car(b: &mut Builder) {
-    match style(b, 4) {
+    match style(b, 5) {
         0 => sedan(b),
         1 => van(b),
         2 => pickup(b),
-        _ => sports_car(b),
+        3 => sports_car(b),
+        _ => hatchback(b),
     }
+}
+
+/// Hatchback: short, a cabin from the windscreen to the tail whose back slopes down.
+fn hatchback(b: &mut Builder) {
+    let paint = b.color();
+    let glass = if b.chance(0.5) { b.dark() } else { paint };
+    let tyre = b.dark();
+    let l = b.u(0.7, 0.9) / 2.0;
+    let w = b.u(0.38, 0.48) / 2.0;
+    let wr = b.u(0.07, 0.1);
+    let body_h = b.u(0.12, 0.2);
+    let y0 = wr * 0.7;
+    b.cuboid(v(-w, y0, -l), v(w, y0 + body_h, l), paint);
+    let front = b.u(0.3, 0.55) * l;
+    let cab_h = b.u(0.12, 0.2);
+    let back = l - b.u(0.0, 0.05);
+    let slope = b.u(0.55, 0.85);
+    let cab_len = back - (-l + front);
+    // The roof ends short of the tail: the cabin's top is narrower along z and shifted forward.
+    let cabin = sheared_box(
+        v(-w * 0.93, y0 + body_h - 0.01, -l + front),
+        v(w * 0.93, y0 + body_h + cab_h, back),
+        v(0.0, 0.0, -cab_len * (1.0 - slope) / 2.0 + b.u(0.0, 0.04)),
+        [b.u(0.85, 0.97), slope],
+    );
+    b.push(hexahedron(cabin), glass);
+    let ww = b.u(THIN, 0.09);
+    let wz = l * b.u(0.55, 0.72);
+    wheels(b, w, wr, ww, [-wz, wz], tyre);
 }
 
 fn sedan(b: &mut Builder) {
     let paint = b.color();
     let glass = if b.chance(0.5) { b.dark() } else { paint };
     let tyre = b.dark();
-    let l = b.u(0.85, 1.0) / 2.0;
-    let w = b.u(0.36, 0.46) / 2.0;
-    let wr = b.u(0.07, 0.1);
-    let body_h = b.u(0.12, 0.2);
+    let l = b.u(0.8, 1.0) / 2.0;
+    let w = b.u(0.34, 0.48) / 2.0;
+    let wr = b.u(0.06, 0.1);
+    let body_h = b.u(0.1, 0.2);
     let y0 = wr * 0.7;
     b.cuboid(v(-w, y0, -l), v(w, y0 + body_h, l), paint);
     let cab_l = b.u(0.45, 0.65) * l;
@@ -267,7 +362,7 @@ fn sedan(b: &mut Builder) {
         [b.u(0.8, 0.95), b.u(0.55, 0.8)],
     );
     b.push(hexahedron(cabin), glass);
-    let ww = b.u(MIN_THICKNESS, 0.08);
+    let ww = b.u(THIN, 0.1);
     let wz = l * b.u(0.6, 0.75);
     for sx in [-1.0, 1.0] {
         for sz in [-1.0, 1.0] {
@@ -303,7 +398,7 @@ fn van(b: &mut Builder) {
         [b.u(0.9, 1.0), b.u(0.85, 0.98)],
     );
     b.push(hexahedron(cabin), glass);
-    let ww = b.u(MIN_THICKNESS, 0.08);
+    let ww = b.u(THIN, 0.1);
     let wz = l * b.u(0.6, 0.75);
     wheels(b, w, wr, ww, [-wz, wz], tyre);
 }
@@ -329,8 +424,8 @@ fn pickup(b: &mut Builder) {
         [0.95, b.u(0.7, 0.9)],
     );
     b.push(hexahedron(cabin), glass);
-    let bed_h = b.u(0.05, 0.1);
-    let t = MIN_THICKNESS;
+    let bed_h = b.u(THIN, 0.1);
+    let t = THIN;
     let y1 = y0 + body_h - 0.01;
     for sx in [-1.0, 1.0] {
         let x0 = sx * w;
@@ -342,7 +437,7 @@ fn pickup(b: &mut Builder) {
         );
     }
     b.cuboid(v(-w, y1, l - t), v(w, y1 + bed_h, l), paint);
-    let ww = b.u(MIN_THICKNESS, 0.08);
+    let ww = b.u(THIN, 0.1);
     let wz = [-l * b.u(0.6, 0.72), l * b.u(0.55, 0.7)];
     wheels(b, w, wr, ww, wz, tyre);
 }
@@ -375,7 +470,7 @@ fn sports_car(b: &mut Builder) {
     );
     b.push(hexahedron(cabin), glass);
     if b.chance(0.4) {
-        let sp = MIN_THICKNESS;
+        let sp = THIN;
         b.cuboid(
             v(-w * 0.9, y0 + body_h + 0.04, l - 0.08),
             v(w * 0.9, y0 + body_h + 0.04 + sp, l - 0.01),
@@ -385,12 +480,12 @@ fn sports_car(b: &mut Builder) {
             let x = sx * w * 0.6;
             b.cuboid(
                 v(x - sp / 2.0, y0 + body_h - 0.01, l - 0.03 - sp),
-                v(x + sp / 2.0, y0 + body_h + 0.045, l - 0.03),
+                v(x + sp / 2.0, y0 + body_h + 0.04 + sp / 2.0, l - 0.03),
                 paint,
             );
         }
     }
-    let ww = b.u(0.05, 0.09);
+    let ww = b.u(THIN, 0.1);
     let wz = l * b.u(0.6, 0.72);
     wheels(b, w, wr, ww, [-wz, wz], tyre);
 }
