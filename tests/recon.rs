@@ -180,7 +180,7 @@ fn batch_gather_equals_its_twin_bit_for_bit() {
         .map(|_| r.random::<u8>())
         .collect();
     let iterations = 3u32;
-    let schedule: Vec<[u32; 4]> = (0..iterations * shape.batch)
+    let mut schedule: Vec<[u32; 4]> = (0..iterations * shape.batch)
         .map(|_| {
             [
                 r.random_range(0..objects),
@@ -194,9 +194,11 @@ fn batch_gather_equals_its_twin_bit_for_bit() {
     let table: Vec<[f32; 2]> = (0..shape.views)
         .map(|v| view_rotation(-15.0 * f64::from(v)))
         .collect();
-    let images = ctx
-        .upload_buffer("images", &batch::cpu::pack_bytes(&bytes))
-        .unwrap();
+    // Only the views the schedule names reach the GPU, each entry's pair at its slot.
+    let staged = batch::stage_views(&ctx, &bytes, shape, &mut schedule).unwrap();
+    assert!(schedule.iter().enumerate().all(|(i, e)| e[3] == i as u32));
+    let staged_bytes: &[u8] = bytemuck::cast_slice(&staged);
+    let images = ctx.upload_buffer("staged views", &staged).unwrap();
     let sched = ctx.upload_buffer("schedule", &schedule).unwrap();
     let tab = ctx.upload_buffer("view rotations", &table).unwrap();
     let (n, px) = (shape.batch as usize, shape.pixels as usize);
@@ -218,7 +220,7 @@ fn batch_gather_equals_its_twin_bit_for_bit() {
                 shape,
                 it,
                 BatchBuffers {
-                    images: images.whole(),
+                    views: images.whole(),
                     schedule: sched.whole(),
                     view_rotations: tab.whole(),
                     input: input.whole(),
@@ -229,7 +231,19 @@ fn batch_gather_equals_its_twin_bit_for_bit() {
             )
         })
         .unwrap();
-        let want = batch::cpu::gather(&bytes, &schedule, &table, shape, it);
+        let want = batch::cpu::gather(staged_bytes, &schedule, &table, shape, it);
+        // The staged pair of each entry is its object's views a and b in the dataset.
+        let view_bytes = 4 * shape.pixels as usize;
+        for e in &schedule[it as usize * n..(it as usize + 1) * n] {
+            for (j, v) in [e[1], e[2]].into_iter().enumerate() {
+                let at = (e[0] * shape.views + v) as usize * view_bytes;
+                let slot = (2 * e[3] as usize + j) * view_bytes;
+                assert_eq!(
+                    &staged_bytes[slot..slot + view_bytes],
+                    &bytes[at..at + view_bytes]
+                );
+            }
+        }
         let (i, t, rot) = (&want.input, &want.targets, &want.rotations);
         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         let got_i: Vec<f32> = ctx.read_buffer(&input, 0, 4 * n * px).unwrap();

@@ -105,7 +105,9 @@ fn one_iteration_against_twins(opts: TrainOptions) {
         pixels: px as u32,
         views: VIEWS,
     };
-    let batch = batch::cpu::gather(&data.images, &schedule, &table, shape, 0);
+    let mut schedule = schedule;
+    let staged = batch::stage_views(&gpu, &data.images, shape, &mut schedule).unwrap();
+    let batch = batch::cpu::gather(bytemuck::cast_slice(&staged), &schedule, &table, shape, 0);
     let (input, targets, rotations) = (&batch.input, &batch.targets, &batch.rotations);
     let t = train::template();
     let vc = t.vertex_count();
@@ -305,4 +307,32 @@ fn the_learning_rate_step_applies_from_its_iteration_on() {
         ),
         Err(softvk::Error::Input(_))
     ));
+}
+
+#[test]
+fn a_dataset_larger_than_a_storage_buffer_trains() {
+    let Some(gpu) = common::gpu() else { return };
+    // Enough 16² objects to pass the device's storage-buffer range (lavapipe's: 128 MiB, 5 462
+    // objects), capped where a device allows far more: only the views a submission names are
+    // staged on the GPU.
+    let per_object = (VIEWS * 4 * SIZE * SIZE) as u64;
+    let limit = u64::from(gpu.info().limits.max_storage_buffer_range);
+    let objects = (limit / per_object + 2).min(6_000) as u32;
+    let small = common::recon::two_objects(&gpu, SIZE);
+    let mut images = Vec::with_capacity((per_object * u64::from(objects)) as usize);
+    while images.len() < images.capacity() {
+        images.extend_from_slice(&small.images);
+    }
+    images.truncate((per_object * u64::from(objects)) as usize);
+    let data = TrainImages {
+        images,
+        classes: vec![
+            ("a".into(), 0..objects / 2),
+            ("b".into(), objects / 2..objects),
+        ],
+        size: SIZE,
+    };
+    let mut trainer = ReconTrainer::new(&gpu, &data, &options(), None).unwrap();
+    assert_eq!(trainer.run(1, 3, None).unwrap(), None);
+    assert!(trainer.read_log(3).unwrap().total.is_finite());
 }

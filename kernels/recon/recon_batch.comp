@@ -1,11 +1,12 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
-// One training batch gathered on the GPU from the dataset's images (uint8 RGBA, NMR layout
-// [object][view][channel][row][column], four bytes per u32 word, little-endian) by the schedule
-// entry (object, view a, view b) of each batch slot at iteration `iteration`:
-//   input[b]              = images[object, view a] / 255            (4 × H × W floats)
-//   targets[2b + j]       = alpha of images[object, view j] / 255   (H × W floats)
-//   target_images[2b + j] = images[object, view j] / 255 as RGBA per pixel (the renderer's
+// One training batch gathered on the GPU from the views staged for the submission (uint8
+// RGBA, [slot][view a, view b][channel][row][column], four bytes per u32 word, little-endian:
+// `crate::recon::batch::stage_views`) by the schedule entry (object, view a, view b, slot) of
+// each batch slot at iteration `iteration`:
+//   input[b]              = views[slot, a] / 255                    (4 × H × W floats)
+//   targets[2b + j]       = alpha of views[slot, j] / 255           (H × W floats)
+//   target_images[2b + j] = views[slot, j] / 255 as RGBA per pixel (the renderer's
 //                           output layout, for the colour loss)
 //   rotations[2b + j]     = view_rotations[view j]                  (the turn about y that
 //                           brings view j's camera to the scene's one camera)
@@ -14,7 +15,7 @@
 
 layout(local_size_x = 64) in;
 
-layout(std430, set = 0, binding = 0) readonly buffer Images { uint images[]; };
+layout(std430, set = 0, binding = 0) readonly buffer Views { uint views[]; };
 layout(std430, set = 0, binding = 1) readonly buffer Schedule { uvec4 schedule[]; };
 layout(std430, set = 0, binding = 2) readonly buffer ViewRotations { vec2 view_rotations[]; };
 layout(std430, set = 0, binding = 3) writeonly buffer Input { float input_images[]; };
@@ -25,12 +26,12 @@ layout(std430, set = 0, binding = 6) writeonly buffer TargetImages { vec4 target
 layout(push_constant) uniform Push {
     uint batch;
     uint pixels;      // H × W
-    uint views;       // views per object in `images` (24)
+    uint views;       // views per object in the dataset (24): the rotation table's length
     uint iteration;   // row of `schedule` (batch entries each)
 } pc;
 
 float byte_at(uint index) {
-    uint word = images[index >> 2u];
+    uint word = views[index >> 2u];
     return float((word >> (8u * (index & 3u))) & 255u) * (1.0 / 255.0);
 }
 
@@ -42,8 +43,8 @@ void main() {
     uint b = gid / pc.pixels;
     uint p = gid - b * pc.pixels;
     uvec4 e = schedule[pc.iteration * pc.batch + b];
-    uint view_a = (e.x * pc.views + e.y) * 4u * pc.pixels;
-    uint view_b = (e.x * pc.views + e.z) * 4u * pc.pixels;
+    uint view_a = (2u * e.w) * 4u * pc.pixels;
+    uint view_b = (2u * e.w + 1u) * 4u * pc.pixels;
     for (uint ch = 0u; ch < 4u; ++ch) {
         input_images[(4u * b + ch) * pc.pixels + p] = byte_at(view_a + ch * pc.pixels + p);
     }

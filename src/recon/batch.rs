@@ -1,7 +1,10 @@
-//! A training batch gathered on the GPU (`recon_batch.comp`): the dataset's images live on the
-//! device as uint8 RGBA (the NMR layout, four bytes per word), and a *schedule* of batch
-//! entries `(object, view a, view b)` per iteration, uploaded once, says what each iteration
-//! sees. So a command buffer of many iterations needs nothing from the host between them.
+//! A training batch gathered on the GPU (`recon_batch.comp`): a *schedule* of batch entries
+//! `(object, view a, view b, slot)` per iteration says what each iteration sees, and the two
+//! views of every entry of a submission are staged beside it as uint8 RGBA (four bytes per
+//! word, at the entry's slot: [`stage_views`]). So a command buffer of many iterations needs
+//! nothing from the host between them, and the dataset itself stays on the host: it may be
+//! larger than one storage buffer (lavapipe's is 128 MiB; 500 objects per class of the NMR
+//! layout are 1.2 GB).
 //!
 //! Per batch slot b: the encoder's input is view a's RGBA / 255 (`4 × H × W`, NCHW); the
 //! silhouette targets are the alphas of views a and b (copies `2b` and `2b + 1`); the copies'
@@ -10,7 +13,7 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
-use crate::gpu::{BufferRange, Context, Kernel, Recorder, specs};
+use crate::gpu::{BufferRange, Context, Kernel, Recorder, check_binding, specs};
 
 /// Push constants of `recon_batch.comp`.
 #[repr(C)]
@@ -41,9 +44,10 @@ pub struct BatchGather {
 /// The buffers of one gather.
 #[derive(Clone, Copy)]
 pub struct BatchBuffers<'a> {
-    /// uint8 RGBA images, `[object][view][channel][pixel]`, packed four per u32 (little-endian).
-    pub images: BufferRange<'a>,
-    /// `(object, view a, view b, unused)` per batch slot, iteration-major.
+    /// The staged views ([`stage_views`]): uint8 RGBA, `[slot][view a, view b][channel][pixel]`,
+    /// packed four per u32 (little-endian).
+    pub views: BufferRange<'a>,
+    /// `(object, view a, view b, slot of the staged views)` per batch slot, iteration-major.
     pub schedule: BufferRange<'a>,
     /// `(cos φ, sin φ)` per view.
     pub view_rotations: BufferRange<'a>,
@@ -94,16 +98,16 @@ impl BatchGather {
         check("batch: targets", &b.targets, 2 * n * px)?;
         check("batch: rotations", &b.rotations, 4 * n)?;
         check("batch: target images", &b.target_images, 8 * n * px)?;
-        if b.images.size < shape.views as u64 * 4 * px {
+        if b.views.size < 2 * 4 * px {
             return Err(Error::Input(format!(
-                "batch: the images buffer `{}` holds less than one object",
-                b.images.buffer.name()
+                "batch: the staged views `{}` hold less than one pair",
+                b.views.buffer.name()
             )));
         }
         rec.dispatch(
             &self.kernel,
             &specs::ReconBatchBindings {
-                images: b.images,
+                views: b.views,
                 schedule: b.schedule,
                 view_rotations: b.view_rotations,
                 input: b.input,
@@ -123,6 +127,37 @@ impl BatchGather {
     }
 }
 
+/// The views `entries` name, staged for the gather: entry i's views a and b of its object,
+/// from `images` (uint8 RGBA, the NMR layout `[object][view][channel][pixel]` of `shape`'s views
+/// and pixels), at slot i (written to the entry's fourth field), packed four bytes per word.
+/// [`Error::Input`] for an entry outside the images; [`Error::DeviceLimit`] when the staged
+/// views exceed a storage buffer (fewer iterations per submission, or a smaller batch, fit).
+pub fn stage_views(
+    ctx: &Context,
+    images: &[u8],
+    shape: BatchShape,
+    entries: &mut [[u32; 4]],
+) -> Result<Vec<u32>> {
+    let view_bytes = 4 * shape.pixels as usize;
+    let objects = images.len() / (view_bytes * shape.views as usize).max(1);
+    cpu::check_schedule(entries, objects as u32, shape.views)?;
+    check_binding(
+        ctx,
+        "a submission's staged training views (fewer iterations per submission or a smaller \
+         batch fit)",
+        2 * view_bytes as u64 * entries.len() as u64,
+    )?;
+    let mut staged = Vec::with_capacity(2 * entries.len() * view_bytes / 4);
+    for (i, e) in entries.iter_mut().enumerate() {
+        for v in [e[1], e[2]] {
+            let at = (e[0] as usize * shape.views as usize + v as usize) * view_bytes;
+            staged.extend(cpu::pack_bytes(&images[at..at + view_bytes]));
+        }
+        e[3] = i as u32;
+    }
+    Ok(staged)
+}
+
 /// CPU twin.
 pub mod cpu {
     use super::BatchShape;
@@ -140,42 +175,39 @@ pub mod cpu {
         pub target_images: Vec<[f32; 4]>,
     }
 
-    /// The batch of schedule row `iteration`, as the kernel computes it (bytes as `f32` times
-    /// the `f32` nearest 1/255).
+    /// The batch of schedule row `iteration`, as the kernel computes it from the views
+    /// [`super::stage_views`] staged (`views`, unpacked: `[slot][view a, view b][channel]
+    /// [pixel]`; bytes as `f32` times the `f32` nearest 1/255).
     pub fn gather(
-        images: &[u8],
+        views: &[u8],
         schedule: &[[u32; 4]],
         view_rotations: &[[f32; 2]],
         shape: BatchShape,
         iteration: u32,
     ) -> Gathered {
-        let (n, px, views) = (
-            shape.batch as usize,
-            shape.pixels as usize,
-            shape.views as usize,
-        );
+        let (n, px) = (shape.batch as usize, shape.pixels as usize);
         let scale = 1.0f32 / 255.0;
         let mut input = vec![0.0; 4 * n * px];
         let mut targets = vec![0.0; 2 * n * px];
         let mut rotations = vec![[0.0; 2]; 2 * n];
         let mut target_images = vec![[0.0; 4]; 2 * n * px];
         for b in 0..n {
-            let [o, va, vb, _] = schedule[iteration as usize * n + b].map(|x| x as usize);
-            let view = |v: usize| &images[(o * views + v) * 4 * px..(o * views + v + 1) * 4 * px];
-            for (dst, &src) in input[4 * b * px..4 * (b + 1) * px].iter_mut().zip(view(va)) {
+            let [_, va, vb, slot] = schedule[iteration as usize * n + b].map(|x| x as usize);
+            let view = |j: usize| &views[(2 * slot + j) * 4 * px..(2 * slot + j + 1) * 4 * px];
+            for (dst, &src) in input[4 * b * px..4 * (b + 1) * px].iter_mut().zip(view(0)) {
                 *dst = f32::from(src) * scale;
             }
             for (j, v) in [va, vb].into_iter().enumerate() {
                 for (dst, &src) in targets[(2 * b + j) * px..(2 * b + j + 1) * px]
                     .iter_mut()
-                    .zip(&view(v)[3 * px..])
+                    .zip(&view(j)[3 * px..])
                 {
                     *dst = f32::from(src) * scale;
                 }
                 rotations[2 * b + j] = view_rotations[v];
                 for p in 0..px {
                     target_images[(2 * b + j) * px + p] =
-                        [0, 1, 2, 3].map(|c| f32::from(view(v)[c * px + p]) * scale);
+                        [0, 1, 2, 3].map(|c| f32::from(view(j)[c * px + p]) * scale);
                 }
             }
         }

@@ -359,70 +359,73 @@ pub fn schedule_entry(
     ]
 }
 
-/// The batch schedule on the GPU: a submission's rows ([`schedule_entry`]) are staged in
-/// host-visible memory and copied to the device buffer at its start (no submission of their
-/// own). Both trainers use it.
-pub(crate) struct Schedule {
+/// Host bytes staged for one submission: written to host-visible memory and copied to a device
+/// buffer at the submission's start (no submission of their own); both grow as submissions
+/// need. The trainers stage their schedule rows and the views those rows name through it.
+pub(crate) struct Staged {
+    name: &'static str,
     device: Buffer,
     upload: Buffer,
     /// Bytes staged for the next copy.
     staged: u64,
 }
 
-impl Schedule {
-    /// Room for one iteration of `batch` slots (it grows as submissions need).
-    pub(crate) fn new(ctx: &Context, batch: u32) -> Result<Self> {
-        let bytes = 16 * u64::from(batch.max(1));
+impl Staged {
+    /// Room for `bytes` to start with.
+    pub(crate) fn new(ctx: &Context, name: &'static str, bytes: u64) -> Result<Self> {
+        let bytes = bytes.max(4);
         Ok(Self {
-            device: ctx.create_buffer("recon schedule", bytes, MemoryKind::Device)?,
-            upload: ctx.create_buffer("recon schedule (upload)", bytes, MemoryKind::Upload)?,
+            name,
+            device: ctx.create_buffer(name, bytes, MemoryKind::Device)?,
+            upload: ctx.create_buffer(name, bytes, MemoryKind::Upload)?,
             staged: 0,
         })
     }
 
-    /// Stages the rows of `iterations` (`batch` objects each, iteration-major) and returns
-    /// them; with `both_views`, each object's row is followed by its views swapped (the second
-    /// view as an input too).
-    pub(crate) fn stage(
-        &mut self,
-        ctx: &Context,
-        seed: u64,
-        classes: &[(String, Range<u32>)],
-        batch: u32,
-        both_views: bool,
-        iterations: std::ops::RangeInclusive<u32>,
-    ) -> Result<Vec<[u32; 4]>> {
-        let entries: Vec<[u32; 4]> = iterations
-            .flat_map(|it| (0..batch).map(move |s| (it, s)))
-            .map(|(it, s)| schedule_entry(seed, it, s, classes))
-            .flat_map(|[o, a, b, _]| {
-                let swapped = both_views.then_some([o, b, a, 0]);
-                std::iter::once([o, a, b, 0]).chain(swapped)
-            })
-            .collect();
-        let bytes: &[u8] = bytemuck::cast_slice(&entries);
+    /// Stages `bytes` for the next [`Staged::record_copy`].
+    pub(crate) fn stage(&mut self, ctx: &Context, bytes: &[u8]) -> Result<()> {
         let size = bytes.len() as u64;
         if size > self.device.size() {
-            self.device = ctx.create_buffer("recon schedule", size, MemoryKind::Device)?;
-            self.upload = ctx.create_buffer("recon schedule (upload)", size, MemoryKind::Upload)?;
+            self.device = ctx.create_buffer(self.name, size, MemoryKind::Device)?;
+            self.upload = ctx.create_buffer(self.name, size, MemoryKind::Upload)?;
         }
         self.upload
             .mapped_mut()
             .ok_or_else(|| Error::Limit("upload memory is not host-mapped".into()))?[..bytes.len()]
             .copy_from_slice(bytes);
         self.staged = size;
-        Ok(entries)
+        Ok(())
     }
 
-    /// Records the copy of the staged rows to the device buffer.
+    /// Records the copy of the staged bytes to the device buffer.
     pub(crate) fn record_copy(&self, rec: &mut Recorder<'_>) {
         rec.copy(&self.upload, 0, &self.device, 0, self.staged);
     }
 
-    /// The rows on the device (what the batch gather reads).
+    /// The device buffer (what the batch gather reads).
     pub(crate) fn buffer(&self) -> &Buffer {
         &self.device
     }
+}
+
+/// The schedule's rows of `iterations` (`objects` per iteration, iteration-major); with
+/// `both_views`, each object's row is followed by its views swapped (the second view as an
+/// input too).
+fn schedule_rows(
+    seed: u64,
+    classes: &[(String, Range<u32>)],
+    objects: u32,
+    both_views: bool,
+    iterations: std::ops::RangeInclusive<u32>,
+) -> Vec<[u32; 4]> {
+    iterations
+        .flat_map(|it| (0..objects).map(move |s| (it, s)))
+        .map(|(it, s)| schedule_entry(seed, it, s, classes))
+        .flat_map(|[o, a, b, _]| {
+            let swapped = both_views.then_some([o, b, a, 0]);
+            std::iter::once([o, a, b, 0]).chain(swapped)
+        })
+        .collect()
 }
 
 /// The losses of the last iteration a submission ran.
@@ -489,9 +492,12 @@ pub(crate) struct Batches {
     both_views: bool,
     shape: BatchShape,
     gather: BatchGather,
-    images: Buffer,
+    /// The training images (the NMR layout, on the host: the views a submission's rows name
+    /// are staged for it, so the dataset may be larger than a storage buffer).
+    images: Vec<u8>,
+    views: Staged,
     view_table: Buffer,
-    schedule: Schedule,
+    schedule: Staged,
     pub(crate) input: Buffer,
     pub(crate) targets: Buffer,
     pub(crate) target_images: Buffer,
@@ -526,12 +532,10 @@ impl Batches {
                 views: VIEWS,
             },
             gather: BatchGather::new(ctx)?,
-            images: ctx.upload_buffer(
-                "recon training images",
-                &super::batch::cpu::pack_bytes(&data.images),
-            )?,
+            images: data.images.clone(),
+            views: Staged::new(ctx, "recon staged views", 2 * 4 * b * px)?,
             view_table: ctx.upload_buffer("recon view rotations", &table)?,
-            schedule: Schedule::new(ctx, batch)?,
+            schedule: Staged::new(ctx, "recon schedule", 16 * b)?,
             input: device("recon input", 4 * b * px)?,
             targets: device("recon targets", u64::from(COPIES) * b * px)?,
             target_images: device("recon target images", 4 * u64::from(COPIES) * b * px)?,
@@ -541,21 +545,27 @@ impl Batches {
 
     /// Stages the rows of iterations `first ..= last` and returns them (one per input, in the
     /// iteration's batch order).
+    /// The rows' two views each are staged beside them ([`super::batch::stage_views`]); a
+    /// submission whose views exceed a storage buffer is [`Error::DeviceLimit`].
     pub(crate) fn stage(&mut self, ctx: &Context, first: u32, last: u32) -> Result<Vec<[u32; 4]>> {
-        self.schedule.stage(
-            ctx,
+        let mut entries = schedule_rows(
             self.seed,
             &self.classes,
             self.objects,
             self.both_views,
             first..=last,
-        )
+        );
+        let views = super::batch::stage_views(ctx, &self.images, self.shape, &mut entries)?;
+        self.views.stage(ctx, bytemuck::cast_slice(&views))?;
+        self.schedule.stage(ctx, bytemuck::cast_slice(&entries))?;
+        Ok(entries)
     }
 
     /// Records the gather of schedule row `row` (the staged rows copied in before row 0's).
     pub(crate) fn record(&self, rec: &mut Recorder<'_>, row: u32) -> Result<()> {
         if row == 0 {
             self.schedule.record_copy(rec);
+            self.views.record_copy(rec);
         }
         rec.pass("recon batch", |rec| {
             self.gather.record(
@@ -563,7 +573,7 @@ impl Batches {
                 self.shape,
                 row,
                 BatchBuffers {
-                    images: self.images.whole(),
+                    views: self.views.buffer().whole(),
                     schedule: self.schedule.buffer().whole(),
                     view_rotations: self.view_table.whole(),
                     input: self.input.whole(),
