@@ -10,6 +10,7 @@ use std::process::Output;
 
 use common::{TempDir, softvk};
 use softvk::recon::model::{ReconModel, Reconstructor};
+use softvk::recon::npz::{self, NpyArray, NpyData};
 use softvk::recon::train::NetShape;
 
 fn ok(run: Output, what: &str) -> String {
@@ -173,30 +174,51 @@ fn train_twice_resume_evaluate_and_reconstruct() {
         "softvk eval-recon",
     );
     let rows: Vec<&str> = table.lines().collect();
-    assert_eq!(
-        rows.len(),
-        5,
-        "header, two classes, mean, protocol:\n{table}"
-    );
     assert!(
-        rows[4].starts_with("mesh predictions voxelized by parity"),
+        rows[0].contains("a (mesh, parity)")
+            && rows[0].contains("a (mesh, winding)")
+            && rows[0].contains("retrieval (knows view)"),
         "{table}"
     );
-    let rows = &rows[..4];
+    assert!(
+        rows[4].starts_with("mesh predictions voxelized by parity")
+            && rows[5].starts_with("mesh predictions voxelized by winding"),
+        "{table}"
+    );
+    assert!(
+        rows.iter()
+            .any(|r| r.starts_with("baseline retrieval (knows view): ")),
+        "{table}"
+    );
     assert!(
         rows[1].contains("chair") || rows[2].contains("chair"),
         "{table}"
     );
     assert!(rows[3].starts_with("mean"), "{table}");
-    for r in &rows[1..] {
+    for r in &rows[1..4] {
         let cols: Vec<f64> = r
             .split_whitespace()
             .rev()
-            .take(4)
+            .take(6)
             .map(|c| c.parse().unwrap())
             .collect();
         assert!(cols.iter().all(|v| (0.0..=1.0).contains(v)), "{r}");
     }
+    // The differences: a row per class and mean for each of the two columns.
+    let at = rows
+        .iter()
+        .position(|r| r.starts_with("network − baseline"))
+        .expect("the comparison");
+    assert_eq!(rows.len(), at + 2 + 3 * 2 + 1, "{table}");
+    assert!(rows[at + 8].contains("as few as 1 test objects"), "{table}");
+    assert!(rows[at + 2].contains("a (mesh, parity)"), "{table}");
+    assert_eq!(
+        std::fs::read_to_string(eval_dir.join("table.txt")).unwrap(),
+        table
+    );
+    let csv = std::fs::read_to_string(eval_dir.join("table.csv")).unwrap();
+    // A header, 3 rows (two classes, mean) × 6 columns of means, 3 × 2 × 4 differences.
+    assert_eq!(csv.lines().count(), 1 + 18 + 24, "{csv}");
     assert!(eval_dir.join("examples.png").exists());
     let input = eval_dir.join("input-03001627-0.png");
     let obj = dir.path("out/chair.obj");
@@ -227,6 +249,171 @@ fn train_twice_resume_evaluate_and_reconstruct() {
         "{err}"
     );
     assert!(!dir.path("out/x.obj").exists());
+}
+
+/// Writes `<class>_test_predicted_voxels.npz` into `dir`: `arr_0` of `shape` and `data`.
+fn write_predictions(dir: &Path, class: &str, shape: Vec<usize>, data: NpyData) {
+    std::fs::create_dir_all(dir).unwrap();
+    let array = NpyArray::new(shape, data).unwrap();
+    npz::write_npz(
+        &dir.join(format!("{class}_test_predicted_voxels.npz")),
+        &[("arr_0", &array)],
+        true,
+    )
+    .unwrap();
+}
+
+/// `eval-recon --predicted LABEL=DIR` scores another program's voxels as a column: the true
+/// voxels from every view score 1, an empty grid 0, each with its intervals against the
+/// baselines; a missing class file, another shape, dtype or value is one error line and
+/// writes no report.
+#[test]
+fn external_predictions_are_scored_as_a_column_and_bad_ones_refused() {
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    let dir = TempDir::new("recon-cli-predicted");
+    let data = dir.path("data");
+    ok(
+        softvk()
+            .args(["dataset", "--out", data.to_str().unwrap()])
+            .args(["--categories", "chair,car", "--train", "2", "--val", "1"])
+            .args(["--test", "2", "--seed", "3"])
+            .output()
+            .unwrap(),
+        "softvk dataset",
+    );
+    const GRID: usize = 32 * 32 * 32;
+    let (chair, car) = ("03001627", "02958343");
+    // Chairs predicted perfectly from every view (the truth repeated 24 times), cars empty.
+    let truth = |class: &str| {
+        let a = npz::read_npz_first(&data.join(format!("{class}_test_voxels.npz"))).unwrap();
+        assert_eq!(a.shape, [2, 32, 32, 32]);
+        a.to_bools()
+    };
+    let repeated: Vec<u8> = truth(chair)
+        .chunks(GRID)
+        .flat_map(|g| std::iter::repeat_n(g, 24).flatten().map(|&x| u8::from(x)))
+        .collect();
+    let shape = vec![2, 24, 32, 32, 32];
+    let good = dir.path("good");
+    write_predictions(&good, chair, shape.clone(), NpyData::U8(repeated.clone()));
+    write_predictions(
+        &good,
+        car,
+        shape.clone(),
+        NpyData::U8(vec![0; 2 * 24 * GRID]),
+    );
+    let eval = |predicted: &Path, report: &Path| {
+        softvk()
+            .args(["eval-recon", "--dataset", data.to_str().unwrap()])
+            .args(["--predicted", &format!("theirs={}", predicted.display())])
+            .args(["--views", "3", "--report", report.to_str().unwrap()])
+            .env("SOFTVK_VALIDATION", "1")
+            .output()
+            .unwrap()
+    };
+    let report = dir.path("report");
+    let table = ok(eval(&good, &report), "softvk eval-recon --predicted");
+    let rows: Vec<&str> = table.lines().collect();
+    assert!(rows[0].contains("theirs (predicted)"), "{table}");
+    let first = |class: &str| -> f64 {
+        let r = rows.iter().find(|r| r.contains(class)).unwrap();
+        r.split_whitespace().nth(3).unwrap().parse().unwrap()
+    };
+    assert_eq!((first("(chair)"), first("(car)")), (1.0, 0.0), "{table}");
+    assert!(
+        rows[3].starts_with("mean") && rows[3].contains(" 0.5000 "),
+        "{table}"
+    );
+    // The CSV: each class's difference to retrieval is 1 (or 0) minus retrieval's mean, inside
+    // its interval.
+    let csv = std::fs::read_to_string(report.join("table.csv")).unwrap();
+    let value = |class: &str, column: &str, minus: &str| -> [f64; 3] {
+        let start = format!("\"{class}\",\"{column}\",{minus},");
+        let line = csv
+            .lines()
+            .find(|l| l.starts_with(&start))
+            .unwrap_or_else(|| panic!("no {start} in\n{csv}"));
+        let v: Vec<f64> = line[start.len()..]
+            .split(',')
+            .map(|c| c.parse().unwrap_or(f64::NAN))
+            .collect();
+        [v[0], v[1], v[2]]
+    };
+    let retrieval = "\"retrieval (knows view)\"";
+    for (class, ours) in [
+        (format!("{chair} (chair)"), 1.0),
+        (format!("{car} (car)"), 0.0),
+    ] {
+        let base = value(&class, "retrieval (knows view)", "")[0];
+        let [d, lo, hi] = value(&class, "theirs (predicted)", retrieval);
+        assert!(
+            (d - (ours - base)).abs() < 1e-12,
+            "{class}: {d} vs {ours} − {base}"
+        );
+        assert!(lo <= d && d <= hi, "{class}: {d} [{lo}, {hi}]");
+        assert_eq!(value(&class, "theirs (predicted)", "")[0], ours);
+    }
+    let [d, lo, hi] = value("mean", "theirs (predicted)", retrieval);
+    assert!(lo <= d && d <= hi && lo < hi, "mean: {d} [{lo}, {hi}]");
+
+    // Refusals, each one line naming the file, with no report written.
+    let refused = |name: &str, setup: &dyn Fn(&Path), says: &str| {
+        let bad = dir.path(name);
+        setup(&bad);
+        let report = dir.path(&format!("{name}-report"));
+        let run = eval(&bad, &report);
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success(), "{name}: accepted");
+        assert!(
+            err.lines().count() == 1 && err.contains(says) && err.contains("predicted_voxels"),
+            "{name}: {err}"
+        );
+        assert!(!report.exists(), "{name}: a report was written");
+    };
+    refused(
+        "missing",
+        &|d| write_predictions(d, chair, shape.clone(), NpyData::U8(repeated.clone())),
+        &format!("no predictions for class {car}"),
+    );
+    refused(
+        "views",
+        &|d| {
+            write_predictions(d, chair, shape.clone(), NpyData::U8(repeated.clone()));
+            write_predictions(
+                d,
+                car,
+                vec![2, 23, 32, 32, 32],
+                NpyData::U8(vec![0; 2 * 23 * GRID]),
+            );
+        },
+        "has shape [2, 23, 32, 32, 32], expected [2, 24, 32, 32, 32]",
+    );
+    refused(
+        "dtype",
+        &|d| {
+            write_predictions(d, chair, shape.clone(), NpyData::U8(repeated.clone()));
+            write_predictions(
+                d,
+                car,
+                shape.clone(),
+                NpyData::F32(vec![0.0; 2 * 24 * GRID]),
+            );
+        },
+        "is float32, expected uint8",
+    );
+    refused(
+        "values",
+        &|d| {
+            let mut twos = repeated.clone();
+            twos[5] = 2;
+            write_predictions(d, chair, shape.clone(), NpyData::U8(twos));
+            write_predictions(d, car, shape.clone(), NpyData::U8(vec![0; 2 * 24 * GRID]));
+        },
+        "holds 2, expected only 0 and 1",
+    );
 }
 
 /// The `--field` flags of a tiny conditioned field.
@@ -292,21 +479,18 @@ fn a_conditioned_field_trains_resumes_and_sits_beside_the_mesh_in_the_table() {
         "softvk eval-recon",
     );
     let rows: Vec<&str> = table.lines().collect();
-    assert_eq!(
-        rows.len(),
-        6,
-        "header, two classes, mean, two notes:\n{table}"
-    );
     assert!(
-        rows[0].contains("m (mesh)") && rows[0].contains("f (field)"),
+        rows[0].contains("m (mesh, parity)")
+            && rows[0].contains("m (mesh, winding)")
+            && rows[0].contains("f (field)"),
         "{table}"
     );
-    assert!(rows[5].starts_with("field predictions"), "{table}");
+    assert!(rows[6].starts_with("field predictions"), "{table}");
     for r in &rows[1..4] {
         let cols: Vec<f64> = r
             .split_whitespace()
             .rev()
-            .take(6)
+            .take(7)
             .map(|c| c.parse().unwrap())
             .collect();
         assert!(cols.iter().all(|v| (0.0..=1.0).contains(v)), "{r}");

@@ -7,9 +7,12 @@
 //!   iterations, and checkpoints (`--resume` goes on from the last one, bit for bit).
 //! - `softvk recon --model MODEL --image IMG --out M.obj`: one image to a mesh (a field's by
 //!   marching cubes), and a shaded turntable GIF of it beside the input.
-//! - `softvk eval-recon --dataset DIR --model MODEL [--model MODEL ...]`: the table of 3D IoU
-//!   per class on the test split, a column per model, beside the retrieval and mean-shape
-//!   baselines ([`softvk::recon::eval`]).
+//! - `softvk eval-recon --dataset DIR --model MODEL [--model MODEL ...] [--predicted LABEL=DIR]`:
+//!   the table of 3D IoU per class on the test split, a column per model (a mesh model's by
+//!   parity and by winding number) and per set of external predictions, beside the baselines
+//!   (retrieval, which knows the view; the mean shape, which knows the class; the visual hull),
+//!   then each column minus each baseline with paired bootstrap intervals
+//!   ([`softvk::recon::eval`]).
 
 use std::path::{Path, PathBuf};
 
@@ -204,9 +207,16 @@ pub struct EvalReconArgs {
     pub dataset: PathBuf,
 
     /// A model written by `softvk train-recon` (mesh or field); repeat it for a column per
-    /// model.
-    #[arg(long, value_name = "MODEL", required = true)]
+    /// model (two for a mesh model: parity and winding-number voxelization).
+    #[arg(long, value_name = "MODEL", required_unless_present = "predicted")]
     pub model: Vec<PathBuf>,
+
+    /// Another program's predictions as a column named LABEL: per class,
+    /// `DIR/<class>_test_predicted_voxels.npz`, array `arr_0`, uint8 0/1 of shape
+    /// (N, 24, 32, 32, 32) (object n's voxels predicted from view v, in the order of the
+    /// dataset's voxels); repeatable.
+    #[arg(long, value_name = "LABEL=DIR", value_parser = label_dir)]
+    pub predicted: Vec<(String, PathBuf)>,
 
     /// Inputs per test object: views spread evenly over the 24 (24: every view, as SoftRas).
     #[arg(long, value_name = "V", default_value_t = 24, value_parser = clap::value_parser!(u32).range(1..))]
@@ -218,7 +228,9 @@ pub struct EvalReconArgs {
 
     /// How a predicted mesh becomes voxels: `parity` (voxel centres inside, the ground truth's
     /// convention) or `softras` (SoftRas's evaluation: the voxels the surface passes through
-    /// and what they enclose).
+    /// and what they enclose, a column before the parity one). Each mesh model is also scored
+    /// by winding number (centres where |w| ≥ 0.5), which a self-overlapping fold does not
+    /// empty as it does parity.
     #[arg(long, value_enum, default_value_t = VoxelizeArg::Parity)]
     pub voxelize: VoxelizeArg,
 }
@@ -256,6 +268,16 @@ impl From<VoxelizeArg> for eval::Voxelizer {
             VoxelizeArg::Softras => eval::Voxelizer::SoftRas,
             VoxelizeArg::Parity => eval::Voxelizer::Parity,
         }
+    }
+}
+
+/// `--predicted LABEL=DIR`.
+fn label_dir(s: &str) -> std::result::Result<(String, PathBuf), String> {
+    match s.split_once('=') {
+        Some((label, dir)) if !label.is_empty() && !dir.is_empty() => {
+            Ok((label.to_owned(), PathBuf::from(dir)))
+        }
+        _ => Err(format!("`{s}`: expected LABEL=DIR")),
     }
 }
 
@@ -316,7 +338,9 @@ impl AnyReconstructor {
         voxelizer: eval::Voxelizer,
     ) -> Result<Vec<f64>> {
         match self {
-            Self::Mesh(r) => eval::reconstruction_ious(ctx, r, class, inputs, voxelizer),
+            Self::Mesh(r) => {
+                Ok(eval::reconstruction_ious(ctx, r, class, inputs, &[voxelizer])?.remove(0))
+            }
             Self::Field(r) => eval::field_reconstruction_ious(ctx, r, class, inputs),
         }
     }
@@ -335,6 +359,23 @@ impl AnyReconstructor {
                 mesh.vertex_colors = Some(vec![[0.7; 3]; mesh.positions.len()]);
                 Ok(Some(mesh))
             }
+        }
+    }
+
+    /// The IoU columns of this model over `inputs` of `class` (`[column][input]`): a mesh
+    /// model's once per voxelizer of `mesh_voxelizers`, a field's once.
+    fn columns(
+        &self,
+        ctx: &Context,
+        class: &ClassData,
+        inputs: &[(usize, usize)],
+        mesh_voxelizers: &[eval::Voxelizer],
+    ) -> Result<Vec<Vec<f64>>> {
+        match self {
+            Self::Mesh(r) => eval::reconstruction_ious(ctx, r, class, inputs, mesh_voxelizers),
+            Self::Field(r) => Ok(vec![eval::field_reconstruction_ious(
+                ctx, r, class, inputs,
+            )?]),
         }
     }
 
@@ -871,22 +912,57 @@ pub fn evaluate(args: &EvalReconArgs) -> Result<()> {
             args.dataset.display()
         )));
     }
+    // Every class's external predictions, read and checked before any work.
+    let predicted = args
+        .predicted
+        .iter()
+        .map(|(_, dir)| {
+            test.classes
+                .iter()
+                .map(|c| eval::read_predictions(dir, c))
+                .collect::<Result<Vec<_>>>()
+        })
+        .collect::<Result<Vec<_>>>()?;
     let ctx = Context::new(&ContextOptions::from_env())?;
     let recons = models
         .iter()
         .map(|m| AnyReconstructor::new(&ctx, m, 32))
         .collect::<Result<Vec<_>>>()?;
+    // A mesh model's columns: `--voxelize softras` when asked, parity and winding always.
+    let mesh_voxelizers: Vec<eval::Voxelizer> = match args.voxelize {
+        VoxelizeArg::Softras => vec![eval::Voxelizer::SoftRas],
+        VoxelizeArg::Parity => vec![],
+    }
+    .into_iter()
+    .chain([eval::Voxelizer::Parity, eval::Voxelizer::Winding])
+    .collect();
+    let stem = |p: &Path| {
+        p.file_stem()
+            .map_or_else(|| "model".into(), |s| s.to_string_lossy().into_owned())
+    };
+    // The examples' names (one per model) and the table's network columns.
     let names: Vec<String> = args
         .model
         .iter()
         .zip(&recons)
-        .map(|(p, r)| {
-            let stem = p
-                .file_stem()
-                .map_or_else(|| "model".into(), |s| s.to_string_lossy().into_owned());
-            format!("{stem} ({})", r.kind())
-        })
+        .map(|(p, r)| format!("{} ({})", stem(p), r.kind()))
         .collect();
+    let mut columns: Vec<String> = Vec::new();
+    for (p, r) in args.model.iter().zip(&recons) {
+        match r {
+            AnyReconstructor::Mesh(_) => columns.extend(
+                mesh_voxelizers
+                    .iter()
+                    .map(|v| format!("{} (mesh, {})", stem(p), v.name())),
+            ),
+            AnyReconstructor::Field(_) => columns.push(format!("{} (field)", stem(p))),
+        }
+    }
+    columns.extend(
+        args.predicted
+            .iter()
+            .map(|(label, _)| format!("{label} (predicted)")),
+    );
     let views = spread_views(args.views);
     // Retrieval: every training object's silhouette per view.
     let train_objects: Vec<(&ClassData, usize)> = train
@@ -904,15 +980,20 @@ pub fn evaluate(args: &EvalReconArgs) -> Result<()> {
     // The retrieved objects' visual hulls, made when first retrieved.
     let mut train_hulls: Vec<Option<Vec<bool>>> = vec![None; train_objects.len()];
     let mut rows = Vec::new();
-    let avg = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
-    for class in &test.classes {
+    let per_object = |v: &[f64]| eval::per_object(v, views.len());
+    for (ci, class) in test.classes.iter().enumerate() {
         let inputs: Vec<(usize, usize)> = (0..class.count)
             .flat_map(|n| views.iter().map(move |&v| (n, v)))
             .collect();
-        let reconstructions = recons
-            .iter()
-            .map(|r| Ok(avg(&r.ious(&ctx, class, &inputs, args.voxelize.into())?)))
-            .collect::<Result<Vec<f64>>>()?;
+        let mut networks = Vec::with_capacity(columns.len());
+        for r in &recons {
+            for c in r.columns(&ctx, class, &inputs, &mesh_voxelizers)? {
+                networks.push(per_object(&c));
+            }
+        }
+        for p in &predicted {
+            networks.push(per_object(&eval::predicted_ious(&p[ci], class, &inputs)?));
+        }
         let mut retrieval = Vec::with_capacity(inputs.len());
         let mut retrieval_hull = Vec::with_capacity(inputs.len());
         for &(n, v) in &inputs {
@@ -947,32 +1028,58 @@ pub fn evaluate(args: &EvalReconArgs) -> Result<()> {
         rows.push(ScoreRow {
             class: class_label(class),
             inputs: inputs.len(),
-            reconstructions,
-            retrieval: avg(&retrieval),
-            retrieval_hull: avg(&retrieval_hull),
-            mean_shape: avg(&mean_iou),
-            visual_hull: avg(&hull),
+            networks,
+            baselines: [
+                per_object(&retrieval),
+                per_object(&retrieval_hull),
+                mean_iou,
+                hull,
+            ],
         });
     }
-    let mesh_voxelizer = match args.voxelize {
-        VoxelizeArg::Softras => "SoftRas's evaluation (surface voxels and what they enclose)",
-        VoxelizeArg::Parity => "parity (voxel centres inside)",
-    };
-    let mut table = format!(
-        "{}mesh predictions voxelized by {mesh_voxelizer}\n",
-        eval::format_table(&names, &rows),
-    );
+    let comparison = eval::compare(&rows)?;
+    let mut table = eval::format_table(&columns, &rows);
+    if recons
+        .iter()
+        .any(|r| matches!(r, AnyReconstructor::Mesh(_)))
+    {
+        if args.voxelize == VoxelizeArg::Softras {
+            table.push_str(
+                "mesh predictions voxelized by softras: SoftRas's evaluation (surface voxels \
+                 and what they enclose)\n",
+            );
+        }
+        table.push_str(
+            "mesh predictions voxelized by parity: voxel centres inside by the parity of \
+             crossings along x (a fold that overlaps the surface empties what it doubles)\n\
+             mesh predictions voxelized by winding: voxel centres where the winding number is \
+             ≥ 0.5 in magnitude (a doubled region stays inside)\n",
+        );
+    }
     if recons
         .iter()
         .any(|r| matches!(r, AnyReconstructor::Field(_)))
     {
         table.push_str("field predictions: φ > 0.5 at the voxel centres\n");
     }
+    if !args.predicted.is_empty() {
+        table.push_str(
+            "predicted: another program's voxels per input \
+             (`<class>_test_predicted_voxels.npz`)\n",
+        );
+    }
+    for line in eval::BASELINE_LEGEND {
+        table.push_str(&format!("baseline {line}\n"));
+    }
+    table.push('\n');
+    table.push_str(&eval::format_comparison(&columns, &rows, &comparison));
     print!("{table}");
     if let Some(dir) = &args.report {
         std::fs::create_dir_all(dir)
             .map_err(|e| Error::Input(format!("cannot create {}: {e}", dir.display())))?;
         AtomicFile::create(&dir.join("table.txt"))?.commit(table.as_bytes())?;
+        AtomicFile::create(&dir.join("table.csv"))?
+            .commit(eval::table_csv(&columns, &rows, &comparison).as_bytes())?;
         write_examples(&ctx, &names, &recons, &test, dir)?;
     }
     Ok(())

@@ -1,6 +1,7 @@
 //! Evaluation tools, on the CPU (the field's φ at voxel centres is evaluated on the GPU by
 //! [`field_occupancy`], or by the twin through [`occupancy_from_fn`]): occupancy grids of a
-//! closed mesh ([`voxelize_mesh`]), of a field, and of the visual hull of silhouettes
+//! closed mesh (by parity, [`voxelize_mesh`], or by winding number,
+//! [`voxelize_mesh_winding`]), of a field, and of the visual hull of silhouettes
 //! ([`visual_hull`]), and their 3D IoU ([`iou`]).
 //!
 //! **Voxels.** A `res³` grid over a [`Cube`]: voxel `(i, j, k)`, index `i + res (j + res k)`,
@@ -179,10 +180,129 @@ pub fn voxelize_mesh(
 ) -> Result<Voxelization> {
     check_mesh(positions, faces, cube, res)?;
     let r = res as usize;
+    let mut rows = row_crossings(positions, faces, cube, res);
+    let mut occ = Occupancy::empty(*cube, res);
+    let mut odd_rays = 0;
+    for (row, xs) in rows.iter_mut().enumerate() {
+        if xs.is_empty() {
+            continue;
+        }
+        xs.sort_by(|a, b| a.0.total_cmp(&b.0));
+        if xs.len() % 2 == 1 {
+            odd_rays += 1;
+        }
+        let mut c = 0;
+        for i in 0..r {
+            let x = row_centre(cube, res, i);
+            while c < xs.len() && xs[c].0 < x {
+                c += 1;
+            }
+            occ.inside[i + r * row] = c % 2 == 1;
+        }
+    }
+    Ok(Voxelization {
+        occupancy: occ,
+        odd_rays,
+    })
+}
+
+/// Voxelizes a closed, consistently oriented triangle mesh by its winding number: a voxel is
+/// inside when the winding number of the surface about its centre is at least 0.5 in magnitude.
+/// Unlike [`voxelize_mesh`]'s parity, a region the surface encloses twice (a fold of a deformed
+/// sphere that overlaps the rest of it, two overlapping closed parts) stays inside, and an
+/// inside-out mesh (winding number −1 within) is inside too.
+///
+/// For a closed surface whose faces are consistently oriented (every edge used once in each
+/// direction) the winding number at a point is the signed count of the surface's crossings
+/// along any ray from it: so it is counted as [`voxelize_mesh`] counts parity, along −x per row
+/// of voxel centres (the same exact crossing test, so a ray through an edge or a vertex counts
+/// once), each crossing counting −1 or +1 by the sign of its triangle's normal's x, summed in
+/// order along the row: the cost of parity. Whichever way the faces turn (outward or inward),
+/// inside is where the count is not 0. For a mesh with holes or inconsistently oriented faces
+/// the count along −x is not a winding number (another ray direction would count otherwise),
+/// so such a mesh is refused with [`Error::Input`] (checked on the faces: every directed edge
+/// once, its reverse once) rather than voxelized by an accident of the axis.
+pub fn voxelize_mesh_winding(
+    positions: &[[f32; 3]],
+    faces: &[[u32; 3]],
+    cube: &Cube,
+    res: u32,
+) -> Result<Occupancy> {
+    check_mesh(positions, faces, cube, res)?;
+    if let Some(e) = unpaired_edge(faces) {
+        return Err(Error::Input(format!(
+            "winding-number voxelization needs a closed, consistently oriented mesh: the edge \
+             {} → {} is not used exactly once in each direction",
+            e[0], e[1]
+        )));
+    }
+    let r = res as usize;
+    let mut rows = row_crossings(positions, faces, cube, res);
+    let mut occ = Occupancy::empty(*cube, res);
+    for (row, xs) in rows.iter_mut().enumerate() {
+        if xs.is_empty() {
+            continue;
+        }
+        xs.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let (mut c, mut winding) = (0, 0i64);
+        for i in 0..r {
+            let x = row_centre(cube, res, i);
+            while c < xs.len() && xs[c].0 < x {
+                // Entering along +x through a face that looks along −x (normal x < 0).
+                winding -= xs[c].1 as i64;
+                c += 1;
+            }
+            occ.inside[i + r * row] = winding != 0;
+        }
+    }
+    Ok(occ)
+}
+
+/// A directed edge of `faces` that is not matched by exactly one use of it and one of its
+/// reverse (`None` for a closed, consistently oriented mesh).
+fn unpaired_edge(faces: &[[u32; 3]]) -> Option<[u32; 2]> {
+    let mut edges: Vec<(u32, u32, bool)> = faces
+        .iter()
+        .flat_map(|f| [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])])
+        .map(|(a, b)| (a.min(b), a.max(b), a < b))
+        .collect();
+    edges.sort_unstable();
+    let mut i = 0;
+    while i < edges.len() {
+        let (a, b, _) = edges[i];
+        let same = edges[i..]
+            .iter()
+            .take_while(|e| (e.0, e.1) == (a, b))
+            .count();
+        // Sorted, a pair is (reverse, forward): exactly one of each.
+        if same != 2 || edges[i].2 || !edges[i + 1].2 || a == b {
+            let forward = edges[i].2;
+            return Some(if forward { [a, b] } else { [b, a] });
+        }
+        i += same;
+    }
+    None
+}
+
+/// The x of voxel centre `i` of a row.
+fn row_centre(cube: &Cube, res: u32, i: usize) -> f64 {
+    cube.min()[0] + 2.0 * cube.half / f64::from(res) * (i as f64 + 0.5)
+}
+
+/// Per row `(j, k)` of voxel centres along x (index `j + res k`), where the ray through the
+/// row crosses each triangle: its x, and the sign of the triangle's normal's x (±1, from the
+/// same exact orientation test that decides the crossing).
+fn row_crossings(
+    positions: &[[f32; 3]],
+    faces: &[[u32; 3]],
+    cube: &Cube,
+    res: u32,
+) -> Vec<Vec<(f64, f64)>> {
+    let r = res as usize;
     let step = 2.0 * cube.half / f64::from(res);
     let origin = cube.min();
     // Row (j, k): the ray at voxel centres y_j, z_k.
-    let mut rows: Vec<Vec<f64>> = vec![Vec::new(); r * r];
+    let mut rows: Vec<Vec<(f64, f64)>> = vec![Vec::new(); r * r];
     let centre = |axis: usize, i: usize| origin[axis] + step * (i as f64 + 0.5);
     // Inclusive index range of voxel centres within [lo, hi] along `axis`.
     let span = |axis: usize, lo: f64, hi: f64| {
@@ -231,33 +351,13 @@ pub fn voxelize_mesh(
                 } else {
                     (v[0][0] + v[1][0] + v[2][0]) / 3.0
                 };
-                rows[j as usize + r * k as usize].push(x);
+                // All three sides agree: s[0] is the (perturbed) orientation of the projected
+                // triangle, counter-clockwise in yz when its normal's x is positive.
+                rows[j as usize + r * k as usize].push((x, s[0]));
             }
         }
     }
-    let mut occ = Occupancy::empty(*cube, res);
-    let mut odd_rays = 0;
-    for (row, xs) in rows.iter_mut().enumerate() {
-        if xs.is_empty() {
-            continue;
-        }
-        xs.sort_by(f64::total_cmp);
-        if xs.len() % 2 == 1 {
-            odd_rays += 1;
-        }
-        let mut c = 0;
-        for i in 0..r {
-            let x = centre(0, i);
-            while c < xs.len() && xs[c] < x {
-                c += 1;
-            }
-            occ.inside[i + r * row] = c % 2 == 1;
-        }
-    }
-    Ok(Voxelization {
-        occupancy: occ,
-        odd_rays,
-    })
+    rows
 }
 
 /// Voxelizes a triangle mesh as SoftRas's evaluation does (`srf.voxelization`, after Neural

@@ -1,17 +1,26 @@
 //! Scoring reconstructions as SoftRas's table does (3D IoU of 32³ voxel grids on the test
-//! split, every view of every object as an input; the prediction voxelized by a [`Voxelizer`]:
-//! by voxel centres as the ground truth is, or as SoftRas's evaluation does), the two baselines
-//! computed beside it, and the visual hull ([`visual_hull_iou`]), the bound of what silhouettes
-//! can decide:
+//! split, every view of every object as an input; a predicted mesh voxelized by a
+//! [`Voxelizer`]: by voxel centres as the ground truth is, by parity or by winding number, or as
+//! SoftRas's evaluation does), another program's voxels read beside them
+//! ([`read_predictions`]), the baselines computed beside them, and how sure each difference is
+//! ([`compare`]). The baselines, named in the table ([`BASELINES`]) by what they know that a
+//! single-view network does not:
 //!
-//! - **retrieval**: the training object whose silhouette, seen from the input's view, best
-//!   matches the input's silhouette (2D IoU of the alpha masks at 0.5), its voxels as the
-//!   answer. It searches every training object of every class: it knows no more than the
-//!   network (one image).
+//! - **retrieval (knows view)**: the training object whose silhouette from the input's own view
+//!   index best matches the input's silhouette (2D IoU of the alpha masks at 0.5), its voxels as
+//!   the answer. It searches every training object of every class, but only among silhouettes
+//!   seen from exactly the input's camera: it is told the viewpoint, which the network must
+//!   infer, and it answers with true voxels, hollows no silhouette shows included.
 //!   Beside it, the same retrieval answering with the retrieved object's visual hull (what its
 //!   silhouettes show), which is all a silhouette-trained network could have learned of it.
-//! - **mean shape**: the class's mean training occupancy, thresholded at 0.5 (it knows the
-//!   class, which the network does not: an upper-ish bar for "no image needed").
+//! - **mean shape (knows class)**: the class's mean training occupancy, thresholded at 0.5 (it
+//!   knows the class, which the network does not: an upper-ish bar for "no image needed").
+//! - **visual hull** of the test object's own 24 silhouettes ([`visual_hull_iou`]): not a
+//!   method, the bound of what silhouettes can decide.
+//!
+//! A class has few test objects, so its mean moves by several hundredths with the sample alone:
+//! each network's difference to each baseline comes with a paired bootstrap interval over test
+//! objects ([`paired_bootstrap`]).
 
 use crate::error::{Error, Result};
 
@@ -98,81 +107,309 @@ pub fn retrieve(query: &Mask, candidates: &[Mask]) -> Option<usize> {
     best.map(|b| b.0)
 }
 
-/// One row of the table: a class and its mean 3D IoUs.
+/// The baselines' columns, in the order of [`ScoreRow::baselines`], named by what each knows
+/// that a single-view network does not.
+pub const BASELINES: [&str; 4] = [
+    "retrieval (knows view)",
+    "retrieval hull (knows view)",
+    "mean shape (knows class)",
+    "visual hull (24 views)",
+];
+
+/// What each of [`BASELINES`] is and knows: the table's legend.
+pub const BASELINE_LEGEND: [&str; 4] = [
+    "retrieval (knows view): the training object (any class) whose silhouette from the input's \
+     own view index best matches the input's; answers with its true voxels. It is told the \
+     viewpoint, which the network is not, and returns hollows no silhouette shows.",
+    "retrieval hull (knows view): the same retrieved object answered with its visual hull (what \
+     its 24 silhouettes can carve): retrieval told the viewpoint, knowing only silhouettes.",
+    "mean shape (knows class): the class's mean training occupancy (≥ half the objects), the \
+     same answer for every input; it is told the class.",
+    "visual hull (24 views): the test object's own hull from its 24 silhouettes, not a method \
+     but what silhouettes at these views can decide.",
+];
+
+/// One class of the table: each column's 3D IoU per test object, the mean over the views
+/// evaluated (the unit the bootstrap resamples).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ScoreRow {
     /// The class.
     pub class: String,
     /// Test inputs scored (objects × views).
     pub inputs: usize,
-    /// Each model's reconstructions (the table's columns after `inputs`).
-    pub reconstructions: Vec<f64>,
-    /// The retrieval baseline.
-    pub retrieval: f64,
-    /// Retrieval answering with the retrieved object's visual hull instead of its voxels: what
-    /// retrieval could know from silhouettes alone, as the network does.
-    pub retrieval_hull: f64,
-    /// The class's mean shape.
-    pub mean_shape: f64,
-    /// The visual hull of each test object's own 24 silhouettes ([`visual_hull_iou`]): what
-    /// silhouettes at the dataset's views can pin down at best, not a method.
-    pub visual_hull: f64,
+    /// Each network column's (a model under one voxelization, or external predictions) per
+    /// object, in the order of the table's network columns.
+    pub networks: Vec<Vec<f64>>,
+    /// Each baseline's per object, in the order of [`BASELINES`].
+    pub baselines: [Vec<f64>; 4],
 }
 
-/// The table as text: a column per model (`models` names them, in the order of
-/// [`ScoreRow::reconstructions`]), then the baselines; one row per class, then the mean over
-/// classes.
-pub fn format_table(models: &[String], rows: &[ScoreRow]) -> String {
+/// The mean of `v` (NaN for none).
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len() as f64
+}
+
+/// Each object's mean of `per_input`, whose inputs are `views` consecutive views per object.
+pub fn per_object(per_input: &[f64], views: usize) -> Vec<f64> {
+    per_input.chunks(views.max(1)).map(mean).collect()
+}
+
+/// The table as text: a column per network (`networks` names them, in the order of
+/// [`ScoreRow::networks`]), then the [`BASELINES`]; one row per class (its mean over test
+/// objects), then the mean over classes.
+pub fn format_table(networks: &[String], rows: &[ScoreRow]) -> String {
     use std::fmt::Write;
-    let widths: Vec<usize> = models.iter().map(|m| m.chars().count().max(14)).collect();
+    let names: Vec<&str> = networks
+        .iter()
+        .map(String::as_str)
+        .chain(BASELINES)
+        .collect();
+    let widths: Vec<usize> = names.iter().map(|m| m.chars().count().max(10)).collect();
     let mut s = String::new();
     let _ = write!(s, "{:<22} {:>7}", "class", "inputs");
-    for (m, w) in models.iter().zip(&widths) {
+    for (m, w) in names.iter().zip(&widths) {
         let _ = write!(s, " {m:>w$}");
     }
-    let _ = writeln!(
-        s,
-        " {:>10} {:>15} {:>11} {:>12}",
-        "retrieval", "retrieval hull", "mean shape", "visual hull"
-    );
-    let line = |s: &mut String, class: &str, inputs: usize, recon: &[f64], rest: [f64; 4]| {
+    s.push('\n');
+    let line = |s: &mut String, class: &str, inputs: usize, values: &[f64]| {
         let _ = write!(s, "{class:<22} {inputs:>7}");
-        for (r, w) in recon.iter().zip(&widths) {
+        for (r, w) in values.iter().zip(&widths) {
             let _ = write!(s, " {r:>w$.4}");
         }
-        let _ = writeln!(
-            s,
-            " {:>10.4} {:>15.4} {:>11.4} {:>12.4}",
-            rest[0], rest[1], rest[2], rest[3]
-        );
+        s.push('\n');
     };
-    for r in rows {
-        line(
-            &mut s,
-            &r.class,
-            r.inputs,
-            &r.reconstructions,
-            [r.retrieval, r.retrieval_hull, r.mean_shape, r.visual_hull],
-        );
+    let means = column_means(rows);
+    for (r, values) in rows.iter().zip(&means) {
+        line(&mut s, &r.class, r.inputs, values);
     }
     if !rows.is_empty() {
-        let n = rows.len() as f64;
-        let mean = |f: &dyn Fn(&ScoreRow) -> f64| rows.iter().map(f).sum::<f64>() / n;
-        let recon: Vec<f64> = (0..models.len())
-            .map(|k| mean(&|r: &ScoreRow| r.reconstructions.get(k).copied().unwrap_or(f64::NAN)))
+        let inputs = rows.iter().map(|r| r.inputs).sum::<usize>();
+        line(&mut s, "mean", inputs, &means[rows.len()]);
+    }
+    s
+}
+
+/// Each class's mean over objects of each column (networks, then baselines), then the mean of
+/// those over classes.
+fn column_means(rows: &[ScoreRow]) -> Vec<Vec<f64>> {
+    let mut means: Vec<Vec<f64>> = rows
+        .iter()
+        .map(|r| {
+            r.networks
+                .iter()
+                .chain(&r.baselines)
+                .map(|v| mean(v))
+                .collect()
+        })
+        .collect();
+    let columns = means.first().map_or(0, Vec::len);
+    let overall = (0..columns)
+        .map(|k| mean(&means.iter().map(|c| c[k]).collect::<Vec<_>>()))
+        .collect();
+    means.push(overall);
+    means
+}
+
+/// A mean difference and its percentile bootstrap interval.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Interval {
+    /// The observed mean difference.
+    pub mean: f64,
+    /// The lower percentile (2.5 % for a 95 % interval).
+    pub lo: f64,
+    /// The upper percentile.
+    pub hi: f64,
+}
+
+/// Resamples of [`compare`]'s bootstrap.
+pub const RESAMPLES: usize = 10_000;
+/// Seed of [`compare`]'s bootstrap.
+pub const BOOTSTRAP_SEED: u64 = 0;
+
+/// The paired, stratified percentile bootstrap of the mean over strata of each stratum's mean
+/// of `a − b`: each stratum (a class) is a pair of columns over the same units (test objects);
+/// a resample draws, within each stratum, as many units as it has with replacement, the same
+/// units for both columns (so what the two share, the difficulty of each object, cancels), and
+/// the interval is the 2.5 and 97.5 percentiles of `resamples` resampled statistics, from a
+/// fixed `seed`. [`Error::Input`] for no strata, an empty stratum or columns of different
+/// lengths.
+pub fn paired_bootstrap(
+    strata: &[(&[f64], &[f64])],
+    resamples: usize,
+    seed: u64,
+) -> Result<Interval> {
+    if strata.is_empty() || resamples == 0 {
+        return Err(Error::Input("a bootstrap of nothing".into()));
+    }
+    let diffs: Vec<Vec<f64>> = strata
+        .iter()
+        .map(|(a, b)| {
+            if a.len() != b.len() || a.is_empty() {
+                return Err(Error::Input(format!(
+                    "a paired bootstrap of columns of {} and {} units",
+                    a.len(),
+                    b.len()
+                )));
+            }
+            Ok(a.iter().zip(b.iter()).map(|(x, y)| x - y).collect())
+        })
+        .collect::<Result<_>>()?;
+    let statistic = |d: &[Vec<f64>], pick: &mut dyn FnMut(usize) -> usize| {
+        d.iter()
+            .map(|d| (0..d.len()).map(|_| d[pick(d.len())]).sum::<f64>() / d.len() as f64)
+            .sum::<f64>()
+            / d.len() as f64
+    };
+    let observed = diffs.iter().map(|d| mean(d)).sum::<f64>() / diffs.len() as f64;
+    let mut rng = crate::rng::SplitMix64(seed);
+    let mut stats: Vec<f64> = (0..resamples)
+        .map(|_| statistic(&diffs, &mut |n| (rng.next() % n as u64) as usize))
+        .collect();
+    stats.sort_by(f64::total_cmp);
+    Ok(Interval {
+        mean: observed,
+        lo: percentile(&stats, 0.025),
+        hi: percentile(&stats, 0.975),
+    })
+}
+
+/// The `p` quantile of sorted `v`, linear between the nearest ranks.
+fn percentile(v: &[f64], p: f64) -> f64 {
+    let x = p * (v.len() - 1) as f64;
+    let (i, f) = (x.floor() as usize, x - x.floor());
+    if i + 1 < v.len() {
+        v[i] + f * (v[i + 1] - v[i])
+    } else {
+        v[i]
+    }
+}
+
+/// Each network column minus each baseline, per class and over the classes (the mean of the
+/// class means, resampled within each class), as [`paired_bootstrap`] intervals with
+/// [`RESAMPLES`] and [`BOOTSTRAP_SEED`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Comparison {
+    /// `[class][network][baseline]`, classes in the table's order.
+    pub classes: Vec<Vec<[Interval; 4]>>,
+    /// `[network][baseline]` over all classes.
+    pub mean: Vec<[Interval; 4]>,
+}
+
+/// The [`Comparison`] of `rows`' networks against their baselines.
+pub fn compare(rows: &[ScoreRow]) -> Result<Comparison> {
+    let networks = rows.first().map_or(0, |r| r.networks.len());
+    if rows.iter().any(|r| r.networks.len() != networks) {
+        return Err(Error::Input("classes of different network columns".into()));
+    }
+    let interval = |rows: &[ScoreRow], k: usize, b: usize| {
+        let strata: Vec<(&[f64], &[f64])> = rows
+            .iter()
+            .map(|r| (&r.networks[k][..], &r.baselines[b][..]))
             .collect();
-        line(
-            &mut s,
-            "mean",
-            rows.iter().map(|r| r.inputs).sum::<usize>(),
-            &recon,
-            [
-                mean(&|r| r.retrieval),
-                mean(&|r| r.retrieval_hull),
-                mean(&|r| r.mean_shape),
-                mean(&|r| r.visual_hull),
-            ],
+        paired_bootstrap(&strata, RESAMPLES, BOOTSTRAP_SEED)
+    };
+    let of = |rows: &[ScoreRow]| -> Result<Vec<[Interval; 4]>> {
+        (0..networks)
+            .map(|k| {
+                let v = (0..4)
+                    .map(|b| interval(rows, k, b))
+                    .collect::<Result<Vec<_>>>()?;
+                Ok([v[0], v[1], v[2], v[3]])
+            })
+            .collect()
+    };
+    Ok(Comparison {
+        classes: rows
+            .iter()
+            .map(|r| of(std::slice::from_ref(r)))
+            .collect::<Result<_>>()?,
+        mean: of(rows)?,
+    })
+}
+
+/// The comparison as text: `network − baseline: mean [lo, hi]`, a row per class and network,
+/// then the means over classes, a column per baseline.
+pub fn format_comparison(networks: &[String], rows: &[ScoreRow], cmp: &Comparison) -> String {
+    use std::fmt::Write;
+    let cell = |i: &Interval| format!("{:+.3} [{:+.3}, {:+.3}]", i.mean, i.lo, i.hi);
+    let nw = networks
+        .iter()
+        .map(|n| n.chars().count())
+        .max()
+        .unwrap_or(0)
+        .max(7);
+    let widths: Vec<usize> = BASELINES
+        .iter()
+        .map(|b| b.chars().count().max(24))
+        .collect();
+    let mut s = format!(
+        "network − baseline: mean [lo, hi], 95 % paired bootstrap over test objects \
+         ({RESAMPLES} resamples within each class, seed {BOOTSTRAP_SEED}; the mean row is the \
+         mean of the class means)\n"
+    );
+    let _ = write!(s, "{:<22} {:<nw$}", "class", "network");
+    for (b, w) in BASELINES.iter().zip(&widths) {
+        let _ = write!(s, " {b:>w$}");
+    }
+    s.push('\n');
+    let classes = rows.iter().map(|r| r.class.as_str()).chain(["mean"]);
+    for (class, per) in classes.zip(cmp.classes.iter().chain([&cmp.mean])) {
+        for (name, intervals) in networks.iter().zip(per) {
+            let _ = write!(s, "{class:<22} {name:<nw$}");
+            for (i, w) in intervals.iter().zip(&widths) {
+                let _ = write!(s, " {:>w$}", cell(i));
+            }
+            s.push('\n');
+        }
+    }
+    let fewest = rows.iter().map(|r| r.baselines[0].len()).min();
+    if let Some(n) = fewest.filter(|&n| n < 10) {
+        let _ = writeln!(
+            s,
+            "(as few as {n} test objects in a class: a percentile bootstrap over so few \
+             understates the spread)"
         );
+    }
+    s
+}
+
+/// The table and the comparison as CSV, a row per value: `class,column,minus,mean,lo,hi`
+/// (`minus` empty for a column's own mean IoU, whose `lo` and `hi` are empty; class `mean` for
+/// the mean over classes), enough to write the tables again.
+pub fn table_csv(networks: &[String], rows: &[ScoreRow], cmp: &Comparison) -> String {
+    use std::fmt::Write;
+    let quote = |t: &str| format!("\"{}\"", t.replace('"', "\"\""));
+    let mut s = String::from("class,column,minus,mean,lo,hi\n");
+    let names: Vec<&str> = networks
+        .iter()
+        .map(String::as_str)
+        .chain(BASELINES)
+        .collect();
+    let classes: Vec<&str> = rows
+        .iter()
+        .map(|r| r.class.as_str())
+        .chain(["mean"])
+        .collect();
+    for (class, values) in classes.iter().zip(&column_means(rows)) {
+        for (name, v) in names.iter().zip(values) {
+            let _ = writeln!(s, "{},{},,{v},,", quote(class), quote(name));
+        }
+    }
+    for (class, per) in classes.iter().zip(cmp.classes.iter().chain([&cmp.mean])) {
+        for (name, intervals) in networks.iter().zip(per) {
+            for (b, i) in BASELINES.iter().zip(intervals) {
+                let _ = writeln!(
+                    s,
+                    "{},{},{},{},{},{}",
+                    quote(class),
+                    quote(name),
+                    quote(b),
+                    i.mean,
+                    i.lo,
+                    i.hi
+                );
+            }
+        }
     }
     s
 }
@@ -224,6 +461,12 @@ pub enum Voxelizer {
     /// perfect mesh scores 1. A fold that overlaps the surface empties the region it doubles.
     #[default]
     Parity,
+    /// The voxels whose centres have a winding number of magnitude ≥ 0.5
+    /// ([`crate::field::voxel::voxelize_mesh_winding`]): the same as parity for a mesh that
+    /// does not overlap itself, but a region a fold encloses twice stays inside, and an
+    /// inside-out mesh is inside. It needs a closed, consistently oriented mesh, which the
+    /// decoder's deformed sphere always is (its faces are the template's); others are refused.
+    Winding,
 }
 
 impl Voxelizer {
@@ -232,41 +475,47 @@ impl Voxelizer {
     pub fn voxelize(&self, positions: &[[f32; 3]], faces: &[[u32; 3]]) -> Result<Vec<bool>> {
         use super::dataset::{VOXEL_RES, occupancy_to_nmr, voxel_cube};
         use crate::field::voxel;
+        let (cube, res) = (voxel_cube(), VOXEL_RES as u32);
         let occ = match self {
-            Voxelizer::SoftRas => voxel::voxelize_mesh_conservative(
-                positions,
-                faces,
-                &voxel_cube(),
-                VOXEL_RES as u32,
-            )?,
-            Voxelizer::Parity => {
-                voxel::voxelize_mesh(positions, faces, &voxel_cube(), VOXEL_RES as u32)?.occupancy
-            }
+            Voxelizer::SoftRas => voxel::voxelize_mesh_conservative(positions, faces, &cube, res)?,
+            Voxelizer::Parity => voxel::voxelize_mesh(positions, faces, &cube, res)?.occupancy,
+            Voxelizer::Winding => voxel::voxelize_mesh_winding(positions, faces, &cube, res)?,
         };
         occupancy_to_nmr(&occ)
+    }
+
+    /// `parity`, `winding` or `softras`, as the table names it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Voxelizer::SoftRas => "softras",
+            Voxelizer::Parity => "parity",
+            Voxelizer::Winding => "winding",
+        }
     }
 }
 
 /// The 3D IoU of the reconstruction from each input `(object, view)` of `class` against the
-/// object's voxels: batches of the reconstructor's capacity, each predicted mesh voxelized by
-/// `voxelizer`.
+/// object's voxels, once per voxelizer (`[voxelizer][input]`): batches of the reconstructor's
+/// capacity, each predicted mesh reconstructed once and voxelized by each of `voxelizers`.
 pub fn reconstruction_ious(
     ctx: &crate::gpu::Context,
     recon: &super::model::Reconstructor,
     class: &super::dataset::ClassData,
     inputs: &[(usize, usize)],
-    voxelizer: Voxelizer,
-) -> Result<Vec<f64>> {
+    voxelizers: &[Voxelizer],
+) -> Result<Vec<Vec<f64>>> {
     let faces = super::train::template().faces;
-    let mut ious = Vec::with_capacity(inputs.len());
+    let mut ious = vec![Vec::with_capacity(inputs.len()); voxelizers.len()];
     for chunk in inputs.chunks(recon.capacity() as usize) {
         let images = input_images(class, chunk);
         let meshes = recon.reconstruct(ctx, &images)?;
         for (mesh, &(n, _)) in meshes.iter().zip(chunk) {
-            ious.push(voxel_iou(
-                &voxelizer.voxelize(&mesh.positions, &faces)?,
-                class.voxels_of(n),
-            )?);
+            for (out, voxelizer) in ious.iter_mut().zip(voxelizers) {
+                out.push(voxel_iou(
+                    &voxelizer.voxelize(&mesh.positions, &faces)?,
+                    class.voxels_of(n),
+                )?);
+            }
         }
     }
     Ok(ious)
@@ -296,6 +545,82 @@ pub fn field_reconstruction_ious(
         }
     }
     Ok(ious)
+}
+
+/// The file of `class_id`'s external predictions in `dir`:
+/// `<class>_test_predicted_voxels.npz`.
+pub fn predictions_path(dir: &std::path::Path, class_id: &str) -> std::path::PathBuf {
+    dir.join(format!("{class_id}_test_predicted_voxels.npz"))
+}
+
+/// Another program's reconstructions of `class`'s test split, scored beside softvk's models:
+/// `arr_0` of [`predictions_path`], uint8 0/1 of shape (N, 24, 32, 32, 32), the voxels
+/// predicted from view v of test object n in the order of the dataset's voxels (as
+/// `<class>_test_voxels.npz`). Returned flat, one `bool` per voxel. [`Error::Input`] (naming
+/// the file) for a missing file or array, another shape or dtype, or a value other than 0
+/// and 1.
+pub fn read_predictions(
+    dir: &std::path::Path,
+    class: &super::dataset::ClassData,
+) -> Result<Vec<bool>> {
+    use super::dataset::{VIEWS, VOXEL_RES};
+    use super::npz::{NpyData, read_npz_array};
+    let path = predictions_path(dir, &class.class_id);
+    if !path.is_file() {
+        return Err(Error::Input(format!(
+            "{}: no predictions for class {} (expected `arr_0`, uint8, shape ({}, {VIEWS}, \
+             {VOXEL_RES}, {VOXEL_RES}, {VOXEL_RES}))",
+            path.display(),
+            class.class_id,
+            class.count
+        )));
+    }
+    let array = read_npz_array(&path, "arr_0")?;
+    let want = [class.count, VIEWS, VOXEL_RES, VOXEL_RES, VOXEL_RES];
+    let NpyData::U8(data) = &array.data else {
+        return Err(Error::Input(format!(
+            "{}: `arr_0` is {}, expected uint8 0/1",
+            path.display(),
+            array.data.dtype_name()
+        )));
+    };
+    if array.shape != want {
+        return Err(Error::Input(format!(
+            "{}: `arr_0` has shape {:?}, expected {want:?} (test objects of class {}, views, \
+             voxels)",
+            path.display(),
+            array.shape,
+            class.class_id
+        )));
+    }
+    if let Some(bad) = data.iter().find(|&&x| x > 1) {
+        return Err(Error::Input(format!(
+            "{}: `arr_0` holds {bad}, expected only 0 and 1",
+            path.display()
+        )));
+    }
+    Ok(data.iter().map(|&x| x == 1).collect())
+}
+
+/// The 3D IoU of each input `(object, view)` of `class` whose prediction `predicted` holds
+/// ([`read_predictions`]'s grid of the class) against the object's voxels.
+pub fn predicted_ious(
+    predicted: &[bool],
+    class: &super::dataset::ClassData,
+    inputs: &[(usize, usize)],
+) -> Result<Vec<f64>> {
+    use super::dataset::{VIEWS, VOXEL_RES};
+    let size = VOXEL_RES.pow(3);
+    inputs
+        .iter()
+        .map(|&(n, v)| {
+            let start = (n * VIEWS + v) * size;
+            let grid = predicted
+                .get(start..start + size)
+                .ok_or_else(|| Error::Input(format!("no prediction for object {n}, view {v}")))?;
+            voxel_iou(grid, class.voxels_of(n))
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -344,5 +669,178 @@ mod tests {
         assert!(matches!(mean_shape(&[]), Err(Error::Input(_))));
         assert_eq!(voxel_iou(&a, &b).unwrap(), 1.0 / 3.0);
         assert!(matches!(voxel_iou(&a, &[true]), Err(Error::Input(_))));
+    }
+
+    /// `mesh` moved by `d`.
+    fn moved(mesh: &crate::mesh::Mesh, d: [f32; 3]) -> Vec<[f32; 3]> {
+        mesh.positions
+            .iter()
+            .map(|p| [p[0] + d[0], p[1] + d[1], p[2] + d[2]])
+            .collect()
+    }
+
+    #[test]
+    fn winding_and_parity_agree_on_closed_meshes_that_do_not_overlap_themselves() {
+        use crate::mesh::Mesh;
+        let sphere = Mesh::icosphere(3);
+        let sphere: Vec<[f32; 3]> = sphere
+            .positions
+            .iter()
+            .map(|p| [0.41 * p[0] + 0.02, 0.33 * p[1] - 0.03, 0.37 * p[2] + 0.01])
+            .collect();
+        let template = crate::recon::train::template();
+        let bumpy: Vec<[f32; 3]> = template
+            .positions
+            .iter()
+            .map(|p| {
+                let r = 0.3 + 0.08 * (3.0 * p[0]).sin() * (2.0 * p[1]).cos();
+                p.map(|c| r * c)
+            })
+            .collect();
+        let cuboid = Mesh::cuboid([0.31, 0.22, 0.13]);
+        for (positions, faces) in [
+            (&sphere, &Mesh::icosphere(3).faces),
+            (&bumpy, &template.faces),
+            (&cuboid.positions, &cuboid.faces),
+        ] {
+            let parity = Voxelizer::Parity.voxelize(positions, faces).unwrap();
+            let winding = Voxelizer::Winding.voxelize(positions, faces).unwrap();
+            assert!(parity.iter().filter(|&&x| x).count() > 100);
+            assert_eq!(parity, winding);
+        }
+    }
+
+    #[test]
+    fn winding_keeps_what_a_self_overlap_doubles_where_parity_empties_it() {
+        use crate::mesh::Mesh;
+        // Two closed boxes in one mesh, overlapping in x ∈ [−0.12, 0.12].
+        let cuboid = Mesh::cuboid([0.27, 0.2, 0.18]);
+        let (a, b) = (
+            moved(&cuboid, [-0.15, 0.0, 0.0]),
+            moved(&cuboid, [0.15, 0.0, 0.0]),
+        );
+        let positions: Vec<[f32; 3]> = a.iter().chain(&b).copied().collect();
+        let n = a.len() as u32;
+        let faces: Vec<[u32; 3]> = cuboid
+            .faces
+            .iter()
+            .copied()
+            .chain(cuboid.faces.iter().map(|f| f.map(|i| i + n)))
+            .collect();
+        let one = |p: &[[f32; 3]]| Voxelizer::Parity.voxelize(p, &cuboid.faces).unwrap();
+        let (a, b) = (one(&a), one(&b));
+        let both = a.iter().zip(&b).filter(|(x, y)| **x && **y).count();
+        assert!(both > 100, "the boxes overlap in {both} voxels");
+        let parity = Voxelizer::Parity.voxelize(&positions, &faces).unwrap();
+        let winding = Voxelizer::Winding.voxelize(&positions, &faces).unwrap();
+        let xor: Vec<bool> = a.iter().zip(&b).map(|(x, y)| x ^ y).collect();
+        let or: Vec<bool> = a.iter().zip(&b).map(|(x, y)| x | y).collect();
+        assert_eq!(parity, xor, "parity empties the overlap");
+        assert_eq!(winding, or, "the winding number keeps it");
+    }
+
+    #[test]
+    fn an_inside_out_mesh_is_inside_by_winding_and_an_open_one_is_refused() {
+        use crate::mesh::Mesh;
+        let sphere = Mesh::icosphere(2);
+        let positions: Vec<[f32; 3]> = sphere
+            .positions
+            .iter()
+            .map(|p| p.map(|c| 0.4 * c))
+            .collect();
+        let reversed: Vec<[u32; 3]> = sphere.faces.iter().map(|f| [f[0], f[2], f[1]]).collect();
+        let outward = Voxelizer::Winding
+            .voxelize(&positions, &sphere.faces)
+            .unwrap();
+        let inward = Voxelizer::Winding.voxelize(&positions, &reversed).unwrap();
+        assert!(outward.iter().filter(|&&x| x).count() > 1000);
+        assert_eq!(inward, outward);
+        // A hole, or one face turned against its neighbours: no winding number to count.
+        let open = &sphere.faces[1..];
+        let mut flipped = sphere.faces.clone();
+        flipped[3].swap(1, 2);
+        for faces in [open, &flipped[..]] {
+            let err = Voxelizer::Winding.voxelize(&positions, faces).unwrap_err();
+            assert!(
+                matches!(&err, Error::Input(m) if m.contains("closed, consistently oriented")),
+                "{err}"
+            );
+        }
+    }
+
+    /// Columns of `n` units: `base[i] + shift + noise[i]`, the noise ±`spread` alternating.
+    fn shifted(base: &[f64], shift: f64, spread: f64) -> Vec<f64> {
+        base.iter()
+            .enumerate()
+            .map(|(i, b)| b + shift + if i % 2 == 0 { spread } else { -spread })
+            .collect()
+    }
+
+    /// `n` values spread over [0, 1) (a fixed pseudo-random draw).
+    fn spread(n: usize, seed: u64) -> Vec<f64> {
+        let mut rng = crate::rng::SplitMix64(seed);
+        (0..n).map(|_| rng.unit()).collect()
+    }
+
+    #[test]
+    fn identical_columns_differ_by_exactly_zero() {
+        let a = spread(9, 1);
+        let i = paired_bootstrap(&[(&a, &a)], 1000, 7).unwrap();
+        assert_eq!((i.mean, i.lo, i.hi), (0.0, 0.0, 0.0));
+    }
+
+    #[test]
+    fn a_known_shift_is_inside_its_interval_and_more_objects_narrow_it() {
+        let width = |n: usize| {
+            let b = spread(n, 3);
+            let a = shifted(&b, 0.1, 0.1);
+            let i = paired_bootstrap(&[(&a, &b)], RESAMPLES, BOOTSTRAP_SEED).unwrap();
+            assert!((i.mean - 0.1).abs() < 1e-12, "{i:?}");
+            assert!(i.lo < 0.1 && 0.1 < i.hi, "{i:?}");
+            assert!(
+                i.lo > 0.0,
+                "{n} objects: a shift as large as the noise is clear: {i:?}"
+            );
+            i.hi - i.lo
+        };
+        let (few, many) = (width(16), width(256));
+        // The width goes as 1/√n: 4 times narrower for 16 times the objects.
+        assert!(few > 3.0 * many && few < 5.0 * many, "{few} {many}");
+    }
+
+    #[test]
+    fn pairing_cancels_what_both_columns_share() {
+        // Objects of very different difficulty (IoUs over [0, 1)), the network ahead of the
+        // baseline by 0.1 on every one.
+        let b = spread(24, 5);
+        let a: Vec<f64> = b.iter().map(|x| x + 0.1).collect();
+        let paired = paired_bootstrap(&[(&a, &b)], RESAMPLES, BOOTSTRAP_SEED).unwrap();
+        assert!((paired.lo - 0.1).abs() < 1e-12 && (paired.hi - 0.1).abs() < 1e-12);
+        // Resampling the two columns independently sees the spread of difficulty instead.
+        let mut rng = crate::rng::SplitMix64(BOOTSTRAP_SEED);
+        let mut draw = |v: &[f64]| {
+            (0..v.len())
+                .map(|_| v[(rng.next() % v.len() as u64) as usize])
+                .sum::<f64>()
+                / v.len() as f64
+        };
+        let mut unpaired: Vec<f64> = (0..RESAMPLES).map(|_| draw(&a) - draw(&b)).collect();
+        unpaired.sort_by(f64::total_cmp);
+        let width = percentile(&unpaired, 0.975) - percentile(&unpaired, 0.025);
+        assert!(width > 0.2, "unpaired: {width}");
+    }
+
+    #[test]
+    fn the_overall_interval_is_of_the_mean_of_class_means_resampled_within_classes() {
+        // Class one (2 objects) ahead by 1, class two (8 objects) by 0: the mean of the class
+        // means is 0.5 whatever the resample; pooling the objects would say 0.2 and spread.
+        let (a1, b1) = ([1.0, 1.0], [0.0, 0.0]);
+        let (a2, b2) = (spread(8, 9), spread(8, 9));
+        let i = paired_bootstrap(&[(&a1, &b1), (&a2, &b2)], 1000, 0).unwrap();
+        assert_eq!((i.mean, i.lo, i.hi), (0.5, 0.5, 0.5));
+        assert!(matches!(
+            paired_bootstrap(&[(&a1, &b2)], 10, 0),
+            Err(Error::Input(_))
+        ));
     }
 }
