@@ -209,16 +209,27 @@ fn train_twice_resume_evaluate_and_reconstruct() {
         .iter()
         .position(|r| r.starts_with("network − baseline"))
         .expect("the comparison");
-    assert_eq!(rows.len(), at + 2 + 3 * 2 + 1, "{table}");
-    assert!(rows[at + 8].contains("as few as 1 test objects"), "{table}");
+    // Then, after a blank line, winding against parity (the second column minus the first):
+    // a title, a header and a row per class and mean.
+    assert_eq!(rows.len(), at + 2 + 3 * 2 + 1 + 2 + 3 + 1, "{table}");
     assert!(rows[at + 2].contains("a (mesh, parity)"), "{table}");
+    assert!(
+        rows[at + 9].starts_with("network − a (mesh, parity)"),
+        "{table}"
+    );
+    assert!(rows[at + 13].starts_with("mean"), "{table}");
+    assert!(
+        rows[at + 14].contains("as few as 1 test objects"),
+        "{table}"
+    );
     assert_eq!(
         std::fs::read_to_string(eval_dir.join("table.txt")).unwrap(),
         table
     );
     let csv = std::fs::read_to_string(eval_dir.join("table.csv")).unwrap();
-    // A header, 3 rows (two classes, mean) × 6 columns of means, 3 × 2 × 4 differences.
-    assert_eq!(csv.lines().count(), 1 + 18 + 24, "{csv}");
+    // A header, 3 rows (two classes, mean) × 6 columns of means, 3 × 2 × 4 differences from
+    // the baselines and 3 of the second column from the first.
+    assert_eq!(csv.lines().count(), 1 + 18 + 24 + 3, "{csv}");
     assert!(eval_dir.join("examples.png").exists());
     let input = eval_dir.join("input-03001627-0.png");
     let obj = dir.path("out/chair.obj");

@@ -284,15 +284,19 @@ fn percentile(v: &[f64], p: f64) -> f64 {
     }
 }
 
-/// Each network column minus each baseline, per class and over the classes (the mean of the
-/// class means, resampled within each class), as [`paired_bootstrap`] intervals with
-/// [`RESAMPLES`] and [`BOOTSTRAP_SEED`].
+/// Each network column minus each baseline, and each network column after the first minus the
+/// first (a conditioned field against the mesh network, a recipe against another), per class
+/// and over the classes (the mean of the class means, resampled within each class), as
+/// [`paired_bootstrap`] intervals with [`RESAMPLES`] and [`BOOTSTRAP_SEED`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct Comparison {
     /// `[class][network][baseline]`, classes in the table's order.
     pub classes: Vec<Vec<[Interval; 4]>>,
     /// `[network][baseline]` over all classes.
     pub mean: Vec<[Interval; 4]>,
+    /// `[class][network − 1]`: network k (from 1) minus network 0, classes in the table's
+    /// order, then the mean over classes.
+    pub versus_first: Vec<Vec<Interval>>,
 }
 
 /// The [`Comparison`] of `rows`' networks against their baselines.
@@ -307,6 +311,17 @@ pub fn compare(rows: &[ScoreRow]) -> Result<Comparison> {
             .map(|r| (&r.networks[k][..], &r.baselines[b][..]))
             .collect();
         paired_bootstrap(&strata, RESAMPLES, BOOTSTRAP_SEED)
+    };
+    let versus_first = |rows: &[ScoreRow]| -> Result<Vec<Interval>> {
+        (1..networks)
+            .map(|k| {
+                let strata: Vec<(&[f64], &[f64])> = rows
+                    .iter()
+                    .map(|r| (&r.networks[k][..], &r.networks[0][..]))
+                    .collect();
+                paired_bootstrap(&strata, RESAMPLES, BOOTSTRAP_SEED)
+            })
+            .collect()
     };
     let of = |rows: &[ScoreRow]| -> Result<Vec<[Interval; 4]>> {
         (0..networks)
@@ -324,6 +339,11 @@ pub fn compare(rows: &[ScoreRow]) -> Result<Comparison> {
             .map(|r| of(std::slice::from_ref(r)))
             .collect::<Result<_>>()?,
         mean: of(rows)?,
+        versus_first: rows
+            .iter()
+            .map(|r| versus_first(std::slice::from_ref(r)))
+            .chain([versus_first(rows)])
+            .collect::<Result<_>>()?,
     })
 }
 
@@ -360,6 +380,19 @@ pub fn format_comparison(networks: &[String], rows: &[ScoreRow], cmp: &Compariso
                 let _ = write!(s, " {:>w$}", cell(i));
             }
             s.push('\n');
+        }
+    }
+    if let Some(first) = networks.first().filter(|_| networks.len() > 1) {
+        let _ = writeln!(
+            s,
+            "\nnetwork − {first}: mean [lo, hi], the same bootstrap (the same objects for both)"
+        );
+        let _ = writeln!(s, "{:<22} {:<nw$} {:>24}", "class", "network", "difference");
+        let classes = rows.iter().map(|r| r.class.as_str()).chain(["mean"]);
+        for (class, per) in classes.zip(&cmp.versus_first) {
+            for (name, i) in networks[1..].iter().zip(per) {
+                let _ = writeln!(s, "{class:<22} {name:<nw$} {:>24}", cell(i));
+            }
         }
     }
     let fewest = rows.iter().map(|r| r.baselines[0].len()).min();
@@ -404,6 +437,22 @@ pub fn table_csv(networks: &[String], rows: &[ScoreRow], cmp: &Comparison) -> St
                     quote(class),
                     quote(name),
                     quote(b),
+                    i.mean,
+                    i.lo,
+                    i.hi
+                );
+            }
+        }
+    }
+    if let Some(first) = networks.first() {
+        for (class, per) in classes.iter().zip(&cmp.versus_first) {
+            for (name, i) in networks[1..].iter().zip(per) {
+                let _ = writeln!(
+                    s,
+                    "{},{},{},{},{},{}",
+                    quote(class),
+                    quote(name),
+                    quote(first),
                     i.mean,
                     i.lo,
                     i.hi
@@ -842,5 +891,45 @@ mod tests {
             paired_bootstrap(&[(&a1, &b2)], 10, 0),
             Err(Error::Input(_))
         ));
+    }
+
+    #[test]
+    fn later_networks_are_compared_with_the_first_on_the_same_objects() {
+        // Network 1 is network 0 plus 0.05 on every object (objects that vary a lot), network 2
+        // is network 0 itself: exact differences, whatever the resample, in every class and
+        // over the classes; and they appear in the text and the CSV.
+        let row = |class: &str, seed: u64| {
+            let n0 = spread(12, seed);
+            let n1: Vec<f64> = n0.iter().map(|x| x + 0.05).collect();
+            let base = spread(12, seed + 1);
+            ScoreRow {
+                class: class.into(),
+                inputs: 12,
+                networks: vec![n0.clone(), n1, n0],
+                baselines: [base.clone(), base.clone(), base.clone(), base],
+            }
+        };
+        let rows = [row("a", 3), row("b", 5)];
+        let cmp = compare(&rows).unwrap();
+        assert_eq!(cmp.versus_first.len(), 3, "two classes and the mean");
+        for per in &cmp.versus_first {
+            assert_eq!(per.len(), 2);
+            for (i, want) in per.iter().zip([0.05, 0.0]) {
+                for x in [i.mean, i.lo, i.hi] {
+                    assert!((x - want).abs() < 1e-12, "{i:?} vs {want}");
+                }
+            }
+        }
+        let names: Vec<String> = ["mesh", "field", "again"].map(String::from).to_vec();
+        let text = format_comparison(&names, &rows, &cmp);
+        assert!(text.contains("network − mesh"), "{text}");
+        let csv = table_csv(&names, &rows, &cmp);
+        assert!(csv.contains("\"mean\",\"field\",\"mesh\",0.05"), "{csv}");
+        let one = compare(&rows.map(|mut r| {
+            r.networks.truncate(1);
+            r
+        }))
+        .unwrap();
+        assert!(one.versus_first.iter().all(Vec::is_empty));
     }
 }

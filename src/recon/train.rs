@@ -777,11 +777,12 @@ impl<'c> Fitter<'c, ReconTraining<'c>> {
         let regs = Regularizers::new(ctx, &faces, (b * v) as usize)?;
         let max_capacity = crate::fit::max_entry_capacity(ctx, &renderer, &scene);
         let total = renderer.count_entries(ctx, &mut scene, opts.tile)?;
-        // Predicted shapes wander from the sphere: room for 4× its entries to start with.
+        // Predicted shapes wander from the sphere: room for 4× its entries to start with, or
+        // as many as the device holds (the gate grows it as the shapes need).
         let capacity = crate::fit::with_headroom(
             ctx,
             "the reconstruction batch's binning",
-            4 * total,
+            (4 * total).min(max_capacity.max(total)),
             max_capacity,
             HINT,
         )?;
