@@ -176,6 +176,20 @@ fn fighter(b: &mut Builder) {
     }
 }
 
+/// A propeller disc (a dark, thin cylinder of radius drawn from `radius`) just in front of the
+/// nose at `z0`.
+fn propeller(b: &mut Builder, z0: f64, radius: (f64, f64)) {
+    let prop = b.u(radius.0, radius.1);
+    let prop_color = b.dark().map(|c| c * 2.0);
+    b.frustum(
+        v(0.0, 0.0, z0 - 0.005),
+        v(0.0, 0.0, z0 - 0.005 - THIN),
+        prop,
+        prop,
+        prop_color,
+    );
+}
+
 /// Propeller plane: straight, untapered wings on top of the fuselage, a propeller disc.
 fn propeller_plane(b: &mut Builder) {
     let body = b.color();
@@ -191,15 +205,7 @@ fn propeller_plane(b: &mut Builder) {
         body,
     );
     b.frustum(v(0.0, 0.0, z0 + 0.07), v(0.0, 0.0, z0), r, r * 0.6, body);
-    let prop = b.u(0.1, 0.16);
-    let prop_color = b.dark().map(|c| c * 2.0);
-    b.frustum(
-        v(0.0, 0.0, z0 - 0.005),
-        v(0.0, 0.0, z0 - 0.005 - THIN),
-        prop,
-        prop,
-        prop_color,
-    );
+    propeller(b, z0, (0.1, 0.16));
     let span = b.u(0.45, 0.55);
     let chord = b.u(0.1, 0.16);
     let wz = z0 + len * b.u(0.2, 0.35);
@@ -248,15 +254,7 @@ fn biplane(b: &mut Builder) {
         body,
     );
     b.frustum(v(0.0, 0.0, z0 + 0.08), v(0.0, 0.0, z0), r, r * 0.7, body);
-    let prop = b.u(0.09, 0.15);
-    let prop_color = b.dark().map(|c| c * 2.0);
-    b.frustum(
-        v(0.0, 0.0, z0 - 0.005),
-        v(0.0, 0.0, z0 - 0.005 - THIN),
-        prop,
-        prop,
-        prop_color,
-    );
+    propeller(b, z0, (0.09, 0.15));
     let span = b.u(0.35, 0.5);
     let chord = b.u(0.1, 0.16);
     let gap = b.u(0.12, 0.22);
