@@ -287,15 +287,16 @@ fn spread_views(n: u32) -> Vec<usize> {
     (0..n).map(|i| i * dataset::VIEWS / n).collect()
 }
 
-/// The train split as the trainer takes it.
-fn train_images(data: &Dataset) -> TrainImages {
-    let mut images = Vec::new();
+/// The train split as the trainer takes it (each class's images freed once copied: the
+/// default data are 1.2 GB).
+fn train_images(data: Dataset) -> TrainImages {
+    let mut images = Vec::with_capacity(data.classes.iter().map(|c| c.images.len()).sum());
     let mut classes = Vec::new();
     let mut start = 0u32;
-    for c in &data.classes {
+    for c in data.classes {
         images.extend_from_slice(&c.images);
         let end = start + c.count as u32;
-        classes.push((c.class_id.clone(), start..end));
+        classes.push((c.class_id, start..end));
         start = end;
     }
     TrainImages {
@@ -575,7 +576,7 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
         None
     };
     let ctx = Context::new(&ContextOptions::from_env())?;
-    let images = train_images(&data);
+    let images = train_images(data);
     let resume_params = resumed.as_ref().map(|m| m.params.clone());
     let resume_params = resume_params.as_deref();
     let run = TrainingRun {
