@@ -433,11 +433,12 @@ fn schedule_rows(
 pub struct TrainLog {
     /// The iteration (from 1).
     pub iteration: u32,
-    /// `L_iou(a) + L_iou(b)`.
+    /// The silhouette loss: the mean of the four IoU losses (SoftRas's recipe) or
+    /// `L_iou(a) + L_iou(b)` (one view).
     pub silhouette: f32,
-    /// Mean Laplacian loss over the batch.
+    /// Mean Laplacian loss over the batch's predicted meshes.
     pub laplacian: f32,
-    /// Mean flatten loss over the batch.
+    /// Mean flatten loss over the batch's predicted meshes.
     pub flatten: f32,
     /// The colour loss (0 when its λ is 0).
     pub color: f32,
