@@ -56,7 +56,7 @@ enum Command {
     Recon(Box<cli::recon::ReconArgs>),
     /// Score a trained model on the test split (3D IoU per class) beside the retrieval and
     /// mean-shape baselines.
-    EvalRecon(Box<cli::recon::EvalReconArgs>),
+    EvalRecon(Box<cli::eval_recon::EvalReconArgs>),
 }
 
 fn main() -> ExitCode {
@@ -102,7 +102,7 @@ fn main() -> ExitCode {
         Command::Dataset(args) => cli::dataset::run(args),
         Command::TrainRecon(args) => cli::recon::train(args),
         Command::Recon(args) => cli::recon::recon(args),
-        Command::EvalRecon(args) => cli::recon::evaluate(args),
+        Command::EvalRecon(args) => cli::eval_recon::evaluate(args),
     };
     match (result, cli::interrupt::requested()) {
         (Ok(()), None) => ExitCode::SUCCESS,

@@ -17,6 +17,7 @@
 pub mod args;
 pub mod bench;
 pub mod dataset;
+pub mod eval_recon;
 pub mod fit_articulated;
 pub mod fit_field;
 pub mod fit_mesh;
