@@ -270,7 +270,7 @@ impl TrainOptions {
 
     /// Images the network sees per iteration (its batch).
     pub fn inputs(&self) -> u32 {
-        self.batch * self.recipe.inputs_per_object()
+        self.batch.saturating_mul(self.recipe.inputs_per_object())
     }
 
     /// The renderer's settings: the image size, the options' σ, vertex colours, and SoftRas's
@@ -515,7 +515,7 @@ impl Batches {
         both_views: bool,
         seed: u64,
     ) -> Result<Self> {
-        let batch = objects * (1 + u32::from(both_views));
+        let batch = objects.saturating_mul(1 + u32::from(both_views));
         let b = u64::from(batch);
         let px = u64::from(data.size) * u64::from(data.size);
         let device = |name: &str, floats: u64| {
