@@ -190,6 +190,53 @@ fn propeller(b: &mut Builder, z0: f64, radius: (f64, f64)) {
     );
 }
 
+/// The tail of a light plane: a small tapered tail plane at the fuselage's end and a swept
+/// fin on top (heights and sweep in units of the fuselage radius and the tail chord).
+struct LightTail {
+    /// The tail plane's height, × r.
+    plane_y: f64,
+    /// The fin's height above the fuselage is drawn from this range.
+    fin_height: (f64, f64),
+    /// The fin's base height, × r.
+    fin_base: f64,
+    /// How far the fin's top is swept back, × the tail chord.
+    fin_sweep: f64,
+}
+
+impl LightTail {
+    /// The tail of a fuselage of radius `r` ending at `-z0`, behind wings of `span` and
+    /// `chord`.
+    fn build(&self, b: &mut Builder, z0: f64, r: f64, span: f64, chord: f64, color: [f32; 3]) {
+        let tspan = span * b.u(0.3, 0.4);
+        let tchord = chord * b.u(0.7, 1.0);
+        let tz = -z0 - tchord;
+        for sx in [-1.0f64, 1.0] {
+            b.push(
+                hexahedron(wing(
+                    sx,
+                    tz,
+                    r * self.plane_y,
+                    tspan,
+                    tchord,
+                    0.8,
+                    0.02,
+                    0.0,
+                    THIN,
+                )),
+                color,
+            );
+        }
+        let fin_h = b.u(self.fin_height.0, self.fin_height.1);
+        let fin = sheared_box(
+            v(-THIN / 2.0, r * self.fin_base, tz),
+            v(THIN / 2.0, r + fin_h, -z0),
+            v(0.0, 0.0, tchord * self.fin_sweep),
+            [1.0, (THIN / tchord).max(0.6)],
+        );
+        b.push(hexahedron(fin), color);
+    }
+}
+
 /// Propeller plane: straight, untapered wings on top of the fuselage, a propeller disc.
 fn propeller_plane(b: &mut Builder) {
     let body = b.color();
@@ -219,23 +266,13 @@ fn propeller_plane(b: &mut Builder) {
             wing_color,
         );
     }
-    let tspan = span * b.u(0.3, 0.4);
-    let tchord = chord * b.u(0.7, 1.0);
-    let tz = -z0 - tchord;
-    for sx in [-1.0f64, 1.0] {
-        b.push(
-            hexahedron(wing(sx, tz, r * 0.4, tspan, tchord, 0.8, 0.02, 0.0, THIN)),
-            wing_color,
-        );
-    }
-    let fin_h = b.u(0.1, 0.16);
-    let fin = sheared_box(
-        v(-THIN / 2.0, r * 0.3, tz),
-        v(THIN / 2.0, r + fin_h, -z0),
-        v(0.0, 0.0, tchord * 0.4),
-        [1.0, (THIN / tchord).max(0.6)],
-    );
-    b.push(hexahedron(fin), wing_color);
+    let tail = LightTail {
+        plane_y: 0.4,
+        fin_height: (0.1, 0.16),
+        fin_base: 0.3,
+        fin_sweep: 0.4,
+    };
+    tail.build(b, z0, r, span, chord, wing_color);
 }
 
 /// Biplane: a short fuselage, two straight wings one above the other joined by struts near
@@ -282,23 +319,13 @@ fn biplane(b: &mut Builder) {
             wing_color,
         );
     }
-    let tspan = span * b.u(0.3, 0.4);
-    let tchord = chord * b.u(0.7, 1.0);
-    let tz = -z0 - tchord;
-    for sx in [-1.0f64, 1.0] {
-        b.push(
-            hexahedron(wing(sx, tz, r * 0.3, tspan, tchord, 0.8, 0.02, 0.0, THIN)),
-            wing_color,
-        );
-    }
-    let fin_h = b.u(0.08, 0.14);
-    let fin = sheared_box(
-        v(-THIN / 2.0, r * 0.2, tz),
-        v(THIN / 2.0, r + fin_h, -z0),
-        v(0.0, 0.0, tchord * 0.3),
-        [1.0, (THIN / tchord).max(0.6)],
-    );
-    b.push(hexahedron(fin), wing_color);
+    let tail = LightTail {
+        plane_y: 0.3,
+        fin_height: (0.08, 0.14),
+        fin_base: 0.2,
+        fin_sweep: 0.3,
+    };
+    tail.build(b, z0, r, span, chord, wing_color);
 }
 
 pub(super) fn car(b: &mut Builder) {
