@@ -1,4 +1,5 @@
-//! Fitting iterations per scene kind (`fit-120`, `fit-field`, `fit-pose`): one iteration per
+//! Fitting iterations per scene kind (`fit-120`, `fit-field`, `fit-pose`; `train-recon` in
+//! [`super::recon`]): one iteration per
 //! submission with its passes, and the fit loop at 1 and 10 iterations per submission.
 
 use std::path::Path;
@@ -285,7 +286,7 @@ struct LoopTiming {
 /// an indented name is a part of the pass above it) and every pass; with `shares`, the
 /// `render`, `backward` and `rest` sums of [`fit_pass_share`] first. Medians.
 #[allow(clippy::too_many_arguments)]
-fn time_iterations(
+pub(super) fn time_iterations(
     ctx: &Context,
     fitter: &mut Fitter<'_, impl Fit>,
     it: &mut u32,
@@ -345,7 +346,7 @@ fn time_iterations(
 
 /// Runs iterations `it .. it + k` of `fitter` in one submission (again from a stopped one, until
 /// all ran) and advances `it`; the wall time of the submission that ran them all, ms.
-fn fit_iterations(
+pub(super) fn fit_iterations(
     fitter: &mut Fitter<'_, impl Fit>,
     it: &mut u32,
     k: u32,
@@ -418,6 +419,10 @@ pub fn run_fit(
         if name == "fit-pose" {
             let assets = opts.assets.clone().unwrap_or_else(crate::assets::dir);
             records.extend(run_pose_fit(ctx, opts, &assets, &mut progress)?);
+            continue;
+        }
+        if name == "train-recon" {
+            records.push(super::recon::run_recon_train(ctx, opts, &mut progress)?);
             continue;
         }
         // SoftRas's template, as `softvk fit-mesh` uses it by default.

@@ -1,0 +1,107 @@
+//! The reconstruction trainer's iteration (`softvk bench --scene train-recon`): where a
+//! `softvk train-recon` iteration at its defaults spends its time, pass by pass.
+
+use super::fits::{fit_iterations, time_iterations};
+use super::forward::summary;
+use super::{BenchOptions, BenchRecord};
+use crate::error::Result;
+use crate::gpu::Context;
+use crate::raster::gpu::{Method, Renderer};
+use crate::recon::dataset::{DatasetOptions, Split, render_shapes, split_shapes};
+use crate::recon::train::{ReconTrainer, TrainImages, TrainOptions, template};
+
+/// Objects per class of the benchmark's data: the iteration's cost does not depend on how many
+/// objects there are to draw from, only on the batch.
+const OBJECTS_PER_CLASS: usize = 4;
+
+/// A `softvk train-recon` iteration at its defaults ([`TrainOptions::default`]: SoftRas's
+/// recipe, batch 64, so 128 input images and 256 renders of the 1280-face template at 64²), on
+/// [`OBJECTS_PER_CLASS`] training objects of each of `softvk dataset`'s default classes.
+///
+/// After one untimed iteration, `opts.repeat` iterations run one per submission with GPU
+/// timestamps: `wall_ms` is the median wall time of an iteration (recording, staging the
+/// batch's views, submission, the gate's status read), `gpu_ms` the median sum of its
+/// top-level passes, and `passes` every pass (parts of a pass indented, after it). `entries` is
+/// the binning's entry count of the last iteration.
+pub(super) fn run_recon_train(
+    ctx: &Context,
+    opts: &BenchOptions,
+    progress: &mut impl FnMut(&str),
+) -> Result<BenchRecord> {
+    let name = "train-recon";
+    let data_opts = DatasetOptions {
+        train: OBJECTS_PER_CLASS,
+        ..DatasetOptions::default()
+    };
+    let renderer = Renderer::new(ctx)?;
+    let mut images = Vec::new();
+    let mut classes = Vec::new();
+    for &category in &data_opts.categories {
+        let shapes = split_shapes(&data_opts, category, Split::Train);
+        let first = (classes.len() * OBJECTS_PER_CLASS) as u32;
+        classes.push((
+            category.name().to_string(),
+            first..first + OBJECTS_PER_CLASS as u32,
+        ));
+        images.extend(render_shapes(ctx, &renderer, &shapes, &data_opts)?);
+    }
+    let train_opts = TrainOptions::default();
+    let data = TrainImages {
+        images,
+        classes,
+        size: train_opts.net.image,
+    };
+    let mut trainer = ReconTrainer::new(ctx, &data, &train_opts, None)?;
+    let inputs = train_opts.inputs();
+    progress(&format!(
+        "{name}: {:?} recipe, batch {} ({inputs} input images, {} renders of {} faces at \
+         {}²), network {:?}, tile {}; entry capacity {}",
+        train_opts.recipe,
+        train_opts.batch,
+        2 * inputs,
+        template().face_count(),
+        train_opts.net.image,
+        train_opts.net,
+        train_opts.tile,
+        trainer.capacity()
+    ));
+    let mut it = 1u32;
+    fit_iterations(&mut trainer, &mut it, 1, None, progress, name)?;
+    let timing = time_iterations(
+        ctx,
+        &mut trainer,
+        &mut it,
+        opts.repeat,
+        160,
+        false,
+        progress,
+        name,
+    )?;
+    let entries = trainer.last_entries();
+    progress(&format!(
+        "{name} fit-iteration: {entries} entries; {}",
+        summary(&timing, opts.repeat)
+    ));
+    Ok(BenchRecord {
+        scene: name.to_string(),
+        method: Method::Tiled {
+            tile: train_opts.tile,
+        },
+        pass: "fit-iteration",
+        gpu_ms: timing.gpu_ms,
+        wall_ms: timing.wall_ms,
+        pairs: 0,
+        counts: None,
+        device: ctx.info().name.clone(),
+        driver: ctx.info().driver.clone(),
+        repeats: opts.repeat,
+        passes: timing.passes,
+        views: 2 * inputs,
+        faces: template().face_count() as u32,
+        width: train_opts.net.image,
+        height: train_opts.net.image,
+        rows: None,
+        entries: Some(entries),
+        identical_to_brute: None,
+    })
+}
