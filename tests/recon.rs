@@ -1,5 +1,5 @@
-//! The reconstruction network's GPU pieces against their twins: the decoder's mesh head
-//! (forward, backward), the batch gather, and the claim the batch rests on — an object turned by
+//! The reconstruction network's GPU pieces against their twins: the decoder's mesh head and
+//! colour generator (forward, backward), the batch gather, and the claim the batch rests on — an object turned by
 //! a view's rotation and seen from azimuth 0 is the object seen from that view.
 
 mod common;
@@ -13,6 +13,7 @@ use softvk::mesh::Mesh;
 use softvk::raster::gpu::{Method, Renderer};
 use softvk::raster::settings::RasterSettings;
 use softvk::recon::batch::{self, BatchBuffers, BatchGather, BatchShape};
+use softvk::recon::colors;
 use softvk::recon::decode::{self, MeshDecoder, view_rotation};
 
 /// The reconstruction's template: an icosphere of 642 vertices (the topology of SoftRas's
@@ -33,7 +34,8 @@ fn max_rel(gpu: &[f32], twin: &[f64]) -> f64 {
 fn decoder_forward_and_backward_match_the_twin_and_rerun_bit_for_bit() {
     let Some(ctx) = gpu() else { return };
     let t = template();
-    let dec = MeshDecoder::new(&ctx, &t.positions).unwrap();
+    let image = 16u32;
+    let dec = MeshDecoder::new(&ctx, &t.positions, image).unwrap();
     let (objects, copies) = (3u32, 2u32);
     let v = t.vertex_count();
     let per = dec.outputs_per_object() as usize;
@@ -68,6 +70,13 @@ fn decoder_forward_and_backward_match_the_twin_and_rerun_bit_for_bit() {
         .map(|_| r.random_range(-1.0f32..1.0))
         .collect();
     let dcol_b = up("d colours", &d_colors);
+    let images: Vec<f32> = (0..objects * 4 * image * image)
+        .map(|_| r.random_range(0.0f32..1.0))
+        .collect();
+    let img_b = up("images", &images);
+    let generator = dec.color_generator();
+    let pooled = mk("pooled", generator.pooled_floats(objects) as usize);
+    let palette = mk("palette", generator.palette_floats(objects) as usize);
     let run = || -> (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>) {
         ctx.submit_and_wait(|rec| {
             dec.record_forward(
@@ -90,12 +99,23 @@ fn decoder_forward_and_backward_match_the_twin_and_rerun_bit_for_bit() {
                 d_out.whole(),
                 partials.whole(),
             )?;
-            dec.record_colors(rec, objects, copies, out_b.whole(), colors.whole())?;
+            dec.record_colors(
+                rec,
+                objects,
+                copies,
+                out_b.whole(),
+                img_b.whole(),
+                pooled.whole(),
+                palette.whole(),
+                colors.whole(),
+            )?;
             dec.record_colors_backward(
                 rec,
                 objects,
                 copies,
                 out_b.whole(),
+                pooled.whole(),
+                palette.whole(),
                 dcol_b.whole(),
                 d_out.whole(),
             )
@@ -115,11 +135,12 @@ fn decoder_forward_and_backward_match_the_twin_and_rerun_bit_for_bit() {
     let (base, signs) = template_terms(&t.positions).unwrap();
     let f64s = |x: &[f32]| x.iter().map(|&a| f64::from(a)).collect::<Vec<f64>>();
     let rot64: Vec<[f64; 2]> = rotations.iter().map(|r| r.map(f64::from)).collect();
-    let (c, p) = decode::cpu::forward(&base, &signs, &f64s(&outputs), &rot64, copies as usize);
+    let (c, p) = decode::cpu::forward(&base, &signs, &f64s(&outputs), per, &rot64, copies as usize);
     let mut d = decode::cpu::backward(
         &base,
         &signs,
         &f64s(&outputs),
+        per,
         &rot64,
         copies as usize,
         &f64s(&d_canon),
@@ -139,20 +160,53 @@ fn decoder_forward_and_backward_match_the_twin_and_rerun_bit_for_bit() {
         .chunks(3)
         .map(|c| [c[0], c[1], c[2]].map(f64::from))
         .collect();
-    decode::cpu::colors_backward(&f64s(&outputs), v, copies as usize, &d_col64, &mut d);
-    let col = decode::cpu::colors(&f64s(&outputs), v, copies as usize);
+    let shape = colors::cpu::Shape {
+        vertices: v,
+        image: image as usize,
+        head: dec.color_head(),
+    };
+    let images64 = f64s(&images);
+    colors::cpu::backward(
+        shape,
+        &f64s(&outputs),
+        &images64,
+        objects as usize,
+        copies as usize,
+        &d_col64,
+        &mut d,
+    );
+    let generated = colors::cpu::forward(shape, &f64s(&outputs), &images64, objects as usize);
+    let want_col: Vec<f64> = generated
+        .colors
+        .iter()
+        .flat_map(|c| std::iter::repeat_n(c, copies as usize))
+        .flatten()
+        .flatten()
+        .copied()
+        .collect();
     let got_col: Vec<f32> = first.3.chunks(4).flat_map(|c| [c[0], c[1], c[2]]).collect();
-    let want_col: Vec<f64> = col.iter().flatten().copied().collect();
-    assert!(max_rel(&got_col, &want_col) < 1e-6, "colours");
+    assert!(
+        max_rel(&got_col, &want_col) < 1e-6,
+        "colours {}",
+        max_rel(&got_col, &want_col)
+    );
     assert!(first.3.chunks(4).all(|c| c[3] == 0.0));
-    // The displacements', the centroids' and the colours' gradients, each against its own
-    // scale.
+    // The displacements', the centroids', the sampling and the selection logits' gradients,
+    // each against its own scale.
+    let sampling = 3 * v + 3 + colors::PALETTE as usize * generator.cells() as usize;
     let group = |i: &usize| match i % per {
         x if x < 3 * v => 0,
         x if x < 3 * v + 3 => 1,
-        _ => 2,
+        x if x < sampling => 2,
+        _ => 3,
     };
-    for (g_id, what) in ["displacement", "centroid", "colour"].iter().enumerate() {
+    let names = [
+        "displacement",
+        "centroid",
+        "sampling logit",
+        "selection logit",
+    ];
+    for (g_id, what) in names.iter().enumerate() {
         let idx: Vec<usize> = (0..d.len()).filter(|i| group(i) == g_id).collect();
         let g: Vec<f32> = idx.iter().map(|&i| first.2[i]).collect();
         let tw: Vec<f64> = idx.iter().map(|&i| d[i]).collect();

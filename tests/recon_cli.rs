@@ -675,9 +675,9 @@ fn a_model_round_trips_through_its_file_and_bad_files_are_refused() {
     };
     ckpt.save(&dir.path("ckpt.npz")).unwrap();
     assert_eq!(ReconModel::load(&dir.path("ckpt.npz")).unwrap(), ckpt);
-    // A file of format 1 (whose mesh decoder squashed the centroid twice) is refused, by its
-    // format.
-    {
+    // Files of format 1 (whose mesh decoder squashed the centroid twice) and 2 (whose colour
+    // head regressed colours instead of sampling the image) are refused, by their format.
+    for old in [1, 2] {
         use softvk::recon::npz::{self, NpyArray, NpyData, Npz};
         let mut file = Npz::open(&dir.path("ckpt.npz")).unwrap();
         let names: Vec<String> = file.names().iter().map(|n| n.to_string()).collect();
@@ -687,14 +687,14 @@ fn a_model_round_trips_through_its_file_and_bad_files_are_refused() {
             .collect();
         for (name, a) in &mut arrays {
             if name == "format" {
-                *a = NpyArray::new(vec![1], NpyData::I32(vec![1])).unwrap();
+                *a = NpyArray::new(vec![1], NpyData::I32(vec![old])).unwrap();
             }
         }
         let refs: Vec<(&str, &NpyArray)> = arrays.iter().map(|(n, a)| (n.as_str(), a)).collect();
         npz::write_npz(&dir.path("old.npz"), &refs, false).unwrap();
         let e = ReconModel::load(&dir.path("old.npz")).unwrap_err();
         assert!(
-            matches!(e, softvk::Error::Input(ref m) if m.contains("model format [1]")),
+            matches!(e, softvk::Error::Input(ref m) if m.contains(&format!("model format [{old}]"))),
             "{e}"
         );
     }

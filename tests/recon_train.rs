@@ -12,13 +12,13 @@ use softvk::nn::cpu as nn_cpu;
 use softvk::raster::reference;
 use softvk::raster::reference_grad;
 use softvk::recon::batch::{self, BatchShape};
-use softvk::recon::decode;
 use softvk::recon::train::{
     self, LrStep, NetShape, Recipe, ReconTrainer, TrainImages, TrainOptions, VIEWS, schedule_entry,
     view_azimuth,
 };
 use softvk::recon::view_camera;
 use softvk::recon::view_rotation;
+use softvk::recon::{colors, decode};
 
 const SIZE: u32 = 16;
 
@@ -111,15 +111,32 @@ fn one_iteration_against_twins(opts: TrainOptions) {
     let (input, targets, rotations) = (&batch.input, &batch.targets, &batch.rotations);
     let t = train::template();
     let vc = t.vertex_count();
-    let layers = opts.net.layers(6 * vc as u64 + 3).unwrap();
+    let per = 3 * vc + 3 + colors::outputs_per_object(vc as u32, SIZE) as usize;
+    let layers = opts.net.layers(per as u64).unwrap();
     let f64s = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect::<Vec<f64>>();
     let input = f64s(input);
     let outs = nn_cpu::sequential_forward(&layers, &params, &input, b);
     let (base, signs) = softvk::fit::deform::cpu::template_terms(&t.positions).unwrap();
     let rot64: Vec<[f64; 2]> = rotations.iter().map(|r| r.map(f64::from)).collect();
     let head = outs.last().unwrap();
-    let (meshes, copies) = decode::cpu::forward(&base, &signs, head, &rot64, 2);
-    let colors = decode::cpu::colors(head, vc, 2);
+    let (meshes, copies) = decode::cpu::forward(&base, &signs, head, per, &rot64, 2);
+    let generator = colors::cpu::Shape {
+        vertices: vc,
+        image: SIZE as usize,
+        head: colors::HeadLayout {
+            stride: per as u32,
+            offset: 3 * vc as u32 + 3,
+        },
+    };
+    // Each input's colours, sampled from it, on both of its copies.
+    let generated = colors::cpu::forward(generator, head, &input, b);
+    let colors: Vec<[f64; 3]> = generated
+        .colors
+        .iter()
+        .flat_map(|c| [c, c])
+        .flatten()
+        .copied()
+        .collect();
     let n = 3 * t.vertex_count();
     let mut s = opts.raster_settings();
     s.sigma = opts.sigma_at(1);
@@ -189,8 +206,9 @@ fn one_iteration_against_twins(opts: TrainOptions) {
     let loss = w_sil * iou.loss
         + lambda * mse
         + (f64::from(opts.laplacian) * lap_sum + f64::from(opts.flatten) * flat_sum) / b as f64;
-    let mut d_head = decode::cpu::backward(&base, &signs, head, &rot64, 2, &d_meshes, &d_copies);
-    decode::cpu::colors_backward(head, vc, 2, &d_colors, &mut d_head);
+    let mut d_head =
+        decode::cpu::backward(&base, &signs, head, per, &rot64, 2, &d_meshes, &d_copies);
+    colors::cpu::backward(generator, head, &input, b, 2, &d_colors, &mut d_head);
     let want = nn_cpu::sequential_backward(&layers, &params, &input, &outs, &d_head, b).d_params;
 
     eprintln!("loss GPU {} vs twins {loss}", log.total);

@@ -126,7 +126,7 @@ pub struct TrainReconArgs {
     pub sigma: f64,
 
     /// λ of the colour loss (the rendered RGBA against the views'); 0 trains silhouettes only
-    /// (cheaper: the copies render as silhouettes) and leaves the colour head untrained.
+    /// (cheaper: the copies render as silhouettes) and leaves the colour generator untrained.
     #[arg(long, default_value_t = 1.0, value_parser = non_negative)]
     pub color: f64,
 
@@ -782,8 +782,9 @@ fn colored_mesh(r: Reconstruction) -> Mesh {
     mesh
 }
 
-/// Renders of reconstructions: their vertex colours under the default light (the colour head
-/// learned the views' shaded colours; the light shows the shape even where it did not), crisp.
+/// Renders of reconstructions: their vertex colours under the default light (the colour
+/// generator samples the input's shaded colours; the light shows the shape even where it did
+/// not), crisp.
 pub(super) fn view_settings(size: u32) -> RasterSettings {
     RasterSettings {
         width: size,

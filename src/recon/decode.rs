@@ -25,14 +25,14 @@
 //! over the vertices in a fixed order) takes dL/d(copy positions) and dL/d(object mesh) (the
 //! regularizers' gradient) and writes dL/dr. Deterministic; each output has one writer.
 //!
-//! **The colour head** (`recon_colors.comp`, `recon_colors_backward.comp`): the next `3 V`
-//! outputs of each object are per-vertex RGB logits, `colour = sigmoid(r_col)`, written to
-//! every copy in the renderer's vertex-colour layout; its backward sums the copies' colour
-//! gradients and writes the colour slots of dL/dr. An object's outputs are thus
-//! `[r_d (3 V), r_c (3), r_col (3 V)]`, `6 V + 3` floats ([`MeshDecoder::outputs_per_object`]).
+//! **The colour head** is [`ColorGenerator`]: after the mesh head's `3 V + 3`, each object's
+//! outputs hold the generator's sampling and selection logits, and its vertex colours are
+//! sampled from the object's input image (see [`super::colors`]). An object's outputs are thus
+//! `[r_d (3 V), r_c (3), colour generator]` ([`MeshDecoder::outputs_per_object`]).
 
 use bytemuck::{Pod, Zeroable};
 
+use super::colors::{ColorGenerator, HeadLayout};
 use crate::error::{Error, LimitKind, Result};
 use crate::fit::deform::cpu::template_terms;
 use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
@@ -62,19 +62,19 @@ pub struct MeshDecoder {
     forward: Kernel,
     backward: Kernel,
     centroid: Kernel,
-    colors: Kernel,
-    colors_backward: Kernel,
+    colors: ColorGenerator,
     vertex_count: u32,
     base: Buffer,
     signs: Buffer,
 }
 
 impl MeshDecoder {
-    /// Pipelines and the template's `base`/`sign` buffers. `template` is already scaled (SoftRas
-    /// scales its sphere by 0.5); every coordinate must be finite, nonzero and inside (−1, 1),
-    /// else [`Error::Input`]. The centroid's gradient sums over the vertices in one loop, so
-    /// a template over the device's shader loop limit is [`Error::DeviceLimit`].
-    pub fn new(ctx: &Context, template: &[[f32; 3]]) -> Result<Self> {
+    /// Pipelines and the template's `base`/`sign` buffers, for inputs of `image`² pixels (the
+    /// colour generator samples them). `template` is already scaled (SoftRas scales its sphere
+    /// by 0.5); every coordinate must be finite, nonzero and inside (−1, 1), else
+    /// [`Error::Input`]. The centroid's gradient sums over the vertices in one loop, so a
+    /// template over the device's shader loop limit is [`Error::DeviceLimit`].
+    pub fn new(ctx: &Context, template: &[[f32; 3]], image: u32) -> Result<Self> {
         let (base, signs) = template_terms(template)?;
         let vertex_count = u32::try_from(template.len())
             .map_err(|_| Error::Input("the template has more than 2^32 vertices".into()))?;
@@ -96,8 +96,7 @@ impl MeshDecoder {
             forward: Kernel::new(ctx, &specs::RECON_DECODE)?,
             backward: Kernel::new(ctx, &specs::RECON_DECODE_BACKWARD)?,
             centroid: Kernel::new(ctx, &specs::RECON_CENTROID_GRAD)?,
-            colors: Kernel::new(ctx, &specs::RECON_COLORS)?,
-            colors_backward: Kernel::new(ctx, &specs::RECON_COLORS_BACKWARD)?,
+            colors: ColorGenerator::new(ctx, vertex_count, image)?,
             vertex_count,
             base: ctx.upload_buffer("decoder template base", &to_f32(&base))?,
             signs: ctx.upload_buffer("decoder template signs", &to_f32(&signs))?,
@@ -110,9 +109,23 @@ impl MeshDecoder {
     }
 
     /// Network outputs per object: `3 V` displacements, the centroid's 3, then the colour
-    /// head's `3 V` (per vertex RGB logits).
+    /// generator's ([`ColorGenerator::outputs_per_object`]).
     pub fn outputs_per_object(&self) -> u64 {
-        6 * u64::from(self.vertex_count) + 3
+        3 * u64::from(self.vertex_count) + 3 + self.colors.outputs_per_object()
+    }
+
+    /// The colour generator (its scratch sizes: [`ColorGenerator::pooled_floats`],
+    /// [`ColorGenerator::palette_floats`]).
+    pub fn color_generator(&self) -> &ColorGenerator {
+        &self.colors
+    }
+
+    /// Where the colour generator's outputs sit in an object's.
+    pub fn color_head(&self) -> HeadLayout {
+        HeadLayout {
+            stride: self.outputs_per_object() as u32,
+            offset: 3 * self.vertex_count + 3,
+        }
     }
 
     /// Bytes of the scratch [`Self::record_backward`] needs for `objects` objects.
@@ -264,59 +277,60 @@ impl MeshDecoder {
 }
 
 impl MeshDecoder {
-    /// Records the colour head for `objects` objects of `copies` copies each: `outputs` →
-    /// `colors`, the renderer's vertex colours (RGB and an unused float per vertex, mesh after
-    /// mesh, copy `k` of object `b` as mesh `b · copies + k`).
+    /// Records the colour generator for `objects` objects of `copies` copies each, from
+    /// `outputs` and the input `images` (`4 × H × W` floats per object) → `colors`, the
+    /// renderer's vertex colours; `pooled` and `palette` are the generator's scratch
+    /// ([`ColorGenerator::record_forward`]).
+    #[allow(clippy::too_many_arguments)]
     pub fn record_colors(
         &self,
         rec: &mut Recorder<'_>,
         objects: u32,
         copies: u32,
         outputs: BufferRange<'_>,
+        images: BufferRange<'_>,
+        pooled: BufferRange<'_>,
+        palette: BufferRange<'_>,
         colors: BufferRange<'_>,
     ) -> Result<()> {
-        let (b, v) = (u64::from(objects), u64::from(self.vertex_count));
-        crate::gpu::check_floats("decoder: outputs", &outputs, b * self.outputs_per_object())?;
-        crate::gpu::check_floats("decoder: colours", &colors, 4 * b * u64::from(copies) * v)?;
-        rec.dispatch(
-            &self.colors,
-            &specs::ReconColorsBindings { outputs, colors }.for_kernel(&self.colors)?,
-            &self.push(objects, copies),
-            crate::gpu::groups(v * b, 64)?,
+        self.colors.record_forward(
+            rec,
+            objects,
+            copies,
+            self.color_head(),
+            outputs,
+            images,
+            pooled,
+            palette,
+            colors,
         )
     }
 
-    /// Records the colour head's backward: dL/d(colours) (3 floats per copy vertex, the
-    /// renderer's backward's layout; zeros for a loss without colour) → the colour head's
-    /// slots of dL/d(`outputs`) (overwritten; the mesh head's slots are left alone).
+    /// Records the colour generator's backward: dL/d(colours) (3 floats per copy vertex; zeros
+    /// for a loss without colour) → the generator's slots of dL/d(`outputs`) (overwritten; the
+    /// mesh head's slots are left alone) ([`ColorGenerator::record_backward`]).
+    #[allow(clippy::too_many_arguments)]
     pub fn record_colors_backward(
         &self,
         rec: &mut Recorder<'_>,
         objects: u32,
         copies: u32,
         outputs: BufferRange<'_>,
+        pooled: BufferRange<'_>,
+        palette: BufferRange<'_>,
         d_colors: BufferRange<'_>,
         d_outputs: BufferRange<'_>,
     ) -> Result<()> {
-        let (b, v) = (u64::from(objects), u64::from(self.vertex_count));
-        let n = b * self.outputs_per_object();
-        crate::gpu::check_floats("decoder: outputs", &outputs, n)?;
-        crate::gpu::check_floats(
-            "decoder: d_colours",
-            &d_colors,
-            3 * b * u64::from(copies) * v,
-        )?;
-        crate::gpu::check_floats("decoder: d_outputs", &d_outputs, n)?;
-        rec.dispatch(
-            &self.colors_backward,
-            &specs::ReconColorsBackwardBindings {
-                outputs,
-                d_colors,
-                d_outputs,
-            }
-            .for_kernel(&self.colors_backward)?,
-            &self.push(objects, copies),
-            crate::gpu::groups(v * b, 64)?,
+        self.colors.record_backward(
+            rec,
+            objects,
+            copies,
+            self.color_head(),
+            outputs,
+            pooled,
+            palette,
+            d_colors,
+            d_outputs,
         )
     }
 }
@@ -327,18 +341,19 @@ pub mod cpu {
         1.0 / (1.0 + (-x).exp())
     }
 
-    /// `(object meshes, copy positions)` from the outputs (`objects × (6 V + 3)`), the
-    /// template's terms ([`crate::fit::deform::cpu::template_terms`]) and the rotations
-    /// (`(cos φ, sin φ)` per copy, object-major).
+    /// `(object meshes, copy positions)` from the outputs (`objects × stride`, the mesh head
+    /// the first `3 V + 3` of each), the template's terms
+    /// ([`crate::fit::deform::cpu::template_terms`]) and the rotations (`(cos φ, sin φ)` per
+    /// copy, object-major).
     pub fn forward(
         base: &[f64],
         signs: &[f64],
         outputs: &[f64],
+        stride: usize,
         rotations: &[[f64; 2]],
         copies: usize,
     ) -> (Vec<f64>, Vec<f64>) {
         let n = base.len();
-        let stride = 2 * n + 3;
         let objects = outputs.len() / stride;
         let mut canonical = vec![0.0; objects * n];
         let mut positions = vec![0.0; objects * copies * n];
@@ -364,19 +379,20 @@ pub mod cpu {
         (canonical, positions)
     }
 
-    /// dL/d(outputs) from dL/d(object meshes) and dL/d(copy positions) (the colour head's
-    /// slots 0: see [`colors_backward`]).
+    /// dL/d(outputs) from dL/d(object meshes) and dL/d(copy positions) (the colour
+    /// generator's slots 0: see [`crate::recon::colors::cpu::backward`]).
+    #[allow(clippy::too_many_arguments)]
     pub fn backward(
         base: &[f64],
         signs: &[f64],
         outputs: &[f64],
+        stride: usize,
         rotations: &[[f64; 2]],
         copies: usize,
         d_canonical: &[f64],
         d_positions: &[f64],
     ) -> Vec<f64> {
         let n = base.len();
-        let stride = 2 * n + 3;
         let objects = outputs.len() / stride;
         let mut d = vec![0.0; outputs.len()];
         for b in 0..objects {
@@ -411,48 +427,6 @@ pub mod cpu {
         }
         d
     }
-
-    /// The copies' vertex colours (RGB per vertex, mesh after mesh) from the outputs'
-    /// colour heads (`vertices` per object).
-    pub fn colors(outputs: &[f64], vertices: usize, copies: usize) -> Vec<[f64; 3]> {
-        let stride = 6 * vertices + 3;
-        let mut out = Vec::new();
-        for r in outputs.chunks(stride) {
-            let c: Vec<[f64; 3]> = (0..vertices)
-                .map(|i| [0, 1, 2].map(|k| sigmoid(r[3 * vertices + 3 + 3 * i + k])))
-                .collect();
-            for _ in 0..copies {
-                out.extend_from_slice(&c);
-            }
-        }
-        out
-    }
-
-    /// Adds to `d_outputs` the colour heads' gradient from dL/d(copy colours).
-    pub fn colors_backward(
-        outputs: &[f64],
-        vertices: usize,
-        copies: usize,
-        d_colors: &[[f64; 3]],
-        d_outputs: &mut [f64],
-    ) {
-        let stride = 6 * vertices + 3;
-        for b in 0..outputs.len() / stride {
-            for i in 0..vertices {
-                let mut g = [0.0; 3];
-                for j in 0..copies {
-                    for (gk, d) in g.iter_mut().zip(d_colors[(b * copies + j) * vertices + i]) {
-                        *gk += d;
-                    }
-                }
-                for (k, g) in g.iter().enumerate() {
-                    let slot = b * stride + 3 * vertices + 3 + 3 * i + k;
-                    let s = sigmoid(outputs[slot]);
-                    d_outputs[slot] += g * s * (1.0 - s);
-                }
-            }
-        }
-    }
 }
 
 #[cfg(test)]
@@ -466,8 +440,6 @@ mod tests {
             &specs::RECON_DECODE,
             &specs::RECON_DECODE_BACKWARD,
             &specs::RECON_CENTROID_GRAD,
-            &specs::RECON_COLORS,
-            &specs::RECON_COLORS_BACKWARD,
         ] {
             assert_eq!(size, spec.push_constant_size, "{}", spec.name);
         }
@@ -490,7 +462,8 @@ mod tests {
         let (base, signs) = template_terms(&template).unwrap();
         let (objects, copies) = (2, 2);
         let mut rng = Lcg(11);
-        let outputs: Vec<f64> = (0..objects * (2 * base.len() + 3))
+        let stride = base.len() + 5;
+        let outputs: Vec<f64> = (0..objects * stride)
             .map(|_| rng.range(-1.5, 1.5))
             .collect();
         let rotations: Vec<[f64; 2]> = (0..objects * copies)
@@ -507,24 +480,24 @@ mod tests {
             .collect();
         // L = w_canon · meshes + w_pos · copies.
         let grad = cpu::backward(
-            &base, &signs, &outputs, &rotations, copies, &w_canon, &w_pos,
+            &base, &signs, &outputs, stride, &rotations, copies, &w_canon, &w_pos,
         );
         assert_grad_matches_fd(&outputs, &grad, 1e-6, |r| {
-            let (c, p) = cpu::forward(&base, &signs, r, &rotations, copies);
+            let (c, p) = cpu::forward(&base, &signs, r, stride, &rotations, copies);
             let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
             dot(&c, &w_canon) + dot(&p, &w_pos)
         });
         // Zero outputs give the template, halved (SoftRas's final 0.5), centred.
-        let zero = vec![0.0; 2 * base.len() + 3];
-        let (c, _) = cpu::forward(&base, &signs, &zero, &[[1.0, 0.0]], 1);
+        let zero = vec![0.0; stride];
+        let (c, _) = cpu::forward(&base, &signs, &zero, stride, &[[1.0, 0.0]], 1);
         for (a, t) in c.iter().zip(template.iter().flatten()) {
             assert!((a - 0.5 * f64::from(*t)).abs() < 1e-12);
         }
         // SoftRas's centroid: with the displacements far negative every vertex collapses onto
         // it, 0.5 tanh(0.1 r_c) (a second tanh would cap it at 0.5 tanh(0.1) ≈ 0.05).
-        let mut collapsed = vec![-40.0; 2 * base.len() + 3];
+        let mut collapsed = vec![-40.0; stride];
         collapsed[base.len()..base.len() + 3].copy_from_slice(&[10.0, -10.0, 3.0]);
-        let (c, _) = cpu::forward(&base, &signs, &collapsed, &[[1.0, 0.0]], 1);
+        let (c, _) = cpu::forward(&base, &signs, &collapsed, stride, &[[1.0, 0.0]], 1);
         let want = [1.0f64, -1.0, 0.3].map(|x| 0.5 * x.tanh());
         for p in c.chunks(3) {
             for k in 0..3 {

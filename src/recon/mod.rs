@@ -9,7 +9,7 @@
 //!   `<class>_<split>_voxels.npz`, 24 views per object), written from [`shapes`] and read back.
 //! - [`batch`]: a training batch gathered on the GPU from the images and a schedule.
 //! - [`decode`]: the decoder's heads: SoftRas's sphere deformation (per view copies) and the
-//!   per-vertex colours.
+//!   per-vertex colours from [`colors`], the colour generator (sampled from the input image).
 //! - [`train`]: the network, SoftRas's losses and the training loop on the GPU.
 //! - [`field`]: the same encoder conditioning a shared occupancy MLP instead,
 //!   trained by sphere probing against each object's silhouettes, and reconstruction with it.
@@ -17,6 +17,7 @@
 //! - [`eval`]: 3D IoU against the voxels, and the retrieval and mean-shape baselines.
 
 pub mod batch;
+pub mod colors;
 pub mod dataset;
 pub mod decode;
 pub mod eval;

@@ -29,10 +29,11 @@ use crate::field::MlpLayout;
 use crate::gpu::{Buffer, Context, MemoryKind};
 use crate::nn::{Layer, Sequential};
 
-/// The file format's version: 2 since the mesh decoder's centroid is SoftRas's `tanh(0.1 r)`
-/// (format 1 squashed it twice, so its mesh models decode differently) and the settings name
-/// the recipe.
-pub const FORMAT: i32 = 2;
+/// The file format's version: 3 since the colour head is the colour generator (sampled from
+/// the input image; format 2 regressed colours, with another head width), 2 since the mesh
+/// decoder's centroid is SoftRas's `tanh(0.1 r)` (format 1 squashed it twice) and the settings
+/// name the recipe.
+pub const FORMAT: i32 = 3;
 
 /// The length of [`TrainState::settings`].
 pub const SETTINGS: usize = 12;
@@ -391,6 +392,8 @@ pub struct Reconstructor {
     meshes: Buffer,
     copies: Buffer,
     colors: Buffer,
+    pooled: Buffer,
+    palette: Buffer,
     capacity: u32,
     image: u32,
 }
@@ -408,7 +411,7 @@ impl Reconstructor {
             return Err(Error::Input("a reconstruction batch of 0 images".into()));
         }
         let t = super::train::template();
-        let decoder = MeshDecoder::new(ctx, &t.positions)?;
+        let decoder = MeshDecoder::new(ctx, &t.positions, model.net.image)?;
         let net = Sequential::new(
             ctx,
             &model.net.layers(decoder.outputs_per_object())?,
@@ -435,6 +438,14 @@ impl Reconstructor {
             meshes: device("recon meshes", 3 * b * v)?,
             copies: device("recon copies", 3 * b * v)?,
             colors: device("recon colours", 4 * b * v)?,
+            pooled: device(
+                "recon pooled cells",
+                decoder.color_generator().pooled_floats(capacity),
+            )?,
+            palette: device(
+                "recon palettes",
+                decoder.color_generator().palette_floats(capacity),
+            )?,
             net,
             decoder,
             capacity,
@@ -464,6 +475,9 @@ impl Reconstructor {
                 n as u32,
                 1,
                 self.net.output().whole(),
+                self.input.whole(),
+                self.pooled.whole(),
+                self.palette.whole(),
                 self.colors.whole(),
             )
         })?;

@@ -4,7 +4,8 @@
 //! ```text
 //! schedule rows ─[BatchGather]→ inputs, targets (alphas of views a, b), rotations
 //! inputs ─[Sequential]→ outputs ─[MeshDecoder]→ meshes, 2 copies each (turned per view)
-//! outputs ─[MeshDecoder colour head]→ vertex colours of the copies (with a colour loss)
+//! outputs, inputs ─[MeshDecoder colour generator]→ vertex colours of the copies, sampled
+//!   from each input image (with a colour loss)
 //! copies ─(guarded soft rasterizer, one camera)→ images ─[SilhouetteLoss, ImageMse]→ L, d_image
 //! d_image ─(render backward)→ d_copies, d_colours;  meshes ─[Regularizers]→ L_lap, L_flat
 //! d_copies, d_colours, d_meshes ─[MeshDecoder backward]→ d_outputs ─[Sequential backward]
@@ -19,9 +20,10 @@
 //! with the learning rate (`adjust_sigma`). The one-view recipe encodes view a only and sums
 //! its two IoU losses (`L_iou(a) + L_iou(b)`), so its regularizers weigh half as much
 //! relative to the silhouettes. `L_iou` is SoftRas's `iou_loss` over its renders and `L_col`
-//! the mean squared error of the rendered RGBA against the views' (unlit vertex colours: the
-//! colour head learns the images' shaded colours; with `λ_col = 0` the copies render as
-//! silhouettes only, which is cheaper, and the colour head is not trained). [`SilhouetteLoss`]
+//! the mean squared error of the rendered RGBA against the views' (unlit vertex colours from
+//! the colour generator, [`super::colors`]: each vertex learns which samples of its input image
+//! to take, shading included; with `λ_col = 0` the copies render as silhouettes only, which is
+//! cheaper, and the generator is not trained). [`SilhouetteLoss`]
 //! averages over all renders (SoftRas's mean; the one-view recipe takes it with weight 2); the
 //! regularizers sum over the batch's meshes (one block-diagonal mesh of templates), so theirs
 //! are taken with weight `λ / meshes`.
@@ -141,9 +143,11 @@ impl NetShape {
     }
 }
 
-/// Parameters of a network of `net`'s shape with the reconstruction's mesh head.
+/// Parameters of a network of `net`'s shape with the reconstruction's mesh head and colour
+/// generator.
 pub fn param_count(net: &NetShape) -> Result<u64> {
-    let outputs = 6 * template().vertex_count() as u64 + 3;
+    let v = template().vertex_count() as u32;
+    let outputs = 3 * u64::from(v) + 3 + super::colors::outputs_per_object(v, net.image);
     Ok(crate::nn::param_offsets(&net.layers(outputs)?).1)
 }
 
@@ -467,6 +471,9 @@ pub struct ReconTraining<'c> {
     batches: Batches,
     /// Zeros standing for dL/d(colours) when the colour loss is off.
     zero_colors: Buffer,
+    /// The colour generator's scratch: the inputs' pooled cells and palettes.
+    pooled: Buffer,
+    palette: Buffer,
     meshes: Buffer,
     d_meshes: Buffer,
     renderer: Renderer,
@@ -734,7 +741,7 @@ impl<'c> Fitter<'c, ReconTraining<'c>> {
             }
         }
         let t = template();
-        let decoder = MeshDecoder::new(ctx, &t.positions)?;
+        let decoder = MeshDecoder::new(ctx, &t.positions, opts.net.image)?;
         let layers = opts.net.layers(decoder.outputs_per_object())?;
         // Per iteration: `inputs` images in, as many meshes, each rendered in COPIES views.
         let inputs = opts.inputs();
@@ -812,6 +819,14 @@ impl<'c> Fitter<'c, ReconTraining<'c>> {
                 })?;
                 z
             },
+            pooled: device(
+                "recon pooled cells",
+                decoder.color_generator().pooled_floats(inputs),
+            )?,
+            palette: device(
+                "recon palettes",
+                decoder.color_generator().palette_floats(inputs),
+            )?,
             meshes: device("recon meshes", 3 * b * v)?,
             d_meshes: device("recon d_meshes", 3 * b * v)?,
             sil: SilhouetteLoss::new(ctx, COPIES * inputs, opts.net.image, opts.net.image)?,
@@ -875,16 +890,18 @@ impl Fit for ReconTraining<'_> {
                 self.meshes.whole(),
                 self.scene.positions().whole(),
             )?;
-            if o.color > 0.0 {
-                self.decoder.record_colors(
-                    rec,
-                    inputs,
-                    COPIES,
-                    self.net.output().whole(),
-                    self.scene.colors().whole(),
-                )?;
-            }
-            Ok(())
+            // Without a colour loss the colours are not rendered, but the generator's backward
+            // (of zero gradients) still reads what its forward writes.
+            self.decoder.record_colors(
+                rec,
+                inputs,
+                COPIES,
+                self.net.output().whole(),
+                self.batches.input.whole(),
+                self.pooled.whole(),
+                self.palette.whole(),
+                self.scene.colors().whole(),
+            )
         })?;
         let scene = &self.scene;
         let g = &self.grads;
@@ -950,6 +967,8 @@ impl Fit for ReconTraining<'_> {
                         inputs,
                         COPIES,
                         self.net.output().whole(),
+                        self.pooled.whole(),
+                        self.palette.whole(),
                         d_colors,
                         self.d_outputs.whole(),
                     )
