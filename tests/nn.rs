@@ -284,16 +284,27 @@ fn gpu_conv_forward_and_backward_match_the_twin_for_every_activation_and_shape()
     }
 }
 
+/// Rows of 37 inputs take the scalar kernels; rows of 36 (whole texels, the weights at a texel
+/// boundary) the texel ones; in the chain, the third layer's rows are whole texels but its
+/// weights start at float (5 · 3 + 3) + (3 · 8 + 8) = 50, off a texel boundary, so it takes the
+/// scalar ones.
 #[test]
 fn gpu_linear_forward_and_backward_match_the_twin_for_every_activation() {
     let Some(ctx) = common::gpu() else { return };
+    let linear = |i, o, activation| {
+        Layer::Linear(Linear {
+            in_features: i,
+            out_features: o,
+            activation,
+        })
+    };
     for (a, act) in ACTIVATIONS.into_iter().enumerate() {
-        let layer = Layer::Linear(Linear {
-            in_features: 37,
-            out_features: 19,
-            activation: act,
-        });
-        check_network(&ctx, &[layer], 3, 200 + a as u64, true);
+        for in_features in [37, 36] {
+            let layer = linear(in_features, 19, act);
+            check_network(&ctx, &[layer], 5, 200 + a as u64, true);
+        }
+        let chain = [linear(5, 3, act), linear(3, 8, act), linear(8, 5, act)];
+        check_network(&ctx, &chain, 5, 300 + a as u64, true);
     }
 }
 

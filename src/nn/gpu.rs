@@ -8,7 +8,7 @@ use bytemuck::{Pod, Zeroable};
 use super::{Activation, Conv2d, Layer, param_offsets, validate_chain};
 use crate::error::{Error, LimitKind, Result};
 use crate::gpu::{
-    Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, specs,
+    Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, TEXEL_BYTES, specs,
 };
 use crate::gpu::{check_binding, groups};
 
@@ -95,6 +95,10 @@ struct LinearBlocks {
     input_gradient: u64,
     /// `nn_linear_wgrad`: 4 outputs × 4 inputs, then one per bias.
     weight_gradient: u64,
+    /// `nn_linear_dinput4`: 8 inputs (2 texels) × 4 samples.
+    input_gradient4: u64,
+    /// `nn_linear_wgrad4`: 4 outputs × 8 inputs, then one per bias.
+    weight_gradient4: u64,
 }
 
 impl LinearBlocks {
@@ -106,6 +110,8 @@ impl LinearBlocks {
             forward: by4(o) * b,
             input_gradient: by4(i) * b,
             weight_gradient: by4(o) * by4(i) + o,
+            input_gradient4: by4(i).div_ceil(2) * b,
+            weight_gradient4: by4(o) * by4(i).div_ceil(2) + o,
         }
     }
 }
@@ -154,12 +160,17 @@ pub struct Sequential {
     /// Per layer: its forward pipeline and, unless its activation is the identity, the
     /// activation's backward.
     forward: Vec<Arc<Kernel>>,
+    /// Per linear layer whose rows are whole texels (`in_features` a multiple of 4): its forward
+    /// reading weights and inputs as texels ([`Sequential::texel_rows`] says when it applies).
+    forward4: Vec<Option<Arc<Kernel>>>,
     act_backward: Vec<Option<Arc<Kernel>>>,
     conv_dinput: Kernel,
     conv_wgrad: Kernel,
     sum_rows: Kernel,
     linear_dinput: Kernel,
     linear_wgrad: Kernel,
+    linear_dinput4: Kernel,
+    linear_wgrad4: Kernel,
     outputs: Vec<Buffer>,
     /// The backward's ping-pong gradients (dL/d(pre-activation), dL/d(a layer's input)).
     scratch: [Buffer; 2],
@@ -219,8 +230,10 @@ impl Sequential {
 
         let conv_forward = KernelVariants::new(&specs::NN_CONV_FORWARD);
         let linear_forward = KernelVariants::new(&specs::NN_LINEAR_FORWARD);
+        let linear_forward4 = KernelVariants::new(&specs::NN_LINEAR_FORWARD4);
         let act = KernelVariants::new(&specs::NN_ACT_BACKWARD);
         let mut forward = Vec::with_capacity(layers.len());
+        let mut forward4 = Vec::with_capacity(layers.len());
         let mut act_backward = Vec::with_capacity(layers.len());
         let mut outputs = Vec::with_capacity(layers.len());
         for (i, layer) in layers.iter().enumerate() {
@@ -228,6 +241,12 @@ impl Sequential {
             forward.push(match layer {
                 Layer::Conv2d(_) => conv_forward.get(ctx, &constants)?,
                 Layer::Linear(_) => linear_forward.get(ctx, &constants)?,
+            });
+            forward4.push(match layer {
+                Layer::Linear(f) if f.in_features % 4 == 0 => {
+                    Some(linear_forward4.get(ctx, &constants)?)
+                }
+                _ => None,
             });
             act_backward.push(match layer.activation() {
                 Activation::Identity => None,
@@ -247,12 +266,15 @@ impl Sequential {
             param_count,
             capacity,
             forward,
+            forward4,
             act_backward,
             conv_dinput: Kernel::new(ctx, &specs::NN_CONV_DINPUT)?,
             conv_wgrad: Kernel::new(ctx, &specs::NN_CONV_WGRAD)?,
             sum_rows: Kernel::new(ctx, &specs::NN_SUM_ROWS)?,
             linear_dinput: Kernel::new(ctx, &specs::NN_LINEAR_DINPUT)?,
             linear_wgrad: Kernel::new(ctx, &specs::NN_LINEAR_WGRAD)?,
+            linear_dinput4: Kernel::new(ctx, &specs::NN_LINEAR_DINPUT4)?,
+            linear_wgrad4: Kernel::new(ctx, &specs::NN_LINEAR_WGRAD4)?,
             outputs,
             scratch: [
                 ctx.create_buffer("nn gradient scratch 0", scratch_bytes, MemoryKind::Device)?,
@@ -363,17 +385,35 @@ impl Sequential {
                         groups(blocks, 64)?,
                     )
                 }
-                Layer::Linear(_) => rec.dispatch(
-                    kernel,
-                    &specs::NnLinearForwardBindings {
-                        params,
-                        input: x,
-                        output: y,
+                Layer::Linear(_) => {
+                    let push = self.linear_push(l, batch, LinearBlocks::of(layer, batch).forward);
+                    let groups = groups(LinearBlocks::of(layer, batch).forward, 64)?;
+                    match self.texel_rows(rec, l, params, x) {
+                        Some((kernel, weights)) => rec.dispatch(
+                            kernel,
+                            &specs::NnLinearForward4Bindings {
+                                params,
+                                weights,
+                                inp: x,
+                                output: y,
+                            }
+                            .for_kernel(kernel)?,
+                            &push,
+                            groups,
+                        ),
+                        None => rec.dispatch(
+                            kernel,
+                            &specs::NnLinearForwardBindings {
+                                params,
+                                input: x,
+                                output: y,
+                            }
+                            .for_kernel(kernel)?,
+                            &push,
+                            groups,
+                        ),
                     }
-                    .for_kernel(kernel)?,
-                    &self.linear_push(l, batch, LinearBlocks::of(layer, batch).forward),
-                    groups(LinearBlocks::of(layer, batch).forward, 64)?,
-                ),
+                }
             })?;
         }
         Ok(())
@@ -537,38 +577,95 @@ impl Sequential {
                 }
             }
             Layer::Linear(_) => {
+                let texels = self.texel_rows(rec, l, params, x);
                 let blocks = LinearBlocks::of(layer, batch);
-                rec.pass(&format!("nn layer {l} weight gradient"), |rec| {
-                    rec.dispatch(
-                        &self.linear_wgrad,
-                        &specs::NnLinearWgradBindings {
-                            input: x,
-                            d_pre,
-                            d_params,
-                        }
-                        .for_kernel(&self.linear_wgrad)?,
-                        &self.linear_push(l, batch, blocks.weight_gradient),
-                        groups(blocks.weight_gradient, 64)?,
-                    )
-                })?;
-                if let Some(d_in) = d_in {
-                    rec.pass(&format!("nn layer {l} input gradient"), |rec| {
-                        rec.dispatch(
-                            &self.linear_dinput,
-                            &specs::NnLinearDinputBindings {
-                                params,
+                rec.pass(
+                    &format!("nn layer {l} weight gradient"),
+                    |rec| match texels {
+                        Some(_) => rec.dispatch(
+                            &self.linear_wgrad4,
+                            &specs::NnLinearWgrad4Bindings {
+                                inp: x,
                                 d_pre,
-                                d_input: d_in,
+                                d_params,
                             }
-                            .for_kernel(&self.linear_dinput)?,
-                            &self.linear_push(l, batch, blocks.input_gradient),
-                            groups(blocks.input_gradient, 64)?,
-                        )
-                    })?;
+                            .for_kernel(&self.linear_wgrad4)?,
+                            &self.linear_push(l, batch, blocks.weight_gradient4),
+                            groups(blocks.weight_gradient4, 64)?,
+                        ),
+                        None => rec.dispatch(
+                            &self.linear_wgrad,
+                            &specs::NnLinearWgradBindings {
+                                input: x,
+                                d_pre,
+                                d_params,
+                            }
+                            .for_kernel(&self.linear_wgrad)?,
+                            &self.linear_push(l, batch, blocks.weight_gradient),
+                            groups(blocks.weight_gradient, 64)?,
+                        ),
+                    },
+                )?;
+                if let Some(d_in) = d_in {
+                    rec.pass(
+                        &format!("nn layer {l} input gradient"),
+                        |rec| match texels {
+                            Some((_, weights)) => rec.dispatch(
+                                &self.linear_dinput4,
+                                &specs::NnLinearDinput4Bindings {
+                                    weights,
+                                    d_pre,
+                                    d_input: d_in,
+                                }
+                                .for_kernel(&self.linear_dinput4)?,
+                                &self.linear_push(l, batch, blocks.input_gradient4),
+                                groups(blocks.input_gradient4, 64)?,
+                            ),
+                            None => rec.dispatch(
+                                &self.linear_dinput,
+                                &specs::NnLinearDinputBindings {
+                                    params,
+                                    d_pre,
+                                    d_input: d_in,
+                                }
+                                .for_kernel(&self.linear_dinput)?,
+                                &self.linear_push(l, batch, blocks.input_gradient),
+                                groups(blocks.input_gradient, 64)?,
+                            ),
+                        },
+                    )?;
                 }
             }
         }
         Ok(d_in_slot)
+    }
+
+    /// For linear layer `l` with rows of whole texels, whose weights (in `params`) and input
+    /// rows (`x`) start at texel boundaries the device can bind: its texel forward and the
+    /// weights' range (the texel backward applies too). `None` where the scalar kernels must
+    /// serve.
+    fn texel_rows<'p>(
+        &self,
+        rec: &Recorder<'_>,
+        l: usize,
+        params: BufferRange<'p>,
+        x: BufferRange<'_>,
+    ) -> Option<(&Arc<Kernel>, BufferRange<'p>)> {
+        let kernel = self.forward4[l].as_ref()?;
+        let Layer::Linear(f) = &self.layers[l] else {
+            return None;
+        };
+        let limits = &rec.context().info().limits;
+        let align = limits.min_texel_buffer_offset_alignment;
+        let weights = params.sub(
+            4 * self.offsets[l],
+            4 * u64::from(f.in_features) * u64::from(f.out_features),
+        );
+        let max = u64::from(limits.max_texel_buffer_elements);
+        let fits = |r: &BufferRange<'_>| {
+            r.offset % align == 0 && r.size % TEXEL_BYTES == 0 && r.size / TEXEL_BYTES <= max
+        };
+        (fits(&weights) && fits(&x)).then_some((kernel, weights))
     }
 
     fn conv_push(&self, l: usize, batch: u32, total: u64) -> ConvPush {
