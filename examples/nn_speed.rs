@@ -1,7 +1,7 @@
 //! Times the forward and the backward of the reconstruction network's size (SoftRas §4.2's
 //! encoder and decoder) at batch 16: conv 4→16, 16→32, 32→64 (kernel 5, stride 2, padding 2,
-//! 64² → 8²), linear 4096→256→256, then 256→512→(6·642 + 3): `NetShape::default()`, the
-//! mesh head and the colour head. Each is recorded once and only
+//! 64² → 8²), linear 4096→256→256, then 256→512→9113 (3·642 + 3 for the mesh head, 8 · (256 +
+//! 642) for the colour generator): `NetShape::default()`. Each is recorded once and only
 //! submit + wait is timed (wall clock), with GPU timestamps per layer beside it.
 //!
 //! Run: `cargo run --release --example nn_speed [-- REPEATS]`.
@@ -18,9 +18,10 @@ fn main() -> softvk::Result<()> {
         .and_then(|a| a.parse().ok())
         .unwrap_or(5);
     let ctx = Context::new(&ContextOptions::from_env())?;
-    // The network `softvk train-recon` trains by default, with its mesh and colour heads.
-    let outputs = 6 * softvk::recon::train::template().vertex_count() as u64 + 3;
-    let layers = NetShape::default().layers(outputs)?;
+    // The network `softvk train-recon` trains by default, with its mesh head and colour
+    // generator.
+    let shape = NetShape::default();
+    let layers = shape.layers(softvk::recon::train::head_outputs(&shape))?;
     let net = Sequential::new(&ctx, &layers, BATCH)?;
     let params = ctx.upload_buffer("params", &net.init(1))?;
     let n_in = (u64::from(BATCH) * net.input_len()) as usize;

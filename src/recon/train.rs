@@ -143,12 +143,17 @@ impl NetShape {
     }
 }
 
+/// Outputs per image of a network of `net`'s shape: the mesh head's `3 V + 3` and the colour
+/// generator's ([`MeshDecoder::outputs_per_object`] without a device).
+pub fn head_outputs(net: &NetShape) -> u64 {
+    let v = template().vertex_count() as u32;
+    3 * u64::from(v) + 3 + super::colors::outputs_per_object(v, net.image)
+}
+
 /// Parameters of a network of `net`'s shape with the reconstruction's mesh head and colour
 /// generator.
 pub fn param_count(net: &NetShape) -> Result<u64> {
-    let v = template().vertex_count() as u32;
-    let outputs = 3 * u64::from(v) + 3 + super::colors::outputs_per_object(v, net.image);
-    Ok(crate::nn::param_offsets(&net.layers(outputs)?).1)
+    Ok(crate::nn::param_offsets(&net.layers(head_outputs(net))?).1)
 }
 
 /// How a batch's objects are seen and scored. Both render every prediction from its object's
