@@ -361,3 +361,55 @@ fn a_turned_object_seen_from_azimuth_zero_is_the_object_seen_from_the_view() {
         assert!(worst < 1e-3, "view {view}: alpha differs by {worst}");
     }
 }
+
+#[test]
+fn the_colour_generator_refuses_images_off_its_cells_and_heads_that_do_not_fit() {
+    let Some(ctx) = gpu() else { return };
+    let t = template();
+    for image in [0, 30] {
+        let e = MeshDecoder::new(&ctx, &t.positions, image).err().unwrap();
+        assert!(
+            matches!(e, softvk::Error::Input(ref m) if m.contains("multiple of 4")),
+            "{e}"
+        );
+    }
+    let generator = colors::ColorGenerator::new(&ctx, 10, 8).unwrap();
+    let own = generator.outputs_per_object() as u32;
+    assert_eq!(own, 8 * (4 + 10));
+    let mk = |floats: u64| {
+        ctx.create_buffer("scratch", 4 * floats, MemoryKind::Device)
+            .unwrap()
+    };
+    let (outputs, images, pooled, palette, colors) = (
+        mk(u64::from(own) + 2),
+        mk(4 * 64),
+        mk(generator.pooled_floats(1)),
+        mk(generator.palette_floats(1)),
+        mk(4 * 10),
+    );
+    let head = |offset| colors::HeadLayout {
+        stride: own + 2,
+        offset,
+    };
+    let record = |offset| {
+        ctx.submit_and_wait(|rec| {
+            generator.record_forward(
+                rec,
+                1,
+                1,
+                head(offset),
+                outputs.whole(),
+                images.whole(),
+                pooled.whole(),
+                palette.whole(),
+                colors.whole(),
+            )
+        })
+    };
+    record(2).unwrap();
+    let e = record(3).unwrap_err();
+    assert!(
+        matches!(e, softvk::Error::Input(ref m) if m.contains("do not fit")),
+        "{e}"
+    );
+}

@@ -132,6 +132,24 @@ impl ColorGenerator {
         4 * u64::from(PALETTE) * u64::from(objects)
     }
 
+    /// The push constants, after checking the shape and the ranges both passes bind.
+    fn checked_push(
+        &self,
+        objects: u32,
+        copies: u32,
+        head: HeadLayout,
+        outputs: &BufferRange<'_>,
+        pooled: &BufferRange<'_>,
+        palette: &BufferRange<'_>,
+    ) -> Result<ColorPush> {
+        let push = self.push(objects, copies, head)?;
+        let b = u64::from(objects);
+        crate::gpu::check_floats("colours: outputs", outputs, b * u64::from(head.stride))?;
+        crate::gpu::check_floats("colours: pooled", pooled, self.pooled_floats(objects))?;
+        crate::gpu::check_floats("colours: palette", palette, self.palette_floats(objects))?;
+        Ok(push)
+    }
+
     fn push(&self, objects: u32, copies: u32, head: HeadLayout) -> Result<ColorPush> {
         if objects == 0 || copies == 0 {
             return Err(Error::Input(
@@ -177,13 +195,10 @@ impl ColorGenerator {
         palette: BufferRange<'_>,
         colors: BufferRange<'_>,
     ) -> Result<()> {
-        let push = self.push(objects, copies, head)?;
+        let push = self.checked_push(objects, copies, head, &outputs, &pooled, &palette)?;
         let (b, v) = (u64::from(objects), u64::from(self.vertex_count));
         let side = u64::from(self.grid * POOL);
-        crate::gpu::check_floats("colours: outputs", &outputs, b * u64::from(head.stride))?;
         crate::gpu::check_floats("colours: images", &images, 4 * b * side * side)?;
-        crate::gpu::check_floats("colours: pooled", &pooled, self.pooled_floats(objects))?;
-        crate::gpu::check_floats("colours: palette", &palette, self.palette_floats(objects))?;
         crate::gpu::check_floats("colours: colours", &colors, 4 * b * u64::from(copies) * v)?;
         rec.dispatch(
             &self.pool,
@@ -231,18 +246,14 @@ impl ColorGenerator {
         d_colors: BufferRange<'_>,
         d_outputs: BufferRange<'_>,
     ) -> Result<()> {
-        let push = self.push(objects, copies, head)?;
+        let push = self.checked_push(objects, copies, head, &outputs, &pooled, &palette)?;
         let (b, v) = (u64::from(objects), u64::from(self.vertex_count));
-        let n = b * u64::from(head.stride);
-        crate::gpu::check_floats("colours: outputs", &outputs, n)?;
-        crate::gpu::check_floats("colours: pooled", &pooled, self.pooled_floats(objects))?;
-        crate::gpu::check_floats("colours: palette", &palette, self.palette_floats(objects))?;
         crate::gpu::check_floats(
             "colours: d_colours",
             &d_colors,
             3 * b * u64::from(copies) * v,
         )?;
-        crate::gpu::check_floats("colours: d_outputs", &d_outputs, n)?;
+        crate::gpu::check_floats("colours: d_outputs", &d_outputs, b * u64::from(head.stride))?;
         rec.dispatch(
             &self.colors_backward,
             &specs::ReconColorsBackwardBindings {
