@@ -37,7 +37,10 @@ const ACTIVATIONS: [Activation; 5] = [
 /// (in_h, in_w, kernel, stride, padding): kernels 3, 4, 5; strides 1, 2; paddings 0, 1, 2; odd
 /// sizes whose output is floored ((7 + 0 − 4) / 2 = 1.5, (9 + 2 − 5) / 2 = 3, (6 + 4 − 5) / 2 = 2.5);
 /// rows wide enough for several of the kernels' 4-column blocks, with a partial last one.
-const CONV_SHAPES: [(u32, u32, u32, u32, u32); 7] = [
+/// (in_h, in_w, kernel, stride, padding). Rows of a multiple of 4 columns (the last four) take
+/// the texel forward (`nn_conv_forward4`), with its window starting 0, 2, 3 and 3 columns into
+/// a texel; the others the scalar one.
+const CONV_SHAPES: [(u32, u32, u32, u32, u32); 11] = [
     (5, 6, 3, 1, 0),
     (7, 6, 4, 2, 0),
     (6, 7, 4, 2, 1),
@@ -45,6 +48,10 @@ const CONV_SHAPES: [(u32, u32, u32, u32, u32); 7] = [
     (6, 5, 5, 2, 2),
     (4, 13, 3, 1, 1),
     (5, 19, 5, 2, 2),
+    (5, 8, 3, 1, 0),
+    (7, 12, 5, 2, 2),
+    (6, 16, 4, 2, 1),
+    (9, 8, 3, 1, 1),
 ];
 
 fn conv(shape: (u32, u32, u32, u32, u32), in_c: u32, out_c: u32, act: Activation) -> Conv2d {

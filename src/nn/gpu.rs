@@ -10,7 +10,7 @@ use crate::error::{Error, LimitKind, Result};
 use crate::gpu::{
     Buffer, BufferRange, Context, Kernel, KernelVariants, MemoryKind, Recorder, TEXEL_BYTES, specs,
 };
-use crate::gpu::{check_binding, groups};
+use crate::gpu::{check_binding, check_texels, groups};
 
 /// Push constants of the conv kernels (`NN_CONV_PUSH` in `nn.glsl`).
 #[repr(C)]
@@ -116,6 +116,23 @@ impl LinearBlocks {
     }
 }
 
+/// Whether `r` binds as a texel buffer on the recorder's device: at a texel-aligned offset, of
+/// whole texels, within `maxTexelBufferElements`.
+fn texel_input(rec: &Recorder<'_>, r: &BufferRange<'_>) -> bool {
+    let limits = &rec.context().info().limits;
+    r.offset % limits.min_texel_buffer_offset_alignment == 0
+        && r.size % TEXEL_BYTES == 0
+        && r.size / TEXEL_BYTES <= u64::from(limits.max_texel_buffer_elements)
+}
+
+/// Texels of a conv layer's packed weights: one per (input channel, tap, block of 4 output
+/// channels).
+fn packed_weight_texels(c: &Conv2d) -> u64 {
+    u64::from(c.in_channels)
+        * u64::from(c.kernel * c.kernel)
+        * u64::from(c.out_channels.div_ceil(4))
+}
+
 /// The caller's ranges of one backward.
 #[derive(Clone, Copy)]
 struct BackwardBuffers<'a> {
@@ -160,9 +177,14 @@ pub struct Sequential {
     /// Per layer: its forward pipeline and, unless its activation is the identity, the
     /// activation's backward.
     forward: Vec<Arc<Kernel>>,
-    /// Per linear layer whose rows are whole texels (`in_features` a multiple of 4): its forward
-    /// reading weights and inputs as texels ([`Sequential::texel_rows`] says when it applies).
+    /// Per layer whose rows are whole texels (a linear layer's `in_features`, a conv's `in_w`, a
+    /// multiple of 4): its forward reading inputs and weights as texels
+    /// ([`Sequential::texel_rows`] and [`Sequential::texel_input`] say when it applies).
     forward4: Vec<Option<Arc<Kernel>>>,
+    /// Packs a conv layer's weights as texels of 4 output channels for its texel forward.
+    conv_pack: Kernel,
+    /// The packed weights of the conv layer being run (the largest such layer's size).
+    conv_packed: Buffer,
     act_backward: Vec<Option<Arc<Kernel>>>,
     conv_dinput: Kernel,
     conv_wgrad: Kernel,
@@ -231,6 +253,7 @@ impl Sequential {
         let conv_forward = KernelVariants::new(&specs::NN_CONV_FORWARD);
         let linear_forward = KernelVariants::new(&specs::NN_LINEAR_FORWARD);
         let linear_forward4 = KernelVariants::new(&specs::NN_LINEAR_FORWARD4);
+        let conv_forward4 = KernelVariants::new(&specs::NN_CONV_FORWARD4);
         let act = KernelVariants::new(&specs::NN_ACT_BACKWARD);
         let mut forward = Vec::with_capacity(layers.len());
         let mut forward4 = Vec::with_capacity(layers.len());
@@ -246,6 +269,10 @@ impl Sequential {
                 Layer::Linear(f) if f.in_features % 4 == 0 => {
                     Some(linear_forward4.get(ctx, &constants)?)
                 }
+                Layer::Conv2d(c) if c.in_w % 4 == 0 => {
+                    let shape = [c.kernel, c.stride, c.padding];
+                    Some(conv_forward4.get(ctx, &[&constants[..], &shape[..]].concat())?)
+                }
                 _ => None,
             });
             act_backward.push(match layer.activation() {
@@ -260,12 +287,28 @@ impl Sequential {
                 MemoryKind::Device,
             )?);
         }
+        let packed_texels = layers
+            .iter()
+            .zip(&forward4)
+            .filter_map(|(l, k)| match (l, k) {
+                (Layer::Conv2d(c), Some(_)) => Some(packed_weight_texels(c)),
+                _ => None,
+            })
+            .max()
+            .unwrap_or(0);
+        check_texels(ctx, "a conv layer's packed weights", 16 * packed_texels)?;
         Ok(Self {
             layers: layers.to_vec(),
             offsets,
             param_count,
             capacity,
             forward,
+            conv_pack: Kernel::new(ctx, &specs::NN_CONV_PACK_WEIGHTS)?,
+            conv_packed: ctx.create_buffer(
+                "nn conv packed weights",
+                crate::gpu::TEXEL_BYTES * packed_texels.max(1),
+                MemoryKind::Device,
+            )?,
             forward4,
             act_backward,
             conv_dinput: Kernel::new(ctx, &specs::NN_CONV_DINPUT)?,
@@ -373,6 +416,32 @@ impl Sequential {
             rec.pass(&format!("nn forward layer {l}"), |rec| match layer {
                 Layer::Conv2d(c) => {
                     let blocks = n * ConvBlocks::of(c).forward;
+                    let push = self.conv_push(l, batch, blocks);
+                    if let Some(kernel4) =
+                        self.forward4[l].as_ref().filter(|_| texel_input(rec, &x))
+                    {
+                        let texels = packed_weight_texels(c);
+                        let packed = self.conv_packed.range(0, TEXEL_BYTES * texels);
+                        rec.dispatch(
+                            &self.conv_pack,
+                            &specs::NnConvPackWeightsBindings { params, packed }
+                                .for_kernel(&self.conv_pack)?,
+                            &self.conv_push(l, batch, texels),
+                            groups(texels, 64)?,
+                        )?;
+                        return rec.dispatch(
+                            kernel4,
+                            &specs::NnConvForward4Bindings {
+                                params,
+                                weights: packed,
+                                inp: x,
+                                output: y,
+                            }
+                            .for_kernel(kernel4)?,
+                            &push,
+                            groups(blocks, 64)?,
+                        );
+                    }
                     rec.dispatch(
                         kernel,
                         &specs::NnConvForwardBindings {
@@ -381,7 +450,7 @@ impl Sequential {
                             output: y,
                         }
                         .for_kernel(kernel)?,
-                        &self.conv_push(l, batch, blocks),
+                        &push,
                         groups(blocks, 64)?,
                     )
                 }
@@ -655,17 +724,11 @@ impl Sequential {
         let Layer::Linear(f) = &self.layers[l] else {
             return None;
         };
-        let limits = &rec.context().info().limits;
-        let align = limits.min_texel_buffer_offset_alignment;
         let weights = params.sub(
             4 * self.offsets[l],
             4 * u64::from(f.in_features) * u64::from(f.out_features),
         );
-        let max = u64::from(limits.max_texel_buffer_elements);
-        let fits = |r: &BufferRange<'_>| {
-            r.offset % align == 0 && r.size % TEXEL_BYTES == 0 && r.size / TEXEL_BYTES <= max
-        };
-        (fits(&weights) && fits(&x)).then_some((kernel, weights))
+        (texel_input(rec, &weights) && texel_input(rec, &x)).then_some((kernel, weights))
     }
 
     fn conv_push(&self, l: usize, batch: u32, total: u64) -> ConvPush {
