@@ -37,10 +37,11 @@ const ACTIVATIONS: [Activation; 5] = [
 /// (in_h, in_w, kernel, stride, padding): kernels 3, 4, 5; strides 1, 2; paddings 0, 1, 2; odd
 /// sizes whose output is floored ((7 + 0 − 4) / 2 = 1.5, (9 + 2 − 5) / 2 = 3, (6 + 4 − 5) / 2 = 2.5);
 /// rows wide enough for several of the kernels' 4-column blocks, with a partial last one.
-/// (in_h, in_w, kernel, stride, padding). Rows of a multiple of 4 columns (the last four) take
-/// the texel forward (`nn_conv_forward4`), with its window starting 0, 2, 3 and 3 columns into
-/// a texel; the others the scalar one.
-const CONV_SHAPES: [(u32, u32, u32, u32, u32); 11] = [
+/// (in_h, in_w, kernel, stride, padding). Input rows of a multiple of 4 columns (the last six)
+/// take the texel forward (`nn_conv_forward4`), its window starting 0, 2, 3, 3, 2 and 0 columns
+/// into a texel; of those, the ones whose output rows are too (16 → 8, 8 → 8, 16 → 8 and 8 → 4
+/// columns) the texel weight gradient (`nn_conv_wgrad4`); the others the scalar kernels.
+const CONV_SHAPES: [(u32, u32, u32, u32, u32); 13] = [
     (5, 6, 3, 1, 0),
     (7, 6, 4, 2, 0),
     (6, 7, 4, 2, 1),
@@ -52,6 +53,8 @@ const CONV_SHAPES: [(u32, u32, u32, u32, u32); 11] = [
     (7, 12, 5, 2, 2),
     (6, 16, 4, 2, 1),
     (9, 8, 3, 1, 1),
+    (5, 16, 5, 2, 2),
+    (5, 8, 5, 1, 0),
 ];
 
 fn conv(shape: (u32, u32, u32, u32, u32), in_c: u32, out_c: u32, act: Activation) -> Conv2d {

@@ -68,6 +68,8 @@ pub(crate) struct ConvBlocks {
     pub input_gradient: u64,
     /// `nn_conv_wgrad`: 4 output × 4 input channels per tap, then one per bias.
     pub weight_gradient: u64,
+    /// `nn_conv_wgrad4`: 4 output channels × 1 input channel per kernel row, then one per bias.
+    pub weight_gradient4: u64,
 }
 
 impl ConvBlocks {
@@ -81,6 +83,8 @@ impl ConvBlocks {
                 * s
                 * u64::from(c.in_w.div_ceil(c.stride)).div_ceil(4),
             weight_gradient: by4(c.out_channels) * by4(c.in_channels) * k * k
+                + u64::from(c.out_channels),
+            weight_gradient4: by4(c.out_channels) * u64::from(c.in_channels) * k
                 + u64::from(c.out_channels),
         }
     }
@@ -181,6 +185,9 @@ pub struct Sequential {
     /// multiple of 4): its forward reading inputs and weights as texels
     /// ([`Sequential::texel_rows`] and [`Sequential::texel_input`] say when it applies).
     forward4: Vec<Option<Arc<Kernel>>>,
+    /// Per conv layer whose input and output rows are whole texels: its weight gradient reading
+    /// the input and dL/d(pre-activation) as texels.
+    wgrad4: Vec<Option<Arc<Kernel>>>,
     /// Packs a conv layer's weights as texels of 4 output channels for its texel forward.
     conv_pack: Kernel,
     /// The packed weights of the conv layer being run (the largest such layer's size).
@@ -254,6 +261,8 @@ impl Sequential {
         let linear_forward = KernelVariants::new(&specs::NN_LINEAR_FORWARD);
         let linear_forward4 = KernelVariants::new(&specs::NN_LINEAR_FORWARD4);
         let conv_forward4 = KernelVariants::new(&specs::NN_CONV_FORWARD4);
+        let conv_wgrad4 = KernelVariants::new(&specs::NN_CONV_WGRAD4);
+        let mut wgrad4 = Vec::with_capacity(layers.len());
         let act = KernelVariants::new(&specs::NN_ACT_BACKWARD);
         let mut forward = Vec::with_capacity(layers.len());
         let mut forward4 = Vec::with_capacity(layers.len());
@@ -272,6 +281,13 @@ impl Sequential {
                 Layer::Conv2d(c) if c.in_w % 4 == 0 => {
                     let shape = [c.kernel, c.stride, c.padding];
                     Some(conv_forward4.get(ctx, &[&constants[..], &shape[..]].concat())?)
+                }
+                _ => None,
+            });
+            wgrad4.push(match layer {
+                Layer::Conv2d(c) if c.in_w % 4 == 0 && c.out_w() % 4 == 0 => {
+                    let shape = [c.kernel, c.stride, c.padding];
+                    Some(conv_wgrad4.get(ctx, &[&constants[..], &shape[..]].concat())?)
                 }
                 _ => None,
             });
@@ -310,6 +326,7 @@ impl Sequential {
                 MemoryKind::Device,
             )?,
             forward4,
+            wgrad4,
             act_backward,
             conv_dinput: Kernel::new(ctx, &specs::NN_CONV_DINPUT)?,
             conv_wgrad: Kernel::new(ctx, &specs::NN_CONV_WGRAD)?,
@@ -600,6 +617,22 @@ impl Sequential {
                 let blocks = ConvBlocks::of(c);
                 let partial = self.partial.range(0, 4 * n * p);
                 rec.pass(&format!("nn layer {l} weight gradient"), |rec| {
+                    let texels = texel_input(rec, &x) && texel_input(rec, &d_pre);
+                    if let Some(kernel) = self.wgrad4[l].as_ref().filter(|_| texels) {
+                        let total = n * blocks.weight_gradient4;
+                        return rec.dispatch(
+                            kernel,
+                            &specs::NnConvWgrad4Bindings {
+                                inp: x,
+                                d_pre,
+                                d_pre_floats: d_pre,
+                                partial,
+                            }
+                            .for_kernel(kernel)?,
+                            &self.conv_push(l, batch, total),
+                            groups(total, 64)?,
+                        );
+                    }
                     rec.dispatch(
                         &self.conv_wgrad,
                         &specs::NnConvWgradBindings {
