@@ -37,11 +37,13 @@ const ACTIVATIONS: [Activation; 5] = [
 /// (in_h, in_w, kernel, stride, padding): kernels 3, 4, 5; strides 1, 2; paddings 0, 1, 2; odd
 /// sizes whose output is floored ((7 + 0 − 4) / 2 = 1.5, (9 + 2 − 5) / 2 = 3, (6 + 4 − 5) / 2 = 2.5);
 /// rows wide enough for several of the kernels' 4-column blocks, with a partial last one.
-/// (in_h, in_w, kernel, stride, padding). Input rows of a multiple of 4 columns (the last six)
+/// (in_h, in_w, kernel, stride, padding), counted from 1 below. Input rows of a multiple of 4
+/// columns (8 to 13)
 /// take the texel forward (`nn_conv_forward4`), its window starting 0, 2, 3, 3, 2 and 0 columns
-/// into a texel; of those, the ones whose output rows are too (16 → 8, 8 → 8, 16 → 8 and 8 → 4
-/// columns) the texel weight gradient (`nn_conv_wgrad4`); the others the scalar kernels.
-const CONV_SHAPES: [(u32, u32, u32, u32, u32); 13] = [
+/// into a texel; output rows of a multiple of 4 (10 to 15) the texel input gradient
+/// (`nn_conv_dinput4`; 14 and 15 with input rows of 9 and 10 columns, strides 2 and 3); both
+/// (10 to 13) the texel weight gradient (`nn_conv_wgrad4`); the others the scalar kernels.
+const CONV_SHAPES: [(u32, u32, u32, u32, u32); 15] = [
     (5, 6, 3, 1, 0),
     (7, 6, 4, 2, 0),
     (6, 7, 4, 2, 1),
@@ -55,6 +57,8 @@ const CONV_SHAPES: [(u32, u32, u32, u32, u32); 13] = [
     (9, 8, 3, 1, 1),
     (5, 16, 5, 2, 2),
     (5, 8, 5, 1, 0),
+    (4, 9, 2, 2, 0),
+    (6, 10, 3, 3, 1),
 ];
 
 fn conv(shape: (u32, u32, u32, u32, u32), in_c: u32, out_c: u32, act: Activation) -> Conv2d {

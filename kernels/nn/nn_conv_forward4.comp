@@ -1,5 +1,6 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_control_flow_attributes : require
 // `nn_conv_forward.comp` for rows of whole texels (in_w a multiple of 4, the input at a texel
 // boundary), its kernel size, stride and padding specialization constants: per input channel
 // and kernel row, the window of input texels the block's taps cover and the 4 output channels'
@@ -68,16 +69,16 @@ void main() {
         for (uint ky = ky0; ky < ky1; ++ky) {
             int row = int(plane + uint(y0 + int(ky))) * row_texels;
             vec4 win[WT];
-            for (uint j = 0u; j < WT; ++j) {
+            [[unroll]] for (uint j = 0u; j < WT; ++j) {
                 int tx = t0 + int(j);
                 bool inside = tx >= 0 && tx < row_texels;
                 vec4 v = uintBitsToFloat(imageLoad(inp, row + clamp(tx, 0, row_texels - 1)));
                 win[j] = inside ? v : vec4(0.0);
             }
             uint w_at = ((c * K + ky) * K) * o_blocks + ob;
-            for (uint kx = 0u; kx < K; ++kx) {
+            [[unroll]] for (uint kx = 0u; kx < K; ++kx) {
                 vec4 w = uintBitsToFloat(imageLoad(weights, int(w_at + kx * o_blocks)));
-                for (uint r = 0u; r < 4u; ++r) {
+                [[unroll]] for (uint r = 0u; r < 4u; ++r) {
                     uint col = OFF + r * S + kx;
                     acc[r] += w * win[col / 4u][col % 4u];
                 }

@@ -1,5 +1,6 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_control_flow_attributes : require
 // `nn_conv_wgrad.comp` for rows of whole texels (in_w and out_w multiples of 4, the input and
 // the gradient at texel boundaries), its kernel size, stride and padding specialization
 // constants: per output row and block of 4 output columns, the 4 output channels' gradients and
@@ -79,7 +80,7 @@ void main() {
     uint in_plane = (b * pc.in_c + c) * pc.in_h;
     // acc[kx]: the 4 output channels' gradients of tap (ky, kx).
     vec4 acc[K];
-    for (uint kx = 0u; kx < K; ++kx) {
+    [[unroll]] for (uint kx = 0u; kx < K; ++kx) {
         acc[kx] = vec4(0.0);
     }
     for (uint oy = oy0; oy < oy1; ++oy) {
@@ -92,15 +93,15 @@ void main() {
             // Rows of d: the 4 columns' gradients of one channel; d[q][r].
             int t0 = (int(4u * xb * S) - int(P) - int(OFF)) / 4;
             vec4 win[WT];
-            for (uint j = 0u; j < WT; ++j) {
+            [[unroll]] for (uint j = 0u; j < WT; ++j) {
                 int tx = t0 + int(j);
                 bool inside = tx >= 0 && tx < row_texels;
                 vec4 v = uintBitsToFloat(imageLoad(inp, row + clamp(tx, 0, row_texels - 1)));
                 win[j] = inside ? v : vec4(0.0);
             }
-            for (uint r = 0u; r < 4u; ++r) {
+            [[unroll]] for (uint r = 0u; r < 4u; ++r) {
                 vec4 dr = vec4(d[0][r], d[1][r], d[2][r], d[3][r]);
-                for (uint kx = 0u; kx < K; ++kx) {
+                [[unroll]] for (uint kx = 0u; kx < K; ++kx) {
                     uint col = OFF + r * S + kx;
                     acc[kx] += dr * win[col / 4u][col % 4u];
                 }
@@ -112,7 +113,7 @@ void main() {
             break;
         }
         uint at = b * p_count + ((o0 + q) * pc.in_c + c) * kk + ky * K;
-        for (uint kx = 0u; kx < K; ++kx) {
+        [[unroll]] for (uint kx = 0u; kx < K; ++kx) {
             partial[at + kx] = acc[kx][q];
         }
     }

@@ -70,6 +70,8 @@ pub(crate) struct ConvBlocks {
     pub weight_gradient: u64,
     /// `nn_conv_wgrad4`: 4 output channels × 1 input channel per kernel row, then one per bias.
     pub weight_gradient4: u64,
+    /// `nn_conv_dinput4`: 4 input channels × 4 s columns of one input row.
+    pub input_gradient4: u64,
 }
 
 impl ConvBlocks {
@@ -86,6 +88,9 @@ impl ConvBlocks {
                 + u64::from(c.out_channels),
             weight_gradient4: by4(c.out_channels) * u64::from(c.in_channels) * k
                 + u64::from(c.out_channels),
+            input_gradient4: by4(c.in_channels)
+                * u64::from(c.in_h)
+                * u64::from(c.in_w).div_ceil(4 * s),
         }
     }
 }
@@ -135,6 +140,14 @@ fn packed_weight_texels(c: &Conv2d) -> u64 {
     u64::from(c.in_channels)
         * u64::from(c.kernel * c.kernel)
         * u64::from(c.out_channels.div_ceil(4))
+}
+
+/// Texels of a conv layer's weights packed by input channel: one per (output channel, tap,
+/// block of 4 input channels).
+fn packed_by_input_texels(c: &Conv2d) -> u64 {
+    u64::from(c.out_channels)
+        * u64::from(c.kernel * c.kernel)
+        * u64::from(c.in_channels.div_ceil(4))
 }
 
 /// The caller's ranges of one backward.
@@ -188,8 +201,13 @@ pub struct Sequential {
     /// Per conv layer whose input and output rows are whole texels: its weight gradient reading
     /// the input and dL/d(pre-activation) as texels.
     wgrad4: Vec<Option<Arc<Kernel>>>,
+    /// Per conv layer whose output rows are whole texels: its input gradient reading
+    /// dL/d(pre-activation) and the weights packed by input channel as texels.
+    dinput4: Vec<Option<Arc<Kernel>>>,
     /// Packs a conv layer's weights as texels of 4 output channels for its texel forward.
     conv_pack: Kernel,
+    /// Packs them as texels of 4 input channels for its texel input gradient.
+    conv_pack_by_input: Kernel,
     /// The packed weights of the conv layer being run (the largest such layer's size).
     conv_packed: Buffer,
     act_backward: Vec<Option<Arc<Kernel>>>,
@@ -263,6 +281,8 @@ impl Sequential {
         let conv_forward4 = KernelVariants::new(&specs::NN_CONV_FORWARD4);
         let conv_wgrad4 = KernelVariants::new(&specs::NN_CONV_WGRAD4);
         let mut wgrad4 = Vec::with_capacity(layers.len());
+        let conv_dinput4 = KernelVariants::new(&specs::NN_CONV_DINPUT4);
+        let mut dinput4 = Vec::with_capacity(layers.len());
         let act = KernelVariants::new(&specs::NN_ACT_BACKWARD);
         let mut forward = Vec::with_capacity(layers.len());
         let mut forward4 = Vec::with_capacity(layers.len());
@@ -281,6 +301,13 @@ impl Sequential {
                 Layer::Conv2d(c) if c.in_w % 4 == 0 => {
                     let shape = [c.kernel, c.stride, c.padding];
                     Some(conv_forward4.get(ctx, &[&constants[..], &shape[..]].concat())?)
+                }
+                _ => None,
+            });
+            dinput4.push(match layer {
+                Layer::Conv2d(c) if c.out_w() % 4 == 0 => {
+                    let shape = [c.kernel, c.stride, c.padding];
+                    Some(conv_dinput4.get(ctx, &[&constants[..], &shape[..]].concat())?)
                 }
                 _ => None,
             });
@@ -305,9 +332,8 @@ impl Sequential {
         }
         let packed_texels = layers
             .iter()
-            .zip(&forward4)
-            .filter_map(|(l, k)| match (l, k) {
-                (Layer::Conv2d(c), Some(_)) => Some(packed_weight_texels(c)),
+            .filter_map(|l| match l {
+                Layer::Conv2d(c) => Some(packed_weight_texels(c).max(packed_by_input_texels(c))),
                 _ => None,
             })
             .max()
@@ -320,6 +346,9 @@ impl Sequential {
             capacity,
             forward,
             conv_pack: Kernel::new(ctx, &specs::NN_CONV_PACK_WEIGHTS)?,
+            // Constant 2 (BY_INPUT) true; 0 and 1 (the activation's) unused.
+            conv_pack_by_input: Kernel::specialized(ctx, &specs::NN_CONV_PACK_WEIGHTS, &[0, 0, 1])?,
+            dinput4,
             conv_packed: ctx.create_buffer(
                 "nn conv packed weights",
                 crate::gpu::TEXEL_BYTES * packed_texels.max(1),
@@ -664,6 +693,30 @@ impl Sequential {
                 })?;
                 if let Some(d_in) = d_in {
                     rec.pass(&format!("nn layer {l} input gradient"), |rec| {
+                        let texels = texel_input(rec, &d_pre);
+                        if let Some(kernel) = self.dinput4[l].as_ref().filter(|_| texels) {
+                            let packed_n = packed_by_input_texels(c);
+                            let packed = self.conv_packed.range(0, TEXEL_BYTES * packed_n);
+                            rec.dispatch(
+                                &self.conv_pack_by_input,
+                                &specs::NnConvPackWeightsBindings { params, packed }
+                                    .for_kernel(&self.conv_pack_by_input)?,
+                                &self.conv_push(l, batch, packed_n),
+                                groups(packed_n, 64)?,
+                            )?;
+                            let total = n * blocks.input_gradient4;
+                            return rec.dispatch(
+                                kernel,
+                                &specs::NnConvDinput4Bindings {
+                                    weights: packed,
+                                    d_pre,
+                                    d_input: d_in,
+                                }
+                                .for_kernel(kernel)?,
+                                &self.conv_push(l, batch, total),
+                                groups(total, 64)?,
+                            );
+                        }
                         rec.dispatch(
                             &self.conv_dinput,
                             &specs::NnConvDinputBindings {
