@@ -196,7 +196,7 @@ pub struct Sequential {
     forward: Vec<Arc<Kernel>>,
     /// Per layer whose rows are whole texels (a linear layer's `in_features`, a conv's `in_w`, a
     /// multiple of 4): its forward reading inputs and weights as texels
-    /// ([`Sequential::texel_rows`] and [`Sequential::texel_input`] say when it applies).
+    /// ([`Sequential::texel_rows`] and [`texel_input`] say when it applies).
     forward4: Vec<Option<Arc<Kernel>>>,
     /// Per conv layer whose input and output rows are whole texels: its weight gradient reading
     /// the input and dL/d(pre-activation) as texels.
