@@ -227,7 +227,7 @@ pub struct FieldReconTraining<'c> {
     d_phi: Buffer,
     losses: Buffer,
     sum: SumChunks,
-    batches: Batches,
+    batches: Batches<'c>,
     /// The staged rows' objects (`batch` per row), for recording them.
     staged: Vec<u32>,
     capacity: u64,
@@ -245,7 +245,7 @@ impl<'c> Fitter<'c, FieldReconTraining<'c>> {
     /// from iteration 1's counts.
     pub fn new(
         ctx: &'c Context,
-        data: &TrainImages,
+        data: &'c TrainImages,
         opts: &FieldTrainOptions,
         params: Option<&[f32]>,
     ) -> Result<Self> {

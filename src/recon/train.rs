@@ -473,7 +473,7 @@ pub struct ReconTraining<'c> {
     decoder: MeshDecoder,
     d_outputs: Buffer,
     partials: Buffer,
-    batches: Batches,
+    batches: Batches<'c>,
     /// Zeros standing for dL/d(colours) when the colour loss is off.
     zero_colors: Buffer,
     /// The colour generator's scratch: the inputs' pooled cells and palettes.
@@ -494,10 +494,10 @@ pub struct ReconTraining<'c> {
 /// The reconstruction network's training, ready to run iterations ([`Fitter::run`]).
 pub type ReconTrainer<'c> = Fitter<'c, ReconTraining<'c>>;
 
-/// A trainer's batches on the GPU: the training images, the schedule's rows staged per
-/// submission, and each iteration's gathered input, targets, view rotations and target images.
-/// Both trainers use it.
-pub(crate) struct Batches {
+/// A trainer's batches on the GPU: the training images (borrowed, on the host), the schedule's
+/// rows staged per submission, and each iteration's gathered input, targets, view rotations and
+/// target images. Both trainers use it.
+pub(crate) struct Batches<'d> {
     classes: Vec<(String, Range<u32>)>,
     seed: u64,
     /// Objects per batch.
@@ -505,9 +505,9 @@ pub(crate) struct Batches {
     both_views: bool,
     shape: BatchShape,
     gather: BatchGather,
-    /// The training images (the NMR layout, on the host: the views a submission's rows name
-    /// are staged for it, so the dataset may be larger than a storage buffer).
-    images: Vec<u8>,
+    /// The training images (the NMR layout, on the host, borrowed: the views a submission's
+    /// rows name are staged for it, so the dataset may be larger than a storage buffer).
+    images: &'d [u8],
     views: Staged,
     view_table: Buffer,
     schedule: Staged,
@@ -517,12 +517,12 @@ pub(crate) struct Batches {
     pub(crate) rotations: Buffer,
 }
 
-impl Batches {
+impl<'d> Batches<'d> {
     /// `data` uploaded, for batches of `objects` objects drawn from `seed`, each seen from its
     /// view a or, with `both_views`, from a and from b (two inputs).
     pub(crate) fn new(
         ctx: &Context,
-        data: &TrainImages,
+        data: &'d TrainImages,
         objects: u32,
         both_views: bool,
         seed: u64,
@@ -545,7 +545,7 @@ impl Batches {
                 views: VIEWS,
             },
             gather: BatchGather::new(ctx)?,
-            images: data.images.clone(),
+            images: &data.images,
             views: Staged::new(ctx, "recon staged views", 2 * 4 * b * px)?,
             view_table: ctx.upload_buffer("recon view rotations", &table)?,
             schedule: Staged::new(ctx, "recon schedule", 16 * b)?,
@@ -568,7 +568,7 @@ impl Batches {
             self.both_views,
             first..=last,
         );
-        let views = super::batch::stage_views(ctx, &self.images, self.shape, &mut entries)?;
+        let views = super::batch::stage_views(ctx, self.images, self.shape, &mut entries)?;
         self.views.stage(ctx, bytemuck::cast_slice(&views))?;
         self.schedule.stage(ctx, bytemuck::cast_slice(&entries))?;
         Ok(entries)
@@ -715,11 +715,12 @@ impl TrainedParams {
 const COPIES: u32 = 2;
 
 impl<'c> Fitter<'c, ReconTraining<'c>> {
-    /// Uploads the training images, builds the network with `params` (or an initialization
-    /// from the seed), zeroes Adam's moments, and sizes the binning on the template.
+    /// Borrows the training images (each submission stages the views its batches name), builds
+    /// the network with `params` (or an initialization from the seed), zeroes Adam's moments,
+    /// and sizes the binning on the template.
     pub fn new(
         ctx: &'c Context,
-        data: &TrainImages,
+        data: &'c TrainImages,
         opts: &TrainOptions,
         params: Option<&[f32]>,
     ) -> Result<Self> {
