@@ -42,8 +42,10 @@ const ACTIVATIONS: [Activation; 5] = [
 /// take the texel forward (`nn_conv_forward4`), its window starting 0, 2, 3, 3, 2 and 0 columns
 /// into a texel; output rows of a multiple of 4 (10 to 15) the texel input gradient
 /// (`nn_conv_dinput4`; 14 and 15 with input rows of 9 and 10 columns, strides 2 and 3); both
-/// (10 to 13) the texel weight gradient (`nn_conv_wgrad4`); the others the scalar kernels.
-const CONV_SHAPES: [(u32, u32, u32, u32, u32); 15] = [
+/// (10 to 13) the texel weight gradient (`nn_conv_wgrad4`); the others the scalar kernels. The
+/// last two pad by as much as their kernel or more (all texel kernels, then the texel input
+/// gradient only).
+const CONV_SHAPES: [(u32, u32, u32, u32, u32); 17] = [
     (5, 6, 3, 1, 0),
     (7, 6, 4, 2, 0),
     (6, 7, 4, 2, 1),
@@ -59,6 +61,8 @@ const CONV_SHAPES: [(u32, u32, u32, u32, u32); 15] = [
     (5, 8, 5, 1, 0),
     (4, 9, 2, 2, 0),
     (6, 10, 3, 3, 1),
+    (4, 4, 2, 2, 2),
+    (3, 2, 1, 1, 1),
 ];
 
 fn conv(shape: (u32, u32, u32, u32, u32), in_c: u32, out_c: u32, act: Activation) -> Conv2d {

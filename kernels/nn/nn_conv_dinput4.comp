@@ -23,11 +23,13 @@ layout(constant_id = 2) const uint K = 5u;
 layout(constant_id = 3) const uint S = 2u;
 layout(constant_id = 4) const uint P = 2u;
 
-// Input columns 4 S xb + u, u < 4 S, gather from output columns 4 xb + m, m in [M0, M1]; those
-// lie in gradient texels xb + TB .. xb + TB + DT − 1. (P < K: the layer's validation.)
-const int M0 = -int((K - 1u - P) / S);
+// Input columns 4 S xb + u, u < 4 S, gather from output columns 4 xb + m, m in [M0, M1]
+// (M0 = ceil((P + 1 − K) / S), of either sign: the padding may pass the kernel); those lie in
+// gradient texels xb + TB .. xb + TB + DT − 1 (TB = floor(M0 / 4)).
+const int LOW = int(P) + 1 - int(K);
+const int M0 = LOW >= 0 ? (LOW + int(S) - 1) / int(S) : -((-LOW) / int(S));
 const int M1 = int((4u * S - 1u + P) / S);
-const int TB = -((3 - M0) / 4);
+const int TB = M0 >= 0 ? M0 / 4 : -((3 - M0) / 4);
 const uint DT = uint(M1 / 4 - TB + 1);
 const uint U = 4u * S;
 
