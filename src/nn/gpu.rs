@@ -135,19 +135,14 @@ fn texel_input(rec: &Recorder<'_>, r: &BufferRange<'_>) -> bool {
 }
 
 /// Texels of a conv layer's packed weights: one per (input channel, tap, block of 4 output
-/// channels).
-fn packed_weight_texels(c: &Conv2d) -> u64 {
-    u64::from(c.in_channels)
-        * u64::from(c.kernel * c.kernel)
-        * u64::from(c.out_channels.div_ceil(4))
-}
-
-/// Texels of a conv layer's weights packed by input channel: one per (output channel, tap,
-/// block of 4 input channels).
-fn packed_by_input_texels(c: &Conv2d) -> u64 {
-    u64::from(c.out_channels)
-        * u64::from(c.kernel * c.kernel)
-        * u64::from(c.in_channels.div_ceil(4))
+/// channels) or, `by_input`, per (output channel, tap, block of 4 input channels).
+fn packed_texels(c: &Conv2d, by_input: bool) -> u64 {
+    let (whole, blocked) = if by_input {
+        (c.out_channels, c.in_channels)
+    } else {
+        (c.in_channels, c.out_channels)
+    };
+    u64::from(whole) * u64::from(c.kernel * c.kernel) * u64::from(blocked.div_ceil(4))
 }
 
 /// The caller's ranges of one backward.
@@ -333,7 +328,7 @@ impl Sequential {
         let packed_texels = layers
             .iter()
             .filter_map(|l| match l {
-                Layer::Conv2d(c) => Some(packed_weight_texels(c).max(packed_by_input_texels(c))),
+                Layer::Conv2d(c) => Some(packed_texels(c, false).max(packed_texels(c, true))),
                 _ => None,
             })
             .max()
@@ -466,15 +461,7 @@ impl Sequential {
                     if let Some(kernel4) =
                         self.forward4[l].as_ref().filter(|_| texel_input(rec, &x))
                     {
-                        let texels = packed_weight_texels(c);
-                        let packed = self.conv_packed.range(0, TEXEL_BYTES * texels);
-                        rec.dispatch(
-                            &self.conv_pack,
-                            &specs::NnConvPackWeightsBindings { params, packed }
-                                .for_kernel(&self.conv_pack)?,
-                            &self.conv_push(l, batch, texels),
-                            groups(texels, 64)?,
-                        )?;
+                        let packed = self.record_pack(rec, l, batch, params, false)?;
                         return rec.dispatch(
                             kernel4,
                             &specs::NnConvForward4Bindings {
@@ -695,15 +682,7 @@ impl Sequential {
                     rec.pass(&format!("nn layer {l} input gradient"), |rec| {
                         let texels = texel_input(rec, &d_pre);
                         if let Some(kernel) = self.dinput4[l].as_ref().filter(|_| texels) {
-                            let packed_n = packed_by_input_texels(c);
-                            let packed = self.conv_packed.range(0, TEXEL_BYTES * packed_n);
-                            rec.dispatch(
-                                &self.conv_pack_by_input,
-                                &specs::NnConvPackWeightsBindings { params, packed }
-                                    .for_kernel(&self.conv_pack_by_input)?,
-                                &self.conv_push(l, batch, packed_n),
-                                groups(packed_n, 64)?,
-                            )?;
+                            let packed = self.record_pack(rec, l, batch, params, true)?;
                             let total = n * blocks.input_gradient4;
                             return rec.dispatch(
                                 kernel,
@@ -815,6 +794,35 @@ impl Sequential {
             4 * u64::from(f.in_features) * u64::from(f.out_features),
         );
         (texel_input(rec, &weights) && texel_input(rec, &x)).then_some((kernel, weights))
+    }
+
+    /// Records the packing of conv layer `l`'s weights (in `params`) as texels of 4 output
+    /// channels or, `by_input`, of 4 input channels; the packed range.
+    fn record_pack(
+        &self,
+        rec: &mut Recorder<'_>,
+        l: usize,
+        batch: u32,
+        params: BufferRange<'_>,
+        by_input: bool,
+    ) -> Result<BufferRange<'_>> {
+        let Layer::Conv2d(c) = &self.layers[l] else {
+            unreachable!("record_pack of a conv layer");
+        };
+        let texels = packed_texels(c, by_input);
+        let packed = self.conv_packed.range(0, TEXEL_BYTES * texels);
+        let kernel = if by_input {
+            &self.conv_pack_by_input
+        } else {
+            &self.conv_pack
+        };
+        rec.dispatch(
+            kernel,
+            &specs::NnConvPackWeightsBindings { params, packed }.for_kernel(kernel)?,
+            &self.conv_push(l, batch, texels),
+            groups(texels, 64)?,
+        )?;
+        Ok(packed)
     }
 
     fn conv_push(&self, l: usize, batch: u32, total: u64) -> ConvPush {
