@@ -158,6 +158,27 @@ fn every_generated_kernel_builds_a_pipeline() {
 }
 
 #[test]
+fn the_contexts_kernels_are_built_once_per_specialization_and_shared() {
+    let Some(gpu) = common::gpu() else { return };
+    let a = gpu.kernel(&specs::SCAN_BLOCK, &[]).unwrap();
+    let b = gpu.kernel(&specs::SCAN_BLOCK, &[]).unwrap();
+    assert!(std::sync::Arc::ptr_eq(&a, &b), "asked twice, built twice");
+    let other = gpu.kernel(&specs::SCAN_REDUCE, &[]).unwrap();
+    assert!(!std::sync::Arc::ptr_eq(&a, &other));
+    assert_eq!(other.name(), "scan_reduce");
+    // Another specialization of one kernel is another pipeline (constants: activation, slope,
+    // K, S, P).
+    let conv = &specs::NN_CONV_FORWARD4;
+    let slope = 0.2f32.to_bits();
+    let k3 = gpu.kernel(conv, &[0, slope, 3, 1, 1]).unwrap();
+    let k3_again = gpu.kernel(conv, &[0, slope, 3, 1, 1]).unwrap();
+    let k4 = gpu.kernel(conv, &[0, slope, 4, 2, 1]).unwrap();
+    assert!(std::sync::Arc::ptr_eq(&k3, &k3_again));
+    assert!(!std::sync::Arc::ptr_eq(&k3, &k4));
+    gpu.check_validation().unwrap();
+}
+
+#[test]
 fn dispatch_rejects_arguments_that_do_not_fit_the_kernel() {
     let Some(gpu) = common::gpu() else { return };
     let kernel = Kernel::new(&gpu, &specs::SCAN_REDUCE).unwrap();

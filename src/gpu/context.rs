@@ -2,6 +2,7 @@
 //! allocator. Either owned (headless, for the CLI, tests and benches) or adopted from a host engine
 //! with [`Context::from_raw`], in which case softvk destroys only what it created itself.
 
+use std::collections::HashMap;
 use std::ffi::{CStr, c_void};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -13,6 +14,7 @@ use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use super::descriptors::DescriptorCache;
 use super::shared::{Shared, ValidationLog, create_pipeline_cache, on_validation_message};
 use super::texel_views::TexelViews;
+use super::{Kernel, KernelSpec};
 use crate::error::{Error, Result, VkContext};
 
 const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
@@ -219,6 +221,8 @@ pub struct Context {
     info: DeviceInfo,
     /// [`Context::cpu_workgroups`].
     cpu_workgroups: bool,
+    /// [`Context::kernel`]'s pipelines, by kernel name and specialization constants.
+    kernels: Mutex<HashMap<(&'static str, Vec<u32>), Arc<Kernel>>>,
 }
 
 /// The atomic cells behind [`Counters`].
@@ -562,8 +566,24 @@ impl Context {
             pool_lock: Mutex::new(()),
             counters: CounterCells::default(),
             cpu_workgroups: info.device_type == vk::PhysicalDeviceType::CPU,
+            kernels: Mutex::new(HashMap::new()),
             info,
         })
+    }
+
+    /// Kernel `spec` specialized with `constants` (see [`Kernel::specialized`]), built the
+    /// first time any caller asks for it and shared from then on for the life of the context.
+    /// For what many small objects each need (one sampler per training object): a pipeline costs
+    /// a compile and, on lavapipe, its machine code in memory, whoever builds it.
+    pub fn kernel(&self, spec: &'static KernelSpec, constants: &[u32]) -> Result<Arc<Kernel>> {
+        let mut kernels = self.kernels.lock().unwrap_or_else(|e| e.into_inner());
+        let key = (spec.name, constants.to_vec());
+        if let Some(kernel) = kernels.get(&key) {
+            return Ok(Arc::clone(kernel));
+        }
+        let kernel = Arc::new(Kernel::specialized(self, spec, constants)?);
+        kernels.insert(key, Arc::clone(&kernel));
+        Ok(kernel)
     }
 
     /// The device this context runs on.

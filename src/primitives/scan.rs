@@ -4,6 +4,8 @@
 //! `maxStorageBufferRange` are processed in chunks of bound sub-ranges, so lavapipe's 128 MiB limit
 //! does not cap the length. Sums wrap modulo 2^32, exactly as the CPU twin's.
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
@@ -35,8 +37,8 @@ struct BlockPush {
 
 /// The scan's pipelines, made once per context.
 pub struct Scan {
-    reduce: Kernel,
-    block: Kernel,
+    reduce: Arc<Kernel>,
+    block: Arc<Kernel>,
 }
 
 /// Scratch for scans of up to `capacity` elements: the block sums of every level, and the
@@ -80,11 +82,11 @@ impl ScanScratch {
 }
 
 impl Scan {
-    /// Builds the scan pipelines.
+    /// The scan's pipelines (the context's, shared by every scan: [`Context::kernel`]).
     pub fn new(ctx: &Context) -> Result<Self> {
         Ok(Self {
-            reduce: Kernel::new(ctx, &specs::SCAN_REDUCE)?,
-            block: Kernel::new(ctx, &specs::SCAN_BLOCK)?,
+            reduce: ctx.kernel(&specs::SCAN_REDUCE, &[])?,
+            block: ctx.kernel(&specs::SCAN_BLOCK, &[])?,
         })
     }
 

@@ -24,6 +24,8 @@
 //! f32 operations, so the twin ([`cpu`]) reproduces rays and uniform points bit for bit; the
 //! Gaussian points go through the GPU's `log`, `sqrt`, `cos` and `sin` and agree to about 1e-7.
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use super::rng::{STREAM_RAYS, stream_key};
@@ -115,8 +117,8 @@ impl PointsPush {
 
 /// The sampler: its kernels, the contour CDF, the boundary points and the output buffers.
 pub struct Sampler {
-    rays_kernel: Kernel,
-    points_kernel: Kernel,
+    rays_kernel: Arc<Kernel>,
+    points_kernel: Arc<Kernel>,
     settings: ProbeSettings,
     views: u32,
     width: u32,
@@ -199,8 +201,8 @@ impl Sampler {
             ctx.upload_buffer("probe hull boundary", &boundary)?
         };
         Ok(Self {
-            rays_kernel: Kernel::new(ctx, &specs::PROBE_SAMPLE_RAYS)?,
-            points_kernel: Kernel::new(ctx, &specs::PROBE_SAMPLE_POINTS)?,
+            rays_kernel: ctx.kernel(&specs::PROBE_SAMPLE_RAYS, &[])?,
+            points_kernel: ctx.kernel(&specs::PROBE_SAMPLE_POINTS, &[])?,
             settings: *settings,
             views,
             width: targets.width,
