@@ -137,3 +137,37 @@ fn the_pose_fitting_benchmark_times_its_iterations_and_its_loop() {
         );
     }
 }
+
+#[test]
+fn the_conditioned_field_training_benchmark_times_every_slot_of_its_batch() {
+    let Some(gpu) = common::gpu() else { return };
+    let opts = BenchOptions {
+        scenes: vec!["train-recon-field".into()],
+        repeat: 1,
+        ..BenchOptions::default()
+    };
+    let mut lines = Vec::new();
+    let records = bench::run_fit(&gpu, &opts, |line| lines.push(line.to_string())).unwrap();
+    let log = lines.join("\n");
+    assert_eq!(records.len(), 1, "{log}");
+    let r = &records[0];
+    assert_eq!(
+        (r.scene.as_str(), r.pass),
+        ("train-recon-field", "fit-iteration")
+    );
+    // The default batch: 16 objects of 24 views at 64².
+    assert_eq!((r.views, r.width, r.height), (16 * 24, 64, 64));
+    assert!(r.entries.is_some_and(|e| e > 0), "{log}");
+    let count = |pass: &str| r.passes.iter().filter(|(name, _)| name == pass).count();
+    for pass in [
+        "sample",
+        "probe forward",
+        "probe backward",
+        "field backward",
+    ] {
+        assert_eq!(count(pass), 16, "{pass}: {log}");
+    }
+    for pass in ["recon encoder", "recon encoder backward", "adam"] {
+        assert_eq!(count(pass), 1, "{pass}: {log}");
+    }
+}

@@ -425,6 +425,14 @@ pub fn run_fit(
             records.push(super::recon::run_recon_train(ctx, opts, &mut progress)?);
             continue;
         }
+        if name == "train-recon-field" {
+            records.push(super::recon::run_field_recon_train(
+                ctx,
+                opts,
+                &mut progress,
+            )?);
+            continue;
+        }
         // SoftRas's template, as `softvk fit-mesh` uses it by default.
         let template = default_template();
         let fit_opts = MeshFitOptions {

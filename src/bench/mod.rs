@@ -46,7 +46,13 @@ pub const LARGE_SCENES: [&str; 4] = ["spot3-1024", "blurry-1024", "crowded-327k"
 
 /// The fitting benchmark's scenes ([`run_fit`]); run only when named (`--scene fit-120`,
 /// `--scene fit-field`).
-pub const FIT_SCENES: [&str; 4] = ["fit-120", "fit-field", "fit-pose", "train-recon"];
+pub const FIT_SCENES: [&str; 5] = [
+    "fit-120",
+    "fit-field",
+    "fit-pose",
+    "train-recon",
+    "train-recon-field",
+];
 
 /// Iterations per submission that [`run_fit`]'s loop timing compares with one.
 pub const FIT_BATCH: u32 = 10;

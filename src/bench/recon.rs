@@ -1,5 +1,6 @@
-//! The reconstruction trainer's iteration (`softvk bench --scene train-recon`): where a
-//! `softvk train-recon` iteration at its defaults spends its time, pass by pass.
+//! The reconstruction trainers' iterations (`softvk bench --scene train-recon`,
+//! `--scene train-recon-field`): where a `softvk train-recon` iteration at its defaults spends
+//! its time, pass by pass, for the mesh network and the conditioned field.
 
 use super::fits::{fit_iterations, time_iterations};
 use super::forward::summary;
@@ -8,6 +9,7 @@ use crate::error::Result;
 use crate::gpu::Context;
 use crate::raster::gpu::{Method, Renderer};
 use crate::recon::dataset::{DatasetOptions, Split, render_shapes, split_shapes};
+use crate::recon::field::{FieldReconTrainer, FieldTrainOptions};
 use crate::recon::train::{ReconTrainer, TrainImages, TrainOptions, template};
 
 /// Objects per class of the benchmark's data: the iteration's cost does not depend on how many
@@ -29,28 +31,8 @@ pub(super) fn run_recon_train(
     progress: &mut impl FnMut(&str),
 ) -> Result<BenchRecord> {
     let name = "train-recon";
-    let data_opts = DatasetOptions {
-        train: OBJECTS_PER_CLASS,
-        ..DatasetOptions::default()
-    };
-    let renderer = Renderer::new(ctx)?;
-    let mut images = Vec::new();
-    let mut classes = Vec::new();
-    for &category in &data_opts.categories {
-        let shapes = split_shapes(&data_opts, category, Split::Train);
-        let first = (classes.len() * OBJECTS_PER_CLASS) as u32;
-        classes.push((
-            category.name().to_string(),
-            first..first + OBJECTS_PER_CLASS as u32,
-        ));
-        images.extend(render_shapes(ctx, &renderer, &shapes, &data_opts)?);
-    }
     let train_opts = TrainOptions::default();
-    let data = TrainImages {
-        images,
-        classes,
-        size: train_opts.net.image,
-    };
+    let data = bench_data(ctx, train_opts.net.image)?;
     let mut trainer = ReconTrainer::new(ctx, &data, &train_opts, None)?;
     let inputs = train_opts.inputs();
     progress(&format!(
@@ -100,6 +82,96 @@ pub(super) fn run_recon_train(
         faces: template().face_count() as u32,
         width: train_opts.net.image,
         height: train_opts.net.image,
+        rows: None,
+        entries: Some(entries),
+        identical_to_brute: None,
+    })
+}
+
+/// [`OBJECTS_PER_CLASS`] training objects of each of `softvk dataset`'s default classes, at
+/// `size`².
+fn bench_data(ctx: &Context, size: u32) -> Result<TrainImages> {
+    let data_opts = DatasetOptions {
+        train: OBJECTS_PER_CLASS,
+        ..DatasetOptions::default()
+    };
+    let renderer = Renderer::new(ctx)?;
+    let mut images = Vec::new();
+    let mut classes = Vec::new();
+    for &category in &data_opts.categories {
+        let shapes = split_shapes(&data_opts, category, Split::Train);
+        let first = (classes.len() * OBJECTS_PER_CLASS) as u32;
+        classes.push((
+            category.name().to_string(),
+            first..first + OBJECTS_PER_CLASS as u32,
+        ));
+        images.extend(render_shapes(ctx, &renderer, &shapes, &data_opts)?);
+    }
+    Ok(TrainImages {
+        images,
+        classes,
+        size,
+    })
+}
+
+/// A `softvk train-recon --field` iteration at its defaults ([`FieldTrainOptions::default`]:
+/// batch 16, each object probed with 64 rays in each of its 24 views and 2 048 anchors), on the
+/// data of [`run_recon_train`], timed the same way. `entries` is the probers' binned entries of
+/// the last iteration (the largest of the batch).
+pub(super) fn run_field_recon_train(
+    ctx: &Context,
+    opts: &BenchOptions,
+    progress: &mut impl FnMut(&str),
+) -> Result<BenchRecord> {
+    let name = "train-recon-field";
+    let train_opts = FieldTrainOptions::default();
+    let data = bench_data(ctx, train_opts.net.net.image)?;
+    let mut trainer = FieldReconTrainer::new(ctx, &data, &train_opts, None)?;
+    let probe = train_opts.probe;
+    progress(&format!(
+        "{name}: batch {} objects, {} rays per view and {} anchors each, network {:?}; entry \
+         capacity {}",
+        train_opts.batch,
+        probe.rays_per_view,
+        probe.anchors,
+        train_opts.net,
+        trainer.capacity()
+    ));
+    let mut it = 1u32;
+    fit_iterations(&mut trainer, &mut it, 1, None, progress, name)?;
+    let timing = time_iterations(
+        ctx,
+        &mut trainer,
+        &mut it,
+        opts.repeat,
+        1024,
+        false,
+        progress,
+        name,
+    )?;
+    let entries = trainer.last_entries();
+    progress(&format!(
+        "{name} fit-iteration: {entries} entries; {}",
+        summary(&timing, opts.repeat)
+    ));
+    Ok(BenchRecord {
+        scene: name.to_string(),
+        method: Method::Tiled {
+            tile: probe.tile_size,
+        },
+        pass: "fit-iteration",
+        gpu_ms: timing.gpu_ms,
+        wall_ms: timing.wall_ms,
+        pairs: 0,
+        counts: None,
+        device: ctx.info().name.clone(),
+        driver: ctx.info().driver.clone(),
+        repeats: opts.repeat,
+        passes: timing.passes,
+        views: train_opts.batch * crate::recon::dataset::VIEWS as u32,
+        faces: 0,
+        width: train_opts.net.net.image,
+        height: train_opts.net.net.image,
         rows: None,
         entries: Some(entries),
         identical_to_brute: None,

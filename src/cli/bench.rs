@@ -26,8 +26,8 @@ pub struct BenchArgs {
     /// the frame; `fit-120`
     /// times a mesh-fitting iteration at SoftRas's demo setting, `fit-field` a `softvk
     /// fit-field` iteration at its defaults on spot, `fit-pose` a `softvk fit-pose` iteration
-    /// at its defaults on spot, `train-recon` a `softvk train-recon` iteration at its defaults
-    /// (each only when named).
+    /// at its defaults on spot, `train-recon` a `softvk train-recon` iteration at its defaults,
+    /// `train-recon-field` one of `softvk train-recon --field` (each only when named).
     #[arg(long = "scene", value_name = "NAME")]
     pub scenes: Vec<String>,
     /// Timed submissions per (scene, method, pass); times are medians.
