@@ -32,12 +32,7 @@ fn time(
         recorded.submit_and_wait().expect("submit");
         let wall = start.elapsed();
         total += if gpu_clock {
-            let ms: f64 = timer
-                .results(ctx)
-                .expect("timestamps")
-                .iter()
-                .map(|t| t.ms)
-                .sum();
+            let ms = timer.total_ms(ctx).expect("timestamps");
             Duration::from_secs_f64(ms * 1e-3)
         } else {
             wall

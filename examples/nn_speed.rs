@@ -72,7 +72,7 @@ fn main() -> softvk::Result<()> {
             wall[wall.len() - 1]
         );
         for pass in timer.results(&ctx)? {
-            println!("  {:<24} {:8.2} ms GPU", pass.name, pass.ms);
+            println!("  {:<24} {:8.2} ms GPU", pass.indented(), pass.ms);
         }
     }
     Ok(())

@@ -316,17 +316,25 @@ fn timer_reports_each_named_pass() {
             scan.record(rec, &scratch, buffer.whole(), buffer.whole(), n)
         })?;
         rec.pass("second", |rec| {
-            scan.record(rec, &scratch, buffer.whole(), buffer.whole(), n)
+            rec.pass("part", |rec| {
+                scan.record(rec, &scratch, buffer.whole(), buffer.whole(), n)
+            })
         })
     })
     .unwrap();
     let times = timer.results(&gpu).unwrap();
-    let names: Vec<_> = times.iter().map(|t| t.name.as_str()).collect();
-    assert_eq!(names, ["first", "second"]);
+    let names: Vec<_> = times.iter().map(|t| t.indented()).collect();
+    assert_eq!(names, ["first", "second", "  part"]);
+    let depths: Vec<_> = times.iter().map(|t| t.depth).collect();
+    assert_eq!(depths, [0, 0, 1]);
     assert!(
         times.iter().all(|t| t.ms > 0.0 && t.ms < 60_000.0),
         "{times:?}"
     );
+    // The total counts the nested pass once, inside its parent.
+    let total = timer.total_ms(&gpu).unwrap();
+    assert_eq!(total, times[0].ms + times[1].ms);
+    assert!(times[2].ms <= times[1].ms, "{times:?}");
     // Scanning the scan of ones gives 0, 0, 1, 3, 6, ...: (i - 1) i / 2.
     let out = gpu.read_buffer::<u32>(&buffer, 0, 5).unwrap();
     assert_eq!(out, vec![0, 0, 1, 3, 6]);

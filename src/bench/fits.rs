@@ -25,8 +25,8 @@ use crate::raster::settings::{Dist, RasterSettings, Rgb};
 /// submission ([`FieldFitter::run`](crate::fit::field_fit::FieldFitter::run), with GPU
 /// timestamps; a fit runs `log_every` of them per submission): `wall_ms` is the median wall
 /// time of a whole iteration (recording, submission, the gate's status read), `gpu_ms` the
-/// median of the sum of its passes, and `passes` every pass (parts of a pass indented, after
-/// it). `pairs` is 0 (not counted for probing); `entries` is the binning's (anchor, tile)
+/// median of the sum of its top-level passes, and `passes` every pass (parts of a pass indented,
+/// after it). `pairs` is 0 (not counted for probing); `entries` is the binning's (anchor, tile)
 /// entry count of the last iteration.
 fn run_field_fit(
     ctx: &Context,
@@ -250,7 +250,7 @@ fn time_fit_loop(
     for _ in 0..FIT_BATCH / k {
         wall += fit_iterations(fitter, it, k, timer.as_mut(), progress, name)?;
         if let Some(timer) = &timer {
-            gpu += timer.results(ctx)?.iter().map(|t| t.ms).sum::<f64>();
+            gpu += timer.total_ms(ctx)?;
         }
     }
     let n = f64::from(FIT_BATCH);
@@ -282,9 +282,10 @@ struct LoopTiming {
 }
 
 /// `repeat` iterations of `fitter` from `*it`, one per submission, with GPU timestamps (room for
-/// `timer_passes` passes): per iteration the wall time, the GPU time (the top-level passes:
-/// an indented name is a part of the pass above it) and every pass; with `shares`, the
-/// `render`, `backward` and `rest` sums of [`fit_pass_share`] first. Medians.
+/// `timer_passes` passes): per iteration the wall time, the GPU time (the top-level passes: a
+/// nested pass, listed indented after its parent, is part of its parent's time) and every pass;
+/// with `shares`, the `render`, `backward` and `rest` sums of [`fit_pass_share`] over the
+/// top-level passes first. Medians.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn time_iterations(
     ctx: &Context,
@@ -314,25 +315,19 @@ pub(super) fn time_iterations(
         )?);
         let Some(timer) = &timer else { continue };
         let times = timer.results(ctx)?;
-        gpu.push(
-            times
-                .iter()
-                .filter(|t| !t.name.starts_with(' '))
-                .map(|t| t.ms)
-                .sum(),
-        );
+        gpu.push(times.iter().filter(|t| t.depth == 0).map(|t| t.ms).sum());
         let mut row: Vec<(String, f64)> = Vec::new();
         if shares {
             row.extend(["render", "backward", "rest"].iter().map(|share| {
                 let ms = times
                     .iter()
-                    .filter(|t| fit_pass_share(&t.name) == *share)
+                    .filter(|t| t.depth == 0 && fit_pass_share(&t.name) == *share)
                     .map(|t| t.ms)
                     .sum();
                 (share.to_string(), ms)
             }));
         }
-        row.extend(times.iter().map(|t| (t.name.clone(), t.ms)));
+        row.extend(times.iter().map(|t| (t.indented(), t.ms)));
         if passes.is_empty() {
             passes = row.iter().map(|(n, _)| (n.clone(), Vec::new())).collect();
         }

@@ -96,13 +96,15 @@ impl Samples {
         self.wall_ms.push(start.elapsed().as_secs_f64() * 1e3);
         if let Some(timer) = timer {
             let times = timer.results(ctx)?;
-            self.gpu_ms.push(times.iter().map(|t| t.ms).sum());
+            self.gpu_ms
+                .push(times.iter().filter(|t| t.depth == 0).map(|t| t.ms).sum());
             // A pass recorded more than once (per view group or window) counts as one, summed.
-            let mut merged: Vec<(&str, f64)> = Vec::new();
+            let mut merged: Vec<(String, f64)> = Vec::new();
             for t in &times {
-                match merged.iter_mut().find(|(name, _)| *name == t.name) {
+                let name = t.indented();
+                match merged.iter_mut().find(|(n, _)| *n == name) {
                     Some((_, ms)) => *ms += t.ms,
-                    None => merged.push((&t.name, t.ms)),
+                    None => merged.push((name, t.ms)),
                 }
             }
             if self.passes.is_empty() {

@@ -23,6 +23,8 @@ pub struct Recorder<'a> {
     cmd: vk::CommandBuffer,
     timer: Option<&'a mut Timer>,
     gate: Option<Gate>,
+    /// How many [`Recorder::pass`]es are open around what is recorded now.
+    depth: u32,
 }
 
 /// The indirect-argument slots of an open [`Recorder::gated`] region.
@@ -50,6 +52,7 @@ impl<'a> Recorder<'a> {
             cmd,
             timer: None,
             gate: None,
+            depth: 0,
         }
     }
 
@@ -77,10 +80,15 @@ impl<'a> Recorder<'a> {
         self.cmd
     }
 
-    /// Records `f` as a named pass, bracketed by GPU timestamps when a timer is attached.
+    /// Records `f` as a named pass, bracketed by GPU timestamps when a timer is attached. A pass
+    /// opened inside another is nested in it ([`PassTime::depth`]): its time is part of its
+    /// parent's.
     pub fn pass<R>(&mut self, name: &str, f: impl FnOnce(&mut Self) -> Result<R>) -> Result<R> {
         let first = self.timestamp(name)?;
-        let result = f(self)?;
+        self.depth += 1;
+        let result = f(self);
+        self.depth -= 1;
+        let result = result?;
         if let Some(index) = first {
             self.write_timestamp(index + 1);
         }
@@ -88,6 +96,7 @@ impl<'a> Recorder<'a> {
     }
 
     fn timestamp(&mut self, name: &str) -> Result<Option<u32>> {
+        let depth = self.depth;
         let Some(timer) = self.timer.as_deref_mut() else {
             return Ok(None);
         };
@@ -98,7 +107,7 @@ impl<'a> Recorder<'a> {
                 timer.capacity / 2
             )));
         }
-        timer.labels.push(name.to_string());
+        timer.labels.push((name.to_string(), depth));
         self.write_timestamp(index);
         Ok(Some(index))
     }
@@ -498,7 +507,8 @@ impl<'a> Recorder<'a> {
 pub struct Timer {
     pool: vk::QueryPool,
     capacity: u32,
-    labels: Vec<String>,
+    /// Each pass's name and depth, in recording order.
+    labels: Vec<(String, u32)>,
     shared: Arc<Shared>,
 }
 
@@ -507,8 +517,18 @@ pub struct Timer {
 pub struct PassTime {
     /// The name given to [`Recorder::pass`].
     pub name: String,
+    /// How many passes enclose it: 0 for a top-level pass, 1 for a part of one, and so on.
+    pub depth: u32,
     /// Milliseconds between the pass's two timestamps.
     pub ms: f64,
+}
+
+impl PassTime {
+    /// The name indented by two spaces per level of [`PassTime::depth`], for listing passes
+    /// after their parents.
+    pub fn indented(&self) -> String {
+        format!("{}{}", "  ".repeat(self.depth as usize), self.name)
+    }
 }
 
 impl Timer {
@@ -533,6 +553,17 @@ impl Timer {
             labels: Vec::new(),
             shared: Arc::clone(&ctx.shared),
         })
+    }
+
+    /// The GPU time of the last completed recording's top-level passes, summed (a nested
+    /// pass's time is already part of its parent's), ms.
+    pub fn total_ms(&self, ctx: &Context) -> Result<f64> {
+        Ok(self
+            .results(ctx)?
+            .iter()
+            .filter(|t| t.depth == 0)
+            .map(|t| t.ms)
+            .sum())
     }
 
     /// The pass times of the last completed recording, in recording order.
@@ -562,8 +593,9 @@ impl Timer {
             .labels
             .iter()
             .zip(raw.chunks_exact(2))
-            .map(|(name, t)| PassTime {
+            .map(|((name, depth), t)| PassTime {
                 name: name.clone(),
+                depth: *depth,
                 ms: ((t[1].wrapping_sub(t[0])) & mask) as f64 * period * 1e-6,
             })
             .collect())

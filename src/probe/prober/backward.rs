@@ -103,11 +103,11 @@ impl Prober {
         let anchors = anchors.sub(0, 16 * self.anchors());
         let phi = phi.sub(0, 4 * self.anchors());
         if total > 0 {
-            rec.pass("  backward entries", |rec| {
+            rec.pass("backward entries", |rec| {
                 self.dispatch_backward(rec, gpu, total, anchors, phi, rays, ranges)
             })?;
         }
-        rec.pass("  reduce", |rec| {
+        rec.pass("reduce", |rec| {
             rec.dispatch(
                 &self.reduce_kernel,
                 &specs::ProbeReduceBindings {
@@ -161,7 +161,7 @@ impl Prober {
         let buckets = self.anchors();
         let key_bits = (u64::BITS - (buckets.max(2) - 1).leading_zeros()).max(1);
         let ranges = self.item_ranges.range(0, 8 * buckets);
-        rec.pass("  ray sort by anchor", |rec| {
+        rec.pass("ray sort by anchor", |rec| {
             rec.dispatch(
                 &self.aux_keys_kernel,
                 &specs::ProbeAuxKeysBindings {
@@ -191,7 +191,7 @@ impl Prober {
             self.binner
                 .record_ranges(rec, self.aux_keys.range(0, 8 * n), ranges, n, buckets)
         })?;
-        rec.pass("  max gradient", |rec| {
+        rec.pass("max gradient", |rec| {
             rec.dispatch(
                 &self.max_grad_kernel,
                 &specs::ProbeMaxGradBindings {

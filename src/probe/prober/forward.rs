@@ -118,11 +118,11 @@ impl Prober {
         rays: BufferRange<'_>,
     ) -> Result<()> {
         self.check_inputs(gpu, &anchors, Some(&phi), Some(&rays))?;
-        rec.pass("  bin list", |rec| self.record_list(rec))?;
+        rec.pass("bin list", |rec| self.record_list(rec))?;
         let rays = rays.sub(0, 16 * self.rays());
-        rec.pass("  ray sort", |rec| self.record_ray_sort(rec, rays))?;
+        rec.pass("ray sort", |rec| self.record_ray_sort(rec, rays))?;
         if self.rays() > 0 {
-            rec.pass("  forward rays", |rec| {
+            rec.pass("forward rays", |rec| {
                 self.dispatch_forward(rec, gpu, &anchors, &phi, &rays)
             })?;
         }
@@ -234,8 +234,8 @@ impl Prober {
         let n = self.rays();
         // The backward reads the entries and the rays by tile, which the tiled forward lists
         // and sorts.
-        rec.pass("  bin list", |rec| self.record_list(rec))?;
-        rec.pass("  ray sort", |rec| {
+        rec.pass("bin list", |rec| self.record_list(rec))?;
+        rec.pass("ray sort", |rec| {
             self.record_ray_sort(rec, rays.sub(0, 16 * n))
         })?;
         // More anchors than one invocation may loop over are folded in passes.

@@ -107,8 +107,8 @@ impl Prober {
         gpu: &GpuTargets,
         anchors: BufferRange<'_>,
     ) -> Result<()> {
-        rec.pass("  items", |rec| self.record_items(rec, gpu, anchors))?;
-        rec.pass("  mask scan", |rec| self.record_mask_scan(rec))
+        rec.pass("items", |rec| self.record_items(rec, gpu, anchors))?;
+        rec.pass("mask scan", |rec| self.record_mask_scan(rec))
     }
 
     fn record_mask_scan(&self, rec: &mut Recorder<'_>) -> Result<()> {
