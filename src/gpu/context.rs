@@ -222,8 +222,11 @@ pub struct Context {
     /// [`Context::cpu_workgroups`].
     cpu_workgroups: bool,
     /// [`Context::kernel`]'s pipelines, by kernel name and specialization constants.
-    kernels: Mutex<HashMap<(&'static str, Vec<u32>), Arc<Kernel>>>,
+    kernels: Mutex<HashMap<KernelKey, Arc<Kernel>>>,
 }
+
+/// A pipeline of [`Context::kernel`]: the kernel's name and its specialization constants.
+type KernelKey = (&'static str, Vec<u32>);
 
 /// The atomic cells behind [`Counters`].
 #[derive(Default)]
