@@ -1,12 +1,9 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
-// One Adam step with PyTorch's semantics (torch.optim.Adam, single-tensor path, no weight decay,
-// no amsgrad), per parameter, in place:
-//   m ← lerp(m, g, 1 − β1);  v ← β2 v + (1 − β2) g²;
-//   p ← p − (lr / (1 − β1^t)) · m / (sqrt(v) / sqrt(1 − β2^t) + eps).
-// The bias corrections are computed on the host in f64, as PyTorch does in Python floats.
-// Twin: `crate::fit::adam::cpu::step`.
+// Adam (`adam.glsl`) on parameters `first .. n`, one an invocation: the tail of a vector whose
+// whole texels of four `adam_step4.comp` updates, or all of it. Twin: `crate::fit::adam::cpu::step`.
 #include "common.glsl"
+#include "adam.glsl"
 
 layout(local_size_x = 64) in;
 
@@ -15,29 +12,16 @@ layout(std430, set = 0, binding = 1) readonly buffer Grads { float grads[]; };
 layout(std430, set = 0, binding = 2) buffer FirstMoment { float m[]; };
 layout(std430, set = 0, binding = 3) buffer SecondMoment { float v[]; };
 
-layout(push_constant) uniform Push {
-    uint n;
-    float lerp_weight;     // 1 − β1
-    float beta2;
-    float one_minus_beta2;
-    float step_size;       // lr / (1 − β1^t)
-    float bias2_sqrt;      // sqrt(1 − β2^t)
-    float eps;
-    uint pad;
-} pc;
-
 void main() {
-    uint i = linear_group_id() * 64u + gl_LocalInvocationIndex;
+    uint i = pc.first + linear_group_id() * 64u + gl_LocalInvocationIndex;
     if (i >= pc.n) {
         return;
     }
-    float g = grads[i];
-    float mi = m[i];
-    // ATen's lerp: exact at both ends whichever side the weight is on.
-    mi = pc.lerp_weight < 0.5 ? mi + pc.lerp_weight * (g - mi)
-                              : g - (g - mi) * (1.0 - pc.lerp_weight);
-    float vi = v[i] * pc.beta2 + pc.one_minus_beta2 * (g * g);
-    m[i] = mi;
-    v[i] = vi;
-    params[i] -= pc.step_size * (mi / (sqrt(vi) / pc.bias2_sqrt + pc.eps));
+    vec4 p = vec4(params[i]);
+    vec4 mi = vec4(m[i]);
+    vec4 vi = vec4(v[i]);
+    adam_update(p, vec4(grads[i]), mi, vi);
+    m[i] = mi.x;
+    v[i] = vi.x;
+    params[i] = p.x;
 }

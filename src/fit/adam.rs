@@ -1,5 +1,6 @@
 //! Adam with PyTorch's semantics (`torch.optim.Adam`: bias-corrected, no weight decay, no
-//! amsgrad), one kernel (`adam_step.comp`) updating parameters and both moments in place:
+//! amsgrad), updating parameters and both moments in place (`adam.glsl`: `adam_step4.comp` on
+//! whole texels of four parameters, `adam_step.comp` on the rest):
 //!
 //! ```text
 //! m ← lerp(m, g, 1 − β1); v ← β2 v + (1 − β2) g²
@@ -8,6 +9,8 @@
 //!
 //! The step number t (from 1) is given at record time; the bias corrections are computed on the
 //! host in f64, as PyTorch computes them in Python floats.
+
+use std::sync::Arc;
 
 use bytemuck::{Pod, Zeroable};
 
@@ -61,11 +64,11 @@ struct AdamPush {
     step_size: f32,
     bias2_sqrt: f32,
     eps: f32,
-    pad: u32,
+    first: u32,
 }
 
 impl AdamPush {
-    fn new(n: u32, o: &AdamOptions, step: u32) -> Self {
+    fn new(n: u32, first: u32, o: &AdamOptions, step: u32) -> Self {
         let (b1, b2) = o.betas;
         let t = f64::from(step);
         Self {
@@ -76,14 +79,16 @@ impl AdamPush {
             step_size: (o.lr / (1.0 - b1.powf(t))) as f32,
             bias2_sqrt: (1.0 - b2.powf(t)).sqrt() as f32,
             eps: o.eps as f32,
-            pad: 0,
+            first,
         }
     }
 }
 
-/// Adam over `n` parameters on the GPU: the kernel and the two moment buffers.
+/// Adam over `n` parameters on the GPU: the kernels (whole texels of four parameters, and the
+/// rest one by one) and the two moment buffers.
 pub struct Adam {
-    kernel: Kernel,
+    kernel: Arc<Kernel>,
+    kernel4: Arc<Kernel>,
     n: u32,
     options: AdamOptions,
     m: Buffer,
@@ -97,7 +102,8 @@ impl Adam {
         check_binding(ctx, "Adam's parameters", 4 * n)?;
         let zeros = vec![0f32; n as usize];
         Ok(Self {
-            kernel: Kernel::new(ctx, &specs::ADAM_STEP)?,
+            kernel: ctx.kernel(&specs::ADAM_STEP, &[])?,
+            kernel4: ctx.kernel(&specs::ADAM_STEP4, &[])?,
             n: n as u32, // < maxStorageBufferRange / 4
             options,
             m: ctx.upload_buffer("adam first moment", &zeros)?,
@@ -167,18 +173,39 @@ impl Adam {
         if n == 0 {
             return Ok(());
         }
-        rec.dispatch(
-            &self.kernel,
-            &specs::AdamStepBindings {
-                params: params.sub(0, 4 * n),
-                grads: grads.sub(0, 4 * n),
-                first_moment: self.m.whole(),
-                second_moment: self.v.whole(),
-            }
-            .for_kernel(&self.kernel)?,
-            &AdamPush::new(self.n, &options, step),
-            groups(n, 64)?,
-        )
+        // Parameters 0 .. 4 t as t texels of four, the rest one by one.
+        let texels = n / 4;
+        if texels > 0 {
+            let bytes = 16 * texels;
+            rec.dispatch(
+                &self.kernel4,
+                &specs::AdamStep4Bindings {
+                    params: params.sub(0, bytes),
+                    grads: grads.sub(0, bytes),
+                    first_moment: self.m.range(0, bytes),
+                    second_moment: self.v.range(0, bytes),
+                }
+                .for_kernel(&self.kernel4)?,
+                &AdamPush::new(texels as u32, 0, &options, step),
+                groups(texels, 64)?,
+            )?;
+        }
+        let first = 4 * texels;
+        if first < n {
+            rec.dispatch(
+                &self.kernel,
+                &specs::AdamStepBindings {
+                    params: params.sub(0, 4 * n),
+                    grads: grads.sub(0, 4 * n),
+                    first_moment: self.m.whole(),
+                    second_moment: self.v.whole(),
+                }
+                .for_kernel(&self.kernel)?,
+                &AdamPush::new(self.n, first as u32, &options, step),
+                groups(n - first, 64)?,
+            )?;
+        }
+        Ok(())
     }
 
     /// Records zeroing both moments (to restart the optimization; the next step is 1 again).
@@ -224,7 +251,12 @@ mod tests {
             std::mem::size_of::<AdamPush>() as u32,
             specs::ADAM_STEP.push_constant_size
         );
+        assert_eq!(
+            specs::ADAM_STEP4.push_constant_size,
+            specs::ADAM_STEP.push_constant_size
+        );
         assert_eq!(specs::ADAM_STEP.bindings.len(), 4);
+        assert_eq!(specs::ADAM_STEP4.bindings.len(), 4);
     }
 
     #[test]
