@@ -577,7 +577,9 @@ impl Context {
     /// Kernel `spec` specialized with `constants` (see [`Kernel::specialized`]), built the
     /// first time any caller asks for it and shared from then on for the life of the context.
     /// For what many small objects each need (one sampler per training object): a pipeline costs
-    /// a compile and, on lavapipe, its machine code in memory, whoever builds it.
+    /// a compile and, on lavapipe, its machine code in memory, whoever builds it. Such a pipeline
+    /// lives as long as the context; with [`DescriptorMode::Sets`], its cached sets go with the
+    /// buffers they name.
     pub fn kernel(&self, spec: &'static KernelSpec, constants: &[u32]) -> Result<Arc<Kernel>> {
         let mut kernels = self.kernels.lock().unwrap_or_else(|e| e.into_inner());
         let key = (spec.name, constants.to_vec());
