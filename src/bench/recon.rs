@@ -6,6 +6,7 @@ use super::fits::{fit_iterations, time_iterations};
 use super::forward::summary;
 use super::{BenchOptions, BenchRecord};
 use crate::error::Result;
+use crate::fit::driver::{Fit, Fitter};
 use crate::gpu::Context;
 use crate::raster::gpu::{Method, Renderer};
 use crate::recon::dataset::{DatasetOptions, Split, render_shapes, split_shapes};
@@ -47,45 +48,21 @@ pub(super) fn run_recon_train(
         train_opts.tile,
         trainer.capacity()
     ));
-    let mut it = 1u32;
-    fit_iterations(&mut trainer, &mut it, 1, None, progress, name)?;
-    let timing = time_iterations(
+    let size = train_opts.net.image;
+    time_training(
         ctx,
+        opts,
         &mut trainer,
-        &mut it,
-        opts.repeat,
-        160,
-        false,
-        progress,
-        name,
-    )?;
-    let entries = trainer.last_entries();
-    progress(&format!(
-        "{name} fit-iteration: {entries} entries; {}",
-        summary(&timing, opts.repeat)
-    ));
-    Ok(BenchRecord {
-        scene: name.to_string(),
-        method: Method::Tiled {
+        Shape {
+            name,
             tile: train_opts.tile,
+            timer_passes: 160,
+            views: 2 * inputs,
+            faces: template().face_count() as u32,
+            size,
         },
-        pass: "fit-iteration",
-        gpu_ms: timing.gpu_ms,
-        wall_ms: timing.wall_ms,
-        pairs: 0,
-        counts: None,
-        device: ctx.info().name.clone(),
-        driver: ctx.info().driver.clone(),
-        repeats: opts.repeat,
-        passes: timing.passes,
-        views: 2 * inputs,
-        faces: template().face_count() as u32,
-        width: train_opts.net.image,
-        height: train_opts.net.image,
-        rows: None,
-        entries: Some(entries),
-        identical_to_brute: None,
-    })
+        progress,
+    )
 }
 
 /// [`OBJECTS_PER_CLASS`] training objects of each of `softvk dataset`'s default classes, at
@@ -137,14 +114,55 @@ pub(super) fn run_field_recon_train(
         train_opts.net,
         trainer.capacity()
     ));
+    let size = train_opts.net.net.image;
+    time_training(
+        ctx,
+        opts,
+        &mut trainer,
+        Shape {
+            name,
+            tile: probe.tile_size,
+            timer_passes: 1024,
+            views: train_opts.batch * crate::recon::dataset::VIEWS as u32,
+            faces: 0,
+            size,
+        },
+        progress,
+    )
+}
+
+/// What a trainer's benchmark record says of its iteration besides the times.
+struct Shape {
+    name: &'static str,
+    tile: u32,
+    /// Room for this many passes in an iteration.
+    timer_passes: u32,
+    /// Renders (mesh) or probed views (field) an iteration.
+    views: u32,
+    /// Faces a render (0: no mesh).
+    faces: u32,
+    /// The images' side.
+    size: u32,
+}
+
+/// One untimed iteration of `trainer`, then `opts.repeat` timed ones ([`time_iterations`]):
+/// the `fit-iteration` record of `shape.name`, with the last iteration's binned entries.
+fn time_training(
+    ctx: &Context,
+    opts: &BenchOptions,
+    trainer: &mut Fitter<'_, impl Fit>,
+    shape: Shape,
+    progress: &mut impl FnMut(&str),
+) -> Result<BenchRecord> {
+    let name = shape.name;
     let mut it = 1u32;
-    fit_iterations(&mut trainer, &mut it, 1, None, progress, name)?;
+    fit_iterations(trainer, &mut it, 1, None, progress, name)?;
     let timing = time_iterations(
         ctx,
-        &mut trainer,
+        trainer,
         &mut it,
         opts.repeat,
-        1024,
+        shape.timer_passes,
         false,
         progress,
         name,
@@ -156,9 +174,7 @@ pub(super) fn run_field_recon_train(
     ));
     Ok(BenchRecord {
         scene: name.to_string(),
-        method: Method::Tiled {
-            tile: probe.tile_size,
-        },
+        method: Method::Tiled { tile: shape.tile },
         pass: "fit-iteration",
         gpu_ms: timing.gpu_ms,
         wall_ms: timing.wall_ms,
@@ -168,10 +184,10 @@ pub(super) fn run_field_recon_train(
         driver: ctx.info().driver.clone(),
         repeats: opts.repeat,
         passes: timing.passes,
-        views: train_opts.batch * crate::recon::dataset::VIEWS as u32,
-        faces: 0,
-        width: train_opts.net.net.image,
-        height: train_opts.net.net.image,
+        views: shape.views,
+        faces: shape.faces,
+        width: shape.size,
+        height: shape.size,
         rows: None,
         entries: Some(entries),
         identical_to_brute: None,
