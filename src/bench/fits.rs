@@ -11,7 +11,7 @@ use super::{BenchOptions, BenchRecord, FIT_BATCH};
 use crate::camera::{Camera, Projection};
 use crate::error::Result;
 use crate::fit::driver::{Fit, Fitter};
-use crate::gpu::{Context, Timer};
+use crate::gpu::{Context, PassTime, Timer};
 use crate::raster::gpu::{Method, Renderer};
 use crate::raster::settings::{Dist, RasterSettings, Rgb};
 
@@ -315,7 +315,7 @@ pub(super) fn time_iterations(
         )?);
         let Some(timer) = &timer else { continue };
         let times = timer.results(ctx)?;
-        gpu.push(times.iter().filter(|t| t.depth == 0).map(|t| t.ms).sum());
+        gpu.push(PassTime::top_level_ms(&times));
         let mut row: Vec<(String, f64)> = Vec::new();
         if shares {
             row.extend(["render", "backward", "rest"].iter().map(|share| {

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use super::{BenchOptions, BenchRecord, Scene};
 use crate::error::{Error, Result};
-use crate::gpu::{Context, Recorded, Timer};
+use crate::gpu::{Context, PassTime, Recorded, Timer};
 use crate::raster::gpu::{Frames, GpuScene, Method, PairCounts, Renderer, ViewGroup};
 
 /// Runs the benchmark: every scene of `opts`, brute force then each tile size, with one line of
@@ -96,8 +96,7 @@ impl Samples {
         self.wall_ms.push(start.elapsed().as_secs_f64() * 1e3);
         if let Some(timer) = timer {
             let times = timer.results(ctx)?;
-            self.gpu_ms
-                .push(times.iter().filter(|t| t.depth == 0).map(|t| t.ms).sum());
+            self.gpu_ms.push(PassTime::top_level_ms(&times));
             // A pass recorded more than once (per view group or window) counts as one, summed.
             let mut merged: Vec<(String, f64)> = Vec::new();
             for t in &times {

@@ -14,7 +14,7 @@ use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use super::descriptors::DescriptorCache;
 use super::shared::{Shared, ValidationLog, create_pipeline_cache, on_validation_message};
 use super::texel_views::TexelViews;
-use super::{Kernel, KernelSpec};
+use super::{Kernel, KernelSpec, KernelVariants};
 use crate::error::{Error, Result, VkContext};
 
 const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
@@ -221,12 +221,9 @@ pub struct Context {
     info: DeviceInfo,
     /// [`Context::cpu_workgroups`].
     cpu_workgroups: bool,
-    /// [`Context::kernel`]'s pipelines, by kernel name and specialization constants.
-    kernels: Mutex<HashMap<KernelKey, Arc<Kernel>>>,
+    /// [`Context::kernel`]'s pipelines, by kernel name.
+    kernels: Mutex<HashMap<&'static str, Arc<KernelVariants>>>,
 }
-
-/// A pipeline of [`Context::kernel`]: the kernel's name and its specialization constants.
-type KernelKey = (&'static str, Vec<u32>);
 
 /// The atomic cells behind [`Counters`].
 #[derive(Default)]
@@ -581,14 +578,15 @@ impl Context {
     /// lives as long as the context; with [`DescriptorMode::Sets`], its cached sets go with the
     /// buffers they name.
     pub fn kernel(&self, spec: &'static KernelSpec, constants: &[u32]) -> Result<Arc<Kernel>> {
-        let mut kernels = self.kernels.lock().unwrap_or_else(|e| e.into_inner());
-        let key = (spec.name, constants.to_vec());
-        if let Some(kernel) = kernels.get(&key) {
-            return Ok(Arc::clone(kernel));
-        }
-        let kernel = Arc::new(Kernel::specialized(self, spec, constants)?);
-        kernels.insert(key, Arc::clone(&kernel));
-        Ok(kernel)
+        let variants = {
+            let mut kernels = self.kernels.lock().unwrap_or_else(|e| e.into_inner());
+            Arc::clone(
+                kernels
+                    .entry(spec.name)
+                    .or_insert_with(|| Arc::new(KernelVariants::new(spec))),
+            )
+        };
+        variants.get(self, constants)
     }
 
     /// The device this context runs on.

@@ -524,6 +524,12 @@ pub struct PassTime {
 }
 
 impl PassTime {
+    /// The time of `times`' top-level passes, summed (a nested pass's time is already part of
+    /// its parent's), ms.
+    pub fn top_level_ms(times: &[PassTime]) -> f64 {
+        times.iter().filter(|t| t.depth == 0).map(|t| t.ms).sum()
+    }
+
     /// The name indented by two spaces per level of [`PassTime::depth`], for listing passes
     /// after their parents.
     pub fn indented(&self) -> String {
@@ -558,12 +564,7 @@ impl Timer {
     /// The GPU time of the last completed recording's top-level passes, summed (a nested
     /// pass's time is already part of its parent's), ms.
     pub fn total_ms(&self, ctx: &Context) -> Result<f64> {
-        Ok(self
-            .results(ctx)?
-            .iter()
-            .filter(|t| t.depth == 0)
-            .map(|t| t.ms)
-            .sum())
+        Ok(PassTime::top_level_ms(&self.results(ctx)?))
     }
 
     /// The pass times of the last completed recording, in recording order.
