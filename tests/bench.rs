@@ -101,6 +101,49 @@ fn bad_options_are_errors_with_a_clear_message() {
 }
 
 #[test]
+fn the_mesh_fitting_benchmark_shares_its_iteration_and_counts_its_pairs() {
+    let Some(gpu) = common::gpu() else { return };
+    let opts = BenchOptions {
+        scenes: vec!["fit-120".into()],
+        repeat: 1,
+        ..BenchOptions::default()
+    };
+    let mut lines = Vec::new();
+    let records = bench::run_fit(&gpu, &opts, |line| lines.push(line.to_string())).unwrap();
+    let log = lines.join("\n");
+    let passes: Vec<_> = records.iter().map(|r| r.pass).collect();
+    assert_eq!(
+        passes,
+        ["fit-iteration", "fit-loop-k1", "fit-loop-k10"],
+        "{log}"
+    );
+    for r in &records {
+        assert_eq!(r.scene, "fit-120");
+        assert_eq!((r.views, r.width, r.height), (120, 64, 64));
+        let counts = r.counts.expect("the fit's pairs are counted");
+        assert!(r.pairs > 0 && r.pairs == counts.binned, "{log}");
+        assert!(r.entries.is_some_and(|e| e > 0), "{log}");
+    }
+    // The iteration's shares first, then its passes; the loops' one pass is the host's.
+    let names: Vec<_> = records[0].passes.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(names[..3], ["render", "backward", "rest"], "{log}");
+    assert!(
+        names.contains(&"raster tiled") && names.contains(&"grad tiled"),
+        "{log}"
+    );
+    let share: f64 = records[0].passes[..3].iter().map(|(_, ms)| ms).sum();
+    let gpu_ms = records[0].gpu_ms.unwrap();
+    assert!(
+        (share - gpu_ms).abs() <= 1e-6 * gpu_ms.max(1.0),
+        "{share} vs {gpu_ms}: {log}"
+    );
+    for r in &records[1..] {
+        let names: Vec<_> = r.passes.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, ["host overhead"], "{log}");
+    }
+}
+
+#[test]
 fn the_pose_fitting_benchmark_times_its_iterations_and_its_loop() {
     let Some(gpu) = common::gpu() else { return };
     let opts = BenchOptions {

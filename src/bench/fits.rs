@@ -12,7 +12,7 @@ use crate::camera::{Camera, Projection};
 use crate::error::Result;
 use crate::fit::driver::{Fit, Fitter};
 use crate::gpu::{Context, PassTime, Timer};
-use crate::raster::gpu::{Method, Renderer};
+use crate::raster::gpu::{Method, PairCounts, Renderer};
 use crate::raster::settings::{Dist, RasterSettings, Rgb};
 
 /// The sphere-probing benchmark (`softvk bench --scene fit-field`): a `softvk fit-field`
@@ -77,43 +77,24 @@ fn run_field_fit(
         cube.center,
         cube.half
     ));
-    let mut it = 1u32;
-    fit_iterations(&mut fitter, &mut it, 1, None, progress, name)?;
-    let timing = time_iterations(
-        ctx,
-        &mut fitter,
-        &mut it,
-        opts.repeat,
-        24,
-        false,
-        progress,
+    let shape = Shape {
         name,
-    )?;
-    let entries = fitter.last_entries();
-    progress(&format!(
-        "{name} fit-iteration: {entries} entries; {}",
-        summary(&timing, opts.repeat)
-    ));
-    Ok(BenchRecord {
-        scene: name.to_string(),
         method: Method::Tiled { tile: s.tile_size },
-        pass: "fit-iteration",
-        gpu_ms: timing.gpu_ms,
-        wall_ms: timing.wall_ms,
-        pairs: 0,
-        counts: None,
-        device: ctx.info().name.clone(),
-        driver: ctx.info().driver.clone(),
-        repeats: opts.repeat,
-        passes: timing.passes,
         views: cameras.len() as u32,
         faces: spot.face_count() as u32,
         width: size,
         height: size,
-        rows: None,
-        entries: Some(entries),
-        identical_to_brute: None,
-    })
+        counts: None,
+    };
+    let mut it = 1u32;
+    let timing = time_fit_iteration(ctx, opts, &mut fitter, &mut it, 24, false, progress, name)?;
+    Ok(shape.record(
+        ctx,
+        "fit-iteration",
+        timing,
+        opts.repeat,
+        fitter.last_entries(),
+    ))
 }
 
 /// The pose-fitting benchmark (`softvk bench --scene fit-pose`): a `softvk fit-pose`
@@ -161,54 +142,27 @@ fn run_pose_fit(
         fit_opts.tile,
         fitter.capacity()
     ));
-    let mut it = 1u32;
-    fit_iterations(&mut fitter, &mut it, 1, None, progress, name)?;
-    let timing = time_iterations(
-        ctx,
-        &mut fitter,
-        &mut it,
-        opts.repeat,
-        32,
-        false,
-        progress,
+    let shape = Shape {
         name,
-    )?;
-    progress(&format!(
-        "{name} fit-iteration: {} entries; {}",
-        fitter.last_entries(),
-        summary(&timing, opts.repeat)
-    ));
-    let record = |pass: &'static str, gpu_ms, wall_ms, passes, repeats, entries| BenchRecord {
-        scene: name.to_string(),
         method: Method::Tiled {
             tile: fit_opts.tile,
         },
-        pass,
-        gpu_ms,
-        wall_ms,
-        pairs: 0,
-        counts: None,
-        device: ctx.info().name.clone(),
-        driver: ctx.info().driver.clone(),
-        repeats,
-        passes,
         views: 1,
         faces: spot.face_count() as u32,
         width: s.width,
         height: s.height,
-        rows: None,
-        entries: Some(entries),
-        identical_to_brute: None,
+        counts: None,
     };
-    let mut records = vec![record(
+    let mut it = 1u32;
+    let timing = time_fit_iteration(ctx, opts, &mut fitter, &mut it, 32, false, progress, name)?;
+    let mut records = vec![shape.record(
+        ctx,
         "fit-iteration",
-        timing.gpu_ms,
-        timing.wall_ms,
-        timing.passes,
+        timing,
         opts.repeat,
         fitter.last_entries(),
     )];
-    let t = time_fit_loop(
+    let timing = time_fit_loop(
         ctx,
         &mut fitter,
         &mut it,
@@ -217,11 +171,10 @@ fn run_pose_fit(
         name,
         "fit-loop-k10",
     )?;
-    records.push(record(
+    records.push(shape.record(
+        ctx,
         "fit-loop-k10",
-        t.gpu_ms,
-        t.wall_ms,
-        t.passes,
+        timing,
         FIT_BATCH,
         fitter.last_entries(),
     ));
@@ -240,7 +193,7 @@ fn time_fit_loop(
     progress: &mut impl FnMut(&str),
     name: &str,
     pass: &str,
-) -> Result<LoopTiming> {
+) -> Result<Timing> {
     let mut timer = if ctx.info().timestamp_valid_bits > 0 {
         Some(Timer::new(ctx, 20 * FIT_BATCH)?)
     } else {
@@ -266,19 +219,92 @@ fn time_fit_loop(
     let passes = host
         .map(|h| vec![("host overhead".to_string(), h)])
         .unwrap_or_default();
-    Ok(LoopTiming {
+    Ok(Timing {
         gpu_ms,
         wall_ms: wall / n,
         passes,
     })
 }
 
-/// What [`time_fit_loop`] measured, per iteration.
-struct LoopTiming {
-    gpu_ms: Option<f64>,
-    wall_ms: f64,
-    /// The host overhead (wall minus GPU), where the GPU was timed.
-    passes: Vec<(String, f64)>,
+/// What a fitting benchmark's records say of its iterations besides the times.
+pub(super) struct Shape {
+    pub(super) name: &'static str,
+    pub(super) method: Method,
+    /// Renders (mesh) or probed views (field) an iteration.
+    pub(super) views: u32,
+    /// Faces a render (0: no mesh).
+    pub(super) faces: u32,
+    pub(super) width: u32,
+    pub(super) height: u32,
+    /// The fine kernels' pairs of the fit's scene, where counted (the records' `pairs` is
+    /// their binned count, else 0).
+    pub(super) counts: Option<PairCounts>,
+}
+
+impl Shape {
+    /// The record of `pass`: `timing` over `repeats` iterations, `entries` binned by the last.
+    pub(super) fn record(
+        &self,
+        ctx: &Context,
+        pass: &'static str,
+        timing: Timing,
+        repeats: u32,
+        entries: u64,
+    ) -> BenchRecord {
+        BenchRecord {
+            scene: self.name.to_string(),
+            method: self.method,
+            pass,
+            gpu_ms: timing.gpu_ms,
+            wall_ms: timing.wall_ms,
+            pairs: self.counts.map_or(0, |c| c.binned),
+            counts: self.counts,
+            device: ctx.info().name.clone(),
+            driver: ctx.info().driver.clone(),
+            repeats,
+            passes: timing.passes,
+            views: self.views,
+            faces: self.faces,
+            width: self.width,
+            height: self.height,
+            rows: None,
+            entries: Some(entries),
+            identical_to_brute: None,
+        }
+    }
+}
+
+/// One untimed iteration of `fitter` from `*it`, then `opts.repeat` timed ones
+/// ([`time_iterations`], with room for `timer_passes` passes and, with `shares`, the shares
+/// first); says their summary through `progress` and leaves `it` after them.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn time_fit_iteration(
+    ctx: &Context,
+    opts: &BenchOptions,
+    fitter: &mut Fitter<'_, impl Fit>,
+    it: &mut u32,
+    timer_passes: u32,
+    shares: bool,
+    progress: &mut impl FnMut(&str),
+    name: &str,
+) -> Result<Timing> {
+    fit_iterations(fitter, it, 1, None, progress, name)?;
+    let timing = time_iterations(
+        ctx,
+        fitter,
+        it,
+        opts.repeat,
+        timer_passes,
+        shares,
+        progress,
+        name,
+    )?;
+    progress(&format!(
+        "{name} fit-iteration: {} entries; {}",
+        fitter.last_entries(),
+        summary(&timing, opts.repeat)
+    ));
+    Ok(timing)
 }
 
 /// `repeat` iterations of `fitter` from `*it`, one per submission, with GPU timestamps (room for
@@ -287,7 +313,7 @@ struct LoopTiming {
 /// with `shares`, the `render`, `backward` and `rest` sums of [`fit_pass_share`] over the
 /// top-level passes first. Medians.
 #[allow(clippy::too_many_arguments)]
-pub(super) fn time_iterations(
+fn time_iterations(
     ctx: &Context,
     fitter: &mut Fitter<'_, impl Fit>,
     it: &mut u32,
@@ -341,7 +367,7 @@ pub(super) fn time_iterations(
 
 /// Runs iterations `it .. it + k` of `fitter` in one submission (again from a stopped one, until
 /// all ran) and advances `it`; the wall time of the submission that ran them all, ms.
-pub(super) fn fit_iterations(
+fn fit_iterations(
     fitter: &mut Fitter<'_, impl Fit>,
     it: &mut u32,
     k: u32,
@@ -402,142 +428,104 @@ pub fn run_fit(
     opts: &BenchOptions,
     mut progress: impl FnMut(&str),
 ) -> Result<Vec<BenchRecord>> {
-    use crate::fit::mesh_fit::{MeshFitOptions, MeshFitter, default_template, demo_target};
-    let names = opts.checked_fit_scenes()?;
+    let assets = opts.assets.clone().unwrap_or_else(crate::assets::dir);
     let mut records = Vec::new();
-    for name in names {
-        if name == "fit-field" {
-            let assets = opts.assets.clone().unwrap_or_else(crate::assets::dir);
-            records.push(run_field_fit(ctx, opts, &assets, &mut progress)?);
-            continue;
-        }
-        if name == "fit-pose" {
-            let assets = opts.assets.clone().unwrap_or_else(crate::assets::dir);
-            records.extend(run_pose_fit(ctx, opts, &assets, &mut progress)?);
-            continue;
-        }
-        if name == "train-recon" {
-            records.push(super::recon::run_recon_train(ctx, opts, &mut progress)?);
-            continue;
-        }
-        if name == "train-recon-field" {
-            records.push(super::recon::run_field_recon_train(
+    for name in opts.checked_fit_scenes()? {
+        match name {
+            "fit-field" => records.push(run_field_fit(ctx, opts, &assets, &mut progress)?),
+            "fit-pose" => records.extend(run_pose_fit(ctx, opts, &assets, &mut progress)?),
+            "train-recon" => records.push(super::recon::run_recon_train(ctx, opts, &mut progress)?),
+            "train-recon-field" => records.push(super::recon::run_field_recon_train(
                 ctx,
                 opts,
                 &mut progress,
-            )?);
-            continue;
+            )?),
+            // `fit-120`, the one left of FIT_SCENES.
+            _ => records.extend(run_mesh_fit(ctx, opts, name, &mut progress)?),
         }
-        // SoftRas's template, as `softvk fit-mesh` uses it by default.
-        let template = default_template();
-        let fit_opts = MeshFitOptions {
-            log_every: 1,
-            ..MeshFitOptions::default()
-        };
-        let s = fit_opts.settings;
-        let cameras: Vec<Camera> = (0..120)
-            .map(|i| Camera {
-                projection: Projection::Perspective {
-                    viewing_angle_deg: 15.0,
-                },
-                ..Camera::from_angles(DISTANCE, 30.0, f64::from(3 * i))
-            })
-            .collect();
-        let hard = RasterSettings {
-            dist: Dist::Hard,
-            alpha: crate::raster::settings::Alpha::Hard,
-            rgb: Rgb::Hard,
-            ..s
-        };
-        let targets: Vec<f32> = Renderer::new(ctx)?.render_silhouettes(
-            ctx,
-            &demo_target(),
-            &cameras,
-            &hard,
-            Method::default(),
-        )?;
-        let mut fitter = MeshFitter::new(ctx, &template, &cameras, &targets, &fit_opts)?;
-        let method = Method::Tiled {
-            tile: fit_opts.tile,
-        };
-        progress(&format!(
-            "{name}: sphere_1352 x0.5 ({} faces) fitted to the demo target's silhouettes, {} \
-             views of {}x{}, sigma {:e}, rgb {:?}, tile {}; entry capacity {}",
-            template.face_count(),
-            cameras.len(),
-            s.width,
-            s.height,
-            s.sigma,
-            s.rgb,
-            fit_opts.tile,
-            fitter.capacity()
-        ));
-        let mut it = 1u32;
-        fit_iterations(&mut fitter, &mut it, 1, None, &mut progress, name)?;
-        progress(&format!(
-            "{name}: warm-up done, {} entries; timing {} iterations",
-            fitter.last_entries(),
-            opts.repeat
-        ));
-        let timing = time_iterations(
-            ctx,
-            &mut fitter,
-            &mut it,
-            opts.repeat,
-            32,
-            true,
-            &mut progress,
-            name,
-        )?;
-        progress(&format!(
-            "{name} fit-iteration: {}",
-            summary(&timing, opts.repeat)
-        ));
-        let counts = fitter.scene().pair_counts(ctx, method)?;
-        progress(&format!(
-            "{name} fit-iteration per pair:{}",
-            per_pair_summary(&timing.passes, &counts)
-        ));
-        let record = |pass: &'static str, gpu_ms, wall_ms, passes, repeats, entries| BenchRecord {
-            scene: name.to_string(),
-            method,
-            pass,
-            gpu_ms,
-            wall_ms,
-            pairs: counts.binned,
-            counts: Some(counts),
-            device: ctx.info().name.clone(),
-            driver: ctx.info().driver.clone(),
-            repeats,
-            passes,
-            views: cameras.len() as u32,
-            faces: template.face_count() as u32,
-            width: s.width,
-            height: s.height,
-            rows: None,
-            entries: Some(entries),
-            identical_to_brute: None,
-        };
-        records.push(record(
-            "fit-iteration",
-            timing.gpu_ms,
-            timing.wall_ms,
-            timing.passes,
-            opts.repeat,
-            fitter.last_entries(),
-        ));
-        // The loop, one and ten iterations per submission.
-        for (pass, k) in [("fit-loop-k1", 1), ("fit-loop-k10", FIT_BATCH)] {
-            let t = time_fit_loop(ctx, &mut fitter, &mut it, k, &mut progress, name, pass)?;
-            records.push(record(
-                pass,
-                t.gpu_ms,
-                t.wall_ms,
-                t.passes,
-                FIT_BATCH,
-                fitter.last_entries(),
-            ));
-        }
+    }
+    Ok(records)
+}
+
+/// The `fit-120` records of [`run_fit`].
+fn run_mesh_fit(
+    ctx: &Context,
+    opts: &BenchOptions,
+    name: &'static str,
+    progress: &mut impl FnMut(&str),
+) -> Result<Vec<BenchRecord>> {
+    use crate::fit::mesh_fit::{MeshFitOptions, MeshFitter, default_template, demo_target};
+    // SoftRas's template, as `softvk fit-mesh` uses it by default.
+    let template = default_template();
+    let fit_opts = MeshFitOptions {
+        log_every: 1,
+        ..MeshFitOptions::default()
+    };
+    let s = fit_opts.settings;
+    let cameras: Vec<Camera> = (0..120)
+        .map(|i| Camera {
+            projection: Projection::Perspective {
+                viewing_angle_deg: 15.0,
+            },
+            ..Camera::from_angles(DISTANCE, 30.0, f64::from(3 * i))
+        })
+        .collect();
+    let hard = RasterSettings {
+        dist: Dist::Hard,
+        alpha: crate::raster::settings::Alpha::Hard,
+        rgb: Rgb::Hard,
+        ..s
+    };
+    let targets: Vec<f32> = Renderer::new(ctx)?.render_silhouettes(
+        ctx,
+        &demo_target(),
+        &cameras,
+        &hard,
+        Method::default(),
+    )?;
+    let mut fitter = MeshFitter::new(ctx, &template, &cameras, &targets, &fit_opts)?;
+    let method = Method::Tiled {
+        tile: fit_opts.tile,
+    };
+    progress(&format!(
+        "{name}: sphere_1352 x0.5 ({} faces) fitted to the demo target's silhouettes, {} \
+         views of {}x{}, sigma {:e}, rgb {:?}, tile {}; entry capacity {}",
+        template.face_count(),
+        cameras.len(),
+        s.width,
+        s.height,
+        s.sigma,
+        s.rgb,
+        fit_opts.tile,
+        fitter.capacity()
+    ));
+    let mut it = 1u32;
+    let timing = time_fit_iteration(ctx, opts, &mut fitter, &mut it, 32, true, progress, name)?;
+    let counts = fitter.scene().pair_counts(ctx, method)?;
+    progress(&format!(
+        "{name} fit-iteration per pair:{}",
+        per_pair_summary(&timing.passes, &counts)
+    ));
+    let shape = Shape {
+        name,
+        method,
+        views: cameras.len() as u32,
+        faces: template.face_count() as u32,
+        width: s.width,
+        height: s.height,
+        counts: Some(counts),
+    };
+    let mut records = vec![shape.record(
+        ctx,
+        "fit-iteration",
+        timing,
+        opts.repeat,
+        fitter.last_entries(),
+    )];
+    // The loop, one and ten iterations per submission.
+    for (pass, k) in [("fit-loop-k1", 1), ("fit-loop-k10", FIT_BATCH)] {
+        let timing = time_fit_loop(ctx, &mut fitter, &mut it, k, progress, name, pass)?;
+        records.push(shape.record(ctx, pass, timing, FIT_BATCH, fitter.last_entries()));
     }
     Ok(records)
 }

@@ -2,11 +2,9 @@
 //! `--scene train-recon-field`): where a `softvk train-recon` iteration at its defaults spends
 //! its time, pass by pass, for the mesh network and the conditioned field.
 
-use super::fits::{fit_iterations, time_iterations};
-use super::forward::summary;
+use super::fits::{Shape, time_fit_iteration};
 use super::{BenchOptions, BenchRecord};
 use crate::error::Result;
-use crate::fit::driver::{Fit, Fitter};
 use crate::gpu::Context;
 use crate::raster::gpu::{Method, Renderer};
 use crate::recon::dataset::{DatasetOptions, Split, render_shapes, split_shapes};
@@ -49,20 +47,26 @@ pub(super) fn run_recon_train(
         trainer.capacity()
     ));
     let size = train_opts.net.image;
-    time_training(
-        ctx,
-        opts,
-        &mut trainer,
-        Shape {
-            name,
+    let shape = Shape {
+        name,
+        method: Method::Tiled {
             tile: train_opts.tile,
-            timer_passes: 160,
-            views: 2 * inputs,
-            faces: template().face_count() as u32,
-            size,
         },
-        progress,
-    )
+        views: 2 * inputs,
+        faces: template().face_count() as u32,
+        width: size,
+        height: size,
+        counts: None,
+    };
+    let mut it = 1u32;
+    let timing = time_fit_iteration(ctx, opts, &mut trainer, &mut it, 160, false, progress, name)?;
+    Ok(shape.record(
+        ctx,
+        "fit-iteration",
+        timing,
+        opts.repeat,
+        trainer.last_entries(),
+    ))
 }
 
 /// [`OBJECTS_PER_CLASS`] training objects of each of `softvk dataset`'s default classes, at
@@ -115,81 +119,33 @@ pub(super) fn run_field_recon_train(
         trainer.capacity()
     ));
     let size = train_opts.net.net.image;
-    time_training(
+    let shape = Shape {
+        name,
+        method: Method::Tiled {
+            tile: probe.tile_size,
+        },
+        views: train_opts.batch * crate::recon::dataset::VIEWS as u32,
+        faces: 0,
+        width: size,
+        height: size,
+        counts: None,
+    };
+    let mut it = 1u32;
+    let timing = time_fit_iteration(
         ctx,
         opts,
         &mut trainer,
-        Shape {
-            name,
-            tile: probe.tile_size,
-            timer_passes: 1024,
-            views: train_opts.batch * crate::recon::dataset::VIEWS as u32,
-            faces: 0,
-            size,
-        },
-        progress,
-    )
-}
-
-/// What a trainer's benchmark record says of its iteration besides the times.
-struct Shape {
-    name: &'static str,
-    tile: u32,
-    /// Room for this many passes in an iteration.
-    timer_passes: u32,
-    /// Renders (mesh) or probed views (field) an iteration.
-    views: u32,
-    /// Faces a render (0: no mesh).
-    faces: u32,
-    /// The images' side.
-    size: u32,
-}
-
-/// One untimed iteration of `trainer`, then `opts.repeat` timed ones ([`time_iterations`]):
-/// the `fit-iteration` record of `shape.name`, with the last iteration's binned entries.
-fn time_training(
-    ctx: &Context,
-    opts: &BenchOptions,
-    trainer: &mut Fitter<'_, impl Fit>,
-    shape: Shape,
-    progress: &mut impl FnMut(&str),
-) -> Result<BenchRecord> {
-    let name = shape.name;
-    let mut it = 1u32;
-    fit_iterations(trainer, &mut it, 1, None, progress, name)?;
-    let timing = time_iterations(
-        ctx,
-        trainer,
         &mut it,
-        opts.repeat,
-        shape.timer_passes,
+        1024,
         false,
         progress,
         name,
     )?;
-    let entries = trainer.last_entries();
-    progress(&format!(
-        "{name} fit-iteration: {entries} entries; {}",
-        summary(&timing, opts.repeat)
-    ));
-    Ok(BenchRecord {
-        scene: name.to_string(),
-        method: Method::Tiled { tile: shape.tile },
-        pass: "fit-iteration",
-        gpu_ms: timing.gpu_ms,
-        wall_ms: timing.wall_ms,
-        pairs: 0,
-        counts: None,
-        device: ctx.info().name.clone(),
-        driver: ctx.info().driver.clone(),
-        repeats: opts.repeat,
-        passes: timing.passes,
-        views: shape.views,
-        faces: shape.faces,
-        width: shape.size,
-        height: shape.size,
-        rows: None,
-        entries: Some(entries),
-        identical_to_brute: None,
-    })
+    Ok(shape.record(
+        ctx,
+        "fit-iteration",
+        timing,
+        opts.repeat,
+        trainer.last_entries(),
+    ))
 }
