@@ -5,7 +5,7 @@
 //!   screen vertices, inverse barycentric matrix, facing, grown bounding box;
 //! - a *fine* pass per pixel ([`shade_pixel`]): one loop over faces with running accumulators
 //!   for alpha ([`AlphaAccum`]), softmax colour ([`SoftmaxAccum`]) and hard colour
-//!   ([`HardAccum`]), each step a small function: [`barycentric`], [`coverage`],
+//!   ([`HardAccum`]), each step a small function: [`barycentric`], [`coverage()`],
 //!   [`clip_barycentric`], [`depth`], [`FaceColors::sample`].
 //!
 //! Where the SPEC differs from SoftRas (non-square pixel centres, euclidean distance to the edges
