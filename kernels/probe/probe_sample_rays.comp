@@ -3,7 +3,7 @@
 // Sphere probing, sampling: the probing rays of one iteration, one invocation per ray (view-major,
 // `rays_per_view` per view). The first `uniform_per_view` rays of a view pick a pixel uniformly;
 // the rest pick one from the view's contour density (the Laplacian of the silhouette, smoothed,
-// |·|, quantized to integers on the host) by binary search in its exclusive prefix sum, and fall
+// |·|, quantized to integers on the host) by binary search in their exclusive prefix sum, and fall
 // back to uniform where a view has no contour. Both jitter uniformly within the pixel. Random
 // words: `rand_u32(key, ray, 0..2)`. Twin: `probe::sampler::cpu::sample_rays`.
 #include "common.glsl"
@@ -12,10 +12,10 @@
 layout(local_size_x = 64) in;
 
 layout(std430, set = 0, binding = 0) readonly buffer Masks { float masks[]; };
-layout(std430, set = 0, binding = 1) readonly buffer Weights { uint weights[]; };
-// Exclusive prefix sum of `weights` over all views (view-major).
-layout(std430, set = 0, binding = 2) readonly buffer Cdf { uint cdf[]; };
-layout(std430, set = 0, binding = 3) writeonly buffer Rays { Ray rays[]; };
+// The exclusive prefix sum of the quantized densities over all views (view-major), and after the
+// last pixel their total: views × pixels + 1 entries.
+layout(std430, set = 0, binding = 1) readonly buffer Cdf { uint cdf[]; };
+layout(std430, set = 0, binding = 2) writeonly buffer Rays { Ray rays[]; };
 
 layout(push_constant) uniform Push {
     uint views;
@@ -39,7 +39,7 @@ void main() {
     uint first = view * pixels;
     uint last = first + pixels - 1u;
     uint base = cdf[first];
-    uint total = cdf[last] + weights[last] - base;
+    uint total = cdf[last + 1u] - base;
     uint h = rand_u32(pc.key, id, 0u);
     uint pixel;
     if (i < pc.uniform_per_view || total == 0u) {

@@ -124,7 +124,6 @@ pub struct Sampler {
     width: u32,
     height: u32,
     quantum: u32,
-    weights: Buffer,
     cdf: Buffer,
     boundary_host: Vec<[f32; 4]>,
     boundary: Buffer,
@@ -188,13 +187,17 @@ impl Sampler {
             "sampler: candidates",
             16 * u64::from(settings.geo_candidates),
         )?;
-        let (weights_host, quantum) = cpu::contour_weights(targets, settings.contour_sigma)?;
+        let (mut weights_host, quantum) = cpu::contour_weights(targets, settings.contour_sigma)?;
+        // A zero after the last pixel puts the total at the CDF's end; the weights themselves
+        // are needed only to scan them, so they do not stay on the device.
+        weights_host.push(0);
         let n = weights_host.len() as u64;
         let weights = ctx.upload_buffer("probe contour weights", &weights_host)?;
         let cdf = ctx.create_buffer("probe contour CDF", 4 * n, MemoryKind::Device)?;
         let scan = Scan::new(ctx)?;
         let scratch = ScanScratch::new(ctx, n)?;
         ctx.submit_and_wait(|rec| scan.record(rec, &scratch, weights.whole(), cdf.whole(), n))?;
+        drop((weights, scratch));
         let boundary_buffer = if boundary.is_empty() {
             ctx.upload_buffer("probe hull boundary", &[[0f32; 4]])?
         } else {
@@ -208,7 +211,6 @@ impl Sampler {
             width: targets.width,
             height: targets.height,
             quantum,
-            weights,
             cdf,
             boundary_host: boundary,
             boundary: boundary_buffer,
@@ -252,7 +254,6 @@ impl Sampler {
             &self.rays_kernel,
             &specs::ProbeSampleRaysBindings {
                 masks: gpu.masks().whole(),
-                weights: self.weights.whole(),
                 cdf: self.cdf.whole(),
                 rays: self.rays.whole(),
             }
@@ -308,12 +309,9 @@ impl Sampler {
         u64::from(self.views) * u64::from(self.settings.rays_per_view)
     }
 
-    /// The quantized contour weights (one `u32` per pixel, view-major).
-    pub fn weights(&self) -> &Buffer {
-        &self.weights
-    }
-
-    /// Their exclusive prefix sum over all views, computed by the GPU scan.
+    /// The exclusive prefix sum of the quantized contour weights over all views (view-major),
+    /// computed by the GPU scan, and after the last pixel their total
+    /// ([`cpu::exclusive_prefix`] of [`cpu::contour_weights`]).
     pub fn cdf(&self) -> &Buffer {
         &self.cdf
     }
@@ -419,17 +417,20 @@ pub mod cpu {
         Ok((weights, q))
     }
 
-    /// The exclusive prefix sum (wrapping, as the GPU's).
+    /// The exclusive prefix sum, and the total after it: `weights.len() + 1` entries (wrapping,
+    /// as the GPU's).
     pub fn exclusive_prefix(weights: &[u32]) -> Vec<u32> {
         let mut acc = 0u32;
-        weights
+        let mut cdf: Vec<u32> = weights
             .iter()
             .map(|&w| {
                 let r = acc;
                 acc = acc.wrapping_add(w);
                 r
             })
-            .collect()
+            .collect();
+        cdf.push(acc);
+        cdf
     }
 
     /// `probe_sample_rays.comp`: the rays of one iteration.
@@ -447,7 +448,7 @@ pub mod cpu {
             let first = view * pixels;
             let last = first + pixels - 1;
             let base = cdf[first];
-            let total = cdf[last].wrapping_add(weights[last]).wrapping_sub(base);
+            let total = cdf[last + 1].wrapping_sub(base);
             for i in 0..rays_per_view {
                 let id = view as u32 * rays_per_view + i;
                 let h = rand_u32(key, id, 0);
