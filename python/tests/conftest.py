@@ -4,6 +4,10 @@ GPU tests fail when no Vulkan device exists, unless ``SOFTVK_NO_GPU=1`` says the
 they are skipped). Meshes come from ``SOFTVK_ASSETS`` or the repository's ``assets/``; the
 ``softvk`` command line from ``SOFTVK_BIN`` or the repository's ``target/release/softvk``
 (``cargo build --release`` makes it).
+
+With ``SOFTVK_TEST_INSTALLED=1`` (CI's wheel and sdist runs) the tests refuse to run against the
+source tree's ``python/softvk``: the package must come from the environment's site-packages, as a
+user's does.
 """
 
 import os
@@ -12,6 +16,15 @@ import pathlib
 import pytest
 
 REPO = pathlib.Path(__file__).resolve().parents[2]
+
+
+def pytest_configure(config):
+    if os.environ.get("SOFTVK_TEST_INSTALLED") == "1":
+        import softvk
+
+        where = pathlib.Path(softvk.__file__).resolve()
+        if REPO / "python" in where.parents or "site-packages" not in where.parts:
+            raise pytest.UsageError(f"SOFTVK_TEST_INSTALLED=1, but softvk was imported from {where}")
 
 
 def assets_dir():

@@ -1,0 +1,114 @@
+"""Type stubs of ``softvk._native``, the engine as Python sees it (PyO3; python/src/lib.rs).
+
+Arrays are numpy arrays, C-contiguous; images are ``[views, H, W, 4]`` RGBA, row 0 at the top.
+"""
+
+from os import PathLike
+from typing import Optional, Sequence, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+F32 = npt.NDArray[np.float32]
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+U8 = npt.NDArray[np.uint8]
+_Path = Union[str, "PathLike[str]"]
+_Vec3 = Tuple[float, float, float]
+
+# ('look_at', eye, at, up, viewing_angle_degrees_or_None, orthographic_scale), or
+# ('projection', P (12 floats, row-major 3×4), dist_coeffs (5), orig_size).
+Camera = Union[
+    Tuple[str, Sequence[float], Sequence[float], Sequence[float], Optional[float], float],
+    Tuple[str, Sequence[float], Sequence[float], float],
+]
+# (ambient intensity, ambient colour, [(intensity, colour, direction), ...])
+Lights = Tuple[float, Sequence[float], Sequence[Tuple[float, Sequence[float], Sequence[float]]]]
+
+class Settings:
+    """One render's settings: SoftRas's rasterizer arguments, the image size and how faces meet
+    pixels (tiled with a tile edge, or SoftRas's brute-force loop)."""
+
+    def __init__(
+        self,
+        width: int,
+        height: int,
+        *,
+        sigma: float = 1e-5,
+        gamma: float = 1e-4,
+        near: float = 1.0,
+        far: float = 100.0,
+        eps: float = 1e-3,
+        dist_eps: float = 1e-4,
+        dist_func: str = "euclidean",
+        aggr_func_rgb: str = "softmax",
+        aggr_func_alpha: str = "prod",
+        background_color: _Vec3 = (0.0, 0.0, 0.0),
+        fill_back: bool = True,
+        texture_type: str = "surface",
+        tile: int = 8,
+        brute: bool = False,
+        silhouettes: bool = False,
+    ) -> None: ...
+    @property
+    def shape(self) -> Tuple[int, int]:
+        """``(height, width)`` of the images."""
+
+class Raster:
+    """A render kept on the device for its backward."""
+
+    def backward(
+        self, grad_images: F32, alpha_only: bool = False, eyes: bool = False
+    ) -> Tuple[F32, F32, Optional[F32]]:
+        """dL/d(positions), dL/d(textures) and (``render_mesh`` with ``eyes``) dL/d(eyes),
+        given dL/d(images) ``[views, H, W, 4]``."""
+    def release(self) -> None:
+        """Frees the render's device buffers now (its backward is gone)."""
+
+def rasterize(face_vertices: F32, textures: F32, settings: Settings) -> Tuple[F32, Raster]:
+    """SoftRas's ``soft_rasterize``: ``[B, F, 3, 3]`` screen-space faces and ``[B, F, R², 3]``
+    (surface) or ``[B, F, 3, 3]`` (vertex) textures to images ``[B, H, W, 4]``."""
+
+def reference_rasterize(face_vertices: F64, textures: F64, settings: Settings) -> F64:
+    """The f64 CPU twin of :func:`rasterize`."""
+
+def reference_rasterize_grad(
+    face_vertices: F64, textures: F64, settings: Settings, grad_images: F64
+) -> Tuple[F64, F64]:
+    """The f64 twin's backward of :func:`reference_rasterize`: dL/d(face vertices) and
+    dL/d(textures) given dL/d(images) ``[B, H, W, 4]``."""
+
+def render_mesh(
+    vertices: F32,
+    faces: I64,
+    textures: F32,
+    view_mesh: I64,
+    cameras: Sequence[Camera],
+    lighting: Lights,
+    settings: Settings,
+) -> Tuple[F32, Raster]:
+    """World-space meshes ``[B, V, 3]`` with shared faces ``[F, 3]`` through cameras and
+    lights, in the engine: view ``i`` shows mesh ``view_mesh[i]``."""
+
+def device_name() -> str:
+    """The name of the Vulkan device softvk renders on (opening it if need be)."""
+
+def release_cached_scenes() -> None:
+    """Frees the scenes kept for reuse by the next render of their kind."""
+
+def is_forked_child() -> bool:
+    """Whether this process is a fork of the one that opened the device."""
+
+def read_exr(path: _Path) -> F32:
+    """The first RGBA layer of an EXR as ``[H, W, 4]``."""
+
+def write_exr(path: _Path, image: F32) -> None:
+    """``[H, W, 4]`` RGBA as a lossless EXR, written whole or not at all."""
+
+def read_rgb(path: _Path) -> F32:
+    """An image as ``[H, W, 3]`` in [0, 1]."""
+
+def write_png(path: _Path, image: U8) -> None:
+    """``[H, W]`` or ``[H, W, 1 | 3 | 4]`` bytes as an 8-bit PNG, written whole or not at all."""
