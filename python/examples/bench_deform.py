@@ -6,7 +6,7 @@ ways, and where the time goes:
   ``srf.soft_rasterize`` on the ``[120, 2700, 3, 3]`` screen-space faces;
 - ``SoftRenderer``: ``sr.SoftRenderer.render_mesh``, which takes the engine's fast path;
 - ``render_mesh``: ``softvk.torch.render_mesh`` called directly on the vertices;
-- ``silhouettes``: ``render_mesh(mesh, mode='silhouettes')``, which renders alpha alone (what
+- ``silhouettes``: ``softvk.torch.render(renderer, mesh, 'silhouettes')``, which renders alpha alone (what
   the demo's loss reads; ``softvk fit-mesh`` renders so too).
 
     python python/examples/bench_deform.py --iters 10
@@ -146,7 +146,7 @@ def main(argv=None):
                               viewing_angle=15)
 
     def silhouettes(mesh):
-        alpha = renderer.render_mesh(mesh, mode="silhouettes")
+        alpha = st.render(renderer, mesh, "silhouettes")
         return alpha[:, None].expand(-1, 4, -1, -1)
 
     ways = {"composed": composed, "SoftRenderer": renderer.render_mesh, "render_mesh": direct,

@@ -18,6 +18,7 @@ from ._native import (
     is_forked_child,
     read_exr,
     reference_rasterize,
+    reference_rasterize_grad,
     release_cached_scenes,
     write_exr,
 )
@@ -29,6 +30,7 @@ __all__ = [
     "is_forked_child",
     "read_exr",
     "reference_rasterize",
+    "reference_rasterize_grad",
     "release_cached_scenes",
     "write_exr",
     "__version__",

@@ -5,6 +5,8 @@
 - :func:`render_mesh` renders world-space meshes through SoftRas's ``look_at`` or
   ``projection`` camera with its ambient + directional lighting, all in the engine: no
   ``[B, F, 3, 3]`` tensor is built in Python.
+- :func:`render` renders a ``softvk.soft_renderer`` mesh through a ``SoftRenderer`` as alpha
+  alone (the alpha-only fast path) or as depth: what SoftRas's ``mode=`` never did.
 
 Both are ``torch.autograd.Function`` s whose backward is softvk's: the exact derivative of the
 forward (SoftRas drops some terms; softvk keeps them), deterministic, bit-identical on reruns,
@@ -20,7 +22,7 @@ import torch
 
 from . import _native
 
-__all__ = ["soft_rasterize", "render_mesh", "rasterize_settings"]
+__all__ = ["soft_rasterize", "render_mesh", "render", "rasterize_settings"]
 
 
 def _size(image_size):
@@ -117,13 +119,20 @@ def _grad(array, like):
 
 
 class SoftRasterizeFunction(torch.autograd.Function):
-    """SoftRas's ``SoftRasterizeFunction`` on softvk's engine."""
+    """SoftRas's ``SoftRasterizeFunction`` on softvk's engine: float32 on the device; float64
+    (what ``torch.autograd.gradcheck`` makes; SoftRas's kernels compute doubles in double) on
+    the f64 CPU twin, forward and backward, never float32 behind a float64 result."""
 
     @staticmethod
     def forward(ctx, face_vertices, textures, settings):
+        ctx.like = (_like(face_vertices), _like(textures))
+        if face_vertices.dtype == torch.float64:
+            host = (_host(face_vertices, np.float64), _host(textures, np.float64))
+            ctx.double = (host, settings)
+            return _images(_native.reference_rasterize(*host, settings), face_vertices)
+        ctx.double = None
         images, raster = _native.rasterize(_host(face_vertices), _host(textures), settings)
         ctx.raster = raster
-        ctx.like = (_like(face_vertices), _like(textures))
         return _images(images, face_vertices)
 
     @staticmethod
@@ -131,8 +140,15 @@ class SoftRasterizeFunction(torch.autograd.Function):
         need_vertices, need_textures = ctx.needs_input_grad[:2]
         if not (need_vertices or need_textures):
             return None, None, None
-        upstream, alpha_only = _upstream(grad_images)
-        d_vertices, d_textures, _ = ctx.raster.backward(upstream, alpha_only)
+        if ctx.double is not None:
+            (face_vertices, textures), settings = ctx.double
+            upstream = _host(grad_images.detach().permute(0, 2, 3, 1), np.float64)
+            d_vertices, d_textures = _native.reference_rasterize_grad(
+                face_vertices, textures, settings, upstream
+            )
+        else:
+            upstream, alpha_only = _upstream(grad_images)
+            d_vertices, d_textures, _ = ctx.raster.backward(upstream, alpha_only)
         face_vertices, textures = ctx.like
         return (
             _grad(d_vertices, face_vertices) if need_vertices else None,
@@ -181,7 +197,20 @@ def soft_rasterize(
         aggr_func_alpha,
         texture_type,
     )
+    _check_dtypes("soft_rasterize", (torch.float32, torch.float64),
+                  face_vertices=face_vertices, textures=textures)
     return SoftRasterizeFunction.apply(face_vertices, textures, settings)
+
+
+def _check_dtypes(what, allowed, **tensors):
+    """One clear error unless every tensor has one dtype of ``allowed`` (as SoftRas's kernels,
+    which dispatch on one floating type for all their inputs)."""
+    dtypes = {name: t.dtype for name, t in tensors.items() if isinstance(t, torch.Tensor)}
+    first = next(iter(dtypes.values()), None)
+    if first not in allowed or any(d != first for d in dtypes.values()):
+        names = ", ".join(f"{n} {d}" for n, d in dtypes.items())
+        kinds = " or ".join(str(a) for a in allowed)
+        raise TypeError(f"softvk: {what} takes {kinds} tensors, all of one dtype; got {names}")
 
 
 class RenderMeshFunction(torch.autograd.Function):
@@ -280,6 +309,9 @@ def render_mesh(
     """
     if vertices.dim() == 2:
         vertices = vertices.unsqueeze(0)
+    # float64 meshes go through SoftRas's composed steps (softvk.soft_renderer), whose
+    # rasterizer computes doubles on the f64 twin; the engine's camera and lights are float32.
+    _check_dtypes("render_mesh", (torch.float32,), vertices=vertices, textures=textures)
     batch = vertices.shape[0]
     faces = faces.detach()
     if faces.dim() == 3:
@@ -299,18 +331,25 @@ def render_mesh(
     if camera_mode in ("look_at", "look"):
         if camera_mode == "look":
             raise ValueError("softvk: render_mesh renders look_at and projection cameras")
+        angles = np.asarray(_as_list(viewing_angle) if not np.isscalar(viewing_angle)
+                            else [viewing_angle], dtype=np.float64).reshape(-1)
+        if len(angles) == 1:
+            angles = np.repeat(angles, batch)
+        if len(angles) != batch:
+            raise ValueError(f"softvk: {len(angles)} viewing angles for a batch of {batch} meshes")
         if eyes is None:
-            eyes = torch.tensor([0.0, 0.0, -(1.0 / np.tan(np.radians(viewing_angle)) + 1)])
+            distance = 1.0 / np.tan(np.radians(angles)) + 1
+            eyes = torch.from_numpy(np.stack([0 * distance, 0 * distance, -distance], axis=1))
             eyes = eyes.to(vertices.device, vertices.dtype)
         eyes = eyes.reshape(-1, 3)
         if eyes.shape[0] == 1 and batch > 1:
             eyes = eyes.expand(batch, 3)
         if eyes.shape[0] != batch:
             raise ValueError(f"softvk: {eyes.shape[0]} eyes for a batch of {batch} meshes")
-        angle = float(viewing_angle) if perspective else None
         cameras = [
-            ("look_at", tuple(e), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), angle, float(viewing_scale))
-            for e in eyes.detach().cpu().double().tolist()
+            ("look_at", tuple(e), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0),
+             float(a) if perspective else None, float(viewing_scale))
+            for e, a in zip(eyes.detach().cpu().double().tolist(), angles)
         ]
     elif camera_mode == "projection":
         if P is None:
@@ -365,3 +404,22 @@ def _directionals(intensities, colors, directions):
         (float(pick(intensities, i)), tuple(pick(colors, i)), tuple(pick(directions, i)))
         for i in range(n)
     ]
+
+
+def render(renderer, mesh, mode="rgba"):
+    """Renders ``mesh`` (a ``softvk.soft_renderer.Mesh``) through ``renderer`` (a
+    ``softvk.soft_renderer.SoftRenderer``), with its camera, lighting and rasterizer settings.
+
+    - ``mode='rgba'``: ``[B, 4, H, W]``, what ``renderer.render_mesh(mesh)`` returns;
+    - ``'silhouettes'``: ``[B, H, W]``, the alpha of that render, rendered alone when the engine
+      takes the renderer (no depth or colour work, forward or backward: the same bits as the
+      full render's alpha);
+    - ``'depth'``: ``[B, H, W]``, the depth of the nearest face covering each pixel (``far``
+      where none does), differentiable in the vertices.
+
+    SoftRas's own ``mode=`` argument is ignored there, as SoftRas ignores it.
+    """
+    modes = ("rgba", "silhouettes", "depth")
+    if mode not in modes:
+        raise ValueError(f"softvk: render's mode must be one of {modes}, got {mode!r}")
+    return renderer._render(mesh, mode)

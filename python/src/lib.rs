@@ -12,7 +12,9 @@
 //!   world positions is the gradient with respect to the screen-space face vertices.
 //! - [`render_mesh`] keeps the camera, the lighting and the face set-up on the device: vertices,
 //!   faces and cameras in, images out.
-//! - [`reference_rasterize`] is the f64 CPU twin of [`rasterize`], the oracle of the tests.
+//! - [`reference_rasterize`] and [`reference_rasterize_grad`] are the f64 CPU twin of
+//!   [`rasterize`] and its backward: the oracle of the tests, and what `soft_rasterize` computes
+//!   for float64 tensors.
 //! - A training loop renders the same shapes through the same views every iteration: when a
 //!   render's [`Raster`] is dropped (its backward done), its scene is kept as a spare, and the
 //!   next render of the same key (topology, views, lights, settings) writes its new vertices
@@ -41,8 +43,8 @@ use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
 use softvk::raster::backward::GradBuffers;
 use softvk::raster::gpu::{GpuScene, Method, Renderer};
-use softvk::raster::reference;
 use softvk::raster::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
+use softvk::raster::{reference, reference_grad};
 
 /// Lights from Python: `(ambient intensity, ambient colour, [(intensity, colour, direction)])`.
 type PyLighting = (f64, [f64; 3], Vec<(f64, [f64; 3], [f64; 3])>);
@@ -752,6 +754,58 @@ fn reference_rasterize<'py>(
     images_array(py, images, (batch, s.height as usize, s.width as usize))
 }
 
+/// `reference_rasterize_grad(face_vertices, textures, settings, grad_images)`: the f64 CPU
+/// twin's backward of [`reference_rasterize`] (float64 throughout): dL/d(face vertices)
+/// `[B, F, 3, 3]` and dL/d(textures) (their shape) given dL/d(images) `[B, H, W, 4]`. With
+/// [`reference_rasterize`] it is what `soft_rasterize` computes for float64 tensors, as SoftRas's
+/// kernels compute doubles in double (`torch.autograd.gradcheck`).
+#[pyfunction]
+fn reference_rasterize_grad<'py>(
+    py: Python<'py>,
+    face_vertices: PyReadonlyArrayDyn<'py, f64>,
+    textures: PyReadonlyArrayDyn<'py, f64>,
+    settings: &Settings,
+    grad_images: PyReadonlyArrayDyn<'py, f64>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let inputs = FaceInputs::new(&face_vertices, &textures, settings.raster.color_mode)?;
+    let (batch, faces, per_face, s) =
+        (inputs.batch, inputs.faces, inputs.per_face, settings.raster);
+    let (height, width) = (s.height as usize, s.width as usize);
+    let (d_image, _) = checked(
+        "grad_images",
+        &grad_images,
+        &[Some(batch), Some(height), Some(width), Some(4)],
+    )?;
+    let d_image: &[[f64; 4]] = bytemuck::cast_slice(d_image);
+    let meshes = inputs.meshes_f64();
+    let (positions, colors) = py.detach(|| -> PyResult<(Vec<f64>, Vec<f64>)> {
+        let (mut positions, mut colors) = (Vec::new(), Vec::new());
+        for (b, mesh) in meshes.iter().enumerate() {
+            let upstream = &d_image[b * height * width..(b + 1) * height * width];
+            let g = reference_grad::grad_f64(
+                mesh,
+                &[Camera::screen_space()],
+                &Lighting::unlit(),
+                &s,
+                upstream,
+            )
+            .map_err(|e| to_py(e.into()))?;
+            positions.extend(g.positions.into_iter().flatten());
+            colors.extend(g.colors.into_iter().flatten());
+        }
+        Ok((positions, colors))
+    })?;
+    let d_pos = positions
+        .into_pyarray(py)
+        .reshape([batch, faces, 3, 3])?
+        .into_any();
+    let d_tex = colors
+        .into_pyarray(py)
+        .reshape([batch, faces, per_face, 3])?
+        .into_any();
+    PyTuple::new(py, [d_pos, d_tex])
+}
+
 /// A camera from Python: `('look_at', eye, at, up, viewing_angle_or_None, scale)` (perspective
 /// with the viewing angle in degrees, or orthographic with `scale` when the angle is `None`),
 /// or `('projection', P (12 floats, rows), dist_coeffs (5), orig_size)`.
@@ -1005,6 +1059,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Raster>()?;
     m.add_function(wrap_pyfunction!(rasterize, m)?)?;
     m.add_function(wrap_pyfunction!(reference_rasterize, m)?)?;
+    m.add_function(wrap_pyfunction!(reference_rasterize_grad, m)?)?;
     m.add_function(wrap_pyfunction!(render_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(device_name, m)?)?;
     m.add_function(wrap_pyfunction!(release_cached_scenes, m)?)?;

@@ -52,7 +52,7 @@ def engine(monkeypatch):
     test_fast_path.py compares with these steps, is turned off here)."""
     fake = FakeEngine()
     monkeypatch.setattr(srf, "soft_rasterize", fake)
-    monkeypatch.setattr(sr.SoftRenderer, "_engine_arguments", lambda self, mesh, mode: None)
+    monkeypatch.setattr(sr.SoftRenderer, "_engine_arguments", lambda self, mesh: None)
     return fake
 
 
@@ -152,15 +152,39 @@ def test_anti_aliasing_renders_twice_the_size_and_averages_2x2(monkeypatch):
     assert torch.isclose(images[0, 2, 3, 5], block.mean())
 
 
-def test_modes_select_rgb_alpha_and_depth(engine):
+def test_mode_is_ignored_as_softras_ignores_it(engine):
+    """SoftRas's rasterizer and renderer return [B, 4, H, W] whatever ``mode`` says, so that
+    ``renderer(v, f, mode='silhouettes')[:, 3]`` is alpha (it read a pixel row of a [B, H, W]
+    alpha before)."""
     rasterizer = sr.SoftRasterizer(image_size=4, far=80)
     mesh = triangle_mesh()
-    mesh.vertices = mesh.vertices + torch.tensor([0.0, 0.0, 2.0], dtype=torch.float64)
     rgba = rasterizer(mesh)
-    assert torch.equal(rasterizer(mesh, "rgb"), rgba[:, :3])
-    assert torch.equal(rasterizer(mesh, "silhouettes"), rgba[:, 3])
+    assert rgba.shape == (1, 4, 4, 4)
+    for mode in ("rgb", "silhouettes", "depth", "normals"):
+        assert torch.equal(rasterizer(mesh, mode), rgba)
+    renderer = sr.SoftRenderer(image_size=4, camera_mode="look_at")
+    images = renderer(mesh.vertices, mesh.faces, mesh.textures)
+    for mode in ("rgb", "silhouettes", "depth"):
+        assert torch.equal(renderer(mesh.vertices, mesh.faces, mesh.textures, mode=mode), images)
+        assert torch.equal(renderer.render_mesh(mesh, mode), images)
+    assert torch.equal(renderer(mesh.vertices, mesh.faces, mode="silhouettes")[:, 3],
+                       images[:, 3])
 
-    depth = rasterizer(mesh, "depth")
+
+def test_softvk_render_gives_alpha_and_depth(engine):
+    import softvk.torch as st
+
+    renderer = sr.SoftRenderer(image_size=4, camera_mode="look_at", far=80)
+    mesh = triangle_mesh()
+    rgba = renderer.render_mesh(mesh)
+    assert torch.equal(st.render(renderer, mesh), rgba)
+    assert torch.equal(st.render(renderer, mesh, "silhouettes"), rgba[:, 3])
+    with pytest.raises(ValueError, match="mode"):
+        st.render(renderer, mesh, "rgb")
+
+    rasterizer = sr.SoftRasterizer(image_size=4, far=80)
+    mesh.vertices = mesh.vertices + torch.tensor([0.0, 0.0, 2.0], dtype=torch.float64)
+    depth = sr.rasterizer.render_depth(rasterizer, mesh)
     call = engine.calls[-1]
     # Depth renders inverse depths as vertex colours with the hard colour aggregation.
     assert call["texture_type"] == "vertex" and call["aggr_func_rgb"] == "hard"
@@ -170,16 +194,15 @@ def test_modes_select_rgb_alpha_and_depth(engine):
     assert depth.shape == (1, 4, 4)
     assert torch.allclose(depth[0, :, :2], torch.full((4, 2), 2.0, dtype=torch.float64))
     assert torch.allclose(depth[0, :, 2:], torch.full((4, 2), 80.0, dtype=torch.float64))
-    with pytest.raises(ValueError):
-        rasterizer(mesh, "normals")
+    assert st.render(renderer, triangle_mesh(), "depth").shape == (1, 4, 4)
 
 
-def test_depth_mode_is_differentiable_in_the_vertices(engine):
+def test_depth_is_differentiable_in_the_vertices(engine):
     rasterizer = sr.SoftRasterizer(image_size=4)
     vertices = torch.tensor([[0.0, 0.0, 3.0], [0.0, 1.0, 3.0], [1.0, 0.0, 3.0]],
                             dtype=torch.float64, requires_grad=True)
     mesh = sr.Mesh(vertices, torch.tensor([[0, 1, 2]]))
-    rasterizer(mesh, "depth").sum().backward()
+    sr.rasterizer.render_depth(rasterizer, mesh).sum().backward()
     # The fake's covered pixels show corner 0's depth: 8 of them, d(depth)/dz0 = 1 each.
     assert torch.allclose(vertices.grad[0], torch.tensor([0.0, 0.0, 8.0], dtype=torch.float64))
     assert torch.isfinite(vertices.grad).all()

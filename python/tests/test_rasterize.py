@@ -103,45 +103,6 @@ def loss_weights(seed, shape):
     return np.random.default_rng(seed).uniform(-1, 1, shape)
 
 
-@pytest.mark.parametrize(
-    "dist,alpha,texture_type",
-    [("euclidean", "prod", "surface"), ("barycentric", "sum", "vertex"), ("euclidean", "prod", "vertex")],
-)
-def test_gradients_match_central_differences_of_the_twin(gpu, dist, alpha, texture_type):
-    batch, faces, size = 2, 4, 12
-    fv = random_faces(11, batch, faces, size=0.9)
-    tex = random_textures(11, batch, faces, texture_type)
-    # dist_eps 1e-10: the cut-off's jump (ε_d) is far below what the differences resolve.
-    kw = dict(sigma_val=5e-3, gamma_val=5e-2, dist_func=dist, aggr_func_alpha=alpha,
-              texture_type=texture_type, dist_eps=1e-10)
-    weights = loss_weights(5, (batch, 4, size, size))
-
-    fv_t = torch.tensor(fv, dtype=torch.float32, requires_grad=True)
-    tex_t = torch.tensor(tex, dtype=torch.float32, requires_grad=True)
-    image = st.soft_rasterize(fv_t, tex_t, image_size=size, **kw)
-    (image * torch.tensor(weights, dtype=torch.float32)).sum().backward()
-
-    fv64, tex64 = f32(fv), f32(tex)
-    loss = lambda f, t: float((twin(f, t, size, **kw) * weights).sum())  # noqa: E731
-    h = 1e-5
-    fd_v = np.zeros_like(fv64)
-    for i in np.ndindex(fv64.shape):
-        up, down = fv64.copy(), fv64.copy()
-        up[i] += h
-        down[i] -= h
-        fd_v[i] = (loss(up, tex64) - loss(down, tex64)) / (2 * h)
-    fd_t = np.zeros_like(tex64)
-    for i in np.ndindex(tex64.shape):
-        up, down = tex64.copy(), tex64.copy()
-        up[i] += h
-        down[i] -= h
-        fd_t[i] = (loss(fv64, up) - loss(fv64, down)) / (2 * h)
-    assert np.abs(fd_v).max() > 1.0  # the scene does depend on its vertices
-    scale_v = np.abs(fd_v).max()
-    np.testing.assert_allclose(fv_t.grad.numpy(), fd_v, atol=2e-3 * scale_v, rtol=0)
-    np.testing.assert_allclose(tex_t.grad.numpy(), fd_t, atol=2e-4 * np.abs(fd_t).max(), rtol=0)
-
-
 def forward_backward(fv, tex, weights, **kw):
     fv_t = torch.tensor(fv, dtype=torch.float32, requires_grad=True)
     tex_t = torch.tensor(tex, dtype=torch.float32, requires_grad=True)

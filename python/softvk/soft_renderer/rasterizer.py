@@ -8,8 +8,6 @@ from . import functional as srf
 
 __all__ = ["SoftRasterizer"]
 
-_MODES = (None, "rgb", "silhouettes", "depth")
-
 
 class SoftRasterizer(nn.Module):
     """Soft rasterization of a mesh whose vertices are in screen space (x, y, depth).
@@ -25,7 +23,8 @@ class SoftRasterizer(nn.Module):
                  texture_type="surface"):
         """
         Args:
-            image_size: output height = width in pixels.
+            image_size: output height = width in pixels, or a ``(height, width)`` pair (SoftRas
+                renders square images only; the shorter side spans [-1, 1] in screen space).
             background_color: RGB.
             near, far: depth range of the colour aggregation.
             anti_aliasing: render at twice the size and average 2×2 blocks.
@@ -69,56 +68,48 @@ class SoftRasterizer(nn.Module):
         self.texture_type = texture_type
 
     def forward(self, mesh, mode=None):
-        """Renders ``mesh`` (vertices in screen space, textures already lit).
+        """Renders ``mesh`` (vertices in screen space, textures already lit) as RGBA
+        [batch, 4, H, W]. ``mode`` is accepted and ignored, as SoftRas ignores it; softvk's
+        alpha-only and depth renders are :func:`softvk.torch.render`'s."""
+        return _rasterize(self, mesh.face_vertices, mesh.face_textures, self.texture_type,
+                          self.aggr_func_rgb, self.background_color)
 
-        Args:
-            mesh: a :class:`Mesh`.
-            mode: what to return:
 
-                - ``None``: [batch, 4, H, W] RGBA, as SoftRas (which ignores ``mode``);
-                - ``'rgb'``: [batch, 3, H, W];
-                - ``'silhouettes'``: [batch, H, W], the soft alpha;
-                - ``'depth'``: [batch, H, W], the depth of the nearest face covering each pixel
-                  (``far`` where none does), differentiable in the vertices. It is rendered
-                  with ``aggr_func_rgb='hard'`` and the inverse depths as vertex colours:
-                  interpolating those with the clipped barycentrics gives exactly
-                  ``1 / z`` of SPEC §2's depth.
+def scaled_size(image_size, factor):
+    """``image_size`` (an int, or a ``(height, width)`` pair) times ``factor``."""
+    if isinstance(image_size, (tuple, list)):
+        height, width = image_size
+        return (int(height) * factor, int(width) * factor)
+    return int(image_size) * factor
 
-        Returns:
-            The images above, H = W = ``image_size``.
-        """
-        if mode not in _MODES:
-            raise ValueError("mode must be one of None, 'rgb', 'silhouettes' or 'depth', got %r"
-                             % (mode,))
-        image_size = self.image_size * (2 if self.anti_aliasing else 1)
-        face_vertices = mesh.face_vertices
-        if mode == "depth":
-            textures = _inverse_depth_colors(face_vertices)
-            texture_type, aggr_func_rgb, background_color = "vertex", "hard", [0, 0, 0]
-        else:
-            textures = mesh.face_textures
-            texture_type, aggr_func_rgb = self.texture_type, self.aggr_func_rgb
-            background_color = self.background_color
 
-        images = srf.soft_rasterize(face_vertices, textures, image_size,
-                                    background_color, self.near, self.far,
-                                    self.fill_back, self.eps,
-                                    self.sigma_val, self.dist_func, self.dist_eps,
-                                    self.gamma_val, aggr_func_rgb, self.aggr_func_alpha,
-                                    texture_type)
-        if self.anti_aliasing:
-            images = F.avg_pool2d(images, kernel_size=2, stride=2)
+def _rasterize(rasterizer, face_vertices, textures, texture_type, aggr_func_rgb,
+               background_color):
+    """``functional.soft_rasterize`` with the rasterizer's settings (and anti-aliasing)."""
+    r = rasterizer
+    image_size = scaled_size(r.image_size, 2 if r.anti_aliasing else 1)
+    images = srf.soft_rasterize(face_vertices, textures, image_size, background_color,
+                                r.near, r.far, r.fill_back, r.eps, r.sigma_val, r.dist_func,
+                                r.dist_eps, r.gamma_val, aggr_func_rgb, r.aggr_func_alpha,
+                                texture_type)
+    if r.anti_aliasing:
+        images = F.avg_pool2d(images, kernel_size=2, stride=2)
+    return images
 
-        if mode is None:
-            return images
-        if mode == "rgb":
-            return images[:, :3]
-        if mode == "silhouettes":
-            return images[:, 3]
-        inverse = images[:, 0]
-        covered = inverse > 0
-        safe = torch.where(covered, inverse, torch.ones_like(inverse))
-        return torch.where(covered, 1.0 / safe, torch.full_like(inverse, float(self.far)))
+
+def render_depth(rasterizer, mesh):
+    """[batch, H, W]: the depth of the nearest face covering each pixel (``far`` where none
+    does), differentiable in the vertices, of a mesh in screen space, with ``rasterizer``'s
+    settings. It is rendered with ``aggr_func_rgb='hard'`` and the inverse depths as vertex
+    colours: interpolating those with the clipped barycentrics gives exactly ``1 / z`` of SPEC
+    §2's depth."""
+    face_vertices = mesh.face_vertices
+    textures = _inverse_depth_colors(face_vertices)
+    images = _rasterize(rasterizer, face_vertices, textures, "vertex", "hard", [0, 0, 0])
+    inverse = images[:, 0]
+    covered = inverse > 0
+    safe = torch.where(covered, inverse, torch.ones_like(inverse))
+    return torch.where(covered, 1.0 / safe, torch.full_like(inverse, float(rasterizer.far)))
 
 
 def _inverse_depth_colors(face_vertices):

@@ -4,10 +4,11 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-from .lighting import Lighting
+from . import functional as srf
+from .lighting import AmbientLighting, DirectionalLighting, Lighting
 from .mesh import Mesh
-from .rasterizer import SoftRasterizer
-from .transform import Transform
+from .rasterizer import SoftRasterizer, render_depth, scaled_size
+from .transform import LookAt, Projection, Transform
 
 __all__ = ["SoftRenderer"]
 
@@ -46,6 +47,57 @@ def _engine_lights(lighting):
     return dict(light_intensity_ambient=ambient[0], light_color_ambient=ambient_color,
                 light_intensity_directionals=intensities, light_color_directionals=colors,
                 light_directions=directions)
+
+
+def _per_view(value, batch):
+    """A camera setting as one float, or one float per mesh of the batch; ``None`` when it asks
+    for a gradient or has another size."""
+    if isinstance(value, torch.Tensor):
+        if value.requires_grad or value.numel() not in (1, batch):
+            return None
+        flat = [float(v) for v in value.detach().reshape(-1).tolist()]
+        return flat[0] if len(flat) == 1 else flat
+    if isinstance(value, (int, float)):
+        return float(value)
+    return None
+
+
+# The functions SoftRas's modules call (``srf.<name>``, looked up at each call). The engine's
+# path computes what these compute; a user who replaced one gets the composed steps instead.
+_SRF_FUNCTIONS = ("soft_rasterize", "look_at", "perspective", "orthogonal", "projection",
+                  "ambient_lighting", "directional_lighting", "face_vertices", "vertex_normals")
+_ORIGINAL_SRF = {name: getattr(srf, name) for name in _SRF_FUNCTIONS}
+
+
+def _stock(module, cls):
+    """Whether ``module`` is exactly a ``cls`` as this package made it: not a subclass, no
+    ``forward`` of its own on the instance, no forward hooks (its own or global)."""
+    from torch.nn.modules import module as torch_module
+
+    if type(module) is not cls or "forward" in vars(module):
+        return False
+    hooks = [getattr(module, name, None) for name in ("_forward_hooks", "_forward_pre_hooks")]
+    hooks += [getattr(torch_module, name, None)
+              for name in ("_global_forward_hooks", "_global_forward_pre_hooks")]
+    return not any(h for h in hooks)
+
+
+def _stock_steps(renderer):
+    """Whether the renderer's lighting, camera and rasterizer are SoftRas's own, unreplaced,
+    and call SoftRas's own functions: only then does the engine's path compute what they do."""
+    lighting, transform = renderer.lighting, renderer.transform
+    modules = [(lighting, Lighting), (lighting.ambient, AmbientLighting),
+               (transform, Transform), (renderer.rasterizer, SoftRasterizer)]
+    if type(lighting.directionals) is not nn.ModuleList:
+        return False
+    modules += [(d, DirectionalLighting) for d in lighting.directionals]
+    if not all(_stock(m, cls) for m, cls in modules):
+        return False
+    if type(transform.transformer) not in (LookAt, Projection):
+        return False
+    if not _stock(transform.transformer, type(transform.transformer)):
+        return False
+    return all(getattr(srf, name) is f for name, f in _ORIGINAL_SRF.items())
 
 
 class SoftRenderer(nn.Module):
@@ -117,20 +169,44 @@ class SoftRenderer(nn.Module):
         self.rasterizer.texture_type = mode
 
     def render_mesh(self, mesh, mode=None):
-        """Renders a :class:`Mesh`: [batch, 4, H, W] RGBA for ``mode=None`` (see
-        :meth:`SoftRasterizer.forward` for the other modes). ``mesh`` is left as it was."""
-        self.set_texture_mode(mesh.texture_type)
-        fast = self._engine_arguments(mesh, mode)
-        if fast is not None:
-            return self._render_in_engine(mesh, mode, fast)
-        return self._render_composed(mesh, mode)
+        """Renders a :class:`Mesh`: [batch, 4, H, W] RGBA. ``mode`` is passed on to the
+        rasterizer, which ignores it, as SoftRas's does (softvk's alpha-only and depth renders
+        are :func:`softvk.torch.render`'s). ``mesh`` is left as it was."""
+        return self._render(mesh, "rgba", mode)
 
-    def _engine_arguments(self, mesh, mode):
+    def forward(self, vertices, faces, textures=None, mode=None, texture_type="surface"):
+        """Renders vertices [batch, V, 3], faces [batch, F, 3] and textures (see :class:`Mesh`;
+        ``None`` is white): [batch, 4, H, W] RGBA, whatever ``mode`` says (as SoftRas)."""
+        mesh = Mesh(vertices, faces, textures=textures, texture_type=texture_type)
+        return self.render_mesh(mesh, mode)
+
+    def _render(self, mesh, what, mode=None):
+        """``what``: ``'rgba'`` [batch, 4, H, W], ``'silhouettes'`` [batch, H, W] (alpha alone)
+        or ``'depth'`` [batch, H, W]. In the engine when it computes what the composed steps
+        compute (:meth:`_engine_arguments`), else through the composed steps."""
+        self.set_texture_mode(mesh.texture_type)
+        if what == "depth":
+            return render_depth(self.rasterizer, self._camera_space(mesh))
+        fast = self._engine_arguments(mesh)
+        if fast is not None:
+            return self._render_in_engine(mesh, what, fast)
+        images = self._render_composed(mesh, mode)
+        return images[:, 3] if what == "silhouettes" else images
+
+    def _engine_arguments(self, mesh):
         """The arguments of ``softvk.torch.render_mesh`` that render ``mesh`` as the composed
-        steps would, or ``None`` when it cannot: a ``'look'`` camera, lights that differ per
-        mesh of the batch, faces that differ per mesh, a mesh whose back faces were filled in
-        (``fill_back_``), or ``mode='depth'``."""
-        if mode not in (None, "rgb", "silhouettes") or getattr(mesh, "_fill_back", False):
+        steps would, or ``None`` when it cannot say so for sure. The composed steps are taken
+        for float64 meshes (computed in double there), a mesh that is not exactly a
+        :class:`Mesh` or whose back faces were filled in (``fill_back_``), lighting, camera or
+        rasterizer modules that were replaced, subclassed, given a ``forward`` or hooks, or
+        whose functions (``functional.*``) were replaced, a ``'look'`` camera, lights or
+        faces that differ per mesh of the batch, and any light or camera setting that asks for
+        a gradient. Every attribute is read here, at the call, as the composed steps read it."""
+        if type(mesh) is not Mesh or getattr(mesh, "_fill_back", False):
+            return None
+        if mesh.vertices.dtype != torch.float32 or mesh.textures.dtype != torch.float32:
+            return None
+        if not _stock_steps(self):
             return None
         light = _engine_lights(self.lighting)
         if light is None:
@@ -138,26 +214,32 @@ class SoftRenderer(nn.Module):
         faces = mesh.faces
         if faces.shape[0] > 1 and bool(torch.any(faces != faces[:1])):
             return None
+        batch = mesh.batch_size
         transformer = self.transform.transformer
-        if self.transform.camera_mode == "look_at":
+        if type(transformer) is LookAt:
             eyes = transformer._eye
-            if not isinstance(eyes, torch.Tensor):
+            if isinstance(eyes, torch.Tensor):
+                if eyes.numel() != 3 and (eyes.dim() != 2 or eyes.shape[0] != batch):
+                    return None
+            else:
                 eyes = torch.tensor(eyes, dtype=torch.float64)
-            if eyes.numel() != 3 and (eyes.dim() != 2 or eyes.shape[0] != mesh.batch_size):
+                if eyes.numel() != 3:
+                    return None
+            angle = _per_view(transformer.viewing_angle, batch)
+            scale = _per_view(transformer.viewing_scale, 1)
+            if angle is None or scale is None:
                 return None
-            camera = dict(camera_mode="look_at", eyes=eyes, perspective=transformer.perspective,
-                          viewing_angle=transformer.viewing_angle,
-                          viewing_scale=transformer.viewing_scale)
-        elif self.transform.camera_mode == "projection":
+            camera = dict(camera_mode="look_at", eyes=eyes,
+                          perspective=bool(transformer.perspective),
+                          viewing_angle=angle, viewing_scale=scale)
+        else:
             P, coeffs = transformer.P, transformer.dist_coeffs
-            if P.shape[0] not in (1, mesh.batch_size) or any(
+            if P.shape[0] not in (1, batch) or any(
                 isinstance(t, torch.Tensor) and t.requires_grad for t in (P, coeffs)
             ):
                 return None
             camera = dict(camera_mode="projection", P=P, dist_coeffs=coeffs,
                           orig_size=transformer.orig_size)
-        else:
-            return None
         r = self.rasterizer
         raster = dict(background_color=r.background_color, near=r.near, far=r.far,
                       fill_back=r.fill_back, eps=r.eps, sigma_val=r.sigma_val,
@@ -166,24 +248,20 @@ class SoftRenderer(nn.Module):
                       texture_type=r.texture_type)
         return dict(camera, **raster, **light)
 
-    def _render_in_engine(self, mesh, mode, arguments):
+    def _render_in_engine(self, mesh, what, arguments):
         """Lighting, camera and rasterization in one engine call (``softvk.torch.render_mesh``):
         no screen-space faces or lit textures are built in Python."""
         import softvk.torch as st
 
-        scale = 2 if self.rasterizer.anti_aliasing else 1
-        images = st.render_mesh(mesh.vertices, mesh.faces[0], mesh.textures,
-                                image_size=self.rasterizer.image_size * scale,
-                                silhouettes=mode == "silhouettes", **arguments)
-        if scale == 2:
+        anti_aliasing = self.rasterizer.anti_aliasing
+        size = scaled_size(self.rasterizer.image_size, 2 if anti_aliasing else 1)
+        images = st.render_mesh(mesh.vertices, mesh.faces[0], mesh.textures, image_size=size,
+                                silhouettes=what == "silhouettes", **arguments)
+        if anti_aliasing:
             images = F.avg_pool2d(images, kernel_size=2, stride=2)
-        if mode == "rgb":
-            return images[:, :3]
-        if mode == "silhouettes":
-            return images[:, 3]
-        return images
+        return images[:, 3] if what == "silhouettes" else images
 
-    def _render_composed(self, mesh, mode):
+    def _render_composed(self, mesh, mode=None):
         """Lighting, then camera, then rasterization, each a module of its own, on a shallow
         copy of ``mesh`` so that the caller's mesh keeps its vertices and textures."""
         mesh = mesh._shallow_copy()
@@ -191,8 +269,7 @@ class SoftRenderer(nn.Module):
         mesh = self.transform(mesh)
         return self.rasterizer(mesh, mode)
 
-    def forward(self, vertices, faces, textures=None, mode=None, texture_type="surface"):
-        """Renders vertices [batch, V, 3], faces [batch, F, 3] and textures (see :class:`Mesh`;
-        ``None`` is white)."""
-        mesh = Mesh(vertices, faces, textures=textures, texture_type=texture_type)
-        return self.render_mesh(mesh, mode)
+    def _camera_space(self, mesh):
+        """``mesh`` (a shallow copy) with its vertices through the camera, unlit."""
+        mesh = mesh._shallow_copy()
+        return self.transform(mesh)

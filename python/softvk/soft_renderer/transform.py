@@ -12,8 +12,13 @@ __all__ = ["Projection", "LookAt", "Look", "Transform"]
 
 
 def _default_eye(viewing_angle):
-    """On -z, at the distance where the unit sphere just fills the view: 1 / tan(a) + 1."""
-    return [0, 0, -(1.0 / math.tan(math.radians(viewing_angle)) + 1)]
+    """On -z, at the distance where the unit sphere just fills the view: 1 / tan(a) + 1; one
+    eye per mesh ([batch, 3], no gradient) for a [batch] tensor of angles."""
+    if torch.is_tensor(viewing_angle) and viewing_angle.numel() > 1:
+        distance = 1.0 / torch.tan(viewing_angle.detach().reshape(-1) * (math.pi / 180)) + 1
+        zero = torch.zeros_like(distance)
+        return torch.stack((zero, zero, -distance), dim=1)
+    return [0, 0, -(1.0 / math.tan(math.radians(float(viewing_angle))) + 1)]
 
 
 class Projection(nn.Module):
@@ -55,7 +60,8 @@ class LookAt(nn.Module):
         """
         Args:
             perspective: perspective (``True``) or orthographic projection.
-            viewing_angle: half the field of view in degrees (perspective).
+            viewing_angle: half the field of view in degrees (perspective): a number, or a
+                tensor (one angle, or [batch], one per mesh; it may require a gradient).
             viewing_scale: scale of the orthographic projection.
             eye: [3] or [batch, 3]; ``None``: ``(0, 0, -(1 / tan(viewing_angle) + 1))``.
         """
