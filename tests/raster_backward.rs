@@ -354,6 +354,49 @@ fn hard_modes_and_the_matrix_projection_match_the_twin() {
     check(&r, &gpu, "matrix", &mesh, &matrix, &s, SMOOTH);
 }
 
+/// A face seen nearly edge-on: spot's face 548 and three neighbours, through the eye of
+/// SoftRas's `get_points_from_angles(2.5, 10, 120)` computed in f32. The sliver's screen
+/// determinant is -3.2e-9 (1.2e-5 of its terms); taken from the f32 screen vertices it came
+/// out positive, and the sign decides what the clipped barycentrics of a pixel beside the
+/// sliver are, (1, 0, 0) or (0, ½, ½), so its depth and texel there: the face's softmax weight
+/// at pixel (16, 24) moved by e^{0.37}, the neighbours' colour gradients by 7.5 %, the sliver's
+/// own went to the other texel, and the positions' gradients were 9 % off. The setup now takes
+/// a look-at view's determinant from the world vertices (`look_at_det` in `face_setup.comp`).
+#[test]
+fn a_face_seen_edge_on_differentiates_as_the_twin() {
+    let Some(gpu) = common::gpu() else { return };
+    let r = Renderer::new(&gpu).unwrap();
+    let positions = vec![
+        [0.228165, -0.692422, 0.147407],
+        [0.276152, -0.679477, 0.14116],
+        [0.227442, -0.724741, 0.0933852],
+        [0.182766, -0.687312, 0.135767],
+        [0.233064, -0.638226, 0.175543],
+        [0.185474, -0.638484, 0.162245],
+    ];
+    // The sliver first.
+    let faces = vec![[4, 5, 0], [0, 3, 2], [0, 1, 4], [3, 0, 5]];
+    let mut mesh = Mesh::new(positions, faces, 2).unwrap();
+    mesh.textures = random_colors(mesh.textures.len(), 5);
+    let eye = DVec3::new(
+        f64::from(2.1321714f32),
+        f64::from(0.43412045f32),
+        f64::from(1.2310098f32),
+    );
+    let cams = [Camera {
+        eye,
+        ..Camera::from_angles(2.5, 10.0, 120.0)
+    }];
+    let s = RasterSettings {
+        width: 32,
+        height: 32,
+        sigma: 1e-4,
+        gamma: 1e-3,
+        ..RasterSettings::default()
+    };
+    check(&r, &gpu, "edge-on sliver", &mesh, &cams, &s, SMOOTH);
+}
+
 #[test]
 fn repeated_backward_runs_are_bit_identical() {
     let Some(gpu) = common::gpu() else { return };

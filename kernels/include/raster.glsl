@@ -4,7 +4,8 @@
 //
 // Where f32 needs a different arrangement of the same formula than the f64 twin, it is said here:
 // - barycentrics are evaluated relative to a vertex of the opposite edge (`barycentric`);
-// - the face determinant is taken in its translated form (`face_setup.comp`);
+// - the face determinant is taken in its translated form, and for a look-at view from the world
+//   vertices (`face_setup.comp`), once: every later step reads it from the setup;
 // - the softmax exponents are taken from depth differences, not from z̄ (`softmax_add_if`);
 // - a division by a per-face constant (1 / z_k, 1 / |edge|², 1 / det) is a multiplication by its
 //   reciprocal, taken once per face (`face_reciprocals`), and a division by σ or by the clip's
@@ -42,11 +43,11 @@ struct FaceSetup {
     vec4 bbox;    // grown screen box (x_min, y_min, x_max, y_max)
     uint flags;   // FACE_FRONT | FACE_FINITE | FACE_DEGENERATE
     uint mesh;    // the batch's mesh the face belongs to (its view's)
-    uint pad0;
+    float det;    // the screen determinant, unclamped (`face_setup.comp`; its sign is FACE_FRONT's)
     uint pad1;
 };
 
-// What the per-pixel steps read of a `FaceSetup` (21 of its 32 words) and the reciprocals they
+// What the per-pixel steps read of a `FaceSetup` (22 of its 32 words) and the reciprocals they
 // multiply by (`face_reciprocals`). The tiled kernels hold one face per lane and broadcast it
 // across the subgroup one word per shuffle (a shuffle is one permute on llvmpipe, a division
 // an 8-lane `vdivps`; a word no step reads is never shuffled: the compiler drops it); brute
@@ -57,6 +58,7 @@ struct Face {
     vec4 bbox;      // grown screen box
     uint flags;     // FACE_*
     uint mesh;      // the batch's mesh
+    float det;      // the setup's determinant, unclamped
     vec3 inv_z;     // 1 / z_k
     vec3 inv_len2;  // 1 / |v_{k+1} - v_k|² of edge k (0 for a zero-length edge)
     float inv_det;  // 1 / the clamped determinant
@@ -72,11 +74,9 @@ void face_reciprocals(inout Face f) {
         f.inv_z[k] = 1.0 / f.v[k].z;
         f.inv_len2[k] = len2 > 0.0 ? 1.0 / len2 : 0.0;
     }
-    // The determinant as the face setup takes it (translated form, no fused products).
-    precise float ta = (f.v[1].x - f.v[0].x) * (f.v[2].y - f.v[0].y);
-    precise float tb = (f.v[2].x - f.v[0].x) * (f.v[1].y - f.v[0].y);
-    precise float det_raw = ta - tb;
-    f.inv_det = 1.0 / (det_raw > 0.0 ? max(det_raw, MIN_DET) : min(det_raw, -MIN_DET));
+    // The determinant the face setup took (for a look-at view not the screen vertices' own:
+    // `face_setup.comp`), clamped as there.
+    f.inv_det = 1.0 / (f.det > 0.0 ? max(f.det, MIN_DET) : min(f.det, -MIN_DET));
 }
 
 Face face_of(FaceSetup s) {
@@ -90,6 +90,7 @@ Face face_of(FaceSetup s) {
     f.bbox = s.bbox;
     f.flags = s.flags;
     f.mesh = s.mesh;
+    f.det = s.det;
     face_reciprocals(f);
     return f;
 }
@@ -106,6 +107,7 @@ Face face_none() {
     f.bbox = vec4(0.0);
     f.flags = 0u;
     f.mesh = 0u;
+    f.det = 0.0;
     f.inv_z = vec3(0.0);
     f.inv_len2 = vec3(0.0);
     f.inv_det = 0.0;

@@ -45,6 +45,7 @@ Face load_face(uint index) {
     uvec4 last = imageLoad(setups, t + 7);
     f.flags = last.x;
     f.mesh = last.y;
+    f.det = uintBitsToFloat(last.z);
     face_reciprocals(f);
     return f;
 }

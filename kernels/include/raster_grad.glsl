@@ -238,13 +238,7 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
     // ±0, and adding ±0 to the edge term changes no bit (x + ±0 = x; +0 + -0 = +0).
     vec2 d_xy[3] = vec2[3](vec2(0.0), vec2(0.0), vec2(0.0));
     if (!ALPHA_ONLY || MODE_DIST == DIST_BARYCENTRIC) {
-        vec2 v0 = f.v[0].xy;
-        vec2 v1 = f.v[1].xy;
-        vec2 v2 = f.v[2].xy;
-        precise float ta = (v1.x - v0.x) * (v2.y - v0.y);
-        precise float tb = (v2.x - v0.x) * (v1.y - v0.y);
-        precise float det_raw = ta - tb;
-        bool clamped = det_raw > 0.0 ? det_raw < MIN_DET : det_raw > -MIN_DET;
+        bool clamped = f.det > 0.0 ? f.det < MIN_DET : f.det > -MIN_DET;
         float d_det = clamped ? 0.0 : -dot(d_w, w) * f.inv_det;
         for (uint k = 0u; k < 3u; ++k) {
             uint ia = k == 2u ? 0u : k + 1u;

@@ -19,6 +19,7 @@ Face face_shuffle(Face f, uint i) {
     g.bbox = subgroupShuffle(f.bbox, i);
     g.flags = subgroupShuffle(f.flags, i);
     g.mesh = subgroupShuffle(f.mesh, i);
+    g.det = subgroupShuffle(f.det, i);
     g.inv_z = subgroupShuffle(f.inv_z, i);
     g.inv_len2 = subgroupShuffle(f.inv_len2, i);
     g.inv_det = subgroupShuffle(f.inv_det, i);

@@ -143,8 +143,14 @@ pub struct GpuFaceSetup {
     pub flags: u32,
     /// The mesh of the batch this face belongs to (its view's [`GpuView::mesh`]).
     pub mesh: u32,
+    /// The screen determinant of `[[x], [y], [1, 1, 1]]`, unclamped: the one `inv` divides by
+    /// and [`FACE_FRONT`] tests, which the fine and backward kernels read rather than recompute.
+    /// For a look-at view it is taken from the world vertices (`look_at_det` in
+    /// `face_setup.comp`), not from the f32 screen vertices, whose rounding can flip the sign of
+    /// a face seen nearly edge-on.
+    pub det: f32,
     /// std430 padding.
-    pub pad: [u32; 2],
+    pub pad: u32,
 }
 
 /// Push constants of `face_setup.comp`.
@@ -303,6 +309,7 @@ mod tests {
         assert_eq!(std::mem::offset_of!(GpuFaceSetup, inv), 48);
         assert_eq!(std::mem::offset_of!(GpuFaceSetup, bbox), 96);
         assert_eq!(std::mem::offset_of!(GpuFaceSetup, flags), 112);
+        assert_eq!(std::mem::offset_of!(GpuFaceSetup, det), 120);
         assert_eq!(specs::FACE_SETUP.bindings.len(), 4);
         assert_eq!(specs::FACE_SETUP.workgroup_size, [64, 1, 1]);
     }
