@@ -12,6 +12,7 @@
 pub mod backward;
 pub mod brute;
 pub mod fine;
+pub mod fragments;
 pub mod gpu;
 pub mod light;
 pub(crate) mod loops;
