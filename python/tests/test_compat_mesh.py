@@ -273,7 +273,10 @@ def test_png_writer_and_reader_round_trip(tmp_path):
 
 
 def test_png_reader_matches_pillow_on_spot_texture():
-    pil = pytest.importorskip("PIL.Image")
+    # Pillow is a test dependency (the `test` extra; Debian's python3-pil in CI): a missing one
+    # fails here rather than skipping the comparison.
+    import PIL.Image as pil
+
     path = assets_dir() / "spot_texture.png"
     with pil.open(str(path)) as image:
         expected = np.asarray(image.convert("RGB"), dtype=np.float32) / 255
