@@ -97,6 +97,8 @@ def fit(target, template, size=64, views=24, iters=300, log_every=50, out=None, 
         mesh, laplacian, flatten = model(views)
         images = renderer.render_mesh(mesh)
         loss = neg_iou_loss(images[:, 3], targets) + 0.03 * laplacian + 0.0003 * flatten
+        if i == 0:
+            log(f"iter 0: mean IoU {mean_iou(images[:, 3].detach(), targets):.4f} (the template)")
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()

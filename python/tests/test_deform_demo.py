@@ -20,7 +20,9 @@ def test_the_deformation_demo_fits_a_sphere_to_24_silhouettes(gpu, assets, tmp_p
         assets / "spot_triangulated.obj", assets / "sphere_1352.obj", size=32, views=24,
         iters=200, log_every=100, out=tmp_path / "fit.obj", log=lines.append,
     )
+    ious = [float(line.split("mean IoU ")[1].split()[0].rstrip(",")) for line in lines]
+    # It learned: from the template sphere's IoU, through the log after 100 iterations, to the
+    # end (measured: 0.466, 0.864, 0.946).
+    assert ious[0] < 0.6 and ious[0] < ious[1] < iou, lines
     assert iou >= 0.9, lines
-    # It learned: the first log line (after 100 iterations) is below the end.
-    assert float(lines[0].split("mean IoU ")[1].split(",")[0]) < iou
     assert (tmp_path / "fit.obj").read_text().count("\nf ") == 2700
