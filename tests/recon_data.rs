@@ -685,3 +685,12 @@ fn dataset_open_rejects_files_whose_shapes_disagree() {
     assert!(ok.classes[0].voxels.iter().all(|&x| x));
     assert_eq!(ok.classes[0].category, None);
 }
+
+#[test]
+fn int64_arrays_round_trip_through_npy_bytes() {
+    let array = NpyArray::new(vec![2, 3], NpyData::I64(vec![-1, 0, 7, 1 << 40, -5, 3])).unwrap();
+    let bytes = array.to_npy_bytes();
+    assert!(String::from_utf8_lossy(&bytes[..64]).contains("<i8"));
+    assert_eq!(NpyArray::from_npy_bytes(&bytes, "x.npy").unwrap(), array);
+    assert_eq!(array.data.dtype_name(), "int64");
+}

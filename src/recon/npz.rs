@@ -1,5 +1,5 @@
 //! NumPy `.npy` arrays and `.npz` archives, as the NMR/SoftRas dataset stores its images and
-//! voxels: typed data (u8, bool, i32, f32, f64) with a shape, C order only.
+//! voxels: typed data (u8, bool, i32, i64, f32, f64) with a shape, C order only.
 //!
 //! The `.npy` header and element coding are [`npyz`]'s; the zip archive around them is the `zip`
 //! crate's, used directly (deflate only) rather than through npyz's `npz` feature, which turns on
@@ -28,6 +28,8 @@ pub enum NpyData {
     Bool(Vec<bool>),
     /// `int32` (`<i4` or `>i4`).
     I32(Vec<i32>),
+    /// `int64` (`<i8` or `>i8`): indices, as PyTorch and NumPy write them.
+    I64(Vec<i64>),
     /// `float32` (`<f4` or `>f4`).
     F32(Vec<f32>),
     /// `float64` (`<f8` or `>f8`).
@@ -41,6 +43,7 @@ impl NpyData {
             NpyData::U8(v) => v.len(),
             NpyData::Bool(v) => v.len(),
             NpyData::I32(v) => v.len(),
+            NpyData::I64(v) => v.len(),
             NpyData::F32(v) => v.len(),
             NpyData::F64(v) => v.len(),
         }
@@ -57,6 +60,7 @@ impl NpyData {
             NpyData::U8(_) => "uint8",
             NpyData::Bool(_) => "bool",
             NpyData::I32(_) => "int32",
+            NpyData::I64(_) => "int64",
             NpyData::F32(_) => "float32",
             NpyData::F64(_) => "float64",
         }
@@ -103,6 +107,7 @@ impl NpyArray {
             NpyData::U8(v) => v.iter().map(|&x| x != 0).collect(),
             NpyData::Bool(v) => v.clone(),
             NpyData::I32(v) => v.iter().map(|&x| x != 0).collect(),
+            NpyData::I64(v) => v.iter().map(|&x| x != 0).collect(),
             NpyData::F32(v) => v.iter().map(|&x| x >= 0.5).collect(),
             NpyData::F64(v) => v.iter().map(|&x| x >= 0.5).collect(),
         }
@@ -116,6 +121,7 @@ impl NpyArray {
             NpyData::U8(v) => write_typed(&mut out, &shape, "|u1", v),
             NpyData::Bool(v) => write_typed(&mut out, &shape, "|b1", v),
             NpyData::I32(v) => write_typed(&mut out, &shape, "<i4", v),
+            NpyData::I64(v) => write_typed(&mut out, &shape, "<i8", v),
             NpyData::F32(v) => write_typed(&mut out, &shape, "<f4", v),
             NpyData::F64(v) => write_typed(&mut out, &shape, "<f8", v),
         };
@@ -146,7 +152,7 @@ impl NpyArray {
             DType::Plain(ts) => (ts.type_char(), ts.size_field() as usize),
             other => {
                 return Err(bad(format!(
-                    "dtype {} is not read (uint8, bool, int32, float32, float64 are)",
+                    "dtype {} is not read (uint8, bool, int32, int64, float32, float64 are)",
                     other.descr()
                 )));
             }
@@ -162,12 +168,13 @@ impl NpyArray {
             (TypeChar::Uint, 1)
                 | (TypeChar::Bool, 1)
                 | (TypeChar::Int, 4)
+                | (TypeChar::Int, 8)
                 | (TypeChar::Float, 4)
                 | (TypeChar::Float, 8)
         );
         if !supported {
             return Err(bad(format!(
-                "dtype {} is not read (uint8, bool, int32, float32, float64 are)",
+                "dtype {} is not read (uint8, bool, int32, int64, float32, float64 are)",
                 dtype.descr()
             )));
         }
@@ -191,7 +198,10 @@ impl NpyArray {
         let data = match kind {
             TypeChar::Uint => NpyData::U8(file.into_vec().map_err(|e| bad(e.to_string()))?),
             TypeChar::Bool => NpyData::Bool(file.into_vec().map_err(|e| bad(e.to_string()))?),
-            TypeChar::Int => NpyData::I32(file.into_vec().map_err(|e| bad(e.to_string()))?),
+            TypeChar::Int if item == 4 => {
+                NpyData::I32(file.into_vec().map_err(|e| bad(e.to_string()))?)
+            }
+            TypeChar::Int => NpyData::I64(file.into_vec().map_err(|e| bad(e.to_string()))?),
             TypeChar::Float if item == 4 => {
                 NpyData::F32(file.into_vec().map_err(|e| bad(e.to_string()))?)
             }
