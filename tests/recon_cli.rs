@@ -462,6 +462,18 @@ fn a_conditioned_field_trains_resumes_and_sits_beside_the_mesh_in_the_table() {
     );
     let bytes = |p: &Path| std::fs::read(p).unwrap();
     assert!(bytes(&f) == bytes(&g), "a resumed field run differs");
+    // Its loss log is the uninterrupted run's: the checkpoint's rows, then the rest's.
+    let log_of = |m: &Path| {
+        let stem = m.file_stem().unwrap().to_str().unwrap();
+        std::fs::read_to_string(m.with_file_name(format!("{stem}-train")).join("loss.csv")).unwrap()
+    };
+    let log = log_of(&f);
+    assert_eq!(
+        log.lines().count(),
+        3,
+        "a header and two submissions:\n{log}"
+    );
+    assert_eq!(log_of(&g), log);
     // A field checkpoint does not resume as a mesh run.
     let refused = softvk()
         .args(["train-recon", "--dataset", data.to_str().unwrap()])
