@@ -731,18 +731,30 @@ fn over_200k_anchors_in_one_tile_probe_as_the_twin() {
         );
     }
     assert!((f64::from(tiled.loss) - want.loss).abs() <= 1e-5 * want.loss);
+    // dL/dφ of every anchor (59 391 of them nonzero), each held to its own size: `|got − want|
+    // ≤ rel |want| + floor · largest`. Measured: the worst component is off by 2.1e-6 of itself
+    // (an anchor whose dL/dφ is 5e-3 of the largest), a sixth of these bars; a bound by 1e-3 of
+    // the largest alone would leave every component below that unchecked.
     let d_want = probe_cpu::backward(&s, &want, &phi64, &p.it.rays);
     let scale = max_abs(d_want.iter().copied());
-    let err = max_abs(
-        tiled
-            .d_phi
-            .iter()
-            .zip(&d_want)
-            .map(|(&g, &w)| f64::from(g) - w),
-    );
+    assert!(scale > 0.0);
+    let (rel, floor) = (1e-5, 1e-8);
+    let mut worst = (0.0f64, 0usize);
+    let mut nonzero = 0;
+    for (i, (&g, &w)) in tiled.d_phi.iter().zip(&d_want).enumerate() {
+        nonzero += usize::from(w != 0.0);
+        let share = (f64::from(g) - w).abs() / (rel * w.abs() + floor * scale);
+        if share > worst.0 {
+            worst = (share, i);
+        }
+    }
+    assert!(nonzero > N / 10, "{nonzero} anchors with a gradient");
+    let i = worst.1;
     assert!(
-        scale > 0.0 && err <= 1e-3 * scale,
-        "d_phi off by {err:e} (scale {scale:e})"
+        worst.0 <= 1.0,
+        "dL/dφ of anchor {i}: {} against the twin's {} (largest {scale:e})",
+        tiled.d_phi[i],
+        d_want[i]
     );
 }
 
