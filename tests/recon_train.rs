@@ -214,16 +214,43 @@ fn one_iteration_against_twins(opts: TrainOptions) {
     eprintln!("loss GPU {} vs twins {loss}", log.total);
     assert!((f64::from(log.total) - loss).abs() <= 1e-4 * loss.abs().max(1e-3));
     assert!((f64::from(log.silhouette) - w_sil * iou.loss).abs() <= 1e-4);
-    let scale = want.iter().fold(0.0f64, |m, g| m.max(g.abs()));
-    let err = got
-        .iter()
-        .zip(&want)
-        .map(|(&a, b)| (f64::from(a) - b).abs())
-        .fold(0.0, f64::max);
-    eprintln!("gradient error {err:.3e} of {scale:.3e}");
-    assert!(scale > 0.0, "a zero gradient checks nothing");
-    assert!(err <= 1e-3 * scale, "gradient error {err:e} of {scale:e}");
+    // Every parameter held to its own size, with a floor relative to its layer's largest (the
+    // encoder's gradients are far smaller than the head's: a bound by the whole network's
+    // largest would leave them unchecked): `|got − want| ≤ REL |want| + FLOOR · layer largest`.
+    let (rel, floor) = (RECIPE_REL, RECIPE_FLOOR);
+    assert_eq!(got.len(), want.len());
+    let mut start = 0;
+    for (l, layer) in layers.iter().enumerate() {
+        let end = start + layer.param_count() as usize;
+        let (g, w) = (&got[start..end], &want[start..end]);
+        let scale = w.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!(scale > 0.0, "layer {l}: a zero gradient checks nothing");
+        let mut worst = (0.0f64, 0usize);
+        for (i, (&a, &b)) in g.iter().zip(w).enumerate() {
+            let share = (f64::from(a) - b).abs() / (rel * b.abs() + floor * scale);
+            if share > worst.0 {
+                worst = (share, i);
+            }
+        }
+        let i = worst.1;
+        assert!(
+            worst.0 <= 1.0,
+            "layer {l} parameter {i}: {} against the twins' {} (the layer's largest {scale:e})",
+            g[i],
+            w[i]
+        );
+        start = end;
+    }
+    assert_eq!(start, want.len());
 }
+
+/// The recipe tests' bars (see `one_iteration_against_twins`): what is left is f32 rounding in
+/// the GPU's layers and renders against the twins' f64. Measured, both recipes: every layer's
+/// worst component uses at most 0.38 of them (the head's, 4e-5 of its layer's largest; the
+/// encoder's first layer, whose largest is 1/120 of the network's, 0.04). The bound these
+/// replace, 1e-3 of the whole network's largest, was 12 % of that first layer's largest.
+const RECIPE_REL: f64 = 1e-3;
+const RECIPE_FLOOR: f64 = 1e-4;
 
 /// Trains `iterations` with `k` per submission; the parameters and the logs.
 fn train_run(
