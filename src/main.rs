@@ -60,6 +60,13 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    // A closed stdout (`softvk info | head -1`) ends the process quietly, as for any Unix tool,
+    // instead of a panic with a backtrace from `println!`. Rust sets SIGPIPE to ignored before
+    // main; this puts the default back. No other thread exists yet.
+    // SAFETY: `signal` with SIG_DFL installs no handler and touches no Rust state.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) if !e.use_stderr() => {

@@ -15,6 +15,31 @@ use softvk::mesh::Mesh;
 use softvk::raster::reference::{self, FaceColors, project_faces, setup_face, shade_pixel};
 use softvk::raster::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
 
+/// `softvk info | head -1`: a closed stdout ends the process by SIGPIPE, as any Unix tool,
+/// with nothing on stderr (it used to panic with a backtrace).
+#[test]
+fn a_closed_stdout_ends_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    if common::no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return;
+    }
+    use std::os::fd::FromRawFd;
+    // A pipe whose read end is closed before the process starts: its first write fails.
+    let mut fds = [0; 2];
+    assert_eq!(unsafe { libc::pipe(fds.as_mut_ptr()) }, 0);
+    unsafe { libc::close(fds[0]) };
+    // SAFETY: fds[1] is the pipe's open write end, owned by nothing else.
+    let write_end = unsafe { std::process::Stdio::from_raw_fd(fds[1]) };
+    let out = softvk().arg("info").stdout(write_end).output().unwrap();
+    assert_eq!(out.status.signal(), Some(libc::SIGPIPE), "{:?}", out.status);
+    assert!(
+        out.stderr.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 #[test]
 fn info_names_the_device_and_the_validation_state() {
     if common::no_gpu() {
