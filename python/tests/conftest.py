@@ -52,3 +52,20 @@ def softvk_bin():
     if not path.exists():
         pytest.fail(f"{path} is missing: build it with `cargo build --release` first")
     return path
+
+
+@pytest.fixture
+def engine_calls(monkeypatch):
+    """Counts the SoftRenderer fast path's engine calls (``softvk.torch.render_mesh``), keeping
+    each call's keyword arguments."""
+    import softvk.torch as st
+
+    calls = []
+    original = st.render_mesh
+
+    def counted(*args, **kwargs):
+        calls.append(kwargs)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(st, "render_mesh", counted)
+    return calls

@@ -16,19 +16,6 @@ def composed(renderer, mesh):
     return renderer.rasterizer(renderer.transform(renderer.lighting(copy)))
 
 
-@pytest.fixture
-def engine_calls(monkeypatch):
-    calls = []
-    original = st.render_mesh
-
-    def counted(*args, **kwargs):
-        calls.append(kwargs)
-        return original(*args, **kwargs)
-
-    monkeypatch.setattr(st, "render_mesh", counted)
-    return calls
-
-
 def spot(assets, views, texture_res=2):
     mesh = sr.Mesh.from_obj(str(assets / "spot_triangulated.obj"), load_texture=True, texture_res=texture_res)
     return mesh.vertices.repeat(views, 1, 1), mesh.faces.repeat(views, 1, 1), mesh.textures.repeat(views, 1, 1, 1)

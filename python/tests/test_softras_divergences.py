@@ -21,20 +21,6 @@ import softvk.soft_renderer.functional as srf
 import softvk.torch as st
 
 
-@pytest.fixture
-def engine_calls(monkeypatch):
-    """Counts the fast path's engine calls (``softvk.torch.render_mesh``)."""
-    calls = []
-    original = st.render_mesh
-
-    def counted(*args, **kwargs):
-        calls.append(kwargs)
-        return original(*args, **kwargs)
-
-    monkeypatch.setattr(st, "render_mesh", counted)
-    return calls
-
-
 def sphere(assets, batch=2, dtype=torch.float32, seed=0):
     """SoftRas's 642-vertex sphere, squashed and shifted so that no view is symmetric, with
     random 2×2 surface textures."""

@@ -254,6 +254,24 @@ fn triangle_dist2_grad(p: V2, v: [V2; 3], g: f64) -> [V2; 3] {
     out
 }
 
+/// A face's barycentrics at `p`: as the edge functions give them, after the perspective
+/// correction (if asked; what "inside" tests), and after the clip (if asked; what the depth and
+/// the outputs use).
+fn barycentrics(p: V2, v: [V2; 3], z: [f64; 3], s: &FragmentSettings) -> [[f64; 3]; 3] {
+    let w0 = barycentric(p, v);
+    let w = if s.perspective_correct {
+        perspective(w0, z)
+    } else {
+        w0
+    };
+    let w_clip = if s.clip_barycentric_coords {
+        clip(w)
+    } else {
+        w
+    };
+    [w0, w, w_clip]
+}
+
 /// One face's values at one pixel, when the face reaches it.
 struct Hit {
     z: f64,
@@ -288,17 +306,7 @@ fn hit(face: &[[f64; 3]; 3], p: V2, s: &FragmentSettings) -> Option<Hit> {
     {
         return None;
     }
-    let w0 = barycentric(p, v);
-    let w = if s.perspective_correct {
-        perspective(w0, z)
-    } else {
-        w0
-    };
-    let w_clip = if s.clip_barycentric_coords {
-        clip(w)
-    } else {
-        w
-    };
+    let [_, w, w_clip] = barycentrics(p, v, z, s);
     let pz = w_clip[0] * z[0] + w_clip[1] * z[1] + w_clip[2] * z[2];
     if pz < 0.0 {
         return None;
@@ -381,17 +389,7 @@ pub fn rasterize_grad(
         let face = &face_verts[f];
         let v = face.map(xy);
         let z = face.map(|c| c[2]);
-        let w0 = barycentric(p, v);
-        let wp = if s.perspective_correct {
-            perspective(w0, z)
-        } else {
-            w0
-        };
-        let w_clip = if s.clip_barycentric_coords {
-            clip(wp)
-        } else {
-            wp
-        };
+        let [w0, wp, w_clip] = barycentrics(p, v, z, s);
         let inside = wp.iter().all(|&x| x > 0.0);
         let sign = if inside { -1.0 } else { 1.0 };
         let d_dist = triangle_dist2_grad(p, v, sign * grad_dists[i]);
