@@ -2,7 +2,6 @@
 differentiates what SoftRas's composed steps (lighting → transform → soft_rasterize) do."""
 
 import numpy as np
-import pytest
 import torch
 
 import softvk.soft_renderer as sr
