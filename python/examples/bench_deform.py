@@ -18,7 +18,6 @@ in the engine alone.
 """
 
 import argparse
-import os
 import pathlib
 import statistics
 import sys
