@@ -701,3 +701,30 @@ fn int64_arrays_round_trip_through_npy_bytes() {
     assert_eq!(NpyArray::from_npy_bytes(&bytes, "x.npy").unwrap(), array);
     assert_eq!(array.data.dtype_name(), "int64");
 }
+
+/// `--batch 16` on twelve objects of one topology: more views than one scene's storage bindings
+/// hold on lavapipe (their super-sampled pixels' aux alone is 192 MiB against 128), so they
+/// render in as many scenes as fit, with the bytes of one object at a time (the batch used to
+/// overflow the binding, after earlier classes' files were written).
+#[test]
+fn a_batch_past_the_storage_bindings_renders_in_parts_with_the_same_bytes() {
+    let Some(gpu) = common::gpu() else { return };
+    let renderer = Renderer::new(&gpu).unwrap();
+    let shape = generate(Category::Car, 5);
+    let shapes = vec![shape; 12];
+    let options = |batch| DatasetOptions {
+        batch,
+        ..DatasetOptions::default()
+    };
+    let settings = dataset::raster_settings(&options(1));
+    let faces = shapes[0].face_count() as u64;
+    let fits = softvk::raster::gpu::views_per_scene(&gpu, faces, &settings) / VIEWS;
+    if fits >= 12 {
+        eprintln!("SKIPPED: this device's storage bindings hold {fits} objects' views at once");
+        return;
+    }
+    let one = dataset::render_shapes(&gpu, &renderer, &shapes, &options(1)).unwrap();
+    let many = dataset::render_shapes(&gpu, &renderer, &shapes, &options(16)).unwrap();
+    assert!(one == many, "a batch of 16 rendered other bytes");
+    assert!(one.iter().any(|&x| x > 0));
+}

@@ -123,7 +123,7 @@ fn tile_run_bound(
 /// bindings: each view adds its faces' setups, its image and its pixels' aux (and running
 /// state, where passes may be needed) to one binding each. At least 1 (a view that does not
 /// fit is the scene's own error).
-fn views_per_scene(ctx: &Context, faces: u64, settings: &RasterSettings) -> usize {
+pub fn views_per_scene(ctx: &Context, faces: u64, settings: &RasterSettings) -> usize {
     let scale = if settings.antialias { 4 } else { 1 };
     let pixels = u64::from(settings.width) * u64::from(settings.height) * scale;
     let carry = if may_need_passes(ctx, faces.min(u64::from(u32::MAX)) as u32) {

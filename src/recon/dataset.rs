@@ -44,7 +44,7 @@ use crate::field::Cube;
 use crate::field::voxel::Occupancy;
 use crate::gpu::Context;
 use crate::lighting::Lighting;
-use crate::raster::gpu::{Method, Renderer};
+use crate::raster::gpu::{Method, Renderer, views_per_scene};
 use crate::raster::settings::RasterSettings;
 use crate::rng::SplitMix64;
 
@@ -167,7 +167,8 @@ pub struct DatasetOptions {
     /// Seed of every object (object `n` of a category and split has its own stream, so
     /// changing one split's count leaves the others' objects as they were).
     pub seed: u64,
-    /// Objects rendered together in one batch (24 views each), where their topologies match.
+    /// Objects rendered together in one batch (24 views each), where their topologies match,
+    /// and at most as many as one scene's storage bindings hold (more render in more scenes).
     /// The bytes do not depend on it. On lavapipe one at a time is fastest (a batch's
     /// super-sampled buffers outgrow the caches: 8 at a time took 1.4× as long); a GPU may
     /// prefer more.
@@ -252,7 +253,8 @@ pub fn raster_settings(options: &DatasetOptions) -> RasterSettings {
 }
 
 /// Renders every shape's 24 views with SoftRas's default lights: uint8 RGBA, flat
-/// (N, 24, 4, 64, 64). Shapes of equal topology render together, `batch` at a time, through
+/// (N, 24, 4, 64, 64). Shapes of equal topology render together, `batch` at a time (at most as
+/// many as one scene's storage bindings hold: [`views_per_scene`]), through
 /// [`Renderer::prepare_batch`].
 pub fn render_shapes(
     ctx: &Context,
@@ -277,9 +279,14 @@ pub fn render_shapes(
         }
     }
     let cameras: Vec<Camera> = (0..VIEWS).map(view_camera).collect();
-    let batch = options.batch.max(1);
     let plane = IMAGE_SIZE * IMAGE_SIZE;
     for group in &groups {
+        // At most the objects whose views one scene's storage bindings hold (the images, the
+        // pixels' aux and the face setups are one binding each): a larger `batch` renders in
+        // more scenes, with the same bytes.
+        let faces = meshes[group[0]].face_count() as u64;
+        let fits = views_per_scene(ctx, faces, &settings) / VIEWS;
+        let batch = options.batch.clamp(1, fits.max(1));
         for chunk in group.chunks(batch) {
             let batch_meshes: Vec<_> = chunk.iter().map(|&n| meshes[n].clone()).collect();
             let views: Vec<(usize, Camera)> = (0..chunk.len())
