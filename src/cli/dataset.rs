@@ -53,8 +53,9 @@ pub struct DatasetArgs {
     #[arg(long, value_name = "S", default_value_t = 0)]
     pub seed: u64,
 
-    /// Objects rendered in one GPU batch (24 views each; the same bytes whatever N). One at a
-    /// time is fastest on lavapipe; a GPU may prefer more.
+    /// Objects rendered in one GPU batch (24 views each; the same bytes whatever N; a batch
+    /// past what one storage binding holds renders in parts). One at a time is fastest on
+    /// lavapipe; a GPU may prefer more.
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub batch: usize,
 
