@@ -218,13 +218,10 @@ class SoftRenderer(nn.Module):
         transformer = self.transform.transformer
         if type(transformer) is LookAt:
             eyes = transformer._eye
-            if isinstance(eyes, torch.Tensor):
-                if eyes.numel() != 3 and (eyes.dim() != 2 or eyes.shape[0] != batch):
-                    return None
-            else:
+            if not isinstance(eyes, torch.Tensor):
                 eyes = torch.tensor(eyes, dtype=torch.float64)
-                if eyes.numel() != 3:
-                    return None
+            if eyes.numel() != 3 and (eyes.dim() != 2 or eyes.shape[0] != batch):
+                return None
             angle = _per_view(transformer.viewing_angle, batch)
             scale = _per_view(transformer.viewing_scale, 1)
             if angle is None or scale is None:
