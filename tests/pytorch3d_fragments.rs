@@ -13,8 +13,11 @@
 //! (measured: 2.8e-6 at most); the vertex gradients within 1e-4 of each component plus
 //! [`GRAD_FLOOR`] of the scene's largest.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
+use softvk::raster::fragments::gpu::{FragmentPlan, FragmentRasterizer};
 use softvk::raster::fragments::{self, FragmentSettings};
 use softvk::recon::npz::{self, NpyArray, NpyData};
 
@@ -108,7 +111,7 @@ fn goldens() -> Vec<PathBuf> {
 fn the_twin_gives_pytorch3d_fragments_on_every_golden_scene() {
     for path in goldens() {
         let s = scene(&path);
-        let out = fragments::rasterize(&s.face_verts, &s.meshes, &s.settings);
+        let out = fragments::rasterize(&s.face_verts, &s.meshes, None, &s.settings);
         let want_faces = ints(&path, "pix_to_face");
         let want_z = floats(&path, "zbuf");
         let want_bary = floats(&path, "bary_coords");
@@ -184,4 +187,341 @@ fn the_twins_backward_gives_pytorch3d_gradients_on_every_golden_scene() {
             );
         }
     }
+}
+
+/// The scene's faces as the kernels take them: nine f32 per face.
+fn face_floats(face_verts: &[[[f64; 3]; 3]]) -> Vec<f32> {
+    face_verts
+        .iter()
+        .flatten()
+        .flatten()
+        .map(|&x| x as f32)
+        .collect()
+}
+
+/// Vertex gradients from per-face corner gradients (nine per face), in face order.
+fn vertex_grads(s: &Scene, per_face: impl Fn(usize, usize, usize) -> f64) -> Vec<[f64; 3]> {
+    let mut got = vec![[0.0f64; 3]; s.vertex_count];
+    for (f, corners) in s.faces.iter().enumerate() {
+        for (c, &v) in corners.iter().enumerate() {
+            for (a, g) in got[v].iter_mut().enumerate() {
+                *g += per_face(f, c, a);
+            }
+        }
+    }
+    got
+}
+
+#[test]
+fn the_kernels_give_pytorch3d_fragments_and_gradients_on_every_golden_scene() {
+    let Some(ctx) = common::gpu() else { return };
+    let mut raster = FragmentRasterizer::new(&ctx).unwrap();
+    let (mut worst_value, mut worst_grad) = (0.0f64, 0.0f64);
+    for path in goldens() {
+        let s = scene(&path);
+        let plan = FragmentPlan::new(&ctx, s.face_verts.len(), &s.meshes, &s.settings).unwrap();
+        let faces = face_floats(&s.face_verts);
+        let out = raster.rasterize(&ctx, &plan, &faces, None).unwrap();
+        let want_faces = ints(&path, "pix_to_face");
+        assert_eq!(out.pix_to_face, want_faces, "{}: pix_to_face", s.name);
+        for (name, got, want) in [
+            ("zbuf", &out.zbuf, floats(&path, "zbuf")),
+            ("dists", &out.dists, floats(&path, "dists")),
+            (
+                "bary_coords",
+                &out.bary_coords,
+                floats(&path, "bary_coords"),
+            ),
+        ] {
+            for (i, (&g, &w)) in got.iter().zip(&want).enumerate() {
+                let e = (f64::from(g) - w).abs();
+                worst_value = worst_value.max(e);
+                assert!(
+                    e <= 1e-5,
+                    "{} {name}[{i}]: {g} against PyTorch3D's {w}",
+                    s.name
+                );
+            }
+        }
+        let as_f32 = |v: Vec<f64>| v.into_iter().map(|x| x as f32).collect::<Vec<f32>>();
+        let mut grad = vec![0.0f32; faces.len()];
+        raster
+            .rasterize_grad_into(
+                &ctx,
+                &plan,
+                &faces,
+                &out.pix_to_face,
+                &as_f32(floats(&path, "grad_zbuf")),
+                &as_f32(floats(&path, "grad_bary")),
+                &as_f32(floats(&path, "grad_dists")),
+                &mut grad,
+            )
+            .unwrap();
+        let got = vertex_grads(&s, |f, c, a| f64::from(grad[9 * f + 3 * c + a]));
+        let want = floats(&path, "grad_verts");
+        let scale = want.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        for (i, w) in want.iter().enumerate() {
+            let g = got[i / 3][i % 3];
+            let bar = 1e-4 * w.abs() + GRAD_FLOOR * scale;
+            worst_grad = worst_grad.max((g - w).abs() / bar);
+            assert!(
+                (g - w).abs() <= bar,
+                "{} vertex {} axis {}: {g} against PyTorch3D's {w} (largest {scale})",
+                s.name,
+                i / 3,
+                i % 3
+            );
+        }
+    }
+    eprintln!(
+        "kernels against PyTorch3D: values within {worst_value:.2e}, gradients use {:.0} % of \
+         their bars",
+        100.0 * worst_grad
+    );
+}
+
+/// Face vertices, meshes `(first, count)` and neighbours.
+type CrowdedScene = (Vec<[[f64; 3]; 3]>, Vec<(usize, usize)>, Vec<i64>);
+
+/// A crowded random scene: `faces` faces in two meshes of different sizes, small and large,
+/// overlapping in depth, some of them halves of faces cut by the near plane (neighbours). The
+/// faces are near-equilateral: beside a sliver, within the blur radius, barycentrics and the
+/// perspective correction's denominator are ill-conditioned enough that f32 and f64 part ways
+/// (PyTorch3D's own f32 as much as the kernels').
+fn crowded_scene(faces: usize, seed: u64) -> CrowdedScene {
+    use rand::RngExt;
+    let mut rng = common::rng(seed);
+    let mut fv = Vec::with_capacity(faces);
+    for i in 0..faces {
+        let size: f64 = if i % 7 == 0 { 0.8 } else { 0.15 };
+        let c = [rng.random_range(-1.1..1.1), rng.random_range(-0.9..0.9)];
+        let z0: f64 = rng.random_range(0.5..3.0);
+        let turn: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+        let face = [0.0, 1.0, 2.0].map(|k: f64| {
+            let a = turn + k * std::f64::consts::TAU / 3.0 + rng.random_range(-0.3..0.3);
+            let r = size * rng.random_range(0.8..1.2);
+            // Grid-exact coordinates: f32 inputs, the same in the twin and the kernels.
+            [
+                c[0] + r * a.cos(),
+                c[1] + r * a.sin(),
+                z0 + rng.random_range(-0.2..0.2),
+            ]
+            .map(|x: f64| f64::from(x as f32))
+        });
+        // Both windings, for the culled modes.
+        fv.push(if i % 2 == 0 {
+            face
+        } else {
+            [face[0], face[2], face[1]]
+        });
+    }
+    let split = faces / 3;
+    let meshes = vec![(0, split), (split, faces - split)];
+    // Pairs of consecutive faces in the second mesh named as each other's other half.
+    let mut neighbors = vec![-1i64; faces];
+    for f in (split..faces - 1).step_by(5) {
+        neighbors[f] = f as i64 + 1;
+        neighbors[f + 1] = f as i64;
+    }
+    (fv, meshes, neighbors)
+}
+
+#[test]
+fn the_kernels_match_the_twin_on_a_crowded_batch_in_every_mode() {
+    let Some(ctx) = common::gpu() else { return };
+    let mut raster = FragmentRasterizer::new(&ctx).unwrap();
+    let (fv, meshes, neighbors) = crowded_scene(600, 3);
+    let faces = face_floats(&fv);
+    for (i, (perspective_correct, clip_barycentric_coords, cull_backfaces)) in [
+        (false, false, false),
+        (true, true, false),
+        (false, true, true),
+        (true, false, true),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let settings = FragmentSettings {
+            width: 37,
+            height: 29,
+            blur_radius: if i % 2 == 0 { 0.0 } else { 4e-3 },
+            faces_per_pixel: [1, 7, 24, 64][i],
+            perspective_correct,
+            clip_barycentric_coords,
+            cull_backfaces,
+        };
+        let plan = FragmentPlan::new(&ctx, fv.len(), &meshes, &settings).unwrap();
+        let out = raster
+            .rasterize(&ctx, &plan, &faces, Some(&neighbors))
+            .unwrap();
+        let twin = fragments::rasterize(&fv, &meshes, Some(&neighbors), &settings);
+        // f32 against f64: a slot may differ only where two depths are within f32 rounding,
+        // counted; every slot whose face agrees must agree in value.
+        let mut differ = 0usize;
+        let mut filled = 0usize;
+        for s in 0..twin.pix_to_face.len() {
+            filled += usize::from(twin.pix_to_face[s] >= 0);
+            if out.pix_to_face[s] != twin.pix_to_face[s] {
+                differ += 1;
+                continue;
+            }
+            if twin.pix_to_face[s] < 0 {
+                continue;
+            }
+            let z = f64::from(out.zbuf[s]);
+            assert!((z - twin.zbuf[s]).abs() <= 1e-5 * twin.zbuf[s].abs().max(1.0));
+            assert!((f64::from(out.dists[s]) - twin.dists[s]).abs() <= 1e-5);
+            for c in 0..3 {
+                let b = f64::from(out.bary_coords[3 * s + c]);
+                assert!(
+                    (b - twin.bary_coords[s][c]).abs() <= 2e-4,
+                    "mode {i} slot {s}: bary {b} {}",
+                    twin.bary_coords[s][c]
+                );
+            }
+        }
+        assert!(filled > 1000, "mode {i}: only {filled} slots filled");
+        assert!(
+            differ * 2000 <= filled,
+            "mode {i}: {differ} of {filled} slots hold another face than the twin's"
+        );
+        // The same bits on a second run.
+        let again = raster
+            .rasterize(&ctx, &plan, &faces, Some(&neighbors))
+            .unwrap();
+        assert_eq!(again, out, "mode {i}: a second run differs");
+
+        // The backward against the twin's, on the kernels' own selection.
+        let n = out.pix_to_face.len();
+        let weight = |s: usize, c: usize| ((s * 7 + c * 3) % 11) as f32 / 11.0 - 0.45;
+        let gz: Vec<f32> = (0..n).map(|s| weight(s, 0)).collect();
+        let gd: Vec<f32> = (0..n).map(|s| weight(s, 4)).collect();
+        let gb: Vec<f32> = (0..3 * n).map(|s| weight(s / 3, 1 + s % 3)).collect();
+        let mut grad = vec![0.0f32; faces.len()];
+        raster
+            .rasterize_grad_into(
+                &ctx,
+                &plan,
+                &faces,
+                &out.pix_to_face,
+                &gz,
+                &gb,
+                &gd,
+                &mut grad,
+            )
+            .unwrap();
+        let wide = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect::<Vec<f64>>();
+        let gb3: Vec<[f64; 3]> = wide(&gb)
+            .chunks_exact(3)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect();
+        let want = fragments::rasterize_grad(
+            &fv,
+            &out.pix_to_face,
+            &wide(&gz),
+            &gb3,
+            &wide(&gd),
+            &settings,
+        );
+        let scale = want
+            .iter()
+            .flatten()
+            .flatten()
+            .fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!(scale > 0.0);
+        for f in 0..fv.len() {
+            for c in 0..3 {
+                for a in 0..3 {
+                    let (g, w) = (f64::from(grad[9 * f + 3 * c + a]), want[f][c][a]);
+                    assert!(
+                        (g - w).abs() <= 1e-4 * w.abs() + 1e-5 * scale,
+                        "mode {i} face {f} corner {c} axis {a}: {g} against the twin's {w}"
+                    );
+                }
+            }
+        }
+        let mut again = vec![0.0f32; faces.len()];
+        raster
+            .rasterize_grad_into(
+                &ctx,
+                &plan,
+                &faces,
+                &out.pix_to_face,
+                &gz,
+                &gb,
+                &gd,
+                &mut again,
+            )
+            .unwrap();
+        assert!(
+            grad.iter()
+                .zip(&again)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "mode {i}: the backward differs between runs"
+        );
+    }
+}
+
+#[test]
+fn a_tile_crowded_past_the_drivers_loop_cap_folds_into_passes_with_the_same_result() {
+    let Some(ctx) = common::gpu() else { return };
+    let mut raster = FragmentRasterizer::new(&ctx).unwrap();
+    // 1 500 faces over the whole image: every tile's run holds all of them, farthest first, so
+    // that each face moves every entry of a full list (the worst case the passes are sized
+    // for: 150 000 loop iterations in one pass).
+    use rand::RngExt;
+    let mut rng = common::rng(11);
+    let mut fv: Vec<[[f64; 3]; 3]> = (0..1500)
+        .map(|_| {
+            let turn: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+            let z0: f64 = rng.random_range(1.0..3.0);
+            [0.0, 1.0, 2.0].map(|k: f64| {
+                let a = turn + k * std::f64::consts::TAU / 3.0;
+                [
+                    5.0 * a.cos(),
+                    5.0 * a.sin(),
+                    z0 + rng.random_range(-0.1..0.1),
+                ]
+                .map(|x: f64| f64::from(x as f32))
+            })
+        })
+        .collect();
+    fv.sort_by(|a, b| {
+        let z = |f: &[[f64; 3]; 3]| f[0][2] + f[1][2] + f[2][2];
+        z(b).total_cmp(&z(a))
+    });
+    let meshes = [(0, fv.len())];
+    let settings = FragmentSettings {
+        width: 16,
+        height: 12,
+        blur_radius: 0.0,
+        faces_per_pixel: 100,
+        perspective_correct: true,
+        clip_barycentric_coords: false,
+        cull_backfaces: false,
+    };
+    let plan = FragmentPlan::new(&ctx, fv.len(), &meshes, &settings).unwrap();
+    let passes = FragmentRasterizer::forward_passes(&plan, fv.len() as u64);
+    if ctx.info().shader_loop_limit().is_some() {
+        assert!(
+            passes >= 4,
+            "{passes} passes: the test does not cross the cap"
+        );
+    }
+    let faces = face_floats(&fv);
+    let out = raster.rasterize(&ctx, &plan, &faces, None).unwrap();
+    let twin = fragments::rasterize(&fv, &meshes, None, &settings);
+    let differ = (0..twin.pix_to_face.len())
+        .filter(|&s| out.pix_to_face[s] != twin.pix_to_face[s])
+        .count();
+    let filled = twin.pix_to_face.iter().filter(|&&f| f >= 0).count();
+    assert_eq!(
+        filled,
+        twin.pix_to_face.len(),
+        "every slot of every pixel is filled"
+    );
+    assert!(
+        differ * 2000 <= filled,
+        "{differ} of {filled} slots differ from the twin"
+    );
 }

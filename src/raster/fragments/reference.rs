@@ -1,60 +1,12 @@
-//! PyTorch3D's mesh rasterizer (`pytorch3d.renderer.mesh.rasterize_meshes`), its f64 CPU twin:
-//! the K nearest faces of every pixel (`pix_to_face`, `zbuf`, `bary_coords`, `dists`) and the
-//! backward of its outputs to the face vertices. The oracle the fragment kernels will be tested
-//! against, as [`reference`](super::reference) is the soft rasterizer's.
-//!
-//! The contract, from PyTorch3D's own CPU code (`csrc/rasterize_meshes/rasterize_meshes_cpu.cpp`
-//! and `csrc/utils/geometry_utils.h`), operation for operation in f64:
-//!
-//! - **Screen space** is PyTorch3D's NDC: faces arrive projected, `(x, y, z)` with +X left, +Y up
-//!   and the shorter image side spanning [-1, 1]. Output row `r` (0 at the top), column `c` (0 at
-//!   the left) samples `(x, y) = (ndc(W − 1 − c, W, H), ndc(H − 1 − r, H, W))`, with
-//!   `ndc(i, S1, S2) = −R/2 + (R i + R/2) / S1`, `R = 2 S1 / S2` when `S1 > S2`, else 2
-//!   ([`pixel_ndc`]).
-//! - **A face is skipped** when its signed area `(v0 − v1) × (v2 − v1)` is within 1e-8 of 0,
-//!   when it is a back face (area < 0) and `cull_backfaces`, when any vertex has `z < 1e-8`, and
-//!   at a pixel outside its bounding box grown by √`blur_radius`.
-//! - **At a pixel**: the barycentrics `w_k = e_k / (area + 1e-8)` (the edge functions); with
-//!   `perspective_correct`, `w_k z_{k+1} z_{k+2} / Σ` (Σ at least 1e-8); with
-//!   `clip_barycentric_coords`, clamped at 0 and divided by their sum (at least 1e-5). The depth
-//!   is `z = Σ w̃_k z_k` with the clipped ones (the face is skipped where it is negative). `dists`
-//!   is the squared distance to the nearest edge (segment), negative when the pixel is inside
-//!   (every unclipped barycentric > 0); outside, the face counts only when that distance is below
-//!   `blur_radius` — a squared NDC distance, as PyTorch3D compares it.
-//! - **Which K**: the faces of the pixel's mesh, ordered by `(z, face index)`: the nearest first,
-//!   equal depths by the lower packed index (PyTorch3D sorts tuples `(z, f, ...)`). Slots past the
-//!   faces found hold `pix_to_face` −1 and −1 in `zbuf`, `dists` and every barycentric.
-//! - **The backward** is PyTorch3D's `RasterizeMeshesBackwardCpu`: per kept (pixel, face), the
-//!   upstream `dists` gradient through the nearest edge's point-segment distance (the nearest point
-//!   held fixed, the envelope theorem; sign flipped inside), the `zbuf` gradient to the
-//!   barycentrics (`z_k`) and to the vertex depths (`w̃_k`), the barycentrics' through the clip and
-//!   the perspective correction (which also reaches the depths) to the edge functions and area.
-//!
-//! Not here yet: PyTorch3D's `z_clip_value` and `cull_to_frustum` (faces cut at the near plane
-//! into new faces, in its Python), and the neighbour bookkeeping for such cut faces.
+//! The f64 CPU twin of PyTorch3D's mesh rasterizer, forward ([`rasterize`]) and backward
+//! ([`rasterize_grad`]): the oracle the fragment kernels are tested against, as
+//! [`crate::raster::reference`] is the soft rasterizer's. The contract it implements is the
+//! [module's](super).
+
+use super::FragmentSettings;
 
 /// PyTorch3D's `kEpsilon` in `geometry_utils.h`.
 const EPSILON: f64 = 1e-8;
-
-/// The settings of one fragment rasterization (PyTorch3D's `RasterizationSettings`, less
-/// `bin_size` and `max_faces_per_bin`, which do not change the result).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct FragmentSettings {
-    /// Image width in pixels.
-    pub width: u32,
-    /// Image height in pixels.
-    pub height: u32,
-    /// Squared NDC distance within which a pixel outside a face still sees it.
-    pub blur_radius: f64,
-    /// K: faces kept per pixel.
-    pub faces_per_pixel: usize,
-    /// Barycentrics corrected for perspective (`w_k z_{k+1} z_{k+2}`, normalized).
-    pub perspective_correct: bool,
-    /// Barycentrics clamped at 0 and renormalized (depth and outputs use them).
-    pub clip_barycentric_coords: bool,
-    /// Faces of negative screen area are skipped.
-    pub cull_backfaces: bool,
-}
 
 /// The K nearest faces of every pixel, `[meshes, H, W, K]` row-major (row 0 at the top), as
 /// PyTorch3D's `Fragments`.
@@ -279,14 +231,25 @@ struct Hit {
     bary_clip: [f64; 3],
 }
 
+/// Whether PyTorch3D skips the face at every pixel: zero area, culled, a vertex nearer than
+/// 1e-8, or (softvk's rule, where PyTorch3D's arithmetic is NaN) a coordinate not finite.
+pub fn face_skipped(face: &[[f64; 3]; 3], s: &FragmentSettings) -> bool {
+    let v = face.map(xy);
+    let area = edge(v[0], v[1], v[2]);
+    let z_min = face[0][2].min(face[1][2]).min(face[2][2]);
+    (s.cull_backfaces && area < 0.0)
+        || area.abs() <= EPSILON
+        || z_min < EPSILON
+        || face.iter().flatten().any(|c| !c.is_finite())
+}
+
 /// What a face gives pixel `p` (PyTorch3D's inner loop), or `None` where it is skipped.
 fn hit(face: &[[f64; 3]; 3], p: V2, s: &FragmentSettings) -> Option<Hit> {
-    let v = face.map(xy);
-    let z = face.map(|c| c[2]);
-    let area = edge(v[0], v[1], v[2]);
-    if (s.cull_backfaces && area < 0.0) || area.abs() <= EPSILON {
+    if face_skipped(face, s) {
         return None;
     }
+    let v = face.map(xy);
+    let z = face.map(|c| c[2]);
     let grow = s.blur_radius.sqrt();
     let (lo, hi) = v.iter().fold(
         ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
@@ -297,13 +260,7 @@ fn hit(face: &[[f64; 3]; 3], p: V2, s: &FragmentSettings) -> Option<Hit> {
             )
         },
     );
-    let z_min = z[0].min(z[1]).min(z[2]);
-    if p[0] > hi[0] + grow
-        || p[0] < lo[0] - grow
-        || p[1] > hi[1] + grow
-        || p[1] < lo[1] - grow
-        || z_min < EPSILON
-    {
+    if p[0] > hi[0] + grow || p[0] < lo[0] - grow || p[1] > hi[1] + grow || p[1] < lo[1] - grow {
         return None;
     }
     let [_, w, w_clip] = barycentrics(p, v, z, s);
@@ -326,10 +283,12 @@ fn hit(face: &[[f64; 3]; 3], p: V2, s: &FragmentSettings) -> Option<Hit> {
 
 /// The fragments of the meshes whose faces are `face_verts[first..first + count]` for each
 /// `(first, count)` of `meshes` (PyTorch3D's packed faces: `pix_to_face` holds indices into
-/// `face_verts`).
+/// `face_verts`). `neighbors`, when given, holds for each face the other half of a face that
+/// PyTorch3D's near-plane clipping cut in two, or −1 (its `clipped_faces_neighbor_idx`).
 pub fn rasterize(
     face_verts: &[[[f64; 3]; 3]],
     meshes: &[(usize, usize)],
+    neighbors: Option<&[i64]>,
     s: &FragmentSettings,
 ) -> Fragments {
     let (w, h, k) = (s.width, s.height, s.faces_per_pixel);
@@ -340,21 +299,33 @@ pub fn rasterize(
         bary_coords: vec![[-1.0; 3]; slots],
         dists: vec![-1.0; slots],
     };
-    let mut hits: Vec<(f64, usize, Hit)> = Vec::new();
+    // PyTorch3D's deque, kept sorted by (z, f): the nearest first, then the lower index.
+    let mut list: Vec<(f64, usize, Hit)> = Vec::new();
     for (n, &(first, count)) in meshes.iter().enumerate() {
         for row in 0..h {
             for col in 0..w {
                 let p = pixel_point(row, col, w, h);
-                hits.clear();
+                list.clear();
                 for (f, face) in face_verts.iter().enumerate().skip(first).take(count) {
-                    if let Some(hit) = hit(face, p, s) {
-                        hits.push((hit.z, f, hit));
+                    let Some(hit) = hit(face, p, s) else {
+                        continue;
+                    };
+                    let other = neighbors.map_or(-1, |nb| nb[f]);
+                    let at = list.iter().position(|e| e.1 as i64 == other && other >= 0);
+                    match at {
+                        // The other half is in the list: replaced if this half is nearer.
+                        Some(i) => {
+                            if hit.signed_dist.abs() < list[i].2.signed_dist.abs() {
+                                list[i] = (hit.z, f, hit);
+                            }
+                        }
+                        None => list.push((hit.z, f, hit)),
                     }
+                    list.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                    list.truncate(k);
                 }
-                // PyTorch3D sorts tuples (z, f, ...): the nearest first, then the lower index.
-                hits.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
                 let base = ((n * h as usize + row as usize) * w as usize + col as usize) * k;
-                for (slot, (_, f, hit)) in hits.iter().take(k).enumerate() {
+                for (slot, (_, f, hit)) in list.iter().enumerate() {
                     out.pix_to_face[base + slot] = *f as i64;
                     out.zbuf[base + slot] = hit.z;
                     out.bary_coords[base + slot] = hit.bary_clip;
@@ -447,7 +418,7 @@ mod tests {
         let big = |z: f64| [[-3.0, -3.0, z], [3.0, -3.0, z], [0.0, 3.0, z]];
         let faces = [big(2.0), big(1.0), big(2.0)];
         let s = settings(2, 2, 4);
-        let out = rasterize(&faces, &[(0, 3)], &s);
+        let out = rasterize(&faces, &[(0, 3)], None, &s);
         assert_eq!(&out.pix_to_face[..4], &[1, 0, 2, -1]);
         // (The depths carry PyTorch3D's 1e-8 on the area: w_k = e_k / (area + 1e-8).)
         for (z, want) in out.zbuf[..4].iter().zip([1.0, 2.0, 2.0, -1.0]) {
@@ -459,6 +430,7 @@ mod tests {
         let culled = rasterize(
             &faces,
             &[(0, 3)],
+            None,
             &FragmentSettings {
                 cull_backfaces: true,
                 ..s
@@ -503,7 +475,7 @@ mod tests {
                 clip_barycentric_coords,
                 cull_backfaces: false,
             };
-            let out = rasterize(&faces, &meshes, &s);
+            let out = rasterize(&faces, &meshes, None, &s);
             let n = out.pix_to_face.len();
             let weight = |i: usize, c: usize| ((i * 7 + c * 3) % 11) as f64 / 11.0 - 0.45;
             let gz: Vec<f64> = (0..n).map(|i| weight(i, 0)).collect();
@@ -514,7 +486,7 @@ mod tests {
             // The loss over the forward's own selection (a small step keeps it: no pixel is
             // near a cut-off or a tie here, checked by the equal pix_to_face below).
             let loss = |fv: &[[[f64; 3]; 3]]| {
-                let o = rasterize(fv, &meshes, &s);
+                let o = rasterize(fv, &meshes, None, &s);
                 assert_eq!(o.pix_to_face, out.pix_to_face);
                 (0..n)
                     .map(|i| {
