@@ -182,8 +182,9 @@ void main() {
     uint face = meshes[view].x + (item - view * pc.items_per_view);
     vec4 box = vec4(items[item * ITEM_WORDS], items[item * ITEM_WORDS + 1u],
                     items[item * ITEM_WORDS + 2u], items[item * ITEM_WORDS + 3u]);
-    uvec4 rect;
-    tile_rect(box, rect); // binned, so the rectangle exists
+    uvec4 pixels;
+    pixel_rect(box, pixels); // binned, so the rectangle exists
+    uvec4 rect = pixels / pc.tile_size;
     uint index = s - offsets[item];
     uint rw = rect.z - rect.x + 1u;
     uint ty = rect.y + index / rw;
@@ -200,10 +201,12 @@ void main() {
     precise vec3 g0 = vec3(0.0);
     precise vec3 g1 = vec3(0.0);
     precise vec3 g2 = vec3(0.0);
-    uint row_end = min((ty + 1u) * pc.tile_size, pc.height);
-    uint col_end = min((tx + 1u) * pc.tile_size, pc.width);
-    for (uint row = ty * pc.tile_size; row < row_end; ++row) {
-        for (uint col = tx * pc.tile_size; col < col_end; ++col) {
+    // The tile's pixels that the face's grown box can hold (binning's pixel rectangle): only
+    // they can list the face.
+    uint row_end = min((ty + 1u) * pc.tile_size, pixels.w + 1u);
+    uint col_end = min((tx + 1u) * pc.tile_size, pixels.z + 1u);
+    for (uint row = max(ty * pc.tile_size, pixels.y); row < row_end; ++row) {
+        for (uint col = max(tx * pc.tile_size, pixels.x); col < col_end; ++col) {
             uint base = ((view * pc.height + row) * pc.width + col) * pc.k;
             uint slot = 0u;
             bool found = false;

@@ -1,9 +1,19 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_ballot : require
+#extension GL_KHR_shader_subgroup_shuffle : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
 // PyTorch3D's rasterizer, step 3 (after setup and binning): the K nearest faces of every pixel.
 // One workgroup per 8×8 block of pixels, one invocation per pixel, visiting the faces binned to
 // the block's tile in index order (binning keeps every face whose grown box can hold a pixel
-// centre of the tile; the box test below is PyTorch3D's own, per pixel). The pixel's list lives
+// centre of the tile; the box test below is PyTorch3D's own, per pixel). As the soft
+// rasterizer's `raster_tiled.comp` does, each subgroup works alone: per batch of as many binned
+// faces as it has lanes, each lane loads one face, a ballot keeps the faces whose grown box
+// holds a pixel centre of the subgroup's pixels, and the loop over the ballot's bits, lowest
+// first (index order), broadcasts each kept face with shuffles to every lane's pixel. (On
+// llvmpipe a load in the loop is a scalar loop over the lanes, a shuffle one permute, and an
+// empty ballot the only thing that skips work.) The pixel's list lives
 // in the output buffers, sorted by (z, face index), so a crowded tile's run is visited in
 // passes over consecutive parts of it ([pass_begin, pass_end): the driver's loop cap), each
 // pass resuming the list the last one left.
@@ -15,7 +25,7 @@
 // list when it is nearer to the pixel (squared edge distance) and is not added beside it, as
 // PyTorch3D does; this one depends on the visiting order, index order in both.
 //
-// Loop iterations per invocation: K to start, per face of the pass at most 2K + 1 (finding the
+// Loop iterations per invocation: K to find the list's end (after the first pass), per face of the pass at most 2K + 1 (finding the
 // other half, moving an entry): what the host's pass size bounds (`forward_pass_faces`).
 // Twin: `reference::rasterize`.
 #include "common.glsl"
@@ -32,6 +42,7 @@ layout(std430, set = 0, binding = 4) readonly buffer PairItems { uint pair_items
 // [start, end) of every tile's run of sorted entries, view-major.
 layout(std430, set = 0, binding = 5) readonly buffer Ranges { uvec2 ranges[]; };
 // [views, H, W, K]: the packed face index as an int64 (low word, high word), -1 where empty.
+// Every output holds -1 in every slot before the first pass (the host fills them).
 layout(std430, set = 0, binding = 6) buffer PixToFace { int pix_to_face[]; };
 layout(std430, set = 0, binding = 7) buffer Zbuf { float zbuf[]; };
 layout(std430, set = 0, binding = 8) buffer Dists { float dists[]; };
@@ -39,6 +50,7 @@ layout(std430, set = 0, binding = 8) buffer Dists { float dists[]; };
 layout(std430, set = 0, binding = 9) buffer Bary { float bary[]; };
 
 #include "fragments.glsl"
+#include "subgroup_face.glsl"
 
 int face_at(uint slot) {
     return pix_to_face[2u * slot];
@@ -65,6 +77,98 @@ bool before(float z, int f, uint slot) {
     return z < zs || (z == zs && f < face_at(slot));
 }
 
+// One face as a lane holds it: its vertices and its box grown by √blur_radius.
+struct LaneFace {
+    vec3 q0;
+    vec3 q1;
+    vec3 q2;
+    vec4 box;  // x_min, y_min, x_max, y_max (PyTorch3D's NDC)
+    uint face;
+};
+
+LaneFace lane_face_shuffle(LaneFace f, uint i) {
+    LaneFace g;
+    g.q0 = subgroupShuffle(f.q0, i);
+    g.q1 = subgroupShuffle(f.q1, i);
+    g.q2 = subgroupShuffle(f.q2, i);
+    g.box = subgroupShuffle(f.box, i);
+    g.face = subgroupShuffle(f.face, i);
+    return g;
+}
+
+// What the face gives the pixel p, added to the pixel's list of `filled` entries from `base`.
+void visit(LaneFace lf, vec2 p, uint base, inout uint filled) {
+    // `CheckPointOutsideBoundingBox` (the face-wide tests were setup's).
+    if (p.x > lf.box.z || p.x < lf.box.x || p.y > lf.box.w || p.y < lf.box.y) {
+        return;
+    }
+    vec3 q0 = lf.q0;
+    vec3 q1 = lf.q1;
+    vec3 q2 = lf.q2;
+    vec3 w0;
+    vec3 w;
+    vec3 w_clip;
+    frag_barycentrics(p, q0, q1, q2, w0, w, w_clip);
+    precise float pz = w_clip.x * q0.z + w_clip.y * q1.z + w_clip.z * q2.z;
+    if (pz < 0.0) {
+        return;
+    }
+    vec3 ed = edge_dists(p, q0.xy, q1.xy, q2.xy);
+    float dist = min(min(ed.x, ed.y), ed.z);
+    bool inside = w.x > 0.0 && w.y > 0.0 && w.z > 0.0;
+    if (!inside && dist >= pc.blur_radius) {
+        return;
+    }
+    float signed_dist = inside ? -dist : dist;
+    int f = int(lf.face);
+
+    // The other half of a clipped face, if it is in the list: replaced when this half is nearer
+    // to the pixel, and either way this half is not added.
+    int other = neighbors[lf.face];
+    uint at = pc.k;
+    if (other >= 0) {
+        for (uint i = 0u; i < filled; ++i) {
+            if (face_at(base + i) == other) {
+                at = i;
+                break;
+            }
+        }
+    }
+    if (at < pc.k) {
+        if (!(dist < abs(dists[base + at]))) {
+            return;
+        }
+        // Move the entry to where (pz, f) sorts, then write it there.
+        uint i = at;
+        while (i > 0u && before(pz, f, base + i - 1u)) {
+            copy_slot(base + i, base + i - 1u);
+            --i;
+        }
+        while (i + 1u < filled && !before(pz, f, base + i + 1u)) {
+            copy_slot(base + i, base + i + 1u);
+            ++i;
+        }
+        write_slot(base + i, f, pz, signed_dist, w_clip);
+        return;
+    }
+    // A plain insertion; when the list is full, its last entry drops out (or this face, if it
+    // sorts after it).
+    uint i = filled;
+    if (filled == pc.k) {
+        if (!before(pz, f, base + pc.k - 1u)) {
+            return;
+        }
+        i = pc.k - 1u;
+    } else {
+        ++filled;
+    }
+    while (i > 0u && before(pz, f, base + i - 1u)) {
+        copy_slot(base + i, base + i - 1u);
+        --i;
+    }
+    write_slot(base + i, f, pz, signed_dist, w_clip);
+}
+
 void main() {
     uint blocks_x = (pc.width + 7u) / 8u;
     uint blocks_y = (pc.height + 7u) / 8u;
@@ -72,113 +176,74 @@ void main() {
     uint block = linear_group_id();
     uint view = block / blocks_per_view;
     if (view >= pc.views) {
-        return; // surplus workgroup of a folded grid
+        return; // surplus workgroup of a folded grid: uniform across the workgroup
     }
     uint in_view = block - view * blocks_per_view;
     uint by = in_view / blocks_x;
     uint bx = in_view - by * blocks_x;
-    uint col = bx * 8u + (gl_LocalInvocationIndex & 7u);
-    uint row = by * 8u + (gl_LocalInvocationIndex >> 3u);
-    if (col >= pc.width || row >= pc.height) {
-        return;
-    }
     uint blocks_per_tile = pc.tile_size / 8u;
     uint tile = view * pc.tiles_x * pc.tiles_y + (by / blocks_per_tile) * pc.tiles_x
               + bx / blocks_per_tile;
     uvec2 range = ranges[tile];
     uint run = range.y - range.x;
     if (pc.pass_begin > 0u && pc.pass_begin >= run) {
-        return; // the tile's run ended in an earlier pass
+        return; // the tile's run ended in an earlier pass: uniform across the workgroup
     }
+    uint lanes = subgroup_lanes();
+    uint lane = gl_SubgroupInvocationID;
+    // This invocation's pixel: `segment_pixel` arranges each subgroup's pixels in a compact
+    // block where the driver gives subgroups consecutive invocations.
+    uvec2 at = segment_pixel(gl_LocalInvocationIndex, 8u, lanes);
+    uint col = bx * 8u + at.x;
+    uint row = by * 8u + at.y;
+    bool valid = col < pc.width && row < pc.height;
+    vec2 p = frag_pixel(min(row, pc.height - 1u), min(col, pc.width - 1u));
+    // The box of the subgroup's pixel centres (lanes past the image's edge count as the edge).
+    vec2 lo = lane_min(p);
+    vec2 hi = lane_max(p);
+
     uint base = ((view * pc.height + row) * pc.width + col) * pc.k;
+    // The host filled every slot with -1 before the first pass; a later pass finds where the
+    // list ends.
     uint filled = 0u;
-    if (pc.pass_begin == 0u) {
-        for (uint i = 0u; i < pc.k; ++i) {
-            write_slot(base + i, -1, -1.0, -1.0, vec3(-1.0));
-        }
-    } else {
+    if (pc.pass_begin > 0u && valid) {
         while (filled < pc.k && face_at(base + filled) >= 0) {
             ++filled;
         }
     }
     uint first_face = meshes[view].x;
-    vec2 p = frag_pixel(row, col);
-    uint end = min(pc.pass_end, run);
-    for (uint e = range.x + pc.pass_begin; e < range.x + end; ++e) {
-        uint face = first_face + pair_items[pairs[e]];
-        vec3 q0;
-        vec3 q1;
-        vec3 q2;
-        load_face_verts(face, q0, q1, q2);
-        // `CheckPointOutsideBoundingBox` (the face-wide tests were setup's).
-        precise float x_min = min(q0.x, min(q1.x, q2.x)) - pc.grow;
-        precise float y_min = min(q0.y, min(q1.y, q2.y)) - pc.grow;
-        precise float x_max = max(q0.x, max(q1.x, q2.x)) + pc.grow;
-        precise float y_max = max(q0.y, max(q1.y, q2.y)) + pc.grow;
-        if (p.x > x_max || p.x < x_min || p.y > y_max || p.y < y_min) {
-            continue;
+    uint begin = range.x + pc.pass_begin;
+    uint end = range.x + min(pc.pass_end, run);
+    for (uint start = begin; start < end; start += lanes) {
+        uint e = start + lane;
+        LaneFace lf;
+        lf.face = 0u;
+        lf.q0 = vec3(0.0);
+        lf.q1 = vec3(0.0);
+        lf.q2 = vec3(0.0);
+        lf.box = vec4(1.0, 1.0, -1.0, -1.0);
+        bool touches = false;
+        if (e < end && lane < lanes) {
+            lf.face = first_face + pair_items[pairs[e]];
+            load_face_verts(lf.face, lf.q0, lf.q1, lf.q2);
+            precise float x_min = min(lf.q0.x, min(lf.q1.x, lf.q2.x)) - pc.grow;
+            precise float y_min = min(lf.q0.y, min(lf.q1.y, lf.q2.y)) - pc.grow;
+            precise float x_max = max(lf.q0.x, max(lf.q1.x, lf.q2.x)) + pc.grow;
+            precise float y_max = max(lf.q0.y, max(lf.q1.y, lf.q2.y)) + pc.grow;
+            lf.box = vec4(x_min, y_min, x_max, y_max);
+            touches = !(hi.x < x_min || hi.y < y_min || lo.x > x_max || lo.y > y_max);
         }
-        vec3 w0;
-        vec3 w;
-        vec3 w_clip;
-        frag_barycentrics(p, q0, q1, q2, w0, w, w_clip);
-        precise float pz = w_clip.x * q0.z + w_clip.y * q1.z + w_clip.z * q2.z;
-        if (pz < 0.0) {
-            continue;
-        }
-        vec3 ed = edge_dists(p, q0.xy, q1.xy, q2.xy);
-        float dist = min(min(ed.x, ed.y), ed.z);
-        bool inside = w.x > 0.0 && w.y > 0.0 && w.z > 0.0;
-        if (!inside && dist >= pc.blur_radius) {
-            continue;
-        }
-        float signed_dist = inside ? -dist : dist;
-        int f = int(face);
-
-        // The other half of a clipped face, if it is in the list: replaced when this half is
-        // nearer to the pixel, and either way this half is not added.
-        int other = neighbors[face];
-        uint at = pc.k;
-        if (other >= 0) {
-            for (uint i = 0u; i < filled; ++i) {
-                if (face_at(base + i) == other) {
-                    at = i;
-                    break;
+        uvec4 kept = subgroupBallot(touches);
+        for (uint word = 0u; word < ballot_words(); ++word) {
+            uint mask = kept[word];
+            while (mask != 0u) {
+                uint i = 32u * word + uint(findLSB(mask));
+                mask &= mask - 1u;
+                LaneFace g = lane_face_shuffle(lf, i);
+                if (valid) {
+                    visit(g, p, base, filled);
                 }
             }
         }
-        if (at < pc.k) {
-            if (!(dist < abs(dists[base + at]))) {
-                continue;
-            }
-            // Move the entry to where (pz, f) sorts, then write it there.
-            uint i = at;
-            while (i > 0u && before(pz, f, base + i - 1u)) {
-                copy_slot(base + i, base + i - 1u);
-                --i;
-            }
-            while (i + 1u < filled && !before(pz, f, base + i + 1u)) {
-                copy_slot(base + i, base + i + 1u);
-                ++i;
-            }
-            write_slot(base + i, f, pz, signed_dist, w_clip);
-            continue;
-        }
-        // A plain insertion; when the list is full, its last entry drops out (or this face,
-        // if it sorts after it).
-        uint i = filled;
-        if (filled == pc.k) {
-            if (!before(pz, f, base + pc.k - 1u)) {
-                continue;
-            }
-            i = pc.k - 1u;
-        } else {
-            ++filled;
-        }
-        while (i > 0u && before(pz, f, base + i - 1u)) {
-            copy_slot(base + i, base + i - 1u);
-            --i;
-        }
-        write_slot(base + i, f, pz, signed_dist, w_clip);
     }
 }

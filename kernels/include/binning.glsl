@@ -33,10 +33,9 @@ layout(push_constant) uniform Push {
 #endif
 
 // Columns and rows of pixel centres the box may contain, widened by one pixel on each side
-// against rounding (the fine pass tests the exact box per pixel; a tile too many costs time,
-// never a pixel), then the tiles holding them. False when no pixel of the image can be touched
-// or the box has a NaN; ±∞ boxes are clamped to the image.
-bool tile_rect(vec4 box, out uvec4 rect) {
+// against rounding, as (c0, r0, c1, r1) inclusive. False when no pixel of the image can be
+// touched or the box has a NaN; ±∞ boxes are clamped to the image.
+bool pixel_rect(vec4 box, out uvec4 rect) {
     if (any(isnan(box))) {
         rect = uvec4(0u);
         return false;
@@ -58,8 +57,17 @@ bool tile_rect(vec4 box, out uvec4 rect) {
         rect = uvec4(0u);
         return false;
     }
-    uint ts = pc.tile_size;
-    rect = uvec4(uint(c0) / ts, uint(r0) / ts, uint(c1) / ts, uint(r1) / ts);
+    rect = uvec4(uint(c0), uint(r0), uint(c1), uint(r1));
+    return true;
+}
+
+// The tiles holding `pixel_rect`'s pixels (the fine pass tests the exact box per pixel; a
+// tile too many costs time, never a pixel).
+bool tile_rect(vec4 box, out uvec4 rect) {
+    if (!pixel_rect(box, rect)) {
+        return false;
+    }
+    rect /= pc.tile_size;
     return true;
 }
 

@@ -12,6 +12,8 @@
 //!   world positions is the gradient with respect to the screen-space face vertices.
 //! - [`render_mesh`] keeps the camera, the lighting and the face set-up on the device: vertices,
 //!   faces and cameras in, images out.
+//! - [`fragments`] is PyTorch3D's rasterizer (`softvk.pytorch3d`): the fragment kernels and
+//!   their f64 twin, on packed projected faces.
 //! - [`reference_rasterize`] and [`reference_rasterize_grad`] are the f64 CPU twin of
 //!   [`rasterize`] and its backward: the oracle of the tests, and what `soft_rasterize` computes
 //!   for float64 tensors.
@@ -42,6 +44,7 @@ use softvk::gpu::{Context, ContextOptions};
 use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
 use softvk::raster::backward::GradBuffers;
+use softvk::raster::fragments::gpu::FragmentRasterizer;
 use softvk::raster::gpu::{GpuScene, Method, Renderer};
 use softvk::raster::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
 use softvk::raster::{reference, reference_grad};
@@ -49,10 +52,23 @@ use softvk::raster::{reference, reference_grad};
 /// Lights from Python: `(ambient intensity, ambient colour, [(intensity, colour, direction)])`.
 type PyLighting = (f64, [f64; 3], Vec<(f64, [f64; 3], [f64; 3])>);
 
+mod fragments;
+
 /// The process's engine, made on first use.
 struct Engine {
     ctx: Context,
     renderer: Renderer,
+    /// PyTorch3D's rasterizer, made on its first use.
+    fragments: Mutex<Option<FragmentRasterizer>>,
+}
+
+/// The engine's fragment rasterizer, made on first use.
+fn engine_fragments(engine: &Engine) -> softvk::Result<MutexGuard<'_, Option<FragmentRasterizer>>> {
+    let mut cell = engine.fragments.lock().unwrap_or_else(|e| e.into_inner());
+    if cell.is_none() {
+        *cell = Some(FragmentRasterizer::new(&engine.ctx)?);
+    }
+    Ok(cell)
 }
 
 static ENGINE: Mutex<Option<Engine>> = Mutex::new(None);
@@ -92,7 +108,11 @@ fn engine() -> PyResult<MutexGuard<'static, Option<Engine>>> {
     if guard.is_none() {
         let ctx = Context::new(&ContextOptions::from_env()).map_err(to_py)?;
         let renderer = Renderer::new(&ctx).map_err(to_py)?;
-        *guard = Some(Engine { ctx, renderer });
+        *guard = Some(Engine {
+            ctx,
+            renderer,
+            fragments: Mutex::new(None),
+        });
         OWNER.store(std::process::id(), Ordering::Release);
     }
     Ok(guard)
@@ -1068,6 +1088,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_rgb, m)?)?;
     m.add_function(wrap_pyfunction!(write_png, m)?)?;
     m.add_function(wrap_pyfunction!(is_forked_child, m)?)?;
+    fragments::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -27,7 +27,9 @@ use bytemuck::{Pod, Zeroable};
 
 use super::FragmentSettings;
 use crate::error::{Error, LimitKind, Result};
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, groups, specs};
+use crate::gpu::{
+    Buffer, BufferRange, Context, Kernel, MemoryKind, PassTime, Recorder, Timer, groups, specs,
+};
 use crate::primitives::binning::{BinJob, Binner, Bins, ItemLayout, TileGrid};
 
 /// Words of one binning item (`ITEM_WORDS` in `kernels/include/fragments.glsl`): the box, the
@@ -149,13 +151,15 @@ impl FragmentPlan {
         // and at most K + 1 list reads; the reduce's: one per tile of a face.
         let backward = 128 + 64 * (k64 + 1);
         let reduce = grid.tiles_per_view() + 8;
-        // The forward's: K to start, then per face of a pass at most 2K + 1.
+        // The forward's: K to find a list's end, then per face of a pass at most 2K + 1, and per
+        // batch of a subgroup's faces one and one per ballot word (at most 2: a face's share of
+        // them at most 3).
         let pass_faces = match loop_cap {
             Some(cap) => {
                 for (what, need) in [
                     ("the backward's per-tile sum", backward),
                     ("the backward's per-face sum over its tiles", reduce),
-                    ("a forward pass of one face", 16 + 3 * k64 + 1),
+                    ("a forward pass of one face", 16 + 3 * k64 + 4),
                 ] {
                     if need > cap {
                         return Err(Error::DeviceLimit {
@@ -168,7 +172,7 @@ impl FragmentPlan {
                         });
                     }
                 }
-                (cap - 16 - k64) / (2 * k64 + 1)
+                (cap - 16 - k64) / (2 * k64 + 4)
             }
             None => u64::from(u32::MAX),
         };
@@ -320,6 +324,9 @@ pub struct FragmentRasterizer {
     /// Read back by [`FragmentRasterizer::bin`]: the entries of the last binning.
     entries: Option<u64>,
     host: HostBuffers,
+    /// GPU timestamps of the slice entry points' passes ([`FragmentRasterizer::time_passes`]).
+    timer: Option<Timer>,
+    timings: Vec<PassTime>,
 }
 
 impl FragmentRasterizer {
@@ -336,7 +343,40 @@ impl FragmentRasterizer {
             partials: None,
             entries: None,
             host: HostBuffers::default(),
+            timer: None,
+            timings: Vec::new(),
         })
+    }
+
+    /// Times every pass of the slice entry points ([`FragmentRasterizer::rasterize_into`],
+    /// [`FragmentRasterizer::rasterize_grad_into`]) with GPU timestamps, from now on: what
+    /// benchmarks read with [`FragmentRasterizer::take_timings`].
+    pub fn time_passes(&mut self, ctx: &Context) -> Result<()> {
+        self.timer = Some(Timer::new(ctx, 16)?);
+        Ok(())
+    }
+
+    /// The pass times recorded since the last call, in order.
+    pub fn take_timings(&mut self) -> Vec<PassTime> {
+        std::mem::take(&mut self.timings)
+    }
+
+    /// Submits what `f` records and waits, timed when [`FragmentRasterizer::time_passes`] asked.
+    fn submit(
+        &mut self,
+        ctx: &Context,
+        f: impl FnOnce(&mut Self, &mut Recorder<'_>) -> Result<()>,
+    ) -> Result<()> {
+        let mut timer = self.timer.take();
+        let result = ctx.submit_and_wait_timed(timer.as_mut(), |rec| f(self, rec));
+        let times = match (&result, &timer) {
+            (Ok(()), Some(t)) => t.results(ctx),
+            _ => Ok(Vec::new()),
+        };
+        self.timer = timer;
+        result?;
+        self.timings.extend(times?);
+        Ok(())
     }
 
     /// Step 1 and the binning's count: records the setup of `plan`'s items and the count pass
@@ -461,6 +501,12 @@ impl FragmentRasterizer {
             * u64::from(plan.push.height.div_ceil(8))
             * u64::from(plan.push.views);
         rec.pass("fragment forward", |rec| {
+            // Every slot empty: −1 in pix_to_face's two words and −1.0 in every float.
+            let minus_one = (-1.0f32).to_bits();
+            rec.fill(out.pix_to_face.sub(0, 8 * slots), u32::MAX);
+            rec.fill(out.zbuf.sub(0, 4 * slots), minus_one);
+            rec.fill(out.dists.sub(0, 4 * slots), minus_one);
+            rec.fill(out.bary_coords.sub(0, 12 * slots), minus_one);
             for pass in 0..passes {
                 let begin = pass * plan.pass_faces;
                 let end = (begin + plan.pass_faces).min(u64::from(u32::MAX));
@@ -684,13 +730,13 @@ impl FragmentRasterizer {
         let outputs_buffer = self.host.outputs.take().expect("made above");
         let result = (|| {
             let inputs = layout.inputs(&inputs_buffer);
-            ctx.submit_and_wait(|rec| self.record_setup(rec, plan, inputs))?;
+            self.submit(ctx, |s, rec| s.record_setup(rec, plan, inputs))?;
             self.bin(ctx)?;
             let bound = self.longest_run_bound(plan)?;
             let mut passes = Self::forward_passes(plan, bound);
             if passes > 1 {
                 // Crowded tiles: the real longest run decides.
-                ctx.submit_and_wait(|rec| self.record_sort(rec, plan))?;
+                self.submit(ctx, |s, rec| s.record_sort(rec, plan))?;
                 passes = Self::forward_passes(plan, self.longest_run(ctx, plan)?);
             }
             let [p, z, d, b] = SlotParts::new(slots).at;
@@ -701,11 +747,11 @@ impl FragmentRasterizer {
                 bary_coords: outputs_buffer.range(b, 12 * slots),
             };
             let sorted = bound.div_ceil(plan.pass_faces) > 1;
-            ctx.submit_and_wait(|rec| {
+            self.submit(ctx, |s, rec| {
                 if !sorted {
-                    self.record_sort(rec, plan)?;
+                    s.record_sort(rec, plan)?;
                 }
-                self.record_forward(
+                s.record_forward(
                     rec,
                     plan,
                     inputs,
@@ -825,7 +871,7 @@ impl FragmentRasterizer {
         let outputs_buffer = self.host.outputs.take().expect("made above");
         let result = (|| {
             let inputs = layout.inputs(&inputs_buffer);
-            ctx.submit_and_wait(|rec| self.record_setup(rec, plan, inputs))?;
+            self.submit(ctx, |s, rec| s.record_setup(rec, plan, inputs))?;
             self.bin(ctx)?;
             let e = layout.extra;
             let [p, z, d, b] = parts.at.map(|at| e + at);
@@ -836,10 +882,10 @@ impl FragmentRasterizer {
                 grad_bary: inputs_buffer.range(b, 12 * slots),
             };
             let out = outputs_buffer.range(0, (36 * faces).max(4));
-            ctx.submit_and_wait(|rec| {
+            self.submit(ctx, |s, rec| {
                 // Faces of no mesh get 0.
                 rec.fill(out, 0);
-                self.record_backward(rec, plan, inputs, &grads, out)
+                s.record_backward(rec, plan, inputs, &grads, out)
             })?;
             let bytes = outputs_buffer.mapped().expect("host-mapped");
             bytemuck::cast_slice_mut::<f32, u8>(grad_face_verts)
