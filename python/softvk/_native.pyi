@@ -80,6 +80,51 @@ def reference_rasterize_grad(
     """The f64 twin's backward of :func:`reference_rasterize`: dL/d(face vertices) and
     dL/d(textures) given dL/d(images) ``[B, H, W, 4]``."""
 
+FragmentSettings = Tuple[int, int, float, int, bool, bool, bool]
+"""``(height, width, blur_radius, faces_per_pixel, perspective_correct,
+clip_barycentric_coords, cull_backfaces)``: PyTorch3D's rasterization arguments."""
+
+def rasterize_fragments(
+    face_verts: F32,
+    meshes: Sequence[Tuple[int, int]],
+    neighbors: Optional[I64],
+    settings: FragmentSettings,
+) -> Tuple[I64, F32, F32, F32]:
+    """PyTorch3D's rasterizer on the device: packed projected faces ``[F, 3, 3]`` and each
+    mesh's ``(first face, face count)`` to ``(pix_to_face, zbuf, bary_coords, dists)``,
+    ``[N, H, W, K]`` (the barycentrics ``[N, H, W, K, 3]``). ``neighbors``: the other half of
+    each face PyTorch3D's near-plane clipping cut in two, or -1."""
+
+def rasterize_fragments_grad(
+    face_verts: F32,
+    meshes: Sequence[Tuple[int, int]],
+    pix_to_face: I64,
+    grad_zbuf: F32,
+    grad_bary: F32,
+    grad_dists: F32,
+    settings: FragmentSettings,
+) -> F32:
+    """The backward of :func:`rasterize_fragments` to the face vertices ``[F, 3, 3]``."""
+
+def reference_fragments(
+    face_verts: F64,
+    meshes: Sequence[Tuple[int, int]],
+    neighbors: Optional[I64],
+    settings: FragmentSettings,
+) -> Tuple[I64, F64, F64, F64]:
+    """The f64 CPU twin of :func:`rasterize_fragments`."""
+
+def reference_fragments_grad(
+    face_verts: F64,
+    meshes: Sequence[Tuple[int, int]],
+    pix_to_face: I64,
+    grad_zbuf: F64,
+    grad_bary: F64,
+    grad_dists: F64,
+    settings: FragmentSettings,
+) -> F64:
+    """The f64 twin's backward of :func:`reference_fragments`."""
+
 def render_mesh(
     vertices: F32,
     faces: I64,
