@@ -8,6 +8,7 @@ against PyTorch3D's, projection and near-plane clipping included, and a whole
 ``MeshRenderer`` with PyTorch3D's shaders.
 """
 
+import importlib.util
 import math
 import pathlib
 
@@ -264,11 +265,7 @@ def test_bad_input_gets_one_clear_error(gpu):
 
 
 def test_near_plane_clipping_without_pytorch3d_says_what_is_missing(gpu):
-    try:
-        import pytorch3d  # noqa: F401
-    except ImportError:
-        pass
-    else:
+    if importlib.util.find_spec("pytorch3d") is not None:
         pytest.skip("PyTorch3D is installed here")
     _, meshes, settings = scene(golden("square_basic.npz"))
     with pytest.raises(ImportError, match="PyTorch3D"):

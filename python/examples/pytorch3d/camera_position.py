@@ -20,8 +20,8 @@ What changed:
   would be downloaded), centred and scaled as the mesh-fitting tutorial normalises its cow
   (largest absolute coordinate 1); its texture is replaced by white, as the tutorial does.
 - Everything runs on CPU tensors, seeded (``--seed``); no plots or GIF. The early stop at loss
-  200 is for 256x256 images; it is scaled by the pixel count for other sizes (``--stop-loss``
-  sets it, 0 disables it).
+  200 is for 256x256 images; for other sizes it is scaled by the image side, as the loss left at
+  convergence comes from the soft edges (``--stop-loss`` sets it, 0 disables it).
 - At the end one JSON line: settings, final loss, IoU of the final silhouette (thresholded at 0.5)
   with the reference, final and true camera positions and their distance, timings (total,
   per iteration, and inside the rasterizer's forward during the optimisation).
@@ -149,13 +149,13 @@ def main():
     parser.add_argument("--image-size", type=int, default=256)
     parser.add_argument("--iterations", type=int, default=200)
     parser.add_argument("--stop-loss", type=float, default=None,
-                        help="stop when the loss is under this (default 200 * (size/256)^2; 0: never)")
+                        help="stop when the loss is under this (default 200 * size / 256; 0: never)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=pathlib.Path, default=None,
                         help="directory for camera_position.png")
     args = parser.parse_args()
     if args.stop_loss is None:
-        args.stop_loss = 200.0 * (args.image_size / 256) ** 2
+        args.stop_loss = 200.0 * args.image_size / 256
 
     started = time.perf_counter()
     torch.manual_seed(args.seed)
