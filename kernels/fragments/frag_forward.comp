@@ -4,7 +4,9 @@
 #extension GL_KHR_shader_subgroup_ballot : require
 #extension GL_KHR_shader_subgroup_shuffle : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
-// PyTorch3D's rasterizer, step 3 (after setup and binning): the K nearest faces of every pixel.
+// PyTorch3D's rasterizer, step 3 (after setup and binning): the K nearest faces of every pixel,
+// as a list of (face, z) per pixel in `pix_to_face`'s two words; `frag_finish.comp` then writes
+// the outputs from it.
 // One workgroup per 8×8 block of pixels, one invocation per pixel, visiting the faces binned to
 // the block's tile in index order (binning keeps every face whose grown box can hold a pixel
 // centre of the tile; the box test below is PyTorch3D's own, per pixel). As the soft
@@ -14,7 +16,7 @@
 // first (index order), broadcasts each kept face with shuffles to every lane's pixel. (On
 // llvmpipe a load in the loop is a scalar loop over the lanes, a shuffle one permute, and an
 // empty ballot the only thing that skips work.) The pixel's list lives
-// in the output buffers, sorted by (z, face index), so a crowded tile's run is visited in
+// in `pix_to_face`, sorted by (z, face index), so a crowded tile's run is visited in
 // passes over consecutive parts of it ([pass_begin, pass_end): the driver's loop cap), each
 // pass resuming the list the last one left.
 //
@@ -41,39 +43,35 @@ layout(std430, set = 0, binding = 3) readonly buffer Pairs { uint pairs[]; };
 layout(std430, set = 0, binding = 4) readonly buffer PairItems { uint pair_items[]; };
 // [start, end) of every tile's run of sorted entries, view-major.
 layout(std430, set = 0, binding = 5) readonly buffer Ranges { uvec2 ranges[]; };
-// [views, H, W, K]: the packed face index as an int64 (low word, high word), -1 where empty.
-// Every output holds -1 in every slot before the first pass (the host fills them).
-layout(std430, set = 0, binding = 6) buffer PixToFace { int pix_to_face[]; };
-layout(std430, set = 0, binding = 7) buffer Zbuf { float zbuf[]; };
-layout(std430, set = 0, binding = 8) buffer Dists { float dists[]; };
-// [views, H, W, K, 3].
-layout(std430, set = 0, binding = 9) buffer Bary { float bary[]; };
+// [views, H, W, K] pairs of words: the face (-1 where empty) and its depth's bits. All ones
+// before the first pass (the host fills them); `frag_finish.comp` turns each pair into the
+// int64 face index.
+layout(std430, set = 0, binding = 6) buffer Lists { uint lists[]; };
 
 #include "fragments.glsl"
 #include "subgroup_face.glsl"
 
 int face_at(uint slot) {
-    return pix_to_face[2u * slot];
+    return int(lists[2u * slot]);
 }
 
-void write_slot(uint slot, int face, float z, float dist, vec3 b) {
-    pix_to_face[2u * slot] = face;
-    pix_to_face[2u * slot + 1u] = face < 0 ? -1 : 0;
-    zbuf[slot] = z;
-    dists[slot] = dist;
-    bary[3u * slot] = b.x;
-    bary[3u * slot + 1u] = b.y;
-    bary[3u * slot + 2u] = b.z;
+float z_at(uint slot) {
+    return uintBitsToFloat(lists[2u * slot + 1u]);
+}
+
+void write_slot(uint slot, int face, float z) {
+    lists[2u * slot] = uint(face);
+    lists[2u * slot + 1u] = floatBitsToUint(z);
 }
 
 void copy_slot(uint to, uint from) {
-    write_slot(to, face_at(from), zbuf[from], dists[from],
-               vec3(bary[3u * from], bary[3u * from + 1u], bary[3u * from + 2u]));
+    lists[2u * to] = lists[2u * from];
+    lists[2u * to + 1u] = lists[2u * from + 1u];
 }
 
 // (z, f) before the entry in `slot`.
 bool before(float z, int f, uint slot) {
-    float zs = zbuf[slot];
+    float zs = z_at(slot);
     return z < zs || (z == zs && f < face_at(slot));
 }
 
@@ -119,7 +117,6 @@ void visit(LaneFace lf, vec2 p, uint base, inout uint filled) {
     if (!inside && dist >= pc.blur_radius) {
         return;
     }
-    float signed_dist = inside ? -dist : dist;
     int f = int(lf.face);
 
     // The other half of a clipped face, if it is in the list: replaced when this half is nearer
@@ -135,7 +132,13 @@ void visit(LaneFace lf, vec2 p, uint base, inout uint filled) {
         }
     }
     if (at < pc.k) {
-        if (!(dist < abs(dists[base + at]))) {
+        // The other half's distance to the pixel, as the forward computed it.
+        vec3 o0;
+        vec3 o1;
+        vec3 o2;
+        load_face_verts(uint(other), o0, o1, o2);
+        vec3 oe = edge_dists(p, o0.xy, o1.xy, o2.xy);
+        if (!(dist < min(min(oe.x, oe.y), oe.z))) {
             return;
         }
         // Move the entry to where (pz, f) sorts, then write it there.
@@ -148,7 +151,7 @@ void visit(LaneFace lf, vec2 p, uint base, inout uint filled) {
             copy_slot(base + i, base + i + 1u);
             ++i;
         }
-        write_slot(base + i, f, pz, signed_dist, w_clip);
+        write_slot(base + i, f, pz);
         return;
     }
     // A plain insertion; when the list is full, its last entry drops out (or this face, if it
@@ -166,7 +169,7 @@ void visit(LaneFace lf, vec2 p, uint base, inout uint filled) {
         copy_slot(base + i, base + i - 1u);
         --i;
     }
-    write_slot(base + i, f, pz, signed_dist, w_clip);
+    write_slot(base + i, f, pz);
 }
 
 void main() {

@@ -315,6 +315,7 @@ fn host_buffer(
 pub struct FragmentRasterizer {
     setup: Arc<Kernel>,
     forward: Arc<Kernel>,
+    finish: Arc<Kernel>,
     backward: Arc<Kernel>,
     reduce: Arc<Kernel>,
     binner: Binner,
@@ -335,6 +336,7 @@ impl FragmentRasterizer {
         Ok(Self {
             setup: ctx.kernel(&specs::FRAG_SETUP, &[])?,
             forward: ctx.kernel(&specs::FRAG_FORWARD, &[])?,
+            finish: ctx.kernel(&specs::FRAG_FINISH, &[])?,
             backward: ctx.kernel(&specs::FRAG_BACKWARD, &[])?,
             reduce: ctx.kernel(&specs::FRAG_REDUCE, &[])?,
             binner: Binner::new(ctx)?,
@@ -501,12 +503,8 @@ impl FragmentRasterizer {
             * u64::from(plan.push.height.div_ceil(8))
             * u64::from(plan.push.views);
         rec.pass("fragment forward", |rec| {
-            // Every slot empty: −1 in pix_to_face's two words and −1.0 in every float.
-            let minus_one = (-1.0f32).to_bits();
+            // Every list empty: all ones in each slot's (face, z) words.
             rec.fill(out.pix_to_face.sub(0, 8 * slots), u32::MAX);
-            rec.fill(out.zbuf.sub(0, 4 * slots), minus_one);
-            rec.fill(out.dists.sub(0, 4 * slots), minus_one);
-            rec.fill(out.bary_coords.sub(0, 12 * slots), minus_one);
             for pass in 0..passes {
                 let begin = pass * plan.pass_faces;
                 let end = (begin + plan.pass_faces).min(u64::from(u32::MAX));
@@ -524,10 +522,7 @@ impl FragmentRasterizer {
                         pairs: self.bins.entries().range(0, 4 * entries),
                         pair_items: self.bins.entry_items().range(0, 4 * entries),
                         ranges: self.bins.ranges().range(0, 8 * tiles),
-                        pix_to_face: out.pix_to_face.sub(0, 8 * slots),
-                        zbuf: out.zbuf.sub(0, 4 * slots),
-                        dists: out.dists.sub(0, 4 * slots),
-                        bary: out.bary_coords.sub(0, 12 * slots),
+                        lists: out.pix_to_face.sub(0, 8 * slots),
                     }
                     .for_kernel(&self.forward)?,
                     &push,
@@ -536,6 +531,25 @@ impl FragmentRasterizer {
                 )?;
             }
             Ok(())
+        })?;
+        rec.pass("fragment outputs", |rec| {
+            let minus_one = (-1.0f32).to_bits();
+            rec.fill(out.zbuf.sub(0, 4 * slots), minus_one);
+            rec.fill(out.dists.sub(0, 4 * slots), minus_one);
+            rec.fill(out.bary_coords.sub(0, 12 * slots), minus_one);
+            rec.dispatch(
+                &self.finish,
+                &specs::FragFinishBindings {
+                    face_verts: inputs.face_verts,
+                    lists: out.pix_to_face.sub(0, 8 * slots),
+                    zbuf: out.zbuf.sub(0, 4 * slots),
+                    dists: out.dists.sub(0, 4 * slots),
+                    bary: out.bary_coords.sub(0, 12 * slots),
+                }
+                .for_kernel(&self.finish)?,
+                &plan.push,
+                groups(slots / u64::from(plan.push.k), 64)?,
+            )
         })
     }
 
@@ -986,6 +1000,7 @@ mod tests {
         for spec in [
             &specs::FRAG_SETUP,
             &specs::FRAG_FORWARD,
+            &specs::FRAG_FINISH,
             &specs::FRAG_BACKWARD,
             &specs::FRAG_REDUCE,
         ] {
