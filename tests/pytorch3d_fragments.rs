@@ -274,7 +274,7 @@ fn the_kernels_give_pytorch3d_fragments_and_gradients_on_every_golden_scene() {
         }
     }
     eprintln!(
-        "kernels against PyTorch3D: values within {worst_value:.2e}, gradients use {:.0} % of \
+        "kernels against PyTorch3D: values within {worst_value:.2e}, gradients use {:.3} % of \
          their bars",
         100.0 * worst_grad
     );

@@ -4,7 +4,7 @@ Arrays are numpy arrays, C-contiguous; images are ``[views, H, W, 4]`` RGBA, row
 """
 
 from os import PathLike
-from typing import Optional, Sequence, Tuple, Union
+from typing import List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -124,6 +124,12 @@ def reference_fragments_grad(
     settings: FragmentSettings,
 ) -> F64:
     """The f64 twin's backward of :func:`reference_fragments`."""
+
+def fragments_time_passes() -> None:
+    """From now on, the fragment rasterizer times its passes with GPU timestamps."""
+
+def fragments_pass_times() -> List[Tuple[str, int, float]]:
+    """``(name, depth, ms)`` of every fragment pass timed since the last call."""
 
 def render_mesh(
     vertices: F32,

@@ -232,11 +232,40 @@ pub fn reference_fragments_grad<'py>(
     Ok(flat.into_pyarray(py).reshape([fshape[0], 3, 3])?.into_any())
 }
 
+/// `fragments_time_passes()`: from now on, the fragment rasterizer times its passes with GPU
+/// timestamps (benchmarks read them with [`fragments_pass_times`]).
+#[pyfunction]
+pub fn fragments_time_passes(py: Python<'_>) -> PyResult<()> {
+    with_engine(py, |engine| {
+        let mut cell = engine_fragments(engine)?;
+        cell.as_mut()
+            .expect("made by engine_fragments")
+            .time_passes(&engine.ctx)
+    })
+}
+
+/// `fragments_pass_times()`: `(name, depth, ms)` of every pass timed since the last call.
+#[pyfunction]
+pub fn fragments_pass_times(py: Python<'_>) -> PyResult<Vec<(String, u32, f64)>> {
+    with_engine(py, |engine| {
+        let mut cell = engine_fragments(engine)?;
+        Ok(cell
+            .as_mut()
+            .expect("made by engine_fragments")
+            .take_timings()
+            .into_iter()
+            .map(|t| (t.name, t.depth, t.ms))
+            .collect())
+    })
+}
+
 /// Registers the functions on the native module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rasterize_fragments, m)?)?;
     m.add_function(wrap_pyfunction!(rasterize_fragments_grad, m)?)?;
     m.add_function(wrap_pyfunction!(reference_fragments, m)?)?;
     m.add_function(wrap_pyfunction!(reference_fragments_grad, m)?)?;
+    m.add_function(wrap_pyfunction!(fragments_time_passes, m)?)?;
+    m.add_function(wrap_pyfunction!(fragments_pass_times, m)?)?;
     Ok(())
 }

@@ -1,0 +1,125 @@
+"""PyTorch3D's rasterizer against softvk's, in one run: the fragment pass alone and with its
+backward, on CPU tensors.
+
+    python bench_rasterizer.py [--image-size 256] [--faces-per-pixel 50] [--repeat 5]
+
+The scene is spot (the cow of ``assets/``, 5 856 faces) through a ``FoVPerspectiveCameras``
+filling most of the image, rasterized as PyTorch3D's silhouette tutorials do
+(``blur_radius = log(1 / 1e-4 - 1) * 1e-4``). Each measurement alternates the two rasterizers,
+``--repeat`` rounds after one warm-up call each, and reports medians; the forward is
+``MeshRasterizer(meshes)`` (projection, near-plane clipping, fragments), the backward
+``torch.autograd.grad`` of a loss over every output. Prints one JSON line.
+"""
+
+import argparse
+import json
+import math
+import os
+import pathlib
+import statistics
+import time
+
+import torch
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--image-size", type=int, default=256)
+    parser.add_argument("--faces-per-pixel", type=int, default=50)
+    parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--mesh", default=None, help="OBJ (default: the repository's spot)")
+    args = parser.parse_args()
+
+    from pytorch3d.io import load_objs_as_meshes
+    from pytorch3d.renderer import (
+        FoVPerspectiveCameras,
+        MeshRasterizer,
+        RasterizationSettings,
+        look_at_view_transform,
+    )
+
+    import softvk
+    from softvk.pytorch3d import MeshRasterizer as SoftvkRasterizer
+
+    repo = pathlib.Path(__file__).resolve().parents[3]
+    path = args.mesh or str(repo / "assets" / "spot_triangulated.obj")
+    mesh = load_objs_as_meshes([path], load_textures=False)
+    verts = mesh.verts_packed()
+    verts = (verts - verts.mean(0)) / (verts - verts.mean(0)).norm(dim=1).max()
+    R, T = look_at_view_transform(2.0, 10, 30)
+    cameras = FoVPerspectiveCameras(R=R, T=T)
+    settings = RasterizationSettings(
+        image_size=args.image_size,
+        blur_radius=math.log(1.0 / 1e-4 - 1.0) * 1e-4,
+        faces_per_pixel=args.faces_per_pixel,
+    )
+    rasterizers = {
+        "pytorch3d": MeshRasterizer(cameras=cameras, raster_settings=settings),
+        "softvk": SoftvkRasterizer(cameras=cameras, raster_settings=settings),
+    }
+    gen = torch.Generator().manual_seed(0)
+    weights = None
+
+    def forward(name, v):
+        return rasterizers[name](mesh.update_padded(v[None]))
+
+    def forward_backward(name):
+        nonlocal weights
+        v = verts.detach().clone().requires_grad_(True)
+        f = forward(name, v)
+        outs = (f.zbuf, f.bary_coords, f.dists)
+        if weights is None:
+            weights = [torch.rand(o.shape, generator=gen) for o in outs]
+        loss = sum((o * w).sum() for o, w in zip(outs, weights))
+        torch.autograd.grad(loss, v)
+
+    times = {name: {"forward": [], "forward_backward": []} for name in rasterizers}
+    softvk._native.fragments_time_passes()
+    softvk._native.fragments_pass_times()  # drop the warm-up's
+    passes = {}
+    with torch.no_grad():
+        for name in rasterizers:
+            forward(name, verts)
+    for name in rasterizers:
+        forward_backward(name)
+    for _ in range(args.repeat):
+        for name in rasterizers:
+            with torch.no_grad():
+                t = time.perf_counter()
+                forward(name, verts)
+                times[name]["forward"].append(time.perf_counter() - t)
+            t = time.perf_counter()
+            forward_backward(name)
+            times[name]["forward_backward"].append(time.perf_counter() - t)
+            # softvk's GPU passes of this round (forward, then forward and backward).
+            for pass_name, depth, ms in softvk._native.fragments_pass_times():
+                if depth == 0:
+                    passes.setdefault(pass_name, []).append(ms)
+    medians = {
+        name: {k: statistics.median(v) for k, v in t.items()} for name, t in times.items()
+    }
+    result = {
+        "mesh": pathlib.Path(path).name,
+        "faces": int(mesh.faces_packed().shape[0]),
+        "image_size": args.image_size,
+        "faces_per_pixel": args.faces_per_pixel,
+        "repeat": args.repeat,
+        "torch_threads": torch.get_num_threads(),
+        "device": softvk.device_name(),
+        "load": os.getloadavg()[0],
+        "ms": {n: {k: round(1e3 * v, 1) for k, v in m.items()} for n, m in medians.items()},
+        # Median GPU ms per call of each softvk pass (a call: the forward alone or with the
+        # backward; setup and binning count run in both).
+        "softvk_gpu_ms": {
+            k: round(statistics.median(v), 2) for k, v in sorted(passes.items())
+        },
+        "speedup": {
+            k: round(medians["pytorch3d"][k] / medians["softvk"][k], 1)
+            for k in ("forward", "forward_backward")
+        },
+    }
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main()
