@@ -56,6 +56,10 @@ class Settings:
     def shape(self) -> Tuple[int, int]:
         """``(height, width)`` of the images."""
 
+class FragmentMemory:
+    """The device-written memory that :func:`rasterize_fragments`' arrays view (their base);
+    reused by a later call once they are all dropped."""
+
 class Raster:
     """A render kept on the device for its backward."""
 
@@ -147,7 +151,8 @@ def device_name() -> str:
     """The name of the Vulkan device softvk renders on (opening it if need be)."""
 
 def release_cached_scenes() -> None:
-    """Frees the scenes kept for reuse by the next render of their kind."""
+    """Frees the scenes kept for reuse by the next render of their kind, and the spare memory of
+    fragment outputs."""
 
 def is_forked_child() -> bool:
     """Whether this process is a fork of the one that opened the device."""

@@ -3,12 +3,103 @@
 //! PyTorch3D's `rasterize_meshes` hands them to its C++: `face_verts [F, 3, 3]`, each mesh's
 //! `(first face, face count)`, and for faces cut by the near plane the other half of each.
 
-use numpy::{IntoPyArray, PyArrayMethods, PyReadonlyArrayDyn};
+use std::sync::Mutex;
+
+use numpy::ndarray::{ArrayView, IxDyn};
+use numpy::{Element, IntoPyArray, PyArray, PyArrayMethods, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
-use softvk::raster::fragments::gpu::{FragmentPlan, HostFragments};
+use softvk::gpu::{Buffer, MemoryKind};
+use softvk::raster::fragments::gpu::{FragmentPlan, SlotParts};
 use softvk::raster::fragments::{self, FragmentSettings};
 
-use super::{checked, engine_fragments, value_error, with_engine};
+use super::{checked, engine_fragments, forked, value_error, with_engine};
+
+/// Host-visible output buffers of earlier forwards whose arrays Python has dropped, kept for the
+/// next forward: on a CPU device a fresh buffer costs a page fault per page at its first write,
+/// and copying the outputs into fresh arrays would cost that and the copy.
+static POOL: Mutex<Vec<Buffer>> = Mutex::new(Vec::new());
+
+/// Spare buffers kept at most.
+const POOL_KEEP: usize = 4;
+
+/// The memory of one forward's output arrays: the buffer the device wrote them into. The arrays
+/// are views of it with this object as their base; when the last is dropped, the buffer goes
+/// back to [`POOL`].
+#[pyclass(module = "softvk._native", frozen)]
+pub struct FragmentMemory {
+    buffer: Mutex<Option<Buffer>>,
+}
+
+impl Drop for FragmentMemory {
+    fn drop(&mut self) {
+        let buffer = self
+            .buffer
+            .get_mut()
+            .unwrap_or_else(|e| e.into_inner())
+            .take();
+        if let Some(buffer) = buffer {
+            if forked().is_some() {
+                // A forked child must not free its parent's device memory.
+                std::mem::forget(buffer);
+                return;
+            }
+            let mut pool = POOL.lock().unwrap_or_else(|e| e.into_inner());
+            pool.push(buffer);
+            if pool.len() > POOL_KEEP {
+                // Keep the largest ones.
+                pool.sort_by_key(|b| std::cmp::Reverse(b.size()));
+                pool.truncate(POOL_KEEP);
+            }
+        }
+    }
+}
+
+/// Frees the spare output buffers (`release_cached_scenes`).
+pub fn release_pool() {
+    POOL.lock().unwrap_or_else(|e| e.into_inner()).clear();
+}
+
+/// A spare buffer of at least `bytes` (the smallest that fits), or none.
+fn pooled(bytes: u64) -> Option<Buffer> {
+    let mut pool = POOL.lock().unwrap_or_else(|e| e.into_inner());
+    let best = pool
+        .iter()
+        .enumerate()
+        .filter(|(_, b)| b.size() >= bytes)
+        .min_by_key(|(_, b)| b.size())
+        .map(|(i, _)| i)?;
+    Some(pool.swap_remove(best))
+}
+
+/// A numpy array of `shape` viewing `memory`'s buffer from byte `at`.
+fn view<'py, T: Element>(
+    memory: &Bound<'py, FragmentMemory>,
+    at: u64,
+    shape: &[usize],
+) -> PyResult<Bound<'py, PyAny>> {
+    let guard = memory
+        .get()
+        .buffer
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    let buffer = guard.as_ref().expect("a forward's memory holds its buffer");
+    let bytes = buffer
+        .mapped()
+        .ok_or_else(|| value_error("fragment outputs are not host-mapped".into()))?;
+    let len: usize = shape.iter().product();
+    let end = at as usize + len * std::mem::size_of::<T>();
+    assert!(end <= bytes.len(), "fragment output view past its buffer");
+    let ptr = bytes[at as usize..].as_ptr().cast::<T>();
+    assert!(ptr.is_aligned(), "fragment output view misaligned");
+    // SAFETY: `ptr` points at `len` initialized, aligned `T`s inside the buffer's mapping
+    // (checked above), which stays mapped and unchanged while `memory` lives: the buffer is
+    // returned to the pool only when `memory` is dropped, and `memory` is the array's base.
+    let array = unsafe { ArrayView::from_shape_ptr(IxDyn(shape), ptr) };
+    // SAFETY: as above; the array keeps `memory` alive.
+    let py_array =
+        unsafe { PyArray::<T, IxDyn>::borrow_from_array(&array, memory.clone().into_any()) };
+    Ok(py_array.into_any())
+}
 
 /// `(height, width, blur_radius, faces_per_pixel, perspective_correct, clip_barycentric_coords,
 /// cull_backfaces)`: PyTorch3D's rasterization arguments that change the result.
@@ -68,35 +159,41 @@ pub fn rasterize_fragments<'py>(
     let s = settings(settings_in);
     let nb = neighbor_list(&neighbors, fshape[0])?;
     let fv = fv.to_vec();
-    let n = meshes.len() * s.height as usize * s.width as usize * s.faces_per_pixel;
-    let mut pix_to_face = vec![0i64; n];
-    let mut zbuf = vec![0f32; n];
-    let mut dists = vec![0f32; n];
-    let mut bary = vec![0f32; 3 * n];
-    with_engine(py, |engine| {
+    let buffer = with_engine(py, |engine| {
         let plan = FragmentPlan::new(&engine.ctx, fshape[0], &meshes, &s)?;
+        let bytes = SlotParts::new(plan.slots()).total;
+        let buffer = match pooled(bytes) {
+            Some(b) => b,
+            None => engine
+                .ctx
+                .create_buffer("fragments", bytes, MemoryKind::Readback)?,
+        };
         let mut cell = engine_fragments(engine)?;
         let raster = cell.as_mut().expect("made by engine_fragments");
-        raster.rasterize_into(
-            &engine.ctx,
-            &plan,
-            &fv,
-            nb.as_deref(),
-            HostFragments {
-                pix_to_face: &mut pix_to_face,
-                zbuf: &mut zbuf,
-                dists: &mut dists,
-                bary_coords: &mut bary,
-            },
-        )
+        match raster.rasterize_to(&engine.ctx, &plan, &fv, nb.as_deref(), &buffer) {
+            Ok(()) => Ok((buffer, plan.slots())),
+            Err(e) => {
+                POOL.lock().unwrap_or_else(|e| e.into_inner()).push(buffer);
+                Err(e)
+            }
+        }
     })?;
+    let (buffer, slots) = buffer;
+    let memory = Bound::new(
+        py,
+        FragmentMemory {
+            buffer: Mutex::new(Some(buffer)),
+        },
+    )?;
+    let [p, z, d, b] = SlotParts::new(slots).at;
     let dims = shape(meshes.len(), &s);
-    let [a, b, c, d] = dims;
+    let mut bary_dims = dims.to_vec();
+    bary_dims.push(3);
     Ok((
-        pix_to_face.into_pyarray(py).reshape(dims)?.into_any(),
-        zbuf.into_pyarray(py).reshape(dims)?.into_any(),
-        bary.into_pyarray(py).reshape([a, b, c, d, 3])?.into_any(),
-        dists.into_pyarray(py).reshape(dims)?.into_any(),
+        view::<i64>(&memory, p, &dims)?,
+        view::<f32>(&memory, z, &dims)?,
+        view::<f32>(&memory, b, &bary_dims)?,
+        view::<f32>(&memory, d, &dims)?,
     ))
 }
 
@@ -261,6 +358,7 @@ pub fn fragments_pass_times(py: Python<'_>) -> PyResult<Vec<(String, u32, f64)>>
 
 /// Registers the functions on the native module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<FragmentMemory>()?;
     m.add_function(wrap_pyfunction!(rasterize_fragments, m)?)?;
     m.add_function(wrap_pyfunction!(rasterize_fragments_grad, m)?)?;
     m.add_function(wrap_pyfunction!(reference_fragments, m)?)?;

@@ -92,7 +92,7 @@ fn forked_error(owner: u32) -> PyErr {
 }
 
 /// Whether this process is a fork of the one that made the engine.
-fn forked() -> Option<u32> {
+pub(crate) fn forked() -> Option<u32> {
     let owner = OWNER.load(Ordering::Acquire);
     (owner != 0 && owner != std::process::id()).then_some(owner)
 }
@@ -722,6 +722,7 @@ fn render<'py>(
 fn release_cached_scenes() {
     if forked().is_none() {
         SPARES.lock().unwrap_or_else(|e| e.into_inner()).clear();
+        fragments::release_pool();
     }
 }
 

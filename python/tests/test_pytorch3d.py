@@ -162,6 +162,28 @@ def test_bin_settings_change_nothing_and_reruns_are_the_same_bits(gpu):
     assert torch.equal(grads[0].view(torch.int32), grads[1].view(torch.int32))
 
 
+def test_outputs_stay_valid_while_later_calls_run_and_their_memory_is_reused(gpu):
+    # The arrays view the memory the device wrote; it goes back to the pool only when they die.
+    a = golden("batched.npz")
+    b = golden("non_square.npz")
+    _, meshes_a, settings_a = scene(a)
+    _, meshes_b, settings_b = scene(b)
+    first = [t.detach().clone() for t in sp.rasterize_meshes(meshes_a, **settings_a)]
+    kept = sp.rasterize_meshes(meshes_a, **settings_a)
+    for _ in range(3):
+        out_b = sp.rasterize_meshes(meshes_b, **settings_b)
+        assert np.array_equal(out_b[0].numpy(), b["pix_to_face"])
+        del out_b
+    for x, y in zip(kept, first):
+        assert torch.equal(x, y)
+    # In-place changes to one call's outputs do not reach the next call's.
+    kept[1].fill_(7.0)
+    del kept
+    again = sp.rasterize_meshes(meshes_a, **settings_a)
+    for x, y in zip(again, first):
+        assert torch.equal(x, y)
+
+
 def test_float64_runs_the_twin_and_matches_central_differences(gpu):
     # Two faces off the pixel grid's lines (no pixel on an edge line, where the clip's kink is).
     verts = torch.tensor(

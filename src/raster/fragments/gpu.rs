@@ -710,6 +710,55 @@ impl FragmentRasterizer {
         Ok(())
     }
 
+    /// The forward on host slices: `face_verts` (nine f32 per face), written into `out`, a
+    /// host-visible buffer of at least `SlotParts::new(plan.slots()).total` bytes, at that
+    /// layout's offsets. Waits for the device.
+    pub fn rasterize_to(
+        &mut self,
+        ctx: &Context,
+        plan: &FragmentPlan,
+        face_verts: &[f32],
+        neighbors: Option<&[i64]>,
+        out: &Buffer,
+    ) -> Result<()> {
+        Self::check_host_inputs(plan, face_verts, neighbors)?;
+        let slots = plan.slots();
+        let parts = SlotParts::new(slots);
+        out.whole().require(parts.total, "fragment outputs")?;
+        let layout = self.upload_inputs(ctx, plan, face_verts, neighbors, 0)?;
+        let inputs_buffer = self.host.inputs.take().expect("uploaded");
+        let result = (|| {
+            let inputs = layout.inputs(&inputs_buffer);
+            self.submit(ctx, |s, rec| s.record_setup(rec, plan, inputs))?;
+            self.bin(ctx)?;
+            let bound = self.longest_run_bound(plan)?;
+            // Crowded tiles: the lists first, then the real longest run decides.
+            let sorted_first = Self::forward_passes(plan, bound) > 1;
+            let mut passes = 1;
+            if sorted_first {
+                self.submit(ctx, |s, rec| s.record_sort(rec, plan))?;
+                passes = Self::forward_passes(plan, self.longest_run(ctx, plan)?);
+            }
+            let [p, z, d, b] = parts.at;
+            let outputs = FragmentOutputs {
+                pix_to_face: out.range(p, 8 * slots),
+                zbuf: out.range(z, 4 * slots),
+                dists: out.range(d, 4 * slots),
+                bary_coords: out.range(b, 12 * slots),
+            };
+            let neighbors =
+                inputs_buffer.range(layout.neighbors, 4 * u64::from(plan.face_count).max(1));
+            self.submit(ctx, |s, rec| {
+                if !sorted_first {
+                    s.record_sort(rec, plan)?;
+                }
+                s.record_forward(rec, plan, inputs, neighbors, &outputs, passes)
+            })
+        })();
+        self.host.inputs = Some(inputs_buffer);
+        result
+    }
+
     /// The forward on host slices: `face_verts` (nine f32 per face), written into `out`'s
     /// slices (each `plan.slots()` long; three f32 a slot for the barycentrics).
     pub fn rasterize_into(
@@ -720,7 +769,6 @@ impl FragmentRasterizer {
         neighbors: Option<&[i64]>,
         out: HostFragments<'_>,
     ) -> Result<()> {
-        Self::check_host_inputs(plan, face_verts, neighbors)?;
         let slots = plan.slots();
         let n = slots as usize;
         if out.pix_to_face.len() != n
@@ -732,51 +780,21 @@ impl FragmentRasterizer {
                 "fragment rasterizer: output slices of the wrong length".into(),
             ));
         }
-        let layout = self.upload_inputs(ctx, plan, face_verts, neighbors, 0)?;
+        let parts = SlotParts::new(slots);
         host_buffer(
             ctx,
             &mut self.host.outputs,
             "fragments",
-            SlotParts::new(slots).total,
+            parts.total,
             MemoryKind::Readback,
         )?;
-        let inputs_buffer = self.host.inputs.take().expect("uploaded");
         let outputs_buffer = self.host.outputs.take().expect("made above");
-        let result = (|| {
-            let inputs = layout.inputs(&inputs_buffer);
-            self.submit(ctx, |s, rec| s.record_setup(rec, plan, inputs))?;
-            self.bin(ctx)?;
-            let bound = self.longest_run_bound(plan)?;
-            let mut passes = Self::forward_passes(plan, bound);
-            if passes > 1 {
-                // Crowded tiles: the real longest run decides.
-                self.submit(ctx, |s, rec| s.record_sort(rec, plan))?;
-                passes = Self::forward_passes(plan, self.longest_run(ctx, plan)?);
-            }
-            let [p, z, d, b] = SlotParts::new(slots).at;
-            let outputs = FragmentOutputs {
-                pix_to_face: outputs_buffer.range(p, 8 * slots),
-                zbuf: outputs_buffer.range(z, 4 * slots),
-                dists: outputs_buffer.range(d, 4 * slots),
-                bary_coords: outputs_buffer.range(b, 12 * slots),
-            };
-            let sorted = bound.div_ceil(plan.pass_faces) > 1;
-            self.submit(ctx, |s, rec| {
-                if !sorted {
-                    s.record_sort(rec, plan)?;
-                }
-                s.record_forward(
-                    rec,
-                    plan,
-                    inputs,
-                    inputs_buffer.range(layout.neighbors, 4 * u64::from(plan.face_count).max(1)),
-                    &outputs,
-                    passes,
-                )
-            })?;
+        let result = self.rasterize_to(ctx, plan, face_verts, neighbors, &outputs_buffer);
+        if result.is_ok() {
             let bytes = outputs_buffer
                 .mapped()
                 .ok_or_else(|| Error::Misuse("readback memory is not host-mapped".into()))?;
+            let [p, z, d, b] = parts.at;
             let part = |at: u64, len: u64| &bytes[at as usize..(at + len) as usize];
             bytemuck::cast_slice_mut::<i64, u8>(out.pix_to_face)
                 .copy_from_slice(part(p, 8 * slots));
@@ -784,9 +802,7 @@ impl FragmentRasterizer {
             bytemuck::cast_slice_mut::<f32, u8>(out.dists).copy_from_slice(part(d, 4 * slots));
             bytemuck::cast_slice_mut::<f32, u8>(out.bary_coords)
                 .copy_from_slice(part(b, 12 * slots));
-            Ok(())
-        })();
-        self.host.inputs = Some(inputs_buffer);
+        }
         self.host.outputs = Some(outputs_buffer);
         result
     }
@@ -918,15 +934,20 @@ fn align(x: u64) -> u64 {
     x.next_multiple_of(256)
 }
 
-/// Where the per-slot arrays lie in one host-visible buffer: `pix_to_face` (or its i64
-/// upstream twin), `zbuf`, `dists`, `bary_coords`, in that order.
-struct SlotParts {
-    at: [u64; 4],
-    total: u64,
+/// Where the per-slot arrays lie in one buffer ([`FragmentRasterizer::rasterize_to`]):
+/// `pix_to_face` (or its i64 upstream twin), `zbuf`, `dists`, `bary_coords`, in that order, each
+/// at a byte offset 256-byte aligned.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SlotParts {
+    /// Byte offsets of `pix_to_face`, `zbuf`, `dists` and `bary_coords`.
+    pub at: [u64; 4],
+    /// Bytes in all.
+    pub total: u64,
 }
 
 impl SlotParts {
-    fn new(slots: u64) -> Self {
+    /// The layout of `slots` slots.
+    pub fn new(slots: u64) -> Self {
         let z = align(8 * slots);
         let d = z + align(4 * slots);
         let b = d + align(4 * slots);
