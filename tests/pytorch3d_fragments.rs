@@ -525,3 +525,65 @@ fn a_tile_crowded_past_the_drivers_loop_cap_folds_into_passes_with_the_same_resu
         "{differ} of {filled} slots differ from the twin"
     );
 }
+
+/// FNV-1a over bytes: a test's fingerprint of outputs, not a cryptographic hash (no hashing
+/// crate is a dependency; 64 bits tell apart any two runs that differ).
+fn fingerprint(parts: &[&[u8]]) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    for part in parts {
+        for &b in *part {
+            h = (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+    h
+}
+
+/// The fragments and gradients of a crowded batch, as bytes, are the same under every subgroup
+/// width and workgroup shape CI runs the kernel tests with (llvmpipe's 4, 8 and 16 lanes, GPU
+/// workgroup shapes): the forward's lists are ordered by (z, face) whatever order faces arrive
+/// in, and each gradient is summed by one invocation in slot order.
+#[test]
+fn the_fragments_and_gradients_are_the_same_bytes_on_every_lane_width() {
+    let Some(ctx) = common::gpu() else { return };
+    let mut raster = FragmentRasterizer::new(&ctx).unwrap();
+    let (fv, meshes, neighbors) = crowded_scene(600, 3);
+    let faces = face_floats(&fv);
+    let settings = FragmentSettings {
+        width: 37,
+        height: 29,
+        blur_radius: 4e-3,
+        faces_per_pixel: 7,
+        perspective_correct: true,
+        clip_barycentric_coords: true,
+        cull_backfaces: false,
+    };
+    let plan = FragmentPlan::new(&ctx, fv.len(), &meshes, &settings).unwrap();
+    let out = raster
+        .rasterize(&ctx, &plan, &faces, Some(&neighbors))
+        .unwrap();
+    let n = out.pix_to_face.len();
+    let gz: Vec<f32> = (0..n).map(|s| (s % 13) as f32 / 13.0 - 0.4).collect();
+    let gb: Vec<f32> = (0..3 * n).map(|s| (s % 7) as f32 / 7.0 - 0.5).collect();
+    let mut grad = vec![0.0f32; faces.len()];
+    raster
+        .rasterize_grad_into(
+            &ctx,
+            &plan,
+            &faces,
+            &out.pix_to_face,
+            &gz,
+            &gb,
+            &gz,
+            &mut grad,
+        )
+        .unwrap();
+    let bytes = |v: &[f32]| bytemuck::cast_slice::<f32, u8>(v).to_vec();
+    let got = fingerprint(&[
+        bytemuck::cast_slice(&out.pix_to_face),
+        &bytes(&out.zbuf),
+        &bytes(&out.dists),
+        &bytes(&out.bary_coords),
+        &bytes(&grad),
+    ]);
+    assert_eq!(got, 0x3e63_ef68_70e5_79c5, "fingerprint {got:#018x}");
+}
