@@ -4,7 +4,9 @@
 //! 0.7.9; see the README there), one per scene: non-square images both ways, batches of meshes
 //! of different sizes, culling, perspective-correct and clipped barycentrics (each alone and
 //! both), K larger than the faces that reach a pixel, exactly equal depths (61 tied slot pairs),
-//! faces skipped for zero area, a vertex behind the eye or a negative depth at a pixel.
+//! faces skipped for zero area, a vertex behind the eye or a negative depth at a pixel; and
+//! faces cut by PyTorch3D's near-plane clipping, halves of one face named as each other's
+//! neighbours.
 //!
 //! PyTorch3D computes in f32 (its CPU kernels take float only), the twin in f64 from the same
 //! f32 inputs. The random scenes were drawn clear of every decision f32 rounding could flip
@@ -56,6 +58,8 @@ const GRAD_FLOOR: f64 = 1e-5;
 
 struct Scene {
     name: String,
+    /// PyTorch3D's `clipped_faces_neighbor_idx` (the near-plane scene's cut faces).
+    neighbors: Option<Vec<i64>>,
     face_verts: Vec<[[f64; 3]; 3]>,
     faces: Vec<[usize; 3]>,
     vertex_count: usize,
@@ -76,6 +80,9 @@ fn scene(path: &Path) -> Scene {
     let size = ints(path, "image_size");
     Scene {
         name: path.file_stem().unwrap().to_string_lossy().into_owned(),
+        neighbors: npz::read_npz_array(path, "clipped_faces_neighbor_idx")
+            .ok()
+            .map(|_| ints(path, "clipped_faces_neighbor_idx")),
         face_verts,
         faces,
         vertex_count: verts.len() / 3,
@@ -111,8 +118,30 @@ fn goldens() -> Vec<PathBuf> {
 fn the_twin_gives_pytorch3d_fragments_on_every_golden_scene() {
     for path in goldens() {
         let s = scene(&path);
-        let out = fragments::rasterize(&s.face_verts, &s.meshes, None, &s.settings);
+        let out = fragments::rasterize(
+            &s.face_verts,
+            &s.meshes,
+            s.neighbors.as_deref(),
+            &s.settings,
+        );
         let want_faces = ints(&path, "pix_to_face");
+        if s.neighbors.is_some() {
+            // The near-plane scene: values are not comparable (see `f32_bound_scene`), and
+            // f32 rounding reorders a few near-equal depths; the selection, cut faces' rule
+            // included, must be PyTorch3D's elsewhere (measured: 8 of 614 filled slots differ).
+            assert!(f32_bound_scene(&s));
+            let differ = (0..want_faces.len())
+                .filter(|&i| out.pix_to_face[i] != want_faces[i])
+                .count();
+            let filled = want_faces.iter().filter(|&&f| f >= 0).count();
+            eprintln!("{}: {differ} of {filled} slots differ", s.name);
+            assert!(
+                differ * 50 <= filled,
+                "{}: {differ} of {filled} slots differ",
+                s.name
+            );
+            continue;
+        }
         let want_z = floats(&path, "zbuf");
         let want_bary = floats(&path, "bary_coords");
         let want_dists = floats(&path, "dists");
@@ -145,10 +174,22 @@ fn the_twin_gives_pytorch3d_fragments_on_every_golden_scene() {
     }
 }
 
+/// Whether PyTorch3D's own f32 values on the scene are too far from exact for the f64 twin to be
+/// held to them: the near-plane scene, whose faces cut at z = 0.5 project to large NDC
+/// coordinates and slivers, where f32 loses digits (measured: a barycentric 2.4e-5 from the
+/// twin's, a vertex gradient −1 654 against −12.5 among components up to 3.9e4). The kernels,
+/// PyTorch3D's arithmetic in f32 operation for operation, are held to it there as everywhere.
+fn f32_bound_scene(s: &Scene) -> bool {
+    s.neighbors.is_some()
+}
+
 #[test]
 fn the_twins_backward_gives_pytorch3d_gradients_on_every_golden_scene() {
     for path in goldens() {
         let s = scene(&path);
+        if f32_bound_scene(&s) {
+            continue;
+        }
         let pix_to_face = ints(&path, "pix_to_face");
         let grad_zbuf = floats(&path, "grad_zbuf");
         let grad_dists = floats(&path, "grad_dists");
@@ -221,7 +262,9 @@ fn the_kernels_give_pytorch3d_fragments_and_gradients_on_every_golden_scene() {
         let s = scene(&path);
         let plan = FragmentPlan::new(&ctx, s.face_verts.len(), &s.meshes, &s.settings).unwrap();
         let faces = face_floats(&s.face_verts);
-        let out = raster.rasterize(&ctx, &plan, &faces, None).unwrap();
+        let out = raster
+            .rasterize(&ctx, &plan, &faces, s.neighbors.as_deref())
+            .unwrap();
         let want_faces = ints(&path, "pix_to_face");
         assert_eq!(out.pix_to_face, want_faces, "{}: pix_to_face", s.name);
         for (name, got, want) in [

@@ -427,6 +427,88 @@ def make_scene(name, seed, build, st):
     return out, stats
 
 
+def make_near_plane():
+    """A floor grid running from behind the camera into the distance, below the eye, so that
+    PyTorch3D's near-plane clipping (`clip_faces`, z_clip_value 0.5 as MeshRasterizer sets it for
+    znear 1) cuts faces in view, some in two: its C++ rasterizer's inputs after the clip (the cut faces as packed faces, each its own
+    three vertices, and `clipped_faces_neighbor_idx`) and its outputs and gradients before
+    `convert_clipped_rasterization_to_original_faces`. Not checked against the float64
+    reference above (it has no rule for cut faces); the Rust tests check the twin and the
+    kernels against it."""
+    from pytorch3d.renderer import FoVPerspectiveCameras, MeshRasterizer
+    from pytorch3d.renderer.mesh.clip import ClipFrustum, clip_faces
+    from pytorch3d.renderer.mesh.rasterize_meshes import _RasterizeFaceVerts
+
+    st = dict(image_size=(24, 32), blur_radius=1e-3, faces_per_pixel=6, perspective_correct=True,
+              clip_barycentric_coords=True, cull_backfaces=False)
+    # The camera at the origin looking along +z (view space is world space); the floor at
+    # y = -0.2, x in [-1.5, 1.5], z in [0.05, 3], an 8 x 8 grid of quads, jittered.
+    cams = FoVPerspectiveCameras(R=torch.eye(3)[None], T=torch.zeros(1, 3))
+    grng = np.random.default_rng(5)
+    xs, zs = np.linspace(-1.5, 1.5, 9), np.linspace(0.05, 3.0, 9)
+    verts = np.array([[x + grng.uniform(-0.05, 0.05), -0.2 + grng.uniform(-0.03, 0.03),
+                       z + grng.uniform(-0.05, 0.05)] for z in zs for x in xs], np.float32)
+    faces = []
+    for i in range(8):
+        for j in range(8):
+            a, b, c, d = 9 * i + j, 9 * i + j + 1, 9 * (i + 1) + j, 9 * (i + 1) + j + 1
+            faces += [[a, b, d], [a, d, c]]
+    floor = Meshes(verts=[torch.from_numpy(verts)], faces=[torch.tensor(faces)])
+    projected = MeshRasterizer(cameras=cams).transform(floor)
+    fv0 = projected.verts_packed()[projected.faces_packed()].detach()
+    frustum = ClipFrustum(left=-1, right=1, top=-1, bottom=1, perspective_correct=True,
+                          z_clip_value=0.5, cull=False)
+    clipped = clip_faces(fv0, projected.mesh_to_faces_packed_first_idx(),
+                         projected.num_faces_per_mesh(), frustum=frustum)
+    neighbors = clipped.clipped_faces_neighbor_idx
+    assert neighbors is not None and int((neighbors >= 0).sum()) > 0
+    fv = clipped.face_verts.detach().clone().requires_grad_(True)
+    ffirst, fcount = clipped.mesh_to_face_first_idx, clipped.num_faces_per_mesh
+    pix_to_face, zbuf, bary, dists = _RasterizeFaceVerts.apply(
+        fv, ffirst, fcount, neighbors, st["image_size"], st["blur_radius"],
+        st["faces_per_pixel"], 0, 10000, st["perspective_correct"],
+        st["clip_barycentric_coords"], st["cull_backfaces"])
+    mask = pix_to_face >= 0
+    grng = np.random.default_rng(7)  # the upstream gradients
+    zero = torch.zeros((), dtype=torch.float32)
+    gz = torch.where(mask, torch.from_numpy(grng.standard_normal(zbuf.shape)).float(), zero)
+    gb = torch.where(mask[..., None], torch.from_numpy(grng.standard_normal(bary.shape)).float(), zero)
+    gd = torch.where(mask, torch.from_numpy(grng.standard_normal(dists.shape)).float(), zero)
+    loss = (gz * zbuf).sum() + (gb * bary).sum() + (gd * dists).sum()
+    (grad_fv,) = torch.autograd.grad(loss, fv)
+    # Which pixels hold a face whose other half reached them too (the rule's work).
+    p2f = pix_to_face.numpy()
+    nb = neighbors.numpy()
+    halves = int(sum(1 for f in np.unique(p2f[p2f >= 0]) if nb[f] >= 0))
+    n = fv.shape[0]
+    out = dict(
+        verts_packed=fv.detach().numpy().reshape(-1, 3),
+        faces_packed=np.arange(3 * n, dtype=np.int64).reshape(n, 3),
+        mesh_to_face_first_idx=ffirst.numpy().astype(np.int64),
+        num_faces_per_mesh=fcount.numpy().astype(np.int64),
+        clipped_faces_neighbor_idx=nb.astype(np.int64),
+        image_size=np.array(st["image_size"], np.int64),
+        blur_radius=np.array(st["blur_radius"], np.float64),
+        faces_per_pixel=np.array(st["faces_per_pixel"], np.int64),
+        perspective_correct=np.array(1, np.int64),
+        clip_barycentric_coords=np.array(1, np.int64),
+        cull_backfaces=np.array(0, np.int64),
+        pix_to_face=p2f.astype(np.int64),
+        zbuf=zbuf.detach().numpy(),
+        bary_coords=bary.detach().numpy(),
+        dists=dists.detach().numpy(),
+        grad_zbuf=gz.numpy(),
+        grad_bary=gb.numpy(),
+        grad_dists=gd.numpy(),
+        grad_verts=grad_fv.numpy().reshape(-1, 3),
+        torch_version=np.array(torch.__version__),
+        pytorch3d_version=np.array(pytorch3d.__version__),
+    )
+    stats = dict(faces=n, cut_in_two=int((nb >= 0).sum()), halves_drawn=halves,
+                 slots=int(mask.sum()))
+    return out, stats
+
+
 def save_npz(path, arrays):
     """As np.savez_compressed, but byte-for-byte reproducible (fixed entry times)."""
     with zipfile.ZipFile(path, "w") as zf:
@@ -460,6 +542,10 @@ def main():
         print(f"{name}: seed {int(out['seed'])}, {stats['slots']} slots, {stats['ties']} tied pairs, "
               f"max |diff| zbuf {stats['zbuf']:.1e} bary {stats['bary']:.1e} dists {stats['dists']:.1e}, "
               f"grad {stats['grad_ratio']:.3f} of tolerance, {os.path.getsize(path)} bytes")
+    out, stats = make_near_plane()
+    path = os.path.join(args.out, "near_plane.npz")
+    save_npz(path, out)
+    print(f"near_plane: {stats}, {os.path.getsize(path)} bytes")
 
 
 if __name__ == "__main__":
