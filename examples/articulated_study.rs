@@ -1,4 +1,4 @@
-//! The basin study of `fit-articulated` (issue #16): from starts whose every joint angle is off
+//! The basin study of `fit-articulated`: from starts whose every joint angle is off
 //! by an offset in a range, the fraction of fits of the built-in figure ([`Rig::figure`]) that
 //! end with every joint within `--success` degrees of the target.
 //!

@@ -694,7 +694,7 @@ fn main() {
     }
 }
 
-/// The thin-structure set of issue #16: one procedural object per thin-parted category (seed
+/// The thin-structure set: one procedural object per thin-parted category (seed
 /// `set` each, not chosen: set 0 tuned the defaults, set 1 is held out), then spot, fitted with
 /// the same options.
 fn thin_set(set: u64) -> Vec<String> {

@@ -1,4 +1,4 @@
-//! The pose study of issue #5: from random initial rotations more than 60° from the target, the
+//! The pose study: from random initial rotations more than 60° from the target, the
 //! fraction of `fit_pose` runs that end within 5° of it, with the σ/γ schedule and without it
 //! (every iteration sharp), on the same iteration budget.
 //!

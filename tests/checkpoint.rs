@@ -1,4 +1,4 @@
-//! Checkpoints and resume (issue #14): a mesh fit stopped at a checkpoint and resumed ends bit
+//! Checkpoints and resume: a mesh fit stopped at a checkpoint and resumed ends bit
 //! for bit as the fit that never stopped, in the library and through `softvk fit-mesh`
 //! (`--checkpoint`, `--resume`, also after a real Ctrl-C); checkpoints of other inputs, other
 //! kinds or no checkpoint at all are refused with one clear error.

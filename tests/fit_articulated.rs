@@ -1,5 +1,5 @@
-//! Non-rigid pose estimation (`fit::rig`, `fit::articulated`, `softvk fit-articulated`, issue
-//! #16): the angle chain of the f64 twin against central finite differences of its forward,
+//! Non-rigid pose estimation (`fit::rig`, `fit::articulated`, `softvk fit-articulated`): the
+//! angle chain of the f64 twin against central finite differences of its forward,
 //! the GPU's skinning and angle gradient against the twin's, a fit that recovers every joint
 //! angle from a start at least 20° off on each, determinism, and the command line.
 

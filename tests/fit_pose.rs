@@ -1,4 +1,4 @@
-//! Pose estimation (`fit::pose`, `softvk fit-pose`, issue #5): the pose chain against central
+//! Pose estimation (`fit::pose`, `softvk fit-pose`): the pose chain against central
 //! finite differences of the f64 twin's forward, the GPU's pose gradient against the twin's,
 //! a small fit that converges, determinism, and the command line (outputs and errors).
 

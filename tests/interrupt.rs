@@ -1,4 +1,4 @@
-//! Ctrl-C and SIGTERM during the fits (issue #14): a real signal to a real `softvk` child
+//! Ctrl-C and SIGTERM during the fits: a real signal to a real `softvk` child
 //! process, then its files and exit status checked. A first signal ends the fit after the
 //! submission in flight, writes the result and report as a normal end does (marked as
 //! interrupted) and exits with 128 + the signal; a second one stops at once. Either way no

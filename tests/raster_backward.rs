@@ -2,7 +2,7 @@
 //! `raster::reference_grad` (itself checked against central finite differences), on lavapipe
 //! with validation on; determinism; and gradient descent on one triangle's silhouette.
 //!
-//! Bound (issue #4): every component within 1e-3 of the largest component's magnitude, for
+//! Bound: every component within 1e-3 of the largest component's magnitude, for
 //! positions, colours and cameras separately; tiled and brute agree to the same bound. That
 //! bound alone lets a component a thousand times smaller than the largest be wholly wrong, so
 //! every component is also held to its own size ([`Bars`], set from measurement). The split

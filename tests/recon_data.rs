@@ -1,4 +1,4 @@
-//! The NMR/SoftRas dataset side of reconstruction (issue #15): `.npy`/`.npz` against files
+//! The NMR/SoftRas dataset side of reconstruction: `.npy`/`.npz` against files
 //! NumPy wrote (`tests/data/npz/make_fixtures.py`), the procedural shapes, and the dataset's
 //! images, voxels and conventions.
 mod common;

@@ -1,6 +1,10 @@
-//! The forward-pass benchmark behind `softvk bench` (SPEC §6): four scenes, each rendered with
-//! the tiled kernel at several tile sizes and with the brute-force baseline, timed as
-//! resubmissions of one recorded command buffer, and written as the JSON records of the spec.
+//! The scene benchmarks behind `softvk bench` (SPEC §6), written as the JSON records of the spec:
+//! render scenes, each rendered with the tiled kernel at several tile sizes and with the
+//! brute-force baseline, timed as resubmissions of one recorded command buffer (`forward.rs`:
+//! [`run`]; `backward.rs`: [`run_backward`]); one iteration of each fit and its loop (`fits.rs`:
+//! [`run_fit`]) and of reconstruction training (`recon.rs`); the scenes themselves
+//! (`scenes.rs`: [`Scene`]).
+//! Micro-benchmarks of single kernels (scan, sort, the forward) are criterion's, in `benches/`.
 //!
 //! Per scene, each method gets its own upload ([`Renderer::prepare`](crate::raster::gpu::Renderer::prepare)), one [`Renderer::run`](crate::raster::gpu::Renderer::run)
 //! (tiled: it sizes the bins exactly) and one recording of [`Renderer::record_forward`](crate::raster::gpu::Renderer::record_forward). Brute

@@ -2,8 +2,10 @@
 //! module per subcommand.
 //!
 //! This lives in the binary crate (`mod cli;` in `main.rs`), not in the library, on purpose:
-//! - every subcommand of SPEC §6 (`render`, `grad`, `fit-mesh`, `fit-field`, `bench`) is a
-//!   subcommand of this one binary, so the binary crate is the only consumer of [`args`];
+//! - every subcommand (`render`, `grad`, `fit-mesh`, `demo`, `fit-pose`, `fit-articulated`,
+//!   `fit-field`, `bench`, `dataset`, `train-recon`, `recon`, `eval-recon`; `info` is in
+//!   `main.rs`) is a subcommand of this one binary, so the binary crate is the only consumer of
+//!   [`args`];
 //! - the library is embedded in host engines (`Context::from_raw`); its public API stays free of
 //!   clap types, flag spellings and exit-status policy, which are the binary's contract, not the
 //!   library's;
@@ -11,8 +13,13 @@
 //!   built by hand, so the flag → settings mapping is checked independently of this code.
 //!
 //! What a subcommand needs from here: [`args::ViewArgs`] and [`args::RasterArgs`] (flatten them
-//! into its own `clap::Args`), [`output`] to write images atomically, and
-//! [`render::render_frames`], the one call that renders.
+//! into its own `clap::Args`), [`output`] to write images atomically,
+//! [`render::render_frames`], the one call that renders, and [`interrupt`] (Ctrl-C and SIGTERM
+//! end a fit at an iteration boundary, with its checkpoint written).
+//!
+//! The modules: one per subcommand ([`render`], [`grad`], [`fit_mesh`] with `demo`,
+//! [`fit_pose`], [`fit_articulated`], [`fit_field`], [`bench`], [`dataset`], [`recon`] with
+//! `train-recon`, [`eval_recon`]) and the shared [`args`], [`output`], [`interrupt`].
 
 pub mod args;
 pub mod bench;

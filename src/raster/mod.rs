@@ -3,7 +3,8 @@
 //! ([`reference`](mod@reference)) and of the backward ([`reference_grad`]), and on the GPU the
 //! face setup ([`setup`]), binning ([`crate::primitives::binning`]), the fine passes — tiled
 //! ([`fine`]) and the brute-force baseline ([`brute`]), bit for bit the same — and the backward
-//! ([`backward`]), driven by [`gpu`].
+//! ([`backward`]), driven by [`gpu`]. Beside it, PyTorch3D's rasterizer ([`fragments`]): the K
+//! nearest faces of every pixel on the same binning, forward and backward, with its own twin.
 //!
 //! The layers, none importing from one above it: the settings; the state every stage reads —
 //! the [`method`], the [`scene`] and the kernels' loop counts; the stages; the driver [`gpu`],

@@ -17,9 +17,10 @@
 //!    partial gradient over the tile's pixels, then per face the sum of its partials in slot
 //!    order ([`FragmentRasterizer::record_backward`]); it needs only the binning's count pass.
 //!
-//! [`FragmentRasterizer::rasterize`] and [`FragmentRasterizer::rasterize_grad`] do all of it on
-//! host slices (what the Python package calls), with host-visible buffers, so the only copies
-//! are the caller's own.
+//! [`FragmentRasterizer::rasterize_to`] (into a host-visible buffer: what the Python package
+//! calls, its arrays then view that memory), [`FragmentRasterizer::rasterize_into`],
+//! [`FragmentRasterizer::rasterize`] and [`FragmentRasterizer::rasterize_grad_into`] do all of it
+//! from host slices, through host-visible buffers.
 
 use std::sync::Arc;
 

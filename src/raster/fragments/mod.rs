@@ -2,7 +2,7 @@
 //! nearest faces of every pixel (`pix_to_face`, `zbuf`, `bary_coords`, `dists`, PyTorch3D's
 //! `Fragments`) and the backward of those outputs to the face vertices, on the GPU
 //! ([`gpu::FragmentRasterizer`]: tiled, exact binning, deterministic) and as the f64 CPU twin
-//! ([`reference`]).
+//! ([`reference`](mod@reference)).
 //!
 //! The contract, from PyTorch3D's own CPU code (`csrc/rasterize_meshes/rasterize_meshes_cpu.cpp`
 //! and `csrc/utils/geometry_utils.h`), which the kernels follow operation for operation in f32
