@@ -82,6 +82,7 @@ struct LaneFace {
     vec3 q2;
     vec4 box;  // x_min, y_min, x_max, y_max (PyTorch3D's NDC)
     uint face;
+    int other; // the other half of a face cut in two, or -1
 };
 
 LaneFace lane_face_shuffle(LaneFace f, uint i) {
@@ -91,6 +92,7 @@ LaneFace lane_face_shuffle(LaneFace f, uint i) {
     g.q2 = subgroupShuffle(f.q2, i);
     g.box = subgroupShuffle(f.box, i);
     g.face = subgroupShuffle(f.face, i);
+    g.other = subgroupShuffle(f.other, i);
     return g;
 }
 
@@ -121,7 +123,7 @@ void visit(LaneFace lf, vec2 p, uint base, inout uint filled) {
 
     // The other half of a clipped face, if it is in the list: replaced when this half is nearer
     // to the pixel, and either way this half is not added.
-    int other = neighbors[lf.face];
+    int other = lf.other;
     uint at = pc.k;
     if (other >= 0) {
         for (uint i = 0u; i < filled; ++i) {
@@ -221,6 +223,7 @@ void main() {
         uint e = start + lane;
         LaneFace lf;
         lf.face = 0u;
+        lf.other = -1;
         lf.q0 = vec3(0.0);
         lf.q1 = vec3(0.0);
         lf.q2 = vec3(0.0);
@@ -228,6 +231,7 @@ void main() {
         bool touches = false;
         if (e < end && lane < lanes) {
             lf.face = first_face + pair_items[pairs[e]];
+            lf.other = neighbors[lf.face];
             load_face_verts(lf.face, lf.q0, lf.q1, lf.q2);
             precise float x_min = min(lf.q0.x, min(lf.q1.x, lf.q2.x)) - pc.grow;
             precise float y_min = min(lf.q0.y, min(lf.q1.y, lf.q2.y)) - pc.grow;
