@@ -8,7 +8,10 @@ filling most of the image, rasterized as PyTorch3D's silhouette tutorials do
 (``blur_radius = log(1 / 1e-4 - 1) * 1e-4``). Each measurement alternates the two rasterizers,
 ``--repeat`` rounds after one warm-up call each, and reports medians; the forward is
 ``MeshRasterizer(meshes)`` (projection, near-plane clipping, fragments), the backward
-``torch.autograd.grad`` of a loss over every output. Prints one JSON line.
+``torch.autograd.grad`` of a loss over every output, and an ``iteration`` one step of the
+"fit a mesh" tutorial's silhouette loop (``fit_mesh.py``'s: a level-4 icosphere's offsets, two
+views' ``SoftSilhouetteShader`` renders against spot's, edge, normal and Laplacian terms, SGD).
+Prints one JSON line.
 """
 
 import argparse
@@ -31,12 +34,17 @@ def main():
     args = parser.parse_args()
 
     from pytorch3d.io import load_objs_as_meshes
+    from pytorch3d.loss import mesh_edge_loss, mesh_laplacian_smoothing, mesh_normal_consistency
     from pytorch3d.renderer import (
+        BlendParams,
         FoVPerspectiveCameras,
         MeshRasterizer,
+        MeshRenderer,
         RasterizationSettings,
+        SoftSilhouetteShader,
         look_at_view_transform,
     )
+    from pytorch3d.utils import ico_sphere
 
     import softvk
     from softvk.pytorch3d import MeshRasterizer as SoftvkRasterizer
@@ -73,7 +81,41 @@ def main():
         loss = sum((o * w).sum() for o, w in zip(outs, weights))
         torch.autograd.grad(loss, v)
 
-    times = {name: {"forward": [], "forward_backward": []} for name in rasterizers}
+    # One iteration of the silhouette fit: two views, the tutorial's weights and optimizer.
+    Rv, Tv = look_at_view_transform(2.7, torch.tensor([0.0, 30.0]), torch.tensor([0.0, 120.0]))
+    views = FoVPerspectiveCameras(R=Rv, T=Tv)
+    target = mesh.update_padded(verts[None])
+    blend = BlendParams(sigma=1e-4, gamma=1e-4)
+    renderers = {
+        name: MeshRenderer(
+            rasterizer=cls(cameras=views, raster_settings=settings),
+            shader=SoftSilhouetteShader(blend_params=blend),
+        )
+        for name, cls in (("pytorch3d", MeshRasterizer), ("softvk", SoftvkRasterizer))
+    }
+    with torch.no_grad():
+        target_sil = renderers["pytorch3d"](target.extend(2))[..., 3]
+    source = ico_sphere(4)
+    fits = {}
+    for name in rasterizers:
+        offsets = torch.zeros_like(source.verts_packed(), requires_grad=True)
+        fits[name] = (offsets, torch.optim.SGD([offsets], lr=1.0, momentum=0.9))
+
+    def iteration(name):
+        offsets, optimizer = fits[name]
+        optimizer.zero_grad()
+        m = source.offset_verts(offsets)
+        sil = renderers[name](m.extend(2))[..., 3]
+        loss = (
+            ((sil - target_sil) ** 2).mean()
+            + mesh_edge_loss(m)
+            + 0.01 * mesh_normal_consistency(m)
+            + mesh_laplacian_smoothing(m, method="uniform")
+        )
+        loss.backward()
+        optimizer.step()
+
+    times = {name: {"forward": [], "forward_backward": [], "iteration": []} for name in rasterizers}
     softvk._native.fragments_time_passes()
     softvk._native.fragments_pass_times()  # drop the warm-up's
     passes = {}
@@ -82,6 +124,7 @@ def main():
             forward(name, verts)
     for name in rasterizers:
         forward_backward(name)
+        iteration(name)
     for _ in range(args.repeat):
         for name in rasterizers:
             with torch.no_grad():
@@ -91,6 +134,9 @@ def main():
             t = time.perf_counter()
             forward_backward(name)
             times[name]["forward_backward"].append(time.perf_counter() - t)
+            t = time.perf_counter()
+            iteration(name)
+            times[name]["iteration"].append(time.perf_counter() - t)
             # softvk's GPU passes of this round (forward, then forward and backward).
             for pass_name, depth, ms in softvk._native.fragments_pass_times():
                 if depth == 0:
@@ -108,14 +154,14 @@ def main():
         "device": softvk.device_name(),
         "load": os.getloadavg()[0],
         "ms": {n: {k: round(1e3 * v, 1) for k, v in m.items()} for n, m in medians.items()},
-        # Median GPU ms per call of each softvk pass (a call: the forward alone or with the
-        # backward; setup and binning count run in both).
+        # Median GPU ms per call of each softvk pass (a call: the forward alone, with the
+        # backward, or an iteration's; setup and binning count run in each).
         "softvk_gpu_ms": {
             k: round(statistics.median(v), 2) for k, v in sorted(passes.items())
         },
         "speedup": {
             k: round(medians["pytorch3d"][k] / medians["softvk"][k], 1)
-            for k in ("forward", "forward_backward")
+            for k in ("forward", "forward_backward", "iteration")
         },
     }
     print(json.dumps(result))
