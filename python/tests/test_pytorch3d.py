@@ -346,6 +346,20 @@ def test_mesh_rasterizer_matches_pytorch3ds_through_its_cameras_and_clipping(gpu
         assert torch.all((ga - gb).abs() <= bar), (dist, cameras)
 
 
+def test_the_readmes_pytorch3d_example_runs(gpu):
+    pytorch3d_or_skip()
+    import re
+
+    text = (GOLDENS.parents[2] / "README.md").read_text()
+    section = text[text.index("\n### PyTorch3D\n"):]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    scope = {}
+    exec(compile(code, "README.md (PyTorch3D)", "exec"), scope)
+    assert tuple(scope["images"].shape) == (1, 256, 256, 4)
+    grad = scope["verts"].grad
+    assert grad is not None and bool(grad.isfinite().all()) and float(grad.abs().max()) > 0
+
+
 def test_pytorch3d_shaders_render_through_softvks_rasterizer(gpu):
     r = pytorch3d_or_skip()
     from pytorch3d.utils import ico_sphere
