@@ -297,6 +297,27 @@ def test_bad_input_gets_one_clear_error(gpu):
     assert drawn and not drawn & nan_faces
 
 
+def test_a_batch_with_an_empty_mesh_rasterizes_the_others(gpu):
+    g = golden("batched.npz")
+    verts, meshes, settings = scene(g)
+    # The middle mesh's faces removed: an empty mesh between two others.
+    counts = meshes.face_counts
+    keep = torch.cat([meshes.faces[: counts[0]], meshes.faces[counts[0] + counts[1]:]])
+    holed = StandInMeshes(verts, keep, [counts[0], 0, counts[2]])
+    p2f, zbuf, bary, dists = holed_out = sp.rasterize_meshes(holed, **settings)
+    want = torch.from_numpy(g["pix_to_face"])
+    assert torch.equal(p2f[0], want[0])
+    assert bool((p2f[1] == -1).all()) and bool((zbuf[1] == -1).all())
+    shifted = torch.where(want[2] >= 0, want[2] - counts[1], want[2])
+    assert torch.equal(p2f[2], shifted)
+    (zbuf.sum() + bary.sum() + dists.sum()).backward()
+    assert bool(verts.grad.isfinite().all())
+    del holed_out
+    nothing = StandInMeshes(verts, meshes.faces[:0], [0])
+    out = sp.rasterize_meshes(nothing, **settings)
+    assert bool((out[0] == -1).all())
+
+
 def test_near_plane_clipping_without_pytorch3d_says_what_is_missing(gpu):
     if importlib.util.find_spec("pytorch3d") is not None:
         pytest.skip("PyTorch3D is installed here")

@@ -11,8 +11,9 @@
 //!    between two submissions ([`FragmentRasterizer::record_setup`] and
 //!    [`FragmentRasterizer::bin`]).
 //! 3. **Forward** (`frag_forward.comp`): per pixel, the faces binned to its tile in index
-//!    order into its K-list (sorted by `(z, face)`), in passes over crowded tiles where the
-//!    driver caps loops ([`FragmentRasterizer::record_forward`]).
+//!    order into its K-list of `(face, z)` (sorted by `(z, face)`), in passes over crowded
+//!    tiles where the driver caps loops; then `frag_finish.comp` writes PyTorch3D's outputs from
+//!    the lists ([`FragmentRasterizer::record_forward`]).
 //! 4. **Backward** (`frag_backward.comp`, `frag_reduce.comp`): per binned (face, tile) entry a
 //!    partial gradient over the tile's pixels, then per face the sum of its partials in slot
 //!    order ([`FragmentRasterizer::record_backward`]); it needs only the binning's count pass.
@@ -36,10 +37,6 @@ use crate::primitives::binning::{BinJob, Binner, Bins, ItemLayout, TileGrid};
 /// Words of one binning item (`ITEM_WORDS` in `kernels/include/fragments.glsl`): the box, the
 /// flag word, padding.
 const ITEM_WORDS: u32 = 8;
-
-/// Bytes of one fragment slot across the outputs: `pix_to_face` (i64), `zbuf`, `dists` (f32)
-/// and the three barycentrics (f32).
-pub const SLOT_BYTES: u64 = 8 + 4 + 4 + 12;
 
 /// Push constants of every fragment kernel (`Push` in `kernels/include/fragments.glsl`).
 #[repr(C)]
@@ -895,7 +892,7 @@ impl FragmentRasterizer {
             ctx,
             &mut self.host.outputs,
             "fragments",
-            (36 * faces).max(SLOT_BYTES),
+            (36 * faces).max(36),
             MemoryKind::Readback,
         )?;
         let inputs_buffer = self.host.inputs.take().expect("uploaded");
