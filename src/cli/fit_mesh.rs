@@ -6,8 +6,9 @@
 //! `-report/`): `ious.csv` (final per-view IoU of the hard silhouettes), `contact_sheet.png`
 //! (predicted vs target at 3× the view size, labelled with each view's IoU: white both, red
 //! predicted only, cyan target only), `turntable.gif` (the fitted mesh shaded, turning; beside
-//! the target's for `demo`), `loss.png` (the loss curves) and `progress.gif` (the contact sheet
-//! every logged iteration). Defaults are
+//! the target's for `demo`), `loss.png` (the loss curves), `loss.csv` (the logged losses and
+//! each logged iteration's (face, tile) entries) and `progress.gif` (the contact sheet every
+//! logged iteration). Defaults are
 //! SoftRas's deformation demo: σ 1e-4, hard colour aggregation, viewing angle 15°, Adam lr 0.01
 //! with betas 0.5, 0.99, 1 − IoU + 0.03 Laplacian + 0.0003 flatten.
 
@@ -364,6 +365,14 @@ fn fit_and_report(
             true,
         ),
     )?;
+    let mut log = String::from("iteration,total,silhouette,laplacian,flatten,entries\n");
+    for l in &result.log {
+        log.push_str(&format!(
+            "{},{},{},{},{},{}\n",
+            l.iteration, l.total, l.silhouette, l.laplacian, l.flatten, l.entries
+        ));
+    }
+    AtomicFile::create(&report_dir.join("loss.csv"))?.commit(log.as_bytes())?;
     let its = result.log.last().map_or(0, |l| l.iteration);
     write_interrupted(report_dir, its, opts.iterations)?;
     gif.finish()?;
