@@ -1202,7 +1202,10 @@ fn fit_mesh_takes_a_100k_face_template_at_64() {
         rows.iter().all(|r| r.iter().all(|x| x.is_finite())),
         "{log}"
     );
-    assert!(rows[2][2] < rows[0][2], "the silhouette loss does not fall: {log}");
+    assert!(
+        rows[2][2] < rows[0][2],
+        "the silhouette loss does not fall: {log}"
+    );
     assert!(rows.iter().all(|r| r[5] > 100_000.0), "{log}");
     // The vertices moved.
     let start = Mesh::load_obj(&template, 1).unwrap();

@@ -23,8 +23,15 @@ use softvk::raster::fragments::gpu::{FragmentPlan, FragmentRasterizer};
 use softvk::raster::fragments::{self, FragmentSettings};
 use softvk::recon::npz::{self, NpyArray, NpyData};
 
+/// The golden files: the checkout's, or (a test binary moved to another machine, as
+/// `.ci/gpu-check` moves them) `tests/data/pytorch3d` under the working directory.
 fn golden_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/pytorch3d")
+    let built = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/pytorch3d");
+    if built.is_dir() {
+        built
+    } else {
+        PathBuf::from("tests/data/pytorch3d")
+    }
 }
 
 fn array(path: &Path, name: &str) -> NpyArray {
