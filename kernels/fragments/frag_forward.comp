@@ -15,10 +15,10 @@
 // holds a pixel centre of the subgroup's pixels, and the loop over the ballot's bits, lowest
 // first (index order), broadcasts each kept face with shuffles to every lane's pixel. (On
 // llvmpipe a load in the loop is a scalar loop over the lanes, a shuffle one permute, and an
-// empty ballot the only thing that skips work.) The pixel's list lives
-// in `pix_to_face`, sorted by (z, face index), so a crowded tile's run is visited in
-// passes over consecutive parts of it ([pass_begin, pass_end): the driver's loop cap), each
-// pass resuming the list the last one left.
+// empty ballot the only thing that skips work.) The pixel's list lives in `lists`, sorted by
+// (z, face index), so a crowded tile's run is visited in passes over consecutive parts of it
+// ([pass_begin, pass_end): the driver's loop cap), each pass resuming the list the last one
+// left.
 //
 // Order: PyTorch3D's CPU rasterizer keeps a deque sorted by the tuple (z, f, ...) and drops its
 // last element past K, so equal depths go to the lower face index; so does this, and the list
@@ -27,8 +27,9 @@
 // list when it is nearer to the pixel (squared edge distance) and is not added beside it, as
 // PyTorch3D does; this one depends on the visiting order, index order in both.
 //
-// Loop iterations per invocation: K to find the list's end (after the first pass), per face of the pass at most 2K + 1 (finding the
-// other half, moving an entry): what the host's pass size bounds (`forward_pass_faces`).
+// Loop iterations per invocation: K to find the list's end (after the first pass), per batch
+// of a pass one and one per ballot word, per face at most 2K + 1 (finding the other half,
+// moving an entry): what the host's pass size bounds (`FragmentPlan::new`).
 // Twin: `reference::rasterize`.
 #include "common.glsl"
 
