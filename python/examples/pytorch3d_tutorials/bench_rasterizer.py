@@ -1,17 +1,23 @@
-"""PyTorch3D's rasterizer against softvk's, in one run: the fragment pass alone and with its
-backward, on CPU tensors.
+"""PyTorch3D's rasterizer against softvk's, in one run: the fragment pass alone, with the
+projection, with its backward, and a whole optimization iteration, on CPU tensors.
 
     python bench_rasterizer.py [--image-size 256] [--faces-per-pixel 50] [--repeat 5]
 
 The scene is spot (the cow of ``assets/``, 5 856 faces) through a ``FoVPerspectiveCameras``
 filling most of the image, rasterized as PyTorch3D's silhouette tutorials do
 (``blur_radius = log(1 / 1e-4 - 1) * 1e-4``). Each measurement alternates the two rasterizers,
-``--repeat`` rounds after one warm-up call each, and reports medians; the forward is
-``MeshRasterizer(meshes)`` (projection, near-plane clipping, fragments), the backward
-``torch.autograd.grad`` of a loss over every output, and an ``iteration`` one step of the
-"fit a mesh" tutorial's silhouette loop (``fit_mesh.py``'s: a level-4 icosphere's offsets, two
-views' ``SoftSilhouetteShader`` renders against spot's, edge, normal and Laplacian terms, SGD).
-Prints one JSON line.
+``--repeat`` rounds after one warm-up call each, and reports medians:
+
+- ``fragment_pass``: each package's ``rasterize_meshes`` alone, on the meshes already projected,
+  with the settings ``MeshRasterizer`` derives (perspective correction, clipped barycentrics,
+  the near-plane clip at znear / 2);
+- ``forward``: ``MeshRasterizer(meshes)`` (PyTorch3D's projection, then the fragment pass);
+- ``forward_backward``: that and ``torch.autograd.grad`` of a loss over every output;
+- ``iteration``: one step of the "fit a mesh" tutorial's silhouette loop (``fit_mesh.py``'s: a
+  level-4 icosphere's offsets, two views' ``SoftSilhouetteShader`` renders against spot's, edge,
+  normal and Laplacian terms, SGD).
+
+Prints one JSON line, with softvk's GPU pass times.
 """
 
 import argparse
@@ -71,6 +77,26 @@ def main():
     def forward(name, v):
         return rasterizers[name](mesh.update_padded(v[None]))
 
+    # The fragment pass alone: each package's `rasterize_meshes` on the meshes already in NDC,
+    # with the settings MeshRasterizer derives (PyTorch3D's projection, done once here).
+    from pytorch3d.renderer.mesh.rasterize_meshes import rasterize_meshes as p3d_rasterize_meshes
+
+    from softvk.pytorch3d import rasterize_meshes as softvk_rasterize_meshes
+
+    projected = rasterizers["pytorch3d"].transform(mesh.update_padded(verts[None]))
+    pass_args = dict(
+        image_size=settings.image_size,
+        blur_radius=settings.blur_radius,
+        faces_per_pixel=settings.faces_per_pixel,
+        perspective_correct=True,
+        clip_barycentric_coords=True,
+        z_clip_value=cameras.get_znear().min().item() / 2,
+    )
+    passes_fn = {"pytorch3d": p3d_rasterize_meshes, "softvk": softvk_rasterize_meshes}
+
+    def fragment_pass(name):
+        return passes_fn[name](projected, **pass_args)
+
     def forward_backward(name):
         nonlocal weights
         v = verts.detach().clone().requires_grad_(True)
@@ -115,7 +141,10 @@ def main():
         loss.backward()
         optimizer.step()
 
-    times = {name: {"forward": [], "forward_backward": [], "iteration": []} for name in rasterizers}
+    times = {
+        name: {"fragment_pass": [], "forward": [], "forward_backward": [], "iteration": []}
+        for name in rasterizers
+    }
     softvk._native.fragments_time_passes()
     softvk._native.fragments_pass_times()  # drop the warm-up's
     passes = {}
@@ -128,6 +157,9 @@ def main():
     for _ in range(args.repeat):
         for name in rasterizers:
             with torch.no_grad():
+                t = time.perf_counter()
+                fragment_pass(name)
+                times[name]["fragment_pass"].append(time.perf_counter() - t)
                 t = time.perf_counter()
                 forward(name, verts)
                 times[name]["forward"].append(time.perf_counter() - t)
@@ -161,7 +193,7 @@ def main():
         },
         "speedup": {
             k: round(medians["pytorch3d"][k] / medians["softvk"][k], 1)
-            for k in ("forward", "forward_backward", "iteration")
+            for k in ("fragment_pass", "forward", "forward_backward", "iteration")
         },
     }
     print(json.dumps(result))
