@@ -14,7 +14,7 @@ layout(local_size_x = 64) in;
 
 layout(std430, set = 0, binding = 0) readonly buffer FaceVerts { float face_verts[]; };
 // [views, H, W, K] pairs of words: in, (face, z bits); out, the int64 face index.
-layout(std430, set = 0, binding = 1) buffer Lists { uint lists[]; };
+layout(std430, set = 0, binding = 1) buffer Lists { uvec2 lists[]; };
 layout(std430, set = 0, binding = 2) writeonly buffer Zbuf { float zbuf[]; };
 layout(std430, set = 0, binding = 3) writeonly buffer Dists { float dists[]; };
 // [views, H, W, K, 3].
@@ -35,11 +35,12 @@ void main() {
     uint base = pixel * pc.k;
     for (uint i = 0u; i < pc.k; ++i) {
         uint slot = base + i;
-        int face = int(lists[2u * slot]);
+        uvec2 entry = lists[slot];
+        int face = int(entry.x);
         if (face < 0) {
             break;
         }
-        float z = uintBitsToFloat(lists[2u * slot + 1u]);
+        float z = uintBitsToFloat(entry.y);
         vec3 q0;
         vec3 q1;
         vec3 q2;
@@ -51,7 +52,7 @@ void main() {
         vec3 ed = edge_dists(p, q0.xy, q1.xy, q2.xy);
         float dist = min(min(ed.x, ed.y), ed.z);
         bool inside = w.x > 0.0 && w.y > 0.0 && w.z > 0.0;
-        lists[2u * slot + 1u] = 0u;
+        lists[slot].y = 0u;
         zbuf[slot] = z;
         dists[slot] = inside ? -dist : dist;
         bary[3u * slot] = w_clip.x;

@@ -47,33 +47,39 @@ layout(std430, set = 0, binding = 5) readonly buffer Ranges { uvec2 ranges[]; };
 // [views, H, W, K] pairs of words: the face (-1 where empty) and its depth's bits. All ones
 // before the first pass (the host fills them); `frag_finish.comp` turns each pair into the
 // int64 face index.
-layout(std430, set = 0, binding = 6) buffer Lists { uint lists[]; };
+layout(std430, set = 0, binding = 6) buffer Lists { uvec2 lists[]; };
 
 #include "fragments.glsl"
 #include "subgroup_face.glsl"
 
+// One entry is one 8-byte load or store (on llvmpipe each is a scalar access per lane: one,
+// not two).
 int face_at(uint slot) {
-    return int(lists[2u * slot]);
-}
-
-float z_at(uint slot) {
-    return uintBitsToFloat(lists[2u * slot + 1u]);
+    return int(lists[slot].x);
 }
 
 void write_slot(uint slot, int face, float z) {
-    lists[2u * slot] = uint(face);
-    lists[2u * slot + 1u] = floatBitsToUint(z);
+    lists[slot] = uvec2(uint(face), floatBitsToUint(z));
 }
 
-void copy_slot(uint to, uint from) {
-    lists[2u * to] = lists[2u * from];
-    lists[2u * to + 1u] = lists[2u * from + 1u];
+// (z, f) before the entry `e`.
+bool before(float z, int f, uvec2 e) {
+    float zs = uintBitsToFloat(e.y);
+    return z < zs || (z == zs && f < int(e.x));
 }
 
-// (z, f) before the entry in `slot`.
-bool before(float z, int f, uint slot) {
-    float zs = z_at(slot);
-    return z < zs || (z == zs && f < face_at(slot));
+// Moves entries one slot towards the list's end, from slot `i` down, while (z, f) sorts before
+// the one in front of them; returns the slot (z, f) belongs in. One load and one store a step.
+uint shift_up(uint base, uint i, float z, int f) {
+    while (i > 0u) {
+        uvec2 prev = lists[base + i - 1u];
+        if (!before(z, f, prev)) {
+            break;
+        }
+        lists[base + i] = prev;
+        --i;
+    }
+    return i;
 }
 
 // One face as a lane holds it: its vertices and its box grown by √blur_radius.
@@ -145,13 +151,13 @@ void visit(LaneFace lf, vec2 p, uint base, inout uint filled) {
             return;
         }
         // Move the entry to where (pz, f) sorts, then write it there.
-        uint i = at;
-        while (i > 0u && before(pz, f, base + i - 1u)) {
-            copy_slot(base + i, base + i - 1u);
-            --i;
-        }
-        while (i + 1u < filled && !before(pz, f, base + i + 1u)) {
-            copy_slot(base + i, base + i + 1u);
+        uint i = shift_up(base, at, pz, f);
+        while (i + 1u < filled) {
+            uvec2 next = lists[base + i + 1u];
+            if (before(pz, f, next)) {
+                break;
+            }
+            lists[base + i] = next;
             ++i;
         }
         write_slot(base + i, f, pz);
@@ -161,18 +167,14 @@ void visit(LaneFace lf, vec2 p, uint base, inout uint filled) {
     // sorts after it).
     uint i = filled;
     if (filled == pc.k) {
-        if (!before(pz, f, base + pc.k - 1u)) {
+        if (!before(pz, f, lists[base + pc.k - 1u])) {
             return;
         }
         i = pc.k - 1u;
     } else {
         ++filled;
     }
-    while (i > 0u && before(pz, f, base + i - 1u)) {
-        copy_slot(base + i, base + i - 1u);
-        --i;
-    }
-    write_slot(base + i, f, pz);
+    write_slot(base + shift_up(base, i, pz, f), f, pz);
 }
 
 void main() {
