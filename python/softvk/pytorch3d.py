@@ -16,8 +16,8 @@ What softvk does differently, and only this:
   bin ever overflows. Tensors come back on the device they came from.
 - **Determinism**: the backward sums each face's gradient in a fixed order (per tile in pixel
   order, then tile by tile), with no float atomics: the same bits on every run.
-- **Non-finite faces** (a NaN or infinite coordinate) are not drawn; PyTorch3D's arithmetic
-  makes NaN fragments of them.
+- **Non-finite faces** (a NaN or infinite coordinate) raise ``ValueError`` naming the face;
+  PyTorch3D's arithmetic makes NaN fragments of them.
 - **float64** face vertices run softvk's f64 CPU twin, forward and backward (for
   ``gradcheck``); float32 the kernels. Other dtypes raise ``TypeError``.
 

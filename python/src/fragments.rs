@@ -12,7 +12,7 @@ use softvk::gpu::{Buffer, MemoryKind};
 use softvk::raster::fragments::gpu::{FragmentPlan, SlotParts};
 use softvk::raster::fragments::{self, FragmentSettings};
 
-use super::{checked, engine_fragments, forked, value_error, with_engine};
+use super::{checked, engine_fragments, forked, to_py, value_error, with_engine};
 
 /// Host-visible output buffers of earlier forwards whose arrays Python has dropped, kept for the
 /// next forward: on a CPU device a fresh buffer costs a page fault per page at its first write,
@@ -249,20 +249,6 @@ fn faces64(fv: &[f64]) -> Vec<[[f64; 3]; 3]> {
         .collect()
 }
 
-fn check_meshes(meshes: &[(usize, usize)], faces: usize) -> PyResult<()> {
-    let mut end = 0;
-    for &(first, count) in meshes {
-        if first < end || first.saturating_add(count) > faces {
-            return Err(value_error(format!(
-                "mesh faces [{first}, {}) overlap another mesh's or pass the {faces} faces",
-                first.saturating_add(count)
-            )));
-        }
-        end = first + count;
-    }
-    Ok(())
-}
-
 /// `reference_fragments(...)`: as [`rasterize_fragments`], by the f64 twin (float64 arrays out; what
 /// `softvk.pytorch3d` runs for float64 tensors).
 #[pyfunction]
@@ -275,7 +261,8 @@ pub fn reference_fragments<'py>(
 ) -> PyResult<Outputs<'py>> {
     let (fv, fshape) = checked("face_verts", &face_verts, &[None, Some(3), Some(3)])?;
     let s = settings(settings_in);
-    check_meshes(&meshes, fshape[0])?;
+    fragments::check_meshes(fshape[0], &meshes).map_err(to_py)?;
+    fragments::check_finite(fv).map_err(to_py)?;
     let nb = neighbor_list(&neighbors, fshape[0])?;
     let fv = faces64(fv);
     let out = py.detach(|| fragments::rasterize(&fv, &meshes, nb.as_deref(), &s));
@@ -308,15 +295,11 @@ pub fn reference_fragments_grad<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let (fv, fshape) = checked("face_verts", &face_verts, &[None, Some(3), Some(3)])?;
     let s = settings(settings_in);
-    check_meshes(&meshes, fshape[0])?;
+    fragments::check_meshes(fshape[0], &meshes).map_err(to_py)?;
+    fragments::check_finite(fv).map_err(to_py)?;
     let dims = shape(meshes.len(), &s);
     let p2f = upstream("pix_to_face", &pix_to_face, dims, None)?;
-    if let Some(bad) = p2f.iter().find(|&&f| f < -1 || f >= fshape[0] as i64) {
-        return Err(value_error(format!(
-            "pix_to_face holds {bad}, not a face of {}",
-            fshape[0]
-        )));
-    }
+    fragments::check_pix_to_face(p2f, fshape[0]).map_err(to_py)?;
     let gz = upstream("grad_zbuf", &grad_zbuf, dims, None)?;
     let gb: Vec<[f64; 3]> = upstream("grad_bary", &grad_bary, dims, Some(3))?
         .chunks_exact(3)

@@ -110,18 +110,7 @@ impl FragmentPlan {
             .ok()
             .filter(|&f| f < i32::MAX as u32)
             .ok_or_else(|| Error::Input(format!("{face_count} faces is too many")))?;
-        let mut end = 0usize;
-        for (n, &(first, count)) in meshes.iter().enumerate() {
-            if first < end || first.saturating_add(count) > face_count as usize {
-                return bad(format!(
-                    "mesh {n}'s faces [{first}, {}) overlap the previous mesh's or pass the {} \
-                     faces",
-                    first.saturating_add(count),
-                    face_count
-                ));
-            }
-            end = first + count;
-        }
+        super::check_meshes(face_count as usize, meshes)?;
         let items_per_view = meshes.iter().map(|m| m.1).max().unwrap_or(0).max(1) as u32;
         let views =
             u32::try_from(meshes.len()).map_err(|_| Error::Input("too many meshes".into()))?;
@@ -705,7 +694,7 @@ impl FragmentRasterizer {
                 )));
             }
         }
-        Ok(())
+        super::check_finite(face_verts)
     }
 
     /// The forward on host slices: `face_verts` (nine f32 per face), written into `out`, a
@@ -863,15 +852,7 @@ impl FragmentRasterizer {
                 "fragment rasterizer backward: slices of the wrong length".into(),
             ));
         }
-        if let Some(bad) = pix_to_face
-            .iter()
-            .find(|&&f| f < -1 || f >= i64::from(plan.face_count))
-        {
-            return Err(Error::Input(format!(
-                "fragment rasterizer backward: pix_to_face holds {bad}, not a face of {}",
-                plan.face_count
-            )));
-        }
+        super::check_pix_to_face(pix_to_face, plan.face_count as usize)?;
         let parts = SlotParts::new(slots);
         let layout = self.upload_inputs(ctx, plan, face_verts, None, parts.total)?;
         {

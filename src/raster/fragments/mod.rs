@@ -14,9 +14,11 @@
 //!   `ndc(i, S1, S2) = −R/2 + (R i + R/2) / S1`, `R = 2 S1 / S2` when `S1 > S2`, else 2
 //!   ([`pixel_ndc`]).
 //! - **A face is skipped** when its signed area `(v0 − v1) × (v2 − v1)` is within 1e-8 of 0,
-//!   when it is a back face (area < 0) and `cull_backfaces`, when any vertex has `z < 1e-8`, when
-//!   a coordinate is not finite (PyTorch3D's arithmetic would be NaN there), and at a pixel
-//!   outside its bounding box grown by √`blur_radius`.
+//!   when it is a back face (area < 0) and `cull_backfaces`, when any vertex has `z < 1e-8`, and
+//!   at a pixel outside its bounding box grown by √`blur_radius`. A coordinate that is not
+//!   finite (PyTorch3D's arithmetic makes NaN fragments of the face) is refused by the host
+//!   entry points ([`check_finite`]); the kernels, which may read an engine's buffers, skip
+//!   such a face.
 //! - **At a pixel**: the barycentrics `w_k = e_k / (area + 1e-8)` (the edge functions); with
 //!   `perspective_correct`, `w_k z_{k+1} z_{k+2} / Σ` (Σ at least 1e-8); with
 //!   `clip_barycentric_coords`, clamped at 0 and divided by their sum (at least 1e-5). The depth
@@ -46,6 +48,51 @@ pub mod gpu;
 pub mod reference;
 
 pub use reference::{Fragments, pixel_ndc, pixel_point, rasterize, rasterize_grad};
+
+use crate::error::{Error, Result};
+
+/// Checks a batch as PyTorch3D packs it: mesh `n` owns faces `[first, first + count)` of
+/// `face_count`, the ranges in increasing order and not overlapping.
+pub fn check_meshes(face_count: usize, meshes: &[(usize, usize)]) -> Result<()> {
+    let mut end = 0usize;
+    for (n, &(first, count)) in meshes.iter().enumerate() {
+        if first < end || first.saturating_add(count) > face_count {
+            return Err(Error::Input(format!(
+                "fragment rasterizer: mesh {n}'s faces [{first}, {}) overlap the previous \
+                 mesh's or pass the {face_count} faces",
+                first.saturating_add(count)
+            )));
+        }
+        end = first + count;
+    }
+    Ok(())
+}
+
+/// Refuses face vertices (nine per face) with a coordinate that is not finite: PyTorch3D's
+/// arithmetic makes NaN fragments of such a face, which no caller means to get.
+pub fn check_finite<T: Copy + Into<f64>>(face_verts: &[T]) -> Result<()> {
+    match face_verts.iter().position(|&c| !c.into().is_finite()) {
+        None => Ok(()),
+        Some(i) => Err(Error::Input(format!(
+            "fragment rasterizer: face {} has a coordinate that is not finite ({})",
+            i / 9,
+            face_verts[i].into()
+        ))),
+    }
+}
+
+/// Checks a forward's `pix_to_face` for a backward over `face_count` faces.
+pub fn check_pix_to_face(pix_to_face: &[i64], face_count: usize) -> Result<()> {
+    match pix_to_face
+        .iter()
+        .find(|&&f| f < -1 || f >= face_count as i64)
+    {
+        None => Ok(()),
+        Some(bad) => Err(Error::Input(format!(
+            "fragment rasterizer backward: pix_to_face holds {bad}, not a face of {face_count}"
+        ))),
+    }
+}
 
 /// The settings of one fragment rasterization (PyTorch3D's `RasterizationSettings`, less
 /// `bin_size` and `max_faces_per_bin`, which do not change the result).
