@@ -31,7 +31,6 @@ What changed:
 import argparse
 import json
 import math
-import os
 import pathlib
 import sys
 import time
@@ -39,7 +38,6 @@ import time
 import numpy as np
 import torch
 import torch.nn as nn
-from pytorch3d.io import load_objs_as_meshes
 from pytorch3d.renderer import (
     BlendParams,
     FoVPerspectiveCameras,
@@ -52,51 +50,12 @@ from pytorch3d.renderer import (
     look_at_rotation,
     look_at_view_transform,
 )
-
-ASSETS = pathlib.Path(
-    os.environ.get("SOFTVK_ASSETS") or pathlib.Path(__file__).resolve().parents[3] / "assets"
-)
+from tutorial_common import ForwardTimer, load_spot, rasterizer_class, save_png
 
 
-def rasterizer_class(name):
-    """The MeshRasterizer class to use: softvk's drop-in replacement or PyTorch3D's."""
-    if name == "softvk":
-        from softvk.pytorch3d import MeshRasterizer
-    else:
-        from pytorch3d.renderer import MeshRasterizer
-    return MeshRasterizer
-
-
-class ForwardTimer:
-    """Accumulates the seconds spent in the ``forward`` of the modules it wraps."""
-
-    def __init__(self):
-        self.seconds = 0.0
-        self.calls = 0
-
-    def wrap(self, module):
-        inner = module.forward
-
-        def forward(*args, **kwargs):
-            start = time.perf_counter()
-            try:
-                return inner(*args, **kwargs)
-            finally:
-                self.seconds += time.perf_counter() - start
-                self.calls += 1
-
-        module.forward = forward  # an instance attribute: nn.Module.__call__ finds it first
-        return module
-
-
-def load_spot(device):
-    """Spot, centred and scaled as the fit-mesh tutorial normalises its cow, textured white."""
-    mesh = load_objs_as_meshes([str(ASSETS / "spot_triangulated.obj")], device=device)
-    verts = mesh.verts_packed()
-    center = verts.mean(0)
-    scale = (verts - center).abs().max()
-    mesh.offset_verts_(-center)
-    mesh.scale_verts_(1.0 / float(scale))
+def load_white_spot(device):
+    """Spot, normalised as the fit-mesh tutorial normalises its cow, textured white."""
+    mesh, _, _ = load_spot(device)
     mesh.textures = TexturesVertex(verts_features=torch.ones_like(mesh.verts_padded()))
     return mesh
 
@@ -131,18 +90,6 @@ def iou(a, b):
     return (a & b).sum().item() / union if union else 1.0
 
 
-def save_png(path, images):
-    """Writes grayscale images in [0, 1], side by side, with Pillow if it is installed."""
-    try:
-        from PIL import Image
-    except ImportError:
-        print(f"Pillow is not installed: not writing {path}", file=sys.stderr)
-        return
-    row = np.concatenate([np.clip(im, 0.0, 1.0) for im in images], axis=1)
-    Image.fromarray((row * 255).round().astype(np.uint8)).save(path)
-    print(f"wrote {path}", file=sys.stderr)
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--rasterizer", choices=["softvk", "pytorch3d"], default="softvk")
@@ -162,7 +109,7 @@ def main():
     np.random.seed(args.seed)
     device = torch.device("cpu")
     MeshRasterizer = rasterizer_class(args.rasterizer)
-    mesh = load_spot(device)
+    mesh = load_white_spot(device)
 
     # The renderers: a soft silhouette one, optimised through, and a Phong one for the reference.
     cameras = FoVPerspectiveCameras(device=device)
@@ -238,7 +185,7 @@ def main():
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
         save_png(args.out / "camera_position.png",
-                 [image_init[0, ..., 3].numpy(), final_silhouette.numpy(), reference.numpy()])
+                 [[image_init[0, ..., 3].numpy(), final_silhouette.numpy(), reference.numpy()]])
     print(json.dumps(result))
 
 
