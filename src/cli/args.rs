@@ -682,30 +682,10 @@ pub struct CheckpointArgs {
     pub checkpoint_every: u32,
 
     /// Go on from the checkpoint in DIR, written by a fit of the same inputs and options (a mesh
-    /// or field fit may ask for more iterations; a pose fit's schedule is spread over its
-    /// iterations, so they must match); it ends bit for bit as the fit that never stopped.
+    /// or field fit may ask for more iterations; a pose or articulated fit's schedule is spread
+    /// over its iterations, so they must match); it ends bit for bit as the fit that never
+    /// stopped.
     #[arg(long, value_name = "DIR")]
     pub resume: Option<PathBuf>,
 }
 
-impl CheckpointArgs {
-    /// Checks the flags and creates the checkpoint folder (after the resume checkpoint was
-    /// read and checked: a refused one leaves nothing behind).
-    pub fn prepare(&self) -> Result<()> {
-        if self.checkpoint_every == 0 {
-            return Err(Error::Input("--checkpoint-every must be at least 1".into()));
-        }
-        if let Some(dir) = &self.checkpoint {
-            std::fs::create_dir_all(dir)
-                .map_err(|e| Error::Input(format!("cannot create {}: {e}", dir.display())))?;
-        }
-        Ok(())
-    }
-
-    /// Whether the fit should checkpoint after logged iteration `it` of `asked` (every N
-    /// rounded up to a multiple of `log_every`, at the end, and when it stops early).
-    pub fn due(&self, it: u32, asked: u32, log_every: u32, stopping: bool) -> bool {
-        let every = self.checkpoint_every.div_ceil(log_every) * log_every;
-        self.checkpoint.is_some() && (stopping || it % every == 0 || it == asked)
-    }
-}

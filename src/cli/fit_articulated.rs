@@ -22,9 +22,11 @@
 use std::path::{Path, PathBuf};
 
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::{Value, json};
-use softvk::fit::articulated::{ArticulatedFitOptions, BlurSchedule, fit_articulated};
+use softvk::fit::articulated::{
+    ArticulatedFit, ArticulatedFitOptions, BlurSchedule, fit_articulated,
+};
+use softvk::fit::session::Progress;
 use softvk::fit::pose::{PoseTarget, Schedule};
 use softvk::fit::report;
 use softvk::fit::rig::Rig;
@@ -34,9 +36,10 @@ use softvk::raster::gpu::{Method, Renderer};
 use softvk::raster::settings::RasterSettings;
 use softvk::{Error, Result};
 
-use super::args::{RasterArgs, ViewArgs, non_negative, positive};
+use super::args::{CheckpointArgs, RasterArgs, ViewArgs, non_negative, positive};
 use super::fit_pose::load_target;
 use super::output::{AtomicFile, ImageFormat, encode_sheet_png};
+use super::session::Watch;
 
 /// The flags of `softvk fit-articulated`.
 #[derive(Args, Clone, Debug)]
@@ -122,7 +125,13 @@ pub struct FitArticulatedArgs {
 
     #[command(flatten)]
     pub raster: RasterArgs,
+
+    #[command(flatten)]
+    pub checkpoints: CheckpointArgs,
 }
+
+/// The checkpoint's file in `--checkpoint DIR` / `--resume DIR`.
+pub const CHECKPOINT_FILE: &str = "articulated-fit.ckpt";
 
 /// Angles in degrees, one per joint (a type of its own: clap would take a `Vec` for a
 /// repeated flag).
@@ -279,16 +288,10 @@ pub fn run(args: &FitArticulatedArgs) -> Result<()> {
         (None, Some(a)) => render_at(a, &settings)?,
         (None, None) => unreachable!("clap requires --target or --target-angles"),
     };
-    let bar = if args.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(u64::from(opts.iterations)).with_style(
-            ProgressStyle::with_template(
-                "{bar:40} {pos}/{len} iterations  {msg}  [{elapsed} < {eta}]",
-            )
-            .expect("a valid template"),
-        )
-    };
+    // The checkpoint is checked before the fit starts (the sharp target is in its inputs).
+    let fingerprint = ArticulatedFit::fingerprint(&rig, &camera, &lighting, &target, &init, &opts);
+    let session = args.checkpoints.session(CHECKPOINT_FILE, fingerprint)?;
+    let watch = Watch::new(args.quiet, u64::from(opts.iterations));
     let mut per_stage = |sigma: f64, gamma: f64| -> Result<Vec<[f32; 4]>> {
         let a = target_angles.as_ref().expect("only with --target-angles");
         render_at(
@@ -313,16 +316,16 @@ pub fn run(args: &FitArticulatedArgs) -> Result<()> {
         fit_target,
         &init,
         &opts,
-        |l| {
-            bar.set_position(u64::from(l.iteration));
-            bar.set_message(format!(
+        session.hooks(|p: &Progress<'_, '_, ArticulatedFit<'_>>| {
+            let l = p.row();
+            let message = format!(
                 "loss {:.5}  σ {:.0e}  blur {:.1} px",
                 l.loss, l.sigma, l.blur
-            ));
-            super::interrupt::requested().is_none()
-        },
+            );
+            Ok(watch.update(l.iteration, message))
+        }),
     )?;
-    bar.finish_and_clear();
+    watch.finish();
     let start_image = render_at(&init, &settings)?;
     ctx.check_validation()?;
 

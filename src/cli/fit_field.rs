@@ -13,17 +13,15 @@
 use std::path::{Path, PathBuf};
 
 use clap::{Args, ValueEnum};
-use indicatif::{ProgressBar, ProgressStyle};
 use softvk::camera::{Camera, Projection};
 use softvk::field::mcubes::{self, Isosurface, MarchingCubes};
 use softvk::field::preview::{PreviewOptions, render_preview};
 use softvk::field::voxel::visual_hull;
 use softvk::field::{Cube, FieldKind};
 use softvk::fit::AdamOptions;
-use softvk::fit::checkpoint::{Checkpoint, FitKind};
 use softvk::fit::field_fit::{
-    self, DEFAULT_CUBE_MARGIN, FieldFitLog, FieldFitOptions, FieldFitState, auto_cube,
-    check_cameras_outside, fit_field_resumable, scaled_to_cube,
+    self, DEFAULT_CUBE_MARGIN, FieldFitLog, FieldFitOptions, FieldFit, auto_cube,
+    check_cameras_outside, fit_field, scaled_to_cube,
 };
 use softvk::fit::report::{self, Series};
 use softvk::gpu::{Context, ContextOptions};
@@ -36,6 +34,8 @@ use softvk::{Error, Result};
 
 use super::args::{CheckpointArgs, finite, non_negative, positive, viewing_angle};
 use super::output::AtomicFile;
+use super::session::Watch;
+use softvk::fit::session::Progress;
 
 /// `--field`.
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -497,48 +497,21 @@ pub fn run(args: &FitFieldArgs) -> Result<()> {
         .clone()
         .unwrap_or_else(|| default_report(&args.out));
     // The checkpoint is checked before anything is written.
-    let fingerprint = FieldFitState::fingerprint(&targets, &opts);
-    let resume = match &args.checkpoints.resume {
-        Some(dir) => {
-            let c = Checkpoint::read(&dir.join(CHECKPOINT_FILE), FitKind::Field, fingerprint)?;
-            Some(FieldFitState::from_checkpoint(&c, &opts)?)
-        }
-        None => None,
-    };
-    args.checkpoints.prepare()?;
+    let fingerprint = FieldFit::fingerprint(&targets, &opts);
+    let session = args.checkpoints.session(CHECKPOINT_FILE, fingerprint)?;
 
     let ctx = Context::new(&ContextOptions::from_env())?;
-    let bar = if args.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(u64::from(opts.iterations)).with_style(
-            ProgressStyle::with_template(
-                "{bar:40} {pos}/{len} iterations  {msg}  [{elapsed} < {eta}]",
-            )
-            .expect("a valid template"),
-        )
-    };
-    let result = fit_field_resumable(&ctx, &targets, &opts, resume.as_ref(), |l, snapshot| {
-        bar.set_position(u64::from(l.iteration));
-        bar.set_message(format!(
+    let watch = Watch::new(args.quiet, u64::from(opts.iterations));
+    let hooks = |p: &Progress<'_, '_, FieldFit>| {
+        let l = p.row();
+        let message = format!(
             "loss {:.5} (L_sil {:.5}, L_geo {:.4})",
             l.total, l.silhouette, l.geo
-        ));
-        let go_on = super::interrupt::requested().is_none();
-        if args
-            .checkpoints
-            .due(l.iteration, opts.iterations, opts.log_every, !go_on)
-        {
-            if let Some(dir) = &args.checkpoints.checkpoint {
-                snapshot
-                    .state()?
-                    .to_checkpoint(fingerprint)
-                    .write(&dir.join(CHECKPOINT_FILE))?;
-            }
-        }
-        Ok(go_on)
-    })?;
-    bar.finish_and_clear();
+        );
+        Ok(watch.update(l.iteration, message))
+    };
+    let result = fit_field(&ctx, &targets, &opts, session.hooks(hooks))?;
+    watch.finish();
 
     // Everything in memory first: an empty surface fails before any file is written.
     let iso = MarchingCubes::new(&ctx)?.extract(&ctx, &result.field, args.mc_res)?;
@@ -612,7 +585,7 @@ pub fn run(args: &FitFieldArgs) -> Result<()> {
     report::write_png(&report_dir.join("compare.png"), &compare)?;
     report::write_png(&report_dir.join("loss.png"), &plot)?;
     AtomicFile::create(&report_dir.join("loss.csv"))?.commit(csv.as_bytes())?;
-    super::fit_mesh::write_interrupted(&report_dir, result.iterations, opts.iterations)?;
+    super::session::write_interrupted(&report_dir, result.iterations, opts.iterations)?;
     iso.write_obj(&args.out)?;
     let t = &result.timings;
     println!(

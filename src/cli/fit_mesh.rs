@@ -15,14 +15,12 @@
 use std::path::{Path, PathBuf};
 
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
 use softvk::camera::{Camera, Projection};
 use softvk::fit::AdamOptions;
-use softvk::fit::checkpoint::{Checkpoint, FitKind};
 use softvk::fit::mesh_fit::{
-    FitLog, MeshFitOptions, MeshFitSnapshot, MeshFitState, default_template, demo_target,
-    fit_mesh_resumable, icosphere_template,
+    FitLog, MeshFit, MeshFitOptions, default_template, demo_target, fit_mesh, icosphere_template,
 };
+use softvk::fit::session::Progress;
 use softvk::fit::report::{self, GifWriter, Series};
 use softvk::gpu::{Context, ContextOptions};
 use softvk::io::{self, Silhouettes};
@@ -33,8 +31,8 @@ use softvk::raster::settings::{Alpha, Dist, RasterSettings, Rgb};
 use softvk::{Error, Result};
 
 use super::args::{AlphaArg, CheckpointArgs, DistArg, finite, positive};
-use super::interrupt;
 use super::output::AtomicFile;
+use super::session::{Watch, write_interrupted};
 
 /// The fitting flags shared by `fit-mesh` and `demo`.
 #[derive(Args, Clone, Debug)]
@@ -162,7 +160,6 @@ impl FitArgs {
             settings,
             tile: self.tile,
             log_every: self.log_every,
-            snapshots: true,
             entry_capacity: None,
         })
     }
@@ -220,19 +217,12 @@ fn fit_and_report(
     target_mesh: Option<&Mesh>,
 ) -> Result<()> {
     let opts = fit.options(sil.width, sil.height, default_iterations)?;
+    let ctx = Context::new(&ContextOptions::from_env())?;
     // The checkpoint is checked before anything is written.
-    let fingerprint = MeshFitState::fingerprint(template, cams, &sil.masks, &opts);
-    let resume = match &fit.checkpoints.resume {
-        Some(dir) => {
-            let c = Checkpoint::read(&dir.join(CHECKPOINT_FILE), FitKind::Mesh, fingerprint)?;
-            Some(MeshFitState::from_checkpoint(&c, template)?)
-        }
-        None => None,
-    };
-    fit.checkpoints.prepare()?;
+    let fingerprint = MeshFit::fingerprint(template, cams, &sil.masks, &opts);
+    let session = fit.checkpoints.session(CHECKPOINT_FILE, fingerprint)?;
     std::fs::create_dir_all(report_dir)
         .map_err(|e| Error::Input(format!("cannot create {}: {e}", report_dir.display())))?;
-    let ctx = Context::new(&ContextOptions::from_env())?;
     let views = sil.views();
     let columns = (views as f64).sqrt().ceil() as u32;
     let (w, h) = (sil.width, sil.height);
@@ -246,58 +236,32 @@ fn fit_and_report(
         sheet_size.1,
         120,
     )?;
-    let bar = if fit.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(u64::from(opts.iterations)).with_style(
-            ProgressStyle::with_template(
-                "{bar:40} {pos}/{len} iterations  {msg}  [{elapsed} < {eta}]",
-            )
-            .expect("a valid template"),
-        )
+    let watch = Watch::new(fit.quiet, u64::from(opts.iterations));
+    let hooks = |p: &Progress<'_, '_, MeshFit<'_>>| {
+        let ious = p.fitter.read_ious()?;
+        let alphas = p.fitter.read_alphas()?;
+        gif.push(&report::contact_sheet(
+            &alphas,
+            &sil.masks,
+            views,
+            w,
+            h,
+            columns,
+            Some(&ious),
+        ))?;
+        let mean = ious.iter().sum::<f32>() / ious.len().max(1) as f32;
+        let message = format!("loss {:.4}  soft IoU {mean:.4}", p.row().total);
+        Ok(watch.update(p.last, message))
     };
-    let mut gif_error = None;
-    let save = |snapshot: &MeshFitSnapshot<'_>| -> Result<()> {
-        match &fit.checkpoints.checkpoint {
-            Some(dir) => snapshot
-                .state()?
-                .to_checkpoint(fingerprint)
-                .write(&dir.join(CHECKPOINT_FILE)),
-            None => Ok(()),
-        }
-    };
-    let result = fit_mesh_resumable(
+    let result = fit_mesh(
         &ctx,
         template,
         cams,
         &sil.masks,
         &opts,
-        resume.as_ref(),
-        |l: &FitLog, ious, alphas, snapshot| {
-            let mean = ious.iter().sum::<f32>() / ious.len().max(1) as f32;
-            bar.set_position(u64::from(l.iteration));
-            bar.set_message(format!("loss {:.4}  soft IoU {mean:.4}", l.total));
-            if let Some(a) = alphas {
-                let frame = report::contact_sheet(a, &sil.masks, views, w, h, columns, Some(ious));
-                if let Err(e) = gif.push(&frame) {
-                    gif_error = Some(e);
-                    return Ok(false);
-                }
-            }
-            let go_on = interrupt::requested().is_none();
-            if fit
-                .checkpoints
-                .due(l.iteration, opts.iterations, opts.log_every, !go_on)
-            {
-                save(snapshot)?;
-            }
-            Ok(go_on)
-        },
+        session.hooks(hooks),
     )?;
-    bar.finish_and_clear();
-    if let Some(e) = gif_error {
-        return Err(e);
-    }
+    watch.finish();
     ctx.check_validation()?;
 
     // Final hard silhouettes of the fitted mesh, their IoUs and the contact sheet.
@@ -388,29 +352,6 @@ fn fit_and_report(
         report_dir.display()
     );
     Ok(())
-}
-
-/// After an interrupt (`cli::interrupt`), `interrupted.txt` in the report folder says so: the
-/// report and the result are the fit's state after iteration `done` of `asked`. A fit that ends
-/// normally removes one an earlier, interrupted run left (a resumed fit's report is whole).
-pub fn write_interrupted(report_dir: &Path, done: u32, asked: u32) -> Result<()> {
-    let path = report_dir.join("interrupted.txt");
-    match interrupt::requested() {
-        Some(signal) => {
-            let line = format!(
-                "{}: stopped after iteration {done} of {asked}; the result and this report are \
-                 the fit's state then\n",
-                interrupt::name(signal)
-            );
-            AtomicFile::create(&path)?.commit(line.as_bytes())
-        }
-        None => match std::fs::remove_file(&path) {
-            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                Err(Error::Io { path, source: e })
-            }
-            _ => Ok(()),
-        },
-    }
 }
 
 fn default_report(out: &Path) -> PathBuf {

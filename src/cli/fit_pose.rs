@@ -27,13 +27,12 @@ use std::path::{Path, PathBuf};
 
 use clap::Args;
 use glam::DVec3;
-use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::{Value, json};
-use softvk::fit::checkpoint::{Checkpoint, FitKind};
 use softvk::fit::pose::{
-    Pose, PoseFitOptions, PoseFitState, PoseTarget, Schedule, fit_pose_multistart,
-    fit_pose_resumable, rotation_distance, screened_starts,
+    Pose, PoseFit, PoseFitOptions, PoseTarget, Schedule, fit_pose, fit_pose_multistart,
+    rotation_distance, screened_starts,
 };
+use softvk::fit::session::Progress;
 use softvk::fit::report;
 use softvk::gpu::{Context, ContextOptions};
 use softvk::mesh::Mesh;
@@ -42,6 +41,7 @@ use softvk::{Error, Result};
 
 use super::args::{CheckpointArgs, RasterArgs, ViewArgs, positive, triple};
 use super::output::{AtomicFile, ImageFormat, encode_sheet_png};
+use super::session::Watch;
 
 /// The least angle between two of `--starts`' screened starts.
 const MIN_START_SEPARATION_DEG: f64 = 30.0;
@@ -297,32 +297,16 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
             "--starts with --checkpoint/--resume: a checkpoint holds one fit".into(),
         ));
     }
+    let ctx = Context::new(&ContextOptions::from_env())?;
     // The checkpoint is checked before anything is written.
-    let fingerprint = PoseFitState::fingerprint(&mesh, &camera, &lighting, &target, &init, &opts);
-    let resume = match &args.checkpoints.resume {
-        Some(dir) => {
-            let c = Checkpoint::read(&dir.join(CHECKPOINT_FILE), FitKind::Pose, fingerprint)?;
-            Some(PoseFitState::from_checkpoint(&c)?)
-        }
-        None => None,
-    };
-    args.checkpoints.prepare()?;
+    let fingerprint = PoseFit::fingerprint(&mesh, &camera, &lighting, &target, &init, &opts);
+    let session = args.checkpoints.session(CHECKPOINT_FILE, fingerprint)?;
     let out = AtomicFile::create(&args.out)?;
     let render_file = AtomicFile::create(&render_path)?;
     let error_file = AtomicFile::create(&error_path)?;
     let compare_file = AtomicFile::create(&compare_path)?;
-
-    let ctx = Context::new(&ContextOptions::from_env())?;
-    let bar = if args.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(u64::from(opts.iterations)).with_style(
-            ProgressStyle::with_template(
-                "{bar:40} {pos}/{len} iterations  {msg}  [{elapsed} < {eta}]",
-            )
-            .expect("a valid template"),
-        )
-    };
+    let watch = Watch::new(args.quiet, u64::from(opts.iterations));
+    let bar = watch.bar();
     let mut multi = None;
     let result = if args.starts > 1 {
         let candidates = args.candidates.unwrap_or(32 * args.starts);
@@ -364,7 +348,11 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
         multi = Some(m);
         best
     } else {
-        fit_pose_resumable(
+        let hooks = |p: &Progress<'_, '_, PoseFit<'_>>| {
+            let l = p.row();
+            Ok(watch.update(l.iteration, format!("loss {:.5}  σ {:.0e}", l.loss, l.sigma)))
+        };
+        fit_pose(
             &ctx,
             &mesh,
             &camera,
@@ -372,24 +360,7 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
             PoseTarget::Fixed(&target),
             &init,
             &opts,
-            resume.as_ref(),
-            |l, snapshot| {
-                bar.set_position(u64::from(l.iteration));
-                bar.set_message(format!("loss {:.5}  σ {:.0e}", l.loss, l.sigma));
-                let go_on = super::interrupt::requested().is_none();
-                if args
-                    .checkpoints
-                    .due(l.iteration, opts.iterations, opts.log_every, !go_on)
-                {
-                    if let Some(dir) = &args.checkpoints.checkpoint {
-                        snapshot
-                            .state()?
-                            .to_checkpoint(fingerprint)
-                            .write(&dir.join(CHECKPOINT_FILE))?;
-                    }
-                }
-                Ok(go_on)
-            },
+            session.hooks(hooks),
         )?
     };
     bar.finish_and_clear();

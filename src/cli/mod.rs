@@ -19,7 +19,8 @@
 //!
 //! The modules: one per subcommand ([`render`], [`grad`], [`fit_mesh`] with `demo`,
 //! [`fit_pose`], [`fit_articulated`], [`fit_field`], [`bench`], [`dataset`], [`recon`] with
-//! `train-recon`, [`eval_recon`]) and the shared [`args`], [`output`], [`interrupt`].
+//! `train-recon`, [`eval_recon`]) and the shared [`args`], [`output`], [`interrupt`] and
+//! [`session`] (the checkpoint flags, progress bar and interrupt check of every fit).
 
 pub mod args;
 pub mod bench;
@@ -34,6 +35,7 @@ pub mod interrupt;
 pub mod output;
 pub mod recon;
 pub mod render;
+pub mod session;
 
 /// Turns a clap error into the single line `main` prints after `softvk: error: `.
 ///

@@ -25,16 +25,16 @@
 //! Not here (yet): checkpoints (the rigid pose fit has them), several starts, a root pose
 //! fitted with the joints (give the camera instead).
 
-use std::time::Instant;
-
 use bytemuck::{Pod, Zeroable};
 
 use super::adam::{Adam, AdamOptions};
 use super::blur::{BlurredMse, MAX_BLUR_STD};
+use super::checkpoint::{Fingerprint, FitKind, Reader, Writer, restore_adam, save_adam};
 use super::driver::{self, Fitter};
+use super::session::{LogRow, Session, Trainee};
 use super::pose::{PoseTarget, Schedule};
 use super::posed::{self, PoseModel, PosedFit, PosedView, Stages};
-use super::rig::{Rig, bone_of};
+use super::rig::{MAX_JOINTS, Rig, bone_of};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::gate::IterationGate;
@@ -593,41 +593,34 @@ pub struct ArticulatedFitResult {
 }
 
 /// Fits the joint angles of `rig` seen from `camera` to `target` (RGBA per pixel, row 0 at the
-/// top, the settings' size) from `init` (radians, one per joint). `progress` is called after
-/// every submission of iterations (every [`ArticulatedFitOptions::log_every`], and at the end
-/// of each σ/γ stage) with its last iteration, and may return `false` to stop early. The
-/// result's loss is against the target of the sharp σ/γ.
+/// top, the settings' size) from `init` (radians, one per joint), in `session`: its hooks see
+/// the fit after every submission of iterations (every [`ArticulatedFitOptions::log_every`],
+/// and at the end of each σ/γ stage); the result's log holds every iteration. The result's
+/// loss is against the target of the sharp σ/γ.
 #[allow(clippy::too_many_arguments)]
-pub fn fit_articulated(
-    ctx: &Context,
+pub fn fit_articulated<'c>(
+    ctx: &'c Context,
     rig: &Rig,
     camera: &Camera,
     lighting: &Lighting,
     mut target: PoseTarget<'_>,
     init: &[f64],
     opts: &ArticulatedFitOptions,
-    mut progress: impl FnMut(&ArticulatedLog) -> bool,
+    session: Session<'_, ArticulatedFit<'c>>,
 ) -> Result<ArticulatedFitResult> {
     opts.validate()?;
     let (mut stages, first_target) = Stages::new(&mut target, opts.sigma_gamma(0))?;
     let mut fitter = ArticulatedFitter::new(ctx, rig, camera, lighting, &first_target, init, opts)?;
-    let mut log = Vec::with_capacity(opts.iterations as usize);
-    let start = Instant::now();
     let every = opts.log_every;
-    let done = fitter.drive(
-        1,
-        opts.iterations,
+    let end = session.run(
+        &mut fitter,
+        (opts.iterations, every),
         |fitter, it| {
             let last = driver::to_next_log(it, every).min(opts.iterations);
             stages.enter(&mut **fitter, opts.sigma_gamma(it - 1))?;
             Ok(driver::to_stage_end(it, last, |i| opts.stage(i)))
         },
-        |fitter, first, last| {
-            log.extend(fitter.log(first, last, start.elapsed().as_secs_f64())?);
-            Ok(progress(&log[log.len() - 1]))
-        },
     )?;
-    let seconds = start.elapsed().as_secs_f64();
     let s = &opts.settings;
     stages.finish(&mut *fitter, (s.sigma, s.gamma))?;
     let (loss, image) = fitter.evaluate(s.sigma, s.gamma, 0.0)?;
@@ -635,10 +628,99 @@ pub fn fit_articulated(
         angles: fitter.angles()?,
         loss,
         image,
-        log,
-        iterations: done,
-        seconds,
+        log: end.log,
+        iterations: end.last,
+        seconds: end.seconds,
     })
+}
+
+impl LogRow for ArticulatedLog {
+    fn iteration(&self) -> u32 {
+        self.iteration
+    }
+    fn loss(&self) -> f64 {
+        self.loss
+    }
+    fn write(&self, w: &mut Writer) {
+        w.u32(self.iteration);
+        for x in [self.loss, self.sigma, self.gamma, self.blur] {
+            w.f64(x);
+        }
+        w.u32(self.angles.len() as u32);
+        for &a in &self.angles {
+            w.f64(a);
+        }
+        w.f64(self.seconds);
+    }
+    fn read(r: &mut Reader<'_>) -> Result<Self> {
+        let iteration = r.u32()?;
+        let (loss, sigma, gamma, blur) = (r.f64()?, r.f64()?, r.f64()?, r.f64()?);
+        let n = r.u32()?;
+        if n as usize > MAX_JOINTS {
+            return Err(Error::Input(format!(
+                "checkpoint row of {n} angles, at most {MAX_JOINTS} expected"
+            )));
+        }
+        let angles = (0..n).map(|_| r.f64()).collect::<Result<Vec<f64>>>()?;
+        Ok(Self {
+            iteration,
+            loss,
+            sigma,
+            gamma,
+            blur,
+            angles,
+            seconds: r.f64()?,
+        })
+    }
+}
+
+/// An articulated fit in a session: a row per iteration, its state the angles and Adam's
+/// moments. The σ/γ and blur stage follows from the iteration, so a fit resumed from it ends
+/// bit for bit as the fit that never stopped.
+impl Trainee for ArticulatedFit<'_> {
+    type Row = ArticulatedLog;
+    const KIND: FitKind = FitKind::Articulated;
+
+    fn rows(
+        &mut self,
+        _ctx: &Context,
+        first: u32,
+        last: u32,
+        _entries: u64,
+        seconds: f64,
+    ) -> Result<Vec<ArticulatedLog>> {
+        self.log(first, last, seconds)
+    }
+
+    fn save_state(&self, ctx: &Context, w: &mut Writer) -> Result<()> {
+        let n = self.model.push.joint_count as usize;
+        save_adam(ctx, &self.model.params, &self.model.adam, n, w)
+    }
+
+    fn restore_state(&mut self, ctx: &Context, r: &mut Reader<'_>) -> Result<()> {
+        let n = self.model.push.joint_count as usize;
+        restore_adam(ctx, &self.model.params, &self.model.adam, n, r, "the rig")
+    }
+}
+
+impl ArticulatedFit<'_> {
+    /// The fingerprint of a fit's inputs that a checkpoint of it must carry: the rig, the
+    /// camera, the lighting, the (first) target, the start and every option (the iteration
+    /// count among them: it spreads the schedules).
+    pub fn fingerprint(
+        rig: &Rig,
+        camera: &Camera,
+        lighting: &Lighting,
+        target: &[[f32; 4]],
+        init: &[f64],
+        opts: &ArticulatedFitOptions,
+    ) -> u64 {
+        let mut f = Fingerprint::default();
+        f.add(format!("{rig:?}").as_bytes());
+        f.add_pod(target).add_pod(init);
+        f.add(format!("{camera:?} {lighting:?} {opts:?}").as_bytes());
+        f.value()
+    }
 }
 
 /// The f64 twin of one evaluation: the render at some angles, its MSE against a target, and

@@ -1,6 +1,8 @@
-//! Checkpoints of a fit's complete state, on disk: what `--checkpoint DIR` writes and
-//! `--resume DIR` reads, so that a fit stopped at a checkpoint and resumed ends bit for bit as
-//! the uninterrupted fit (softvk is deterministic).
+//! Checkpoints of a fit's complete state, on disk: what a session ([`super::session`]) writes
+//! for `--checkpoint DIR` and reads back for `--resume DIR`, so that a fit stopped at a
+//! checkpoint and resumed ends bit for bit as the uninterrupted fit (softvk is deterministic).
+//! Every fit has this one format; its payload is the session's log, then the fit's state
+//! ([`super::session::Trainee::save_state`]).
 //!
 //! The file is a small explicit binary format, written by hand rather than through serde and a
 //! binary codec: it is a handful of little-endian numbers and `f32` arrays, and what matters is
@@ -9,8 +11,9 @@
 //!
 //! ```text
 //! b"SOFTVKCK", format u32, version (u32 length + UTF-8), kind u32, fingerprint u64,
-//! iteration u32, seconds f64, then the kind's payload (arrays as u64 length + f32s),
-//! then a checksum u64 (FNV-1a of every byte before it)
+//! iteration u32, seconds f64, then the payload: the log (u32 rows, then each row) and the
+//! fit's state (arrays as u64 length + values), then a checksum u64 (FNV-1a of every byte
+//! before it)
 //! ```
 //!
 //! The checksum refuses a damaged or truncated file before anything in it is believed; the
@@ -24,7 +27,7 @@ use crate::error::{Error, Result};
 use crate::gpu::{Buffer, Context};
 
 const MAGIC: &[u8; 8] = b"SOFTVKCK";
-const FORMAT: u32 = 2;
+const FORMAT: u32 = 3;
 
 /// The kind of fit a checkpoint belongs to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -35,6 +38,8 @@ pub enum FitKind {
     Field = 2,
     /// `fit-pose`.
     Pose = 3,
+    /// `fit-articulated`.
+    Articulated = 4,
 }
 
 impl FitKind {
@@ -43,6 +48,7 @@ impl FitKind {
             1 => "mesh fit",
             2 => "field fit",
             3 => "pose fit",
+            4 => "articulated fit",
             _ => "unknown fit",
         }
     }
@@ -266,32 +272,55 @@ impl<'a> Reader<'a> {
         }
         (0..n).map(|_| self.f32()).collect()
     }
+    /// The bytes not read yet.
+    pub fn rest(&self) -> &'a [u8] {
+        &self.bytes[self.at..]
+    }
     /// Whether every byte was read.
     pub fn done(&self) -> bool {
         self.at == self.bytes.len()
     }
 }
 
-/// Writes the parameters and Adam's two moments of an optimizer state.
-pub fn write_optimizer(w: &mut Writer, params: &[f32], m: &[f32], v: &[f32]) {
-    w.f32s(params);
-    w.f32s(m);
-    w.f32s(v);
+/// Writes the parameters in `params` and the moments of `adam` (`n` values each), read from
+/// the device: the state of a fit whose optimizer is one Adam over a flat parameter vector.
+pub fn save_adam(
+    ctx: &Context,
+    params: &Buffer,
+    adam: &Adam,
+    n: usize,
+    w: &mut Writer,
+) -> Result<()> {
+    let (m, v) = adam.moments();
+    w.f32s(&ctx.read_buffer::<f32>(params, 0, n)?);
+    w.f32s(&ctx.read_buffer::<f32>(m, 0, n)?);
+    w.f32s(&ctx.read_buffer::<f32>(v, 0, n)?);
+    Ok(())
 }
 
-/// Reads what [`write_optimizer`] wrote for `n` parameters: (parameters, m, v).
-pub fn read_optimizer(r: &mut Reader<'_>, n: usize) -> Result<(Vec<f32>, Vec<f32>, Vec<f32>)> {
-    let p = r.f32s(n)?;
-    let m = r.f32s(n)?;
-    let v = r.f32s(n)?;
-    if p.len() != n || m.len() != n || v.len() != n {
+/// Reads what [`save_adam`] wrote and puts it back on the device, after checking that each
+/// array holds the `n` values of `params` (`what`: whose parameters, for the error) and that
+/// every value is finite.
+pub fn restore_adam(
+    ctx: &Context,
+    params: &Buffer,
+    adam: &Adam,
+    n: usize,
+    r: &mut Reader<'_>,
+    what: &str,
+) -> Result<()> {
+    let (p, m, v) = (r.f32s(n)?, r.f32s(n)?, r.f32s(n)?);
+    if [&p, &m, &v].iter().any(|a| a.len() != n) {
         return Err(Error::Input(format!(
-            "checkpoint of {} parameters, this fit has {n}",
+            "resume: the state has {} parameters, {what} {n}",
             p.len()
         )));
     }
     check_state(&p, &m, &v)?;
-    Ok((p, m, v))
+    let (dm, dv) = adam.moments();
+    ctx.write_buffer(params, 0, &p)?;
+    ctx.write_buffer(dm, 0, &m)?;
+    ctx.write_buffer(dv, 0, &v)
 }
 
 /// Refuses an optimizer state with a non-finite parameter or moment, or a negative second
@@ -304,125 +333,4 @@ pub fn check_state<T: Copy + Into<f64>>(params: &[T], m: &[T], v: &[T]) -> Resul
         ));
     }
     Ok(())
-}
-
-/// Writes a fit's log: its length, then each entry by `entry`.
-pub fn write_log<T>(w: &mut Writer, log: &[T], mut entry: impl FnMut(&mut Writer, &T)) {
-    w.u32(log.len() as u32);
-    for l in log {
-        entry(w, l);
-    }
-}
-
-/// Reads what [`write_log`] wrote for a checkpoint after `iterations` (a log has at most one
-/// entry per iteration), each entry by `entry`; the log must end the payload.
-pub fn read_log<T>(
-    r: &mut Reader<'_>,
-    iterations: u32,
-    mut entry: impl FnMut(&mut Reader<'_>) -> Result<T>,
-) -> Result<Vec<T>> {
-    let n = r.u32()?;
-    if n > iterations {
-        return Err(Error::Input(
-            "checkpoint log longer than its iterations".into(),
-        ));
-    }
-    let log = (0..n).map(|_| entry(r)).collect::<Result<Vec<T>>>()?;
-    if !r.done() {
-        return Err(Error::Input("checkpoint has bytes after its log".into()));
-    }
-    Ok(log)
-}
-
-/// Checks that a state after `iteration` can go on to the `asked` iterations.
-pub(crate) fn check_resume(iteration: u32, asked: u32) -> Result<()> {
-    if iteration > asked {
-        return Err(Error::Input(format!(
-            "resume: the state is after iteration {iteration}, past the {asked} asked"
-        )));
-    }
-    Ok(())
-}
-
-/// Puts a resumed state's parameters and Adam's moments back on the GPU, after checking that
-/// each holds the `params` buffer's `n` values (`what`: whose parameters, for the error).
-pub(crate) fn restore_optimizer(
-    ctx: &Context,
-    params: &Buffer,
-    adam: &Adam,
-    n: usize,
-    state: [&[f32]; 3],
-    what: &str,
-) -> Result<()> {
-    if state.iter().any(|v| v.len() != n) {
-        return Err(Error::Input(format!(
-            "resume: the state has {} parameters, {what} {n}",
-            state[0].len()
-        )));
-    }
-    let (m, v) = adam.moments();
-    ctx.write_buffer(params, 0, state[0])?;
-    ctx.write_buffer(m, 0, state[1])?;
-    ctx.write_buffer(v, 0, state[2])
-}
-
-/// A log row a checkpoint carries.
-pub trait LogRow: Sized {
-    /// Appends the row.
-    fn write(&self, w: &mut Writer);
-    /// Reads a row [`LogRow::write`] wrote.
-    fn read(r: &mut Reader<'_>) -> Result<Self>;
-}
-
-/// The complete state of a fit whose optimizer is one Adam over a flat parameter vector, after
-/// an iteration: the parameters, Adam's moments, the iterations done (Adam's step), the log and
-/// the time spent. What else a fit needs to resume is keyed by the iteration (the samplers'
-/// random numbers) or has none (the deformation fit), so a fit resumed from it ends bit for bit
-/// as the fit that never stopped.
-#[derive(Clone, Debug, PartialEq)]
-pub struct FitState<L> {
-    /// Iterations done.
-    pub iteration: u32,
-    /// The parameters.
-    pub params: Vec<f32>,
-    /// Adam's first moments.
-    pub adam_m: Vec<f32>,
-    /// Adam's second moments.
-    pub adam_v: Vec<f32>,
-    /// The logged losses so far.
-    pub log: Vec<L>,
-    /// Seconds the iterations took so far.
-    pub seconds: f64,
-}
-
-impl<L: LogRow> FitState<L> {
-    /// As a checkpoint of a `kind` fit for inputs of `fingerprint`.
-    pub fn to_kind_checkpoint(&self, kind: FitKind, fingerprint: u64) -> Checkpoint {
-        let mut w = Writer::default();
-        write_optimizer(&mut w, &self.params, &self.adam_m, &self.adam_v);
-        write_log(&mut w, &self.log, |w, l| l.write(w));
-        Checkpoint {
-            kind,
-            fingerprint,
-            iteration: self.iteration,
-            seconds: self.seconds,
-            payload: w.0,
-        }
-    }
-
-    /// From a checkpoint ([`Checkpoint::read`] checked its kind and inputs) of a fit of
-    /// `params` parameters.
-    pub fn from_payload(c: &Checkpoint, params: usize) -> Result<Self> {
-        let mut r = Reader::new(&c.payload);
-        let (params, adam_m, adam_v) = read_optimizer(&mut r, params)?;
-        let log = read_log(&mut r, c.iteration, L::read)?;
-        Ok(Self {
-            iteration: c.iteration,
-            params,
-            adam_m,
-            adam_v,
-            log,
-            seconds: c.seconds,
-        })
-    }
 }

@@ -37,11 +37,9 @@ use std::time::Instant;
 
 use glam::DVec3;
 
-use super::checkpoint::{
-    Checkpoint, Fingerprint, FitKind, FitState, LogRow, Reader, Writer, check_resume,
-    restore_optimizer,
-};
-use super::driver::{self, Fit, Fitter};
+use super::checkpoint::{Fingerprint, FitKind, Reader, Writer, restore_adam, save_adam};
+use super::driver::{Fit, Fitter};
+use super::session::{LogRow, Session, Trainee, to_next_log};
 use super::{Adam, AdamOptions};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -634,22 +632,42 @@ impl FieldFit {
     }
 }
 
-/// Fits a field to `targets` (silhouettes and their cameras). `progress` is called after every
-/// logged iteration and may return `false` to stop early.
-pub fn fit_field(
-    ctx: &Context,
+/// Fits a field to `targets` (silhouettes and their cameras) in `session` (its checkpoints
+/// carry [`FieldFit::fingerprint`]).
+pub fn fit_field<'c>(
+    ctx: &'c Context,
     targets: &Targets,
     opts: &FieldFitOptions,
-    mut progress: impl FnMut(&FieldFitLog) -> bool,
+    session: Session<'_, FieldFit>,
 ) -> Result<FieldFitResult> {
-    fit_field_resumable(ctx, targets, opts, None, |l, _| Ok(progress(l)))
+    let setup = Instant::now();
+    let mut fitter = FieldFitter::new(ctx, targets, opts)?;
+    let setup_s = setup.elapsed().as_secs_f64();
+    let end = session.run(
+        &mut fitter,
+        (opts.iterations, opts.log_every),
+        to_next_log(opts.log_every),
+    )?;
+    Ok(FieldFitResult {
+        timings: FieldFitTimings {
+            setup_s,
+            log_s: end.logging_seconds,
+            iterations_s: end.seconds,
+            regrowths: fitter.regrowths(),
+        },
+        field: fitter.into_field(),
+        log: end.log,
+        iterations: end.last,
+    })
 }
 
-/// A field fit's complete state after an iteration ([`FitState`]): the field's parameters. The
-/// samplers need nothing else: their random numbers are keyed by (seed, iteration).
-pub type FieldFitState = FitState<FieldFitLog>;
-
 impl LogRow for FieldFitLog {
+    fn iteration(&self) -> u32 {
+        self.iteration
+    }
+    fn loss(&self) -> f64 {
+        f64::from(self.total)
+    }
     fn write(&self, w: &mut Writer) {
         w.u32(self.iteration);
         w.f32(self.silhouette);
@@ -668,33 +686,45 @@ impl LogRow for FieldFitLog {
     }
 }
 
-/// A logged iteration's view of the running field fit ([`FieldFitSnapshot::state`] reads its
-/// state from the GPU when asked: checkpoints).
-pub struct FieldFitSnapshot<'a> {
-    ctx: &'a Context,
-    fitter: &'a FieldFit,
-    iteration: u32,
-    log: &'a [FieldFitLog],
-    seconds: f64,
-}
+/// A field fit in a session: its row is the losses of the logged iteration, its state the
+/// field's parameters and Adam's moments (the samplers need nothing else: their random numbers
+/// are keyed by (seed, iteration)).
+impl Trainee for FieldFit {
+    type Row = FieldFitLog;
+    const KIND: FitKind = FitKind::Field;
 
-impl FieldFitSnapshot<'_> {
-    /// The fit's complete state now.
-    pub fn state(&self) -> Result<FieldFitState> {
-        let n = self.fitter.field.param_count();
-        let (m, v) = self.fitter.adam.moments();
-        Ok(FieldFitState {
-            iteration: self.iteration,
-            params: self.ctx.read_buffer(self.fitter.field.params(), 0, n)?,
-            adam_m: self.ctx.read_buffer(m, 0, n)?,
-            adam_v: self.ctx.read_buffer(v, 0, n)?,
-            log: self.log.to_vec(),
-            seconds: self.seconds,
-        })
+    fn rows(
+        &mut self,
+        ctx: &Context,
+        _first: u32,
+        last: u32,
+        _entries: u64,
+        seconds: f64,
+    ) -> Result<Vec<FieldFitLog>> {
+        let (silhouette, geo) = self.read_losses(ctx)?;
+        Ok(vec![FieldFitLog {
+            iteration: last,
+            silhouette,
+            geo,
+            total: self
+                .opts
+                .probe
+                .total_loss(f64::from(silhouette), f64::from(geo)) as f32,
+            seconds,
+        }])
+    }
+
+    fn save_state(&self, ctx: &Context, w: &mut Writer) -> Result<()> {
+        save_adam(ctx, self.field.params(), &self.adam, self.field.param_count(), w)
+    }
+
+    fn restore_state(&mut self, ctx: &Context, r: &mut Reader<'_>) -> Result<()> {
+        let n = self.field.param_count();
+        restore_adam(ctx, self.field.params(), &self.adam, n, r, "the field")
     }
 }
 
-impl FitState<FieldFitLog> {
+impl FieldFit {
     /// The fingerprint of a fit's inputs that a checkpoint of it must carry: the silhouettes,
     /// the cameras and every option (the field type among them) but the iteration count and
     /// the logging.
@@ -711,90 +741,6 @@ impl FitState<FieldFitLog> {
         f.add(format!("{o:?}").as_bytes());
         f.value()
     }
-
-    /// As a checkpoint for inputs of `fingerprint`.
-    pub fn to_checkpoint(&self, fingerprint: u64) -> Checkpoint {
-        self.to_kind_checkpoint(FitKind::Field, fingerprint)
-    }
-
-    /// From a checkpoint ([`Checkpoint::read`] checked its kind and inputs) of a fit with
-    /// `opts` (its field's parameter count).
-    pub fn from_checkpoint(c: &Checkpoint, opts: &FieldFitOptions) -> Result<Self> {
-        Self::from_payload(c, opts.field.param_count())
-    }
-}
-
-/// [`fit_field`], optionally from a state a previous fit of the same inputs reached (`resume`:
-/// it goes on with iteration `resume.iteration + 1`), with a progress callback that also gets
-/// a [`FieldFitSnapshot`] (to checkpoint) and may fail. Resumed, the fit ends bit for bit as the
-/// fit that never stopped.
-pub fn fit_field_resumable(
-    ctx: &Context,
-    targets: &Targets,
-    opts: &FieldFitOptions,
-    resume: Option<&FieldFitState>,
-    mut progress: impl FnMut(&FieldFitLog, &FieldFitSnapshot<'_>) -> Result<bool>,
-) -> Result<FieldFitResult> {
-    let setup = Instant::now();
-    let mut fitter = FieldFitter::new(ctx, targets, opts)?;
-    let mut timings = FieldFitTimings {
-        setup_s: setup.elapsed().as_secs_f64(),
-        ..FieldFitTimings::default()
-    };
-    let start = Instant::now();
-    let mut log = Vec::new();
-    let mut first = 1;
-    let mut earlier = 0.0;
-    if let Some(state) = resume {
-        check_resume(state.iteration, opts.iterations)?;
-        restore_optimizer(
-            ctx,
-            fitter.field.params(),
-            &fitter.adam,
-            fitter.field.param_count(),
-            [&state.params, &state.adam_m, &state.adam_v],
-            "the field",
-        )?;
-        log = state.log.clone();
-        first = state.iteration + 1;
-        earlier = state.seconds;
-    }
-    let every = opts.log_every;
-    let done = fitter.drive(
-        first,
-        opts.iterations,
-        |_, it| Ok(driver::to_next_log(it, every)),
-        |fitter, _, last| {
-            let t = Instant::now();
-            let (silhouette, geo) = fitter.read_losses(ctx)?;
-            let entry = FieldFitLog {
-                iteration: last,
-                silhouette,
-                geo,
-                total: opts.probe.total_loss(f64::from(silhouette), f64::from(geo)) as f32,
-                seconds: earlier + start.elapsed().as_secs_f64(),
-            };
-            log.push(entry);
-            let snapshot = FieldFitSnapshot {
-                ctx,
-                fitter,
-                iteration: last,
-                log: &log,
-                seconds: entry.seconds,
-            };
-            let go_on = progress(&entry, &snapshot)?;
-            timings.log_s += t.elapsed().as_secs_f64();
-            Ok(go_on)
-        },
-    )?;
-    timings.regrowths = fitter.regrowths();
-    timings.iterations_s = earlier + start.elapsed().as_secs_f64();
-    Ok(FieldFitResult {
-        field: fitter.into_field(),
-        log,
-        iterations: done,
-        timings,
-    })
 }
 
 /// The prober's entry capacity for a count of `total` ([`super::with_headroom`]).

@@ -24,15 +24,11 @@
 //! (added on the host in [`crate::raster::backward::GradKernels::finish`]) is zero and the GPU's
 //! position gradient is complete.
 
-use std::time::Instant;
-
 use glam::{DMat3, DVec3};
 
-use super::checkpoint::{
-    Checkpoint, Fingerprint, FitKind, FitState, LogRow, Reader, Writer, check_resume,
-    restore_optimizer,
-};
-use super::driver::{self, Fit, Fitter};
+use super::checkpoint::{Fingerprint, FitKind, Reader, Writer, restore_adam, save_adam};
+use super::driver::{Fit, Fitter};
+use super::session::{LogRow, Session, Trainee, to_next_log};
 use super::{Adam, AdamOptions, Deform, Regularizers, SilhouetteLoss, with_headroom};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -65,9 +61,6 @@ pub struct MeshFitOptions {
     /// Read the losses back every this many iterations (and after the last); also the
     /// iterations per submission.
     pub log_every: u32,
-    /// Also read back the predicted alpha images at every logged iteration (for progress
-    /// pictures).
-    pub snapshots: bool,
     /// The (face, tile) entries reserved at the start; `None` (the default): the template's
     /// count, read back once, with [`ENTRY_HEADROOM`]. More spares the re-runs of a fit whose
     /// shape grows; less saves memory (the bins and the backward's partials scale with it). An
@@ -97,7 +90,6 @@ impl Default for MeshFitOptions {
             },
             tile: crate::raster::gpu::DEFAULT_TILE,
             log_every: 20,
-            snapshots: false,
             entry_capacity: None,
         }
     }
@@ -199,34 +191,41 @@ pub fn demo_target() -> Mesh {
 }
 
 /// Fits `template` to `targets` (one f32 mask per pixel, view-major, `W × H` per view, W and H
-/// from the options) seen from `cameras`. `progress` is called after every logged iteration
-/// with the log entry, the per-view (soft) IoUs and, with `snapshots`, the predicted alpha per
-/// pixel (view-major) the iteration rendered; it may return `false` to stop early.
-pub fn fit_mesh(
-    ctx: &Context,
+/// from the options) seen from `cameras`, in `session` (its hooks see the fit after every
+/// logged iteration: [`MeshFit::read_ious`], [`MeshFit::read_alphas`]; its checkpoints carry
+/// [`MeshFit::fingerprint`]).
+pub fn fit_mesh<'c>(
+    ctx: &'c Context,
     template: &Mesh,
     cameras: &[Camera],
     targets: &[f32],
     opts: &MeshFitOptions,
-    mut progress: impl FnMut(&FitLog, &[f32], Option<&[f32]>) -> bool,
+    session: Session<'_, MeshFit<'c>>,
 ) -> Result<MeshFitResult> {
-    fit_mesh_resumable(
-        ctx,
-        template,
-        cameras,
-        targets,
-        opts,
-        None,
-        |l, ious, a, _| Ok(progress(l, ious, a)),
-    )
+    let mut fitter = MeshFitter::new(ctx, template, cameras, targets, opts)?;
+    let end = session.run(
+        &mut fitter,
+        (opts.iterations, opts.log_every),
+        to_next_log(opts.log_every),
+    )?;
+    Ok(MeshFitResult {
+        mesh: fitter.mesh(template)?,
+        log: end.log,
+        first_iteration: end.first,
+        seconds: end.seconds,
+        regrowths: fitter.regrowths(),
+        entry_capacity: fitter.capacity(),
+        params: fitter.read_params()?,
+    })
 }
 
-/// A mesh fit's complete state after an iteration ([`FitState`]): the parameters are `3 V`
-/// displacements, then the centre (the deformation fit has no other state: no sampler, no
-/// schedule).
-pub type MeshFitState = FitState<FitLog>;
-
 impl LogRow for FitLog {
+    fn iteration(&self) -> u32 {
+        self.iteration
+    }
+    fn loss(&self) -> f64 {
+        f64::from(self.total)
+    }
     fn write(&self, w: &mut Writer) {
         w.u32(self.iteration);
         w.f32(self.silhouette);
@@ -249,32 +248,47 @@ impl LogRow for FitLog {
     }
 }
 
-/// A logged iteration's view of the running fit, for a progress callback that wants its state
-/// ([`MeshFitSnapshot::state`], read from the GPU only when asked: checkpoints).
-pub struct MeshFitSnapshot<'a> {
-    fitter: &'a MeshFitter<'a>,
-    iteration: u32,
-    log: &'a [FitLog],
-    seconds: f64,
-}
+/// A mesh fit in a session: its row is the losses of the logged iteration, its state the
+/// parameters (`3 V` displacements, then the centre) and Adam's moments (the deformation fit
+/// has no other state: no sampler, no schedule).
+impl Trainee for MeshFit<'_> {
+    type Row = FitLog;
+    const KIND: FitKind = FitKind::Mesh;
 
-impl MeshFitSnapshot<'_> {
-    /// The fit's complete state now.
-    pub fn state(&self) -> Result<MeshFitState> {
-        let (m, v) = self.fitter.adam.moments();
-        let n = self.fitter.deform.param_count() as usize;
-        Ok(MeshFitState {
-            iteration: self.iteration,
-            params: self.fitter.read_params()?,
-            adam_m: self.fitter.ctx.read_buffer(m, 0, n)?,
-            adam_v: self.fitter.ctx.read_buffer(v, 0, n)?,
-            log: self.log.to_vec(),
-            seconds: self.seconds,
-        })
+    fn rows(
+        &mut self,
+        ctx: &Context,
+        _first: u32,
+        last: u32,
+        entries: u64,
+        seconds: f64,
+    ) -> Result<Vec<FitLog>> {
+        let o = &self.opts;
+        let silhouette = self.sil.read_loss(ctx)?;
+        let r = self.regs.read_losses(ctx)?;
+        Ok(vec![FitLog {
+            iteration: last,
+            silhouette,
+            laplacian: r.laplacian,
+            flatten: r.flatten,
+            total: silhouette + o.laplacian * r.laplacian + o.flatten * r.flatten,
+            entries,
+            seconds,
+        }])
+    }
+
+    fn save_state(&self, ctx: &Context, w: &mut Writer) -> Result<()> {
+        let n = self.deform.param_count() as usize;
+        save_adam(ctx, &self.params, &self.adam, n, w)
+    }
+
+    fn restore_state(&mut self, ctx: &Context, r: &mut Reader<'_>) -> Result<()> {
+        let n = self.deform.param_count() as usize;
+        restore_adam(ctx, &self.params, &self.adam, n, r, "the template")
     }
 }
 
-impl FitState<FitLog> {
+impl MeshFit<'_> {
     /// The fingerprint of a fit's inputs that a checkpoint of it must carry: the template, the
     /// targets, the cameras and every option but the iteration count, the logging and the entry
     /// capacity (which change no result: a fit may be resumed for more iterations).
@@ -291,88 +305,12 @@ impl FitState<FitLog> {
         let o = MeshFitOptions {
             iterations: 0,
             log_every: 0,
-            snapshots: false,
             entry_capacity: None,
             ..opts.clone()
         };
         f.add(format!("{o:?}").as_bytes());
         f.value()
     }
-
-    /// As a checkpoint for inputs of `fingerprint`.
-    pub fn to_checkpoint(&self, fingerprint: u64) -> Checkpoint {
-        self.to_kind_checkpoint(FitKind::Mesh, fingerprint)
-    }
-
-    /// From a checkpoint ([`Checkpoint::read`] checked its kind and inputs) of a fit of
-    /// `template`.
-    pub fn from_checkpoint(c: &Checkpoint, template: &Mesh) -> Result<Self> {
-        Self::from_payload(c, 3 * template.vertex_count() + 3)
-    }
-}
-
-/// [`fit_mesh`], optionally from a state a previous fit of the same inputs reached (`resume`:
-/// it goes on with iteration `resume.iteration + 1`), with a progress callback that also gets
-/// a [`MeshFitSnapshot`] (to checkpoint) and may fail. Resumed, the fit ends bit for bit as the
-/// fit that never stopped.
-pub fn fit_mesh_resumable(
-    ctx: &Context,
-    template: &Mesh,
-    cameras: &[Camera],
-    targets: &[f32],
-    opts: &MeshFitOptions,
-    resume: Option<&MeshFitState>,
-    mut progress: impl FnMut(&FitLog, &[f32], Option<&[f32]>, &MeshFitSnapshot<'_>) -> Result<bool>,
-) -> Result<MeshFitResult> {
-    let mut fitter = MeshFitter::new(ctx, template, cameras, targets, opts)?;
-    let start = Instant::now();
-    let mut log = Vec::new();
-    let mut it = 1;
-    let mut earlier = 0.0;
-    if let Some(state) = resume {
-        check_resume(state.iteration, opts.iterations)?;
-        restore_optimizer(
-            ctx,
-            &fitter.params,
-            &fitter.adam,
-            fitter.deform.param_count() as usize,
-            [&state.params, &state.adam_m, &state.adam_v],
-            "the template",
-        )?;
-        log = state.log.clone();
-        it = state.iteration + 1;
-        earlier = state.seconds;
-    }
-    let first_iteration = it;
-    let every = opts.log_every;
-    fitter.drive(
-        it,
-        opts.iterations,
-        |_, it| Ok(driver::to_next_log(it, every)),
-        |fitter, _, last| {
-            let seconds = earlier + start.elapsed().as_secs_f64();
-            let (entry, ious, alphas) =
-                fitter.read_progress(fitter.last_entries(), last, seconds)?;
-            log.push(entry);
-            let snapshot = MeshFitSnapshot {
-                fitter,
-                iteration: last,
-                log: &log,
-                seconds,
-            };
-            progress(&log[log.len() - 1], &ious, alphas.as_deref(), &snapshot)
-        },
-    )?;
-    let seconds = earlier + start.elapsed().as_secs_f64();
-    Ok(MeshFitResult {
-        mesh: fitter.mesh(template)?,
-        log,
-        first_iteration,
-        seconds,
-        regrowths: fitter.regrowths(),
-        entry_capacity: fitter.capacity(),
-        params: fitter.read_params()?,
-    })
 }
 
 /// A mesh fit's GPU state: the scene, the losses, the optimizer, the parameters and the guarded
@@ -575,35 +513,17 @@ impl Fit for MeshFit<'_> {
 }
 
 impl MeshFit<'_> {
-    /// The losses of iteration `it` (the last one run, of `entries` entries), the per-view IoUs
-    /// and, with snapshots, the predicted alphas.
-    fn read_progress(
-        &self,
-        entries: u64,
-        it: u32,
-        seconds: f64,
-    ) -> Result<(FitLog, Vec<f32>, Option<Vec<f32>>)> {
-        let o = &self.opts;
-        let silhouette = self.sil.read_loss(self.ctx)?;
-        let r = self.regs.read_losses(self.ctx)?;
-        let entry = FitLog {
-            iteration: it,
-            silhouette,
-            laplacian: r.laplacian,
-            flatten: r.flatten,
-            total: silhouette + o.laplacian * r.laplacian + o.flatten * r.flatten,
-            entries,
-            seconds,
-        };
-        let ious = self.sil.read_ious(self.ctx)?;
-        let alphas = if o.snapshots {
-            let n = (o.settings.width * o.settings.height) as usize * ious.len();
-            let rgba: Vec<[f32; 4]> = self.ctx.read_buffer(self.scene.output(), 0, n)?;
-            Some(rgba.iter().map(|p| p[3]).collect())
-        } else {
-            None
-        };
-        Ok((entry, ious, alphas))
+    /// The per-view soft IoUs of the last iteration that ran.
+    pub fn read_ious(&self) -> Result<Vec<f32>> {
+        self.sil.read_ious(self.ctx)
+    }
+
+    /// The predicted alpha per pixel (view-major) of the last iteration that ran.
+    pub fn read_alphas(&self) -> Result<Vec<f32>> {
+        let s = &self.opts.settings;
+        let n = (s.width * s.height * self.scene.view_count()) as usize;
+        let rgba: Vec<[f32; 4]> = self.ctx.read_buffer(self.scene.output(), 0, n)?;
+        Ok(rgba.iter().map(|p| p[3]).collect())
     }
 
     /// The template with the positions the parameters give now.

@@ -64,6 +64,7 @@ mod regularizers;
 #[cfg(feature = "plots")]
 pub mod report;
 pub mod rig;
+pub mod session;
 pub mod silhouette;
 
 pub use crate::gpu::GradOut;

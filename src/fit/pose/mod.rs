@@ -53,17 +53,14 @@
 //! MSE and backward of the reference rasterizer, then the same chain); tests check it against
 //! central finite differences, and [`PoseProblem::evaluate`] and [`PoseFitter`] against it.
 
-use std::time::Instant;
 
 use glam::{DMat3, DQuat, DVec3};
 
 use super::adam::AdamOptions;
-use super::checkpoint::{
-    Checkpoint, Fingerprint, FitKind, Reader, Writer, check_resume, check_state, read_log,
-    write_log,
-};
+use super::checkpoint::{Fingerprint, FitKind, Reader, Writer, check_state};
 use super::driver;
 use super::posed::Stages;
+use super::session::{LogRow, Session, Trainee};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::Context;
@@ -388,81 +385,130 @@ pub struct PoseFitResult {
 }
 
 /// Fits the pose of `mesh` seen from `camera` to `target` (RGBA per pixel, row 0 at the top,
-/// the settings' size), from `init`. `progress` is called after every submission of
-/// iterations (every [`PoseFitOptions::log_every`], and at the end of each σ/γ stage) with
-/// its last iteration, and may return `false` to stop early; the result's log holds every
-/// iteration. The result's loss is against the target of the sharp σ/γ.
+/// the settings' size), from `init`, in `session`: its hooks see the fit after every
+/// submission of iterations (every [`PoseFitOptions::log_every`], and at the end of each σ/γ
+/// stage); the result's log holds every iteration. The result's loss is against the target of
+/// the sharp σ/γ.
 // The scene (mesh, camera, lighting), the target, the start and the options are each a
 // caller's choice; bundling them would only move the count into a struct.
 #[allow(clippy::too_many_arguments)]
-pub fn fit_pose(
-    ctx: &Context,
+pub fn fit_pose<'c>(
+    ctx: &'c Context,
     mesh: &Mesh,
     camera: &Camera,
     lighting: &Lighting,
-    target: PoseTarget<'_>,
+    mut target: PoseTarget<'_>,
     init: &Pose,
     opts: &PoseFitOptions,
-    mut progress: impl FnMut(&PoseLog) -> bool,
+    session: Session<'_, PoseFit<'c>>,
 ) -> Result<PoseFitResult> {
-    fit_pose_resumable(
-        ctx,
-        mesh,
-        camera,
-        lighting,
-        target,
-        init,
-        opts,
-        None,
-        |l, _| Ok(progress(l)),
-    )
+    // Before the schedule is read (PoseFitter::new checks the rest).
+    opts.validate()?;
+    let (mut stages, first_target) = Stages::new(&mut target, opts.sigma_gamma(0))?;
+    let mut fitter = PoseFitter::new(ctx, mesh, camera, lighting, &first_target, init, opts)?;
+    let every = opts.log_every;
+    let end = session.run(
+        &mut fitter,
+        (opts.iterations, every),
+        |fitter, it| {
+            let last = driver::to_next_log(it, every).min(opts.iterations);
+            stages.enter(&mut **fitter, opts.sigma_gamma(it - 1))?;
+            Ok(driver::to_stage_end(it, last, |i| opts.sigma_gamma(i)))
+        },
+    )?;
+    let s = &opts.settings;
+    stages.finish(&mut *fitter, (s.sigma, s.gamma))?;
+    let (loss, image) = fitter.evaluate(s.sigma, s.gamma)?;
+    Ok(PoseFitResult {
+        pose: fitter.pose()?,
+        loss,
+        image,
+        centre: fitter.centre(),
+        log: end.log,
+        iterations: end.last,
+        seconds: end.seconds,
+    })
 }
 
-/// A pose fit's complete state after an iteration: the pose, Adam's moments (on the host, in
-/// f64), the iterations done and the log. The σ/γ stage follows from the iteration, so a fit
-/// resumed from it ([`fit_pose_resumable`]) ends bit for bit as the fit that never stopped.
-#[derive(Clone, Debug, PartialEq)]
-pub struct PoseFitState {
-    /// Iterations done.
-    pub iteration: u32,
-    /// The pose's parameters (axis-angle, translation).
-    pub params: [f64; 6],
-    /// Adam's first moments.
-    pub adam_m: [f64; 6],
-    /// Adam's second moments.
-    pub adam_v: [f64; 6],
-    /// One entry per iteration so far.
-    pub log: Vec<PoseLog>,
-    /// Seconds the iterations took so far.
-    pub seconds: f64,
-}
-
-/// An iteration's view of the running pose fit ([`PoseFitSnapshot::state`]: checkpoints).
-pub struct PoseFitSnapshot<'a> {
-    fitter: &'a PoseFitter<'a>,
-    iteration: u32,
-    log: &'a [PoseLog],
-    seconds: f64,
-}
-
-impl PoseFitSnapshot<'_> {
-    /// The fit's complete state now (the parameters and moments read from the GPU).
-    pub fn state(&self) -> Result<PoseFitState> {
-        let [params, adam_m, adam_v] = self.fitter.read_state()?;
-        Ok(PoseFitState {
-            iteration: self.iteration,
-            params,
-            adam_m,
-            adam_v,
-            log: self.log.to_vec(),
-            seconds: self.seconds,
+impl LogRow for PoseLog {
+    fn iteration(&self) -> u32 {
+        self.iteration
+    }
+    fn loss(&self) -> f64 {
+        self.loss
+    }
+    fn write(&self, w: &mut Writer) {
+        w.u32(self.iteration);
+        for x in [self.loss, self.sigma, self.gamma]
+            .into_iter()
+            .chain(self.pose.to_array())
+            .chain([self.seconds])
+        {
+            w.f64(x);
+        }
+    }
+    fn read(r: &mut Reader<'_>) -> Result<Self> {
+        let iteration = r.u32()?;
+        let (loss, sigma, gamma) = (r.f64()?, r.f64()?, r.f64()?);
+        let mut pose = [0.0; 6];
+        for x in &mut pose {
+            *x = r.f64()?;
+        }
+        Ok(PoseLog {
+            iteration,
+            loss,
+            sigma,
+            gamma,
+            pose: Pose::from_array(pose),
+            seconds: r.f64()?,
         })
     }
 }
 
-impl PoseFitState {
+/// A pose fit in a session: a row per iteration, its state the pose and Adam's moments (in
+/// f64). The σ/γ stage follows from the iteration, so a fit resumed from it ends bit for bit
+/// as the fit that never stopped.
+impl Trainee for PoseFit<'_> {
+    type Row = PoseLog;
+    const KIND: FitKind = FitKind::Pose;
+
+    fn rows(
+        &mut self,
+        _ctx: &Context,
+        first: u32,
+        last: u32,
+        _entries: u64,
+        seconds: f64,
+    ) -> Result<Vec<PoseLog>> {
+        self.log(first, last, seconds)
+    }
+
+    fn save_state(&self, _ctx: &Context, w: &mut Writer) -> Result<()> {
+        for a in self.read_state()? {
+            for x in a {
+                w.f64(x);
+            }
+        }
+        Ok(())
+    }
+
+    fn restore_state(&mut self, _ctx: &Context, r: &mut Reader<'_>) -> Result<()> {
+        let mut six = || -> Result<[f64; 6]> {
+            let mut a = [0.0; 6];
+            for x in &mut a {
+                *x = r.f64()?;
+            }
+            Ok(a)
+        };
+        let (params, m, v) = (six()?, six()?, six()?);
+        check_state(&params, &m, &v)?;
+        self.write_state([&params, &m, &v])
+    }
+}
+
+impl PoseFit<'_> {
     /// The fingerprint of a fit's inputs that a checkpoint of it must carry: the mesh with its
-    /// colours, the camera, the lighting, the target, the start and every option (the
+    /// colours, the camera, the lighting, the (first) target, the start and every option (the
     /// iteration count among them: it spreads the σ/γ schedule).
     pub fn fingerprint(
         mesh: &Mesh,
@@ -482,136 +528,6 @@ impl PoseFitState {
         f.add(format!("{camera:?} {lighting:?} {init:?} {opts:?}").as_bytes());
         f.value()
     }
-
-    /// As a checkpoint for inputs of `fingerprint`.
-    pub fn to_checkpoint(&self, fingerprint: u64) -> Checkpoint {
-        let mut w = Writer::default();
-        for x in self.params.iter().chain(&self.adam_m).chain(&self.adam_v) {
-            w.f64(*x);
-        }
-        write_log(&mut w, &self.log, |w, l| {
-            w.u32(l.iteration);
-            for x in [l.loss, l.sigma, l.gamma]
-                .into_iter()
-                .chain(l.pose.to_array())
-                .chain([l.seconds])
-            {
-                w.f64(x);
-            }
-        });
-        Checkpoint {
-            kind: FitKind::Pose,
-            fingerprint,
-            iteration: self.iteration,
-            seconds: self.seconds,
-            payload: w.0,
-        }
-    }
-
-    /// From a checkpoint ([`Checkpoint::read`] checked its kind and inputs).
-    pub fn from_checkpoint(c: &Checkpoint) -> Result<Self> {
-        let mut r = Reader::new(&c.payload);
-        let mut six = || -> Result<[f64; 6]> {
-            let mut a = [0.0; 6];
-            for x in &mut a {
-                *x = r.f64()?;
-            }
-            Ok(a)
-        };
-        let (params, adam_m, adam_v) = (six()?, six()?, six()?);
-        check_state(&params, &adam_m, &adam_v)?;
-        let log = read_log(&mut r, c.iteration, |r| {
-            let iteration = r.u32()?;
-            let (loss, sigma, gamma) = (r.f64()?, r.f64()?, r.f64()?);
-            let mut pose = [0.0; 6];
-            for x in &mut pose {
-                *x = r.f64()?;
-            }
-            Ok(PoseLog {
-                iteration,
-                loss,
-                sigma,
-                gamma,
-                pose: Pose::from_array(pose),
-                seconds: r.f64()?,
-            })
-        })?;
-        Ok(Self {
-            iteration: c.iteration,
-            params,
-            adam_m,
-            adam_v,
-            log,
-            seconds: c.seconds,
-        })
-    }
-}
-
-/// [`fit_pose`], optionally from a state a previous fit of the same inputs reached (`resume`:
-/// it goes on with iteration `resume.iteration + 1`), with a progress callback that also gets
-/// a [`PoseFitSnapshot`] (to checkpoint) and may fail. Resumed, the fit ends bit for bit as the
-/// fit that never stopped.
-#[allow(clippy::too_many_arguments)]
-pub fn fit_pose_resumable(
-    ctx: &Context,
-    mesh: &Mesh,
-    camera: &Camera,
-    lighting: &Lighting,
-    mut target: PoseTarget<'_>,
-    init: &Pose,
-    opts: &PoseFitOptions,
-    resume: Option<&PoseFitState>,
-    mut progress: impl FnMut(&PoseLog, &PoseFitSnapshot<'_>) -> Result<bool>,
-) -> Result<PoseFitResult> {
-    // Before the schedule is read (PoseFitter::new checks the rest).
-    opts.validate()?;
-    let (mut stages, first_target) = Stages::new(&mut target, opts.sigma_gamma(0))?;
-    let mut fitter = PoseFitter::new(ctx, mesh, camera, lighting, &first_target, init, opts)?;
-    let mut log = Vec::with_capacity(opts.iterations as usize);
-    let start = Instant::now();
-    let mut done = 0;
-    let mut earlier = 0.0;
-    if let Some(state) = resume {
-        check_resume(state.iteration, opts.iterations)?;
-        fitter.write_state([&state.params, &state.adam_m, &state.adam_v])?;
-        log = state.log.clone();
-        done = state.iteration;
-        earlier = state.seconds;
-    }
-    let every = opts.log_every;
-    let done = fitter.drive(
-        done + 1,
-        opts.iterations,
-        |fitter, it| {
-            let last = driver::to_next_log(it, every).min(opts.iterations);
-            stages.enter(&mut **fitter, opts.sigma_gamma(it - 1))?;
-            Ok(driver::to_stage_end(it, last, |i| opts.sigma_gamma(i)))
-        },
-        |fitter, first, last| {
-            let seconds = earlier + start.elapsed().as_secs_f64();
-            log.extend(fitter.read_log(first, last, seconds)?);
-            let snapshot = PoseFitSnapshot {
-                fitter,
-                iteration: last,
-                log: &log,
-                seconds,
-            };
-            progress(&log[log.len() - 1], &snapshot)
-        },
-    )?;
-    let seconds = earlier + start.elapsed().as_secs_f64();
-    let s = &opts.settings;
-    stages.finish(&mut *fitter, (s.sigma, s.gamma))?;
-    let (loss, image) = fitter.evaluate(s.sigma, s.gamma)?;
-    Ok(PoseFitResult {
-        pose: fitter.pose()?,
-        loss,
-        image,
-        centre: fitter.centre(),
-        log,
-        iterations: done,
-        seconds,
-    })
 }
 
 #[cfg(test)]

@@ -4,9 +4,10 @@
 use glam::DQuat;
 
 use super::{
-    Pose, PoseFitOptions, PoseFitResult, PoseLog, PoseProblem, PoseTarget, fit_pose,
+    Pose, PoseFit, PoseFitOptions, PoseFitResult, PoseLog, PoseProblem, PoseTarget, fit_pose,
     rotation_distance,
 };
+use crate::fit::session::{Progress, Session};
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -170,11 +171,13 @@ pub fn fit_pose_multistart(
             PoseTarget::PerStage(f) => PoseTarget::PerStage(&mut **f),
         };
         let mut stopped = false;
-        let result = fit_pose(ctx, mesh, camera, lighting, here, init, opts, |l| {
-            let go_on = progress(k, l);
+        let hooks = |p: &Progress<'_, '_, PoseFit<'_>>| {
+            let go_on = progress(k, p.row());
             stopped |= !go_on;
-            go_on
-        })?;
+            Ok(go_on)
+        };
+        let session = Session::new().hooks(hooks);
+        let result = fit_pose(ctx, mesh, camera, lighting, here, init, opts, session)?;
         outcomes.push(StartOutcome {
             init: *init,
             pose: result.pose,

@@ -1,0 +1,407 @@
+//! One resumable session around every fit's and trainer's loop: the schedule of submissions,
+//! the log, checkpoints and resume, the hooks a caller watches through (progress, interrupt),
+//! and the stopping rule.
+//!
+//! A fit says only what is its own: its iterations ([`Fit`], run by [`Fitter`]), its log row
+//! ([`LogRow`]), and the state a resumed fit needs ([`Trainee::save_state`] /
+//! [`Trainee::restore_state`]: parameters and Adam's moments). [`Session::run`] does the rest:
+//!
+//! - **Submissions**: from the first iteration to the last, each ending where the fit's plan
+//!   says (by default the next logged iteration, [`driver::to_next_log`]), through
+//!   [`Fitter::drive`] (which re-runs an iteration whose binning outgrew its capacity).
+//! - **The log**: after each submission, the fit's rows for its iterations
+//!   ([`Trainee::rows`]), stamped with the session's seconds (those before a resume included).
+//! - **Hooks** ([`Hooks`]): after each submission, with a [`Progress`] view of the fit and
+//!   its log; returning `false` stops the session there (an interrupt).
+//! - **Checkpoints** ([`CheckpointPlan`]): the state and the log written atomically every N
+//!   iterations, at the end and when the session stops early, in the one checkpoint format of
+//!   [`super::checkpoint`]; [`Resume::read`] reads one back (refusing another kind of fit,
+//!   other inputs, another format or softvk version, or a damaged file, each with one line),
+//!   and a session resumed from it ends bit for bit as the session that never stopped (softvk
+//!   is deterministic, and every random number is keyed by the iteration).
+//! - **The stopping rule** ([`StopRule`]): a session may end when its loss has stopped
+//!   improving.
+//!
+//! What a new fit needs, then: its [`Fit`] (the recording of an iteration), a [`Trainee`]
+//! impl of about 40 lines (its row, its state), and a function that builds its [`Fitter`] and
+//! calls [`Session::run`]; its command-line file parses arguments and writes outputs.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use super::checkpoint::{Checkpoint, FitKind, Reader, Writer};
+use super::driver::{self, Fit, Fitter};
+use crate::error::{Error, Result};
+use crate::gpu::Context;
+
+/// A log row a session keeps and a checkpoint carries: one per logged iteration (or, for the
+/// pose fits, per iteration).
+pub trait LogRow: Clone {
+    /// The iteration it logs (from 1).
+    fn iteration(&self) -> u32;
+    /// The loss the stopping rule watches (the fit's total).
+    fn loss(&self) -> f64;
+    /// Appends the row to a checkpoint.
+    fn write(&self, w: &mut Writer);
+    /// Reads a row [`LogRow::write`] wrote.
+    fn read(r: &mut Reader<'_>) -> Result<Self>;
+}
+
+/// What a [`Fit`] adds to run in a [`Session`]: its log row, and its state.
+pub trait Trainee: Fit {
+    /// Its log row.
+    type Row: LogRow;
+    /// Its kind of checkpoint.
+    const KIND: FitKind;
+
+    /// The rows of iterations `first ..= last`, which have just run (the last of them with
+    /// `entries` (face, tile) entries), `seconds` into the session.
+    fn rows(
+        &mut self,
+        ctx: &Context,
+        first: u32,
+        last: u32,
+        entries: u64,
+        seconds: f64,
+    ) -> Result<Vec<Self::Row>>;
+
+    /// Writes what a resumed session needs besides the log (the parameters and the optimizer's
+    /// moments), read from the device now.
+    fn save_state(&self, ctx: &Context, w: &mut Writer) -> Result<()>;
+
+    /// Puts back what [`Trainee::save_state`] wrote, checking it (sizes, finiteness).
+    fn restore_state(&mut self, ctx: &Context, r: &mut Reader<'_>) -> Result<()>;
+}
+
+/// Where and how often a session checkpoints, and what names its inputs.
+#[derive(Clone, Debug)]
+pub struct CheckpointPlan {
+    /// The checkpoint file (replaced atomically each time).
+    pub path: PathBuf,
+    /// The fingerprint of the fit's inputs the checkpoints carry (each fit has a function for
+    /// it, e.g. [`crate::fit::mesh_fit::MeshFit::fingerprint`]); [`Resume::read`] refuses a
+    /// checkpoint of another.
+    pub fingerprint: u64,
+    /// Iterations between checkpoints, rounded up to a multiple of the logging interval; one
+    /// is also written at the end and when the session stops early.
+    pub every: u32,
+}
+
+/// When a session ends before its last iteration because its loss stopped improving: once
+/// `window` iterations have passed since the best loss so far (over the rows logged from
+/// iteration `from`) without a row below `best × (1 − min_improvement)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StopRule {
+    /// The first iteration whose row counts (before it, the session never stops: a schedule's
+    /// early stages, whose losses are not comparable with the last stage's).
+    pub from: u32,
+    /// Iterations without improvement that end the session.
+    pub window: u32,
+    /// The relative improvement that counts as one.
+    pub min_improvement: f64,
+}
+
+impl StopRule {
+    /// Whether `log` (in iteration order) has stopped improving.
+    pub fn stalled<R: LogRow>(&self, log: &[R]) -> bool {
+        let mut best: Option<(f64, u32)> = None;
+        for r in log.iter().filter(|r| r.iteration() >= self.from) {
+            let loss = r.loss();
+            match best {
+                Some((b, _)) if loss >= b * (1.0 - self.min_improvement) => {}
+                _ => best = Some((loss, r.iteration())),
+            }
+        }
+        let last = log.last().map_or(0, LogRow::iteration);
+        best.is_some_and(|(_, at)| last >= at + self.window)
+    }
+}
+
+/// A checkpoint read back for a session to go on from.
+#[derive(Clone, Debug)]
+pub struct Resume<R> {
+    /// Iterations done.
+    pub iteration: u32,
+    /// Seconds they took.
+    pub seconds: f64,
+    /// Their log.
+    pub log: Vec<R>,
+    /// The fit's state ([`Trainee::save_state`]'s bytes).
+    pub state: Vec<u8>,
+}
+
+impl<R: LogRow> Resume<R> {
+    /// Reads the checkpoint at `path` of a `kind` fit of inputs of `fingerprint` (see
+    /// [`Checkpoint::read`] for what is refused).
+    pub fn read(path: &Path, kind: FitKind, fingerprint: u64) -> Result<Self> {
+        let c = Checkpoint::read(path, kind, fingerprint)?;
+        let mut r = Reader::new(&c.payload);
+        let n = r.u32()?;
+        if n > c.iteration {
+            return Err(Error::Input(format!(
+                "{}: checkpoint log longer than its iterations",
+                path.display()
+            )));
+        }
+        let log = (0..n).map(|_| R::read(&mut r)).collect::<Result<Vec<R>>>()?;
+        if log.last().is_some_and(|l| l.iteration() > c.iteration) {
+            return Err(Error::Input(format!(
+                "{}: checkpoint log past its iterations",
+                path.display()
+            )));
+        }
+        Ok(Self {
+            iteration: c.iteration,
+            seconds: c.seconds,
+            log,
+            state: r.rest().to_vec(),
+        })
+    }
+}
+
+/// What hooks see after each submission.
+pub struct Progress<'a, 'c, F: Trainee> {
+    /// The fit (read its state, render a frame).
+    pub fitter: &'a Fitter<'c, F>,
+    /// The log so far (those of a resumed session included).
+    pub log: &'a [F::Row],
+    /// The submission's first iteration.
+    pub first: u32,
+    /// Its last iteration.
+    pub last: u32,
+    /// The last iteration asked for.
+    pub iterations: u32,
+}
+
+impl<F: Trainee> Progress<'_, '_, F> {
+    /// The last row.
+    pub fn row(&self) -> &F::Row {
+        self.log.last().expect("a submission logs at least one row")
+    }
+}
+
+/// What watches a session: called after each submission, `false` stops it there.
+pub trait Hooks<F: Trainee> {
+    /// After iterations `p.first ..= p.last` ran and were logged.
+    fn after(&mut self, p: &Progress<'_, '_, F>) -> Result<bool>;
+}
+
+impl<F: Trainee, H: FnMut(&Progress<'_, '_, F>) -> Result<bool>> Hooks<F> for H {
+    fn after(&mut self, p: &Progress<'_, '_, F>) -> Result<bool> {
+        self(p)
+    }
+}
+
+/// Hooks that watch nothing.
+pub struct NoHooks;
+
+impl<F: Trainee> Hooks<F> for NoHooks {
+    fn after(&mut self, _: &Progress<'_, '_, F>) -> Result<bool> {
+        Ok(true)
+    }
+}
+
+/// Why a session ended before its last iteration.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stopped {
+    /// A hook said so (an interrupt).
+    Hook,
+    /// The [`StopRule`].
+    Converged,
+}
+
+/// A finished session.
+#[derive(Clone, Debug)]
+pub struct SessionEnd<R> {
+    /// The whole log (a resumed session's earlier rows first).
+    pub log: Vec<R>,
+    /// The first iteration this run ran (after a resume, the checkpoint's + 1).
+    pub first: u32,
+    /// The last iteration that ran.
+    pub last: u32,
+    /// Seconds of iterations, those before a resume included.
+    pub seconds: f64,
+    /// Seconds of this run spent after submissions: reading rows, the hooks and checkpoints.
+    pub logging_seconds: f64,
+    /// Why it ended early, if it did.
+    pub stopped: Option<Stopped>,
+}
+
+/// A session's settings besides the fit's own: checkpoints, a resume, the stopping rule and
+/// the hooks. The default has none of them.
+pub struct Session<'h, F: Trainee> {
+    /// Checkpoints, if any.
+    pub checkpoint: Option<CheckpointPlan>,
+    /// A checkpoint to go on from.
+    pub resume: Option<Resume<F::Row>>,
+    /// The stopping rule, if any.
+    pub stop: Option<StopRule>,
+    hooks: Box<dyn Hooks<F> + 'h>,
+}
+
+impl<F: Trainee> Default for Session<'_, F> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<'h, F: Trainee> Session<'h, F> {
+    /// No checkpoint, resume, stopping rule or hook.
+    pub fn new() -> Self {
+        Self {
+            checkpoint: None,
+            resume: None,
+            stop: None,
+            hooks: Box::new(NoHooks),
+        }
+    }
+
+    /// With `hooks` after each submission.
+    pub fn hooks(mut self, hooks: impl Hooks<F> + 'h) -> Self {
+        self.hooks = Box::new(hooks);
+        self
+    }
+
+    /// Checkpointing as `plan` says.
+    pub fn checkpoint(mut self, plan: Option<CheckpointPlan>) -> Self {
+        self.checkpoint = plan;
+        self
+    }
+
+    /// Going on from `resume`.
+    pub fn resume(mut self, resume: Option<Resume<F::Row>>) -> Self {
+        self.resume = resume;
+        self
+    }
+
+    /// Ending early by `rule`.
+    pub fn stop(mut self, rule: Option<StopRule>) -> Self {
+        self.stop = rule;
+        self
+    }
+
+    /// The first iteration [`Session::run`] will run.
+    pub fn first_iteration(&self) -> u32 {
+        self.resume.as_ref().map_or(1, |r| r.iteration + 1)
+    }
+
+    /// Runs `fitter` from the first iteration (after the resumed checkpoint's, whose state it
+    /// restores) to iteration `iterations`, each submission ending where `plan` (given the
+    /// fitter and the submission's first iteration) says, logging, calling the hooks,
+    /// checkpointing (every multiple of `log_every` past the plan's interval) and applying the
+    /// stopping rule.
+    pub fn run<'c>(
+        self,
+        fitter: &mut Fitter<'c, F>,
+        (iterations, log_every): (u32, u32),
+        mut plan: impl FnMut(&mut Fitter<'c, F>, u32) -> Result<u32>,
+    ) -> Result<SessionEnd<F::Row>> {
+        let Session {
+            checkpoint,
+            resume,
+            stop,
+            mut hooks,
+        } = self;
+        if iterations == 0 || log_every == 0 {
+            return Err(Error::Input(format!(
+                "{}: iterations and the logging interval must be at least 1",
+                F::NAME
+            )));
+        }
+        let ctx = fitter.ctx();
+        let (mut log, first, earlier) = match resume {
+            Some(resume) => {
+                if resume.iteration > iterations {
+                    return Err(Error::Input(format!(
+                        "resume: the state is after iteration {}, past the {iterations} asked",
+                        resume.iteration
+                    )));
+                }
+                let mut r = Reader::new(&resume.state);
+                fitter.restore_state(ctx, &mut r)?;
+                if !r.done() {
+                    return Err(Error::Input(
+                        "checkpoint has bytes after the fit's state".into(),
+                    ));
+                }
+                (resume.log, resume.iteration + 1, resume.seconds)
+            }
+            None => (Vec::new(), 1, 0.0),
+        };
+        let checkpoint_every = checkpoint
+            .as_ref()
+            .map(|c| c.every.max(1).div_ceil(log_every) * log_every);
+        let start = Instant::now();
+        let mut stopped = None;
+        let mut logging_seconds = 0.0;
+        let last = fitter.drive(
+            first,
+            iterations,
+            |fitter, it| plan(fitter, it),
+            |fitter, a, b| {
+                let logging = Instant::now();
+                let seconds = earlier + start.elapsed().as_secs_f64();
+                let entries = fitter.last_entries();
+                log.extend(fitter.rows(ctx, a, b, entries, seconds)?);
+                let progress = Progress {
+                    fitter,
+                    log: &log,
+                    first: a,
+                    last: b,
+                    iterations,
+                };
+                let mut go_on = hooks.after(&progress)?;
+                if !go_on {
+                    stopped = Some(Stopped::Hook);
+                } else if b < iterations && stop.is_some_and(|s| s.stalled(&log)) {
+                    stopped = Some(Stopped::Converged);
+                    go_on = false;
+                }
+                if let (Some(plan), Some(every)) = (&checkpoint, checkpoint_every)
+                    && (!go_on || b % every == 0 || b == iterations)
+                {
+                    write_checkpoint(fitter, plan, b, seconds, &log)?;
+                }
+                logging_seconds += logging.elapsed().as_secs_f64();
+                Ok(go_on)
+            },
+        )?;
+        Ok(SessionEnd {
+            log,
+            first,
+            last,
+            seconds: earlier + start.elapsed().as_secs_f64(),
+            logging_seconds,
+            stopped,
+        })
+    }
+}
+
+/// Writes the checkpoint of `fitter` after `iteration`: the log, then the fit's state.
+fn write_checkpoint<F: Trainee>(
+    fitter: &Fitter<'_, F>,
+    plan: &CheckpointPlan,
+    iteration: u32,
+    seconds: f64,
+    log: &[F::Row],
+) -> Result<()> {
+    let mut w = Writer::default();
+    w.u32(log.len() as u32);
+    for row in log {
+        row.write(&mut w);
+    }
+    fitter.save_state(fitter.ctx(), &mut w)?;
+    Checkpoint {
+        kind: F::KIND,
+        fingerprint: plan.fingerprint,
+        iteration,
+        seconds,
+        payload: w.0,
+    }
+    .write(&plan.path)
+}
+
+/// The plan most fits use: each submission up to the next logged iteration.
+pub fn to_next_log<F>(every: u32) -> impl FnMut(&mut F, u32) -> Result<u32> {
+    move |_, it| Ok(driver::to_next_log(it, every))
+}
