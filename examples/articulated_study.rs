@@ -28,6 +28,7 @@ use softvk::camera::Camera;
 use softvk::fit::articulated::{ArticulatedFitOptions, fit_articulated};
 use softvk::fit::pose::PoseTarget;
 use softvk::fit::rig::Rig;
+use softvk::fit::session::Session;
 use softvk::gpu::{Context, ContextOptions};
 use softvk::lighting::Lighting;
 use softvk::raster::gpu::{Method, Renderer};
@@ -260,7 +261,7 @@ fn main() {
                     },
                     init,
                     &opts,
-                    |_| true,
+                    Session::new(),
                 )
                 .unwrap();
                 secs.push(t0.elapsed().as_secs_f64());

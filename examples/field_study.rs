@@ -43,7 +43,10 @@ use softvk::field::preview::{PreviewOptions, render_preview};
 use softvk::field::voxel::{self, Occupancy};
 use softvk::field::{Cube, Field, FieldKind};
 use softvk::fit::AdamOptions;
-use softvk::fit::field_fit::{FieldFitOptions, FieldFitter, auto_cube, fit_field, scaled_to_cube};
+use softvk::fit::field_fit::{
+    FieldFitLog, FieldFitOptions, FieldFitter, auto_cube, fit_field, scaled_to_cube,
+};
+use softvk::fit::session::Session;
 use softvk::gpu::{Context, ContextOptions};
 use softvk::io::Silhouettes;
 use softvk::mesh::Mesh;
@@ -403,15 +406,20 @@ fn run_fit(ctx: &Context, p: &Problem, keys: &Keys, label: &str) -> f64 {
         let summary = format!("{iterations} its, {:.1} s", t.elapsed().as_secs_f64());
         (field, summary)
     } else {
-        let r = fit_field(ctx, targets, &opts, |l| {
-            if verbose {
-                eprintln!(
-                    "  it {:4}  L_sil {:.5}  L_geo {:.5}  total {:.5}  {:.1} s",
-                    l.iteration, l.silhouette, l.geo, l.total, l.seconds
-                );
-            }
-            true
-        })
+        let r = fit_field(
+            ctx,
+            targets,
+            &opts,
+            Session::new().on_row(|l: &FieldFitLog| {
+                if verbose {
+                    eprintln!(
+                        "  it {:4}  L_sil {:.5}  L_geo {:.5}  total {:.5}  {:.1} s",
+                        l.iteration, l.silhouette, l.geo, l.total, l.seconds
+                    );
+                }
+                true
+            }),
+        )
         .unwrap();
         let last = r.log.last().copied();
         let summary = format!(

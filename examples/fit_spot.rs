@@ -11,7 +11,8 @@
 use softvk::camera::{Camera, Projection};
 use softvk::field::Cube;
 use softvk::field::voxel::{iou, visual_hull, voxelize_mesh};
-use softvk::fit::mesh_fit::{MeshFitOptions, default_template, fit_mesh};
+use softvk::fit::mesh_fit::{MeshFit, MeshFitOptions, default_template, fit_mesh};
+use softvk::fit::session::{Progress, Session};
 use softvk::fit::silhouette::hard_ious;
 use softvk::gpu::{Context, ContextOptions};
 use softvk::io::{Silhouettes, write_obj};
@@ -65,15 +66,17 @@ fn main() {
         iterations,
         ..MeshFitOptions::default()
     };
-    let fit = fit_mesh(&ctx, &default_template(), &train, &targets, &opts, |l, ious, _| {
+    let log = |p: &Progress<'_, '_, MeshFit<'_>>| {
+        let (l, ious) = (p.row(), p.fitter.read_ious()?);
         let mean = ious.iter().sum::<f32>() / ious.len() as f32;
         eprintln!(
             "it {:5} loss {:.4} (1-IoU {:.4}, lap {:.4}, flat {:.2}) soft IoU {mean:.4}  {:.1} s",
             l.iteration, l.total, l.silhouette, l.laplacian, l.flatten, l.seconds
         );
-        true
-    })
-    .unwrap();
+        Ok(true)
+    };
+    let session = Session::new().hooks(log);
+    let fit = fit_mesh(&ctx, &default_template(), &train, &targets, &opts, session).unwrap();
     let px = (size * size) as usize;
     let seen = ious(&silhouettes(&ctx, &fit.mesh, &train, size), &targets, px);
     let unseen_t = silhouettes(&ctx, &spot, &test, size);

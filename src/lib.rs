@@ -19,8 +19,9 @@
 //!   f64 twin).
 //! - [`fit`]: the fitting building blocks as kernels — silhouette losses, Laplacian and flatten
 //!   regularizers, deformation, Adam, blur — the loop driver that every fit runs on
-//!   ([`fit::driver`]), the fits (mesh, field, rigid pose, articulated pose), their checkpoints
-//!   and reports.
+//!   ([`fit::driver`]) and the session around it ([`fit::session`]: log, hooks, checkpoints,
+//!   resume, stopping rule), the fits (mesh, field, rigid pose, articulated pose), their
+//!   checkpoint format and reports.
 //! - [`probe`]: implicit-field sphere probing — sampling (rays, anchors, surface candidates),
 //!   probing anchors binned to screen tiles, the silhouette loss and the geometric regularizer,
 //!   with their gradients with respect to φ.

@@ -1,20 +1,23 @@
-//! Checkpoints and resume: a mesh fit stopped at a checkpoint and resumed ends bit
-//! for bit as the fit that never stopped, in the library and through `softvk fit-mesh`
-//! (`--checkpoint`, `--resume`, also after a real Ctrl-C); checkpoints of other inputs, other
-//! kinds or no checkpoint at all are refused with one clear error.
+//! Checkpoints and resume: a fit stopped at a checkpoint and resumed ends bit for bit as the
+//! fit that never stopped, for every fit a session runs (mesh, field, pose, articulated), in
+//! the library and through `softvk fit-mesh` (`--checkpoint`, `--resume`, also after a real
+//! Ctrl-C); checkpoints of other inputs, other kinds or no checkpoint at all are refused with
+//! one clear error.
 
 mod common;
 
+use std::cell::RefCell;
 use std::path::Path;
+use std::rc::Rc;
 use std::time::Duration;
 
 use common::{TempDir, softvk};
 use softvk::camera::Camera;
-use softvk::fit::checkpoint::{Checkpoint, Fingerprint, FitKind};
+use softvk::fit::checkpoint::{Checkpoint, Fingerprint, FitKind, Writer};
 use softvk::fit::mesh_fit::{
-    FitLog, MeshFitOptions, MeshFitResult, MeshFitState, fit_mesh, fit_mesh_resumable,
-    icosphere_template,
+    FitLog, MeshFit, MeshFitOptions, MeshFitResult, fit_mesh, icosphere_template,
 };
+use softvk::fit::session::{CheckpointPlan, LogRow, Progress, Resume, Session, Trainee};
 use softvk::io::CameraRow;
 use softvk::mesh::Mesh;
 use softvk::raster::settings::RasterSettings;
@@ -75,65 +78,117 @@ fn assert_same_fit(what: &str, a: &MeshFitResult, b: &MeshFitResult) {
     assert_eq!(losses(&a.log), losses(&b.log), "{what}: logged losses");
 }
 
+/// A session that checkpoints into `path` (for inputs of `fingerprint`) and stops after
+/// iteration `stop`, leaving its checkpoint there.
+fn stopping_at<'h, F: Trainee>(stop: u32, path: &Path, fingerprint: u64) -> Session<'h, F> {
+    Session::new()
+        .checkpoint(Some(CheckpointPlan {
+            path: path.to_path_buf(),
+            fingerprint,
+            every: 1000,
+        }))
+        .hooks(move |p: &Progress<'_, '_, F>| Ok(p.last < stop))
+}
+
+/// A session resumed from the checkpoint at `path`, which must be after iteration `at`,
+/// recording the iterations its hooks see into `logged`.
+fn resumed_from<'h, F: Trainee>(
+    path: &Path,
+    fingerprint: u64,
+    at: u32,
+    logged: &Rc<RefCell<Vec<u32>>>,
+) -> Session<'h, F> {
+    let logged = Rc::clone(logged);
+    let resume = Resume::read(path, F::KIND, fingerprint).unwrap();
+    assert_eq!(resume.iteration, at, "the checkpoint's iteration");
+    assert_eq!(
+        resume.log.last().map(LogRow::iteration),
+        Some(at),
+        "the checkpoint's log"
+    );
+    Session::new()
+        .resume(Some(resume))
+        .hooks(move |p: &Progress<'_, '_, F>| {
+            logged.borrow_mut().push(p.last);
+            Ok(true)
+        })
+}
+
 #[test]
 fn a_mesh_fit_resumed_from_any_checkpoint_ends_bit_for_bit_as_the_uninterrupted_fit() {
     let Some(gpu) = common::gpu() else { return };
     let template = icosphere_template();
     let cams: Vec<Camera> = rows().iter().map(CameraRow::camera).collect();
     let targets = masks();
-    let whole = fit_mesh(&gpu, &template, &cams, &targets, &options(8), |_, _, _| {
-        true
-    })
-    .unwrap();
+    let fit = |session| fit_mesh(&gpu, &template, &cams, &targets, &options(8), session);
+    let whole = fit(Session::new()).unwrap();
     let dir = TempDir::new("ckpt-lib");
-    let fingerprint = MeshFitState::fingerprint(&template, &cams, &targets, &options(8));
+    let fingerprint = MeshFit::fingerprint(&template, &cams, &targets, &options(8));
     for stop in [2u32, 4, 6] {
-        // Run to `stop`, take the state there (through a file, as the CLI does), resume.
-        let mut state = None;
-        fit_mesh_resumable(
-            &gpu,
-            &template,
-            &cams,
-            &targets,
-            &options(8),
-            None,
-            |l, _, _, snapshot| {
-                if l.iteration == stop {
-                    state = Some(snapshot.state()?);
-                    return Ok(false);
-                }
-                Ok(true)
-            },
-        )
-        .unwrap();
-        let state = state.unwrap();
-        assert_eq!(state.iteration, stop);
+        // Run to `stop`, with the checkpoint written there; resume from the file.
         let path = dir.path(&format!("at-{stop}.ckpt"));
-        state.to_checkpoint(fingerprint).write(&path).unwrap();
-        let read = Checkpoint::read(&path, FitKind::Mesh, fingerprint).unwrap();
-        let back = MeshFitState::from_checkpoint(&read, &template).unwrap();
-        assert_eq!(back, state, "the checkpoint file round trip");
+        fit(stopping_at(stop, &path, fingerprint)).unwrap();
         // The resumed fit runs only the iterations after the checkpoint's (a fit that started
         // again from 1 would end the same, deterministic as it is, but not log these).
-        let mut logged = Vec::new();
-        let resumed = fit_mesh_resumable(
-            &gpu,
-            &template,
-            &cams,
-            &targets,
-            &options(8),
-            Some(&back),
-            |l, _, _, _| {
-                logged.push(l.iteration);
-                Ok(true)
-            },
-        )
-        .unwrap();
+        let logged = Rc::default();
+        let resumed = fit(resumed_from(&path, fingerprint, stop, &logged)).unwrap();
         assert_eq!(resumed.first_iteration, stop + 1);
         // Logged every 2: the submissions after the checkpoint, not from 1.
         let rest: Vec<u32> = (stop + 2..=8).step_by(2).collect();
-        assert_eq!(logged, rest, "stopped at {stop}");
+        assert_eq!(*logged.borrow(), rest, "stopped at {stop}");
         assert_same_fit(&format!("stopped at {stop}"), &whole, &resumed);
+    }
+    // A state of another template size is refused when the fit starts.
+    let path = dir.path("at-2.ckpt");
+    let mut small = Mesh::icosphere(1);
+    for c in small.positions.iter_mut().flatten() {
+        *c = if *c == 0.0 { 1e-3 } else { 0.5 * *c };
+    }
+    let fp = MeshFit::fingerprint(&small, &cams, &targets, &options(8));
+    let c = Checkpoint::read(&path, FitKind::Mesh, fingerprint).unwrap();
+    Checkpoint {
+        fingerprint: fp,
+        ..c
+    }
+    .write(&path)
+    .unwrap();
+    let resume = Resume::read(&path, FitKind::Mesh, fp).unwrap();
+    let e = fit_mesh(
+        &gpu,
+        &small,
+        &cams,
+        &targets,
+        &options(8),
+        Session::new().resume(Some(resume)),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("parameters") || e.contains("at most"), "{e}");
+}
+
+/// A checkpoint of a mesh fit after iteration 2: a log row, then a state of `n` parameters.
+fn mesh_checkpoint(fingerprint: u64, n: usize) -> Checkpoint {
+    let mut w = Writer::default();
+    w.u32(1);
+    FitLog {
+        iteration: 2,
+        silhouette: 0.5,
+        laplacian: 0.25,
+        flatten: 0.125,
+        total: 0.875,
+        entries: 40,
+        seconds: 1.0,
+    }
+    .write(&mut w);
+    for value in [0.5, 0.25, 0.125] {
+        w.f32s(&vec![value; n]);
+    }
+    Checkpoint {
+        kind: FitKind::Mesh,
+        fingerprint,
+        iteration: 2,
+        seconds: 1.0,
+        payload: w.0,
     }
 }
 
@@ -142,30 +197,24 @@ fn foreign_or_broken_checkpoints_are_refused_with_one_line() {
     let template = icosphere_template();
     let cams: Vec<Camera> = rows().iter().map(CameraRow::camera).collect();
     let targets = masks();
-    let fp = MeshFitState::fingerprint(&template, &cams, &targets, &options(8));
+    let fp = MeshFit::fingerprint(&template, &cams, &targets, &options(8));
     // Only the iteration count and the logging may differ.
     assert_eq!(
         fp,
-        MeshFitState::fingerprint(&template, &cams, &targets, &options(3000))
+        MeshFit::fingerprint(&template, &cams, &targets, &options(3000))
     );
     let mut other = targets.clone();
     other[5] = 1.0 - other[5];
     assert_ne!(
         fp,
-        MeshFitState::fingerprint(&template, &cams, &other, &options(8))
+        MeshFit::fingerprint(&template, &cams, &other, &options(8))
     );
     let dir = TempDir::new("ckpt-bad");
     let n = 3 * template.vertex_count() + 3;
-    let state = MeshFitState {
-        iteration: 2,
-        params: vec![0.5; n],
-        adam_m: vec![0.25; n],
-        adam_v: vec![0.125; n],
-        log: Vec::new(),
-        seconds: 1.0,
-    };
     let path = dir.path("c.ckpt");
-    state.to_checkpoint(fp).write(&path).unwrap();
+    mesh_checkpoint(fp, n).write(&path).unwrap();
+    let back = Resume::<FitLog>::read(&path, FitKind::Mesh, fp).unwrap();
+    assert_eq!((back.iteration, back.log.len()), (2, 1), "the round trip");
     let refused = |path: &Path, kind: FitKind, fp: u64, needle: &str| {
         let e = Checkpoint::read(path, kind, fp)
             .err()
@@ -174,6 +223,12 @@ fn foreign_or_broken_checkpoints_are_refused_with_one_line() {
         assert!(e.contains(needle) && !e.contains('\n'), "{needle}: {e}");
     };
     refused(&path, FitKind::Mesh, fp ^ 1, "another fit");
+    refused(
+        &path,
+        FitKind::Pose,
+        fp,
+        "a mesh fit checkpoint, not a pose fit's",
+    );
     let bytes = std::fs::read(&path).unwrap();
     let garbage = dir.path("garbage.ckpt");
     std::fs::write(&garbage, b"P6 not a checkpoint").unwrap();
@@ -200,21 +255,26 @@ fn foreign_or_broken_checkpoints_are_refused_with_one_line() {
     let v = dir.path("version.ckpt");
     std::fs::write(&v, sealed(&version)).unwrap();
     refused(&v, FitKind::Mesh, fp, "written by softvk");
+    // An earlier format (the format number follows the magic).
+    let mut old = body.to_vec();
+    old[8..12].copy_from_slice(&2u32.to_le_bytes());
+    let o = dir.path("old.ckpt");
+    std::fs::write(&o, sealed(&old)).unwrap();
+    refused(
+        &o,
+        FitKind::Mesh,
+        fp,
+        "checkpoint format 2, this softvk reads format 3",
+    );
     refused(&dir.path("missing.ckpt"), FitKind::Mesh, fp, "missing.ckpt");
-    // A payload cut short after a valid header.
+    // A log cut short after a valid header.
     let cut = dir.path("cut.ckpt");
-    std::fs::write(&cut, sealed(&body[..body.len() - 9])).unwrap();
-    let c = Checkpoint::read(&cut, FitKind::Mesh, fp).unwrap();
-    let e = MeshFitState::from_checkpoint(&c, &template)
+    let header = body.len() - mesh_checkpoint(fp, n).payload.len();
+    std::fs::write(&cut, sealed(&body[..header + 20])).unwrap();
+    let e = Resume::<FitLog>::read(&cut, FitKind::Mesh, fp)
         .unwrap_err()
         .to_string();
     assert!(e.contains("truncated"), "{e}");
-    // A state of another template size.
-    let c = Checkpoint::read(&path, FitKind::Mesh, fp).unwrap();
-    let e = MeshFitState::from_checkpoint(&c, &Mesh::icosphere(1))
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("parameters") || e.contains("at most"), "{e}");
 }
 
 fn fit_cmd(sil: &Path, cams: &Path, out: &Path, args: &[&str]) -> std::process::Command {
@@ -388,9 +448,7 @@ fn fit_mesh_checkpoints_and_resumes_to_the_same_bytes_even_after_ctrl_c() {
 fn a_field_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_fit() {
     use softvk::field::FieldKind;
     use softvk::fit::AdamOptions;
-    use softvk::fit::field_fit::{
-        FieldFitLog, FieldFitOptions, FieldFitState, fit_field, fit_field_resumable,
-    };
+    use softvk::fit::field_fit::{FieldFit, FieldFitLog, FieldFitOptions, fit_field};
     use softvk::probe::ProbeSettings;
     use softvk::probe::targets::sphere_silhouettes;
     let Some(gpu) = common::gpu() else { return };
@@ -433,35 +491,23 @@ fn a_field_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_f
             })
             .collect()
     };
-    let whole = fit_field(&gpu, &targets, &opts, |_| true).unwrap();
+    let whole = fit_field(&gpu, &targets, &opts, Session::new()).unwrap();
     let n = whole.field.param_count();
     let params = |f: &softvk::field::Field| -> Vec<u32> {
         bits(&gpu.read_buffer::<f32>(f.params(), 0, n).unwrap())
     };
-    let fp = FieldFitState::fingerprint(&targets, &opts);
+    let fp = FieldFit::fingerprint(&targets, &opts);
     let dir = TempDir::new("ckpt-field");
-    let mut state = None;
-    fit_field_resumable(&gpu, &targets, &opts, None, |l, snapshot| {
-        if l.iteration == 4 {
-            state = Some(snapshot.state()?);
-            return Ok(false);
-        }
-        Ok(true)
-    })
-    .unwrap();
     let path = dir.path("f.ckpt");
-    state.unwrap().to_checkpoint(fp).write(&path).unwrap();
-    let c = Checkpoint::read(&path, FitKind::Field, fp).unwrap();
-    let back = FieldFitState::from_checkpoint(&c, &opts).unwrap();
-    assert_eq!(back.iteration, 4);
+    fit_field(&gpu, &targets, &opts, stopping_at(4, &path, fp)).unwrap();
     // Only the rest runs: iterations 5 and 6, logged at 6.
-    let mut logged = Vec::new();
-    let resumed = fit_field_resumable(&gpu, &targets, &opts, Some(&back), |l, _| {
-        logged.push(l.iteration);
-        Ok(true)
-    })
-    .unwrap();
-    assert_eq!(logged, [6], "a resumed fit logs only what it runs");
+    let logged = Rc::default();
+    let resumed = fit_field(&gpu, &targets, &opts, resumed_from(&path, fp, 4, &logged)).unwrap();
+    assert_eq!(
+        *logged.borrow(),
+        [6],
+        "a resumed fit logs only what it runs"
+    );
     assert_eq!(resumed.iterations, 6);
     assert_eq!(
         params(&whole.field),
@@ -479,7 +525,7 @@ fn a_field_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_f
         field: FieldKind::Grid { res: 9 },
         ..opts
     };
-    assert_ne!(fp, FieldFitState::fingerprint(&targets, &other));
+    assert_ne!(fp, FieldFit::fingerprint(&targets, &other));
 }
 
 /// The pose fit, across a σ/γ schedule stage change (stages follow from the iteration):
@@ -487,9 +533,7 @@ fn a_field_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_f
 #[test]
 fn a_pose_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_fit() {
     use glam::DVec3;
-    use softvk::fit::pose::{
-        Pose, PoseFitOptions, PoseFitState, PoseTarget, Schedule, fit_pose, fit_pose_resumable,
-    };
+    use softvk::fit::pose::{Pose, PoseFit, PoseFitOptions, PoseTarget, Schedule, fit_pose};
     use softvk::lighting::Lighting;
     use softvk::raster::gpu::{Method, Renderer};
     let Some(gpu) = common::gpu() else { return };
@@ -537,62 +581,28 @@ fn a_pose_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_fi
         translation: DVec3::new(0.02, 0.0, -0.01),
     };
     let pose_bits = |p: &Pose| p.to_array().map(f64::to_bits);
-    let whole = fit_pose(
-        &gpu,
-        &mesh,
-        &camera,
-        &lighting,
-        PoseTarget::Fixed(&target),
-        &init,
-        &opts,
-        |_| true,
-    )
-    .unwrap();
-    let fp = PoseFitState::fingerprint(&mesh, &camera, &lighting, &target, &init, &opts);
+    let fit = |session| {
+        fit_pose(
+            &gpu,
+            &mesh,
+            &camera,
+            &lighting,
+            PoseTarget::Fixed(&target),
+            &init,
+            &opts,
+            session,
+        )
+    };
+    let whole = fit(Session::new()).unwrap();
+    let fp = PoseFit::fingerprint(&mesh, &camera, &lighting, &target, &init, &opts);
     let dir = TempDir::new("ckpt-pose");
     // 5: inside the second of three stages (4 iterations each).
-    let mut state = None;
-    fit_pose_resumable(
-        &gpu,
-        &mesh,
-        &camera,
-        &lighting,
-        PoseTarget::Fixed(&target),
-        &init,
-        &opts,
-        None,
-        |l, snapshot| {
-            if l.iteration == 5 {
-                state = Some(snapshot.state()?);
-                return Ok(false);
-            }
-            Ok(true)
-        },
-    )
-    .unwrap();
     let path = dir.path("p.ckpt");
-    state.unwrap().to_checkpoint(fp).write(&path).unwrap();
-    let c = Checkpoint::read(&path, FitKind::Pose, fp).unwrap();
-    let back = PoseFitState::from_checkpoint(&c).unwrap();
-    assert_eq!(back.iteration, 5);
-    let mut logged = Vec::new();
-    let resumed = fit_pose_resumable(
-        &gpu,
-        &mesh,
-        &camera,
-        &lighting,
-        PoseTarget::Fixed(&target),
-        &init,
-        &opts,
-        Some(&back),
-        |l, _| {
-            logged.push(l.iteration);
-            Ok(true)
-        },
-    )
-    .unwrap();
+    fit(stopping_at(5, &path, fp)).unwrap();
+    let logged = Rc::default();
+    let resumed = fit(resumed_from(&path, fp, 5, &logged)).unwrap();
     assert_eq!(
-        logged,
+        *logged.borrow(),
         (6..=12).collect::<Vec<_>>(),
         "a resumed fit runs only the rest"
     );
@@ -613,6 +623,6 @@ fn a_pose_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_fi
     };
     assert_ne!(
         fp,
-        PoseFitState::fingerprint(&mesh, &camera, &lighting, &target, &other, &opts)
+        PoseFit::fingerprint(&mesh, &camera, &lighting, &target, &other, &opts)
     );
 }

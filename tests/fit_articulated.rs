@@ -11,9 +11,13 @@ use std::path::Path;
 use std::process::Command;
 
 use softvk::camera::Camera;
-use softvk::fit::articulated::{self, ArticulatedFitOptions, ArticulatedFitter, fit_articulated};
+use softvk::fit::articulated::{
+    self, ArticulatedFit, ArticulatedFitOptions, ArticulatedFitter, fit_articulated,
+};
+use softvk::fit::checkpoint::FitKind;
 use softvk::fit::pose::{PoseTarget, Schedule};
 use softvk::fit::rig::Rig;
+use softvk::fit::session::{CheckpointPlan, Progress, Resume, Session};
 use softvk::lighting::Lighting;
 use softvk::raster::gpu::{Method, Renderer};
 use softvk::raster::settings::{ColorMode, RasterSettings};
@@ -224,10 +228,10 @@ fn a_fit_from_20_degrees_off_on_every_joint_recovers_every_angle_within_2_degree
         PoseTarget::PerStage(&mut per_stage),
         &start,
         &opts,
-        |_| {
+        Session::new().hooks(|_: &Progress<'_, '_, ArticulatedFit<'_>>| {
             calls += 1;
-            true
-        },
+            Ok(true)
+        }),
     )
     .unwrap();
     let errors: Vec<f64> = r
@@ -262,7 +266,7 @@ fn a_fit_from_20_degrees_off_on_every_joint_recovers_every_angle_within_2_degree
 }
 
 #[test]
-fn repeated_fits_are_bit_identical_and_stop_when_asked() {
+fn repeated_fits_are_bit_identical_stop_when_asked_and_resume_to_the_same_bits() {
     let Some(gpu) = common::gpu() else { return };
     let rig = Rig::figure();
     let (target_angles, start) = poses();
@@ -273,7 +277,7 @@ fn repeated_fits_are_bit_identical_and_stop_when_asked() {
         ..ArticulatedFitOptions::default()
     };
     let target = gpu_render(&gpu, &rig, &opts.settings, &target_angles);
-    let fit = |stop_after: u32| {
+    let fit = |session| {
         fit_articulated(
             &gpu,
             &rig,
@@ -282,24 +286,76 @@ fn repeated_fits_are_bit_identical_and_stop_when_asked() {
             PoseTarget::Fixed(&target),
             &start,
             &opts,
-            |l| l.iteration < stop_after,
+            session,
         )
         .unwrap()
     };
-    let (a, b) = (fit(99), fit(99));
+    let (a, b) = (fit(Session::new()), fit(Session::new()));
     assert_eq!(a.angles, b.angles);
     // Every logged loss and angle too (the seconds differ).
-    let rows = |r: &articulated::ArticulatedFitResult| -> Vec<(u32, f64, Vec<f64>)> {
+    let rows = |r: &articulated::ArticulatedFitResult| -> Vec<(u32, u64, Vec<u64>)> {
         r.log
             .iter()
-            .map(|l| (l.iteration, l.loss, l.angles.clone()))
+            .map(|l| {
+                let angles = l.angles.iter().map(|a| a.to_bits()).collect();
+                (l.iteration, l.loss.to_bits(), angles)
+            })
             .collect()
     };
     assert_eq!(rows(&a), rows(&b));
     assert_ne!(a.angles, start);
-    let stopped = fit(4);
+    // Stopped by its hooks after iteration 4, with a checkpoint written there.
+    let dir = TempDir::new("articulated-resume");
+    let path = dir.path("a.ckpt");
+    let fp = ArticulatedFit::fingerprint(
+        &rig,
+        &camera(),
+        &Lighting::default(),
+        &target,
+        &start,
+        &opts,
+    );
+    let stopped = fit(Session::new()
+        .checkpoint(Some(CheckpointPlan {
+            path: path.clone(),
+            fingerprint: fp,
+            every: 100,
+        }))
+        .hooks(|p: &Progress<'_, '_, ArticulatedFit<'_>>| Ok(p.last < 4)));
     assert_eq!(stopped.iterations, 4);
     assert_eq!(stopped.log.len(), 4);
+    // Resumed from it (inside the first of four stages of three iterations: across the stage
+    // changes), it runs only the rest and ends bit for bit as the fit that never stopped.
+    let resume = Resume::read(&path, FitKind::Articulated, fp).unwrap();
+    assert_eq!(resume.iteration, 4);
+    let mut logged = Vec::new();
+    let resumed = fit(Session::new().resume(Some(resume)).hooks(
+        |p: &Progress<'_, '_, ArticulatedFit<'_>>| {
+            logged.push(p.last);
+            Ok(true)
+        },
+    ));
+    assert_eq!(
+        logged,
+        [6, 8, 9, 12],
+        "submissions end at logs and stage ends"
+    );
+    assert_eq!(resumed.iterations, 12);
+    assert_eq!(
+        a.angles.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+        resumed
+            .angles
+            .iter()
+            .map(|x| x.to_bits())
+            .collect::<Vec<_>>()
+    );
+    assert_eq!(a.loss.to_bits(), resumed.loss.to_bits());
+    assert_eq!(rows(&a), rows(&resumed));
+    // Another start is another fit's checkpoint.
+    let e = Resume::<articulated::ArticulatedLog>::read(&path, FitKind::Articulated, fp ^ 1)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("another fit"), "{e}");
 }
 
 #[test]

@@ -16,6 +16,7 @@ use softvk::fit::adam::cpu as adam_cpu;
 use softvk::fit::field_fit::{
     FieldFitOptions, FieldFitter, auto_cube, check_cameras_outside, fit_field,
 };
+use softvk::fit::session::Session;
 use softvk::probe::prober::cpu as probe_cpu;
 use softvk::probe::sampler::{Ray, cpu as sampler_cpu};
 use softvk::probe::targets::sphere_silhouettes;
@@ -222,7 +223,7 @@ fn a_repeated_fit_gives_bit_identical_parameters() {
             ..tiny_options(Aggregate::Max, 0.3)
         };
         let fit = || {
-            let r = fit_field(&ctx, &targets, &opts, |_| true).unwrap();
+            let r = fit_field(&ctx, &targets, &opts, Session::new()).unwrap();
             (r.field.read_params(&ctx).unwrap(), r.log)
         };
         let (a, log_a) = fit();
@@ -246,7 +247,7 @@ fn fit_bits(
     opts: &FieldFitOptions,
 ) -> (Vec<u32>, Vec<(u32, u32, u32)>, u64) {
     let before = ctx.counters().submissions;
-    let r = fit_field(ctx, targets, opts, |_| true).unwrap();
+    let r = fit_field(ctx, targets, opts, Session::new()).unwrap();
     let submissions = ctx.counters().submissions - before;
     let params = r.field.read_params(ctx).unwrap();
     let log = r
@@ -379,7 +380,7 @@ fn a_short_fit_of_a_sphere_raises_its_3d_iou() {
         )
         .unwrap()
     };
-    let r = fit_field(&ctx, &targets, &opts, |_| true).unwrap();
+    let r = fit_field(&ctx, &targets, &opts, Session::new()).unwrap();
     let after = voxel::iou(
         &voxel::field_occupancy(&ctx, &r.field, &cube, 24).unwrap(),
         &sphere,
@@ -423,7 +424,7 @@ fn cameras_inside_the_cube_and_bad_options_are_input_errors() {
         ..tiny_options(Aggregate::Max, 0.1)
     };
     assert!(matches!(
-        fit_field(&ctx, &targets, &opts, |_| true),
+        fit_field(&ctx, &targets, &opts, Session::new()),
         Err(Error::Input(_))
     ));
 }

@@ -7,7 +7,8 @@ mod common;
 use softvk::camera::{Camera, Projection};
 use softvk::fit::flatten::{self, FlattenEdges};
 use softvk::fit::laplacian::{self, Adjacency};
-use softvk::fit::mesh_fit::{MeshFitOptions, fit_mesh};
+use softvk::fit::mesh_fit::{FitLog, MeshFitOptions, fit_mesh};
+use softvk::fit::session::Session;
 use softvk::fit::{adam, deform, silhouette};
 use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
@@ -82,10 +83,17 @@ fn a_gpu_iteration_equals_the_iteration_of_the_twins() {
     };
     let t = template();
     let mut gpu_losses = Vec::new();
-    let fit = fit_mesh(&gpu, &t, &cams, &targets, &opts, |l, _, _| {
-        gpu_losses.push(l.total);
-        true
-    })
+    let fit = fit_mesh(
+        &gpu,
+        &t,
+        &cams,
+        &targets,
+        &opts,
+        Session::new().on_row(|l: &FitLog| {
+            gpu_losses.push(l.total);
+            true
+        }),
+    )
     .unwrap();
     assert_eq!(gpu_losses.len(), ITERATIONS as usize);
 
@@ -257,7 +265,7 @@ fn a_mesh_fit_converges_to_its_targets() {
         ..opts
     };
     let before = hard_iou(&gpu, &template(), &cams, &targets, 20);
-    let fit = fit_mesh(&gpu, &template(), &cams, &targets, &opts, |_, _, _| true).unwrap();
+    let fit = fit_mesh(&gpu, &template(), &cams, &targets, &opts, Session::new()).unwrap();
     let after = hard_iou(&gpu, &fit.mesh, &cams, &targets, 20);
     eprintln!("hard IoU {before:.3} -> {after:.3}");
     assert!(
@@ -278,10 +286,17 @@ type FitRun = (Vec<u32>, Vec<(u32, u32, u64)>, u32, u64);
 fn run_fit(gpu: &common::Gpu, cams: &[Camera], targets: &[f32], opts: &MeshFitOptions) -> FitRun {
     let mut logged = Vec::new();
     let before = gpu.counters().submissions;
-    let fit = fit_mesh(gpu, &template(), cams, targets, opts, |l, _, _| {
-        logged.push((l.iteration, l.total.to_bits(), l.entries));
-        true
-    })
+    let fit = fit_mesh(
+        gpu,
+        &template(),
+        cams,
+        targets,
+        opts,
+        Session::new().on_row(|l: &FitLog| {
+            logged.push((l.iteration, l.total.to_bits(), l.entries));
+            true
+        }),
+    )
     .unwrap();
     let submissions = gpu.counters().submissions - before;
     (bits(&fit.params), logged, fit.regrowths, submissions)

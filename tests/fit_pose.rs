@@ -16,6 +16,7 @@ use softvk::fit::pose::{
     self, Pose, PoseFitOptions, PoseFitter, PoseProblem, PoseTarget, Schedule, fit_pose,
     rotation_distance,
 };
+use softvk::fit::session::Session;
 use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
 use softvk::raster::gpu::{Method, Renderer};
@@ -281,7 +282,7 @@ fn k_pose_iterations_per_submission_give_the_bits_of_one_per_submission() {
             PoseTarget::Fixed(&target),
             &init,
             &o,
-            |_| true,
+            Session::new(),
         )
         .unwrap();
         let submissions = gpu.counters().submissions - before;
@@ -402,7 +403,7 @@ fn run_small_fit(
         fit_target,
         init,
         opts,
-        |l| {
+        Session::new().on_row(|l: &pose::PoseLog| {
             if std::env::var_os("POSE_DEBUG").is_some() {
                 eprintln!(
                     "it {} σ {:.0e} γ {:.0e} loss {:.4e} err {:.3}°",
@@ -414,7 +415,7 @@ fn run_small_fit(
                 );
             }
             true
-        },
+        }),
     )
     .unwrap();
     assert_eq!(result.iterations, opts.iterations);
@@ -646,7 +647,7 @@ fn repeated_fits_are_bit_identical() {
             PoseTarget::Fixed(&image),
             &init,
             &opts,
-            |_| true,
+            Session::new(),
         )
         .unwrap();
         let losses: Vec<u64> = r.log.iter().map(|l| l.loss.to_bits()).collect();
@@ -676,7 +677,7 @@ fn bad_inputs_to_the_library_are_errors() {
             PoseTarget::Fixed(target),
             init,
             opts,
-            |_| true,
+            Session::new(),
         )
     };
     assert!(fit(&good[..px - 1], &init, &opts).is_err(), "short target");

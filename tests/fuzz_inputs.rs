@@ -937,33 +937,63 @@ fn absurd_image_headers_are_refused_before_decoding() {
 // ---------------------------------------------------------------------------------------------
 // Checkpoints.
 
-/// A valid checkpoint file of each kind of fit, with a reader that restores its state: mesh
-/// (an icosphere(1) template), field (the default options' field) and pose.
+/// A valid checkpoint file of each kind of fit, with a reader that reads its log and state as
+/// a resume does (without a device: the state's checks are the host's): mesh (an icosphere(1)
+/// template), field (the default options' field) and pose.
 type CheckpointReader = Box<dyn Fn(&Path) -> Result<(), softvk::Error>>;
 
 fn checkpoint_cases() -> Vec<(&'static str, Vec<u8>, CheckpointReader)> {
-    use softvk::fit::checkpoint::{Checkpoint, FitKind};
-    use softvk::fit::field_fit::{FieldFitLog, FieldFitOptions, FieldFitState};
-    use softvk::fit::mesh_fit::{FitLog, MeshFitState};
-    use softvk::fit::pose::{Pose, PoseFitState, PoseLog};
+    use softvk::fit::checkpoint::{
+        Checkpoint, FitKind, Reader, Writer, read_adam, read_f64_state, write_f64_state,
+    };
+    use softvk::fit::field_fit::{FieldFitLog, FieldFitOptions};
+    use softvk::fit::mesh_fit::FitLog;
+    use softvk::fit::pose::{Pose, PoseLog};
+    use softvk::fit::session::{LogRow, Resume};
     const FINGERPRINT: u64 = 0x5eed;
     let ramp = |n: usize, scale: f32| -> Vec<f32> { (0..n).map(|i| scale * i as f32).collect() };
     let dir = CaseDir::new("checkpoint-seed");
-    let bytes = |c: Checkpoint| {
+    let checkpoint = |kind, iteration, log: &dyn Fn(&mut Writer), state: &dyn Fn(&mut Writer)| {
+        let mut w = Writer::default();
+        log(&mut w);
+        state(&mut w);
         let path = dir.0.join("seed.ckpt");
-        c.write(&path).unwrap();
+        Checkpoint {
+            kind,
+            fingerprint: FINGERPRINT,
+            iteration,
+            seconds: 0.3,
+            payload: w.0,
+        }
+        .write(&path)
+        .unwrap();
         std::fs::read(&path).unwrap()
     };
+    let rows = |w: &mut Writer, rows: &[&dyn Fn(&mut Writer)]| {
+        w.u32(rows.len() as u32);
+        for r in rows {
+            r(w);
+        }
+    };
+    // What a resume reads: the log, then the state, all of it.
+    fn read<R: LogRow>(
+        p: &Path,
+        kind: FitKind,
+        state: impl Fn(&mut Reader<'_>) -> Result<(), softvk::Error>,
+    ) -> Result<(), softvk::Error> {
+        let resume = Resume::<R>::read(p, kind, FINGERPRINT)?;
+        let mut r = Reader::new(&resume.state);
+        state(&mut r)?;
+        if !r.done() {
+            return Err(softvk::Error::Input("bytes after the state".into()));
+        }
+        Ok(())
+    }
 
-    let template = Mesh::icosphere(1);
-    let n = 3 * template.vertex_count() + 3;
-    let mesh = MeshFitState {
-        iteration: 3,
-        params: ramp(n, 0.01),
-        adam_m: ramp(n, -0.001),
-        adam_v: ramp(n, 1e-6),
-        log: (1..=3)
-            .map(|i| FitLog {
+    let n_mesh = 3 * Mesh::icosphere(1).vertex_count() + 3;
+    let mesh_row = |i: u32| {
+        move |w: &mut Writer| {
+            FitLog {
                 iteration: i,
                 silhouette: 0.5 / i as f32,
                 laplacian: 0.1,
@@ -971,66 +1001,81 @@ fn checkpoint_cases() -> Vec<(&'static str, Vec<u8>, CheckpointReader)> {
                 total: 0.8,
                 entries: 1000 + u64::from(i),
                 seconds: 0.1 * f64::from(i),
-            })
-            .collect(),
-        seconds: 0.3,
+            }
+            .write(w)
+        }
     };
-    let opts = FieldFitOptions::default();
-    let n = opts.field.param_count();
-    let field = FieldFitState {
-        iteration: 2,
-        params: ramp(n, 1e-3),
-        adam_m: ramp(n, 1e-4),
-        adam_v: ramp(n, 1e-8),
-        log: (1..=2)
-            .map(|i| FieldFitLog {
+    let mesh = checkpoint(
+        FitKind::Mesh,
+        3,
+        &|w| rows(w, &[&mesh_row(1), &mesh_row(2), &mesh_row(3)]),
+        &|w| {
+            w.f32s(&ramp(n_mesh, 0.01));
+            w.f32s(&ramp(n_mesh, -0.001));
+            w.f32s(&ramp(n_mesh, 1e-6));
+        },
+    );
+    let n_field = FieldFitOptions::default().field.param_count();
+    let field_row = |i: u32| {
+        move |w: &mut Writer| {
+            FieldFitLog {
                 iteration: i,
                 silhouette: 0.3,
                 geo: 0.01,
                 total: 0.31,
                 seconds: 0.5,
-            })
-            .collect(),
-        seconds: 1.0,
+            }
+            .write(w)
+        }
     };
-    let pose = PoseFitState {
-        iteration: 1,
-        params: [0.1, -0.2, 0.3, 0.0, 0.05, 2.0],
-        adam_m: [0.01; 6],
-        adam_v: [1e-4; 6],
-        log: vec![PoseLog {
+    let field = checkpoint(
+        FitKind::Field,
+        2,
+        &|w| rows(w, &[&field_row(1), &field_row(2)]),
+        &|w| {
+            w.f32s(&ramp(n_field, 1e-3));
+            w.f32s(&ramp(n_field, 1e-4));
+            w.f32s(&ramp(n_field, 1e-8));
+        },
+    );
+    let pose_row = |w: &mut Writer| {
+        PoseLog {
             iteration: 1,
             loss: 0.2,
             sigma: 1e-4,
             gamma: 1e-4,
             pose: Pose::from_array([0.1, -0.2, 0.3, 0.0, 0.05, 2.0]),
             seconds: 0.2,
-        }],
-        seconds: 0.2,
+        }
+        .write(w)
     };
+    let pose = checkpoint(FitKind::Pose, 1, &|w| rows(w, &[&pose_row]), &|w| {
+        write_f64_state(w, &[[0.1, -0.2, 0.3, 0.0, 0.05, 2.0], [0.01; 6], [1e-4; 6]])
+    });
     vec![
         (
             "mesh",
-            bytes(mesh.to_checkpoint(FINGERPRINT)),
+            mesh,
             Box::new(move |p: &Path| {
-                let c = Checkpoint::read(p, FitKind::Mesh, FINGERPRINT)?;
-                MeshFitState::from_checkpoint(&c, &template).map(drop)
+                read::<FitLog>(p, FitKind::Mesh, |r| {
+                    read_adam(r, n_mesh, "the template").map(drop)
+                })
             }),
         ),
         (
             "field",
-            bytes(field.to_checkpoint(FINGERPRINT)),
+            field,
             Box::new(move |p: &Path| {
-                let c = Checkpoint::read(p, FitKind::Field, FINGERPRINT)?;
-                FieldFitState::from_checkpoint(&c, &opts).map(drop)
+                read::<FieldFitLog>(p, FitKind::Field, |r| {
+                    read_adam(r, n_field, "the field").map(drop)
+                })
             }),
         ),
         (
             "pose",
-            bytes(pose.to_checkpoint(FINGERPRINT)),
+            pose,
             Box::new(|p: &Path| {
-                let c = Checkpoint::read(p, FitKind::Pose, FINGERPRINT)?;
-                PoseFitState::from_checkpoint(&c).map(drop)
+                read::<PoseLog>(p, FitKind::Pose, |r| read_f64_state::<6>(r).map(drop))
             }),
         ),
     ]
@@ -1063,12 +1108,8 @@ fn checkpoints_never_panic_and_refuse_damage_in_one_line() {
 /// second moment is refused: a resumed fit would otherwise run on garbage.
 #[test]
 fn checkpoints_with_non_finite_states_are_refused() {
-    use softvk::fit::checkpoint::{Checkpoint, FitKind};
-    use softvk::fit::mesh_fit::MeshFitState;
-    let template = Mesh::icosphere(0);
-    let n = 3 * template.vertex_count() + 3;
-    let dir = CaseDir::new("checkpoint-nan");
-    let path = dir.0.join("state.ckpt");
+    use softvk::fit::checkpoint::{Reader, Writer, read_adam, read_f64_state, write_f64_state};
+    let n = 3 * Mesh::icosphere(0).vertex_count() + 3;
     for (what, at, value) in [
         ("NaN parameter", 0, f32::NAN),
         ("infinite first moment", n + 1, f32::INFINITY),
@@ -1076,17 +1117,21 @@ fn checkpoints_with_non_finite_states_are_refused() {
     ] {
         let mut flat = vec![0.5f32; 3 * n];
         flat[at] = value;
-        let state = MeshFitState {
-            iteration: 0,
-            params: flat[..n].to_vec(),
-            adam_m: flat[n..2 * n].to_vec(),
-            adam_v: flat[2 * n..].to_vec(),
-            log: Vec::new(),
-            seconds: 0.0,
-        };
-        state.to_checkpoint(7).write(&path).unwrap();
-        let c = Checkpoint::read(&path, FitKind::Mesh, 7).unwrap();
-        let err = MeshFitState::from_checkpoint(&c, &template).unwrap_err();
+        let mut w = Writer::default();
+        for k in 0..3 {
+            w.f32s(&flat[k * n..(k + 1) * n]);
+        }
+        let err = read_adam(&mut Reader::new(&w.0), n, "the template").unwrap_err();
         assert!(err.to_string().contains("non-finite"), "{what}: {err}");
+        // The pose fit's f64 state, likewise.
+        let mut state = [[0.5f64; 6]; 3];
+        state[at / n][at % 6] = f64::from(value);
+        let mut w = Writer::default();
+        write_f64_state(&mut w, &state);
+        let err = read_f64_state::<6>(&mut Reader::new(&w.0)).unwrap_err();
+        assert!(
+            err.to_string().contains("non-finite"),
+            "{what} (f64): {err}"
+        );
     }
 }

@@ -688,4 +688,3 @@ pub struct CheckpointArgs {
     #[arg(long, value_name = "DIR")]
     pub resume: Option<PathBuf>,
 }
-

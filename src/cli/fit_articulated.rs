@@ -26,10 +26,10 @@ use serde_json::{Value, json};
 use softvk::fit::articulated::{
     ArticulatedFit, ArticulatedFitOptions, BlurSchedule, fit_articulated,
 };
-use softvk::fit::session::Progress;
 use softvk::fit::pose::{PoseTarget, Schedule};
 use softvk::fit::report;
 use softvk::fit::rig::Rig;
+use softvk::fit::session::Progress;
 use softvk::gpu::{Context, ContextOptions};
 use softvk::io;
 use softvk::raster::gpu::{Method, Renderer};

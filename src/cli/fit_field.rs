@@ -20,7 +20,7 @@ use softvk::field::voxel::visual_hull;
 use softvk::field::{Cube, FieldKind};
 use softvk::fit::AdamOptions;
 use softvk::fit::field_fit::{
-    self, DEFAULT_CUBE_MARGIN, FieldFitLog, FieldFitOptions, FieldFit, auto_cube,
+    self, DEFAULT_CUBE_MARGIN, FieldFit, FieldFitLog, FieldFitOptions, auto_cube,
     check_cameras_outside, fit_field, scaled_to_cube,
 };
 use softvk::fit::report::{self, Series};

@@ -20,8 +20,8 @@ use softvk::fit::AdamOptions;
 use softvk::fit::mesh_fit::{
     FitLog, MeshFit, MeshFitOptions, default_template, demo_target, fit_mesh, icosphere_template,
 };
-use softvk::fit::session::Progress;
 use softvk::fit::report::{self, GifWriter, Series};
+use softvk::fit::session::Progress;
 use softvk::gpu::{Context, ContextOptions};
 use softvk::io::{self, Silhouettes};
 use softvk::lighting::Lighting;

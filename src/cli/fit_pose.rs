@@ -32,8 +32,8 @@ use softvk::fit::pose::{
     Pose, PoseFit, PoseFitOptions, PoseTarget, Schedule, fit_pose, fit_pose_multistart,
     rotation_distance, screened_starts,
 };
-use softvk::fit::session::Progress;
 use softvk::fit::report;
+use softvk::fit::session::Progress;
 use softvk::gpu::{Context, ContextOptions};
 use softvk::mesh::Mesh;
 use softvk::raster::gpu::{Method, Renderer};
@@ -350,7 +350,10 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
     } else {
         let hooks = |p: &Progress<'_, '_, PoseFit<'_>>| {
             let l = p.row();
-            Ok(watch.update(l.iteration, format!("loss {:.5}  σ {:.0e}", l.loss, l.sigma)))
+            Ok(watch.update(
+                l.iteration,
+                format!("loss {:.5}  σ {:.0e}", l.loss, l.sigma),
+            ))
         };
         fit_pose(
             &ctx,

@@ -26,9 +26,8 @@ impl CheckpointArgs {
         }
         let plan = match &self.checkpoint {
             Some(dir) => {
-                std::fs::create_dir_all(dir).map_err(|e| {
-                    Error::Input(format!("cannot create {}: {e}", dir.display()))
-                })?;
+                std::fs::create_dir_all(dir)
+                    .map_err(|e| Error::Input(format!("cannot create {}: {e}", dir.display())))?;
                 Some(CheckpointPlan {
                     path: dir.join(file),
                     fingerprint,
@@ -73,15 +72,6 @@ impl Watch {
         self.bar.set_position(u64::from(position));
         self.bar.set_message(message);
         interrupt::requested().is_none()
-    }
-
-    /// A line above the bar (on standard error when it is hidden).
-    pub fn println(&self, line: String) {
-        if self.bar.is_hidden() {
-            eprintln!("{line}");
-        } else {
-            self.bar.println(line);
-        }
     }
 
     /// Clears the bar.

@@ -31,10 +31,10 @@ use super::adam::{Adam, AdamOptions};
 use super::blur::{BlurredMse, MAX_BLUR_STD};
 use super::checkpoint::{Fingerprint, FitKind, Reader, Writer, restore_adam, save_adam};
 use super::driver::{self, Fitter};
-use super::session::{LogRow, Session, Trainee};
 use super::pose::{PoseTarget, Schedule};
 use super::posed::{self, PoseModel, PosedFit, PosedView, Stages};
 use super::rig::{MAX_JOINTS, Rig, bone_of};
+use super::session::{LogRow, Session, Trainee};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::gate::IterationGate;
@@ -612,15 +612,11 @@ pub fn fit_articulated<'c>(
     let (mut stages, first_target) = Stages::new(&mut target, opts.sigma_gamma(0))?;
     let mut fitter = ArticulatedFitter::new(ctx, rig, camera, lighting, &first_target, init, opts)?;
     let every = opts.log_every;
-    let end = session.run(
-        &mut fitter,
-        (opts.iterations, every),
-        |fitter, it| {
-            let last = driver::to_next_log(it, every).min(opts.iterations);
-            stages.enter(&mut **fitter, opts.sigma_gamma(it - 1))?;
-            Ok(driver::to_stage_end(it, last, |i| opts.stage(i)))
-        },
-    )?;
+    let end = session.run(&mut fitter, (opts.iterations, every), |fitter, it| {
+        let last = driver::to_next_log(it, every).min(opts.iterations);
+        stages.enter(&mut **fitter, opts.sigma_gamma(it - 1))?;
+        Ok(driver::to_stage_end(it, last, |i| opts.stage(i)))
+    })?;
     let s = &opts.settings;
     stages.finish(&mut *fitter, (s.sigma, s.gamma))?;
     let (loss, image) = fitter.evaluate(s.sigma, s.gamma, 0.0)?;

@@ -298,17 +298,10 @@ pub fn save_adam(
     Ok(())
 }
 
-/// Reads what [`save_adam`] wrote and puts it back on the device, after checking that each
-/// array holds the `n` values of `params` (`what`: whose parameters, for the error) and that
-/// every value is finite.
-pub fn restore_adam(
-    ctx: &Context,
-    params: &Buffer,
-    adam: &Adam,
-    n: usize,
-    r: &mut Reader<'_>,
-    what: &str,
-) -> Result<()> {
+/// Reads what [`save_adam`] wrote, checking that each array holds `n` values (`what`: whose
+/// parameters, for the error) and that the state is finite ([`check_state`]): the parameters
+/// and the two moments.
+pub fn read_adam(r: &mut Reader<'_>, n: usize, what: &str) -> Result<[Vec<f32>; 3]> {
     let (p, m, v) = (r.f32s(n)?, r.f32s(n)?, r.f32s(n)?);
     if [&p, &m, &v].iter().any(|a| a.len() != n) {
         return Err(Error::Input(format!(
@@ -317,10 +310,45 @@ pub fn restore_adam(
         )));
     }
     check_state(&p, &m, &v)?;
+    Ok([p, m, v])
+}
+
+/// Reads what [`save_adam`] wrote ([`read_adam`]) and puts it back on the device.
+pub fn restore_adam(
+    ctx: &Context,
+    params: &Buffer,
+    adam: &Adam,
+    n: usize,
+    r: &mut Reader<'_>,
+    what: &str,
+) -> Result<()> {
+    let [p, m, v] = read_adam(r, n, what)?;
     let (dm, dv) = adam.moments();
     ctx.write_buffer(params, 0, &p)?;
     ctx.write_buffer(dm, 0, &m)?;
     ctx.write_buffer(dv, 0, &v)
+}
+
+/// Writes `N` f64 parameters and their two moments (an optimizer state kept in f64: the pose
+/// fit's).
+pub fn write_f64_state<const N: usize>(w: &mut Writer, state: &[[f64; N]; 3]) {
+    for a in state {
+        for &x in a {
+            w.f64(x);
+        }
+    }
+}
+
+/// Reads what [`write_f64_state`] wrote, checked by [`check_state`].
+pub fn read_f64_state<const N: usize>(r: &mut Reader<'_>) -> Result<[[f64; N]; 3]> {
+    let mut state = [[0.0; N]; 3];
+    for a in &mut state {
+        for x in a.iter_mut() {
+            *x = r.f64()?;
+        }
+    }
+    check_state(&state[0], &state[1], &state[2])?;
+    Ok(state)
 }
 
 /// Refuses an optimizer state with a non-finite parameter or moment, or a negative second

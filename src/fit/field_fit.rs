@@ -634,8 +634,8 @@ impl FieldFit {
 
 /// Fits a field to `targets` (silhouettes and their cameras) in `session` (its checkpoints
 /// carry [`FieldFit::fingerprint`]).
-pub fn fit_field<'c>(
-    ctx: &'c Context,
+pub fn fit_field(
+    ctx: &Context,
     targets: &Targets,
     opts: &FieldFitOptions,
     session: Session<'_, FieldFit>,
@@ -715,7 +715,13 @@ impl Trainee for FieldFit {
     }
 
     fn save_state(&self, ctx: &Context, w: &mut Writer) -> Result<()> {
-        save_adam(ctx, self.field.params(), &self.adam, self.field.param_count(), w)
+        save_adam(
+            ctx,
+            self.field.params(),
+            &self.adam,
+            self.field.param_count(),
+            w,
+        )
     }
 
     fn restore_state(&mut self, ctx: &Context, r: &mut Reader<'_>) -> Result<()> {

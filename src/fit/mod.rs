@@ -14,6 +14,10 @@
 //! of the position gradient, which the renderer's backward adds on the host, is zero there), and
 //! runs whole iterations on the GPU with no host round trip ([`crate::gpu::gate`]).
 //!
+//! - [`driver`] and [`session`]: the loop every fit runs on ([`driver::Fitter`]: iterations
+//!   per submission behind the binning's gate) and the session around it (log, hooks,
+//!   checkpoints in the one format of [`checkpoint`], resume, stopping rule). A fit is its
+//!   [`driver::Fit`] and its [`session::Trainee`]; see [`session`] for what a new one needs.
 //! - [`silhouette`]: SoftRas's `neg_iou_loss` on the alpha channel ([`SilhouetteLoss`]) and the
 //!   image MSE ([`ImageMse`]), with their dL/d(image) in the renderer's `d_image` layout.
 //! - [`laplacian`] and [`flatten`]: SoftRas's `LaplacianLoss` and `FlattenLoss`, driven on the

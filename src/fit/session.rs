@@ -143,7 +143,9 @@ impl<R: LogRow> Resume<R> {
                 path.display()
             )));
         }
-        let log = (0..n).map(|_| R::read(&mut r)).collect::<Result<Vec<R>>>()?;
+        let log = (0..n)
+            .map(|_| R::read(&mut r))
+            .collect::<Result<Vec<R>>>()?;
         if log.last().is_some_and(|l| l.iteration() > c.iteration) {
             return Err(Error::Input(format!(
                 "{}: checkpoint log past its iterations",
@@ -260,6 +262,14 @@ impl<'h, F: Trainee> Session<'h, F> {
     pub fn hooks(mut self, hooks: impl Hooks<F> + 'h) -> Self {
         self.hooks = Box::new(hooks);
         self
+    }
+
+    /// With hooks that see only the last row of each submission (`false` stops).
+    pub fn on_row(self, mut f: impl FnMut(&F::Row) -> bool + 'h) -> Self
+    where
+        F: 'h,
+    {
+        self.hooks(move |p: &Progress<'_, '_, F>| Ok(f(p.row())))
     }
 
     /// Checkpointing as `plan` says.

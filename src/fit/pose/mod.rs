@@ -53,11 +53,10 @@
 //! MSE and backward of the reference rasterizer, then the same chain); tests check it against
 //! central finite differences, and [`PoseProblem::evaluate`] and [`PoseFitter`] against it.
 
-
 use glam::{DMat3, DQuat, DVec3};
 
 use super::adam::AdamOptions;
-use super::checkpoint::{Fingerprint, FitKind, Reader, Writer, check_state};
+use super::checkpoint::{Fingerprint, FitKind, Reader, Writer, read_f64_state, write_f64_state};
 use super::driver;
 use super::posed::Stages;
 use super::session::{LogRow, Session, Trainee};
@@ -407,15 +406,11 @@ pub fn fit_pose<'c>(
     let (mut stages, first_target) = Stages::new(&mut target, opts.sigma_gamma(0))?;
     let mut fitter = PoseFitter::new(ctx, mesh, camera, lighting, &first_target, init, opts)?;
     let every = opts.log_every;
-    let end = session.run(
-        &mut fitter,
-        (opts.iterations, every),
-        |fitter, it| {
-            let last = driver::to_next_log(it, every).min(opts.iterations);
-            stages.enter(&mut **fitter, opts.sigma_gamma(it - 1))?;
-            Ok(driver::to_stage_end(it, last, |i| opts.sigma_gamma(i)))
-        },
-    )?;
+    let end = session.run(&mut fitter, (opts.iterations, every), |fitter, it| {
+        let last = driver::to_next_log(it, every).min(opts.iterations);
+        stages.enter(&mut **fitter, opts.sigma_gamma(it - 1))?;
+        Ok(driver::to_stage_end(it, last, |i| opts.sigma_gamma(i)))
+    })?;
     let s = &opts.settings;
     stages.finish(&mut *fitter, (s.sigma, s.gamma))?;
     let (loss, image) = fitter.evaluate(s.sigma, s.gamma)?;
@@ -484,24 +479,12 @@ impl Trainee for PoseFit<'_> {
     }
 
     fn save_state(&self, _ctx: &Context, w: &mut Writer) -> Result<()> {
-        for a in self.read_state()? {
-            for x in a {
-                w.f64(x);
-            }
-        }
+        write_f64_state(w, &self.read_state()?);
         Ok(())
     }
 
     fn restore_state(&mut self, _ctx: &Context, r: &mut Reader<'_>) -> Result<()> {
-        let mut six = || -> Result<[f64; 6]> {
-            let mut a = [0.0; 6];
-            for x in &mut a {
-                *x = r.f64()?;
-            }
-            Ok(a)
-        };
-        let (params, m, v) = (six()?, six()?, six()?);
-        check_state(&params, &m, &v)?;
+        let [params, m, v] = read_f64_state(r)?;
         self.write_state([&params, &m, &v])
     }
 }
