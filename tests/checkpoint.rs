@@ -166,7 +166,8 @@ fn a_mesh_fit_resumed_from_any_checkpoint_ends_bit_for_bit_as_the_uninterrupted_
     assert!(e.contains("parameters") || e.contains("at most"), "{e}");
 }
 
-/// A checkpoint of a mesh fit after iteration 2: a log row, then a state of `n` parameters.
+/// A checkpoint of a mesh fit after iteration 2: a log row, no validations, then a state of `n`
+/// parameters.
 fn mesh_checkpoint(fingerprint: u64, n: usize) -> Checkpoint {
     let mut w = Writer::default();
     w.u32(1);
@@ -180,6 +181,7 @@ fn mesh_checkpoint(fingerprint: u64, n: usize) -> Checkpoint {
         seconds: 1.0,
     }
     .write(&mut w);
+    w.u32(0); // no validations
     for value in [0.5, 0.25, 0.125] {
         w.f32s(&vec![value; n]);
     }

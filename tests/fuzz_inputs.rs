@@ -956,6 +956,7 @@ fn checkpoint_cases() -> Vec<(&'static str, Vec<u8>, CheckpointReader)> {
     let checkpoint = |kind, iteration, log: &dyn Fn(&mut Writer), state: &dyn Fn(&mut Writer)| {
         let mut w = Writer::default();
         log(&mut w);
+        w.u32(0); // no validations
         state(&mut w);
         let path = dir.0.join("seed.ckpt");
         Checkpoint {

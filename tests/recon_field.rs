@@ -196,7 +196,6 @@ fn reconstruction_is_the_twins_field_and_the_model_round_trips() {
         field: Some(opts.net.mlp),
         params: trainer.trained().read_params(&gpu).unwrap(),
         iteration: 30,
-        train: None,
     };
     let dir = common::TempDir::new("recon-field-model");
     let path = dir.path("field.npz");

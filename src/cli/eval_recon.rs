@@ -19,7 +19,7 @@ use softvk::recon::model::ReconModel;
 use softvk::{Error, Result};
 
 use super::output::AtomicFile;
-use super::recon::{AnyReconstructor, spread_views, upscale, view_settings};
+use softvk::recon::reconstruct::{AnyReconstructor, spread_views, upscale, view_settings};
 
 /// The flags of `softvk eval-recon`.
 #[derive(Args, Clone, Debug)]

@@ -13,34 +13,37 @@
 use std::path::{Path, PathBuf};
 
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
 use softvk::camera::Camera;
 use softvk::field::MlpLayout;
 use softvk::fit::AdamOptions;
-use softvk::fit::driver::{Fit, Fitter};
+use softvk::fit::checkpoint::FitKind;
+use softvk::fit::driver::{Fitter, to_next_log};
 use softvk::fit::report::{self, GifWriter, Series};
+use softvk::fit::session::{CheckpointPlan, Progress, Resume, Session, Trainee};
 use softvk::gpu::{Context, ContextOptions};
 use softvk::io::write_obj_colored;
 use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
 use softvk::probe::ProbeSettings;
 use softvk::raster::gpu::{Method, Renderer};
-use softvk::raster::settings::{ColorMode, RasterSettings};
-use softvk::recon::dataset::{self, ClassData, Dataset, Split};
-use softvk::recon::eval;
+use softvk::recon::dataset::{self, Dataset, Split};
 use softvk::recon::field::{
-    self, FieldNet, FieldReconTrainer, FieldReconTraining, FieldReconstructor, FieldTrainOptions,
+    self, FieldNet, FieldReconTrainer, FieldReconTraining, FieldTrainOptions,
 };
-use softvk::recon::model::{ReconModel, Reconstruction, Reconstructor, SETTINGS, TrainState};
+use softvk::recon::model::ReconModel;
+use softvk::recon::reconstruct::{
+    AnyReconstructor, spread_views, upscale, validation_iou, view_settings,
+};
+use softvk::recon::session::{self, TrainRow};
 use softvk::recon::train::{
-    self, LrStep, NetShape, Recipe, ReconTrainer, ReconTraining, TrainImages, TrainOptions,
-    TrainedParams,
+    LrStep, NetShape, Recipe, ReconTrainer, ReconTraining, TrainImages, TrainOptions, TrainedParams,
 };
 use softvk::{Error, Result};
 
 use super::args::{non_negative, positive};
 use super::interrupt;
 use super::output::AtomicFile;
+use super::session::Watch;
 
 /// `--channels`: three comma-separated positive widths.
 fn channels(s: &str) -> std::result::Result<[u32; 3], String> {
@@ -213,163 +216,11 @@ impl From<RecipeArg> for Recipe {
     }
 }
 
-/// `n` views spread evenly over the 24.
-pub(super) fn spread_views(n: u32) -> Vec<usize> {
-    let n = n.min(dataset::VIEWS as u32) as usize;
-    (0..n).map(|i| i * dataset::VIEWS / n).collect()
-}
-
-/// The train split as the trainer takes it (each class's images freed once copied: the
-/// default data are 1.2 GB).
-fn train_images(data: Dataset) -> TrainImages {
-    let mut images = Vec::with_capacity(data.classes.iter().map(|c| c.images.len()).sum());
-    let mut classes = Vec::new();
-    let mut start = 0u32;
-    for c in data.classes {
-        images.extend_from_slice(&c.images);
-        let end = start + c.count as u32;
-        classes.push((c.class_id, start..end));
-        start = end;
-    }
-    TrainImages {
-        images,
-        classes,
-        size: dataset::IMAGE_SIZE as u32,
-    }
-}
-
 fn report_dir(out: &Path) -> PathBuf {
     let stem = out
         .file_stem()
         .map_or_else(|| "model".into(), |s| s.to_string_lossy().into_owned());
     out.with_file_name(format!("{stem}-train"))
-}
-
-/// A trained model of either kind, ready to reconstruct.
-pub(super) enum AnyReconstructor {
-    /// The mesh decoder's.
-    Mesh(Box<Reconstructor>),
-    /// A conditioned field's.
-    Field(Box<FieldReconstructor>),
-}
-
-impl AnyReconstructor {
-    /// `model`'s reconstructor, for batches of up to `capacity` images.
-    pub(super) fn new(ctx: &Context, model: &ReconModel, capacity: u32) -> Result<Self> {
-        Ok(match model.field {
-            Some(_) => Self::Field(Box::new(FieldReconstructor::new(ctx, model, capacity)?)),
-            None => Self::Mesh(Box::new(Reconstructor::new(ctx, model, capacity)?)),
-        })
-    }
-
-    /// The 3D IoU of the reconstruction from each `(object, view)` input of `class`.
-    pub(super) fn ious(
-        &self,
-        ctx: &Context,
-        class: &ClassData,
-        inputs: &[(usize, usize)],
-        voxelizer: eval::Voxelizer,
-    ) -> Result<Vec<f64>> {
-        match self {
-            Self::Mesh(r) => {
-                Ok(eval::reconstruction_ious(ctx, r, class, inputs, &[voxelizer])?.remove(0))
-            }
-            Self::Field(r) => eval::field_reconstruction_ious(ctx, r, class, inputs),
-        }
-    }
-
-    /// The mesh of one image (`4 × H × W` bytes): the deformed template with its colours, or
-    /// the field's marching-cubes mesh in grey (`None` when φ never crosses 0.5).
-    pub(super) fn mesh(&self, ctx: &Context, image: &[u8]) -> Result<Option<Mesh>> {
-        match self {
-            Self::Mesh(r) => Ok(Some(colored_mesh(r.reconstruct(ctx, image)?.remove(0)))),
-            Self::Field(r) => {
-                let iso = r.isosurface(ctx, image, FIELD_MESH_RES)?;
-                if iso.is_empty() {
-                    return Ok(None);
-                }
-                let mut mesh = iso.to_mesh()?;
-                mesh.vertex_colors = Some(vec![[0.7; 3]; mesh.positions.len()]);
-                Ok(Some(mesh))
-            }
-        }
-    }
-
-    /// The IoU columns of this model over `inputs` of `class` (`[column][input]`): a mesh
-    /// model's once per voxelizer of `mesh_voxelizers`, a field's once.
-    pub(super) fn columns(
-        &self,
-        ctx: &Context,
-        class: &ClassData,
-        inputs: &[(usize, usize)],
-        mesh_voxelizers: &[eval::Voxelizer],
-    ) -> Result<Vec<Vec<f64>>> {
-        match self {
-            Self::Mesh(r) => eval::reconstruction_ious(ctx, r, class, inputs, mesh_voxelizers),
-            Self::Field(r) => Ok(vec![eval::field_reconstruction_ious(
-                ctx, r, class, inputs,
-            )?]),
-        }
-    }
-
-    /// `mesh` or `field`.
-    pub(super) fn kind(&self) -> &'static str {
-        match self {
-            Self::Mesh(_) => "mesh",
-            Self::Field(_) => "field",
-        }
-    }
-}
-
-/// Lattice of the marching cubes that mesh a conditioned field.
-const FIELD_MESH_RES: u32 = 64;
-
-/// The mean validation IoU of `model` over `views` of every val object.
-fn validate(ctx: &Context, model: &ReconModel, val: &Dataset, views: &[usize]) -> Result<f64> {
-    let recon = AnyReconstructor::new(ctx, model, 32)?;
-    let mut all = Vec::new();
-    for c in &val.classes {
-        let inputs: Vec<(usize, usize)> = (0..c.count)
-            .flat_map(|n| views.iter().map(move |&v| (n, v)))
-            .collect();
-        all.extend(recon.ious(ctx, c, &inputs, eval::Voxelizer::default())?);
-    }
-    Ok(all.iter().sum::<f64>() / all.len().max(1) as f64)
-}
-
-/// What the training loop needs of either trainer beside its iterations.
-trait Training: Fit {
-    /// The log row of the last iteration: iteration, L_sil, L_col, L_lap, L_flat, total.
-    fn log(&self, iteration: u32) -> Result<[f64; 6]>;
-    /// The parameters, their gradient and Adam's moments.
-    fn trained(&self) -> &TrainedParams;
-}
-
-impl Training for ReconTraining<'_> {
-    fn log(&self, iteration: u32) -> Result<[f64; 6]> {
-        let l = self.read_log(iteration)?;
-        Ok([
-            f64::from(iteration),
-            f64::from(l.silhouette),
-            f64::from(l.color),
-            f64::from(l.laplacian),
-            f64::from(l.flatten),
-            f64::from(l.total),
-        ])
-    }
-    fn trained(&self) -> &TrainedParams {
-        ReconTraining::trained(self)
-    }
-}
-
-impl Training for FieldReconTraining<'_> {
-    fn log(&self, iteration: u32) -> Result<[f64; 6]> {
-        let l = f64::from(self.read_log(iteration)?.silhouette);
-        Ok([f64::from(iteration), l, 0.0, 0.0, 0.0, l])
-    }
-    fn trained(&self) -> &TrainedParams {
-        FieldReconTraining::trained(self)
-    }
 }
 
 /// `softvk train-recon`.
@@ -389,10 +240,6 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
         at,
         factor: args.lr_decay,
     });
-    let step = [
-        lr_step.map_or(0.0, |s| f64::from(s.at)),
-        lr_step.map_or(1.0, |s| s.factor),
-    ];
     let mesh_opts = TrainOptions {
         net,
         recipe: args.recipe.into(),
@@ -431,45 +278,11 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
         seed: args.seed,
     };
     let field_layout = args.field.then_some(field_opts.net.mlp);
-    let (adam, seed, batch) = if args.field {
-        (field_opts.adam, field_opts.seed, field_opts.batch)
+    let settings = if args.field {
+        field_opts.settings()
     } else {
-        (mesh_opts.adam, mesh_opts.seed, mesh_opts.batch)
+        mesh_opts.settings()
     };
-    let specific = if args.field {
-        let p = &field_opts.probe;
-        [
-            f64::from(p.rays_per_view),
-            f64::from(p.anchors),
-            p.tau,
-            f64::from(p.tile_size),
-        ]
-    } else {
-        [
-            f64::from(mesh_opts.laplacian),
-            f64::from(mesh_opts.flatten),
-            f64::from(mesh_opts.color),
-            mesh_opts.sigma,
-        ]
-    };
-    let settings = [
-        seed as f64,
-        f64::from(batch),
-        adam.lr,
-        adam.betas.0,
-        adam.betas.1,
-        specific[0],
-        specific[1],
-        specific[2],
-        specific[3],
-        step[0],
-        step[1],
-        if args.field {
-            0.0
-        } else {
-            mesh_opts.recipe.code()
-        },
-    ];
     let per_iteration = if args.field {
         field_opts.batch
     } else {
@@ -481,61 +294,48 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
             .map_err(|_| Error::Input(format!("--images {images}: over 2^32 iterations")))?,
     };
     let dir = report_dir(&args.out);
-    let ckpt_path = dir.join("checkpoint.npz");
-    let resumed = if args.resume {
-        let m = ReconModel::load(&ckpt_path)?;
-        let Some(t) = &m.train else {
-            return Err(Error::Input(format!(
-                "{}: a final model, not a checkpoint",
-                ckpt_path.display()
-            )));
+    let ckpt_path = dir.join(CHECKPOINT_FILE);
+    let fingerprint = session::fingerprint(&net, field_layout);
+    let resume = if args.resume {
+        let kind = if args.field {
+            FitKind::ReconField
+        } else {
+            FitKind::ReconMesh
         };
-        if m.net != net
-            || m.field != field_layout
-            || !same_past(&t.settings, &settings, m.iteration)
-        {
-            return Err(Error::Input(format!(
-                "{}: written by a run with other options (network {:?}, field {:?}, settings \
-                 {:?})",
-                ckpt_path.display(),
-                m.net,
-                m.field,
-                t.settings
-            )));
-        }
-        Some(m)
+        let r = Resume::read(&ckpt_path, kind, fingerprint)?;
+        session::check_resume(&ckpt_path, &r, &net, field_layout, &settings)?;
+        Some(r)
     } else {
         None
     };
     let ctx = Context::new(&ContextOptions::from_env())?;
-    let images = train_images(data);
-    let resume_params = resumed.as_ref().map(|m| m.params.clone());
-    let resume_params = resume_params.as_deref();
+    let images = TrainImages::from_dataset(data);
     let run = TrainingRun {
         args,
         ctx: &ctx,
         val,
         dir,
         ckpt_path,
-        resumed,
-        model_of: |params: Vec<f32>, iteration: u32, train: Option<TrainState>| ReconModel {
+        fingerprint,
+        model_of: |params: Vec<f32>, iteration: u32| ReconModel {
             net,
             field: field_layout,
             params,
             iteration,
-            train,
         },
-        settings,
         iterations,
         per_iteration,
     };
     if args.field {
-        let trainer = FieldReconTrainer::new(&ctx, &images, &field_opts, resume_params)?;
-        run.go(trainer)
+        let trainer = FieldReconTrainer::new(&ctx, &images, &field_opts, None)?;
+        run.go(trainer, resume)
     } else {
-        run.go(ReconTrainer::new(&ctx, &images, &mesh_opts, resume_params)?)
+        run.go(ReconTrainer::new(&ctx, &images, &mesh_opts, None)?, resume)
     }
 }
+
+/// The checkpoint's file in the report folder.
+const CHECKPOINT_FILE: &str = "checkpoint.ckpt";
 
 /// A training run's inputs beside its trainer.
 struct TrainingRun<'a, M> {
@@ -544,105 +344,77 @@ struct TrainingRun<'a, M> {
     val: Option<Dataset>,
     dir: PathBuf,
     ckpt_path: PathBuf,
-    resumed: Option<ReconModel>,
-    /// The model of parameters after an iteration, with the training state of a checkpoint.
+    fingerprint: u64,
+    /// The model of parameters after an iteration.
     model_of: M,
-    settings: [f64; SETTINGS],
     /// The last iteration (`--iters`, or `--images` over `per_iteration`).
     iterations: u32,
     /// Input images per iteration.
     per_iteration: u32,
 }
 
-impl<M: Fn(Vec<f32>, u32, Option<TrainState>) -> ReconModel> TrainingRun<'_, M> {
-    /// Trains to the last iteration (validating and checkpointing every `--val-every`, stopping at an
-    /// interrupt with a checkpoint) and writes the model.
-    fn go<T: Training>(self, mut trainer: Fitter<'_, T>) -> Result<()> {
+impl<M: Fn(Vec<f32>, u32) -> ReconModel> TrainingRun<'_, M> {
+    /// Trains to the last iteration in a session (validating and checkpointing every
+    /// `--val-every`, stopping at an interrupt with a checkpoint) and writes the model.
+    fn go<'c, T>(self, mut trainer: Fitter<'c, T>, resume: Option<Resume<TrainRow>>) -> Result<()>
+    where
+        T: Trainee<Row = TrainRow> + Trained,
+    {
         let Self {
             args,
             ctx,
             val,
             dir,
             ckpt_path,
-            resumed,
+            fingerprint,
             model_of,
-            settings,
             iterations,
             per_iteration,
         } = self;
-        let (mut log, mut vals, start) = match &resumed {
-            Some(m) => {
-                let t = m.train.as_ref().expect("checked above");
-                trainer.trained().write_moments(ctx, &t.adam_m, &t.adam_v)?;
-                (t.log.clone(), t.val.clone(), m.iteration)
-            }
-            None => (Vec::new(), Vec::new(), 0),
-        };
+        let start = resume.as_ref().map_or(0, |r| r.iteration);
         std::fs::create_dir_all(&dir)
             .map_err(|e| Error::Input(format!("cannot create {}: {e}", dir.display())))?;
         let val_views = spread_views(args.val_views);
-        let bar = ProgressBar::new(u64::from(iterations));
-        bar.set_style(
-            ProgressStyle::with_template("{bar:30} {pos}/{len} it {elapsed} eta {eta} {msg}")
-                .expect("a valid template"),
-        );
-        bar.set_position(u64::from(start));
-        let save = |trainer: &T, it: u32, log: &[[f64; 6]], vals: &[[f64; 2]]| {
-            let (adam_m, adam_v) = trainer.trained().read_moments(ctx)?;
-            model_of(
-                trainer.trained().read_params(ctx)?,
-                it,
-                Some(TrainState {
-                    adam_m,
-                    adam_v,
-                    settings,
-                    log: log.to_vec(),
-                    val: vals.to_vec(),
-                }),
-            )
-            .save(&ckpt_path)
+        let watch = Watch::new(false, u64::from(iterations));
+        watch.bar().set_position(u64::from(start));
+        let model_now = |p: &Progress<'_, '_, T>| -> Result<ReconModel> {
+            Ok(model_of(p.fitter.trained().read_params(ctx)?, p.last))
         };
+        let hooks = |p: &Progress<'_, '_, T>| {
+            let row = p.row();
+            let go_on = watch.update(p.last, format!("L_sil {:.4}", row.silhouette));
+            let validated = p.validations.last().filter(|v| v.0 == p.last);
+            if let Some(&(_, iou)) = validated {
+                watch.println(format!(
+                    "iteration {}: L_sil {:.4}, validation 3D IoU {iou:.4}",
+                    p.last, row.silhouette
+                ));
+            }
+            let at_boundary = p.last % args.val_every == 0 || p.last == iterations;
+            if at_boundary || !go_on {
+                write_train_report(&dir, p.log, p.validations)?;
+            }
+            Ok(go_on)
+        };
+        let mut session = Session::new()
+            .resume(resume)
+            .checkpoint(Some(CheckpointPlan {
+                path: ckpt_path.clone(),
+                fingerprint,
+                every: args.val_every,
+            }))
+            .hooks(hooks);
+        if let Some(val) = &val {
+            session = session.validate(args.val_every, |p: &Progress<'_, '_, T>| {
+                validation_iou(ctx, &model_now(p)?, val, &val_views)
+            });
+        }
         // Submissions of `--log-every` iterations, ending at each validation.
-        let boundary = |it: u32| (it - 1) / args.val_every * args.val_every + args.val_every;
-        let done = trainer.drive(
-            start + 1,
-            iterations,
-            |_, it| Ok((it + args.log_every - 1).min(boundary(it))),
-            |trainer, first, last| {
-                let row = trainer.log(last)?;
-                if !row[5].is_finite() {
-                    return Err(Error::Input(format!(
-                        "training diverged at iteration {last} (loss {}); try a smaller --lr",
-                        row[5]
-                    )));
-                }
-                log.push(row);
-                bar.set_position(u64::from(last));
-                bar.set_message(format!("L_sil {:.4}", row[1]));
-                let interrupted = interrupt::requested().is_some();
-                let at_boundary = last == boundary(first) || last == iterations;
-                if at_boundary && let Some(val) = &val {
-                    let model = model_of(trainer.trained().read_params(ctx)?, last, None);
-                    let iou = validate(ctx, &model, val, &val_views)?;
-                    vals.push([f64::from(last), iou]);
-                    let line = format!(
-                        "iteration {last}: L_sil {:.4}, validation 3D IoU {iou:.4}",
-                        row[1]
-                    );
-                    if bar.is_hidden() {
-                        eprintln!("{line}");
-                    } else {
-                        bar.println(line);
-                    }
-                }
-                if at_boundary || interrupted {
-                    save(trainer, last, &log, &vals)?;
-                    write_train_report(&dir, &log, &vals)?;
-                }
-                Ok(!interrupted)
-            },
-        )?;
-        bar.finish_and_clear();
+        let end = session.run(&mut trainer, (iterations, 1), |_, it| {
+            Ok((it + args.log_every - 1).min(to_next_log(it, args.val_every)))
+        })?;
+        watch.finish();
+        let done = end.last;
         if done < iterations {
             eprintln!(
                 "softvk: stopped after iteration {done} of {}; `--resume` goes on from {}",
@@ -651,15 +423,15 @@ impl<M: Fn(Vec<f32>, u32, Option<TrainState>) -> ReconModel> TrainingRun<'_, M> 
             );
             return Ok(());
         }
-        model_of(trainer.trained().read_params(ctx)?, done, None).save(&args.out)?;
-        let last = log.last().copied().unwrap_or([0.0; 6]);
+        model_of(trainer.trained().read_params(ctx)?, done).save(&args.out)?;
+        let last = end.log.last().map_or(0.0, |r| r.silhouette);
         println!(
-            "{}trained {done} iterations ({} input images): L_sil {:.4}{}; model {}",
+            "{}trained {done} iterations ({} input images): L_sil {last:.4}{}; model {}",
             interrupt::resumed_note(start + 1, done),
             u64::from(done) * u64::from(per_iteration),
-            last[1],
-            vals.last()
-                .map(|v| format!(", validation 3D IoU {:.4}", v[1]))
+            end.validations
+                .last()
+                .map(|v| format!(", validation 3D IoU {:.4}", v.1))
                 .unwrap_or_default(),
             args.out.display()
         );
@@ -667,19 +439,34 @@ impl<M: Fn(Vec<f32>, u32, Option<TrainState>) -> ReconModel> TrainingRun<'_, M> 
     }
 }
 
-/// Whether a run with `now`'s settings would have run a checkpoint's first `done` iterations
-/// as `then`'s did: the same settings, except that the learning rate's step may differ where it
-/// has not acted yet (both steps later than `done`, or none).
-fn same_past(then: &[f64; SETTINGS], now: &[f64; SETTINGS], done: u32) -> bool {
-    let unacted = |s: &[f64; SETTINGS]| s[9] == 0.0 || s[9] > f64::from(done);
-    then[..9] == now[..9]
-        && then[11] == now[11]
-        && (then[9..11] == now[9..11] || (unacted(then) && unacted(now)))
+/// The trained parameters of either trainer.
+trait Trained {
+    fn trained(&self) -> &TrainedParams;
 }
 
-fn write_train_report(dir: &Path, log: &[[f64; 6]], vals: &[[f64; 2]]) -> Result<()> {
+impl Trained for ReconTraining<'_> {
+    fn trained(&self) -> &TrainedParams {
+        ReconTraining::trained(self)
+    }
+}
+
+impl Trained for FieldReconTraining<'_> {
+    fn trained(&self) -> &TrainedParams {
+        FieldReconTraining::trained(self)
+    }
+}
+
+fn write_train_report(dir: &Path, rows: &[TrainRow], vals: &[(u32, f64)]) -> Result<()> {
+    let log: Vec<[f64; 6]> = rows
+        .iter()
+        .map(|r| {
+            let it = f64::from(r.iteration);
+            [it, r.silhouette, r.color, r.laplacian, r.flatten, r.total]
+        })
+        .collect();
+    let vals: Vec<[f64; 2]> = vals.iter().map(|&(it, v)| [f64::from(it), v]).collect();
     let mut csv = String::from("iteration,silhouette,color,laplacian,flatten,total\n");
-    for r in log {
+    for r in &log {
         csv.push_str(&format!(
             "{},{},{},{},{},{}\n",
             r[0], r[1], r[2], r[3], r[4], r[5]
@@ -687,7 +474,7 @@ fn write_train_report(dir: &Path, log: &[[f64; 6]], vals: &[[f64; 2]]) -> Result
     }
     AtomicFile::create(&dir.join("loss.csv"))?.commit(csv.as_bytes())?;
     let mut csv = String::from("iteration,val_iou\n");
-    for r in vals {
+    for r in &vals {
         csv.push_str(&format!("{},{}\n", r[0], r[1]));
     }
     AtomicFile::create(&dir.join("val.csv"))?.commit(csv.as_bytes())?;
@@ -774,28 +561,6 @@ pub fn recon(args: &ReconArgs) -> Result<()> {
     Ok(())
 }
 
-/// The template with a reconstruction's positions and vertex colours.
-fn colored_mesh(r: Reconstruction) -> Mesh {
-    let mut mesh = train::template();
-    mesh.positions = r.positions;
-    mesh.vertex_colors = Some(r.colors);
-    mesh
-}
-
-/// Renders of reconstructions: their vertex colours under the default light (the colour
-/// generator samples the input's shaded colours; the light shows the shape even where it did
-/// not), crisp.
-pub(super) fn view_settings(size: u32) -> RasterSettings {
-    RasterSettings {
-        width: size,
-        height: size,
-        sigma: 1e-5,
-        gamma: 1e-4,
-        color_mode: ColorMode::Vertex,
-        ..RasterSettings::default()
-    }
-}
-
 /// The reconstruction shaded, turning (24 frames at the dataset's elevation and distance),
 /// beside the input.
 fn write_turntable(ctx: &Context, path: &Path, mesh: &Mesh, input: &[u8], size: u32) -> Result<()> {
@@ -829,16 +594,4 @@ fn write_turntable(ctx: &Context, path: &Path, mesh: &Mesh, input: &[u8], size: 
         gif.push(&frame(v))?;
     }
     gif.finish()
-}
-
-/// NMR-layout RGBA planes (`size²` each) as `big × big` pixels (nearest), values in [0, 1].
-pub(super) fn upscale(planes: &[u8], size: u32, big: u32) -> Vec<[f32; 4]> {
-    let px = (size * size) as usize;
-    (0..big * big)
-        .map(|i| {
-            let (x, y) = ((i % big) * size / big, (i / big) * size / big);
-            let j = (y * size + x) as usize;
-            [0, 1, 2, 3].map(|c| f32::from(planes[c * px + j]) / 255.0)
-        })
-        .collect()
 }

@@ -74,6 +74,15 @@ impl Watch {
         interrupt::requested().is_none()
     }
 
+    /// A line above the bar (on standard error when it is hidden).
+    pub fn println(&self, line: String) {
+        if self.bar.is_hidden() {
+            eprintln!("{line}");
+        } else {
+            self.bar.println(line);
+        }
+    }
+
     /// Clears the bar.
     pub fn finish(&self) {
         self.bar.finish_and_clear();

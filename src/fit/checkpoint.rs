@@ -1,7 +1,8 @@
 //! Checkpoints of a fit's complete state, on disk: what a session ([`super::session`]) writes
 //! for `--checkpoint DIR` and reads back for `--resume DIR`, so that a fit stopped at a
 //! checkpoint and resumed ends bit for bit as the uninterrupted fit (softvk is deterministic).
-//! Every fit has this one format; its payload is the session's log, then the fit's state
+//! Every fit and trainer has this one format; its payload is the session's log and
+//! validations, then the fit's state
 //! ([`super::session::Trainee::save_state`]).
 //!
 //! The file is a small explicit binary format, written by hand rather than through serde and a
@@ -11,9 +12,9 @@
 //!
 //! ```text
 //! b"SOFTVKCK", format u32, version (u32 length + UTF-8), kind u32, fingerprint u64,
-//! iteration u32, seconds f64, then the payload: the log (u32 rows, then each row) and the
-//! fit's state (arrays as u64 length + values), then a checksum u64 (FNV-1a of every byte
-//! before it)
+//! iteration u32, seconds f64, then the payload: the log (u32 rows, then each row), the
+//! validations (u32 count, then u32 iteration and f64 score each) and the fit's state (arrays
+//! as u64 length + values), then a checksum u64 (FNV-1a of every byte before it)
 //! ```
 //!
 //! The checksum refuses a damaged or truncated file before anything in it is believed; the
@@ -40,6 +41,10 @@ pub enum FitKind {
     Pose = 3,
     /// `fit-articulated`.
     Articulated = 4,
+    /// `train-recon`: the mesh network.
+    ReconMesh = 5,
+    /// `train-recon --field`: the conditioned field.
+    ReconField = 6,
 }
 
 impl FitKind {
@@ -49,6 +54,8 @@ impl FitKind {
             2 => "field fit",
             3 => "pose fit",
             4 => "articulated fit",
+            5 => "mesh network training",
+            6 => "conditioned field training",
             _ => "unknown fit",
         }
     }

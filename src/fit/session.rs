@@ -126,6 +126,8 @@ pub struct Resume<R> {
     pub seconds: f64,
     /// Their log.
     pub log: Vec<R>,
+    /// Their validations, `(iteration, score)`.
+    pub validations: Vec<(u32, f64)>,
     /// The fit's state ([`Trainee::save_state`]'s bytes).
     pub state: Vec<u8>,
 }
@@ -146,7 +148,19 @@ impl<R: LogRow> Resume<R> {
         let log = (0..n)
             .map(|_| R::read(&mut r))
             .collect::<Result<Vec<R>>>()?;
-        if log.last().is_some_and(|l| l.iteration() > c.iteration) {
+        let n = r.u32()?;
+        if n > c.iteration {
+            return Err(Error::Input(format!(
+                "{}: checkpoint has more validations than iterations",
+                path.display()
+            )));
+        }
+        let validations = (0..n)
+            .map(|_| Ok((r.u32()?, r.f64()?)))
+            .collect::<Result<Vec<_>>>()?;
+        let past = |it: u32| it > c.iteration;
+        if log.last().is_some_and(|l| past(l.iteration())) || validations.iter().any(|v| past(v.0))
+        {
             return Err(Error::Input(format!(
                 "{}: checkpoint log past its iterations",
                 path.display()
@@ -156,6 +170,7 @@ impl<R: LogRow> Resume<R> {
             iteration: c.iteration,
             seconds: c.seconds,
             log,
+            validations,
             state: r.rest().to_vec(),
         })
     }
@@ -173,6 +188,9 @@ pub struct Progress<'a, 'c, F: Trainee> {
     pub last: u32,
     /// The last iteration asked for.
     pub iterations: u32,
+    /// The validations so far, `(iteration, score)` ([`Session::validate`]); the last is this
+    /// submission's when it ended at a validation boundary.
+    pub validations: &'a [(u32, f64)],
 }
 
 impl<F: Trainee> Progress<'_, '_, F> {
@@ -217,6 +235,8 @@ pub enum Stopped {
 pub struct SessionEnd<R> {
     /// The whole log (a resumed session's earlier rows first).
     pub log: Vec<R>,
+    /// The validations, `(iteration, score)` (those of a resumed session first).
+    pub validations: Vec<(u32, f64)>,
     /// The first iteration this run ran (after a resume, the checkpoint's + 1).
     pub first: u32,
     /// The last iteration that ran.
@@ -239,7 +259,11 @@ pub struct Session<'h, F: Trainee> {
     /// The stopping rule, if any.
     pub stop: Option<StopRule>,
     hooks: Box<dyn Hooks<F> + 'h>,
+    validation: Option<(u32, Validator<'h, F>)>,
 }
+
+/// What scores a fit at validation boundaries ([`Session::validate`]).
+type Validator<'h, F> = Box<dyn FnMut(&Progress<'_, '_, F>) -> Result<f64> + 'h>;
 
 impl<F: Trainee> Default for Session<'_, F> {
     fn default() -> Self {
@@ -255,6 +279,7 @@ impl<'h, F: Trainee> Session<'h, F> {
             resume: None,
             stop: None,
             hooks: Box::new(NoHooks),
+            validation: None,
         }
     }
 
@@ -270,6 +295,18 @@ impl<'h, F: Trainee> Session<'h, F> {
         F: 'h,
     {
         self.hooks(move |p: &Progress<'_, '_, F>| Ok(f(p.row())))
+    }
+
+    /// Validation every `every` iterations and after the last: submissions end there, and
+    /// `score` (given the fit after that iteration) is logged beside the rows, seen by the
+    /// hooks, and carried by checkpoints.
+    pub fn validate(
+        mut self,
+        every: u32,
+        score: impl FnMut(&Progress<'_, '_, F>) -> Result<f64> + 'h,
+    ) -> Self {
+        self.validation = Some((every.max(1), Box::new(score)));
+        self
     }
 
     /// Checkpointing as `plan` says.
@@ -311,6 +348,7 @@ impl<'h, F: Trainee> Session<'h, F> {
             resume,
             stop,
             mut hooks,
+            mut validation,
         } = self;
         if iterations == 0 || log_every == 0 {
             return Err(Error::Input(format!(
@@ -319,7 +357,7 @@ impl<'h, F: Trainee> Session<'h, F> {
             )));
         }
         let ctx = fitter.ctx();
-        let (mut log, first, earlier) = match resume {
+        let (mut log, mut validations, first, earlier) = match resume {
             Some(resume) => {
                 if resume.iteration > iterations {
                     return Err(Error::Input(format!(
@@ -334,10 +372,16 @@ impl<'h, F: Trainee> Session<'h, F> {
                         "checkpoint has bytes after the fit's state".into(),
                     ));
                 }
-                (resume.log, resume.iteration + 1, resume.seconds)
+                (
+                    resume.log,
+                    resume.validations,
+                    resume.iteration + 1,
+                    resume.seconds,
+                )
             }
-            None => (Vec::new(), 1, 0.0),
+            None => (Vec::new(), Vec::new(), 1, 0.0),
         };
+        let validate_every = validation.as_ref().map(|v| v.0);
         let checkpoint_every = checkpoint
             .as_ref()
             .map(|c| c.every.max(1).div_ceil(log_every) * log_every);
@@ -347,18 +391,35 @@ impl<'h, F: Trainee> Session<'h, F> {
         let last = fitter.drive(
             first,
             iterations,
-            |fitter, it| plan(fitter, it),
+            |fitter, it| {
+                let end = plan(fitter, it)?;
+                Ok(validate_every.map_or(end, |every| end.min(driver::to_next_log(it, every))))
+            },
             |fitter, a, b| {
                 let logging = Instant::now();
                 let seconds = earlier + start.elapsed().as_secs_f64();
                 let entries = fitter.last_entries();
                 log.extend(fitter.rows(ctx, a, b, entries, seconds)?);
+                if let Some((every, score)) = &mut validation
+                    && (b % *every == 0 || b == iterations)
+                {
+                    let progress = Progress {
+                        fitter,
+                        log: &log,
+                        first: a,
+                        last: b,
+                        iterations,
+                        validations: &validations,
+                    };
+                    validations.push((b, score(&progress)?));
+                }
                 let progress = Progress {
                     fitter,
                     log: &log,
                     first: a,
                     last: b,
                     iterations,
+                    validations: &validations,
                 };
                 let mut go_on = hooks.after(&progress)?;
                 if !go_on {
@@ -370,7 +431,7 @@ impl<'h, F: Trainee> Session<'h, F> {
                 if let (Some(plan), Some(every)) = (&checkpoint, checkpoint_every)
                     && (!go_on || b % every == 0 || b == iterations)
                 {
-                    write_checkpoint(fitter, plan, b, seconds, &log)?;
+                    write_checkpoint(fitter, plan, b, seconds, &log, &validations)?;
                 }
                 logging_seconds += logging.elapsed().as_secs_f64();
                 Ok(go_on)
@@ -378,6 +439,7 @@ impl<'h, F: Trainee> Session<'h, F> {
         )?;
         Ok(SessionEnd {
             log,
+            validations,
             first,
             last,
             seconds: earlier + start.elapsed().as_secs_f64(),
@@ -387,18 +449,25 @@ impl<'h, F: Trainee> Session<'h, F> {
     }
 }
 
-/// Writes the checkpoint of `fitter` after `iteration`: the log, then the fit's state.
+/// Writes the checkpoint of `fitter` after `iteration`: the log, the validations, then the
+/// fit's state.
 fn write_checkpoint<F: Trainee>(
     fitter: &Fitter<'_, F>,
     plan: &CheckpointPlan,
     iteration: u32,
     seconds: f64,
     log: &[F::Row],
+    validations: &[(u32, f64)],
 ) -> Result<()> {
     let mut w = Writer::default();
     w.u32(log.len() as u32);
     for row in log {
         row.write(&mut w);
+    }
+    w.u32(validations.len() as u32);
+    for &(it, score) in validations {
+        w.u32(it);
+        w.f64(score);
     }
     fitter.save_state(fitter.ctx(), &mut w)?;
     Checkpoint {

@@ -13,7 +13,11 @@
 //! - [`train`]: the network, SoftRas's losses and the training loop on the GPU.
 //! - [`field`]: the same encoder conditioning a shared occupancy MLP instead,
 //!   trained by sphere probing against each object's silhouettes, and reconstruction with it.
+//! - [`session`]: both trainers in a fit session (their log row, their checkpointed state,
+//!   what a resumed run must match).
 //! - [`model`]: the model file (mesh or field) and reconstruction with it.
+//! - [`reconstruct`]: reconstruction with a model of either kind, the validation score, and
+//!   what training, evaluation and `softvk recon` share.
 //! - [`eval`]: 3D IoU against the voxels, and the retrieval and mean-shape baselines.
 
 pub mod batch;
@@ -24,6 +28,8 @@ pub mod eval;
 pub mod field;
 pub mod model;
 pub mod npz;
+pub mod reconstruct;
+pub mod session;
 pub mod shapes;
 pub mod train;
 

@@ -9,13 +9,9 @@
 //! | `field` | int32 (3) | a conditioned-field model only ([`super::field`]): the MLP's hidden layers, width, frequencies |
 //! | `params` | float32 (P) | the network's parameters, [`crate::nn::Sequential`]'s layout (a field model: then the MLP's) |
 //! | `iteration` | int32 (1) | iterations trained |
-//! | `adam_m`, `adam_v` | float32 (P) | Adam's moments (a checkpoint; absent from a final model) |
-//! | `train` | float64 (12) | [`TrainState::settings`] (a checkpoint) |
-//! | `log` | float64 (R, 6) | iteration, L_sil, L_col, L_lap, L_flat, total (a checkpoint) |
-//! | `val` | float64 (S, 2) | iteration, validation 3D IoU (a checkpoint) |
 //!
-//! A checkpoint is a model that also carries what resuming needs; [`ReconModel::load`] reads
-//! either and checks every shape.
+//! [`ReconModel::load`] checks every shape. A training run's checkpoints are not models: they
+//! are the one checkpoint format of every fit and trainer ([`super::session`]).
 
 use std::ops::Range;
 use std::path::Path;
@@ -35,26 +31,8 @@ use crate::nn::{Layer, Sequential};
 /// name the recipe.
 pub const FORMAT: i32 = 3;
 
-/// The length of [`TrainState::settings`].
+/// The length of a training run's settings ([`super::train::TrainOptions::settings`]).
 pub const SETTINGS: usize = 12;
-
-/// What resuming a run needs besides the parameters.
-#[derive(Clone, Debug, PartialEq)]
-pub struct TrainState {
-    /// Adam's first moments.
-    pub adam_m: Vec<f32>,
-    /// Adam's second moments.
-    pub adam_v: Vec<f32>,
-    /// `[seed, batch, lr, β1, β2, λ_lap, λ_flat, λ_col, σ, lr step's iteration (0: none),
-    /// lr step's factor, recipe]` of the run, checked on resume; a field model's hold rays per
-    /// view, anchors, τ and the tile size where the mesh's hold λ_lap, λ_flat, λ_col and σ, and
-    /// recipe 0; a mesh model's recipe is [`super::train::Recipe::code`].
-    pub settings: [f64; SETTINGS],
-    /// The loss log so far: `[iteration, L_sil, L_col, L_lap, L_flat, total]` per row.
-    pub log: Vec<[f64; 6]>,
-    /// The validation IoUs so far: `[iteration, mean 3D IoU]` per row.
-    pub val: Vec<[f64; 2]>,
-}
 
 /// The shape of a conditioned-field network: the encoder ([`NetShape`], whose head predicts the
 /// codes) and the occupancy MLP.
@@ -155,8 +133,6 @@ pub struct ReconModel {
     pub params: Vec<f32>,
     /// Iterations trained.
     pub iteration: u32,
-    /// Present in a checkpoint.
-    pub train: Option<TrainState>,
 }
 
 impl ReconModel {
@@ -198,34 +174,12 @@ impl ReconModel {
                 )?,
             ));
         }
-        if let Some(t) = &self.train {
-            arrays.push(("adam_m", f32s(&t.adam_m)?));
-            arrays.push(("adam_v", f32s(&t.adam_v)?));
-            arrays.push((
-                "train",
-                NpyArray::new(vec![SETTINGS], NpyData::F64(t.settings.to_vec()))?,
-            ));
-            arrays.push((
-                "log",
-                NpyArray::new(
-                    vec![t.log.len(), 6],
-                    NpyData::F64(t.log.iter().flatten().copied().collect()),
-                )?,
-            ));
-            arrays.push((
-                "val",
-                NpyArray::new(
-                    vec![t.val.len(), 2],
-                    NpyData::F64(t.val.iter().flatten().copied().collect()),
-                )?,
-            ));
-        }
         let refs: Vec<(&str, &NpyArray)> = arrays.iter().map(|(k, a)| (*k, a)).collect();
         let bytes = npz_bytes(&refs, false)?;
         AtomicFile::create(path)?.commit(&bytes)
     }
 
-    /// Reads a model or a checkpoint, checking the format, the shapes and the parameter count.
+    /// Reads a model, checking the format, the shapes and the parameter count.
     pub fn load(path: &Path) -> Result<ReconModel> {
         let bad = |what: String| Error::Input(format!("{}: {what}", path.display()));
         let mut npz = Npz::open(path)?;
@@ -300,52 +254,11 @@ impl ReconModel {
             [i] if *i >= 0 => *i as u32,
             _ => return Err(bad(format!("iteration {iteration:?}"))),
         };
-        let train = if npz.names().contains(&"adam_m") {
-            let adam_m = floats(npz.array("adam_m")?, "adam_m")?;
-            let adam_v = floats(npz.array("adam_v")?, "adam_v")?;
-            let settings = match npz.array("train")?.data {
-                NpyData::F64(v) if v.len() == SETTINGS => {
-                    let mut a = [0.0; SETTINGS];
-                    a.copy_from_slice(&v);
-                    a
-                }
-                _ => return Err(bad(format!("`train` is not {SETTINGS} float64"))),
-            };
-            if adam_m.len() != params.len() || adam_v.len() != params.len() {
-                return Err(bad("Adam's moments do not match the parameters".into()));
-            }
-            let rows = |a: NpyArray, name: &str, width: usize| -> Result<Vec<Vec<f64>>> {
-                match (&a.shape[..], a.data) {
-                    ([_, w], NpyData::F64(v)) if *w == width => {
-                        Ok(v.chunks(width).map(<[f64]>::to_vec).collect())
-                    }
-                    _ => Err(bad(format!("`{name}` is not float64 rows of {width}"))),
-                }
-            };
-            let log = rows(npz.array("log")?, "log", 6)?
-                .into_iter()
-                .map(|r| [r[0], r[1], r[2], r[3], r[4], r[5]])
-                .collect();
-            let val = rows(npz.array("val")?, "val", 2)?
-                .into_iter()
-                .map(|r| [r[0], r[1]])
-                .collect();
-            Some(TrainState {
-                adam_m,
-                adam_v,
-                settings,
-                log,
-                val,
-            })
-        } else {
-            None
-        };
         Ok(ReconModel {
             net: shape,
             field,
             params,
             iteration,
-            train,
         })
     }
 }

@@ -58,7 +58,7 @@ use crate::rng::SplitMix64;
 use super::batch::{BatchBuffers, BatchGather, BatchShape};
 use super::decode::{MeshDecoder, view_rotation};
 
-use super::dataset::view_camera;
+use super::dataset::{self, Dataset, view_camera};
 
 /// Views per object in the NMR data.
 pub const VIEWS: u32 = super::dataset::VIEWS as u32;
@@ -313,6 +313,25 @@ pub struct TrainImages {
 }
 
 impl TrainImages {
+    /// The train split as the trainer takes it (each class's images freed once copied: the
+    /// default data are 1.2 GB).
+    pub fn from_dataset(data: Dataset) -> TrainImages {
+        let mut images = Vec::with_capacity(data.classes.iter().map(|c| c.images.len()).sum());
+        let mut classes = Vec::new();
+        let mut start = 0u32;
+        for c in data.classes {
+            images.extend_from_slice(&c.images);
+            let end = start + c.count as u32;
+            classes.push((c.class_id, start..end));
+            start = end;
+        }
+        TrainImages {
+            images,
+            classes,
+            size: dataset::IMAGE_SIZE as u32,
+        }
+    }
+
     /// Objects in all classes.
     pub fn objects(&self) -> u32 {
         self.classes.iter().map(|c| c.1.end).max().unwrap_or(0)
@@ -1047,6 +1066,11 @@ impl ReconTraining<'_> {
     /// The parameters, their gradient and Adam's moments.
     pub fn trained(&self) -> &TrainedParams {
         &self.trained
+    }
+
+    /// The options.
+    pub fn options(&self) -> &TrainOptions {
+        &self.opts
     }
 
     /// The network.
