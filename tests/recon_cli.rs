@@ -79,14 +79,16 @@ fn train_twice_resume_evaluate_and_reconstruct() {
     assert!(bytes(&a) == bytes(&c), "a resumed run differs");
     // Its log is the uninterrupted run's: the checkpoint's rows, then the rest's (a run that
     // started again from 1 would log iterations 2 twice).
-    let log_of = |m: &Path| {
+    let report_of = |m: &Path, file: &str| {
         let dir = m.with_file_name(format!(
             "{}-train",
             m.file_stem().unwrap().to_str().unwrap()
         ));
-        std::fs::read_to_string(dir.join("loss.csv")).unwrap()
+        std::fs::read_to_string(dir.join(file)).unwrap()
     };
-    assert_eq!(log_of(&c), log_of(&a));
+    assert_eq!(report_of(&c, "loss.csv"), report_of(&a, "loss.csv"));
+    // And its validations: the checkpoint's (at 2), then the rest's (at 4).
+    assert_eq!(report_of(&c, "val.csv"), report_of(&a, "val.csv"));
     let report = dir.path("a-train");
     let log = std::fs::read_to_string(report.join("loss.csv")).unwrap();
     assert_eq!(

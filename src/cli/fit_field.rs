@@ -14,9 +14,9 @@ use std::path::{Path, PathBuf};
 
 use clap::{Args, ValueEnum};
 use softvk::camera::{Camera, Projection};
-use softvk::field::mcubes::{self, Isosurface, MarchingCubes};
-use softvk::field::preview::{PreviewOptions, render_preview};
-use softvk::field::voxel::visual_hull;
+use softvk::field::mcubes::MarchingCubes;
+use softvk::field::preview::{PreviewOptions, render_preview, surfaces_side_by_side};
+use softvk::field::voxel::visual_hull_surface;
 use softvk::field::{Cube, FieldKind};
 use softvk::fit::AdamOptions;
 use softvk::fit::field_fit::{
@@ -26,10 +26,7 @@ use softvk::fit::field_fit::{
 use softvk::fit::report::{self, Series};
 use softvk::gpu::{Context, ContextOptions};
 use softvk::io;
-use softvk::lighting::Lighting;
 use softvk::probe::{Aggregate, ProbeSettings, Targets};
-use softvk::raster::gpu::{Method, Renderer};
-use softvk::raster::settings::RasterSettings;
 use softvk::{Error, Result};
 
 use super::args::{CheckpointArgs, finite, non_negative, positive, viewing_angle};
@@ -406,63 +403,6 @@ fn default_report(out: &Path) -> PathBuf {
     out.with_file_name(format!("{stem}-report"))
 }
 
-/// The surface of the visual hull of `sil` seen from `cams`, on the marching-cubes lattice of
-/// `res³` nodes over `cube`: the hull is sampled at the voxel centres of a cube grown by
-/// `res / (res − 1)`, which are exactly that lattice's nodes.
-fn visual_hull_surface(
-    sil: &io::Silhouettes,
-    cams: &[Camera],
-    cube: &Cube,
-    res: u32,
-) -> Result<Isosurface> {
-    let grown = Cube::new(cube.center, cube.half * f64::from(res) / f64::from(res - 1))?;
-    let hull = visual_hull(sil, cams, &grown, res)?;
-    let phi: Vec<f64> = (0..res)
-        .flat_map(|z| (0..res).flat_map(move |y| (0..res).map(move |x| [x, y, z])))
-        .map(|q| if hull.get(q) { 1.0 } else { 0.0 })
-        .collect();
-    mcubes::cpu::extract(&phi, res, cube)
-}
-
-/// Surfaces rendered side by side (`size`² each, lit white, SoftRas's sharp σ) under their
-/// names; an empty surface leaves its panel black.
-fn compare_sheet(
-    ctx: &Context,
-    surfaces: &[(&str, &Isosurface)],
-    camera: &Camera,
-    size: u32,
-) -> Result<image::RgbaImage> {
-    let renderer = Renderer::new(ctx)?;
-    let settings = RasterSettings {
-        width: size,
-        height: size,
-        ..RasterSettings::default()
-    };
-    let images = surfaces
-        .iter()
-        .map(|(_, iso)| {
-            if iso.is_empty() {
-                return Ok(vec![[0.0; 4]; (size * size) as usize]);
-            }
-            let frames = renderer.render_views(
-                ctx,
-                &iso.to_mesh()?,
-                std::slice::from_ref(camera),
-                &Lighting::default(),
-                &settings,
-                Method::default(),
-            )?;
-            Ok(frames.images)
-        })
-        .collect::<Result<Vec<_>>>()?;
-    let named: Vec<(&str, &[[f32; 4]])> = surfaces
-        .iter()
-        .zip(&images)
-        .map(|((name, _), img)| (*name, img.as_slice()))
-        .collect();
-    Ok(report::side_by_side(&named, size, size))
-}
-
 /// The checkpoint's file in `--checkpoint DIR` / `--resume DIR`.
 pub const CHECKPOINT_FILE: &str = "field-fit.ckpt";
 
@@ -541,7 +481,7 @@ pub fn run(args: &FitFieldArgs) -> Result<()> {
     // The fitted surface beside the silhouettes' visual hull, both shaded by softvk's rasterizer
     // from the preview's camera: what the fit rounded off or carved beyond the hull.
     let hull = visual_hull_surface(&sil, &cams, result.field.cube(), args.mc_res)?;
-    let compare = compare_sheet(
+    let compare = surfaces_side_by_side(
         &ctx,
         &[("visual hull", &hull), ("fitted", &iso)],
         &preview_cam,

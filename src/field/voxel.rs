@@ -527,6 +527,24 @@ pub fn visual_hull(
     }))
 }
 
+/// The surface of the visual hull of `sil` seen from `cams`, on the marching-cubes lattice of
+/// `res³` nodes over `cube`: the hull is sampled at the voxel centres of a cube grown by
+/// `res / (res − 1)`, which are exactly that lattice's nodes.
+pub fn visual_hull_surface(
+    sil: &Silhouettes,
+    cams: &[Camera],
+    cube: &Cube,
+    res: u32,
+) -> Result<super::mcubes::Isosurface> {
+    let grown = Cube::new(cube.center, cube.half * f64::from(res) / f64::from(res - 1))?;
+    let hull = visual_hull(sil, cams, &grown, res)?;
+    let phi: Vec<f64> = (0..res)
+        .flat_map(|z| (0..res).flat_map(move |y| (0..res).map(move |x| [x, y, z])))
+        .map(|q| if hull.get(q) { 1.0 } else { 0.0 })
+        .collect();
+    super::mcubes::cpu::extract(&phi, res, cube)
+}
+
 /// 3D IoU `|A ∩ B| / |A ∪ B|` of two occupancies of the same grid (1 when both are empty).
 pub fn iou(a: &Occupancy, b: &Occupancy) -> Result<f64> {
     if a.res != b.res || a.cube != b.cube {
