@@ -31,7 +31,7 @@ use glam::{DQuat, DVec3};
 use rand::{RngExt, SeedableRng};
 use softvk::camera::Camera;
 use softvk::fit::pose::{
-    Pose, PoseFitOptions, PoseTarget, Schedule, fit_pose_multistart, rotation_distance,
+    Pose, PoseFitOptions, PoseTarget, Refine, Schedule, fit_pose_multistart, rotation_distance,
     screened_starts,
 };
 use softvk::gpu::{Context, ContextOptions};
@@ -61,7 +61,15 @@ const HELP: &str = "pose_study [--trials N] [--size N] [--iters N] [--texture-re
   [--min-angle DEG] [--max-angle DEG] [--success DEG] [--starts K] [--candidates N] [--modes sharp,schedule[@S/G],rendered[@S/G]]
   [--sigma-start S]
   [--gamma-start G] [--stages N] [--sigma S] [--gamma G] [--lr LR] [--lr-translation LR]
-  [--lr-final F] [--tile N] [--verbose]";
+  [--lr-final F] [--tile N] [--refine N --window W --improvement X | --no-refine] [--verbose]";
+
+/// The refinement `--refine`, `--window` and `--improvement` start from when the defaults
+/// have none.
+const REFINE: Refine = Refine {
+    iterations: 220,
+    window: 20,
+    min_improvement: 1e-3,
+};
 
 fn parse() -> Args {
     let defaults = PoseFitOptions::default();
@@ -115,6 +123,10 @@ fn parse() -> Args {
             "--lr-translation" => a.opts.lr_translation = num(value()),
             "--lr-final" => a.opts.lr_final = num(value()),
             "--tile" => a.opts.tile = num(value()) as u32,
+            "--refine" => a.opts.refine.get_or_insert(REFINE).iterations = num(value()) as u32,
+            "--window" => a.opts.refine.get_or_insert(REFINE).window = num(value()) as u32,
+            "--improvement" => a.opts.refine.get_or_insert(REFINE).min_improvement = num(value()),
+            "--no-refine" => a.opts.refine = None,
             "--verbose" => a.verbose = true,
             "--help" | "-h" => {
                 println!("{HELP}");
@@ -234,7 +246,8 @@ fn main() {
         ctx.info().name,
         args.starts
     );
-    println!("trial,mode,init_deg,final_deg,translation_err,loss,seconds,best_start");
+    println!("refinement after the schedule: {:?}", args.opts.refine);
+    println!("trial,mode,init_deg,final_deg,translation_err,loss,seconds,best_start,iterations");
     let total = Instant::now();
     let mut summary = Vec::new();
     let cpu_start = cpu_seconds();
@@ -306,23 +319,26 @@ fn main() {
             let seconds_all: f64 = multi.starts.iter().map(|s| s.seconds).sum();
             let err = rotation_distance(result.pose.rotation, target_pose.rotation).to_degrees();
             let terr = (result.pose.translation - target_pose.translation).length();
+            let its: u64 = multi.starts.iter().map(|s| u64::from(s.iterations)).sum();
             println!(
-                "{trial},{mode},{init_deg:.2},{err:.3},{terr:.4},{:.6},{seconds_all:.2},{}",
+                "{trial},{mode},{init_deg:.2},{err:.3},{terr:.4},{:.6},{seconds_all:.2},{},{its}",
                 result.loss, multi.best_start
             );
             errors.push(err);
             seconds += seconds_all;
-            iterations += u64::from(result.iterations) * multi.starts.len() as u64;
+            iterations += its;
         }
         ctx.check_validation().expect("no validation messages");
         let hits = errors.iter().filter(|&&e| e < args.success).count();
         summary.push(format!(
-            "{mode:>8}: {hits}/{} within {}° ({:.0}%), median error {:.2}°, {:.1} s wall, \
-             {:.1} ms per iteration, {:.0} s CPU (process, all threads)",
+            "{mode:>8}: {hits}/{} within {}° ({:.0}%), median error {:.2}°, worst {:.2}°, {} \
+             iterations, {:.1} s wall, {:.1} ms per iteration, {:.0} s CPU (process, all threads)",
             errors.len(),
             args.success,
             100.0 * hits as f64 / errors.len().max(1) as f64,
             median(&errors),
+            errors.iter().copied().fold(0.0, f64::max),
+            iterations,
             seconds,
             1e3 * seconds / iterations.max(1) as f64,
             cpu_seconds() - mode_cpu

@@ -37,7 +37,7 @@ use softvk::raster::settings::RasterSettings;
 use softvk::{Error, Result};
 
 use super::args::{CheckpointArgs, RasterArgs, ViewArgs, non_negative, positive};
-use super::fit_pose::load_target;
+use super::output::load_target;
 use super::output::{AtomicFile, ImageFormat, encode_sheet_png};
 use super::session::Watch;
 

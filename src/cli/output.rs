@@ -90,6 +90,32 @@ fn encode_png(
 
 pub use softvk::atomic_file::AtomicFile;
 
+/// A fit's target image (`fit-pose`, `fit-articulated`): RGBA floats in [0, 1], row 0 at the
+/// top, and its size. It must have an alpha
+/// channel: the loss compares coverage too.
+pub fn load_target(path: &Path) -> Result<(u32, u32, Vec<[f32; 4]>)> {
+    let bytes = std::fs::read(path)
+        .map_err(|e| Error::Input(format!("cannot read target {}: {e}", path.display())))?;
+    let img =
+        image::load_from_memory_with_format(&bytes, image::ImageFormat::Png).map_err(|e| {
+            Error::Input(format!(
+                "target {}: not a readable PNG: {e}",
+                path.display()
+            ))
+        })?;
+    if !img.color().has_alpha() {
+        return Err(Error::Input(format!(
+            "target {} has no alpha channel; fit-pose compares RGBA (coverage in alpha), as \
+             `softvk render` writes it",
+            path.display()
+        )));
+    }
+    let rgba = img.to_rgba32f();
+    let (w, h) = rgba.dimensions();
+    let pixels = rgba.pixels().map(|p| p.0).collect();
+    Ok((w, h, pixels))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -178,6 +178,31 @@ pub fn icosphere_template() -> Mesh {
     mesh
 }
 
+/// A template (`softvk fit-mesh --template T.obj`) scaled into (-0.5, 0.5)³ around its bounding box's centre, turned slightly if a
+/// coordinate is exactly 0 (the deformation keeps a zero coordinate at zero).
+pub fn normalize_template(mut mesh: Mesh) -> Mesh {
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for p in &mesh.positions {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    let centre: [f32; 3] = std::array::from_fn(|k| 0.5 * (lo[k] + hi[k]));
+    let half = (0..3).map(|k| 0.5 * (hi[k] - lo[k])).fold(0.0f32, f32::max);
+    let scale = 0.45 / half.max(1e-12);
+    for p in &mut mesh.positions {
+        for k in 0..3 {
+            p[k] = (p[k] - centre[k]) * scale;
+            if p[k] == 0.0 {
+                p[k] = 1e-4;
+            }
+        }
+    }
+    mesh
+}
+
 /// The demo's target, generated in code: an icosphere pushed out into three lobes and a dent.
 pub fn demo_target() -> Mesh {
     let mut mesh = Mesh::icosphere(3);

@@ -554,9 +554,46 @@ impl std::fmt::Debug for GifWriter {
     }
 }
 
+/// |render − target| as a heat map: the mean absolute difference over R, G, B, A per pixel,
+/// black (0) → red → yellow → white (1), opaque.
+pub fn error_map(render: &[[f32; 4]], target: &[[f32; 4]]) -> Vec<[f32; 4]> {
+    render
+        .iter()
+        .zip(target)
+        .map(|(r, t)| {
+            let e = (0..4).map(|k| (r[k] - t[k]).abs()).sum::<f32>() / 4.0;
+            let x = e.clamp(0.0, 1.0) * 3.0;
+            [
+                x.min(1.0),
+                (x - 1.0).clamp(0.0, 1.0),
+                (x - 2.0).clamp(0.0, 1.0),
+                1.0,
+            ]
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn error_map_runs_black_red_yellow_white() {
+        let t = [[0.0f32; 4]; 4];
+        let r = [
+            [0.0; 4],
+            [1.0 / 3.0; 4],
+            [2.0 / 3.0; 4],
+            [1.0, 1.0, 1.0, 1.0],
+        ];
+        let m = error_map(&r, &t);
+        let close = |a: [f32; 4], b: [f32; 4]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-6);
+        assert!(close(m[0], [0.0, 0.0, 0.0, 1.0]));
+        assert!(close(m[1], [1.0, 0.0, 0.0, 1.0]));
+        assert!(close(m[2], [1.0, 1.0, 0.0, 1.0]));
+        assert!(close(m[3], [1.0, 1.0, 1.0, 1.0]));
+    }
+
     use crate::io::test_support::TempDir;
 
     #[test]

@@ -128,7 +128,7 @@ impl<'c> Fitter<'c, PoseFit<'c>> {
             )?,
             log: ctx.create_buffer(
                 "pose log",
-                32 * u64::from(opts.iterations),
+                32 * u64::from(opts.last_iteration()),
                 MemoryKind::Device,
             )?,
             push,
@@ -217,10 +217,10 @@ impl PoseFit<'_> {
     /// The log of iterations `first ..= last` that ran: each one's loss, σ, γ and the pose it
     /// evaluated (`seconds` as given).
     pub fn log(&self, first: u32, last: u32, seconds: f64) -> Result<Vec<PoseLog>> {
-        if first == 0 || first > last || last > self.model.opts.iterations {
+        if first == 0 || first > last || last > self.model.opts.last_iteration() {
             return Err(Error::Misuse(format!(
                 "pose fit: the log of {first}..={last} of 1..={}",
-                self.model.opts.iterations
+                self.model.opts.last_iteration()
             )));
         }
         self.read_log(first, last, seconds)
@@ -241,7 +241,7 @@ impl PoseModel for Rigid {
     const NAME: &'static str = "pose fit";
 
     fn last_iteration(&self) -> u32 {
-        self.opts.iterations
+        self.opts.last_iteration()
     }
 
     fn set_iteration(&mut self, it: u32) -> Result<(f64, f64)> {

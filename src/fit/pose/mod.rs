@@ -59,7 +59,7 @@ use super::adam::AdamOptions;
 use super::checkpoint::{Fingerprint, FitKind, Reader, Writer, read_f64_state, write_f64_state};
 use super::driver;
 use super::posed::Stages;
-use super::session::{LogRow, Session, Trainee};
+use super::session::{LogRow, Session, StopRule, Trainee};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::Context;
@@ -250,10 +250,24 @@ impl Default for Schedule {
     }
 }
 
+/// Refinement after a pose fit's schedule: up to `iterations` more at the sharp σ/γ and the
+/// final learning rates, ended by the session's [`StopRule`] once the loss has not improved by
+/// `min_improvement` (relative) for `window` iterations.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Refine {
+    /// At most this many iterations after the schedule's.
+    pub iterations: u32,
+    /// Iterations without improvement that end the fit.
+    pub window: u32,
+    /// The relative fall of the loss that counts as an improvement.
+    pub min_improvement: f64,
+}
+
 /// Everything settable about a pose fit.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PoseFitOptions {
-    /// Iterations.
+    /// Iterations of the schedule (σ/γ stages and the learning rates' decay spread over them);
+    /// [`PoseFitOptions::refine`] may run more.
     pub iterations: u32,
     /// Adam's learning rate of the rotation (radians per step, about).
     pub lr_rotation: f64,
@@ -272,6 +286,9 @@ pub struct PoseFitOptions {
     /// Iterations per submission (the fit reads its log and calls back after each; also a
     /// checkpoint's granularity). A submission also ends where the σ/γ stage changes.
     pub log_every: u32,
+    /// Iterations after the schedule's, until the loss stops improving; `None`: the schedule's
+    /// iterations only.
+    pub refine: Option<Refine>,
 }
 
 impl Default for PoseFitOptions {
@@ -290,6 +307,7 @@ impl Default for PoseFitOptions {
             },
             tile: 8,
             log_every: 10,
+            refine: None,
         }
     }
 }
@@ -316,7 +334,34 @@ impl PoseFitOptions {
         }
         crate::raster::gpu::Method::check_tile(self.tile)?;
         self.settings.validate()?;
+        if let Some(r) = self.refine {
+            if r.window == 0 || !(0.0..1.0).contains(&r.min_improvement) {
+                return Err(Error::Input(format!(
+                    "refinement: a window of at least 1 iteration and an improvement in [0, 1) \
+                     (window {}, improvement {})",
+                    r.window, r.min_improvement
+                )));
+            }
+            if self.iterations.checked_add(r.iterations).is_none() {
+                return Err(Error::Input("refinement: too many iterations".into()));
+            }
+        }
         Ok(())
+    }
+
+    /// The last iteration the fit may run: the schedule's, and the refinement's at most.
+    pub fn last_iteration(&self) -> u32 {
+        self.iterations + self.refine.map_or(0, |r| r.iterations)
+    }
+
+    /// The rule that ends the refinement ([`PoseFitOptions::refine`]): it counts the rows from
+    /// the schedule's last iteration on.
+    pub fn stop_rule(&self) -> Option<StopRule> {
+        self.refine.map(|r| StopRule {
+            from: self.iterations,
+            window: r.window,
+            min_improvement: r.min_improvement,
+        })
     }
 
     /// σ and γ of iteration `it` (0-based).
@@ -328,11 +373,13 @@ impl PoseFitOptions {
         }
     }
 
-    /// The learning-rate factor of iteration `it` (0-based): `lr_final^(it / (N − 1))`.
+    /// The learning-rate factor of iteration `it` (0-based): `lr_final^(it / (N − 1))` over
+    /// the schedule's N iterations, `lr_final` after them.
     pub fn lr_factor(&self, it: u32) -> f64 {
         if self.iterations <= 1 {
             return 1.0;
         }
+        let it = it.min(self.iterations - 1);
         self.lr_final
             .powf(f64::from(it) / f64::from(self.iterations - 1))
     }
@@ -406,11 +453,16 @@ pub fn fit_pose<'c>(
     let (mut stages, first_target) = Stages::new(&mut target, opts.sigma_gamma(0))?;
     let mut fitter = PoseFitter::new(ctx, mesh, camera, lighting, &first_target, init, opts)?;
     let every = opts.log_every;
-    let end = session.run(&mut fitter, (opts.iterations, every), |fitter, it| {
-        let last = driver::to_next_log(it, every).min(opts.iterations);
-        stages.enter(&mut **fitter, opts.sigma_gamma(it - 1))?;
-        Ok(driver::to_stage_end(it, last, |i| opts.sigma_gamma(i)))
-    })?;
+    let last = opts.last_iteration();
+    // The refinement's rule, unless the caller's session has one.
+    let stop = session.stop.or(opts.stop_rule());
+    let end = session
+        .stop(stop)
+        .run(&mut fitter, (last, every), |fitter, it| {
+            let end = driver::to_next_log(it, every).min(last);
+            stages.enter(&mut **fitter, opts.sigma_gamma(it - 1))?;
+            Ok(driver::to_stage_end(it, end, |i| opts.sigma_gamma(i)))
+        })?;
     let s = &opts.settings;
     stages.finish(&mut *fitter, (s.sigma, s.gamma))?;
     let (loss, image) = fitter.evaluate(s.sigma, s.gamma)?;

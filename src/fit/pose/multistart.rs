@@ -130,6 +130,8 @@ pub struct StartOutcome {
     pub loss: f64,
     /// Its wall time.
     pub seconds: f64,
+    /// Iterations it ran.
+    pub iterations: u32,
 }
 
 /// A finished multi-start fit.
@@ -183,6 +185,7 @@ pub fn fit_pose_multistart(
             pose: result.pose,
             loss: result.loss,
             seconds: result.seconds,
+            iterations: result.iterations,
         });
         let better = match &best {
             None => true,

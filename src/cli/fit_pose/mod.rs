@@ -25,12 +25,10 @@
 
 use std::path::{Path, PathBuf};
 
-use clap::Args;
 use glam::DVec3;
 use serde_json::{Value, json};
 use softvk::fit::pose::{
-    Pose, PoseFit, PoseFitOptions, PoseTarget, Schedule, fit_pose, fit_pose_multistart,
-    rotation_distance, screened_starts,
+    Pose, PoseFit, PoseTarget, fit_pose, fit_pose_multistart, rotation_distance, screened_starts,
 };
 use softvk::fit::report;
 use softvk::fit::session::Progress;
@@ -39,124 +37,14 @@ use softvk::mesh::Mesh;
 use softvk::raster::gpu::{Method, Renderer};
 use softvk::{Error, Result};
 
-use super::args::{CheckpointArgs, RasterArgs, ViewArgs, positive, triple};
-use super::output::{AtomicFile, ImageFormat, encode_sheet_png};
-use super::session::Watch;
+use crate::cli::output::{AtomicFile, ImageFormat, encode_sheet_png, load_target};
+use crate::cli::session::Watch;
+
+mod args;
+pub use args::*;
 
 /// The least angle between two of `--starts`' screened starts.
 const MIN_START_SEPARATION_DEG: f64 = 30.0;
-
-/// The defaults of the pose fit (chosen by `examples/pose_study.rs`; RESULTS.md).
-fn defaults() -> PoseFitOptions {
-    PoseFitOptions::default()
-}
-
-/// The flags of `softvk fit-pose`.
-#[derive(Args, Clone, Debug)]
-pub struct FitPoseArgs {
-    /// The mesh (OBJ; its MTL map_Kd texture is sampled with --texture-res).
-    #[arg(long, value_name = "M.obj")]
-    pub mesh: PathBuf,
-
-    /// Centre the mesh and scale its longest side to [-1, 1], as SoftRas's
-    /// `load_obj(normalization=True)` (for meshes as distributed, in their own units).
-    #[arg(long)]
-    pub normalize: bool,
-
-    /// The target image: a PNG with an alpha channel (as `softvk render` writes).
-    #[arg(long, value_name = "T.png")]
-    pub target: PathBuf,
-
-    /// The pose to write (JSON).
-    #[arg(long, value_name = "pose.json")]
-    pub out: PathBuf,
-
-    /// The final render (PNG) [default: <out stem>-render.png beside --out].
-    #[arg(long, value_name = "R.png")]
-    pub render: Option<PathBuf>,
-
-    /// Heat map of |render − target| (PNG) [default: <out stem>-error.png beside --out].
-    #[arg(long, value_name = "E.png")]
-    pub error: Option<PathBuf>,
-
-    /// Target, start and result side by side, labelled (PNG) [default: <out stem>-compare.png
-    /// beside --out]. The start is rendered at the final σ and γ, as the result is.
-    #[arg(long, value_name = "C.png")]
-    pub compare: Option<PathBuf>,
-
-    /// Iterations [default: 80].
-    #[arg(long = "iters", value_name = "N")]
-    pub iterations: Option<u32>,
-
-    /// Initial rotation: an axis-angle vector in degrees (direction the axis, length the angle).
-    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = triple)]
-    pub init_rotation: Option<[f64; 3]>,
-
-    /// Initial translation.
-    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = triple)]
-    pub init_translation: Option<[f64; 3]>,
-
-    /// Render every iteration at the sharp --sigma/--gamma (no blurry-to-sharp schedule).
-    #[arg(long)]
-    pub no_schedule: bool,
-
-    /// Fit from K starts and keep the one that ends with the lowest loss: the K best of
-    /// --candidates rotations spread over all rotations (the first is --init-rotation),
-    /// rendered once each and at least 30° apart. Far starts land in wrong basins; one of K
-    /// screened starts usually begins in the right one.
-    #[arg(long, value_name = "K", default_value_t = 1,
-          value_parser = clap::value_parser!(u32).range(1..=1024))]
-    pub starts: u32,
-
-    /// Rotations screened for --starts [default: 32 × K; K or fewer: the K spread evenly,
-    /// unscreened].
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=65536))]
-    pub candidates: Option<u32>,
-
-    /// σ of the schedule's first (blurry) stage [default: 1e-3].
-    #[arg(long, value_name = "S", value_parser = positive, conflicts_with = "no_schedule")]
-    pub sigma_start: Option<f64>,
-
-    /// γ of the schedule's first stage [default: 1e-3].
-    #[arg(long, value_name = "G", value_parser = positive, conflicts_with = "no_schedule")]
-    pub gamma_start: Option<f64>,
-
-    /// Stages of the schedule (geometric from the start σ/γ to --sigma/--gamma; the last is
-    /// sharp) [default: 4].
-    #[arg(long, value_name = "N", conflicts_with = "no_schedule",
-          value_parser = clap::value_parser!(u32).range(1..))]
-    pub stages: Option<u32>,
-
-    /// Adam learning rate of the rotation (radians) [default: 0.1].
-    #[arg(long, value_name = "LR", value_parser = positive)]
-    pub lr: Option<f64>,
-
-    /// Adam learning rate of the translation [default: 0.005].
-    #[arg(long, value_name = "LR", value_parser = positive)]
-    pub lr_translation: Option<f64>,
-
-    /// Both learning rates decay geometrically to this factor at the last iteration
-    /// [default: 0.1].
-    #[arg(long, value_name = "F", value_parser = positive)]
-    pub lr_final: Option<f64>,
-
-    /// Tile edge in pixels (a multiple of 8) [default: 8].
-    #[arg(long, value_name = "N")]
-    pub tile: Option<u32>,
-
-    /// No progress bar.
-    #[arg(long)]
-    pub quiet: bool,
-
-    #[command(flatten)]
-    pub view: ViewArgs,
-
-    #[command(flatten)]
-    pub raster: RasterArgs,
-
-    #[command(flatten)]
-    pub checkpoints: CheckpointArgs,
-}
 
 /// The checkpoint's file in `--checkpoint DIR` / `--resume DIR`.
 pub const CHECKPOINT_FILE: &str = "pose-fit.ckpt";
@@ -167,50 +55,6 @@ fn beside(out: &Path, suffix: &str) -> PathBuf {
         .file_stem()
         .map_or("pose".into(), |s| s.to_string_lossy().into_owned());
     out.with_file_name(format!("{stem}{suffix}"))
-}
-
-/// The target: RGBA floats in [0, 1], row 0 at the top, and its size. It must have an alpha
-/// channel: the loss compares coverage too.
-pub fn load_target(path: &Path) -> Result<(u32, u32, Vec<[f32; 4]>)> {
-    let bytes = std::fs::read(path)
-        .map_err(|e| Error::Input(format!("cannot read target {}: {e}", path.display())))?;
-    let img =
-        image::load_from_memory_with_format(&bytes, image::ImageFormat::Png).map_err(|e| {
-            Error::Input(format!(
-                "target {}: not a readable PNG: {e}",
-                path.display()
-            ))
-        })?;
-    if !img.color().has_alpha() {
-        return Err(Error::Input(format!(
-            "target {} has no alpha channel; fit-pose compares RGBA (coverage in alpha), as \
-             `softvk render` writes it",
-            path.display()
-        )));
-    }
-    let rgba = img.to_rgba32f();
-    let (w, h) = rgba.dimensions();
-    let pixels = rgba.pixels().map(|p| p.0).collect();
-    Ok((w, h, pixels))
-}
-
-/// |render − target| as a heat map: the mean absolute difference over R, G, B, A per pixel,
-/// black (0) → red → yellow → white (1), opaque.
-pub fn error_map(render: &[[f32; 4]], target: &[[f32; 4]]) -> Vec<[f32; 4]> {
-    render
-        .iter()
-        .zip(target)
-        .map(|(r, t)| {
-            let e = (0..4).map(|k| (r[k] - t[k]).abs()).sum::<f32>() / 4.0;
-            let x = e.clamp(0.0, 1.0) * 3.0;
-            [
-                x.min(1.0),
-                (x - 1.0).clamp(0.0, 1.0),
-                (x - 2.0).clamp(0.0, 1.0),
-                1.0,
-            ]
-        })
-        .collect()
 }
 
 /// Runs `softvk fit-pose`.
@@ -230,27 +74,8 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
         )));
     }
     let camera = args.view.camera()?;
-    let settings = args.raster.settings(size)?;
     let lighting = args.raster.lighting();
-    let schedule = (!args.no_schedule).then(|| {
-        let s = Schedule::default();
-        Schedule {
-            sigma_start: args.sigma_start.unwrap_or(s.sigma_start),
-            gamma_start: args.gamma_start.unwrap_or(s.gamma_start),
-            stages: args.stages.unwrap_or(s.stages),
-        }
-    });
-    let opts = PoseFitOptions {
-        iterations: args.iterations.unwrap_or(d.iterations),
-        lr_rotation: args.lr.unwrap_or(d.lr_rotation),
-        lr_translation: args.lr_translation.unwrap_or(d.lr_translation),
-        lr_final: args.lr_final.unwrap_or(d.lr_final),
-        schedule,
-        settings,
-        tile,
-        ..d
-    };
-    opts.validate()?;
+    let opts = args.options(size, tile)?;
     let init = Pose {
         rotation: DVec3::from(args.init_rotation.unwrap_or([0.0; 3])) * (1f64.to_radians()),
         translation: DVec3::from(args.init_translation.unwrap_or([0.0; 3])),
@@ -449,7 +274,7 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
             .map_err(|e| Error::Input(format!("{}: {e}", path.display())))
     };
     let render_png = png(&result.image, &render_path)?;
-    let error_png = png(&error_map(&result.image, &target), &error_path)?;
+    let error_png = png(&report::error_map(&result.image, &target), &error_path)?;
     // The start (the winning one of several), posed about the same centre and rendered as the
     // result was.
     let start_pose = multi.as_ref().map_or(init, |m| m.starts[m.best_start].init);
@@ -518,23 +343,6 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn error_map_runs_black_red_yellow_white() {
-        let t = [[0.0f32; 4]; 4];
-        let r = [
-            [0.0; 4],
-            [1.0 / 3.0; 4],
-            [2.0 / 3.0; 4],
-            [1.0, 1.0, 1.0, 1.0],
-        ];
-        let m = error_map(&r, &t);
-        let close = |a: [f32; 4], b: [f32; 4]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-6);
-        assert!(close(m[0], [0.0, 0.0, 0.0, 1.0]));
-        assert!(close(m[1], [1.0, 0.0, 0.0, 1.0]));
-        assert!(close(m[2], [1.0, 1.0, 0.0, 1.0]));
-        assert!(close(m[3], [1.0, 1.0, 1.0, 1.0]));
-    }
 
     #[test]
     fn outputs_default_beside_the_pose() {

@@ -1,38 +1,15 @@
-//! `softvk fit-field --silhouettes DIR --cameras C.csv --out M.obj [--iters N] [field options]`
-//! (SPEC §6): an implicit field fitted to silhouettes by sphere probing
-//! ([`softvk::fit::field_fit`]), then its surface φ = 0.5 by marching cubes.
-//!
-//! Writes the mesh (OBJ) and a report folder (default: `<out>` without its extension +
-//! `-report/`): `preview.png` (the field's surface shaded by ray marching, from the first
-//! camera's direction), `compare.png` (the visual hull's surface beside the fitted one, both
-//! rasterized by softvk from that camera), `loss.png` (L_sil against the iteration; with λ > 0
-//! also λ L_geo and the sum) and `loss.csv` (the same numbers). Every input is checked before
-//! anything is written, and the files are computed in memory first, so a failure writes
-//! nothing.
+//! The flags of `softvk fit-field`, and the fit's options they make.
 
-use std::path::{Path, PathBuf};
-
+use crate::cli::args::{CheckpointArgs, finite, non_negative, positive, viewing_angle};
 use clap::{Args, ValueEnum};
 use softvk::camera::{Camera, Projection};
-use softvk::field::mcubes::MarchingCubes;
-use softvk::field::preview::{PreviewOptions, render_preview, surfaces_side_by_side};
-use softvk::field::voxel::visual_hull_surface;
 use softvk::field::{Cube, FieldKind};
 use softvk::fit::AdamOptions;
-use softvk::fit::field_fit::{
-    self, DEFAULT_CUBE_MARGIN, FieldFit, FieldFitLog, FieldFitOptions, auto_cube,
-    check_cameras_outside, fit_field, scaled_to_cube,
-};
-use softvk::fit::report::{self, Series};
-use softvk::gpu::{Context, ContextOptions};
+use softvk::fit::field_fit::{self, DEFAULT_CUBE_MARGIN, FieldFitOptions};
 use softvk::io;
-use softvk::probe::{Aggregate, ProbeSettings, Targets};
+use softvk::probe::{Aggregate, ProbeSettings};
 use softvk::{Error, Result};
-
-use super::args::{CheckpointArgs, finite, non_negative, positive, viewing_angle};
-use super::output::AtomicFile;
-use super::session::Watch;
-use softvk::fit::session::Progress;
+use std::path::PathBuf;
 
 /// `--field`.
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -74,7 +51,7 @@ pub enum CubeArg {
 }
 
 /// `--cube`: `auto` or `cx,cy,cz,half`.
-fn cube_arg(s: &str) -> std::result::Result<CubeArg, String> {
+pub(super) fn cube_arg(s: &str) -> std::result::Result<CubeArg, String> {
     if s.trim() == "auto" {
         return Ok(CubeArg::Auto);
     }
@@ -95,7 +72,7 @@ fn cube_arg(s: &str) -> std::result::Result<CubeArg, String> {
         .map_err(|_| format!("the half-edge must be > 0, got {}", v[3]))
 }
 
-fn fraction(s: &str) -> std::result::Result<f64, String> {
+pub(super) fn fraction(s: &str) -> std::result::Result<f64, String> {
     let v = finite(s)?;
     if (0.0..=1.0).contains(&v) {
         Ok(v)
@@ -319,7 +296,7 @@ pub struct FitFieldArgs {
 
 impl FitFieldArgs {
     /// The options in cube units (the cube itself is set by [`scaled_to_cube`] later).
-    fn options(&self) -> Result<FieldFitOptions> {
+    pub(super) fn options(&self) -> Result<FieldFitOptions> {
         let field = match self.field {
             FieldArg::Grid => FieldKind::Grid { res: self.grid_res },
             FieldArg::Mlp => FieldKind::Mlp {
@@ -384,7 +361,7 @@ impl FitFieldArgs {
         Ok(opts)
     }
 
-    fn cameras(&self, rows: &[io::CameraRow]) -> Vec<Camera> {
+    pub(super) fn cameras(&self, rows: &[io::CameraRow]) -> Vec<Camera> {
         rows.iter()
             .map(|r| Camera {
                 projection: Projection::Perspective {
@@ -394,155 +371,4 @@ impl FitFieldArgs {
             })
             .collect()
     }
-}
-
-fn default_report(out: &Path) -> PathBuf {
-    let stem = out
-        .file_stem()
-        .map_or("fit".into(), |s| s.to_string_lossy().into_owned());
-    out.with_file_name(format!("{stem}-report"))
-}
-
-/// The checkpoint's file in `--checkpoint DIR` / `--resume DIR`.
-pub const CHECKPOINT_FILE: &str = "field-fit.ckpt";
-
-/// Runs `softvk fit-field`.
-pub fn run(args: &FitFieldArgs) -> Result<()> {
-    let sil = io::load_silhouettes(&args.silhouettes)?;
-    let rows = io::load_cameras(&args.cameras)?;
-    io::check_counts(&rows, &sil)?;
-    if let Some(n) = args.size {
-        if (n, n) != (sil.width, sil.height) {
-            return Err(Error::Input(format!(
-                "--size {n}, but the silhouettes are {}x{}",
-                sil.width, sil.height
-            )));
-        }
-    }
-    let unit = args.options()?;
-    let cams = args.cameras(&rows);
-    let targets = Targets::from_silhouettes(&cams, &sil)?;
-    let cube = match args.cube {
-        CubeArg::Given(c) => c,
-        CubeArg::Auto => auto_cube(&targets, args.cube_margin)?,
-    };
-    check_cameras_outside(&targets, &cube)?;
-    let opts = FieldFitOptions {
-        probe: scaled_to_cube(&unit.probe, &cube),
-        ..unit
-    };
-    opts.validate()?;
-    let report_dir = args
-        .report
-        .clone()
-        .unwrap_or_else(|| default_report(&args.out));
-    // The checkpoint is checked before anything is written.
-    let fingerprint = FieldFit::fingerprint(&targets, &opts);
-    let session = args.checkpoints.session(CHECKPOINT_FILE, fingerprint)?;
-
-    let ctx = Context::new(&ContextOptions::from_env())?;
-    let watch = Watch::new(args.quiet, u64::from(opts.iterations));
-    let hooks = |p: &Progress<'_, '_, FieldFit>| {
-        let l = p.row();
-        let message = format!(
-            "loss {:.5} (L_sil {:.5}, L_geo {:.4})",
-            l.total, l.silhouette, l.geo
-        );
-        Ok(watch.update(l.iteration, message))
-    };
-    let result = fit_field(&ctx, &targets, &opts, session.hooks(hooks))?;
-    watch.finish();
-
-    // Everything in memory first: an empty surface fails before any file is written.
-    let iso = MarchingCubes::new(&ctx)?.extract(&ctx, &result.field, args.mc_res)?;
-    if iso.is_empty() {
-        return Err(Error::Input(format!(
-            "the fitted field has no surface (φ never crosses 0.5 on the {}³ lattice); try more \
-             --iters or another --lr",
-            args.mc_res
-        )));
-    }
-    let preview_cam = Camera {
-        projection: Projection::Perspective {
-            viewing_angle_deg: args.viewing_angle,
-        },
-        ..cams[0]
-    };
-    let preview = render_preview(
-        &ctx,
-        &result.field,
-        &preview_cam,
-        &PreviewOptions {
-            width: args.preview_size,
-            height: args.preview_size,
-            ..PreviewOptions::default()
-        },
-    )?;
-    // The fitted surface beside the silhouettes' visual hull, both shaded by softvk's rasterizer
-    // from the preview's camera: what the fit rounded off or carved beyond the hull.
-    let hull = visual_hull_surface(&sil, &cams, result.field.cube(), args.mc_res)?;
-    let compare = surfaces_side_by_side(
-        &ctx,
-        &[("visual hull", &hull), ("fitted", &iso)],
-        &preview_cam,
-        args.preview_size,
-    )?;
-    ctx.check_validation()?;
-    let lambda = opts.probe.geo_lambda;
-    let series = |name: &str, color, f: &dyn Fn(&FieldFitLog) -> f64| Series {
-        name: name.into(),
-        points: result
-            .log
-            .iter()
-            .map(|l| (f64::from(l.iteration), f(l)))
-            .collect(),
-        color,
-    };
-    // Without the regularizer the total is L_sil: one curve.
-    let curves = if lambda > 0.0 {
-        vec![
-            series("total", [0, 0, 0], &|l| f64::from(l.total)),
-            series("L_sil", [220, 40, 40], &|l| f64::from(l.silhouette)),
-            series("lambda L_geo", [40, 120, 220], &|l| {
-                lambda * f64::from(l.geo)
-            }),
-        ]
-    } else {
-        vec![series("L_sil", [220, 40, 40], &|l| f64::from(l.silhouette))]
-    };
-    let plot = report::loss_plot(&curves, 800, 500, true);
-    let mut csv = String::from("iteration,l_sil,l_geo,total,seconds\n");
-    for l in &result.log {
-        csv.push_str(&format!(
-            "{},{},{},{},{:.3}\n",
-            l.iteration, l.silhouette, l.geo, l.total, l.seconds
-        ));
-    }
-
-    std::fs::create_dir_all(&report_dir)
-        .map_err(|e| Error::Input(format!("cannot create {}: {e}", report_dir.display())))?;
-    report::write_png(&report_dir.join("preview.png"), &preview)?;
-    report::write_png(&report_dir.join("compare.png"), &compare)?;
-    report::write_png(&report_dir.join("loss.png"), &plot)?;
-    AtomicFile::create(&report_dir.join("loss.csv"))?.commit(csv.as_bytes())?;
-    super::session::write_interrupted(&report_dir, result.iterations, opts.iterations)?;
-    iso.write_obj(&args.out)?;
-    let t = &result.timings;
-    println!(
-        "{} iterations in {:.1} s ({:.1} ms per iteration) on the cube centre ({:.4}, {:.4}, \
-         {:.4}) half-edge {:.4}; final L_sil {:.5}; {} vertices, {} faces; wrote {} and {}",
-        result.iterations,
-        t.iterations_s,
-        1e3 * t.iterations_s / f64::from(result.iterations.max(1)),
-        cube.center[0],
-        cube.center[1],
-        cube.center[2],
-        cube.half,
-        result.log.last().map_or(f32::NAN, |l| l.silhouette),
-        iso.positions.len(),
-        iso.faces.len(),
-        args.out.display(),
-        report_dir.display()
-    );
-    Ok(())
 }

@@ -1,0 +1,147 @@
+//! The flags of `softvk fit-pose`, and the fit's options they make.
+
+use crate::cli::args::{CheckpointArgs, RasterArgs, ViewArgs, positive, triple};
+use clap::Args;
+use softvk::Result;
+use softvk::fit::pose::{PoseFitOptions, Schedule};
+use std::path::PathBuf;
+
+/// The defaults of the pose fit (chosen by `examples/pose_study.rs`; RESULTS.md).
+pub(super) fn defaults() -> PoseFitOptions {
+    PoseFitOptions::default()
+}
+
+/// The flags of `softvk fit-pose`.
+#[derive(Args, Clone, Debug)]
+pub struct FitPoseArgs {
+    /// The mesh (OBJ; its MTL map_Kd texture is sampled with --texture-res).
+    #[arg(long, value_name = "M.obj")]
+    pub mesh: PathBuf,
+
+    /// Centre the mesh and scale its longest side to [-1, 1], as SoftRas's
+    /// `load_obj(normalization=True)` (for meshes as distributed, in their own units).
+    #[arg(long)]
+    pub normalize: bool,
+
+    /// The target image: a PNG with an alpha channel (as `softvk render` writes).
+    #[arg(long, value_name = "T.png")]
+    pub target: PathBuf,
+
+    /// The pose to write (JSON).
+    #[arg(long, value_name = "pose.json")]
+    pub out: PathBuf,
+
+    /// The final render (PNG) [default: <out stem>-render.png beside --out].
+    #[arg(long, value_name = "R.png")]
+    pub render: Option<PathBuf>,
+
+    /// Heat map of |render − target| (PNG) [default: <out stem>-error.png beside --out].
+    #[arg(long, value_name = "E.png")]
+    pub error: Option<PathBuf>,
+
+    /// Target, start and result side by side, labelled (PNG) [default: <out stem>-compare.png
+    /// beside --out]. The start is rendered at the final σ and γ, as the result is.
+    #[arg(long, value_name = "C.png")]
+    pub compare: Option<PathBuf>,
+
+    /// Iterations [default: 80].
+    #[arg(long = "iters", value_name = "N")]
+    pub iterations: Option<u32>,
+
+    /// Initial rotation: an axis-angle vector in degrees (direction the axis, length the angle).
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = triple)]
+    pub init_rotation: Option<[f64; 3]>,
+
+    /// Initial translation.
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = triple)]
+    pub init_translation: Option<[f64; 3]>,
+
+    /// Render every iteration at the sharp --sigma/--gamma (no blurry-to-sharp schedule).
+    #[arg(long)]
+    pub no_schedule: bool,
+
+    /// Fit from K starts and keep the one that ends with the lowest loss: the K best of
+    /// --candidates rotations spread over all rotations (the first is --init-rotation),
+    /// rendered once each and at least 30° apart. Far starts land in wrong basins; one of K
+    /// screened starts usually begins in the right one.
+    #[arg(long, value_name = "K", default_value_t = 1,
+          value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub starts: u32,
+
+    /// Rotations screened for --starts [default: 32 × K; K or fewer: the K spread evenly,
+    /// unscreened].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=65536))]
+    pub candidates: Option<u32>,
+
+    /// σ of the schedule's first (blurry) stage [default: 1e-3].
+    #[arg(long, value_name = "S", value_parser = positive, conflicts_with = "no_schedule")]
+    pub sigma_start: Option<f64>,
+
+    /// γ of the schedule's first stage [default: 1e-3].
+    #[arg(long, value_name = "G", value_parser = positive, conflicts_with = "no_schedule")]
+    pub gamma_start: Option<f64>,
+
+    /// Stages of the schedule (geometric from the start σ/γ to --sigma/--gamma; the last is
+    /// sharp) [default: 4].
+    #[arg(long, value_name = "N", conflicts_with = "no_schedule",
+          value_parser = clap::value_parser!(u32).range(1..))]
+    pub stages: Option<u32>,
+
+    /// Adam learning rate of the rotation (radians) [default: 0.1].
+    #[arg(long, value_name = "LR", value_parser = positive)]
+    pub lr: Option<f64>,
+
+    /// Adam learning rate of the translation [default: 0.005].
+    #[arg(long, value_name = "LR", value_parser = positive)]
+    pub lr_translation: Option<f64>,
+
+    /// Both learning rates decay geometrically to this factor at the last iteration
+    /// [default: 0.1].
+    #[arg(long, value_name = "F", value_parser = positive)]
+    pub lr_final: Option<f64>,
+
+    /// Tile edge in pixels (a multiple of 8) [default: 8].
+    #[arg(long, value_name = "N")]
+    pub tile: Option<u32>,
+
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+
+    #[command(flatten)]
+    pub view: ViewArgs,
+
+    #[command(flatten)]
+    pub raster: RasterArgs,
+
+    #[command(flatten)]
+    pub checkpoints: CheckpointArgs,
+}
+
+impl FitPoseArgs {
+    /// The fit's options these flags ask for, for an image of `size` on `tile`-pixel tiles.
+    pub(super) fn options(&self, size: (u32, u32), tile: u32) -> Result<PoseFitOptions> {
+        let d = defaults();
+        let settings = self.raster.settings(size)?;
+        let schedule = (!self.no_schedule).then(|| {
+            let s = Schedule::default();
+            Schedule {
+                sigma_start: self.sigma_start.unwrap_or(s.sigma_start),
+                gamma_start: self.gamma_start.unwrap_or(s.gamma_start),
+                stages: self.stages.unwrap_or(s.stages),
+            }
+        });
+        let opts = PoseFitOptions {
+            iterations: self.iterations.unwrap_or(d.iterations),
+            lr_rotation: self.lr.unwrap_or(d.lr_rotation),
+            lr_translation: self.lr_translation.unwrap_or(d.lr_translation),
+            lr_final: self.lr_final.unwrap_or(d.lr_final),
+            schedule,
+            settings,
+            tile,
+            ..d
+        };
+        opts.validate()?;
+        Ok(opts)
+    }
+}
