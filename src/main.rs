@@ -51,7 +51,7 @@ enum Command {
     Dataset(Box<cli::dataset::DatasetArgs>),
     /// Train the single-view reconstruction network on a dataset's silhouettes (SoftRas's
     /// unsupervised 3D learning).
-    TrainRecon(Box<cli::recon::TrainReconArgs>),
+    TrainRecon(Box<cli::train_recon::TrainReconArgs>),
     /// Reconstruct a mesh from one image with a trained model.
     Recon(Box<cli::recon::ReconArgs>),
     /// Score a trained model on the test split (3D IoU per class) beside the retrieval and
@@ -107,7 +107,7 @@ fn main() -> ExitCode {
         Command::Demo(args) => cli::fit_mesh::demo(args),
         Command::Bench(args) => cli::bench::run(args),
         Command::Dataset(args) => cli::dataset::run(args),
-        Command::TrainRecon(args) => cli::recon::train(args),
+        Command::TrainRecon(args) => cli::train_recon::train(args),
         Command::Recon(args) => cli::recon::recon(args),
         Command::EvalRecon(args) => cli::eval_recon::evaluate(args),
     };

@@ -18,8 +18,8 @@
 //! end a fit at an iteration boundary, with its checkpoint written).
 //!
 //! The modules: one per subcommand ([`render`], [`grad`], [`fit_mesh`] with `demo`,
-//! [`fit_pose`], [`fit_articulated`], [`fit_field`], [`bench`], [`dataset`], [`recon`] with
-//! `train-recon`, [`eval_recon`]) and the shared [`args`], [`output`], [`interrupt`] and
+//! [`fit_pose`], [`fit_articulated`], [`fit_field`], [`bench`], [`dataset`], [`train_recon`],
+//! [`recon`], [`eval_recon`]) and the shared [`args`], [`output`], [`interrupt`] and
 //! [`session`] (the checkpoint flags, progress bar and interrupt check of every fit).
 
 pub mod args;
@@ -36,6 +36,7 @@ pub mod output;
 pub mod recon;
 pub mod render;
 pub mod session;
+pub mod train_recon;
 
 /// Turns a clap error into the single line `main` prints after `softvk: error: `.
 ///

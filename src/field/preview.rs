@@ -275,35 +275,6 @@ pub fn render_preview_with(
     Ok(image)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn pixel_rays_project_back_to_their_pixel_centres() {
-        let cams = [
-            Camera::from_angles(2.732, 30.0, 45.0),
-            Camera {
-                projection: Projection::Orthographic { scale: 0.7 },
-                ..Camera::from_angles(3.0, -20.0, 200.0)
-            },
-        ];
-        for cam in cams {
-            for (c, r) in [(0, 0), (3, 5), (7, 2)] {
-                let ray = pixel_ray(&cam, c, r, 8, 6).unwrap();
-                let (xp, yp) = pixel_center(c, r, 8, 6);
-                for t in [0.5, 2.0, 4.0] {
-                    let s = cam.to_screen(ray.origin + ray.dir * t);
-                    assert!(
-                        (s[0] - xp).abs() < 1e-12 && (s[1] - yp).abs() < 1e-12,
-                        "{s:?}"
-                    );
-                }
-            }
-        }
-    }
-}
-
 /// Surfaces rendered side by side (`size`² each, lit white, SoftRas's sharp σ) under their
 /// names; an empty surface leaves its panel black.
 #[cfg(feature = "plots")]
@@ -345,4 +316,33 @@ pub fn surfaces_side_by_side(
         .map(|((name, _), img)| (*name, img.as_slice()))
         .collect();
     Ok(crate::fit::report::side_by_side(&named, size, size))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pixel_rays_project_back_to_their_pixel_centres() {
+        let cams = [
+            Camera::from_angles(2.732, 30.0, 45.0),
+            Camera {
+                projection: Projection::Orthographic { scale: 0.7 },
+                ..Camera::from_angles(3.0, -20.0, 200.0)
+            },
+        ];
+        for cam in cams {
+            for (c, r) in [(0, 0), (3, 5), (7, 2)] {
+                let ray = pixel_ray(&cam, c, r, 8, 6).unwrap();
+                let (xp, yp) = pixel_center(c, r, 8, 6);
+                for t in [0.5, 2.0, 4.0] {
+                    let s = cam.to_screen(ray.origin + ray.dir * t);
+                    assert!(
+                        (s[0] - xp).abs() < 1e-12 && (s[1] - yp).abs() < 1e-12,
+                        "{s:?}"
+                    );
+                }
+            }
+        }
+    }
 }
