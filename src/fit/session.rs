@@ -484,3 +484,53 @@ fn write_checkpoint<F: Trainee>(
 pub fn to_next_log<F>(every: u32) -> impl FnMut(&mut F, u32) -> Result<u32> {
     move |_, it| Ok(driver::to_next_log(it, every))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Clone)]
+    struct Row(u32, f64);
+
+    impl LogRow for Row {
+        fn iteration(&self) -> u32 {
+            self.0
+        }
+        fn loss(&self) -> f64 {
+            self.1
+        }
+        fn write(&self, w: &mut Writer) {
+            w.u32(self.0);
+            w.f64(self.1);
+        }
+        fn read(r: &mut Reader<'_>) -> Result<Self> {
+            Ok(Row(r.u32()?, r.f64()?))
+        }
+    }
+
+    fn log(losses: &[f64]) -> Vec<Row> {
+        (1..).zip(losses).map(|(i, &l)| Row(i, l)).collect()
+    }
+
+    #[test]
+    fn the_stopping_rule_waits_a_window_after_the_last_real_improvement() {
+        let rule = StopRule {
+            from: 3,
+            window: 3,
+            min_improvement: 0.01,
+        };
+        // Rows before `from` never count: a high loss there is no best to beat.
+        assert!(!rule.stalled(&log(&[0.1, 0.1, 5.0, 4.0, 3.0])));
+        // Best at 5 (3.0); 6..8 improve by less than 1 %: stalled once 8 ≥ 5 + 3.
+        let l = [9.0, 9.0, 5.0, 4.0, 3.0, 2.99, 2.985, 2.98];
+        assert!(!rule.stalled(&log(&l[..7])));
+        assert!(rule.stalled(&log(&l)));
+        // A fall of more than 1 % moves the best, and the window starts again.
+        let l = [9.0, 9.0, 5.0, 4.0, 3.0, 2.99, 2.985, 2.9];
+        assert!(!rule.stalled(&log(&l)));
+        // A rise never counts as an improvement.
+        assert!(rule.stalled(&log(&[9.0, 9.0, 1.0, 2.0, 3.0, 4.0])));
+        // Nothing logged from `from` on: never stalled.
+        assert!(!rule.stalled(&log(&[1.0, 1.0])));
+    }
+}
