@@ -63,14 +63,6 @@ const HELP: &str = "pose_study [--trials N] [--size N] [--iters N] [--texture-re
   [--gamma-start G] [--stages N] [--sigma S] [--gamma G] [--lr LR] [--lr-translation LR]
   [--lr-final F] [--tile N] [--refine N --window W --improvement X | --no-refine] [--verbose]";
 
-/// The refinement `--refine`, `--window` and `--improvement` start from when the defaults
-/// have none.
-const REFINE: Refine = Refine {
-    iterations: 220,
-    window: 20,
-    min_improvement: 1e-3,
-};
-
 fn parse() -> Args {
     let defaults = PoseFitOptions::default();
     let mut a = Args {
@@ -123,9 +115,18 @@ fn parse() -> Args {
             "--lr-translation" => a.opts.lr_translation = num(value()),
             "--lr-final" => a.opts.lr_final = num(value()),
             "--tile" => a.opts.tile = num(value()) as u32,
-            "--refine" => a.opts.refine.get_or_insert(REFINE).iterations = num(value()) as u32,
-            "--window" => a.opts.refine.get_or_insert(REFINE).window = num(value()) as u32,
-            "--improvement" => a.opts.refine.get_or_insert(REFINE).min_improvement = num(value()),
+            "--refine" => {
+                a.opts.refine.get_or_insert_with(Refine::default).iterations = num(value()) as u32
+            }
+            "--window" => {
+                a.opts.refine.get_or_insert_with(Refine::default).window = num(value()) as u32
+            }
+            "--improvement" => {
+                a.opts
+                    .refine
+                    .get_or_insert_with(Refine::default)
+                    .min_improvement = num(value())
+            }
             "--no-refine" => a.opts.refine = None,
             "--verbose" => a.verbose = true,
             "--help" | "-h" => {

@@ -564,6 +564,7 @@ fn a_pose_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_fi
         },
         // Called back after every iteration, so that the fit can stop at 5.
         log_every: 1,
+        refine: None,
         ..PoseFitOptions::default()
     };
     let target = Renderer::new(&gpu)
@@ -627,4 +628,44 @@ fn a_pose_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_fi
         fp,
         PoseFit::fingerprint(&mesh, &camera, &lighting, &target, &other, &opts)
     );
+    // Stopped inside the refinement after the schedule and resumed, the stopping rule (which
+    // reads the log the checkpoint carries) ends it where it ended the fit that never stopped.
+    let refined = PoseFitOptions {
+        refine: Some(softvk::fit::pose::Refine {
+            iterations: 40,
+            window: 3,
+            min_improvement: 0.05,
+        }),
+        ..opts.clone()
+    };
+    let fit = |session| {
+        fit_pose(
+            &gpu,
+            &mesh,
+            &camera,
+            &lighting,
+            PoseTarget::Fixed(&target),
+            &init,
+            &refined,
+            session,
+        )
+    };
+    let whole = fit(Session::new()).unwrap();
+    assert!(
+        (15..refined.last_iteration()).contains(&whole.iterations),
+        "the rule ended the refinement after {} iterations",
+        whole.iterations
+    );
+    let fp = PoseFit::fingerprint(&mesh, &camera, &lighting, &target, &init, &refined);
+    let path = dir.path("refined.ckpt");
+    fit(stopping_at(14, &path, fp)).unwrap();
+    let logged = Rc::default();
+    let resumed = fit(resumed_from(&path, fp, 14, &logged)).unwrap();
+    assert_eq!(resumed.iterations, whole.iterations);
+    assert_eq!(
+        pose_bits(&whole.pose),
+        pose_bits(&resumed.pose),
+        "refined pose"
+    );
+    assert_eq!(log(&whole), log(&resumed), "refined log");
 }

@@ -13,7 +13,7 @@ use glam::DVec3;
 use rand::RngExt;
 use softvk::camera::Camera;
 use softvk::fit::pose::{
-    self, Pose, PoseFitOptions, PoseFitter, PoseProblem, PoseTarget, Schedule, fit_pose,
+    self, Pose, PoseFitOptions, PoseFitter, PoseProblem, PoseTarget, Refine, Schedule, fit_pose,
     rotation_distance,
 };
 use softvk::fit::session::Session;
@@ -360,6 +360,7 @@ fn small_fit_options(iterations: u32) -> PoseFitOptions {
             height: 32,
             ..RasterSettings::default()
         },
+        refine: None,
         ..PoseFitOptions::default()
     }
 }
@@ -446,6 +447,88 @@ fn a_sharp_fit_from_25_degrees_off_ends_within_2_degrees() {
     assert!(err < 2.0, "ended {err}° from the target");
     assert!(shift < 0.02, "translation off by {shift}");
     assert!(last < 0.05 * first, "loss {first} → {last}");
+}
+
+/// The refinement after the schedule: it runs past the schedule's iterations until the loss
+/// stops improving (the session's stopping rule holds where it ended, before its maximum), and
+/// ends closer than the schedule alone. Of several starts, only the winner is refined.
+#[test]
+fn refinement_runs_until_the_loss_stops_improving_and_only_the_winner_is_refined() {
+    let Some(gpu) = common::gpu() else { return };
+    let (mesh, target, init, mut opts) = small_fit();
+    opts.iterations = 30;
+    let image = gpu_target(&gpu, &mesh, &opts.settings, &target);
+    let fit = |opts: &PoseFitOptions| {
+        fit_pose(
+            &gpu,
+            &mesh,
+            &camera(),
+            &lighting(),
+            PoseTarget::Fixed(&image),
+            &init,
+            opts,
+            Session::new(),
+        )
+        .unwrap()
+    };
+    let error = |p: &Pose| rotation_distance(p.rotation, target.rotation).to_degrees();
+    let plain = fit(&opts);
+    assert_eq!(plain.iterations, 30);
+    let refined_opts = PoseFitOptions {
+        refine: Some(Refine {
+            iterations: 300,
+            window: 10,
+            min_improvement: 1e-2,
+        }),
+        ..opts.clone()
+    };
+    let refined = fit(&refined_opts);
+    let rule = refined_opts.stop_rule().unwrap();
+    assert!(
+        refined.iterations > 30 && refined.iterations < refined_opts.last_iteration(),
+        "stopped after {} of at most {}",
+        refined.iterations,
+        refined_opts.last_iteration()
+    );
+    assert!(rule.stalled(&refined.log), "ended before the rule held");
+    // The schedule's iterations are the plain fit's, bit for bit.
+    let bits = |l: &[pose::PoseLog]| -> Vec<u64> { l.iter().map(|r| r.loss.to_bits()).collect() };
+    assert_eq!(bits(&refined.log[..30]), bits(&plain.log));
+    let (before, after) = (error(&plain.pose), error(&refined.pose));
+    eprintln!(
+        "{before:.3}° after the schedule, {after:.3}° refined in {} iterations",
+        refined.iterations
+    );
+    assert!(after < 0.5 * before, "{before}° → {after}°");
+    assert!(
+        refined.loss < plain.loss,
+        "{} → {}",
+        plain.loss,
+        refined.loss
+    );
+    // Two starts: both run the schedule, the winner (the near one) alone is refined.
+    let far = Pose {
+        rotation: DVec3::new(2.0, -1.0, 0.5),
+        ..init
+    };
+    let multi = pose::fit_pose_multistart(
+        &gpu,
+        &mesh,
+        &camera(),
+        &lighting(),
+        PoseTarget::Fixed(&image),
+        &[far, init],
+        &refined_opts,
+        |_, _| true,
+    )
+    .unwrap();
+    assert_eq!(multi.best_start, 1);
+    assert_eq!(
+        multi.starts[0].iterations, 30,
+        "the loser ran the schedule only"
+    );
+    assert_eq!(multi.starts[1].iterations, 30 + refined.iterations);
+    assert_eq!(multi.best.pose.to_array(), refined.pose.to_array());
 }
 
 #[test]
@@ -792,6 +875,10 @@ fn fit_pose_writes_the_pose_json_and_both_images() {
             "--no-schedule",
             "--lr",
             "0.05",
+            "--starts",
+            "1",
+            "--refine",
+            "0",
         ],
     );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -888,6 +975,10 @@ fn fit_pose_writes_the_pose_json_and_both_images() {
         &[
             "--iters",
             "4",
+            "--starts",
+            "1",
+            "--refine",
+            "0",
             "--stages",
             "2",
             "--sigma-start",
@@ -938,6 +1029,25 @@ fn fit_pose_writes_the_pose_json_and_both_images() {
         json_v3(&json, "rotation_axis_angle"),
         json_v3(&starts[best], "rotation_axis_angle")
     );
+    // By default, 8 screened starts (from 32 × 8 candidates unless told), the winner refined.
+    let out4 = dir.path("default.json");
+    let o = fit_cmd(
+        &mesh,
+        &target,
+        &out4,
+        &[
+            "--iters",
+            "4",
+            "--candidates",
+            "16",
+            "--init-rotation",
+            "0,150,0",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let json = read_json(&out4);
+    assert_eq!(json["starts"].as_array().unwrap().len(), 8);
+    assert!(json["iterations"].as_u64().unwrap() > 4, "refined: {json}");
 }
 
 fn read_json(path: &Path) -> serde_json::Value {
@@ -996,7 +1106,7 @@ fn fit_pose_errors_are_one_line_and_write_nothing() {
             "candidates without starts",
             &mesh,
             &target,
-            vec!["--candidates", "8"],
+            vec!["--candidates", "8", "--starts", "1"],
             "--starts",
         ),
         (

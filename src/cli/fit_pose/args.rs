@@ -3,7 +3,7 @@
 use crate::cli::args::{CheckpointArgs, RasterArgs, ViewArgs, positive, triple};
 use clap::Args;
 use softvk::Result;
-use softvk::fit::pose::{PoseFitOptions, Schedule};
+use softvk::fit::pose::{PoseFitOptions, Refine, Schedule};
 use std::path::PathBuf;
 
 /// The defaults of the pose fit (chosen by `examples/pose_study.rs`; RESULTS.md).
@@ -44,9 +44,14 @@ pub struct FitPoseArgs {
     #[arg(long, value_name = "C.png")]
     pub compare: Option<PathBuf>,
 
-    /// Iterations [default: 80].
+    /// Iterations of the σ/γ schedule [default: 80].
     #[arg(long = "iters", value_name = "N")]
     pub iterations: Option<u32>,
+
+    /// After the schedule, at most N more iterations at the sharp σ/γ, ended when the loss has
+    /// stopped improving (of several starts, the winner's only); 0: none [default: 220].
+    #[arg(long, value_name = "N")]
+    pub refine: Option<u32>,
 
     /// Initial rotation: an axis-angle vector in degrees (direction the axis, length the angle).
     #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = triple)]
@@ -63,10 +68,10 @@ pub struct FitPoseArgs {
     /// Fit from K starts and keep the one that ends with the lowest loss: the K best of
     /// --candidates rotations spread over all rotations (the first is --init-rotation),
     /// rendered once each and at least 30° apart. Far starts land in wrong basins; one of K
-    /// screened starts usually begins in the right one.
-    #[arg(long, value_name = "K", default_value_t = 1,
-          value_parser = clap::value_parser!(u32).range(1..=1024))]
-    pub starts: u32,
+    /// screened starts usually begins in the right one [default: 8; 1 with --checkpoint or
+    /// --resume, as a checkpoint holds one fit].
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub starts: Option<u32>,
 
     /// Rotations screened for --starts [default: 32 × K; K or fewer: the K spread evenly,
     /// unscreened].
@@ -118,7 +123,19 @@ pub struct FitPoseArgs {
     pub checkpoints: CheckpointArgs,
 }
 
+/// `--starts`' default: enough screened starts that one begins in the right basin from any
+/// rotation (RESULTS.md, "Pose estimation").
+pub(super) const DEFAULT_STARTS: u32 = 8;
+
 impl FitPoseArgs {
+    /// `--starts`, or its default: [`DEFAULT_STARTS`], 1 with checkpoints.
+    pub(super) fn starts(&self) -> u32 {
+        let checkpoints =
+            self.checkpoints.checkpoint.is_some() || self.checkpoints.resume.is_some();
+        self.starts
+            .unwrap_or(if checkpoints { 1 } else { DEFAULT_STARTS })
+    }
+
     /// The fit's options these flags ask for, for an image of `size` on `tile`-pixel tiles.
     pub(super) fn options(&self, size: (u32, u32), tile: u32) -> Result<PoseFitOptions> {
         let d = defaults();
@@ -131,8 +148,18 @@ impl FitPoseArgs {
                 stages: self.stages.unwrap_or(s.stages),
             }
         });
+        let refine = match (self.refine, d.refine) {
+            (Some(0), _) => None,
+            (Some(n), Some(r)) => Some(Refine { iterations: n, ..r }),
+            (Some(n), None) => Some(Refine {
+                iterations: n,
+                ..Refine::default()
+            }),
+            (None, r) => r,
+        };
         let opts = PoseFitOptions {
             iterations: self.iterations.unwrap_or(d.iterations),
+            refine,
             lr_rotation: self.lr.unwrap_or(d.lr_rotation),
             lr_translation: self.lr_translation.unwrap_or(d.lr_translation),
             lr_final: self.lr_final.unwrap_or(d.lr_final),

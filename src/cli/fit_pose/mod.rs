@@ -110,14 +110,13 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
             "--out, --render, --error and --compare must be four different files".into(),
         ));
     }
-    if args.candidates.is_some() && args.starts == 1 {
+    let starts = args.starts();
+    if args.candidates.is_some() && starts == 1 {
         return Err(Error::Input(
             "--candidates chooses the starts of --starts K (K > 1)".into(),
         ));
     }
-    if args.starts > 1
-        && (args.checkpoints.checkpoint.is_some() || args.checkpoints.resume.is_some())
-    {
+    if starts > 1 && (args.checkpoints.checkpoint.is_some() || args.checkpoints.resume.is_some()) {
         return Err(Error::Input(
             "--starts with --checkpoint/--resume: a checkpoint holds one fit".into(),
         ));
@@ -133,36 +132,36 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
     let watch = Watch::new(args.quiet, u64::from(opts.iterations));
     let bar = watch.bar();
     let mut multi = None;
-    let result = if args.starts > 1 {
-        let candidates = args.candidates.unwrap_or(32 * args.starts);
+    let result = if starts > 1 {
+        let candidates = args.candidates.unwrap_or(32 * starts);
         bar.set_message(format!("screening {candidates} rotations"));
-        let starts = screened_starts(
+        let inits = screened_starts(
             &ctx,
             &mesh,
             &camera,
             &lighting,
             &target,
             &init,
-            args.starts,
+            starts,
             candidates,
             MIN_START_SEPARATION_DEG.to_radians(),
             &opts,
         )?;
-        bar.set_length(u64::from(opts.iterations) * u64::from(args.starts));
+        bar.set_length(u64::from(opts.iterations) * u64::from(starts));
         let m = fit_pose_multistart(
             &ctx,
             &mesh,
             &camera,
             &lighting,
             PoseTarget::Fixed(&target),
-            &starts,
+            &inits,
             &opts,
             |k, l| {
                 bar.set_position(k as u64 * u64::from(opts.iterations) + u64::from(l.iteration));
                 bar.set_message(format!(
                     "start {}/{}  loss {:.5}  σ {:.0e}",
                     k + 1,
-                    args.starts,
+                    starts,
                     l.loss,
                     l.sigma
                 ));

@@ -151,6 +151,11 @@ pub struct MultiStartResult {
 /// away lands in a wrong one, while one of several starts spread over the rotations
 /// ([`spread_starts`]) usually begins inside the right one. `progress(start, log)` is
 /// [`fit_pose`]'s, with the start's index; `false` stops the start it is in and every later one.
+///
+/// With [`PoseFitOptions::refine`], the starts run the schedule only, and the winner alone is
+/// refined: fitted again from its start with the refinement (its schedule's iterations are the
+/// same bits), its outcome replaced by the refined one. A start's loss after the schedule
+/// already tells the basins apart; refining the losers would only spend iterations.
 #[allow(clippy::too_many_arguments)]
 pub fn fit_pose_multistart(
     ctx: &Context,
@@ -167,26 +172,34 @@ pub fn fit_pose_multistart(
     }
     let mut outcomes = Vec::with_capacity(starts.len());
     let mut best: Option<(usize, PoseFitResult)> = None;
-    for (k, init) in starts.iter().enumerate() {
+    let schedule_only = PoseFitOptions {
+        refine: None,
+        ..opts.clone()
+    };
+    let mut fit = |k: usize, opts: &PoseFitOptions, stopped: &mut bool| {
         let here = match &mut target {
             PoseTarget::Fixed(t) => PoseTarget::Fixed(t),
             PoseTarget::PerStage(f) => PoseTarget::PerStage(&mut **f),
         };
-        let mut stopped = false;
         let hooks = |p: &Progress<'_, '_, PoseFit<'_>>| {
             let go_on = progress(k, p.row());
-            stopped |= !go_on;
+            *stopped |= !go_on;
             Ok(go_on)
         };
         let session = Session::new().hooks(hooks);
-        let result = fit_pose(ctx, mesh, camera, lighting, here, init, opts, session)?;
-        outcomes.push(StartOutcome {
-            init: *init,
-            pose: result.pose,
-            loss: result.loss,
-            seconds: result.seconds,
-            iterations: result.iterations,
-        });
+        fit_pose(ctx, mesh, camera, lighting, here, &starts[k], opts, session)
+    };
+    let outcome = |k: usize, result: &PoseFitResult| StartOutcome {
+        init: starts[k],
+        pose: result.pose,
+        loss: result.loss,
+        seconds: result.seconds,
+        iterations: result.iterations,
+    };
+    let mut stopped = false;
+    for k in 0..starts.len() {
+        let result = fit(k, &schedule_only, &mut stopped)?;
+        outcomes.push(outcome(k, &result));
         let better = match &best {
             None => true,
             Some((_, b)) => result.loss < b.loss || !b.loss.is_finite() && result.loss.is_finite(),
@@ -198,7 +211,15 @@ pub fn fit_pose_multistart(
             break;
         }
     }
-    let (best_start, best) = best.expect("at least one start ran");
+    let (best_start, mut best) = best.expect("at least one start ran");
+    if opts.refine.is_some() && !stopped {
+        best = fit(best_start, opts, &mut stopped)?;
+        outcomes[best_start] = StartOutcome {
+            seconds: outcomes[best_start].seconds + best.seconds,
+            iterations: outcomes[best_start].iterations + best.iterations,
+            ..outcome(best_start, &best)
+        };
+    }
     Ok(MultiStartResult {
         best,
         best_start,
