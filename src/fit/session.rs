@@ -19,12 +19,15 @@
 //!   other inputs, another format or softvk version, or a damaged file, each with one line),
 //!   and a session resumed from it ends bit for bit as the session that never stopped (softvk
 //!   is deterministic, and every random number is keyed by the iteration).
+//! - **Validation** ([`Session::validate`]): a score every N iterations (submissions end
+//!   there), logged beside the rows and carried by checkpoints (the reconstruction trainers').
 //! - **The stopping rule** ([`StopRule`]): a session may end when its loss has stopped
-//!   improving.
+//!   improving (the pose fits' refinement).
 //!
-//! What a new fit needs, then: its [`Fit`] (the recording of an iteration), a [`Trainee`]
-//! impl of about 40 lines (its row, its state), and a function that builds its [`Fitter`] and
-//! calls [`Session::run`]; its command-line file parses arguments and writes outputs.
+//! What a new fit needs, then: its [`Fit`] (the recording of an iteration), a [`LogRow`] and
+//! a [`Trainee`] impl (its row, its state: about 70 lines for the articulated fit), a
+//! fingerprint of its inputs, and a function that builds its [`Fitter`] and calls
+//! [`Session::run`]; its command-line folder parses arguments (`args.rs`) and writes outputs.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
