@@ -4,7 +4,7 @@ mod common;
 
 use ash::vk;
 use softvk::Error;
-use softvk::gpu::{Kernel, MemoryKind, Timer, specs};
+use softvk::gpu::{MemoryKind, Timer, specs};
 use softvk::primitives::{Scan, ScanScratch};
 
 #[test]
@@ -153,7 +153,8 @@ fn every_generated_kernel_builds_a_pipeline() {
             spec.name
         );
         assert!(spec.workgroup_size.iter().all(|&s| s >= 1), "{}", spec.name);
-        Kernel::new(&gpu, spec).unwrap_or_else(|e| panic!("{}: {e}", spec.name));
+        gpu.kernel(spec, &[])
+            .unwrap_or_else(|e| panic!("{}: {e}", spec.name));
     }
 }
 
@@ -181,7 +182,7 @@ fn the_contexts_kernels_are_built_once_per_specialization_and_shared() {
 #[test]
 fn dispatch_rejects_arguments_that_do_not_fit_the_kernel() {
     let Some(gpu) = common::gpu() else { return };
-    let kernel = Kernel::new(&gpu, &specs::SCAN_REDUCE).unwrap();
+    let kernel = gpu.kernel(&specs::SCAN_REDUCE, &[]).unwrap();
     let buffer = gpu.create_buffer("args", 4096, MemoryKind::Device).unwrap();
     let result = gpu.submit_and_wait(|rec| rec.dispatch(&kernel, &[buffer.whole()], &[0u32; 2], 1));
     assert!(
@@ -251,7 +252,7 @@ fn texel_bindings_are_reflected_and_checked() {
     );
 
     let Some(gpu) = common::gpu() else { return };
-    let kernel = Kernel::new(&gpu, &specs::RASTER_TILED).unwrap();
+    let kernel = gpu.kernel(&specs::RASTER_TILED, &[]).unwrap();
     let buffer = gpu
         .create_buffer("texels", 4096, MemoryKind::Device)
         .unwrap();
@@ -453,7 +454,7 @@ fn bindings_are_declared_by_the_kernels_and_bound_by_name() {
 
     // A kernel given another kernel's buffers is caught before anything is recorded (the
     // library's dispatches all go through `for_kernel`).
-    let sum = Kernel::new(&gpu, &specs::FIT_SUM).unwrap();
+    let sum = gpu.kernel(&specs::FIT_SUM, &[]).unwrap();
     let x = by_name("Partials");
     let mse = specs::MseViewsBindings {
         images: x,

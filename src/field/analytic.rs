@@ -1,6 +1,8 @@
 //! The analytic shapes' kernels (`field_shape_eval`, `field_shape_grad`); the maths is in
 //! [`super::shape`].
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use super::shape::Shape;
@@ -27,8 +29,8 @@ pub(crate) struct ShapeGpu {
     code: u32,
     param_count: u32,
     sharpness: f32,
-    eval: Kernel,
-    grad: Kernel,
+    eval: Arc<Kernel>,
+    grad: Arc<Kernel>,
     partial: Buffer,
 }
 
@@ -39,8 +41,8 @@ impl ShapeGpu {
             code: shape.code(),
             param_count: p as u32,
             sharpness: sharpness as f32,
-            eval: Kernel::new(ctx, &specs::FIELD_SHAPE_EVAL)?,
-            grad: Kernel::new(ctx, &specs::FIELD_SHAPE_GRAD)?,
+            eval: ctx.kernel(&specs::FIELD_SHAPE_EVAL, &[])?,
+            grad: ctx.kernel(&specs::FIELD_SHAPE_GRAD, &[])?,
             partial: ctx.create_buffer(
                 "shape field chunk partials",
                 4 * p * u64::from(SHAPE_BATCH / FIELD_CHUNK),

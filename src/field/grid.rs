@@ -14,6 +14,8 @@
 //! One invocation's loops are bounded by the chunk (256 points) and by `batch / GRID_CHUNK + 1`
 //! pieces: far under llvmpipe's cap for any input.
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use super::{Cube, check_binding_bytes};
@@ -55,10 +57,10 @@ struct CornerPush {
 
 pub(crate) struct GridGpu {
     res: u32,
-    eval: Kernel,
-    keys_kernel: Kernel,
-    chunks: Kernel,
-    corner: Kernel,
+    eval: Arc<Kernel>,
+    keys_kernel: Arc<Kernel>,
+    chunks: Arc<Kernel>,
+    corner: Arc<Kernel>,
     sort: RadixSort,
     sort_scratch: SortScratch,
     keys: Buffer,
@@ -75,10 +77,10 @@ impl GridGpu {
         let batch = u64::from(GRID_BATCH);
         Ok(Self {
             res,
-            eval: Kernel::new(ctx, &specs::FIELD_GRID_EVAL)?,
-            keys_kernel: Kernel::new(ctx, &specs::FIELD_GRID_KEYS)?,
-            chunks: Kernel::new(ctx, &specs::FIELD_GRID_CHUNKS)?,
-            corner: Kernel::new(ctx, &specs::FIELD_GRID_CORNER)?,
+            eval: ctx.kernel(&specs::FIELD_GRID_EVAL, &[])?,
+            keys_kernel: ctx.kernel(&specs::FIELD_GRID_KEYS, &[])?,
+            chunks: ctx.kernel(&specs::FIELD_GRID_CHUNKS, &[])?,
+            corner: ctx.kernel(&specs::FIELD_GRID_CORNER, &[])?,
             sort: RadixSort::new(ctx)?,
             sort_scratch: SortScratch::new(ctx, batch)?,
             keys: ctx.create_buffer("grid field sort keys", 8 * batch, MemoryKind::Device)?,

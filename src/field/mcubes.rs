@@ -25,6 +25,8 @@
 //! same way by every cell that shares the edge. Vertices are numbered in order of first use by
 //! the triangles (cells in index order, then table order), on the GPU path and in the twin alike.
 
+use std::sync::Arc;
+
 use std::collections::HashMap;
 use std::sync::OnceLock;
 
@@ -358,9 +360,9 @@ struct EmitPush {
 
 /// Marching cubes' kernels and case table on the GPU.
 pub struct MarchingCubes {
-    lattice: Kernel,
-    cases: Kernel,
-    emit: Kernel,
+    lattice: Arc<Kernel>,
+    cases: Arc<Kernel>,
+    emit: Arc<Kernel>,
     scan: Scan,
     table: Buffer,
 }
@@ -369,9 +371,9 @@ impl MarchingCubes {
     /// Builds the kernels and uploads the case table.
     pub fn new(ctx: &Context) -> Result<Self> {
         Ok(Self {
-            lattice: Kernel::new(ctx, &specs::FIELD_LATTICE)?,
-            cases: Kernel::new(ctx, &specs::MC_CASES)?,
-            emit: Kernel::new(ctx, &specs::MC_EMIT)?,
+            lattice: ctx.kernel(&specs::FIELD_LATTICE, &[])?,
+            cases: ctx.kernel(&specs::MC_CASES, &[])?,
+            emit: ctx.kernel(&specs::MC_EMIT, &[])?,
             scan: Scan::new(ctx)?,
             table: ctx.upload_buffer("marching cubes case table", &table().words())?,
         })

@@ -25,6 +25,8 @@
 //! [`Error::Limit`] a network whose per-point loops would pass the cap. 4 × 128 with 6
 //! frequencies fits; 8 × 256 does not.
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use super::{Cube, FIELD_CHUNK, SumChunks, check_binding_bytes};
@@ -208,10 +210,10 @@ const SCRATCH_BUDGET: u64 = 32 << 20;
 /// The MLP's kernels and backward scratch (sized for one batch of points).
 pub(crate) struct MlpGpu {
     layout: MlpLayout,
-    eval: Kernel,
-    forward: Kernel,
-    delta: Kernel,
-    wgrad: Kernel,
+    eval: Arc<Kernel>,
+    forward: Arc<Kernel>,
+    delta: Arc<Kernel>,
+    wgrad: Arc<Kernel>,
     acts: Buffer,
     deltas: Buffer,
     partial: Buffer,
@@ -255,10 +257,10 @@ impl MlpGpu {
         check_binding_bytes(ctx, &what, (batch / chunk) * p * 4)?;
         Ok(Self {
             layout,
-            eval: Kernel::specialized(ctx, &specs::FIELD_MLP_EVAL, &layout.constants(true))?,
-            forward: Kernel::specialized(ctx, &specs::FIELD_MLP_FORWARD, &layout.constants(true))?,
-            delta: Kernel::specialized(ctx, &specs::FIELD_MLP_DELTA, &layout.constants(false))?,
-            wgrad: Kernel::new(ctx, &specs::FIELD_MLP_WGRAD)?,
+            eval: ctx.kernel(&specs::FIELD_MLP_EVAL, &layout.constants(true))?,
+            forward: ctx.kernel(&specs::FIELD_MLP_FORWARD, &layout.constants(true))?,
+            delta: ctx.kernel(&specs::FIELD_MLP_DELTA, &layout.constants(false))?,
+            wgrad: ctx.kernel(&specs::FIELD_MLP_WGRAD, &[])?,
             acts: ctx.create_buffer(
                 "mlp field activations",
                 4 * act_features * batch,

@@ -55,6 +55,8 @@ pub mod preview;
 pub mod shape;
 pub mod voxel;
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 pub use mlp::MlpLayout;
@@ -502,13 +504,13 @@ struct SumPush {
 
 /// `field_sum_chunks.comp`: chunk partials to the gradient, in chunk order.
 pub(crate) struct SumChunks {
-    kernel: Kernel,
+    kernel: Arc<Kernel>,
 }
 
 impl SumChunks {
     pub(crate) fn new(ctx: &Context) -> Result<Self> {
         Ok(Self {
-            kernel: Kernel::new(ctx, &specs::FIELD_SUM_CHUNKS)?,
+            kernel: ctx.kernel(&specs::FIELD_SUM_CHUNKS, &[])?,
         })
     }
 

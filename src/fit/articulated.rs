@@ -25,6 +25,8 @@
 //! Not here (yet): checkpoints (the rigid pose fit has them), several starts, a root pose
 //! fitted with the joints (give the camera instead).
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use super::adam::{Adam, AdamOptions};
@@ -283,9 +285,9 @@ pub type ArticulatedFit<'c> = PosedFit<'c, Skinned>;
 pub struct Skinned {
     opts: ArticulatedFitOptions,
     mse: BlurredMse,
-    fk: Kernel,
-    apply: Kernel,
-    grad: Kernel,
+    fk: Arc<Kernel>,
+    apply: Arc<Kernel>,
+    grad: Arc<Kernel>,
     /// The rest positions, packed xyz.
     rest: Buffer,
     joint_defs: Buffer,
@@ -356,9 +358,9 @@ impl<'c> Fitter<'c, ArticulatedFit<'c>> {
         let angles: Vec<f32> = init.iter().map(|&a| a as f32).collect();
         let model = Skinned {
             mse: BlurredMse::new(ctx, 1, opts.settings.width, opts.settings.height)?,
-            fk: Kernel::new(ctx, &specs::SKIN_FK)?,
-            apply: Kernel::new(ctx, &specs::SKIN_APPLY)?,
-            grad: Kernel::new(ctx, &specs::SKIN_GRAD)?,
+            fk: ctx.kernel(&specs::SKIN_FK, &[])?,
+            apply: ctx.kernel(&specs::SKIN_APPLY, &[])?,
+            grad: ctx.kernel(&specs::SKIN_GRAD, &[])?,
             rest: ctx.upload_buffer("rig rest positions", rig.mesh.positions.as_flattened())?,
             joint_defs: ctx.upload_buffer("rig joints", &defs)?,
             skins: ctx.upload_buffer("rig skin", &skins)?,

@@ -8,6 +8,8 @@
 //! render softened by σ, the blur treats the render and the target alike, so a sharp target (a
 //! photograph) is compared fairly at every width.
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use super::ImageMse;
@@ -39,7 +41,7 @@ struct BlurPush {
 /// The separable Gaussian blur of `views` RGBA images of `width`×`height` (see the [module
 /// docs](self)), with its scratch image.
 pub struct ImageBlur {
-    kernel: Kernel,
+    kernel: Arc<Kernel>,
     width: u32,
     height: u32,
     pixels: u32,
@@ -52,7 +54,7 @@ impl ImageBlur {
         let pixels = u64::from(views) * u64::from(width) * u64::from(height);
         let bytes = crate::gpu::check_binding(ctx, "a blurred image", 16 * pixels)?;
         Ok(Self {
-            kernel: Kernel::new(ctx, &specs::IMAGE_BLUR)?,
+            kernel: ctx.kernel(&specs::IMAGE_BLUR, &[])?,
             width,
             height,
             pixels: pixels as u32, // < maxStorageBufferRange / 16

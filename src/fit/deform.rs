@@ -19,6 +19,8 @@
 //! `deform_forward.comp`; `deform_backward.comp` then `fit_sum.comp` for the centre's gradient,
 //! a sum over the vertices in a fixed order.
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
@@ -35,8 +37,8 @@ struct DeformPush {
 
 /// The deformation on the GPU for one template.
 pub struct Deform {
-    forward: Kernel,
-    backward: Kernel,
+    forward: Arc<Kernel>,
+    backward: Arc<Kernel>,
     sum: Sum,
     vertex_count: u32,
     base: Buffer,
@@ -58,8 +60,8 @@ impl Deform {
         )?;
         let to_f32 = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
         Ok(Self {
-            forward: Kernel::new(ctx, &specs::DEFORM_FORWARD)?,
-            backward: Kernel::new(ctx, &specs::DEFORM_BACKWARD)?,
+            forward: ctx.kernel(&specs::DEFORM_FORWARD, &[])?,
+            backward: ctx.kernel(&specs::DEFORM_BACKWARD, &[])?,
             sum: Sum::new(ctx)?,
             vertex_count,
             base: ctx.upload_buffer("deform base", &to_f32(&base))?,

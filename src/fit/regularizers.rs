@@ -1,6 +1,8 @@
 //! The mesh regularizers of SoftRas's deformation demo on the GPU: [`super::laplacian`] and
 //! [`super::flatten`], for one fixed topology.
 
+use std::sync::Arc;
+
 use super::flatten::{EdgesPush, FlattenEdges};
 use super::laplacian::{Adjacency, ApplyPush, WeightedPush};
 use crate::error::{Error, Result};
@@ -23,10 +25,10 @@ pub struct RegularizerLosses {
 /// Loss values land in [`Self::values_buffer`]: float [`Self::LAPLACIAN`] and float
 /// [`Self::FLATTEN`].
 pub struct Regularizers {
-    apply: Kernel,
-    lap_grad: Kernel,
-    edges_kernel: Kernel,
-    gather: Kernel,
+    apply: Arc<Kernel>,
+    lap_grad: Arc<Kernel>,
+    edges_kernel: Arc<Kernel>,
+    gather: Arc<Kernel>,
     sum: Sum,
     vertex_count: u32,
     edge_count: u32,
@@ -77,10 +79,10 @@ impl Regularizers {
             ctx.create_buffer(name, check_binding(ctx, name, bytes)?, MemoryKind::Device)
         };
         Ok(Self {
-            apply: Kernel::new(ctx, &specs::LAPLACIAN_APPLY)?,
-            lap_grad: Kernel::new(ctx, &specs::LAPLACIAN_GRAD)?,
-            edges_kernel: Kernel::new(ctx, &specs::FLATTEN_EDGES)?,
-            gather: Kernel::new(ctx, &specs::FLATTEN_GATHER)?,
+            apply: ctx.kernel(&specs::LAPLACIAN_APPLY, &[])?,
+            lap_grad: ctx.kernel(&specs::LAPLACIAN_GRAD, &[])?,
+            edges_kernel: ctx.kernel(&specs::FLATTEN_EDGES, &[])?,
+            gather: ctx.kernel(&specs::FLATTEN_GATHER, &[])?,
             sum: Sum::new(ctx)?,
             vertex_count: vertex_count as u32, // checked above
             edge_count: e as u32,

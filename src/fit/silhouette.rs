@@ -10,6 +10,8 @@
 //! - [`ImageMse`]: `L = mean((P − T)²)` over the M = N·W·H·4 RGBA values, `dL/dP = 2 (P − T) / M`.
 //!   Kernels: `mse_views.comp`, `fit_sum.comp`, `mse_grad.comp`.
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
@@ -82,8 +84,8 @@ impl Shape {
 
 /// SoftRas's `neg_iou_loss` on the GPU for N views of W×H (see the [module docs](self)).
 pub struct SilhouetteLoss {
-    views_kernel: Kernel,
-    grad_kernel: Kernel,
+    views_kernel: Arc<Kernel>,
+    grad_kernel: Arc<Kernel>,
     sum: Sum,
     shape: Shape,
     stats: Buffer,
@@ -95,8 +97,8 @@ impl SilhouetteLoss {
     pub fn new(ctx: &Context, views: u32, width: u32, height: u32) -> Result<Self> {
         let shape = Shape::new(ctx, "silhouette loss", views, width, height)?;
         Ok(Self {
-            views_kernel: Kernel::new(ctx, &specs::IOU_VIEWS)?,
-            grad_kernel: Kernel::new(ctx, &specs::IOU_GRAD)?,
+            views_kernel: ctx.kernel(&specs::IOU_VIEWS, &[])?,
+            grad_kernel: ctx.kernel(&specs::IOU_GRAD, &[])?,
             sum: Sum::new(ctx)?,
             shape,
             stats: ctx.create_buffer(
@@ -200,8 +202,8 @@ impl SilhouetteLoss {
 
 /// The mean squared error of RGBA images on the GPU (see the [module docs](self)).
 pub struct ImageMse {
-    views_kernel: Kernel,
-    grad_kernel: Kernel,
+    views_kernel: Arc<Kernel>,
+    grad_kernel: Arc<Kernel>,
     sum: Sum,
     shape: Shape,
     partials: Buffer,
@@ -213,8 +215,8 @@ impl ImageMse {
     pub fn new(ctx: &Context, views: u32, width: u32, height: u32) -> Result<Self> {
         let shape = Shape::new(ctx, "image MSE", views, width, height)?;
         Ok(Self {
-            views_kernel: Kernel::new(ctx, &specs::MSE_VIEWS)?,
-            grad_kernel: Kernel::new(ctx, &specs::MSE_GRAD)?,
+            views_kernel: ctx.kernel(&specs::MSE_VIEWS, &[])?,
+            grad_kernel: ctx.kernel(&specs::MSE_GRAD, &[])?,
             sum: Sum::new(ctx)?,
             shape,
             partials: ctx.create_buffer(

@@ -14,7 +14,7 @@ use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use super::descriptors::DescriptorCache;
 use super::shared::{Shared, ValidationLog, create_pipeline_cache, on_validation_message};
 use super::texel_views::TexelViews;
-use super::{Kernel, KernelSpec, KernelVariants};
+use super::{Kernel, KernelSpec};
 use crate::error::{Error, Result, VkContext};
 
 const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
@@ -55,6 +55,10 @@ impl DescriptorMode {
         }
     }
 }
+
+/// A pipeline's key in the context's cache: the kernel's name and its specialization
+/// constants.
+type KernelKey = (&'static str, Vec<u32>);
 
 /// How to create an owned context.
 #[derive(Clone, Debug, Default)]
@@ -221,8 +225,8 @@ pub struct Context {
     info: DeviceInfo,
     /// [`Context::cpu_workgroups`].
     cpu_workgroups: bool,
-    /// [`Context::kernel`]'s pipelines, by kernel name.
-    kernels: Mutex<HashMap<&'static str, Arc<KernelVariants>>>,
+    /// [`Context::kernel`]'s pipelines, by kernel name and specialization constants.
+    kernels: Mutex<HashMap<KernelKey, Arc<Kernel>>>,
 }
 
 /// The atomic cells behind [`Counters`].
@@ -571,22 +575,22 @@ impl Context {
         })
     }
 
-    /// Kernel `spec` specialized with `constants` (see [`Kernel::specialized`]), built the
-    /// first time any caller asks for it and shared from then on for the life of the context.
-    /// For what many small objects each need (one sampler per training object): a pipeline costs
-    /// a compile and, on lavapipe, its machine code in memory, whoever builds it. Such a pipeline
-    /// lives as long as the context; with [`DescriptorMode::Sets`], its cached sets go with the
-    /// buffers they name.
+    /// Kernel `spec` specialized with `constants` (`constants[i]` the 32-bit value of its
+    /// specialization constant `constant_id = i`; none: their defaults), built the first time
+    /// any caller asks for it and shared from then on for the life of the context: **the one
+    /// way to get a pipeline** (see [`crate::gpu`]). A pipeline costs a compile and, on
+    /// lavapipe, its machine code in memory, whoever asks for it; here it costs that once per
+    /// context, however many objects record it (one sampler per training object). With
+    /// [`DescriptorMode::Sets`], its cached sets go with the buffers they name.
     pub fn kernel(&self, spec: &'static KernelSpec, constants: &[u32]) -> Result<Arc<Kernel>> {
-        let variants = {
-            let mut kernels = self.kernels.lock().unwrap_or_else(|e| e.into_inner());
-            Arc::clone(
-                kernels
-                    .entry(spec.name)
-                    .or_insert_with(|| Arc::new(KernelVariants::new(spec))),
-            )
-        };
-        variants.get(self, constants)
+        let mut kernels = self.kernels.lock().unwrap_or_else(|e| e.into_inner());
+        let key = (spec.name, constants.to_vec());
+        if let Some(kernel) = kernels.get(&key) {
+            return Ok(Arc::clone(kernel));
+        }
+        let kernel = Arc::new(Kernel::specialized(self, spec, constants)?);
+        kernels.insert(key, Arc::clone(&kernel));
+        Ok(kernel)
     }
 
     /// The device this context runs on.

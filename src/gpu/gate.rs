@@ -23,6 +23,8 @@
 //! Only dispatches are gated; fills and copies recorded in a gated region always run and must be
 //! harmless when the rest does not (the binning's sentinel fill of its keys is).
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use super::{
@@ -55,7 +57,7 @@ pub struct GateStatus {
 /// The gate's kernel and buffers: the status, the recorded grids (host-visible) and the grids
 /// the gated dispatches read.
 pub struct IterationGate {
-    kernel: Kernel,
+    kernel: Arc<Kernel>,
     status: Buffer,
     grids: Buffer,
     args: Buffer,
@@ -73,7 +75,7 @@ impl IterationGate {
     pub fn new(ctx: &Context) -> Result<Self> {
         let bytes = GATE_SLOTS * INDIRECT_ARGS_BYTES;
         Ok(Self {
-            kernel: Kernel::new(ctx, &specs::ITERATION_GATE)?,
+            kernel: ctx.kernel(&specs::ITERATION_GATE, &[])?,
             status: ctx.create_buffer("gate status", 16, MemoryKind::Device)?,
             grids: ctx.create_buffer("gate grids", bytes, MemoryKind::Upload)?,
             args: ctx.create_buffer("gate indirect args", bytes, MemoryKind::Device)?,

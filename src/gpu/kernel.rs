@@ -1,13 +1,14 @@
 //! Compute pipelines built from the kernels `build.rs` compiled. A [`Kernel`] is made once (shader
-//! module, descriptor set layout, pipeline layout, pipeline) and recorded many times.
+//! module, descriptor set layout, pipeline layout, pipeline) by the context's cache
+//! ([`Context::kernel`], the one way to get one) and recorded many times.
 //!
 //! A kernel whose modes are specialization constants (`layout(constant_id = i)`) gets one
-//! pipeline per combination of values it is recorded with: [`KernelVariants`] builds each on
-//! first use and keeps it. On llvmpipe every branch runs for every lane, so a mode passed as a
-//! push constant costs the work of all modes; specialized, only the used mode's code exists.
+//! pipeline per combination of values it is recorded with, each built on first use:
+//! [`KernelVariants`] names the kernel and asks the cache. On llvmpipe every branch runs for
+//! every lane, so a mode passed as a push constant costs the work of all modes; specialized,
+//! only the used mode's code exists.
 
-use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 use ash::vk;
 
@@ -109,15 +110,10 @@ impl Kernel {
         })
     }
 
-    /// Builds the pipeline for `spec` on `ctx`'s device (specialization constants, if any, keep
-    /// their defaults).
-    pub fn new(ctx: &Context, spec: &'static KernelSpec) -> Result<Self> {
-        Self::specialized(ctx, spec, &[])
-    }
-
     /// Builds the pipeline for `spec` with `constants[i]` as the 32-bit value of the kernel's
-    /// specialization constant `constant_id = i`.
-    pub fn specialized(
+    /// specialization constant `constant_id = i` (none: their defaults). Only the context's
+    /// cache builds pipelines ([`Context::kernel`]): everything else asks it.
+    pub(crate) fn specialized(
         ctx: &Context,
         spec: &'static KernelSpec,
         constants: &[u32],
@@ -217,22 +213,17 @@ impl Kernel {
     }
 }
 
-/// One kernel's pipelines per combination of specialization constants, each built the first time
-/// it is asked for ([`KernelVariants::get`]) and kept for the life of this value. Building a
-/// pipeline goes through the context's pipeline cache, which persists on disk where it can
-/// ([`crate::gpu::ContextOptions::pipeline_cache`]).
+/// One kernel's pipelines per combination of specialization constants, through the context's
+/// cache ([`Context::kernel`]): what a struct that records one kernel in several
+/// specializations keeps, so that it names the kernel once.
 pub struct KernelVariants {
     spec: &'static KernelSpec,
-    built: Mutex<HashMap<Vec<u32>, Arc<Kernel>>>,
 }
 
 impl KernelVariants {
-    /// No pipeline yet: each is built on first use.
+    /// The variants of `spec`.
     pub fn new(spec: &'static KernelSpec) -> Self {
-        Self {
-            spec,
-            built: Mutex::new(HashMap::new()),
-        }
+        Self { spec }
     }
 
     /// The kernel's interface.
@@ -240,21 +231,9 @@ impl KernelVariants {
         self.spec
     }
 
-    /// The pipeline specialized with `constants` (see [`Kernel::specialized`]), built now if this
-    /// combination was never asked for.
+    /// The pipeline specialized with `constants` ([`Context::kernel`]).
     pub fn get(&self, ctx: &Context, constants: &[u32]) -> Result<Arc<Kernel>> {
-        let mut built = self.built.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(kernel) = built.get(constants) {
-            return Ok(Arc::clone(kernel));
-        }
-        let kernel = Arc::new(Kernel::specialized(ctx, self.spec, constants)?);
-        built.insert(constants.to_vec(), Arc::clone(&kernel));
-        Ok(kernel)
-    }
-
-    /// How many pipelines have been built.
-    pub fn built(&self) -> usize {
-        self.built.lock().map_or(0, |b| b.len())
+        ctx.kernel(self.spec, constants)
     }
 }
 

@@ -4,6 +4,14 @@
 //! (descriptor sets, texel views); the device state the context shares with everything it makes
 //! (`shared`, which holds those caches); the context; buffers and kernels, which hold that state
 //! to free themselves; recording and dispatch.
+//!
+//! **One way to get a pipeline: [`Context::kernel`]`(&specs::NAME, &constants)`.** The context
+//! builds each (kernel, specialization constants) once, through its pipeline cache, and shares
+//! the `Arc<Kernel>` with every caller for its own life: a pipeline costs a compile and, on
+//! lavapipe, its machine code in memory, and many objects record the same kernels (a sampler
+//! per training object). A struct that records one kernel in several specializations keeps a
+//! [`KernelVariants`] (the kernel named once) and asks it with the constants at hand; it asks
+//! the same cache. `Kernel` has no public constructor: nothing else builds a pipeline.
 
 mod context;
 mod descriptors;

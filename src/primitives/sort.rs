@@ -11,6 +11,8 @@
 //! result (a stable sort's output is unique), without the three dispatches a pass that cost
 //! about 0.1 ms each on llvmpipe whatever their size.
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use super::scan::{Scan, ScanScratch};
@@ -58,9 +60,9 @@ struct RadixPush {
 
 /// The sort's pipelines, made once per context.
 pub struct RadixSort {
-    small: Kernel,
-    count: Kernel,
-    scatter: Kernel,
+    small: Arc<Kernel>,
+    count: Arc<Kernel>,
+    scatter: Arc<Kernel>,
     scan: Scan,
 }
 
@@ -109,9 +111,9 @@ impl RadixSort {
     /// Builds the sort pipelines.
     pub fn new(ctx: &Context) -> Result<Self> {
         Ok(Self {
-            small: Kernel::new(ctx, &specs::RADIX_SMALL)?,
-            count: Kernel::new(ctx, &specs::RADIX_COUNT)?,
-            scatter: Kernel::new(ctx, &specs::RADIX_SCATTER)?,
+            small: ctx.kernel(&specs::RADIX_SMALL, &[])?,
+            count: ctx.kernel(&specs::RADIX_COUNT, &[])?,
+            scatter: ctx.kernel(&specs::RADIX_SCATTER, &[])?,
             scan: Scan::new(ctx)?,
         })
     }

@@ -1,6 +1,8 @@
 //! The strided sum that finishes every fit loss (`kernels/fit/fit_sum.comp`): one workgroup per
 //! component, a fixed order, no atomics.
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::Result;
@@ -24,13 +26,13 @@ pub(crate) struct SumPush {
 
 /// `fit_sum.comp`, made once per owner.
 pub(crate) struct Sum {
-    kernel: Kernel,
+    kernel: Arc<Kernel>,
 }
 
 impl Sum {
     pub fn new(ctx: &Context) -> Result<Self> {
         Ok(Self {
-            kernel: Kernel::new(ctx, &specs::FIT_SUM)?,
+            kernel: ctx.kernel(&specs::FIT_SUM, &[])?,
         })
     }
 

@@ -14,6 +14,8 @@
 //!
 //! Twins in [`cpu`]. Deterministic: one writer per output, no float atomics.
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 
@@ -53,8 +55,8 @@ struct DenseMaxPush {
 
 /// Dense marching of a fixed set of rays through a cube: kernels and buffers.
 pub struct DenseMarch {
-    points_kernel: Kernel,
-    max_kernel: Kernel,
+    points_kernel: Arc<Kernel>,
+    max_kernel: Arc<Kernel>,
     rays: u32,
     total: u32,
     width: u32,
@@ -106,8 +108,8 @@ impl DenseMarch {
         check_binding(ctx, "dense marching: samples", 16 * u64::from(total))?;
         let n = rays.len() as u32;
         Ok(Self {
-            points_kernel: Kernel::new(ctx, &specs::PROBE_DENSE_POINTS)?,
-            max_kernel: Kernel::new(ctx, &specs::PROBE_DENSE_MAX)?,
+            points_kernel: ctx.kernel(&specs::PROBE_DENSE_POINTS, &[])?,
+            max_kernel: ctx.kernel(&specs::PROBE_DENSE_MAX, &[])?,
             rays: n,
             total,
             width: targets.width,

@@ -18,6 +18,8 @@
 //!    L_geo and dL_geo/dφ per point (through the normals only: W is piecewise constant; the
 //!    k = 0 entries get 0), one writer per value: deterministic.
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use super::ProbeSettings;
@@ -59,8 +61,8 @@ struct LossPush {
 
 /// The regularizer's kernels and buffers, for [`ProbeSettings::geo_candidates`] candidates.
 pub struct GeoRegularizer {
-    points_kernel: Kernel,
-    loss_kernel: Kernel,
+    points_kernel: Arc<Kernel>,
+    loss_kernel: Arc<Kernel>,
     sum: Sum,
     settings: ProbeSettings,
     points: Buffer,
@@ -76,8 +78,8 @@ impl GeoRegularizer {
         let points = n * u64::from(POINTS_PER_CANDIDATE);
         check_binding(ctx, "geometric regularizer: points", 16 * points)?;
         Ok(Self {
-            points_kernel: Kernel::new(ctx, &specs::PROBE_GEO_POINTS)?,
-            loss_kernel: Kernel::new(ctx, &specs::PROBE_GEO_LOSS)?,
+            points_kernel: ctx.kernel(&specs::PROBE_GEO_POINTS, &[])?,
+            loss_kernel: ctx.kernel(&specs::PROBE_GEO_LOSS, &[])?,
             sum: Sum::new(ctx)?,
             settings: *settings,
             points: ctx.create_buffer("geo points", 16 * points, MemoryKind::Device)?,

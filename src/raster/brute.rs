@@ -6,6 +6,8 @@
 //! Besides RGBA, every rendered pixel gets a [`crate::raster::fine::PixelAux`]: the forward's
 //! running aggregates that the backward pass needs, so it needs no second forward.
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
@@ -35,7 +37,7 @@ pub use crate::gpu::specs::RasterBruteBindings as BruteBindings;
 /// The brute-force pipelines, made once per context.
 pub struct BruteRaster {
     raster: KernelVariants,
-    downsample: Kernel,
+    downsample: Arc<Kernel>,
 }
 
 impl BruteRaster {
@@ -43,7 +45,7 @@ impl BruteRaster {
     pub fn new(ctx: &Context) -> Result<Self> {
         Ok(Self {
             raster: KernelVariants::new(&specs::RASTER_BRUTE),
-            downsample: Kernel::new(ctx, &specs::DOWNSAMPLE_2X2)?,
+            downsample: ctx.kernel(&specs::DOWNSAMPLE_2X2, &[])?,
         })
     }
 

@@ -17,6 +17,8 @@
 //! [`lighting_grad_surface`]: super::reference_grad::lighting_grad_surface
 //! [`lighting_grad_vertex`]: super::reference_grad::lighting_grad_vertex
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use super::reference_grad::VertexFaces;
@@ -47,9 +49,9 @@ struct LightPush {
 /// kernels. Made for one scene ([`SceneLight::new`]); records over any buffers laid out as
 /// that scene's.
 pub struct SceneLight {
-    forward: Kernel,
-    backward: Kernel,
-    gather: Kernel,
+    forward: Arc<Kernel>,
+    backward: Arc<Kernel>,
+    gather: Arc<Kernel>,
     /// Unlit colours (surface: texels; vertex: vertex colours, white without), RGB + unused.
     base: Buffer,
     /// Ambient, then (direction, I c) per directional light.
@@ -97,9 +99,9 @@ impl SceneLight {
         let light_rows = light_rows(&scene.lighting);
         let layout = scene.position_layout();
         Ok(Self {
-            forward: Kernel::new(ctx, &specs::LIGHT_FORWARD)?,
-            backward: Kernel::new(ctx, &specs::LIGHT_BACKWARD)?,
-            gather: Kernel::new(ctx, &specs::LIGHT_GATHER)?,
+            forward: ctx.kernel(&specs::LIGHT_FORWARD, &[])?,
+            backward: ctx.kernel(&specs::LIGHT_BACKWARD, &[])?,
+            gather: ctx.kernel(&specs::LIGHT_GATHER, &[])?,
             base: ctx.upload_buffer("light unlit colours", &base)?,
             faces: ctx.upload_buffer("light faces", first.faces.as_flattened())?,
             lights: ctx.upload_buffer("light parameters", &light_rows)?,

@@ -7,6 +7,8 @@
 //! projection, on the host in f64 ([`crate::lighting`]), and uploads the lit per-face texels or
 //! per-vertex colours as f32.
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use crate::camera::{Camera, Projection, look_at};
@@ -217,14 +219,14 @@ pub(crate) fn dist_code(dist: Dist) -> u32 {
 
 /// The face setup pipeline, made once per context.
 pub struct FaceSetupKernel {
-    kernel: Kernel,
+    kernel: Arc<Kernel>,
 }
 
 impl FaceSetupKernel {
     /// Builds the pipeline.
     pub fn new(ctx: &Context) -> Result<Self> {
         Ok(Self {
-            kernel: Kernel::new(ctx, &specs::FACE_SETUP)?,
+            kernel: ctx.kernel(&specs::FACE_SETUP, &[])?,
         })
     }
 

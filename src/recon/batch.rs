@@ -10,6 +10,8 @@
 //! silhouette targets are the alphas of views a and b (copies `2b` and `2b + 1`); the copies'
 //! rotations are the views' [`super::view_rotation`]s, from a table of one per view.
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
@@ -38,7 +40,7 @@ pub struct BatchShape {
 
 /// The gather kernel.
 pub struct BatchGather {
-    kernel: Kernel,
+    kernel: Arc<Kernel>,
 }
 
 /// The buffers of one gather.
@@ -65,7 +67,7 @@ impl BatchGather {
     /// The pipeline.
     pub fn new(ctx: &Context) -> Result<Self> {
         Ok(Self {
-            kernel: Kernel::new(ctx, &specs::RECON_BATCH)?,
+            kernel: ctx.kernel(&specs::RECON_BATCH, &[])?,
         })
     }
 

@@ -21,6 +21,8 @@
 //! gets no gradient. Deterministic: each output has one writer and sums run in a fixed order.
 //! Twins: [`cpu`].
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, LimitKind, Result};
@@ -64,11 +66,11 @@ pub struct HeadLayout {
 
 /// The colour generator on the GPU for a template of `V` vertices and square inputs.
 pub struct ColorGenerator {
-    pool: Kernel,
-    palette: Kernel,
-    colors: Kernel,
-    colors_backward: Kernel,
-    palette_backward: Kernel,
+    pool: Arc<Kernel>,
+    palette: Arc<Kernel>,
+    colors: Arc<Kernel>,
+    colors_backward: Arc<Kernel>,
+    palette_backward: Arc<Kernel>,
     vertex_count: u32,
     grid: u32,
 }
@@ -102,11 +104,11 @@ impl ColorGenerator {
             }
         }
         Ok(Self {
-            pool: Kernel::new(ctx, &specs::RECON_POOL)?,
-            palette: Kernel::new(ctx, &specs::RECON_PALETTE)?,
-            colors: Kernel::new(ctx, &specs::RECON_COLORS)?,
-            colors_backward: Kernel::new(ctx, &specs::RECON_COLORS_BACKWARD)?,
-            palette_backward: Kernel::new(ctx, &specs::RECON_PALETTE_BACKWARD)?,
+            pool: ctx.kernel(&specs::RECON_POOL, &[])?,
+            palette: ctx.kernel(&specs::RECON_PALETTE, &[])?,
+            colors: ctx.kernel(&specs::RECON_COLORS, &[])?,
+            colors_backward: ctx.kernel(&specs::RECON_COLORS_BACKWARD, &[])?,
+            palette_backward: ctx.kernel(&specs::RECON_PALETTE_BACKWARD, &[])?,
             vertex_count,
             grid,
         })

@@ -30,6 +30,8 @@
 //! sampled from the object's input image (see [`super::colors`]). An object's outputs are thus
 //! `[r_d (3 V), r_c (3), colour generator]` ([`MeshDecoder::outputs_per_object`]).
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use super::colors::{ColorGenerator, HeadLayout};
@@ -59,9 +61,9 @@ pub fn view_rotation(azimuth_deg: f64) -> [f32; 2] {
 
 /// The decoder's mesh head on the GPU for one template: kernels and the template's terms.
 pub struct MeshDecoder {
-    forward: Kernel,
-    backward: Kernel,
-    centroid: Kernel,
+    forward: Arc<Kernel>,
+    backward: Arc<Kernel>,
+    centroid: Arc<Kernel>,
     colors: ColorGenerator,
     vertex_count: u32,
     base: Buffer,
@@ -93,9 +95,9 @@ impl MeshDecoder {
         }
         let to_f32 = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
         Ok(Self {
-            forward: Kernel::new(ctx, &specs::RECON_DECODE)?,
-            backward: Kernel::new(ctx, &specs::RECON_DECODE_BACKWARD)?,
-            centroid: Kernel::new(ctx, &specs::RECON_CENTROID_GRAD)?,
+            forward: ctx.kernel(&specs::RECON_DECODE, &[])?,
+            backward: ctx.kernel(&specs::RECON_DECODE_BACKWARD, &[])?,
+            centroid: ctx.kernel(&specs::RECON_CENTROID_GRAD, &[])?,
             colors: ColorGenerator::new(ctx, vertex_count, image)?,
             vertex_count,
             base: ctx.upload_buffer("decoder template base", &to_f32(&base))?,

@@ -1,6 +1,8 @@
 //! The pose fit on the GPU: every iteration recorded with no read-back, as many per submission
 //! as asked ([`PoseFitter`]).
 
+use std::sync::Arc;
+
 use glam::DVec3;
 
 use bytemuck::{Pod, Zeroable};
@@ -41,8 +43,8 @@ pub type PoseFit<'c> = PosedFit<'c, Rigid>;
 pub struct Rigid {
     opts: PoseFitOptions,
     mse: ImageMse,
-    apply: Kernel,
-    grad: Kernel,
+    apply: Arc<Kernel>,
+    grad: Arc<Kernel>,
     /// The rest positions, packed xyz.
     rest: Buffer,
     /// ω at floats [0, 3), t at [`PosePush::translation_at`, + 3): two bindable ranges.
@@ -112,8 +114,8 @@ impl<'c> Fitter<'c, PoseFit<'c>> {
         let first = opts.adam(0);
         let model = Rigid {
             mse: ImageMse::new(ctx, 1, opts.settings.width, opts.settings.height)?,
-            apply: Kernel::new(ctx, &specs::POSE_APPLY)?,
-            grad: Kernel::new(ctx, &specs::POSE_GRAD)?,
+            apply: ctx.kernel(&specs::POSE_APPLY, &[])?,
+            grad: ctx.kernel(&specs::POSE_GRAD, &[])?,
             rest: ctx.upload_buffer("pose rest positions", &rest)?,
             params: ctx.upload_buffer("pose parameters", &p0)?,
             d_params: ctx.upload_buffer("pose gradient", &vec![0f32; param_floats])?,

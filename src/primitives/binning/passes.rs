@@ -2,6 +2,8 @@
 //! per-tile counts and lists or the scatter, the radix sort by tile and the ranges; exact (the
 //! count read back first) or guarded (over a reserved capacity, the count left on the GPU).
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 #[cfg(doc)]
@@ -83,12 +85,12 @@ struct RangesPush {
 
 /// The binning pipelines, made once per context.
 pub struct Binner {
-    count: Kernel,
-    scatter: Kernel,
-    ranges: Kernel,
-    mask_counts: Kernel,
-    mask_list: Kernel,
-    count_sum: Kernel,
+    count: Arc<Kernel>,
+    scatter: Arc<Kernel>,
+    ranges: Arc<Kernel>,
+    mask_counts: Arc<Kernel>,
+    mask_list: Arc<Kernel>,
+    count_sum: Arc<Kernel>,
     scan: Scan,
     sort: RadixSort,
 }
@@ -97,12 +99,12 @@ impl Binner {
     /// Builds the pipelines.
     pub fn new(ctx: &Context) -> Result<Self> {
         Ok(Self {
-            count: Kernel::new(ctx, &specs::BIN_COUNT)?,
-            scatter: Kernel::new(ctx, &specs::BIN_SCATTER)?,
-            ranges: Kernel::new(ctx, &specs::BIN_RANGES)?,
-            mask_counts: Kernel::new(ctx, &specs::BIN_MASK_COUNTS)?,
-            mask_list: Kernel::new(ctx, &specs::BIN_MASK_LIST)?,
-            count_sum: Kernel::new(ctx, &specs::BIN_COUNT_SUM)?,
+            count: ctx.kernel(&specs::BIN_COUNT, &[])?,
+            scatter: ctx.kernel(&specs::BIN_SCATTER, &[])?,
+            ranges: ctx.kernel(&specs::BIN_RANGES, &[])?,
+            mask_counts: ctx.kernel(&specs::BIN_MASK_COUNTS, &[])?,
+            mask_list: ctx.kernel(&specs::BIN_MASK_LIST, &[])?,
+            count_sum: ctx.kernel(&specs::BIN_COUNT_SUM, &[])?,
             scan: Scan::new(ctx)?,
             sort: RadixSort::new(ctx)?,
         })

@@ -52,6 +52,8 @@ pub mod cpu;
 mod forward;
 mod lists;
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use self::backward::backward_iterations;
@@ -163,19 +165,19 @@ pub struct ProbeRun {
 
 /// The probing pipelines and their buffers, for one set of targets and settings.
 pub struct Prober {
-    items_kernel: Kernel,
+    items_kernel: Arc<Kernel>,
     /// The forward, brute-force forward and backward kernels are specialized on
     /// [`Prober::modes`] (the aggregation and the assignment).
     forward_kernel: KernelVariants,
     brute_kernel: KernelVariants,
-    keys_kernel: Kernel,
+    keys_kernel: Arc<Kernel>,
     backward_kernel: KernelVariants,
-    reduce_kernel: Kernel,
-    mask_counts_kernel: Kernel,
+    reduce_kernel: Arc<Kernel>,
+    mask_counts_kernel: Arc<Kernel>,
     /// Specialized by whether it writes each entry's tile (constant 0: not under G = max).
     mask_list_kernel: KernelVariants,
-    aux_keys_kernel: Kernel,
-    max_grad_kernel: Kernel,
+    aux_keys_kernel: Arc<Kernel>,
+    max_grad_kernel: Arc<Kernel>,
     binner: Binner,
     scan: Scan,
     scan_scratch: ScanScratch,
@@ -309,16 +311,16 @@ impl Prober {
         )?;
         check_binding(ctx, "sphere probing: anchor tile rectangles", 8 * items)?;
         Ok(Self {
-            items_kernel: Kernel::new(ctx, &specs::PROBE_ITEMS)?,
+            items_kernel: ctx.kernel(&specs::PROBE_ITEMS, &[])?,
             forward_kernel: KernelVariants::new(&specs::PROBE_FORWARD),
             brute_kernel: KernelVariants::new(&specs::PROBE_FORWARD_BRUTE),
-            keys_kernel: Kernel::new(ctx, &specs::PROBE_RAY_KEYS)?,
+            keys_kernel: ctx.kernel(&specs::PROBE_RAY_KEYS, &[])?,
             backward_kernel: KernelVariants::new(&specs::PROBE_BACKWARD),
-            reduce_kernel: Kernel::new(ctx, &specs::PROBE_REDUCE)?,
-            mask_counts_kernel: Kernel::new(ctx, &specs::BIN_MASK_COUNTS)?,
+            reduce_kernel: ctx.kernel(&specs::PROBE_REDUCE, &[])?,
+            mask_counts_kernel: ctx.kernel(&specs::BIN_MASK_COUNTS, &[])?,
             mask_list_kernel: KernelVariants::new(&specs::PROBE_MASK_LIST),
-            aux_keys_kernel: Kernel::new(ctx, &specs::PROBE_AUX_KEYS)?,
-            max_grad_kernel: Kernel::new(ctx, &specs::PROBE_MAX_GRAD)?,
+            aux_keys_kernel: ctx.kernel(&specs::PROBE_AUX_KEYS, &[])?,
+            max_grad_kernel: ctx.kernel(&specs::PROBE_MAX_GRAD, &[])?,
             binner: Binner::new(ctx)?,
             scan: Scan::new(ctx)?,
             scan_scratch: ScanScratch::new(ctx, tiles)?,

@@ -50,6 +50,8 @@ mod world;
 
 pub use buffers::{GradBuffers, GradIo};
 
+use std::sync::Arc;
+
 use super::method::Method;
 use super::reference_grad;
 use super::scene::Binned;
@@ -61,10 +63,10 @@ use crate::gpu::{Context, Kernel, KernelVariants, Recorder, specs};
 pub struct GradKernels {
     tiled: KernelVariants,
     brute: KernelVariants,
-    reduce: Kernel,
-    reduce_texels: Kernel,
-    world: Kernel,
-    gather: Kernel,
+    reduce: Arc<Kernel>,
+    reduce_texels: Arc<Kernel>,
+    world: Arc<Kernel>,
+    gather: Arc<Kernel>,
 }
 
 impl GradKernels {
@@ -73,10 +75,10 @@ impl GradKernels {
         Ok(Self {
             tiled: KernelVariants::new(&specs::GRAD_TILED),
             brute: KernelVariants::new(&specs::GRAD_BRUTE),
-            reduce: Kernel::new(ctx, &specs::GRAD_REDUCE)?,
-            reduce_texels: Kernel::new(ctx, &specs::GRAD_REDUCE_TEXELS)?,
-            world: Kernel::new(ctx, &specs::GRAD_WORLD)?,
-            gather: Kernel::new(ctx, &specs::GRAD_GATHER)?,
+            reduce: ctx.kernel(&specs::GRAD_REDUCE, &[])?,
+            reduce_texels: ctx.kernel(&specs::GRAD_REDUCE_TEXELS, &[])?,
+            world: ctx.kernel(&specs::GRAD_WORLD, &[])?,
+            gather: ctx.kernel(&specs::GRAD_GATHER, &[])?,
         })
     }
 
