@@ -668,4 +668,12 @@ fn a_pose_fit_resumed_from_a_checkpoint_ends_bit_for_bit_as_the_uninterrupted_fi
         "refined pose"
     );
     assert_eq!(log(&whole), log(&resumed), "refined log");
+    // The checkpoint written where the rule ended the fit ends it again: nothing more runs.
+    let ended = dir.path("ended.ckpt");
+    fit(stopping_at(u32::MAX, &ended, fp)).unwrap();
+    let logged = Rc::default();
+    let again = fit(resumed_from(&ended, fp, whole.iterations, &logged)).unwrap();
+    assert!(logged.borrow().is_empty(), "ran {:?}", logged.borrow());
+    assert_eq!(again.iterations, whole.iterations);
+    assert_eq!(pose_bits(&whole.pose), pose_bits(&again.pose), "ended pose");
 }

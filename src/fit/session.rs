@@ -391,9 +391,16 @@ impl<'h, F: Trainee> Session<'h, F> {
         let start = Instant::now();
         let mut stopped = None;
         let mut logging_seconds = 0.0;
+        // A checkpoint written where the rule ended the session (its last one) ends it again.
+        let last_before = first - 1;
+        let ended = last_before > 0 && stop.is_some_and(|s| s.stalled(&log));
+        if ended {
+            stopped = Some(Stopped::Converged);
+        }
+        let to = if ended { last_before } else { iterations };
         let last = fitter.drive(
             first,
-            iterations,
+            to,
             |fitter, it| {
                 let end = plan(fitter, it)?;
                 Ok(validate_every.map_or(end, |every| end.min(driver::to_next_log(it, every))))
