@@ -4,7 +4,9 @@
 //! [`run`]; `backward.rs`: [`run_backward`]); one iteration of each fit and its loop (`fits.rs`:
 //! [`run_fit`]) and of reconstruction training (`recon.rs`); the scenes themselves
 //! (`scenes.rs`: [`Scene`]).
-//! Micro-benchmarks of single kernels (scan, sort, the forward) are criterion's, in `benches/`.
+//! Whole workloads only: micro-benchmarks of single kernels and networks (scan, sort, the MLP
+//! field, the reconstruction network) are criterion's, in `benches/`, which use the library's
+//! kernels and nothing from here.
 //!
 //! Per scene, each method gets its own upload ([`Renderer::prepare`](crate::raster::gpu::Renderer::prepare)), one [`Renderer::run`](crate::raster::gpu::Renderer::run)
 //! (tiled: it sizes the bins exactly) and one recording of [`Renderer::record_forward`](crate::raster::gpu::Renderer::record_forward). Brute
