@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Alternating A/B runs of softvk binaries on one `softvk bench` scene.
 
-    bench/ab.py [--rounds N] [--repeat N] SCENE BASE BIN...
+    tools/bench-ab.py [--rounds N] [--repeat N] SCENE BASE BIN...
 
 Each round runs every binary once, in a shuffled order,
 
@@ -16,6 +16,9 @@ the min and median GPU and wall ms over the rounds, the median of the per-round 
 BASE, and the median of every pass. Run it on a quiet machine (the load average is printed per
 round). The before/after figures of BENCHMARKS.md were taken this way; `SOFTVK_ASSETS` is
 passed through to the binaries.
+
+A tool around `softvk bench`, not a benchmark of its own: it compares binaries' speed as
+`tools/output-hashes` compares their outputs.
 """
 import argparse
 import json
