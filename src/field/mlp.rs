@@ -40,10 +40,10 @@ pub const SOFTPLUS_BETA: f64 = 100.0;
 pub const MAX_WIDTH: u32 = 256;
 /// The evaluation kernel unrolls a network of at most this many weights and [`UNROLL_WIDTH`]
 /// units per layer (3 × 32 with 3 frequencies has 2 752 weights): straight-line code that keeps
-/// the activations in registers, 10–13× faster on llvmpipe (`examples/mlp_speed.rs`,
+/// the activations in registers, 10–13× faster on llvmpipe (`benches/networks.rs`,
 /// BENCHMARKS.md). Its compile time is what bounds it: 1–1.5 s for the width-32 networks up
-/// to 4 × 32, but 15–21 s for 2 × 56 or 1 × 128 (whole runs of `mlp_speed`, compile
-/// included), and minutes for 4 × 64.
+/// to 4 × 32, but 15–21 s for 2 × 56 or 1 × 128 (whole runs of the `mlp_speed` example that
+/// bench replaced, compile included), and minutes for 4 × 64.
 pub const UNROLL_WEIGHTS: usize = 4096;
 /// See [`UNROLL_WEIGHTS`].
 pub const UNROLL_WIDTH: u32 = 32;
