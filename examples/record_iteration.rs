@@ -79,9 +79,9 @@ fn main() -> softvk::Result<()> {
         deform.record_forward(rec, params.whole(), scene.positions().whole())
     })?;
     // The capacity: the template's entries and room to grow.
-    let total = renderer.count_entries(&ctx, &mut scene, TILE)?;
-    renderer.reserve_guarded(&ctx, &mut scene, TILE, 2 * total)?;
-    let mut grads = GradBuffers::new(&ctx, &scene, Method::Tiled { tile: TILE })?;
+    let total = renderer.count_entries(&ctx, &scene, TILE)?;
+    let bins = renderer.reserve_guarded(&ctx, &scene, TILE, 2 * total)?;
+    let mut grads = GradBuffers::guarded(&ctx, &scene, &bins)?;
     grads.set_alpha_only(true);
     let io = grads.io();
     let mut gate = IterationGate::new(&ctx)?;
@@ -132,6 +132,7 @@ fn main() -> softvk::Result<()> {
                 renderer.record_forward_guarded(
                     &mut rec,
                     &scene,
+                    &bins,
                     &mut gate,
                     it,
                     |rec, binned| {

@@ -124,8 +124,8 @@ fn render_and_differentiate(gpu: &Context) -> (Vec<Bits>, Vec<usize>) {
         let mut prepared = r.prepare(gpu, &mesh, &cams, &lighting(), &s).unwrap();
         let mut last = None;
         for _ in 0..3 {
-            let binned = r.run(gpu, &mut prepared, method).unwrap();
-            let frames = r.read_frames(gpu, binned.scene()).unwrap();
+            let binned = r.run(gpu, &mut prepared, method).unwrap().binned();
+            let frames = binned.scene().read_frames(gpu).unwrap();
             let grads = r.backward(gpu, &binned, &w, true).unwrap();
             let bits = (frame_bits(&frames), grad_bits(&grads));
             if let Some(previous) = &last {

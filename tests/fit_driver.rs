@@ -15,7 +15,7 @@ use softvk::gpu::{Buffer, Context, Recorder};
 use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
 use softvk::raster::backward::GradBuffers;
-use softvk::raster::gpu::{GpuScene, Method, Renderer};
+use softvk::raster::gpu::{GpuScene, GuardedBins, Method, Renderer};
 use softvk::raster::settings::{Alpha, Dist, RasterSettings, Rgb};
 
 const SIZE: u32 = 24;
@@ -25,6 +25,7 @@ const TILE: u32 = 8;
 struct VertexFit {
     renderer: Renderer,
     scene: GpuScene,
+    bins: GuardedBins,
     sil: SilhouetteLoss,
     adam: Adam,
     targets: Buffer,
@@ -50,9 +51,10 @@ impl Fit for VertexFit {
             adam,
             targets,
             grads,
+            bins,
             ..
         } = self;
-        renderer.record_forward_guarded(rec, scene, gate, it, |rec, binned| {
+        renderer.record_forward_guarded(rec, scene, bins, gate, it, |rec, binned| {
             let scene = binned.scene();
             let io = grads.io();
             sil.record(
@@ -72,7 +74,8 @@ impl Fit for VertexFit {
 
     fn grow(&mut self, ctx: &Context, total: u64) -> Result<()> {
         let capacity = with_headroom(ctx, "a vertex fit", total, self.max_capacity, "")?;
-        self.grads = reserve_guarded(ctx, &self.renderer, &mut self.scene, TILE, capacity, true)?;
+        (self.bins, self.grads) =
+            reserve_guarded(ctx, &self.renderer, &self.scene, TILE, capacity, true)?;
         self.capacity = capacity;
         Ok(())
     }
@@ -128,7 +131,7 @@ fn vertex_fit(ctx: &Context, capacity: u64) -> Fitter<'_, VertexFit> {
         .unwrap();
     scene.set_silhouette_only(true);
     let max_capacity = max_entry_capacity(ctx, &renderer, &scene);
-    let grads = reserve_guarded(ctx, &renderer, &mut scene, TILE, capacity, true).unwrap();
+    let (bins, grads) = reserve_guarded(ctx, &renderer, &scene, TILE, capacity, true).unwrap();
     let views = cameras().len() as u32;
     let adam = Adam::new(
         ctx,
@@ -153,6 +156,7 @@ fn vertex_fit(ctx: &Context, capacity: u64) -> Fitter<'_, VertexFit> {
         max_capacity,
         renderer,
         scene,
+        bins,
     };
     Fitter::from_fit(ctx, fit).unwrap()
 }

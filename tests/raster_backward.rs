@@ -19,7 +19,7 @@ use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
 use softvk::primitives::binning::MASK_MAX_TILES_PER_VIEW;
 use softvk::raster::backward::{GradBuffers, GradSplit};
-use softvk::raster::gpu::{GpuScene, Method, Renderer};
+use softvk::raster::gpu::{ExactRun, GpuScene, Method, Renderer};
 use softvk::raster::reference_grad::{self, Gradients};
 use softvk::raster::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
 
@@ -221,7 +221,7 @@ fn check(
     for method in METHODS {
         let scene = forward(r, gpu, mesh, cams, s, method);
         let got = r
-            .backward(gpu, &scene.binned(method).unwrap(), &w, cameras)
+            .backward(gpu, &scene.last_run().unwrap().binned(), &w, cameras)
             .unwrap_or_else(|e| panic!("{what} {method:?}: {e}"));
         let (err, share) = assert_close(
             &format!("{what} {method:?} vs twin"),
@@ -421,12 +421,12 @@ fn repeated_backward_runs_are_bit_identical() {
     ] {
         let a_scene = forward(&r, &gpu, &mesh, &cams, &s, method);
         let a = r
-            .backward(&gpu, &a_scene.binned(method).unwrap(), &w, true)
+            .backward(&gpu, &a_scene.last_run().unwrap().binned(), &w, true)
             .unwrap();
         let r2 = Renderer::new(&gpu).unwrap();
         let b_scene = forward(&r2, &gpu, &mesh, &cams, &s, method);
         let b = r2
-            .backward(&gpu, &b_scene.binned(method).unwrap(), &w, true)
+            .backward(&gpu, &b_scene.last_run().unwrap().binned(), &w, true)
             .unwrap();
         assert!(bits(&a) == bits(&b), "{method:?}");
     }
@@ -509,17 +509,15 @@ fn gradient_descent_on_one_triangle_matches_a_silhouette() {
             let mut scene = r
                 .prepare(&gpu, &mesh, &cams, &Lighting::unlit(), &s)
                 .unwrap();
-            r.run(&gpu, &mut scene, Method::default()).unwrap();
-            let img = r.read_frames(&gpu, &scene).unwrap().images;
+            let run = r.run(&gpu, &mut scene, Method::default()).unwrap();
+            let img = run.binned().scene().read_frames(&gpu).unwrap().images;
             // L = Σ (A − A_target)², the target's silhouette rendered with the same σ.
             let d: Vec<[f32; 4]> = img
                 .iter()
                 .zip(&soft_target)
                 .map(|(p, t)| [0.0, 0.0, 0.0, 2.0 * (p[3] - t[3])])
                 .collect();
-            let g = r
-                .backward(&gpu, &scene.binned(Method::default()).unwrap(), &d, false)
-                .unwrap();
+            let g = r.backward(&gpu, &run.binned(), &d, false).unwrap();
             for k in 0..3 {
                 for c in 0..2 {
                     let gk = g.positions[k][c];
@@ -548,7 +546,7 @@ fn backward_input_errors() {
     let err = r
         .backward(
             &gpu,
-            &scene.binned(Method::Tiled { tile: 8 }).unwrap(),
+            &scene.last_run().unwrap().binned(),
             &weights(10, 1),
             false,
         )
@@ -557,17 +555,9 @@ fn backward_input_errors() {
     let mut w = weights(64, 1);
     w[3][1] = f32::NAN;
     let err = r
-        .backward(
-            &gpu,
-            &scene.binned(Method::Tiled { tile: 8 }).unwrap(),
-            &w,
-            false,
-        )
+        .backward(&gpu, &scene.last_run().unwrap().binned(), &w, false)
         .unwrap_err();
     assert!(err.to_string().contains("not finite"), "{err}");
-    // A backward over tiles the scene was not binned with: misuse, caught before any work.
-    let err = scene.binned(Method::Tiled { tile: 16 }).unwrap_err();
-    assert!(matches!(err, softvk::Error::Misuse(_)), "{err}");
 }
 
 /// A batch of two meshes of equal topology, four views: each mesh's gradients (positions,
@@ -599,7 +589,7 @@ fn a_batch_differentiates_as_each_mesh_alone() {
             .unwrap();
         r.run(&gpu, &mut scene, method).unwrap();
         let batch = r
-            .backward(&gpu, &scene.binned(method).unwrap(), &w, true)
+            .backward(&gpu, &scene.last_run().unwrap().binned(), &w, true)
             .unwrap();
         let nv = meshes[0].vertex_count();
         let nc = batch.colors.len() / 2;
@@ -612,7 +602,7 @@ fn a_batch_differentiates_as_each_mesh_alone() {
                 .collect();
             let alone_scene = forward(&r, &gpu, mesh, &my_cams, &s, method);
             let alone = r
-                .backward(&gpu, &alone_scene.binned(method).unwrap(), &my_w, true)
+                .backward(&gpu, &alone_scene.last_run().unwrap().binned(), &my_w, true)
                 .unwrap();
             let what = format!("{method:?} mesh {m}");
             assert!(
@@ -657,9 +647,9 @@ fn updated_meshes_render_and_differentiate_as_a_fresh_scene() {
     let method = Method::Tiled { tile: 8 };
     let render = |scene: &mut softvk::raster::gpu::GpuScene| {
         r.run(&gpu, scene, method).unwrap();
-        let frames = r.read_frames(&gpu, scene).unwrap();
+        let frames = scene.read_frames(&gpu).unwrap();
         let grads = r
-            .backward(&gpu, &scene.binned(method).unwrap(), &w, true)
+            .backward(&gpu, &scene.last_run().unwrap().binned(), &w, true)
             .unwrap();
         (frames.images, grads)
     };
@@ -711,7 +701,7 @@ fn kept_backward_buffers_differentiate_an_updated_scene_as_new_ones() {
     let method = Method::Tiled { tile: 8 };
     let backward = |scene: &GpuScene, gb: &GradBuffers| {
         gb.set_d_image(&gpu, scene, &w).unwrap();
-        let binned = scene.binned(method).unwrap();
+        let binned = scene.last_run().unwrap().binned();
         let kernels = r.grad_kernels();
         gpu.submit_and_wait(|rec| kernels.record(rec, &binned, gb, &gb.io()))
             .unwrap();
@@ -721,29 +711,27 @@ fn kept_backward_buffers_differentiate_an_updated_scene_as_new_ones() {
     let mut fresh = r
         .prepare_batch(&gpu, &new, &views, &lighting(), &s)
         .unwrap();
-    r.run(&gpu, &mut fresh, method).unwrap();
-    let expected = backward(&fresh, &GradBuffers::new(&gpu, &fresh, method).unwrap());
+    let fresh_gb = GradBuffers::new(&gpu, &r.run(&gpu, &mut fresh, method).unwrap().binned());
+    let expected = backward(&fresh, &fresh_gb.unwrap());
 
     let mut kept = r
         .prepare_batch(&gpu, &old, &views, &lighting(), &s)
         .unwrap();
-    r.run(&gpu, &mut kept, method).unwrap();
-    let gb = GradBuffers::new(&gpu, &kept, method).unwrap();
+    let gb = GradBuffers::new(&gpu, &r.run(&gpu, &mut kept, method).unwrap().binned()).unwrap();
     assert!(
         backward(&kept, &gb) != expected,
         "the new meshes must differentiate differently"
     );
     kept.update_meshes(&gpu, &new).unwrap();
-    r.run(&gpu, &mut kept, method).unwrap();
-    assert!(gb.fits(&kept, method));
+    assert!(gb.fits(&r.run(&gpu, &mut kept, method).unwrap().binned()));
     assert!(backward(&kept, &gb) == expected);
 
-    assert!(!gb.fits(&kept, Method::Brute));
+    assert!(!gb.fits(&r.run(&gpu, &mut kept, Method::Brute).unwrap().binned()));
+    r.run(&gpu, &mut kept, method).unwrap();
     let mut smaller = r
         .prepare_batch(&gpu, &new, &views, &lighting(), &settings(8, 8))
         .unwrap();
-    r.run(&gpu, &mut smaller, method).unwrap();
-    assert!(!gb.fits(&smaller, method));
+    assert!(!gb.fits(&r.run(&gpu, &mut smaller, method).unwrap().binned()));
     // Buffers made for the meshes shrunk to a tenth (most faces in one of 64 tiles, at a small
     // σ) are too small for the meshes at full size, which cross tiles.
     let sharp = RasterSettings {
@@ -760,13 +748,12 @@ fn kept_backward_buffers_differentiate_an_updated_scene_as_new_ones() {
     let mut grows = r
         .prepare_batch(&gpu, &shrunk, &views, &lighting(), &sharp)
         .unwrap();
-    r.run(&gpu, &mut grows, method).unwrap();
-    let small = GradBuffers::new(&gpu, &grows, method).unwrap();
-    assert!(small.fits(&grows, method));
+    let small = GradBuffers::new(&gpu, &r.run(&gpu, &mut grows, method).unwrap().binned()).unwrap();
+    assert!(small.fits(&grows.last_run().unwrap().binned()));
     grows.update_meshes(&gpu, &new).unwrap();
-    r.run(&gpu, &mut grows, method).unwrap();
-    assert!(grows.binned_entries() > small.entry_capacity());
-    assert!(!small.fits(&grows, method));
+    let binned = r.run(&gpu, &mut grows, method).unwrap().binned();
+    assert!(binned.entries() > small.entry_capacity());
+    assert!(!small.fits(&binned));
 }
 
 /// One tile holding more faces than llvmpipe lets one shader invocation loop over (65 535
@@ -824,9 +811,14 @@ fn backward_split(
     method: Method,
     split: GradSplit,
 ) -> (Gradients, u64, u32) {
-    let gb = GradBuffers::with_split(gpu, scene, method, split).unwrap();
+    // Brute force's backward reads only the forward's aux, which every method writes alike.
+    let binned = match method {
+        Method::Brute => ExactRun::brute(scene).binned(),
+        Method::Tiled { .. } => scene.last_run().unwrap().binned(),
+    };
+    assert_eq!(binned.method(), method);
+    let gb = GradBuffers::with_split(gpu, &binned, split).unwrap();
     gb.set_d_image(gpu, scene, w).unwrap();
-    let binned = scene.binned(method).unwrap();
     gpu.submit_and_wait(|rec| r.grad_kernels().record(rec, &binned, &gb, &gb.io()))
         .unwrap();
     let g = r
@@ -882,7 +874,7 @@ fn partials_in_many_chunks_match_the_twin_and_one_chunk_bit_for_bit() {
                 backward_split(&r, &gpu, &fwd, &w, method, GradSplit::default());
             let units = match method {
                 Method::Brute => u64::from(bands) * 2 * mesh.face_count() as u64,
-                Method::Tiled { .. } => fwd.binned_entries(),
+                Method::Tiled { .. } => fwd.last_run().unwrap().binned().entries(),
             };
             assert!(
                 one_chunk >= units,
@@ -970,7 +962,7 @@ fn brute_bands_and_split_tiles_match_the_twin() {
 
     let tile = Method::Tiled { tile: 32 };
     let fwd = forward(&r, &gpu, &mesh, &cams, &s, tile);
-    let run = fwd.binned_entries();
+    let run = fwd.last_run().unwrap().binned().entries();
     assert!(run > 64, "the one tile holds only {run} faces");
     let parts = GradSplit {
         tile_faces: Some(64),
@@ -1027,7 +1019,7 @@ fn the_backward_splits_work_past_the_drivers_loop_cap() {
     let want = reference_grad::grad(&crowded, &cams, &lighting(), &s, &w64).unwrap();
     let tile = Method::Tiled { tile: 32 };
     let fwd = forward(&r, &gpu, &crowded, &cams, &s, tile);
-    assert_eq!(fwd.binned_entries(), (n * n) as u64);
+    assert_eq!(fwd.last_run().unwrap().binned().entries(), (n * n) as u64);
     let (got, _, _) = backward_split(&r, &gpu, &fwd, &w, tile, GradSplit::default());
     assert_close(
         "4 624 faces in one 32-pixel tile",
@@ -1073,15 +1065,20 @@ fn alpha_only_backwards_equal_the_full_backward_for_an_alpha_upstream() {
                 let what = format!("{dist:?} {alpha:?} {method:?}");
                 let full = forward(&r, &gpu, &mesh, &cams, &s, method);
                 let want = r
-                    .backward(&gpu, &full.binned(method).unwrap(), &alpha_upstream, false)
+                    .backward(
+                        &gpu,
+                        &full.last_run().unwrap().binned(),
+                        &alpha_upstream,
+                        false,
+                    )
                     .unwrap();
                 assert!(values(&want).iter().any(|&x| x != 0.0), "{what}");
                 // Declared on the buffers, over the full render.
-                let mut gb = GradBuffers::new(&gpu, &full, method).unwrap();
+                let binned = full.last_run().unwrap().binned();
+                let mut gb = GradBuffers::new(&gpu, &binned).unwrap();
                 gb.set_alpha_only(true);
                 gb.set_d_image(&gpu, &full, &alpha_upstream).unwrap();
                 let k = r.grad_kernels();
-                let binned = full.binned(method).unwrap();
                 gpu.submit_and_wait(|rec| k.record(rec, &binned, &gb, &gb.io()))
                     .unwrap();
                 let declared = k.finish(&gpu, &full, &gb, &gb.io(), false).unwrap();
@@ -1091,7 +1088,12 @@ fn alpha_only_backwards_equal_the_full_backward_for_an_alpha_upstream() {
                 sil.set_silhouette_only(true);
                 r.run(&gpu, &mut sil, method).unwrap();
                 let got = r
-                    .backward(&gpu, &sil.binned(method).unwrap(), &alpha_upstream, false)
+                    .backward(
+                        &gpu,
+                        &sil.last_run().unwrap().binned(),
+                        &alpha_upstream,
+                        false,
+                    )
                     .unwrap();
                 assert!(values(&got) == values(&want), "{what}: silhouette");
             }
@@ -1141,12 +1143,16 @@ fn one_view_past_the_entry_budget_renders_and_differentiates_window_by_window() 
         };
         let w = weights((w_px * h_px) as usize, 62);
         let whole = forward(&r, &gpu, &mesh, &cams, &s, tile);
-        assert_eq!(whole.groups().len(), 1, "{what}");
-        let entries = whole.binned_entries();
+        assert_eq!(
+            whole.last_run().unwrap().binned().groups().len(),
+            1,
+            "{what}"
+        );
+        let entries = whole.last_run().unwrap().binned().entries();
         let budget = entries * 3 / 5;
         let windowed = Renderer::new(&gpu).unwrap().with_entry_budget(budget);
         let win = forward(&windowed, &gpu, &mesh, &cams, &s, tile);
-        let groups = win.groups();
+        let groups = win.last_run().unwrap().binned().groups();
         assert!(groups.len() >= 2, "{what}: {groups:?}");
         let rows = s.height.div_ceil(8);
         let mut next_row = 0;
@@ -1157,10 +1163,19 @@ fn one_view_past_the_entry_budget_renders_and_differentiates_window_by_window() 
             next_row += g.tile_rows.1;
         }
         assert_eq!(next_row, rows, "{what}: windows cover every tile row");
-        assert_eq!(win.binned_entries(), entries, "{what}: each entry once");
         assert_eq!(
-            win.pair_counts(&gpu, tile).unwrap(),
-            whole.pair_counts(&gpu, tile).unwrap(),
+            win.last_run().unwrap().binned().entries(),
+            entries,
+            "{what}: each entry once"
+        );
+        assert_eq!(
+            win.last_run().unwrap().binned().pair_counts(&gpu).unwrap(),
+            whole
+                .last_run()
+                .unwrap()
+                .binned()
+                .pair_counts(&gpu)
+                .unwrap(),
             "{what}: the same pairs visited"
         );
         // Which way the windows were binned: masks up to 2 048 tiles, the sort beyond.
@@ -1171,7 +1186,7 @@ fn one_view_past_the_entry_budget_renders_and_differentiates_window_by_window() 
             "{what}: {window_tiles} tiles per window"
         );
         let brute = forward(&r, &gpu, &mesh, &cams, &s, Method::Brute);
-        let frames = |scene: &GpuScene| frame_bits(&r.read_frames(&gpu, scene).unwrap());
+        let frames = |scene: &GpuScene| frame_bits(&scene.read_frames(&gpu).unwrap());
         let want = frames(&whole);
         assert!(frames(&win) == want, "{what}: windows changed the forward");
         assert!(frames(&brute) == want, "{what}: tiled differs from brute");
@@ -1228,7 +1243,7 @@ fn gpu_and_cpu_workgroup_shapes_give_the_same_bits() {
                     .unwrap();
                 let scene = forward(&r, gpu, &mesh, &cams, &s, method);
                 let g = r
-                    .backward(gpu, &scene.binned(method).unwrap(), &w, true)
+                    .backward(gpu, &scene.last_run().unwrap().binned(), &w, true)
                     .unwrap();
                 (frame_bits(&frames), bits(&g))
             };

@@ -23,7 +23,7 @@ use softvk::primitives::binning::{self, TileGrid};
 use softvk::raster::gpu::{Frames, Method, Renderer};
 use softvk::raster::reference::{self, FaceColors, project_faces, setup_face, shade_pixel};
 use softvk::raster::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
-use softvk::raster::setup::{FACE_DEGENERATE, FACE_FINITE, FACE_FRONT};
+use softvk::raster::setup::{FACE_DEGENERATE, FACE_FINITE, FACE_FRONT, GpuFaceSetup};
 
 /// Absolute tolerance per channel.
 const TOL: f64 = 1e-4;
@@ -37,6 +37,19 @@ const JITTER: f64 = 1e-6;
 const TILES: [u32; 3] = [8, 16, 32];
 
 /// Bit patterns of a frame set, so that -0.0 vs 0.0 and NaN payloads count as differences.
+/// The face setups of `mesh` seen from `cams` (view-major), read back after a forward.
+fn face_setups(
+    r: &Renderer,
+    gpu: &common::Gpu,
+    mesh: &Mesh,
+    cams: &[Camera],
+    s: &RasterSettings,
+) -> Vec<GpuFaceSetup> {
+    let mut scene = r.prepare(gpu, mesh, cams, &Lighting::unlit(), s).unwrap();
+    r.run(gpu, &mut scene, Method::default()).unwrap();
+    scene.read_setups(gpu).unwrap()
+}
+
 fn bits(f: &Frames) -> (Vec<u32>, Vec<u32>) {
     (
         f.images.iter().flatten().map(|c| c.to_bits()).collect(),
@@ -607,7 +620,7 @@ fn face_setup_matches_the_twin() {
             sigma: 1e-3,
             ..RasterSettings::default()
         };
-        let setups = r.face_setups(&gpu, &mesh, &cams, &s).unwrap();
+        let setups = face_setups(&r, &gpu, &mesh, &cams, &s);
         assert_eq!(setups.len(), cams.len() * mesh.face_count());
         for (v, cam) in cams.iter().enumerate() {
             for (j, tri) in project_faces(&mesh, cam).into_iter().enumerate() {
@@ -938,9 +951,7 @@ fn a_vertex_on_the_camera_plane_skips_its_face() {
     )
     .unwrap();
     mesh.textures = vec![[0.9, 0.2, 0.1], [0.1, 0.8, 0.3]];
-    let setups = r
-        .face_setups(&gpu, &mesh, &[cam], &RasterSettings::default())
-        .unwrap();
+    let setups = face_setups(&r, &gpu, &mesh, &[cam], &RasterSettings::default());
     assert_ne!(setups[0].flags & FACE_FINITE, 0);
     assert_eq!(setups[1].flags & FACE_FINITE, 0);
     let s = RasterSettings {
@@ -984,24 +995,56 @@ fn bad_inputs_are_errors_not_panics() {
         },
         ..Camera::default()
     };
-    let err = r.render_brute(&gpu, &mesh, &matrix, &lit, &s).unwrap_err();
+    let err = r
+        .render_views(
+            &gpu,
+            &mesh,
+            std::slice::from_ref(&matrix),
+            &lit,
+            &s,
+            Method::Brute,
+        )
+        .unwrap_err();
     assert!(matches!(err, softvk::Error::Input(_)), "{err}");
     let bad = RasterSettings { sigma: -1.0, ..s };
     let err = r
-        .render_brute(&gpu, &mesh, &Camera::default(), &lit, &bad)
+        .render_views(
+            &gpu,
+            &mesh,
+            std::slice::from_ref(&Camera::default()),
+            &lit,
+            &bad,
+            Method::Brute,
+        )
         .unwrap_err();
     assert!(matches!(err, softvk::Error::Render(_)), "{err}");
     let mut broken = mesh.clone();
     broken.faces[2][0] = 1000;
     let err = r
-        .render_brute(&gpu, &broken, &Camera::default(), &lit, &s)
+        .render_views(
+            &gpu,
+            &broken,
+            std::slice::from_ref(&Camera::default()),
+            &lit,
+            &s,
+            Method::Brute,
+        )
         .unwrap_err();
     assert!(err.to_string().contains("face 2"), "{err}");
     let nan_eye = Camera {
         eye: DVec3::new(f64::NAN, 0.0, -2.0),
         ..Camera::default()
     };
-    let err = r.render_brute(&gpu, &mesh, &nan_eye, &lit, &s).unwrap_err();
+    let err = r
+        .render_views(
+            &gpu,
+            &mesh,
+            std::slice::from_ref(&nan_eye),
+            &lit,
+            &s,
+            Method::Brute,
+        )
+        .unwrap_err();
     assert!(matches!(err, softvk::Error::Input(_)), "{err}");
 }
 
@@ -1046,9 +1089,17 @@ fn check_binning(
     s: &RasterSettings,
     tile: u32,
 ) -> binning::cpu::Binned {
-    let (setups, binned) = r
-        .bin_faces(gpu, mesh, cams, s, tile)
+    let mut scene = r
+        .prepare(gpu, mesh, cams, &Lighting::unlit(), s)
         .unwrap_or_else(|e| panic!("{what}: {e}"));
+    let run = r
+        .run(gpu, &mut scene, Method::Tiled { tile })
+        .unwrap_or_else(|e| panic!("{what}: {e}"))
+        .binned();
+    let mut groups = run.read_bins(gpu).unwrap();
+    assert_eq!(groups.len(), 1, "{what}: one binning of every view");
+    let binned = groups.pop().unwrap();
+    let setups = run.scene().read_setups(gpu).unwrap();
     let k = if s.antialias { 2 } else { 1 };
     let grid = TileGrid::new(s.width * k, s.height * k, tile).unwrap();
     let boxes: Vec<Option<[f32; 4]>> = setups
@@ -1254,16 +1305,21 @@ fn view_groups_split_under_an_entry_budget() {
     let r = Renderer::new(&gpu).unwrap();
     let want = render_all(&r, &gpu, "budget", &mesh, &cams, &lighting(), &s);
     let mut scene = r.prepare(&gpu, &mesh, &cams, &lighting(), &s).unwrap();
-    r.run(&gpu, &mut scene, Method::Tiled { tile: 8 }).unwrap();
-    let one_group = scene.binned_entries();
+    let one_group = r
+        .run(&gpu, &mut scene, Method::Tiled { tile: 8 })
+        .unwrap()
+        .binned()
+        .entries();
     let budget = one_group / 3;
     let small = Renderer::new(&gpu).unwrap().with_entry_budget(budget);
     let mut scene = small.prepare(&gpu, &mesh, &cams, &lighting(), &s).unwrap();
-    small
+    let split = small
         .run(&gpu, &mut scene, Method::Tiled { tile: 8 })
-        .unwrap();
-    assert_eq!(scene.binned_entries(), one_group, "every entry binned once");
-    let got = small.read_frames(&gpu, &scene).unwrap();
+        .unwrap()
+        .binned();
+    assert!(split.groups().len() > 1, "{:?}", split.groups());
+    assert_eq!(split.entries(), one_group, "every entry binned once");
+    let got = scene.read_frames(&gpu).unwrap();
     assert!(bits(&got) == bits(&want), "split groups differ");
 
     let tiny = Renderer::new(&gpu).unwrap().with_entry_budget(10);
@@ -1413,7 +1469,7 @@ fn a_batch_of_meshes_renders_as_each_mesh_alone() {
                 .prepare_batch(&gpu, &meshes, &views, &lighting(), &s)
                 .unwrap();
             r.run(&gpu, &mut scene, method).unwrap();
-            let batch = r.read_frames(&gpu, &scene).unwrap();
+            let batch = scene.read_frames(&gpu).unwrap();
             for (v, (m, cam)) in views.iter().enumerate() {
                 let alone = render_all(&r, &gpu, "alone", &meshes[*m], &[*cam], &lighting(), &s);
                 let bits = |img: &[[f32; 4]]| -> Vec<u32> {
@@ -1488,7 +1544,7 @@ fn silhouette_renders_have_the_full_renders_alpha() {
                     let mut scene = r.prepare(&gpu, &mesh, &cams, &lighting(), &s).unwrap();
                     scene.set_silhouette_only(silhouette);
                     r.run(&gpu, &mut scene, method).unwrap();
-                    r.read_frames(&gpu, &scene).unwrap()
+                    scene.read_frames(&gpu).unwrap()
                 };
                 let (full, sil) = (render(false), render(true));
                 let what = format!("{dist:?} {alpha:?} {method:?}");
@@ -1527,7 +1583,7 @@ fn misuse_and_small_buffers_are_matchable_errors() {
         height: 16,
         ..RasterSettings::default()
     };
-    let scene = r
+    let mut scene = r
         .prepare(
             &gpu,
             &Mesh::icosphere(1),
@@ -1536,14 +1592,26 @@ fn misuse_and_small_buffers_are_matchable_errors() {
             &s,
         )
         .unwrap();
-    // The tiled forward recorded, or its pairs counted, before any tiled run.
-    let tiled = Method::Tiled { tile: 8 };
-    let err = gpu
-        .submit_and_wait(|rec| r.record_forward(rec, &scene, tiled).map(|_| ()))
-        .unwrap_err();
-    assert!(matches!(err, Error::Misuse(_)), "{err}");
-    let err = scene.pair_counts(&gpu, tiled).unwrap_err();
-    assert!(matches!(err, Error::Misuse(_)), "{err}");
+    // A scene forgets its run when it changes: nothing replays or differentiates a binning
+    // made for other settings (a forward that never ran does not compile).
+    assert!(scene.last_run().is_none());
+    r.run(&gpu, &mut scene, Method::Tiled { tile: 8 }).unwrap();
+    assert!(scene.last_run().is_some());
+    scene.set_blur(2e-4, 1e-4).unwrap();
+    assert!(scene.last_run().is_none());
+    // Guarded bins are for the scene they were reserved for.
+    let other = r
+        .prepare(
+            &gpu,
+            &Mesh::icosphere(1),
+            &[Camera::default(); 2],
+            &lighting(),
+            &s,
+        )
+        .unwrap();
+    let bins = r.reserve_guarded(&gpu, &other, 8, 100).unwrap();
+    let err = bins.binned(&scene).unwrap_err();
+    assert!(matches!(err, Error::Input(_)), "{err}");
 
     // Binning into bins never reserved, and sorting before the count is read.
     let binner = Binner::new(&gpu).unwrap();

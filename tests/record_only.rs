@@ -232,9 +232,10 @@ fn convenience_iteration(
 ) -> (f32, Vec<[f64; 3]>) {
     let binned = renderer
         .run(ctx, scene, Method::Tiled { tile: TILE })
-        .unwrap();
+        .unwrap()
+        .binned();
     let scene = binned.scene();
-    let mut gb = GradBuffers::new(ctx, scene, binned.method()).unwrap();
+    let mut gb = GradBuffers::new(ctx, &binned).unwrap();
     gb.set_alpha_only(true);
     ctx.submit_and_wait(|rec| {
         sil.record(
@@ -303,11 +304,11 @@ fn a_fit_iteration_records_into_the_callers_command_buffer_over_the_callers_buff
     let host_colors = HostBuffer::new(ctx, "host d_colors", color_bytes);
 
     // Sizing: the capacity from one count (a convenience, before the frames).
-    let total = renderer.count_entries(ctx, &mut scene, TILE).unwrap();
-    renderer
-        .reserve_guarded(ctx, &mut scene, TILE, total + total / 4)
+    let total = renderer.count_entries(ctx, &scene, TILE).unwrap();
+    let bins = renderer
+        .reserve_guarded(ctx, &scene, TILE, total + total / 4)
         .unwrap();
-    let mut gb = GradBuffers::new(ctx, &scene, Method::Tiled { tile: TILE }).unwrap();
+    let mut gb = GradBuffers::guarded(ctx, &scene, &bins).unwrap();
     gb.set_alpha_only(true);
     let mut gate = IterationGate::new(ctx).unwrap();
     let io = GradIo {
@@ -325,7 +326,7 @@ fn a_fit_iteration_records_into_the_callers_command_buffer_over_the_callers_buff
         let mut rec = unsafe { Recorder::new(ctx, commands.cmd) };
         gate.reset();
         renderer
-            .record_forward_guarded(&mut rec, &scene, &mut gate, 1, |rec, binned| {
+            .record_forward_guarded(&mut rec, &scene, &bins, &mut gate, 1, |rec, binned| {
                 sil.record(
                     rec,
                     scene.output().whole(),
@@ -361,12 +362,12 @@ fn a_capacity_too_small_stops_the_gated_work_and_says_so() {
     let ctx: &Context = &gpu;
     let renderer = Renderer::new(ctx).unwrap();
     let (mesh, _) = inputs(ctx);
-    let mut scene = renderer
+    let scene = renderer
         .prepare(ctx, &mesh, &cameras(), &Lighting::unlit(), &settings())
         .unwrap();
-    let total = renderer.count_entries(ctx, &mut scene, TILE).unwrap();
-    renderer
-        .reserve_guarded(ctx, &mut scene, TILE, total - 1)
+    let total = renderer.count_entries(ctx, &scene, TILE).unwrap();
+    let bins = renderer
+        .reserve_guarded(ctx, &scene, TILE, total - 1)
         .unwrap();
     let mut gate = IterationGate::new(ctx).unwrap();
     // A marker the gated region would overwrite if it ran.
@@ -376,7 +377,7 @@ fn a_capacity_too_small_stops_the_gated_work_and_says_so() {
     let mut ran = false;
     ctx.submit_and_wait(|rec| {
         gate.reset();
-        renderer.record_forward_guarded(rec, &scene, &mut gate, 5, |_, _| {
+        renderer.record_forward_guarded(rec, &scene, &bins, &mut gate, 5, |_, _| {
             ran = true; // recorded (and gated), not run
             Ok(())
         })
@@ -387,28 +388,17 @@ fn a_capacity_too_small_stops_the_gated_work_and_says_so() {
     assert_eq!(status.stopped, Some((5, total)));
     let image: Vec<[f32; 4]> = ctx.read_buffer(scene.output(), 0, n).unwrap();
     assert!(image.iter().all(|p| *p == [7.0; 4]), "gated work ran");
-    // A scene never reserved, or last binned by an exact run (bins sized for its own view
-    // groups, not for one guarded group), is misuse, before anything is recorded.
-    let mut fresh = renderer
-        .prepare(ctx, &mesh, &cameras(), &Lighting::unlit(), &settings())
+    // Bins reserved for another scene's size are refused before anything is recorded (a
+    // scene with no bins at all does not compile).
+    let other = renderer
+        .prepare(ctx, &mesh, &cameras()[..1], &Lighting::unlit(), &settings())
         .unwrap();
-    fresh.set_silhouette_only(true);
-    let guarded = |scene: &GpuScene, gate: &mut IterationGate| {
-        ctx.submit_and_wait(|rec| {
-            renderer.record_forward_guarded(rec, scene, gate, 1, |_, _| Ok(()))
+    let err = ctx
+        .submit_and_wait(|rec| {
+            renderer.record_forward_guarded(rec, &other, &bins, &mut gate, 1, |_, _| Ok(()))
         })
-    };
-    let err = guarded(&fresh, &mut gate).unwrap_err();
-    assert!(matches!(err, softvk::Error::Misuse(_)), "{err}");
-    renderer
-        .run(ctx, &mut fresh, Method::Tiled { tile: TILE })
-        .unwrap();
-    let err = guarded(&fresh, &mut gate).unwrap_err();
-    assert!(matches!(err, softvk::Error::Misuse(_)), "{err}");
-    renderer
-        .reserve_guarded(ctx, &mut fresh, TILE, total + total / 4)
-        .unwrap();
-    guarded(&fresh, &mut gate).unwrap();
+        .unwrap_err();
+    assert!(matches!(err, softvk::Error::Input(_)), "{err}");
 }
 
 #[test]
@@ -430,9 +420,9 @@ fn positions_bound_with_a_stride_render_as_packed_ones() {
     let upstream: Vec<[f32; 4]> = (0..n)
         .map(|i| [0.3, -0.2, 0.1, if i % 3 == 0 { 1.0 } else { -0.5 }])
         .collect();
-    let binned = renderer.run(ctx, &mut packed, method).unwrap();
+    let binned = renderer.run(ctx, &mut packed, method).unwrap().binned();
     let want_grads = renderer.backward(ctx, &binned, &upstream, true).unwrap();
-    let want = renderer.read_frames(ctx, &packed).unwrap();
+    let want = packed.read_frames(ctx).unwrap();
     let layout = VertexLayout {
         offset: 4,
         stride: 5,
@@ -446,13 +436,13 @@ fn positions_bound_with_a_stride_render_as_packed_ones() {
         .unwrap();
     let buffer = ctx.upload_buffer("strided", &floats).unwrap();
     strided.bind_positions(buffer, layout).unwrap();
-    let binned = renderer.run(ctx, &mut strided, method).unwrap();
+    let binned = renderer.run(ctx, &mut strided, method).unwrap().binned();
     let got_grads = renderer.backward(ctx, &binned, &upstream, true).unwrap();
     assert!(
         got_grads == want_grads,
         "a strided vertex buffer differentiates differently"
     );
-    let got = renderer.read_frames(ctx, &strided).unwrap();
+    let got = strided.read_frames(ctx).unwrap();
     assert!(got == want, "a strided vertex buffer renders differently");
     // Too small for the layout, or a stride without room for xyz: refused, nothing changed.
     let small = ctx.create_buffer("small", 64, MemoryKind::Device).unwrap();

@@ -625,11 +625,18 @@ impl Raster {
         let method = self.key.method;
         let eyes = eyes && matches!(self.kind, RasterKind::Mesh { .. });
         let grads = with_engine(py, |engine| {
-            let binned = scene.binned(method)?;
+            // The scene is kept for this backward alone: nothing changes it after its run.
+            let binned = scene
+                .last_run()
+                .filter(|run| run.binned().method() == method)
+                .ok_or_else(|| {
+                    softvk::Error::Input("this render's forward is gone; render again".into())
+                })?
+                .binned();
             let mut kept = self.grads.lock().unwrap_or_else(|e| e.into_inner());
             let gb = match kept.take() {
-                Some(gb) if gb.fits(scene, method) => kept.insert(gb),
-                _ => kept.insert(GradBuffers::new(&engine.ctx, scene, method)?),
+                Some(gb) if gb.fits(&binned) => kept.insert(gb),
+                _ => kept.insert(GradBuffers::new(&engine.ctx, &binned)?),
             };
             gb.set_alpha_only(alpha_only);
             gb.set_d_image(&engine.ctx, scene, d_image)?;

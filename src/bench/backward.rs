@@ -56,14 +56,14 @@ pub fn run_backward(
                 &scene.lighting,
                 &scene.settings,
             )?;
-            let prepared = renderer.run(ctx, &mut gpu, method).and_then(|binned| {
-                let gb = GradBuffers::new(ctx, binned.scene(), method)?;
-                gb.set_d_image(ctx, binned.scene(), &d_image)?;
+            let prepared = renderer.run(ctx, &mut gpu, method).and_then(|run| {
+                let gb = GradBuffers::new(ctx, &run.binned())?;
+                gb.set_d_image(ctx, run.binned().scene(), &d_image)?;
                 // A first, untimed backward: it also tells whether the device can run it.
-                renderer.backward(ctx, &binned, &d_image, false)?;
-                Ok((binned, gb))
+                renderer.backward(ctx, &run.binned(), &d_image, false)?;
+                Ok((run, gb))
             });
-            let (binned, gb) = match prepared {
+            let (run, gb) = match prepared {
                 Ok(prepared) => prepared,
                 Err(Error::Limit(why)) => {
                     progress(&format!("{} {label}: skipped: {why}", scene.name));
@@ -71,21 +71,22 @@ pub fn run_backward(
                 }
                 Err(e) => return Err(e),
             };
+            let binned = run.binned();
             let gpu = binned.scene();
-            let counts = gpu.pair_counts(ctx, method)?;
+            let counts = binned.pair_counts(ctx)?;
             let entries = match method {
-                Method::Tiled { .. } => Some(gpu.binned_entries()),
+                Method::Tiled { .. } => Some(binned.entries()),
                 Method::Brute => None,
             };
             for pass in ["backward", "forward+backward"] {
                 let mut timer = if ctx.info().timestamp_valid_bits > 0 {
-                    Some(Timer::new(ctx, 16 + 3 * gpu.groups().len() as u32)?)
+                    Some(Timer::new(ctx, 16 + 3 * binned.groups().len() as u32)?)
                 } else {
                     None
                 };
                 let recorded = ctx.record(timer.as_mut(), |rec| {
                     let binned = if pass == "forward+backward" {
-                        renderer.record_forward(rec, gpu, method)?
+                        renderer.record_forward(rec, &run)?
                     } else {
                         binned
                     };

@@ -501,7 +501,7 @@ fn run_mesh_fit(
     ));
     let mut it = 1u32;
     let timing = time_fit_iteration(ctx, opts, &mut fitter, &mut it, 32, true, progress, name)?;
-    let counts = fitter.scene().pair_counts(ctx, method)?;
+    let counts = fitter.binned()?.pair_counts(ctx)?;
     progress(&format!(
         "{name} fit-iteration per pair:{}",
         per_pair_summary(&timing.passes, &counts)

@@ -6,7 +6,9 @@ use std::time::Instant;
 use super::{BenchOptions, BenchRecord, Scene};
 use crate::error::{Error, Result};
 use crate::gpu::{Context, PassTime, Recorded, Timer};
-use crate::raster::gpu::{Frames, GpuScene, Method, PairCounts, Renderer, ViewGroup};
+use crate::raster::gpu::{
+    Binned, ExactRun, Frames, GpuScene, Method, PairCounts, Renderer, ViewGroup,
+};
 
 /// Runs the benchmark: every scene of `opts`, brute force then each tile size, with one line of
 /// `progress` per step (including the outcome of every bit-for-bit check).
@@ -145,28 +147,26 @@ impl<'a> Variant<'a> {
             &scene.lighting,
             &scene.settings,
         )?;
-        let entries = match method {
-            Method::Brute => None,
-            Method::Tiled { .. } => {
-                renderer.run(ctx, &mut gpu, method)?;
-                Some(gpu.binned_entries())
-            }
+        // Brute force is recorded without a first run (it bins nothing, and its setups are
+        // counted after its first timed submission, [`Variant::sample`]).
+        let run = match method {
+            Method::Brute => ExactRun::brute(&gpu),
+            Method::Tiled { .. } => renderer.run(ctx, &mut gpu, method)?,
         };
-        // Brute force has not run yet (its setups are not made): counted after its first
-        // timed submission ([`Variant::sample`]).
-        let counts = match method {
-            Method::Tiled { .. } => gpu.pair_counts(ctx, method)?,
-            Method::Brute => PairCounts::default(),
+        let binned = run.binned();
+        let (entries, counts) = match method {
+            Method::Brute => (None, PairCounts::default()),
+            Method::Tiled { .. } => (Some(binned.entries()), binned.pair_counts(ctx)?),
         };
         // Face setup and downsampling, count, sort and fine pass per view group or window; a
         // device without timestamps still gets wall times.
         let mut timer = if ctx.info().timestamp_valid_bits > 0 {
-            Some(Timer::new(ctx, 2 + 3 * gpu.groups().len() as u32)?)
+            Some(Timer::new(ctx, 2 + 3 * binned.groups().len() as u32)?)
         } else {
             None
         };
         let recorded = ctx.record(timer.as_mut(), |rec| {
-            renderer.record_forward(rec, &gpu, method).map(|_| ())
+            renderer.record_forward(rec, &run).map(|_| ())
         })?;
         Ok(Self {
             method,
@@ -192,13 +192,25 @@ impl<'a> Variant<'a> {
         self.samples
             .take(ctx, &self.recorded, self.timer.as_ref())?;
         if self.counts == PairCounts::default() {
-            self.counts = self.gpu.pair_counts(ctx, self.method)?;
+            self.counts = self.binned().pair_counts(ctx)?;
         }
         Ok(())
     }
 
     fn timing(&self) -> Timing {
         self.samples.timing()
+    }
+
+    /// The binning of the recorded forward.
+    fn binned(&self) -> Binned<'_> {
+        match self.method {
+            Method::Brute => ExactRun::brute(&self.gpu).binned(),
+            Method::Tiled { .. } => self
+                .gpu
+                .last_run()
+                .expect("a tiled variant ran, and nothing changed its scene")
+                .binned(),
+        }
     }
 }
 
@@ -258,14 +270,11 @@ fn bench_scene(
                 * if scene.settings.antialias { 4 } else { 1 }
         ));
         v.sample(ctx)?;
-        reference = Some((
-            bits(&renderer.read_frames(ctx, &v.gpu)?),
-            "brute force".into(),
-        ));
+        reference = Some((bits(&v.gpu.read_frames(ctx)?), "brute force".into()));
         variants.push(v);
     }
     let check = |v: &Variant<'_>, reference: &mut Option<(Bits, String)>, when: &str| {
-        let got = bits(&renderer.read_frames(ctx, &v.gpu)?);
+        let got = bits(&v.gpu.read_frames(ctx)?);
         let Some((want, what)) = reference else {
             *reference = Some((got, v.label()));
             return Ok("the reference for the other tile sizes (brute force not run)".into());
@@ -286,7 +295,7 @@ fn bench_scene(
             v.label(),
             v.counts.binned,
             v.entries.unwrap_or(0),
-            binnings(v.gpu.groups())
+            binnings(v.binned().groups())
         ));
         variants.push(v);
     }

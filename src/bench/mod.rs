@@ -167,7 +167,7 @@ pub struct BenchRecord {
     /// (pixel, face) pairs binned: every pixel of a tile times its binned faces, or every pixel
     /// times every face for brute force ([`PairCounts::binned`]).
     pub pairs: u64,
-    /// The pairs the fine kernels visit and accept ([`GpuScene::pair_counts`](crate::raster::gpu::GpuScene::pair_counts)), for the
+    /// The pairs the fine kernels visit and accept ([`Binned::pair_counts`](crate::raster::gpu::Binned::pair_counts)), for the
     /// per-pair costs ([`ns_per_visited_pair`]).
     pub counts: Option<PairCounts>,
     /// Device name, as `softvk info` prints it.

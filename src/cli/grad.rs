@@ -112,7 +112,7 @@ pub fn run(args: &GradArgs) -> Result<()> {
     };
     let renderer = Renderer::new(&ctx)?;
     let mut scene = renderer.prepare(&ctx, &mesh, &[camera], &lighting, &settings)?;
-    let binned = renderer.run(&ctx, &mut scene, method)?;
+    let binned = renderer.run(&ctx, &mut scene, method)?.binned();
     let grads = renderer.backward(&ctx, &binned, &weights, camera_out.is_some())?;
     ctx.check_validation()?;
 

@@ -24,7 +24,7 @@ use crate::error::{Error, LimitKind, Result};
 use crate::gpu::gate::IterationGate;
 use crate::gpu::{Context, Recorder, Timer};
 use crate::raster::backward::{GradBuffers, grad_stride};
-use crate::raster::gpu::{GpuScene, Method, Renderer};
+use crate::raster::gpu::{GpuScene, GuardedBins, Renderer};
 
 /// Entry capacity reserved over a count seen: `count × 3 / 2`.
 pub const ENTRY_HEADROOM: (u64, u64) = (3, 2);
@@ -260,22 +260,22 @@ pub fn max_entry_capacity(ctx: &Context, renderer: &Renderer, scene: &GpuScene) 
         .min(u64::from(u32::MAX))
 }
 
-/// The guarded fits' sizing step: `scene`'s bins reserved for `capacity` entries on
-/// `tile`-pixel tiles ([`Renderer::reserve_guarded`]) and the backward's buffers for them,
-/// differentiating alpha only when `alpha_only` ([`GradBuffers::set_alpha_only`]).
+/// The guarded fits' sizing step: bins for `scene` with `capacity` entries on `tile`-pixel
+/// tiles ([`Renderer::reserve_guarded`]) and the backward's buffers for them, differentiating
+/// alpha only when `alpha_only` ([`GradBuffers::set_alpha_only`]).
 ///
 /// [`Renderer::reserve_guarded`]: Renderer::reserve_guarded
 /// [`GradBuffers::set_alpha_only`]: GradBuffers::set_alpha_only
 pub fn reserve_guarded(
     ctx: &Context,
     renderer: &Renderer,
-    scene: &mut GpuScene,
+    scene: &GpuScene,
     tile: u32,
     capacity: u64,
     alpha_only: bool,
-) -> Result<GradBuffers> {
-    renderer.reserve_guarded(ctx, scene, tile, capacity)?;
-    let mut grads = GradBuffers::with_entry_capacity(ctx, scene, Method::Tiled { tile }, capacity)?;
+) -> Result<(GuardedBins, GradBuffers)> {
+    let bins = renderer.reserve_guarded(ctx, scene, tile, capacity)?;
+    let mut grads = GradBuffers::guarded(ctx, scene, &bins)?;
     grads.set_alpha_only(alpha_only);
-    Ok(grads)
+    Ok((bins, grads))
 }

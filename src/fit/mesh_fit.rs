@@ -38,7 +38,7 @@ use crate::gpu::{Buffer, Context, MemoryKind, Recorder};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::raster::backward::GradBuffers;
-use crate::raster::gpu::{GpuScene, Renderer};
+use crate::raster::gpu::{Binned, GpuScene, GuardedBins, Renderer};
 use crate::raster::settings::{Alpha, RasterSettings, Rgb};
 
 pub use super::driver::ENTRY_HEADROOM;
@@ -345,6 +345,8 @@ pub struct MeshFit<'c> {
     opts: MeshFitOptions,
     renderer: Renderer,
     scene: GpuScene,
+    /// The guarded forward's bins, beside the scene.
+    bins: GuardedBins,
     deform: Deform,
     regs: Regularizers,
     sil: SilhouetteLoss,
@@ -423,17 +425,19 @@ impl<'c> Fitter<'c, MeshFit<'c>> {
                 ctx.submit_and_wait(|rec| {
                     deform.record_forward(rec, params.whole(), scene.positions().whole())
                 })?;
-                let total = renderer.count_entries(ctx, &mut scene, opts.tile)?;
+                let total = renderer.count_entries(ctx, &scene, opts.tile)?;
                 with_headroom(ctx, &mesh_entries(views), total, max_capacity, MESH_HINT)?
             }
         };
         // The silhouette loss differentiates alpha only (as the scene renders it).
-        let grads = super::reserve_guarded(ctx, &renderer, &mut scene, opts.tile, capacity, true)?;
+        let (bins, grads) =
+            super::reserve_guarded(ctx, &renderer, &scene, opts.tile, capacity, true)?;
         let fit = MeshFit {
             ctx,
             opts: opts.clone(),
             renderer,
             scene,
+            bins,
             deform,
             regs,
             sil,
@@ -473,12 +477,13 @@ impl Fit for MeshFit<'_> {
             d_params,
             targets,
             grads: g,
+            bins,
             ..
         } = self;
         rec.pass("deform", |rec| {
             deform.record_forward(rec, params.whole(), scene.positions().whole())
         })?;
-        renderer.record_forward_guarded(rec, scene, gate, it, |rec, binned| {
+        renderer.record_forward_guarded(rec, scene, bins, gate, it, |rec, binned| {
             let io = g.io();
             rec.pass("silhouette loss", |rec| {
                 sil.record(
@@ -524,10 +529,10 @@ impl Fit for MeshFit<'_> {
             self.max_capacity,
             MESH_HINT,
         )?;
-        self.grads = super::reserve_guarded(
+        (self.bins, self.grads) = super::reserve_guarded(
             ctx,
             &self.renderer,
-            &mut self.scene,
+            &self.scene,
             self.opts.tile,
             capacity,
             true,
@@ -564,9 +569,14 @@ impl MeshFit<'_> {
         Ok(mesh)
     }
 
-    /// The scene the fit renders (its last binning, for [`GpuScene::pair_counts`]).
+    /// The scene the fit renders.
     pub fn scene(&self) -> &GpuScene {
         &self.scene
+    }
+
+    /// The binning of the last iteration's forward (for [`Binned::pair_counts`]).
+    pub fn binned(&self) -> Result<Binned<'_>> {
+        self.bins.binned(&self.scene)
     }
 
     /// Entries the bins and the backward's partials hold now.

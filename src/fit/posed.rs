@@ -11,7 +11,7 @@ use crate::gpu::{Buffer, BufferRange, Context, MemoryKind, Recorder};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::raster::backward::{GradBuffers, GradIo};
-use crate::raster::gpu::{GpuScene, Method, Renderer};
+use crate::raster::gpu::{GpuScene, GuardedBins, Renderer};
 use crate::raster::light::SceneLight;
 use crate::raster::settings::RasterSettings;
 
@@ -25,6 +25,8 @@ pub struct PosedView {
     pub(crate) light: SceneLight,
     pub(crate) target: Buffer,
     pub(crate) grads: GradBuffers,
+    /// The guarded forward's bins, beside the scene.
+    bins: GuardedBins,
     /// dL/d(unlit colour), which the fits do not need (the lighting's backward writes it).
     d_base: Buffer,
     tile: u32,
@@ -51,13 +53,14 @@ impl PosedView {
     ) -> Result<Self> {
         check_target(target, settings)?;
         let renderer = Renderer::new(ctx)?;
-        let mut scene =
+        let scene =
             renderer.prepare(ctx, mesh, std::slice::from_ref(camera), lighting, settings)?;
-        renderer.reserve_guarded(ctx, &mut scene, tile, 1)?;
+        let (bins, grads) = reserve_guarded(ctx, &renderer, &scene, tile, 1, false)?;
         let light = SceneLight::new(ctx, &scene)?;
         Ok(Self {
             target: ctx.upload_buffer("posed target", target)?,
-            grads: GradBuffers::with_entry_capacity(ctx, &scene, Method::Tiled { tile }, 1)?,
+            bins,
+            grads,
             d_base: ctx.create_buffer(
                 "posed unlit colour gradients",
                 12 * light.color_count().max(1),
@@ -91,9 +94,7 @@ impl PosedView {
     /// sharp one, and the backward's texel partials, cleared over the whole capacity every
     /// iteration, are the larger cost at these image sizes); it changes no result.
     pub(crate) fn fit_capacity(&mut self, ctx: &Context) -> Result<()> {
-        let total = self
-            .renderer
-            .count_entries(ctx, &mut self.scene, self.tile)?;
+        let total = self.renderer.count_entries(ctx, &self.scene, self.tile)?;
         self.resize(ctx, total)
     }
 
@@ -106,14 +107,8 @@ impl PosedView {
             self.max_capacity,
             "use larger tiles or a smaller σ",
         )?;
-        self.grads = reserve_guarded(
-            ctx,
-            &self.renderer,
-            &mut self.scene,
-            self.tile,
-            capacity,
-            false,
-        )?;
+        (self.bins, self.grads) =
+            reserve_guarded(ctx, &self.renderer, &self.scene, self.tile, capacity, false)?;
         self.capacity = capacity;
         Ok(())
     }
@@ -152,10 +147,11 @@ impl PosedView {
             light,
             target,
             grads,
+            bins,
             d_base,
             ..
         } = self;
-        renderer.record_forward_guarded(rec, scene, gate, it, |rec, binned| {
+        renderer.record_forward_guarded(rec, scene, bins, gate, it, |rec, binned| {
             let scene = binned.scene();
             let io = grads.io();
             rec.pass("image loss", |rec| {
@@ -184,7 +180,7 @@ impl PosedView {
         loss: impl FnOnce(&mut Recorder<'_>, BufferRange<'_>, BufferRange<'_>) -> Result<()>,
     ) -> Result<()> {
         let (renderer, target) = (&self.renderer, &self.target);
-        renderer.record_forward_guarded(rec, &self.scene, gate, 0, |rec, binned| {
+        renderer.record_forward_guarded(rec, &self.scene, &self.bins, gate, 0, |rec, binned| {
             loss(rec, binned.scene().output().whole(), target.whole())
         })
     }

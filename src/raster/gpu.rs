@@ -21,14 +21,17 @@
 //! it once and resubmit).
 //!
 //! Loops that must not wait for the count (fitting, a host engine's frames) bin *guarded*
-//! instead: [`Renderer::reserve_guarded`] sizes every view as one group with a capacity of
-//! entries, and [`Renderer::record_forward_guarded`] records the forward into any command
-//! buffer with the sort over the whole capacity (sentinel keys) and everything after the count
-//! gated on the GPU by an [`IterationGate`]: no read-back, no submission.
+//! instead: [`Renderer::reserve_guarded`] returns [`GuardedBins`], every view as one group with
+//! a capacity of entries, and [`Renderer::record_forward_guarded`] records the forward into any
+//! command buffer over them, with the sort over the whole capacity (sentinel keys) and
+//! everything after the count gated on the GPU by an [`IterationGate`]: no read-back, no
+//! submission.
 //!
-//! Every forward returns a [`Binned`]: the scene and how its faces were binned, which its
-//! backward ([`GradKernels::record`], [`Renderer::backward`]) takes. It borrows the scene, so
-//! nothing re-bins it in between.
+//! The two modes are types ([`crate::raster::binned`]): [`Renderer::run`] returns an
+//! [`ExactRun`], which [`Renderer::record_forward`] replays; a guarded forward needs its
+//! [`GuardedBins`]. Every forward gives a [`Binned`] (the scene and how its faces were binned),
+//! which its backward ([`GradKernels::record`], [`Renderer::backward`]) takes. It borrows the
+//! scene, so nothing re-bins it in between.
 
 use crate::camera::Camera;
 use crate::error::{Error, LimitKind, Result};
@@ -40,41 +43,17 @@ use crate::primitives::binning::{self, Binner, Bins, TileGrid};
 #[cfg(doc)]
 use crate::raster::backward::GradIo;
 use crate::raster::backward::{GradBuffers, GradKernels};
+pub use crate::raster::binned::{Binned, ExactRun, GuardedBins, PairCounts, ViewGroup};
 use crate::raster::brute::{BruteBindings, BruteRaster};
 use crate::raster::fine::{CARRY_BYTES, PixelAux, TiledBindings, TiledRaster};
 use crate::raster::loops::tiled_forward_iterations;
 pub use crate::raster::method::{DEFAULT_TILE, Method};
 use crate::raster::reference::MeshF64;
 use crate::raster::reference_grad::Gradients;
-pub use crate::raster::scene::{Binned, GpuScene, PairCounts, ViewGroup};
-use crate::raster::scene::{lit_batch, upload_geometry};
+use crate::raster::scene::lit_batch;
+pub use crate::raster::scene::{Frames, GpuScene};
 use crate::raster::settings::{ColorMode, RasterSettings};
 use crate::raster::setup::{FaceSetupKernel, GpuFaceSetup, GpuView, VertexLayout};
-
-/// One GPU render's results, for every view.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Frames {
-    /// Output width in pixels.
-    pub width: u32,
-    /// Output height in pixels.
-    pub height: u32,
-    /// RGBA per output pixel, view-major, row-major, row 0 at the top.
-    pub images: Vec<[f32; 4]>,
-    /// Width of the rendered image the aux buffer describes (2× with anti-aliasing).
-    pub rendered_width: u32,
-    /// Height of the rendered image.
-    pub rendered_height: u32,
-    /// The forward state per *rendered* pixel (see [`PixelAux`]).
-    pub aux: Vec<PixelAux>,
-}
-
-impl Frames {
-    /// The image of view `v`.
-    pub fn image(&self, v: usize) -> &[[f32; 4]] {
-        let n = (self.width * self.height) as usize;
-        &self.images[v * n..(v + 1) * n]
-    }
-}
 
 /// The forward's pipelines, made once per context.
 pub struct Renderer {
@@ -315,9 +294,7 @@ impl Renderer {
                 None
             },
             bins: Vec::new(),
-            groups: Vec::new(),
-            tile: None,
-            guarded: false,
+            last_run: None,
             silhouette_only: false,
             meshes: meshes.iter().map(MeshF64::from_mesh).collect(),
             lighting: lighting.clone(),
@@ -373,36 +350,27 @@ impl Renderer {
         scene: &GpuScene,
         bins: &Bins,
         grid: TileGrid,
-        first_view: u32,
-        views: u32,
+        group: &ViewGroup,
     ) -> Result<()> {
-        let job = scene.job(grid, first_view, views);
+        let job = scene.job(grid, group.first, group.views);
         rec.pass("bin sort", |rec| {
             self.binner
                 .record_sort(rec, bins, scene.setups.whole(), &job)
         })?;
-        self.record_fine(rec, scene, bins, grid, first_view, views)
+        self.record_fine(rec, scene, bins, grid, group)
     }
 
-    /// The tiled fine pass of one view group over its sorted bins.
+    /// The tiled fine pass of one view group (or window) over its sorted bins, planned for the
+    /// most entries a tile of the group holds.
     fn record_fine(
         &self,
         rec: &mut Recorder<'_>,
         scene: &GpuScene,
         bins: &Bins,
         grid: TileGrid,
-        first_view: u32,
-        views: u32,
+        group: &ViewGroup,
     ) -> Result<()> {
-        // The most entries a tile of these views holds: their group's (windows of one group
-        // share it).
-        let max_run = scene
-            .groups
-            .iter()
-            .filter(|g| g.first < first_view + views && first_view < g.first + g.views)
-            .map(|g| g.max_tile_entries)
-            .max()
-            .unwrap_or(u64::from(scene.face_count));
+        let (first_view, views, max_run) = (group.first, group.views, group.max_tile_entries);
         rec.pass("raster tiled", |rec| {
             self.tiled.record(
                 rec,
@@ -463,17 +431,19 @@ impl Renderer {
     }
 
     /// Runs the whole forward of `scene` (face setup, fine pass by `method`, downsampling),
-    /// leaving images and aux on the GPU. Tiled: two submissions per view group (the count's
-    /// total is read back in between to size the entries exactly). A convenience over the
-    /// recorded stages, which waits; loops record [`Renderer::record_forward_guarded`].
+    /// leaving images and aux on the GPU, and returns it as an [`ExactRun`]: what its backward
+    /// takes ([`ExactRun::binned`]) and what [`Renderer::record_forward`] replays. Tiled: two
+    /// submissions per view group (the count's total is read back in between to size the
+    /// entries exactly). A convenience over the recorded stages, which waits; loops record
+    /// [`Renderer::record_forward_guarded`].
     pub fn run<'s>(
         &self,
         ctx: &Context,
         scene: &'s mut GpuScene,
         method: Method,
-    ) -> Result<Binned<'s>> {
+    ) -> Result<ExactRun<'s>> {
         self.run_with_cull(ctx, scene, method, true)?;
-        Ok(Binned { scene, method })
+        Ok(scene.last_run().expect("a run leaves its binning"))
     }
 
     fn run_with_cull(
@@ -483,13 +453,16 @@ impl Renderer {
         method: Method,
         cull: bool,
     ) -> Result<()> {
+        scene.last_run = None;
         let tile = match method {
             Method::Brute => {
-                return ctx.submit_and_wait(|rec| {
+                ctx.submit_and_wait(|rec| {
                     self.record_setup(rec, scene)?;
                     self.record_brute(rec, scene, cull)?;
                     self.record_downsample(rec, scene)
-                });
+                })?;
+                scene.last_run = Some((method, Vec::new()));
+                return Ok(());
             }
             Method::Tiled { tile } => tile,
         };
@@ -499,7 +472,7 @@ impl Renderer {
         // exact (64-bit where it could wrap), and the groups halve only where the real entries
         // do not fit.
         let per_group = (u32::MAX / scene.face_count.max(1)).clamp(1, scene.view_count.max(1));
-        let max_entries = binning::max_entries(ctx).min(self.entry_budget.unwrap_or(u64::MAX));
+        let max_entries = self.max_entries(ctx);
         // Groups of views still to render, first view and count; split on demand.
         let all_rows = (0, grid.tiles_y);
         let mut todo: Vec<(u32, u32, (u32, u32))> = (0..scene.view_count)
@@ -507,29 +480,27 @@ impl Renderer {
             .map(|v| (v, per_group.min(scene.view_count - v), all_rows))
             .rev()
             .collect();
-        scene.groups.clear();
-        scene.tile = Some(tile);
-        scene.guarded = false;
+        let mut groups: Vec<ViewGroup> = Vec::new();
         let mut setup_done = false;
         while let Some((first, views, tile_rows)) = todo.pop() {
             let grid = grid.window(tile_rows.0, tile_rows.1)?;
             let job = scene.job(grid, first, views);
-            let index = scene.groups.len();
+            let index = groups.len();
             if scene.bins.len() <= index {
                 scene.bins.push(Bins::new(ctx)?);
             }
-            let mut bins = std::mem::replace(&mut scene.bins[index], Bins::new(ctx)?);
+            let bins = &mut scene.bins[index];
             bins.reserve(ctx, &job)?;
+            let bins = &scene.bins[index];
             ctx.submit_and_wait(|rec| {
                 if !setup_done {
                     self.record_setup(rec, scene)?;
                 }
-                self.record_count(rec, scene, &bins, grid, first, views)
+                self.record_count(rec, scene, bins, grid, first, views)
             })?;
             setup_done = true;
-            let total = bins.read_total(ctx)?;
+            let total = scene.bins[index].read_total(ctx)?;
             if total > max_entries {
-                scene.bins[index] = bins;
                 // Too many entries at once: bin two halves separately, of the views or, for one
                 // view, of its tile rows (windows render the rows they cover, nothing else).
                 let (row0, rows) = tile_rows;
@@ -550,26 +521,30 @@ impl Renderer {
                 }
                 continue;
             }
-            bins.reserve_entries(ctx, total)?;
-            let last = todo.is_empty();
-            let done = ctx.submit_and_wait(|rec| {
-                self.record_group(rec, scene, &bins, grid, first, views)?;
-                if last {
-                    self.record_downsample(rec, scene)?;
-                }
-                Ok(())
-            });
-            let max_tile_entries = done
-                .and_then(|()| tile_run_bound(ctx, &bins, &grid, views, total, scene.face_count));
-            scene.bins[index] = bins;
-            scene.groups.push(ViewGroup {
+            scene.bins[index].reserve_entries(ctx, total)?;
+            let mut group = ViewGroup {
                 first,
                 views,
                 tile_rows,
                 entries: total,
-                max_tile_entries: max_tile_entries?,
-            });
+                // A tile holds each face at most once: a bound the fine pass may plan by before
+                // the exact largest tile is known.
+                max_tile_entries: total.min(u64::from(scene.face_count)),
+            };
+            let last = todo.is_empty();
+            let bins = &scene.bins[index];
+            ctx.submit_and_wait(|rec| {
+                self.record_group(rec, scene, bins, grid, &group)?;
+                if last {
+                    self.record_downsample(rec, scene)?;
+                }
+                Ok(())
+            })?;
+            group.max_tile_entries =
+                tile_run_bound(ctx, bins, &grid, views, total, scene.face_count)?;
+            groups.push(group);
         }
+        scene.last_run = Some((method, groups));
         Ok(())
     }
 
@@ -580,32 +555,29 @@ impl Renderer {
     }
 
     /// The (face, tile) entries of every view of `scene` binned as one group on `tile`-pixel
-    /// tiles, counted on the GPU and read back (one submission): what a guarded loop sizes its
-    /// capacity from ([`Renderer::reserve_guarded`]). Sizes the scene's bins as a guarded
-    /// binning of capacity 1 (reserve again before recording).
-    pub fn count_entries(&self, ctx: &Context, scene: &mut GpuScene, tile: u32) -> Result<u64> {
-        self.reserve_guarded(ctx, scene, tile, 1)?;
-        ctx.submit_and_wait(|rec| self.record_setup_and_count(rec, scene))?;
-        scene.bins[0].read_total(ctx)
+    /// tiles, counted on the GPU and read back (one submission, into bins of its own): what a
+    /// guarded loop sizes its capacity from ([`Renderer::reserve_guarded`]).
+    pub fn count_entries(&self, ctx: &Context, scene: &GpuScene, tile: u32) -> Result<u64> {
+        let mut bins = self.reserve_guarded(ctx, scene, tile, 1)?;
+        ctx.submit_and_wait(|rec| self.record_setup_and_count(rec, scene, &bins))?;
+        bins.bins[0].read_total(ctx)
     }
 
-    /// Face setup and the count of every view as one group, on the tiles of
-    /// [`Renderer::reserve_guarded`] (the total lands in [`Bins::total_buffer`] of the first bins).
-    fn record_setup_and_count(&self, rec: &mut Recorder<'_>, scene: &GpuScene) -> Result<()> {
-        let (tile, bins) = match (scene.tile, scene.bins.first()) {
-            (Some(tile), Some(bins)) if scene.guarded => (tile, bins),
-            _ => {
-                return Err(Error::Misuse(
-                    "a guarded forward needs Renderer::reserve_guarded first".into(),
-                ));
-            }
-        };
-        let grid = scene.grid(tile)?;
+    /// Face setup and the count of every view as one group into guarded bins (the total lands
+    /// in their [`Bins::total_buffer`]).
+    fn record_setup_and_count(
+        &self,
+        rec: &mut Recorder<'_>,
+        scene: &GpuScene,
+        bins: &GuardedBins,
+    ) -> Result<()> {
+        bins.check(scene)?;
+        let grid = scene.grid(bins.tile)?;
         self.record_setup(rec, scene)?;
-        self.record_count(rec, scene, bins, grid, 0, scene.view_count)
+        self.record_count(rec, scene, &bins.bins[0], grid, 0, scene.view_count)
     }
 
-    /// Records the tiled forward of a scene sized by [`Renderer::reserve_guarded`] into any
+    /// Records the tiled forward of `scene` into `bins` ([`Renderer::reserve_guarded`]) into any
     /// command buffer, with no read-back: face setup, the count, `gate`'s check of the count
     /// against the capacity for `iteration`, then — gated: they run only when the entries fit —
     /// the sort (over the whole capacity, with sentinels), ranges, the fine pass, the
@@ -616,54 +588,48 @@ impl Renderer {
         &self,
         rec: &mut Recorder<'_>,
         scene: &'s GpuScene,
+        bins: &'s GuardedBins,
         gate: &mut IterationGate,
         iteration: u32,
         then: impl FnOnce(&mut Recorder<'_>, Binned<'s>) -> Result<()>,
     ) -> Result<()> {
-        self.record_setup_and_count(rec, scene)?;
-        let capacity = scene.groups.first().map_or(0, |g| g.entries);
+        self.record_setup_and_count(rec, scene, bins)?;
+        let binned = bins.binned(scene)?;
+        let group = &bins.group[0];
         gate.record_check(
             rec,
-            scene.bins[0].total_buffer().whole(),
+            bins.bins[0].total_buffer().whole(),
             iteration,
-            capacity,
+            group.entries,
         )?;
         gate.record_gated(rec, |rec| {
-            let tile = scene.tile.expect("checked by record_setup_and_count");
-            let grid = scene.grid(tile)?;
+            let grid = scene.grid(bins.tile)?;
             let job = scene.job(grid, 0, scene.view_count);
-            let bins = &scene.bins[0];
             rec.pass("bin sort", |rec| {
                 self.binner
-                    .record_sort_guarded(rec, bins, scene.setups.whole(), &job)
+                    .record_sort_guarded(rec, &bins.bins[0], scene.setups.whole(), &job)
             })?;
-            self.record_fine(rec, scene, bins, grid, 0, scene.view_count)?;
+            self.record_fine(rec, scene, &bins.bins[0], grid, group)?;
             self.record_downsample(rec, scene)?;
-            then(
-                rec,
-                Binned {
-                    scene,
-                    method: Method::Tiled { tile },
-                },
-            )
+            then(rec, binned)
         })
     }
 
     /// For loops that never wait for the count (fitting, a host's frames; see the guarded
-    /// binning of [`crate::primitives::binning`]): sizes `scene`'s bins for every view as one
-    /// group on `tile`-pixel tiles with exactly `capacity` entries; the tiled passes are planned
-    /// for any count up to it (a tile holds each face at most once, so its run is at most
+    /// binning of [`crate::primitives::binning`]): bins for every view of `scene` as one group
+    /// on `tile`-pixel tiles with exactly `capacity` entries; the tiled passes are planned for
+    /// any count up to it (a tile holds each face at most once, so its run is at most
     /// `min(capacity, faces)`: past the driver's loop cap, the forward folds tiles in passes).
-    /// The scene's group then records `capacity` as its entries (an upper bound: the count
-    /// itself stays on the GPU). Record each forward
-    /// with [`Renderer::record_forward_guarded`].
+    /// Their group records `capacity` as its entries (an upper bound: the count itself stays on
+    /// the GPU). Record each forward with [`Renderer::record_forward_guarded`]; when a gate
+    /// reports an overflow, reserve anew with more.
     pub fn reserve_guarded(
         &self,
         ctx: &Context,
-        scene: &mut GpuScene,
+        scene: &GpuScene,
         tile: u32,
         capacity: u64,
-    ) -> Result<()> {
+    ) -> Result<GuardedBins> {
         Method::check_tile(tile)?;
         let grid = scene.grid(tile)?;
         let job = scene.job(grid, 0, scene.view_count);
@@ -687,63 +653,50 @@ impl Renderer {
                 grid.tiles_per_view()
             )));
         }
-        if scene.bins.is_empty() {
-            scene.bins.push(Bins::new(ctx)?);
-        }
-        scene.bins[0].reserve(ctx, &job)?;
-        scene.bins[0].reserve_entry_capacity(ctx, capacity.max(1))?;
-        // Past the loop cap, the forward folds a tile this crowded in passes.
-        let max_run = capacity.min(u64::from(scene.face_count));
-        scene.tile = Some(tile);
-        scene.guarded = true;
-        scene.groups = vec![ViewGroup {
-            first: 0,
-            views: scene.view_count,
-            tile_rows: (0, grid.tiles_y),
-            entries: capacity.max(1),
-            max_tile_entries: max_run,
-        }];
-        Ok(())
+        let mut bins = Bins::new(ctx)?;
+        bins.reserve(ctx, &job)?;
+        bins.reserve_entry_capacity(ctx, capacity.max(1))?;
+        Ok(GuardedBins {
+            tile,
+            made_for: GuardedBins::shape(scene),
+            bins: [bins],
+            group: [ViewGroup {
+                first: 0,
+                views: scene.view_count,
+                tile_rows: (0, grid.tiles_y),
+                entries: capacity.max(1),
+                // Past the loop cap, the forward folds a tile this crowded in passes.
+                max_tile_entries: capacity.min(u64::from(scene.face_count)),
+            }],
+        })
     }
 
-    /// Records the whole forward of `scene` into one command buffer, for resubmission
-    /// (benchmarks): face setup, then per view group (or window) of the last run count,
-    /// scatter, sort, ranges and fine pass, then downsampling. Tiled needs a previous
-    /// [`Renderer::run`] with the same method (its entry counts size the buffers; resubmitting
-    /// the same scene reproduces them); loops whose scene changes record
+    /// Records the forward of `run` again into one command buffer, for resubmission
+    /// (benchmarks): face setup, then per view group (or window) of the run count, scatter,
+    /// sort, ranges and fine pass, then downsampling, into the run's bins. Resubmitting the
+    /// same scene reproduces the run's entry counts; loops whose scene changes record
     /// [`Renderer::record_forward_guarded`] instead.
     pub fn record_forward<'s>(
         &self,
         rec: &mut Recorder<'_>,
-        scene: &'s GpuScene,
-        method: Method,
+        run: &ExactRun<'s>,
     ) -> Result<Binned<'s>> {
+        let binned = run.binned();
+        let scene = binned.scene;
         self.record_setup(rec, scene)?;
-        match method {
+        match binned.method {
             Method::Brute => self.record_brute(rec, scene, true)?,
             Method::Tiled { tile } => {
-                if scene.tile != Some(tile) || scene.groups.is_empty() {
-                    return Err(Error::Misuse(
-                        "record_forward needs a previous tiled run with the same tile size".into(),
-                    ));
-                }
-                if scene.guarded {
-                    return Err(Error::Misuse(
-                        "record_forward replays an exact run's binning; a scene sized by \
-                         reserve_guarded records record_forward_guarded"
-                            .into(),
-                    ));
-                }
-                for (group, bins) in scene.groups.iter().zip(&scene.bins) {
+                for (group, bins) in binned.groups.iter().zip(binned.bins) {
                     let (first_row, rows) = group.tile_rows;
                     let grid = scene.grid(tile)?.window(first_row, rows)?;
                     self.record_count(rec, scene, bins, grid, group.first, group.views)?;
-                    self.record_group(rec, scene, bins, grid, group.first, group.views)?;
+                    self.record_group(rec, scene, bins, grid, group)?;
                 }
             }
         }
         self.record_downsample(rec, scene)?;
-        Ok(Binned { scene, method })
+        Ok(binned)
     }
 
     /// The backward's pipelines (for callers that record the backward themselves).
@@ -763,31 +716,15 @@ impl Renderer {
         cameras: bool,
     ) -> Result<Gradients> {
         let scene = binned.scene();
-        let gb = GradBuffers::new(ctx, scene, binned.method())?;
+        let gb = GradBuffers::new(ctx, binned)?;
         gb.set_d_image(ctx, scene, d_image)?;
         ctx.submit_and_wait(|rec| self.grad.record(rec, binned, &gb, &gb.io()))?;
         self.grad.finish(ctx, scene, &gb, &gb.io(), cameras)
     }
 
-    /// Reads back the images and aux of the last run.
-    pub fn read_frames(&self, ctx: &Context, scene: &GpuScene) -> Result<Frames> {
-        let s = &scene.settings;
-        let outputs = (s.width * s.height * scene.view_count) as usize;
-        let rendered = (scene.width * scene.height * scene.view_count) as usize;
-        let out = scene.small.as_ref().unwrap_or(&scene.image);
-        Ok(Frames {
-            width: s.width,
-            height: s.height,
-            images: ctx.read_buffer(out, 0, outputs)?,
-            rendered_width: scene.width,
-            rendered_height: scene.height,
-            aux: ctx.read_buffer(&scene.aux, 0, rendered)?,
-        })
-    }
-
-    /// Renders `mesh` from every camera and reads back images and aux: in one batch, or in as
-    /// many as the device's storage bindings ask for (a batch's face setups, images and aux
-    /// are one binding each).
+    /// Renders `mesh` from every camera by `method` and reads back images and aux: in one
+    /// batch, or in as many as the device's storage bindings ask for (a batch's face setups,
+    /// images and aux are one binding each).
     pub fn render_views(
         &self,
         ctx: &Context,
@@ -797,7 +734,7 @@ impl Renderer {
         settings: &RasterSettings,
         method: Method,
     ) -> Result<Frames> {
-        self.render_in_scenes(ctx, mesh, cameras, lighting, settings, method, false)
+        self.render_in_scenes(ctx, mesh, cameras, lighting, settings, method, false, true)
     }
 
     /// Renders `cameras` in as few scenes as the device's storage bindings allow (a scene
@@ -813,6 +750,7 @@ impl Renderer {
         settings: &RasterSettings,
         method: Method,
         silhouette_only: bool,
+        cull: bool,
     ) -> Result<Frames> {
         let per_scene = views_per_scene(ctx, mesh.face_count() as u64, settings);
         let mut frames: Option<Frames> = None;
@@ -824,8 +762,8 @@ impl Renderer {
         for part in parts {
             let mut scene = self.prepare(ctx, mesh, part, lighting, settings)?;
             scene.set_silhouette_only(silhouette_only);
-            self.run(ctx, &mut scene, method)?;
-            let more = self.read_frames(ctx, &scene)?;
+            self.run_with_cull(ctx, &mut scene, method, cull)?;
+            let more = scene.read_frames(ctx)?;
             match &mut frames {
                 None => frames = Some(more),
                 Some(f) => {
@@ -856,24 +794,13 @@ impl Renderer {
             settings,
             method,
             true,
+            true,
         )?;
         Ok(frames.images.iter().map(|p| p[3]).collect())
     }
 
-    /// Renders `mesh` from every camera with the brute-force kernel and reads back images and aux.
-    pub fn render_brute_views(
-        &self,
-        ctx: &Context,
-        mesh: &Mesh,
-        cameras: &[Camera],
-        lighting: &Lighting,
-        settings: &RasterSettings,
-    ) -> Result<Frames> {
-        self.render_views(ctx, mesh, cameras, lighting, settings, Method::Brute)
-    }
-
-    /// As [`Renderer::render_brute_views`], choosing whether the fine pass culls by the grown
-    /// boxes (it must make no difference; tests check that it makes none, bit for bit).
+    /// As [`Renderer::render_views`] by brute force, choosing whether the fine pass culls by the
+    /// grown boxes (it must make no difference; tests check that it makes none, bit for bit).
     #[cfg(feature = "test-knobs")]
     pub fn render_brute_views_with_cull(
         &self,
@@ -884,88 +811,17 @@ impl Renderer {
         settings: &RasterSettings,
         cull: bool,
     ) -> Result<Frames> {
-        let mut scene = self.prepare(ctx, mesh, cameras, lighting, settings)?;
-        self.run_with_cull(ctx, &mut scene, Method::Brute, cull)?;
-        self.read_frames(ctx, &scene)
+        self.render_in_scenes(
+            ctx,
+            mesh,
+            cameras,
+            lighting,
+            settings,
+            Method::Brute,
+            false,
+            cull,
+        )
     }
-
-    /// Renders one view with the brute-force kernel: RGBA per pixel, row 0 at the top.
-    pub fn render_brute(
-        &self,
-        ctx: &Context,
-        mesh: &Mesh,
-        camera: &Camera,
-        lighting: &Lighting,
-        settings: &RasterSettings,
-    ) -> Result<Vec<[f32; 4]>> {
-        Ok(self
-            .render_brute_views(ctx, mesh, std::slice::from_ref(camera), lighting, settings)?
-            .images)
-    }
-
-    /// Runs only the face setup and reads it back (`cameras.len() * F` entries, view-major).
-    pub fn face_setups(
-        &self,
-        ctx: &Context,
-        mesh: &Mesh,
-        cameras: &[Camera],
-        settings: &RasterSettings,
-    ) -> Result<Vec<GpuFaceSetup>> {
-        let views = checked_views(mesh, cameras, settings)?;
-        let (positions, faces) = upload_geometry(ctx, mesh)?;
-        let view_buf = ctx.upload_buffer("views", &views)?;
-        let n = mesh.face_count() * views.len();
-        let setups = ctx.create_buffer(
-            "face setups",
-            (n * std::mem::size_of::<GpuFaceSetup>()) as u64,
-            MemoryKind::Device,
-        )?;
-        ctx.submit_and_wait(|rec| {
-            self.setup.record(
-                rec,
-                (positions.whole(), VertexLayout::default()),
-                faces.whole(),
-                view_buf.whole(),
-                setups.whole(),
-                mesh.vertex_count() as u32,
-                mesh.face_count() as u32,
-                views.len() as u32,
-                settings,
-            )
-        })?;
-        ctx.read_buffer(&setups, 0, n)
-    }
-
-    /// Bins the faces of `cameras` on `tile`-pixel tiles (after the GPU face setup) and reads the
-    /// result back, with the setups it binned (tests compare it with [`binning::cpu::bin`]).
-    pub fn bin_faces(
-        &self,
-        ctx: &Context,
-        mesh: &Mesh,
-        cameras: &[Camera],
-        settings: &RasterSettings,
-        tile: u32,
-    ) -> Result<(Vec<GpuFaceSetup>, binning::cpu::Binned)> {
-        let scene = self.prepare(ctx, mesh, cameras, &Lighting::unlit(), settings)?;
-        let grid = scene.grid(tile)?;
-        let job = scene.job(grid, 0, scene.view_count);
-        ctx.submit_and_wait(|rec| self.record_setup(rec, &scene))?;
-        let mut bins = Bins::new(ctx)?;
-        let binned = self.binner.run(ctx, &mut bins, &scene.setups, &job)?;
-        let setups = ctx.read_buffer(&scene.setups, 0, (job.item_count()) as usize)?;
-        Ok((setups, binned))
-    }
-}
-
-/// Convenience: builds a [`Renderer`] and renders one view with the brute-force kernel.
-pub fn render_brute(
-    ctx: &Context,
-    mesh: &Mesh,
-    camera: &Camera,
-    lighting: &Lighting,
-    settings: &RasterSettings,
-) -> Result<Vec<[f32; 4]>> {
-    Renderer::new(ctx)?.render_brute(ctx, mesh, camera, lighting, settings)
 }
 
 /// Validates a render's inputs (mesh, settings, at least one camera) and builds the GPU views.

@@ -7,10 +7,12 @@
 //! nearest faces of every pixel on the same binning, forward and backward, with its own twin.
 //!
 //! The layers, none importing from one above it: the settings; the state every stage reads —
-//! the [`method`], the [`scene`] and the kernels' loop counts; the stages; the driver [`gpu`],
+//! the [`method`], the [`scene`], what a forward leaves for its backward ([`binned`]) and the
+//! kernels' loop counts; the stages; the driver [`gpu`],
 //! which re-exports the state its callers name.
 
 pub mod backward;
+pub mod binned;
 pub mod brute;
 pub mod fine;
 pub mod fragments;

@@ -1,7 +1,7 @@
 //! A scene on the GPU ([`GpuScene`]): the meshes, lit colours, views and every buffer of their
-//! forward, kept so the scene renders again without re-uploading; what a forward leaves for its
-//! backward ([`Binned`]); and how many (pixel, face) pairs its fine passes visit
-//! ([`PairCounts`]). [`crate::raster::gpu::Renderer`] makes and renders scenes.
+//! forward, kept so the scene renders again without re-uploading, with the bins of its exact
+//! runs. [`crate::raster::gpu::Renderer`] makes and renders scenes; what a forward leaves for
+//! its backward is in [`crate::raster::binned`].
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -9,6 +9,8 @@ use crate::gpu::{Buffer, BufferRange, Context};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::primitives::binning::{BinJob, Bins, ItemLayout, TileGrid};
+use crate::raster::binned::{Binned, ExactRun, ViewGroup};
+use crate::raster::fine::PixelAux;
 use crate::raster::method::Method;
 use crate::raster::reference::{FaceColors, MeshF64};
 use crate::raster::settings::{ColorMode, RasterSettings};
@@ -21,6 +23,31 @@ pub(crate) const SETUP_LAYOUT: ItemLayout = ItemLayout {
     flag_offset: (std::mem::offset_of!(GpuFaceSetup, flags) / 4) as u32,
     flag_mask: FACE_FINITE,
 };
+
+/// One GPU render's results, for every view.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frames {
+    /// Output width in pixels.
+    pub width: u32,
+    /// Output height in pixels.
+    pub height: u32,
+    /// RGBA per output pixel, view-major, row-major, row 0 at the top.
+    pub images: Vec<[f32; 4]>,
+    /// Width of the rendered image the aux buffer describes (2× with anti-aliasing).
+    pub rendered_width: u32,
+    /// Height of the rendered image.
+    pub rendered_height: u32,
+    /// The forward state per *rendered* pixel (see [`PixelAux`]).
+    pub aux: Vec<PixelAux>,
+}
+
+impl Frames {
+    /// The image of view `v`.
+    pub fn image(&self, v: usize) -> &[[f32; 4]] {
+        let n = (self.width * self.height) as usize;
+        &self.images[v * n..(v + 1) * n]
+    }
+}
 
 /// A scene on the GPU: mesh, lit colours, views, and every buffer of its forward pass, kept so
 /// the scene can be rendered again without re-uploading (the bins grow, never shrink).
@@ -47,163 +74,21 @@ pub struct GpuScene {
     /// passes on this device, a placeholder elsewhere.
     pub(crate) carry: Buffer,
     pub(crate) small: Option<Buffer>,
-    /// Bins per view group: group `i` of the last tiled run used `bins[i]`. They are kept (the
-    /// backward pass reuses them: no second binning) and grow, never shrink.
+    /// The bins of the exact runs ([`Renderer::run`]), one per view group or window of the last
+    /// one. Kept for the next run and for the backward (no second binning); they grow, never
+    /// shrink.
+    ///
+    /// [`Renderer::run`]: crate::raster::gpu::Renderer::run
     pub(crate) bins: Vec<Bins>,
-    /// The view groups of the last tiled render.
-    pub(crate) groups: Vec<ViewGroup>,
-    /// The tile size of the last tiled render.
-    pub(crate) tile: Option<u32>,
-    /// The bins were sized by
-    /// [`Renderer::reserve_guarded`](crate::raster::gpu::Renderer::reserve_guarded) (one group of
-    /// every view, a capacity), not by an exact run: what a guarded forward needs.
-    pub(crate) guarded: bool,
+    /// The method and view groups of the last exact run, while nothing has changed the scene
+    /// since ([`GpuScene::last_run`]).
+    pub(crate) last_run: Option<(Method, Vec<ViewGroup>)>,
     /// Render alpha only ([`GpuScene::set_silhouette_only`]).
     pub(crate) silhouette_only: bool,
     /// The batch's meshes in f64, the lighting and the views, for the backward's host share.
     pub(crate) meshes: Vec<MeshF64>,
     pub(crate) lighting: Lighting,
     pub(crate) views_host: Vec<(usize, Camera)>,
-}
-
-/// What a forward leaves for its backward: the scene it rendered and how (with tiles, the scene's
-/// bins and view groups hold the binning). Every forward returns one; the backward takes it.
-/// It borrows the scene, so the scene cannot be re-binned, re-sized or re-rendered while it
-/// lives.
-#[derive(Clone, Copy)]
-pub struct Binned<'s> {
-    pub(crate) scene: &'s GpuScene,
-    pub(crate) method: Method,
-}
-
-impl std::fmt::Debug for Binned<'_> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Binned")
-            .field("method", &self.method)
-            .field("groups", &self.scene.groups)
-            .finish_non_exhaustive()
-    }
-}
-
-impl<'s> Binned<'s> {
-    /// The scene rendered.
-    pub fn scene(&self) -> &'s GpuScene {
-        self.scene
-    }
-
-    /// How faces met pixels.
-    pub fn method(&self) -> Method {
-        self.method
-    }
-}
-
-/// Views binned together: `first .. first + views`, with their (face, tile) entry count.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct ViewGroup {
-    /// First view of the group.
-    pub first: u32,
-    /// Views in the group.
-    pub views: u32,
-    /// The group's window of tile rows ([`TileGrid::window`]): `(first row, rows)`, every row of
-    /// the image unless one view held more entries than one binding and was binned window by
-    /// window.
-    pub tile_rows: (u32, u32),
-    /// (face, tile) entries binned; for a guarded binning
-    /// ([`Renderer::reserve_guarded`](crate::raster::gpu::Renderer::reserve_guarded), whose count
-    /// stays on the GPU), the entry capacity, an upper bound.
-    pub entries: u64,
-    /// The most entries one tile holds, or an upper bound of it (the entry count) where that
-    /// already satisfies the driver's loop cap ([`crate::gpu::DeviceInfo::shader_loop_limit`]).
-    pub max_tile_entries: u64,
-}
-
-/// The (pixel, face) pairs of one render's fine passes ([`GpuScene::pair_counts`]): what per
-/// pair costs mean (ns per visited pair) independently of how fast the device is.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct PairCounts {
-    /// Every pixel of a tile times the faces binned to it (tiled), or every pixel times every
-    /// face (brute force).
-    pub binned: u64,
-    /// Pairs the forward's fine kernel shades: tiled, for each subgroup of a block's pixels,
-    /// its lanes times the binned faces whose box touches the box of its pixel centres (the
-    /// rest are skipped by the ballot); brute force, all.
-    pub forward: u64,
-    /// Pairs the backward's fine kernel evaluates where no upstream pixel is zero (zero ones
-    /// are skipped too): tiled, for each batch of a subgroup's lanes' faces and each segment of
-    /// as many of the tile's pixels, the lanes times the batch's faces that touch the segment;
-    /// brute force, all.
-    pub backward: u64,
-    /// Pairs whose pixel centre lies in the face's grown box: the ones that can contribute.
-    pub accepted: u64,
-}
-
-/// The pixel centres of a `width × height` image in f32, as the kernels compute them.
-struct PixelCenters {
-    x: Vec<f32>,
-    y: Vec<f32>,
-}
-
-impl PixelCenters {
-    fn new(width: u32, height: u32) -> Self {
-        let (w, h) = (width as f32, height as f32);
-        let s = w.min(h);
-        Self {
-            x: (0..width).map(|c| (2.0 * c as f32 + 1.0 - w) / s).collect(),
-            y: (0..height)
-                .map(|r| (2.0 * (h - 1.0 - r as f32) + 1.0 - h) / s)
-                .collect(),
-        }
-    }
-
-    /// Pixel centres inside `b` (`outside_bbox` false). `x` increases with the column and `y`
-    /// decreases with the row.
-    fn inside(&self, b: [f32; 4]) -> u64 {
-        let cols = (self.x.partition_point(|&x| x <= b[2]))
-            .saturating_sub(self.x.partition_point(|&x| x < b[0]));
-        let rows = (self.y.partition_point(|&y| y >= b[1]))
-            .saturating_sub(self.y.partition_point(|&y| y > b[3]));
-        (cols * rows) as u64
-    }
-
-    /// The box of the centres of `pixels` (col, row), if any.
-    fn hull(&self, pixels: &[(u32, u32)]) -> Option<[f32; 4]> {
-        let mut it = pixels
-            .iter()
-            .map(|&(c, r)| (self.x[c as usize], self.y[r as usize]));
-        let (x, y) = it.next()?;
-        Some(it.fold([x, y, x, y], |b, (x, y)| {
-            [b[0].min(x), b[1].min(y), b[2].max(x), b[3].max(y)]
-        }))
-    }
-}
-
-/// `segment_shape` of `kernels/include/subgroup_face.glsl`: the block (width, height) of pixels
-/// that `lanes` lanes cover together, as square as a power of two allows; `None` (rows) when
-/// `lanes` is not a power of two up to 64.
-fn segment_shape(lanes: u32) -> Option<(u32, u32)> {
-    (lanes.is_power_of_two() && lanes <= 64).then(|| {
-        let w = 1 << lanes.ilog2().div_ceil(2);
-        (w, lanes / w)
-    })
-}
-
-/// `segment_pixel`: where pixel `i` of a `size`-wide square lies (x, y) when its pixels go to
-/// lanes `lanes` at a time, one [`segment_shape`] block per run.
-fn segment_pixel(i: u32, size: u32, lanes: u32) -> (u32, u32) {
-    let Some((w, h)) = segment_shape(lanes) else {
-        return (i % size, i / size);
-    };
-    let (segment, lane) = (i / lanes, i % lanes);
-    let per_row = size / w;
-    (
-        (segment % per_row) * w + lane % w,
-        (segment / per_row) * h + lane / w,
-    )
-}
-
-/// Whether face box `f` can hold a pixel centre of box `p` (the kernels' ballot test).
-fn boxes_touch(f: [f32; 4], p: [f32; 4]) -> bool {
-    !(p[2] < f[0] || p[3] < f[1] || p[0] > f[2] || p[1] > f[3])
 }
 
 impl GpuScene {
@@ -234,124 +119,12 @@ impl GpuScene {
     /// [`crate::raster::backward::GradBuffers::set_alpha_only`]).
     pub fn set_silhouette_only(&mut self, silhouette_only: bool) {
         self.silhouette_only = silhouette_only;
+        self.last_run = None;
     }
 
     /// Whether only alpha is rendered ([`GpuScene::set_silhouette_only`]).
     pub fn silhouette_only(&self) -> bool {
         self.silhouette_only
-    }
-
-    /// The (face, tile) entries of the last tiled render, over all view groups.
-    pub fn binned_entries(&self) -> u64 {
-        self.groups.iter().map(|g| g.entries).sum()
-    }
-
-    /// How many (pixel, face) pairs the last run's fine passes bin, visit and accept
-    /// ([`PairCounts`]), counted on the host from the setups and bins read back, by the
-    /// kernels' own rules for this device's subgroup size. Tiled needs the last run to have
-    /// been tiled with this tile size (in any view groups and windows).
-    pub fn pair_counts(&self, ctx: &Context, method: Method) -> Result<PairCounts> {
-        let (w, h) = (self.width, self.height);
-        let faces = self.face_count as usize;
-        let views = self.view_count as usize;
-        let setups: Vec<GpuFaceSetup> = ctx.read_buffer(&self.setups, 0, faces * views)?;
-        let centers = PixelCenters::new(w, h);
-        // Pairs whose pixel lies in the face's box: the box test's (`outside_bbox`) passes.
-        let accepted = setups
-            .iter()
-            .filter(|f| f.flags & FACE_FINITE != 0)
-            .map(|f| centers.inside(f.bbox))
-            .sum();
-        let pixels = u64::from(w) * u64::from(h) * views as u64;
-        let Method::Tiled { tile } = method else {
-            let all = pixels * faces as u64;
-            return Ok(PairCounts {
-                binned: all,
-                forward: all,
-                backward: all,
-                accepted,
-            });
-        };
-        if self.tile != Some(tile) || self.groups.is_empty() {
-            return Err(Error::Misuse(
-                "pair_counts needs a previous tiled run with this tile size".into(),
-            ));
-        }
-        let lanes = ctx.info().subgroup_size.clamp(1, 64);
-        let mut counts = PairCounts {
-            accepted,
-            ..PairCounts::default()
-        };
-        // Every group of views, or window of one view's tile rows, with its own bins.
-        for (group, bins) in self.groups.iter().zip(&self.bins) {
-            let (first_row, rows) = group.tile_rows;
-            let grid = self.grid(tile)?.window(first_row, rows)?;
-            let per_view = grid.tiles_per_view() as usize;
-            let tiles = per_view * group.views as usize;
-            let ranges: Vec<[u32; 2]> = ctx.read_buffer(bins.ranges(), 0, tiles)?;
-            let total = ranges.iter().map(|r| r[1]).max().unwrap_or(0) as usize;
-            let entries: Vec<u32> = ctx.read_buffer(bins.entries(), 0, total)?;
-            let items: Vec<u32> = ctx.read_buffer(bins.entry_items(), 0, total)?;
-            for (t, r) in ranges.iter().enumerate() {
-                let view = group.first as usize + t / per_view;
-                let in_view = (t % per_view) as u32;
-                let (x0, y0) = (
-                    (in_view % grid.tiles_x) * tile,
-                    (grid.first_row + in_view / grid.tiles_x) * tile,
-                );
-                let run: Vec<&GpuFaceSetup> = (r[0] as usize..r[1] as usize)
-                    .map(|k| &setups[view * faces + items[entries[k] as usize] as usize])
-                    .collect();
-                let tile_w = (w - x0).min(tile);
-                let tile_h = (h - y0).min(tile);
-                counts.binned += run.len() as u64 * u64::from(tile_w * tile_h);
-                let touching = |faces: &[&GpuFaceSetup], pixels: &[(u32, u32)]| -> u64 {
-                    let Some(b) = centers.hull(pixels) else {
-                        return 0;
-                    };
-                    faces
-                        .iter()
-                        .filter(|f| f.flags & FACE_FINITE != 0 && boxes_touch(f.bbox, b))
-                        .count() as u64
-                };
-                // Forward: per 8×8 block of the tile, per subgroup of its 64 pixels (one
-                // `segment_pixel` block each, edge pixels clamped into the image), the faces whose
-                // box touches the subgroup's.
-                for by in (y0..y0 + tile).step_by(8).filter(|&y| y < h) {
-                    for bx in (x0..x0 + tile).step_by(8).filter(|&x| x < w) {
-                        for first in (0..64).step_by(lanes as usize) {
-                            let group: Vec<(u32, u32)> = (first..first + lanes.min(64))
-                                .map(|i| {
-                                    let (x, y) = segment_pixel(i, 8, lanes);
-                                    ((bx + x).min(w - 1), (by + y).min(h - 1))
-                                })
-                                .collect();
-                            counts.forward += u64::from(lanes) * touching(&run, &group);
-                        }
-                    }
-                }
-                // Backward: per batch of `lanes` faces, per segment of `lanes` pixels of the tile
-                // (`segment_pixel` blocks, those in the image), the batch's faces whose box
-                // touches the segment.
-                let tile_pixels: Vec<(u32, u32)> = (0..tile * tile)
-                    .map(|i| {
-                        let (x, y) = segment_pixel(i, tile, lanes);
-                        (x0 + x, y0 + y)
-                    })
-                    .collect();
-                for batch in run.chunks(lanes as usize) {
-                    for segment in tile_pixels.chunks(lanes as usize) {
-                        let inside: Vec<(u32, u32)> = segment
-                            .iter()
-                            .copied()
-                            .filter(|&(c, r)| c < w && r < h)
-                            .collect();
-                        counts.backward += u64::from(lanes) * touching(batch, &inside);
-                    }
-                }
-            }
-        }
-        Ok(counts)
     }
 
     /// The output image buffer (RGBA per output pixel, view-major, row 0 at the top): the 2×2
@@ -401,6 +174,7 @@ impl GpuScene {
         }
         self.positions = buffer;
         self.position_layout = layout;
+        self.last_run = None;
         Ok(())
     }
 
@@ -423,6 +197,7 @@ impl GpuScene {
         settings.gamma = gamma;
         settings.validate()?;
         self.settings = settings;
+        self.last_run = None;
         Ok(())
     }
 
@@ -452,6 +227,7 @@ impl GpuScene {
         for (dst, src) in m.positions.iter_mut().zip(positions) {
             *dst = glam::DVec3::from(src.map(f64::from));
         }
+        self.last_run = None;
         Ok(
             match FaceColors::of(m, &self.lighting, self.settings.color_mode) {
                 FaceColors::Surface { texels, .. } => rgb_padded(&texels),
@@ -508,31 +284,47 @@ impl GpuScene {
         ctx.write_buffer(&self.positions, 0, &positions)?;
         ctx.write_buffer(&self.colors, 0, &colors)?;
         self.meshes = meshes.iter().map(MeshF64::from_mesh).collect();
+        self.last_run = None;
         Ok(())
     }
 
-    /// The [`Binned`] the scene's last forward by `method` left, for a backward recorded apart
-    /// from its forward (a benchmark timing the backward alone over one render). Tiled:
-    /// [`Error::Misuse`] unless the last tiled forward used these tiles. The forward's own
-    /// return value says the same without asking; prefer it.
-    pub fn binned(&self, method: Method) -> Result<Binned<'_>> {
-        if let Method::Tiled { tile } = method {
-            if self.tile != Some(tile) || self.groups.is_empty() {
-                return Err(Error::Misuse(format!(
-                    "the scene was not last binned with {tile}-pixel tiles (it was with {:?})",
-                    self.tile
-                )));
-            }
-        }
-        Ok(Binned {
-            scene: self,
-            method,
+    /// The scene's last exact run ([`Renderer::run`]), while nothing has changed the scene
+    /// since (each setter and update forgets it): for a caller that keeps the scene between its
+    /// forward and its backward without keeping the run's borrow. `None` after a change, or
+    /// before the first run.
+    ///
+    /// [`Renderer::run`]: crate::raster::gpu::Renderer::run
+    pub fn last_run(&self) -> Option<ExactRun<'_>> {
+        let (method, groups) = self.last_run.as_ref()?;
+        Some(ExactRun {
+            binned: Binned {
+                scene: self,
+                method: *method,
+                groups,
+                bins: &self.bins[..groups.len()],
+            },
         })
     }
 
-    /// The view groups of the last tiled run.
-    pub fn groups(&self) -> &[ViewGroup] {
-        &self.groups
+    /// Reads back the face setups of the last forward: one per (view, face), view-major.
+    pub fn read_setups(&self, ctx: &Context) -> Result<Vec<GpuFaceSetup>> {
+        let n = self.face_count as usize * self.view_count as usize;
+        ctx.read_buffer(&self.setups, 0, n)
+    }
+
+    /// Reads back the images and aux of the last forward.
+    pub fn read_frames(&self, ctx: &Context) -> Result<Frames> {
+        let s = &self.settings;
+        let outputs = (s.width * s.height * self.view_count) as usize;
+        let rendered = (self.width * self.height * self.view_count) as usize;
+        Ok(Frames {
+            width: s.width,
+            height: s.height,
+            images: ctx.read_buffer(self.output(), 0, outputs)?,
+            rendered_width: self.width,
+            rendered_height: self.height,
+            aux: ctx.read_buffer(&self.aux, 0, rendered)?,
+        })
     }
 
     /// The rendered (pre-downsampling) image size.
@@ -595,48 +387,4 @@ fn rgb_padded(colors: &[[f64; 3]]) -> Vec<f32> {
         .iter()
         .flat_map(|c| [c[0] as f32, c[1] as f32, c[2] as f32, 0.0])
         .collect()
-}
-
-/// Positions and faces as the packed triples the kernels read.
-pub(crate) fn upload_geometry(ctx: &Context, mesh: &Mesh) -> Result<(Buffer, Buffer)> {
-    let positions: Vec<f32> = mesh.positions.iter().flatten().copied().collect();
-    let faces: Vec<u32> = mesh.faces.iter().flatten().copied().collect();
-    Ok((
-        ctx.upload_buffer("mesh positions", &positions)?,
-        ctx.upload_buffer("mesh faces", &faces)?,
-    ))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::{segment_pixel, segment_shape};
-
-    /// Every pixel of a tile goes to exactly one lane of one segment, and a segment's pixels
-    /// fill one `segment_shape` block, for every subgroup size a device may have.
-    #[test]
-    fn segments_cover_each_pixel_once_in_square_blocks() {
-        for lanes in [1u32, 2, 4, 8, 16, 32, 64, 3, 48] {
-            for size in [8u32, 16, 32] {
-                let mut seen = vec![false; (size * size) as usize];
-                for i in 0..size * size {
-                    let (x, y) = segment_pixel(i, size, lanes);
-                    assert!(x < size && y < size, "lanes {lanes}, size {size}, i {i}");
-                    assert!(!std::mem::replace(&mut seen[(y * size + x) as usize], true));
-                }
-                let Some((w, h)) = segment_shape(lanes) else {
-                    assert!(!lanes.is_power_of_two());
-                    continue;
-                };
-                assert_eq!(w * h, lanes);
-                assert!(w == h || w == 2 * h, "lanes {lanes}: {w} × {h}");
-                for first in (0..size * size).step_by(lanes as usize) {
-                    let (x0, y0) = segment_pixel(first, size, lanes);
-                    for i in first..first + lanes {
-                        let (x, y) = segment_pixel(i, size, lanes);
-                        assert!((x0..x0 + w).contains(&x) && (y0..y0 + h).contains(&y));
-                    }
-                }
-            }
-        }
-    }
 }

@@ -295,7 +295,7 @@ pub fn render_shapes(
             let mut scene =
                 renderer.prepare_batch(ctx, &batch_meshes, &views, &lighting, &settings)?;
             renderer.run(ctx, &mut scene, Method::default())?;
-            let frames = renderer.read_frames(ctx, &scene)?;
+            let frames = scene.read_frames(ctx)?;
             for (m, &n) in chunk.iter().enumerate() {
                 for v in 0..VIEWS {
                     let image = frames.image(m * VIEWS + v);

@@ -51,7 +51,7 @@ use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::nn::{Activation, Conv2d, Layer, Linear, Sequential};
 use crate::raster::backward::GradBuffers;
-use crate::raster::gpu::{GpuScene, Renderer};
+use crate::raster::gpu::{GpuScene, GuardedBins, Renderer};
 use crate::raster::settings::{ColorMode, RasterSettings};
 use crate::rng::SplitMix64;
 
@@ -503,6 +503,8 @@ pub struct ReconTraining<'c> {
     renderer: Renderer,
     scene: GpuScene,
     grads: GradBuffers,
+    /// The guarded forward's bins, beside the scene.
+    bins: GuardedBins,
     sil: SilhouetteLoss,
     mse: ImageMse,
     regs: Regularizers,
@@ -809,7 +811,7 @@ impl<'c> Fitter<'c, ReconTraining<'c>> {
             .collect();
         let regs = Regularizers::new(ctx, &faces, (b * v) as usize)?;
         let max_capacity = crate::fit::max_entry_capacity(ctx, &renderer, &scene);
-        let total = renderer.count_entries(ctx, &mut scene, opts.tile)?;
+        let total = renderer.count_entries(ctx, &scene, opts.tile)?;
         // Predicted shapes wander from the sphere: room for 4× its entries to start with, or
         // as many as the device holds (the gate grows it as the shapes need).
         let capacity = crate::fit::with_headroom(
@@ -820,9 +822,8 @@ impl<'c> Fitter<'c, ReconTraining<'c>> {
             HINT,
         )?;
         let alpha_only = opts.color == 0.0;
-        let grads = crate::fit::reserve_guarded(
-            ctx, &renderer, &mut scene, opts.tile, capacity, alpha_only,
-        )?;
+        let (bins, grads) =
+            crate::fit::reserve_guarded(ctx, &renderer, &scene, opts.tile, capacity, alpha_only)?;
         let trainer = ReconTraining {
             ctx,
             opts: opts.clone(),
@@ -860,6 +861,7 @@ impl<'c> Fitter<'c, ReconTraining<'c>> {
             renderer,
             scene,
             grads,
+            bins,
             decoder,
             net,
             capacity,
@@ -931,7 +933,7 @@ impl Fit for ReconTraining<'_> {
         let scene = &self.scene;
         let g = &self.grads;
         self.renderer
-            .record_forward_guarded(rec, scene, gate, it, |rec, binned| {
+            .record_forward_guarded(rec, scene, &self.bins, gate, it, |rec, binned| {
                 let io = g.io();
                 rec.pass("silhouette loss", |rec| {
                     self.sil.record(
@@ -1025,10 +1027,10 @@ impl Fit for ReconTraining<'_> {
             self.max_capacity,
             HINT,
         )?;
-        self.grads = crate::fit::reserve_guarded(
+        (self.bins, self.grads) = crate::fit::reserve_guarded(
             ctx,
             &self.renderer,
-            &mut self.scene,
+            &self.scene,
             self.opts.tile,
             capacity,
             self.opts.color == 0.0,

@@ -15,7 +15,7 @@ use softvk::gpu::{Buffer, Context, Recorder};
 use softvk::lighting::Lighting;
 use softvk::mesh::Mesh;
 use softvk::raster::backward::{GradBuffers, GradIo};
-use softvk::raster::gpu::{GpuScene, Method, Renderer};
+use softvk::raster::gpu::{GpuScene, GuardedBins, Renderer};
 use softvk::raster::settings::RasterSettings;
 use softvk::raster::setup::VertexLayout;
 
@@ -29,6 +29,8 @@ const TILE: u32 = 8;
 pub struct SoftvkStage {
     renderer: Renderer,
     scene: GpuScene,
+    /// The guarded forward's bins.
+    bins: GuardedBins,
     grads: GradBuffers,
     /// Recording a frame resets and arms the gate.
     gate: RefCell<IterationGate>,
@@ -97,13 +99,14 @@ impl SoftvkStage {
         // headroom and grow when the gate says so).
         let tiles = u64::from(settings.width.div_ceil(TILE) * settings.height.div_ceil(TILE));
         let capacity = u64::from(gpu.face_count()) * tiles * cameras.len() as u64;
-        renderer.reserve_guarded(ctx, &mut gpu, TILE, capacity)?;
-        let mut grads = GradBuffers::new(ctx, &gpu, Method::Tiled { tile: TILE })?;
+        let bins = renderer.reserve_guarded(ctx, &gpu, TILE, capacity)?;
+        let mut grads = GradBuffers::guarded(ctx, &gpu, &bins)?;
         grads.set_alpha_only(true);
         Ok(Self {
             gate: RefCell::new(IterationGate::new(ctx)?),
             renderer,
             scene: gpu,
+            bins,
             grads,
             upstream,
             d_positions,
@@ -125,9 +128,14 @@ impl SoftvkStage {
             colors: self.grads.io().colors,
         };
         let (renderer, grads) = (&self.renderer, &self.grads);
-        renderer.record_forward_guarded(rec, &self.scene, &mut gate, frame, |rec, binned| {
-            renderer.grad_kernels().record(rec, &binned, grads, &io)
-        })?;
+        renderer.record_forward_guarded(
+            rec,
+            &self.scene,
+            &self.bins,
+            &mut gate,
+            frame,
+            |rec, binned| renderer.grad_kernels().record(rec, &binned, grads, &io),
+        )?;
         rec.copy(self.scene.output(), 0, &self.image, 0, self.image.size());
         Ok(())
     }

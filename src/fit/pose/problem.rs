@@ -127,9 +127,9 @@ impl PoseProblem {
         })?;
         // The exact-sized tiled forward (its count is read back: the host round trip of this
         // loop is the pose chain's anyway).
-        let binned = renderer.run(ctx, scene, Method::Tiled { tile })?;
+        let binned = renderer.run(ctx, scene, Method::Tiled { tile })?.binned();
         let scene = binned.scene();
-        let entries = scene.binned_entries();
+        let entries = binned.entries();
         if self
             .grads
             .as_ref()
@@ -137,7 +137,7 @@ impl PoseProblem {
         {
             // Drop the old buffers before making the larger ones.
             self.grads = None;
-            self.grads = Some(GradBuffers::new(ctx, scene, Method::Tiled { tile })?);
+            self.grads = Some(GradBuffers::new(ctx, &binned)?);
         }
         let gb = self.grads.as_ref().expect("made above");
         let io = gb.io();

@@ -4,6 +4,7 @@
 
 #[cfg(doc)]
 use super::Binner;
+use super::cpu;
 use super::job::{BinJob, BinStrategy, COUNTS_PER_SUM, mask_layout};
 use crate::error::{Error, Result};
 use crate::gpu::{Buffer, Context, MemoryKind};
@@ -154,6 +155,29 @@ impl Bins {
     /// The one `u32` where the last count pass left its entry total (on the GPU).
     pub fn total_buffer(&self) -> &Buffer {
         self.scan_scratch.total()
+    }
+
+    /// Reads back a sorted binning of `job` holding `total` entries (the count's total), as its
+    /// CPU twin lays it out ([`cpu::bin`]): what tests compare the GPU's binning with.
+    pub fn read(&self, ctx: &Context, job: &BinJob, total: u64) -> Result<cpu::Binned> {
+        let n = job.item_count() as usize;
+        let t = total as usize;
+        let slots: Vec<u32> = ctx.read_buffer(&self.pairs, 0, t)?;
+        let items_of_slot: Vec<u32> = ctx.read_buffer(&self.pair_items, 0, t)?;
+        let ranges: Vec<[u32; 2]> = ctx.read_buffer(&self.ranges, 0, job.tile_count() as usize)?;
+        // Each entry's tile, from the ranges (the masks have no keys).
+        let mut tiles = vec![0u32; t];
+        for (tile, r) in ranges.iter().enumerate() {
+            tiles[r[0] as usize..r[1] as usize].fill(tile as u32);
+        }
+        Ok(cpu::Binned {
+            offsets: ctx.read_buffer(&self.counts, 0, n)?,
+            total: total as u32,
+            tiles,
+            slots,
+            slot_items: items_of_slot,
+            ranges,
+        })
     }
 
     /// Reads the entry count of the last recorded count pass (after its submission finished),

@@ -525,24 +525,7 @@ impl Binner {
         let total = bins.read_total(ctx)?;
         bins.reserve_entries(ctx, total)?;
         ctx.submit_and_wait(|rec| self.record_sort(rec, bins, items.whole(), job))?;
-        let n = job.item_count() as usize;
-        let t = total as usize;
-        let slots: Vec<u32> = ctx.read_buffer(&bins.pairs, 0, t)?;
-        let items_of_slot: Vec<u32> = ctx.read_buffer(&bins.pair_items, 0, t)?;
-        let ranges: Vec<[u32; 2]> = ctx.read_buffer(&bins.ranges, 0, job.tile_count() as usize)?;
-        // Each entry's tile, from the ranges (the masks have no keys).
-        let mut tiles = vec![0u32; t];
-        for (tile, r) in ranges.iter().enumerate() {
-            tiles[r[0] as usize..r[1] as usize].fill(tile as u32);
-        }
-        Ok(cpu::Binned {
-            offsets: ctx.read_buffer(&bins.counts, 0, n)?,
-            total: total as u32,
-            tiles,
-            slots,
-            slot_items: items_of_slot,
-            ranges,
-        })
+        bins.read(ctx, job, total)
     }
 }
 

@@ -8,6 +8,7 @@ use super::plan::band_rows;
 use super::{GradSplit, face_grad_width, grad_stride};
 use crate::error::{Error, LimitKind, Result};
 use crate::gpu::{Buffer, BufferRange, Context, MemoryKind, TEXEL_BYTES};
+use crate::raster::binned::{Binned, GuardedBins};
 use crate::raster::fine::{FineModes, MAX_MASKED_TEXELS};
 use crate::raster::loops::ColorWork;
 use crate::raster::method::Method;
@@ -113,6 +114,13 @@ impl GradIo<'_> {
     }
 }
 
+/// The tiled partials an exact forward's backward sizes for: its largest group's entries, with
+/// headroom so that a fit whose entries breathe does not reallocate every step.
+fn most(binned: &Binned<'_>) -> u64 {
+    let most = binned.groups().iter().map(|g| g.entries).max().unwrap_or(0);
+    most + most / 4
+}
+
 fn checked(ctx: &Context, what: &str, bytes: u64) -> Result<u64> {
     let max = u64::from(ctx.info().limits.max_storage_buffer_range);
     if bytes > max {
@@ -125,34 +133,37 @@ fn checked(ctx: &Context, what: &str, bytes: u64) -> Result<u64> {
 }
 
 impl GradBuffers {
-    /// Buffers for the backward of `scene` by `method`. Tiled needs the scene's last forward run
-    /// to have been tiled with the same tile size (the backward reuses its binning).
-    pub fn new(ctx: &Context, scene: &GpuScene, method: Method) -> Result<Self> {
-        Self::build(ctx, scene, method, GradSplit::default(), None)
+    /// Buffers for the backward of the forward that left `binned` (the backward reuses its
+    /// binning; tiled partials are sized for its largest group).
+    pub fn new(ctx: &Context, binned: &Binned<'_>) -> Result<Self> {
+        Self::build(
+            ctx,
+            binned.scene(),
+            binned.method(),
+            GradSplit::default(),
+            most(binned),
+        )
     }
 
     /// As [`GradBuffers::new`], splitting the work at most as `split` says (a test knob: the
     /// `test-knobs` feature).
     #[cfg(feature = "test-knobs")]
-    pub fn with_split(
-        ctx: &Context,
-        scene: &GpuScene,
-        method: Method,
-        split: GradSplit,
-    ) -> Result<Self> {
-        Self::build(ctx, scene, method, split, None)
+    pub fn with_split(ctx: &Context, binned: &Binned<'_>, split: GradSplit) -> Result<Self> {
+        Self::build(ctx, binned.scene(), binned.method(), split, most(binned))
     }
 
-    /// As [`GradBuffers::new`], with tiled partials for `entries` (face, tile) entries (at least
-    /// the scene's largest group; at most what one binding holds, more take several chunks): a
-    /// guarded fitting loop sizes them as its bins.
-    pub fn with_entry_capacity(
-        ctx: &Context,
-        scene: &GpuScene,
-        method: Method,
-        entries: u64,
-    ) -> Result<Self> {
-        Self::build(ctx, scene, method, GradSplit::default(), Some(entries))
+    /// Buffers for the backward of every guarded forward of `scene` into `bins`
+    /// ([`crate::raster::gpu::Renderer::reserve_guarded`]): tiled partials for their capacity
+    /// (at most what one binding holds; more take several chunks).
+    pub fn guarded(ctx: &Context, scene: &GpuScene, bins: &GuardedBins) -> Result<Self> {
+        let binned = bins.binned(scene)?;
+        Self::build(
+            ctx,
+            scene,
+            binned.method(),
+            GradSplit::default(),
+            bins.capacity(),
+        )
     }
 
     fn build(
@@ -160,17 +171,8 @@ impl GradBuffers {
         scene: &GpuScene,
         method: Method,
         split: GradSplit,
-        entries: Option<u64>,
+        entries: u64,
     ) -> Result<Self> {
-        if let Method::Tiled { tile } = method {
-            if scene.tile != Some(tile) || scene.groups.is_empty() {
-                return Err(Error::Input(format!(
-                    "the tiled backward (tile {tile}) needs a forward run with the same tiles \
-                     first (the scene was last binned with {:?})",
-                    scene.tile
-                )));
-            }
-        }
         let mode = scene.settings.color_mode;
         let stride = grad_stride(mode, scene.texture_res);
         let width = face_grad_width(mode);
@@ -219,11 +221,7 @@ impl GradBuffers {
                 let bands = scene.height.div_ceil(rows);
                 (rows, bands, items * u64::from(bands))
             }
-            Method::Tiled { .. } => {
-                let most = scene.groups.iter().map(|g| g.entries).max().unwrap_or(0);
-                // Headroom, so that a fit whose entries breathe does not reallocate every step.
-                (0, 0, entries.map_or(most + most / 4, |e| e.max(most)))
-            }
+            Method::Tiled { .. } => (0, 0, entries),
         };
         if units > u64::from(u32::MAX) {
             return Err(Error::Limit(format!(
@@ -259,7 +257,7 @@ impl GradBuffers {
         })
     }
 
-    /// Whether these buffers serve the backward of `scene`'s last forward as well as new ones
+    /// Whether these buffers serve the backward of the forward that left `binned` as well as new ones
     /// would: made for a scene of its sizes and method, with room for its (face, tile) entries
     /// in as few chunks. For a scene with the same meshes' topology and views as the one they
     /// were made for (the vertex adjacency and each mesh's views are uploaded once): a loop
@@ -267,18 +265,12 @@ impl GradBuffers {
     /// Keeping them is faster than making them again: on a CPU device fresh device memory
     /// costs a page fault per page at its first write (about 40 ms of a 200 ms backward on the
     /// deformation demo's 120 views on llvmpipe).
-    pub fn fits(&self, scene: &GpuScene, method: Method) -> bool {
-        if self.method != method || self.made_for != SceneSizes::of(scene) {
+    pub fn fits(&self, binned: &Binned<'_>) -> bool {
+        if self.method != binned.method() || self.made_for != SceneSizes::of(binned.scene()) {
             return false;
         }
-        match method {
-            Method::Brute => true,
-            Method::Tiled { tile } => {
-                let most = scene.groups.iter().map(|g| g.entries).max().unwrap_or(0);
-                scene.tile == Some(tile)
-                    && (self.chunk_units >= most || self.chunk_units >= self.budget_units)
-            }
-        }
+        let most = binned.groups().iter().map(|g| g.entries).max().unwrap_or(0);
+        self.chunk_units >= most || self.chunk_units >= self.budget_units
     }
 
     /// The buffers' own upstream gradient (written by [`GradBuffers::set_d_image`], or by a

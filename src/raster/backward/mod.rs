@@ -52,9 +52,9 @@ pub use buffers::{GradBuffers, GradIo};
 
 use std::sync::Arc;
 
+use super::binned::Binned;
 use super::method::Method;
 use super::reference_grad;
-use super::scene::Binned;
 use super::settings::ColorMode;
 use crate::error::{Error, Result};
 use crate::gpu::{Context, Kernel, KernelVariants, Recorder, specs};
@@ -118,7 +118,7 @@ impl GradKernels {
             }
             match gb.method {
                 Method::Brute => self.record_brute(rec, scene, gb, io),
-                Method::Tiled { tile } => self.record_tiled(rec, scene, gb, io, tile),
+                Method::Tiled { tile } => self.record_tiled(rec, binned, gb, io, tile),
             }
         })?;
         // Stages 4 and 5.

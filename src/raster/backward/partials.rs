@@ -10,6 +10,7 @@ use super::reduce::UnitGroup;
 use super::{GradBuffers, GradIo, GradKernels, groups};
 use crate::error::{Error, LimitKind, Result};
 use crate::gpu::{Recorder, specs};
+use crate::raster::binned::Binned;
 use crate::raster::fine::{RasterPush, tiled_backward_workgroup};
 use crate::raster::loops::brute_backward_iterations;
 use crate::raster::scene::GpuScene;
@@ -122,17 +123,13 @@ impl GradKernels {
     pub(super) fn record_tiled(
         &self,
         rec: &mut Recorder<'_>,
-        scene: &GpuScene,
+        binned: &Binned<'_>,
         gb: &GradBuffers,
         io: &GradIo<'_>,
         tile: u32,
     ) -> Result<()> {
+        let scene = binned.scene();
         let grid = scene.grid(tile)?;
-        if scene.tile != Some(tile) {
-            return Err(Error::Misuse(format!(
-                "the tiled backward (tile {tile}) needs the scene binned with those tiles"
-            )));
-        }
         let limit = rec.context().info().shader_loop_limit();
         // The modes, then the tile size (constant 6 of `grad_tiled.comp`).
         let modes = gb
@@ -141,7 +138,7 @@ impl GradKernels {
         let mut constants = modes.to_vec();
         constants.push(tile);
         let kernel = self.tiled.get(rec.context(), &constants)?;
-        for (group, bins) in scene.groups.iter().zip(&scene.bins) {
+        for (group, bins) in binned.groups().iter().zip(binned.bins) {
             let grid = grid.window(group.tile_rows.0, group.tile_rows.1)?;
             if group.entries == 0 {
                 // No face touches these views: their gradients stay zero.
