@@ -47,7 +47,7 @@ use crate::error::{Error, Result};
 use crate::gpu::Context;
 use crate::primitives::binning::{Bins, cpu};
 use crate::raster::method::Method;
-use crate::raster::scene::GpuScene;
+use crate::raster::scene::{GpuScene, ViewGroup};
 use crate::raster::setup::{FACE_FINITE, GpuFaceSetup};
 
 /// The scene a forward rendered and how its faces met its pixels: with tiles, the bins and view
@@ -262,6 +262,26 @@ impl<'s> ExactRun<'s> {
     }
 }
 
+impl GpuScene {
+    /// The scene's last exact run ([`Renderer::run`]), while nothing has changed the scene
+    /// since (each setter and update forgets it): for a caller that keeps the scene between its
+    /// forward and its backward without keeping the run's borrow. `None` after a change, or
+    /// before the first run.
+    ///
+    /// [`Renderer::run`]: crate::raster::gpu::Renderer::run
+    pub fn last_run(&self) -> Option<ExactRun<'_>> {
+        let (method, groups) = self.last_run.as_ref()?;
+        Some(ExactRun {
+            binned: Binned {
+                scene: self,
+                method: *method,
+                groups,
+                bins: &self.bins[..groups.len()],
+            },
+        })
+    }
+}
+
 /// The bins of a guarded forward ([`Renderer::reserve_guarded`]): every view of one scene as one
 /// group on one tile size, with a fixed capacity of (face, tile) entries, so that a loop records
 /// forward after forward with no read-back ([`Renderer::record_forward_guarded`]). Reserve anew
@@ -322,26 +342,6 @@ impl GuardedBins {
             scene.view_count,
         )
     }
-}
-
-/// Views binned together: `first .. first + views`, with their (face, tile) entry count.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct ViewGroup {
-    /// First view of the group.
-    pub first: u32,
-    /// Views in the group.
-    pub views: u32,
-    /// The group's window of tile rows ([`TileGrid::window`](crate::primitives::binning::TileGrid::window)): `(first row, rows)`, every row of
-    /// the image unless one view held more entries than one binding and was binned window by
-    /// window.
-    pub tile_rows: (u32, u32),
-    /// (face, tile) entries binned; for a guarded binning
-    /// ([`Renderer::reserve_guarded`](crate::raster::gpu::Renderer::reserve_guarded), whose count
-    /// stays on the GPU), the entry capacity, an upper bound.
-    pub entries: u64,
-    /// The most entries one tile holds, or an upper bound of it (the entry count) where that
-    /// already satisfies the driver's loop cap ([`crate::gpu::DeviceInfo::shader_loop_limit`]).
-    pub max_tile_entries: u64,
 }
 
 /// The (pixel, face) pairs of one render's fine passes ([`Binned::pair_counts`]): what per

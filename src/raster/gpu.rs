@@ -43,7 +43,7 @@ use crate::primitives::binning::{self, Binner, Bins, TileGrid};
 #[cfg(doc)]
 use crate::raster::backward::GradIo;
 use crate::raster::backward::{GradBuffers, GradKernels};
-pub use crate::raster::binned::{Binned, ExactRun, GuardedBins, PairCounts, ViewGroup};
+pub use crate::raster::binned::{Binned, ExactRun, GuardedBins, PairCounts};
 use crate::raster::brute::{BruteBindings, BruteRaster};
 use crate::raster::fine::{CARRY_BYTES, PixelAux, TiledBindings, TiledRaster};
 use crate::raster::loops::tiled_forward_iterations;
@@ -51,7 +51,7 @@ pub use crate::raster::method::{DEFAULT_TILE, Method};
 use crate::raster::reference::MeshF64;
 use crate::raster::reference_grad::Gradients;
 use crate::raster::scene::lit_batch;
-pub use crate::raster::scene::{Frames, GpuScene};
+pub use crate::raster::scene::{Frames, GpuScene, ViewGroup};
 use crate::raster::settings::{ColorMode, RasterSettings};
 use crate::raster::setup::{FaceSetupKernel, GpuFaceSetup, GpuView, VertexLayout};
 

@@ -9,7 +9,6 @@ use crate::gpu::{Buffer, BufferRange, Context};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
 use crate::primitives::binning::{BinJob, Bins, ItemLayout, TileGrid};
-use crate::raster::binned::{Binned, ExactRun, ViewGroup};
 use crate::raster::fine::PixelAux;
 use crate::raster::method::Method;
 use crate::raster::reference::{FaceColors, MeshF64};
@@ -47,6 +46,26 @@ impl Frames {
         let n = (self.width * self.height) as usize;
         &self.images[v * n..(v + 1) * n]
     }
+}
+
+/// Views binned together: `first .. first + views`, with their (face, tile) entry count.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ViewGroup {
+    /// First view of the group.
+    pub first: u32,
+    /// Views in the group.
+    pub views: u32,
+    /// The group's window of tile rows ([`TileGrid::window`](crate::primitives::binning::TileGrid::window)): `(first row, rows)`, every row of
+    /// the image unless one view held more entries than one binding and was binned window by
+    /// window.
+    pub tile_rows: (u32, u32),
+    /// (face, tile) entries binned; for a guarded binning
+    /// ([`Renderer::reserve_guarded`](crate::raster::gpu::Renderer::reserve_guarded), whose count
+    /// stays on the GPU), the entry capacity, an upper bound.
+    pub entries: u64,
+    /// The most entries one tile holds, or an upper bound of it (the entry count) where that
+    /// already satisfies the driver's loop cap ([`crate::gpu::DeviceInfo::shader_loop_limit`]).
+    pub max_tile_entries: u64,
 }
 
 /// A scene on the GPU: mesh, lit colours, views, and every buffer of its forward pass, kept so
@@ -286,24 +305,6 @@ impl GpuScene {
         self.meshes = meshes.iter().map(MeshF64::from_mesh).collect();
         self.last_run = None;
         Ok(())
-    }
-
-    /// The scene's last exact run ([`Renderer::run`]), while nothing has changed the scene
-    /// since (each setter and update forgets it): for a caller that keeps the scene between its
-    /// forward and its backward without keeping the run's borrow. `None` after a change, or
-    /// before the first run.
-    ///
-    /// [`Renderer::run`]: crate::raster::gpu::Renderer::run
-    pub fn last_run(&self) -> Option<ExactRun<'_>> {
-        let (method, groups) = self.last_run.as_ref()?;
-        Some(ExactRun {
-            binned: Binned {
-                scene: self,
-                method: *method,
-                groups,
-                bins: &self.bins[..groups.len()],
-            },
-        })
     }
 
     /// Reads back the face setups of the last forward: one per (view, face), view-major.
