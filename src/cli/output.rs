@@ -6,7 +6,7 @@
 //! 0 at the top. OpenEXR tools assume premultiplied colour; softvk's EXR is data, not a plate to
 //! composite.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use softvk::{Error, Result};
 
@@ -114,6 +114,55 @@ pub fn load_target(path: &Path) -> Result<(u32, u32, Vec<[f32; 4]>)> {
     let (w, h) = rgba.dimensions();
     let pixels = rgba.pixels().map(|p| p.0).collect();
     Ok((w, h, pixels))
+}
+
+/// A file a command writes beside its main output: `--flag PATH`, or `<out stem><suffix>` beside
+/// `--out` when the flag is not given.
+pub struct SideFile<'a> {
+    /// The flag that names it (for errors).
+    pub flag: &'a str,
+    /// The path the flag gave.
+    pub path: Option<&'a Path>,
+    /// What the default's name ends with (`-render.png`); a `.png` one must be a PNG.
+    pub suffix: &'a str,
+}
+
+/// The side files of `out` (`default_stem` names them when `out` has no stem), in order: each a
+/// PNG where its suffix is, and all of them and `out` different files. What `fit-pose` and
+/// `fit-articulated` write beside their angles.
+pub fn side_files(out: &Path, default_stem: &str, files: &[SideFile<'_>]) -> Result<Vec<PathBuf>> {
+    let stem = out
+        .file_stem()
+        .map_or(default_stem.into(), |s| s.to_string_lossy().into_owned());
+    let paths: Vec<PathBuf> = files
+        .iter()
+        .map(|f| {
+            f.path.map_or_else(
+                || out.with_file_name(format!("{stem}{}", f.suffix)),
+                Path::to_path_buf,
+            )
+        })
+        .collect();
+    for (f, p) in files.iter().zip(&paths) {
+        if f.suffix.ends_with(".png") && ImageFormat::from_path(p)? != ImageFormat::Png {
+            return Err(Error::Input(format!("{}: must be a .png", p.display())));
+        }
+    }
+    let all: Vec<&Path> = std::iter::once(out)
+        .chain(paths.iter().map(PathBuf::as_path))
+        .collect();
+    if (1..all.len()).any(|i| all[..i].contains(&all[i])) {
+        let flags: Vec<&str> = files.iter().map(|f| f.flag).collect();
+        let (last, rest) = flags.split_last().expect("at least one side file");
+        let count = ["two", "three", "four", "five", "six"]
+            .get(flags.len() - 1)
+            .map_or_else(|| (flags.len() + 1).to_string(), |w| (*w).to_string());
+        return Err(Error::Input(format!(
+            "--out, {} and {last} must be {count} different files",
+            rest.join(", ")
+        )));
+    }
+    Ok(paths)
 }
 
 #[cfg(test)]
@@ -277,5 +326,41 @@ mod tests {
             assert!(err.to_string().contains(bad), "{err}");
         }
         assert_eq!(dir.entries(), ["file", "sub.png"]);
+    }
+
+    fn side<'a>(flag: &'a str, path: Option<&'a Path>, suffix: &'a str) -> SideFile<'a> {
+        SideFile { flag, path, suffix }
+    }
+
+    #[test]
+    fn side_files_default_beside_the_output_and_must_differ() {
+        let out = Path::new("a/b/pose.json");
+        let given = Path::new("c/mine.png");
+        let files = [
+            side("--render", None, "-render.png"),
+            side("--compare", Some(given), "-compare.png"),
+            side("--mesh-out", None, "-posed.obj"),
+        ];
+        assert_eq!(
+            side_files(out, "pose", &files).unwrap(),
+            [
+                PathBuf::from("a/b/pose-render.png"),
+                PathBuf::from("c/mine.png"),
+                PathBuf::from("a/b/pose-posed.obj"),
+            ]
+        );
+        // A PNG side file named otherwise, or two files the same.
+        let exr = Path::new("c/mine.exr");
+        let err = side_files(out, "pose", &[side("--render", Some(exr), "-render.png")]);
+        assert!(err.unwrap_err().to_string().contains("must be a .png"));
+        let clash = [
+            side("--render", Some(given), "-render.png"),
+            side("--compare", Some(given), "-compare.png"),
+        ];
+        let err = side_files(out, "pose", &clash).unwrap_err().to_string();
+        assert!(
+            err.contains("--out, --render and --compare must be three different files"),
+            "{err}"
+        );
     }
 }

@@ -19,7 +19,7 @@
 //! (`--mesh-out`, default `<out stem>-posed.obj`). Everything is written after the fit; any
 //! error is one line and leaves no file.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use serde_json::{Value, json};
 use softvk::fit::articulated::{
@@ -36,19 +36,11 @@ use softvk::raster::settings::RasterSettings;
 use softvk::{Error, Result};
 
 use crate::cli::output::load_target;
-use crate::cli::output::{AtomicFile, ImageFormat, encode_sheet_png};
+use crate::cli::output::{AtomicFile, ImageFormat, SideFile, encode_sheet_png, side_files};
 use crate::cli::session::Watch;
 
 mod args;
 pub use args::*;
-
-/// `<out stem><suffix>` beside `out`.
-fn beside(out: &Path, suffix: &str) -> PathBuf {
-    let stem = out
-        .file_stem()
-        .map_or("angles".into(), |s| s.to_string_lossy().into_owned());
-    out.with_file_name(format!("{stem}{suffix}"))
-}
 
 /// Degrees to radians, one per joint of `rig` ([`Error::Input`] naming `flag` otherwise).
 fn joint_angles(rig: &Rig, flag: &str, degrees: &[f64]) -> Result<Vec<f64>> {
@@ -131,29 +123,29 @@ pub fn run(args: &FitArticulatedArgs) -> Result<()> {
         ..d
     };
     opts.validate()?;
-    let render_path = args
-        .render
-        .clone()
-        .unwrap_or_else(|| beside(&args.out, "-render.png"));
-    let compare_path = args
-        .compare
-        .clone()
-        .unwrap_or_else(|| beside(&args.out, "-compare.png"));
-    let mesh_path = args
-        .mesh_out
-        .clone()
-        .unwrap_or_else(|| beside(&args.out, "-posed.obj"));
-    for p in [&render_path, &compare_path] {
-        if ImageFormat::from_path(p)? != ImageFormat::Png {
-            return Err(Error::Input(format!("{}: must be a .png", p.display())));
-        }
-    }
-    let paths = [&args.out, &render_path, &compare_path, &mesh_path];
-    if (1..paths.len()).any(|i| paths[..i].contains(&paths[i])) {
-        return Err(Error::Input(
-            "--out, --render, --compare and --mesh-out must be four different files".into(),
-        ));
-    }
+    let [render_path, compare_path, mesh_path]: [PathBuf; 3] = side_files(
+        &args.out,
+        "angles",
+        &[
+            SideFile {
+                flag: "--render",
+                path: args.render.as_deref(),
+                suffix: "-render.png",
+            },
+            SideFile {
+                flag: "--compare",
+                path: args.compare.as_deref(),
+                suffix: "-compare.png",
+            },
+            SideFile {
+                flag: "--mesh-out",
+                path: args.mesh_out.as_deref(),
+                suffix: "-posed.obj",
+            },
+        ],
+    )?
+    .try_into()
+    .expect("three side files");
     let out = AtomicFile::create(&args.out)?;
     let render_file = AtomicFile::create(&render_path)?;
     let compare_file = AtomicFile::create(&compare_path)?;

@@ -37,7 +37,9 @@ use softvk::mesh::Mesh;
 use softvk::raster::gpu::{Method, Renderer};
 use softvk::{Error, Result};
 
-use crate::cli::output::{AtomicFile, ImageFormat, encode_sheet_png, load_target};
+use crate::cli::output::{
+    AtomicFile, ImageFormat, SideFile, encode_sheet_png, load_target, side_files,
+};
 use crate::cli::session::Watch;
 
 mod args;
@@ -48,14 +50,6 @@ const MIN_START_SEPARATION_DEG: f64 = 30.0;
 
 /// The checkpoint's file in `--checkpoint DIR` / `--resume DIR`.
 pub const CHECKPOINT_FILE: &str = "pose-fit.ckpt";
-
-/// `<out stem><suffix>` beside `out`.
-fn beside(out: &Path, suffix: &str) -> PathBuf {
-    let stem = out
-        .file_stem()
-        .map_or("pose".into(), |s| s.to_string_lossy().into_owned());
-    out.with_file_name(format!("{stem}{suffix}"))
-}
 
 /// Runs `softvk fit-pose`.
 pub fn run(args: &FitPoseArgs) -> Result<()> {
@@ -87,29 +81,29 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
             args.mesh.display()
         )));
     }
-    let render_path = args
-        .render
-        .clone()
-        .unwrap_or_else(|| beside(&args.out, "-render.png"));
-    let error_path = args
-        .error
-        .clone()
-        .unwrap_or_else(|| beside(&args.out, "-error.png"));
-    let compare_path = args
-        .compare
-        .clone()
-        .unwrap_or_else(|| beside(&args.out, "-compare.png"));
-    for p in [&render_path, &error_path, &compare_path] {
-        if ImageFormat::from_path(p)? != ImageFormat::Png {
-            return Err(Error::Input(format!("{}: must be a .png", p.display())));
-        }
-    }
-    let paths = [&args.out, &render_path, &error_path, &compare_path];
-    if (1..paths.len()).any(|i| paths[..i].contains(&paths[i])) {
-        return Err(Error::Input(
-            "--out, --render, --error and --compare must be four different files".into(),
-        ));
-    }
+    let [render_path, error_path, compare_path]: [PathBuf; 3] = side_files(
+        &args.out,
+        "pose",
+        &[
+            SideFile {
+                flag: "--render",
+                path: args.render.as_deref(),
+                suffix: "-render.png",
+            },
+            SideFile {
+                flag: "--error",
+                path: args.error.as_deref(),
+                suffix: "-error.png",
+            },
+            SideFile {
+                flag: "--compare",
+                path: args.compare.as_deref(),
+                suffix: "-compare.png",
+            },
+        ],
+    )?
+    .try_into()
+    .expect("three side files");
     let starts = args.starts();
     if args.candidates.is_some() && starts == 1 {
         return Err(Error::Input(
@@ -342,14 +336,6 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn outputs_default_beside_the_pose() {
-        assert_eq!(
-            beside(Path::new("a/b/pose.json"), "-render.png"),
-            PathBuf::from("a/b/pose-render.png")
-        );
-    }
 
     #[test]
     fn json_numbers_are_finite_or_null() {
