@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 use clap::Args;
 use glam::DVec3;
 use softvk::camera::{Camera, Projection};
+use softvk::io;
 use softvk::mesh::Mesh;
 use softvk::raster::settings::MAX_IMAGE_SIDE;
 use softvk::{Error, Result};
@@ -228,6 +229,35 @@ pub fn triple(s: &str) -> std::result::Result<[f64; 3], String> {
         *o = finite(p)?;
     }
     Ok(out)
+}
+
+/// A silhouette fit's views (`fit-mesh`, `fit-field`): the silhouettes in `dir`, the cameras'
+/// CSV rows, one per silhouette, and the `--size` given, which must be the silhouettes'.
+pub fn load_silhouette_views(
+    dir: &Path,
+    cameras: &Path,
+    size: Option<u32>,
+) -> Result<(io::Silhouettes, Vec<io::CameraRow>)> {
+    let sil = io::load_silhouettes(dir)?;
+    let rows = io::load_cameras(cameras)?;
+    io::check_counts(&rows, &sil)?;
+    if let Some(n) = size {
+        if (n, n) != (sil.width, sil.height) {
+            return Err(Error::Input(format!(
+                "--size {n}, but the silhouettes are {}x{}",
+                sil.width, sil.height
+            )));
+        }
+    }
+    Ok((sil, rows))
+}
+
+/// A fit's report folder by default: `<out stem>-report` beside `out`.
+pub fn default_report(out: &Path) -> PathBuf {
+    let stem = out
+        .file_stem()
+        .map_or("fit".into(), |s| s.to_string_lossy().into_owned());
+    out.with_file_name(format!("{stem}-report"))
 }
 
 /// The OBJ at `path` with `texture_res`² texels a face, normalized as SoftRas's

@@ -10,8 +10,6 @@
 //! anything is written, and the files are computed in memory first, so a failure writes
 //! nothing.
 
-use std::path::{Path, PathBuf};
-
 use softvk::camera::{Camera, Projection};
 use softvk::field::mcubes::MarchingCubes;
 use softvk::field::preview::{PreviewOptions, render_preview, surfaces_side_by_side};
@@ -22,10 +20,10 @@ use softvk::fit::field_fit::{
 };
 use softvk::fit::report::{self, Series};
 use softvk::gpu::{Context, ContextOptions};
-use softvk::io;
 use softvk::probe::Targets;
 use softvk::{Error, Result};
 
+use crate::cli::args::{default_report, load_silhouette_views};
 use crate::cli::output::AtomicFile;
 use crate::cli::session::Watch;
 use softvk::fit::session::Progress;
@@ -33,29 +31,12 @@ use softvk::fit::session::Progress;
 mod args;
 pub use args::*;
 
-fn default_report(out: &Path) -> PathBuf {
-    let stem = out
-        .file_stem()
-        .map_or("fit".into(), |s| s.to_string_lossy().into_owned());
-    out.with_file_name(format!("{stem}-report"))
-}
-
 /// The checkpoint's file in `--checkpoint DIR` / `--resume DIR`.
 pub const CHECKPOINT_FILE: &str = "field-fit.ckpt";
 
 /// Runs `softvk fit-field`.
 pub fn run(args: &FitFieldArgs) -> Result<()> {
-    let sil = io::load_silhouettes(&args.silhouettes)?;
-    let rows = io::load_cameras(&args.cameras)?;
-    io::check_counts(&rows, &sil)?;
-    if let Some(n) = args.size {
-        if (n, n) != (sil.width, sil.height) {
-            return Err(Error::Input(format!(
-                "--size {n}, but the silhouettes are {}x{}",
-                sil.width, sil.height
-            )));
-        }
-    }
+    let (sil, rows) = load_silhouette_views(&args.silhouettes, &args.cameras, args.size)?;
     let unit = args.options()?;
     let cams = args.cameras(&rows);
     let targets = Targets::from_silhouettes(&cams, &sil)?;

@@ -30,6 +30,7 @@ use softvk::raster::gpu::{Method, Renderer};
 use softvk::raster::settings::{Alpha, Dist, RasterSettings};
 use softvk::{Error, Result};
 
+use crate::cli::args::{default_report, load_silhouette_views};
 use crate::cli::output::AtomicFile;
 use crate::cli::session::{Watch, write_interrupted};
 
@@ -189,26 +190,9 @@ fn fit_and_report(
     Ok(())
 }
 
-fn default_report(out: &Path) -> PathBuf {
-    let stem = out
-        .file_stem()
-        .map_or("fit".into(), |s| s.to_string_lossy().into_owned());
-    out.with_file_name(format!("{stem}-report"))
-}
-
 /// Runs `softvk fit-mesh`.
 pub fn run(args: &FitMeshArgs) -> Result<()> {
-    let sil = io::load_silhouettes(&args.silhouettes)?;
-    let rows = io::load_cameras(&args.cameras)?;
-    io::check_counts(&rows, &sil)?;
-    if let Some(n) = args.size {
-        if (n, n) != (sil.width, sil.height) {
-            return Err(Error::Input(format!(
-                "--size {n}, but the silhouettes are {}x{}",
-                sil.width, sil.height
-            )));
-        }
-    }
+    let (sil, rows) = load_silhouette_views(&args.silhouettes, &args.cameras, args.size)?;
     args.fit.options(sil.width, sil.height, FIT_ITERATIONS)?;
     let template = match &args.template {
         Some(path) if path.as_os_str() == "icosphere" => icosphere_template(),
