@@ -18,16 +18,20 @@
 //
 // Each subgroup works alone (no shared memory, no barrier; see `raster_tiled.comp`): it takes
 // as many faces as it has lanes (one per lane, whose lane keeps its sums), then walks the tile's
-// pixels as many at a time (a segment: a `segment_shape` block, 4 × 2 for 8 lanes, blocks
-// row-major; only the segments some of its faces' boxes meet), each lane loading one pixel's
-// upstream. A ballot keeps the faces whose box touches the segment's pixels with a non-zero
-// upstream (any other face adds nothing there), and the loop over its bits broadcasts each kept
-// face with shuffles: every lane takes its pixel's contribution, `lane_sum` adds them up, and
-// the face's own lane adds the sum to its running total. So a face's partial is summed segment
-// by segment in segment order, each segment by the subgroup's reduction (a fixed order on a
-// given device: runs are bit-identical; against brute force it differs by float
-// reassociation). A texel slot gets, segment by segment, the sum in lane order of the
-// segment's pixels on that texel, added by the lowest of them (same order on every run).
+// pixels as many at a time (a segment: `lanes` consecutive pixels of `morton_pixel`'s order, a
+// `segment_shape` block; only the segments some of its faces' boxes meet), each lane loading
+// one pixel's upstream. A ballot keeps the faces whose box touches the segment's pixels with a
+// non-zero upstream (any other face adds nothing there), and the loop over its bits broadcasts
+// each kept face with shuffles: every lane takes its pixel's contribution.
+//
+// The order of every sum is the pixels' and not the subgroup's, so that any subgroup size (4
+// to 64 lanes) gives the same bits: a face's partial is the sum, one 2 × 2 quad after another
+// in `morton_pixel`'s order, of each quad's `quad_sum`; the face's own lane adds the segment's
+// quads to its running total one at a time. A texel slot gets its pixels' contributions one at
+// a time in the same order, added to its value by the lowest lane of the segment on that texel.
+// A lane or pixel with nothing to add adds -0.0 (`NEG_ZERO`), which changes no bit, so a
+// segment or face skipped for having nothing to add gives what visiting it would. Against brute
+// force the sums differ by float reassociation only.
 // 64 invocations (a multiple of any subgroup size up to 64), or one subgroup on a CPU device:
 // `tiled_backward_workgroup` (src/raster/fine.rs) says why. Nothing here depends on how many
 // subgroups a workgroup has: its faces go to them round robin.
@@ -88,21 +92,16 @@ float center_y(int r) {
     return pixel_center(0u, uint(r), pc.width, pc.height).y;
 }
 
-// The segments (`segment_shape` blocks of the tile whose first pixel is (col0, row0), as block
-// columns and rows x0, y0, x1, y1) whose pixel centres' box meets face `f`'s box: those with a
-// column whose centre is at most the box's right edge and one whose centre is at least its left
-// edge, and rows likewise. The first and last such column and row are found by the binning's
-// arithmetic and corrected by a step either way with the centres `pixel_center` computes, so
-// the test is the ballot's own (`!(hi.x < bbox.x || ...)` over the segment's pixels in the
-// image). Every segment when the lanes make no blocks (rows of pixels); none (x0 > x1) for a
-// face no pixel sees.
-uvec4 segment_rect(Face f, uint col0, uint row0, uint lanes) {
-    uvec2 shape = segment_shape(lanes);
+// The pixels of the tile whose first pixel is (col0, row0) that a segment must hold for face
+// `f` to be kept there, as tile columns and rows x0, y0, x1, y1 (inclusive): those whose centres
+// lie in `f`'s box in x and in y. The first and last such column and row are found by the
+// binning's arithmetic and corrected by a step either way with the centres `pixel_center`
+// computes, so a segment meets this rect when the ballot's own test (`!(hi.x < bbox.x || ...)`
+// over the segment's pixels in the image) may keep the face. None (x0 > x1) for a face no pixel
+// sees.
+uvec4 segment_rect(Face f, uint col0, uint row0) {
     if ((f.flags & FACE_FINITE) == 0u) {
         return uvec4(1u, 0u, 0u, 0u);
-    }
-    if (shape.x == 0u) {
-        return uvec4(0u, 0u, 0xFFFFFFFFu, 0xFFFFFFFFu);
     }
     int w = int(pc.width);
     int h = int(pc.height);
@@ -126,20 +125,18 @@ uvec4 segment_rect(Face f, uint col0, uint row0, uint lanes) {
     bottom = bottom + 1 < h && center_y(bottom + 1) >= f.bbox.y ? bottom + 1 : bottom;
     bottom = bottom >= 0 && bottom < h && center_y(bottom) < f.bbox.y ? bottom - 1 : bottom;
     // A segment of columns [a, b] (b within the image) meets the box in x where a <= right and
-    // b >= left; in the tile's columns, a = x w_s, b = a + w_s - 1.
+    // b >= left.
     int c0 = int(col0);
     int r0 = int(row0);
     int t = int(tile_size());
-    int sw = int(shape.x);
-    int sh = int(shape.y);
-    int x0 = max(left - c0, 0) / sw;
+    int x0 = max(left - c0, 0);
     int x1 = min(right - c0, t - 1);
-    int y0 = max(top - r0, 0) / sh;
+    int y0 = max(top - r0, 0);
     int y1 = min(bottom - r0, t - 1);
     if (x1 < 0 || y1 < 0 || left >= w || top >= h || left > right || top > bottom) {
         return uvec4(1u, 0u, 0u, 0u);
     }
-    return uvec4(uint(x0), uint(y0), uint(x1 / sw), uint(y1 / sh));
+    return uvec4(uint(x0), uint(y0), uint(x1), uint(y1));
 }
 
 // The visits of one group of at most 32 segments, from segment `group0` on, of the batch whose
@@ -148,30 +145,27 @@ uvec4 segment_rect(Face f, uint col0, uint row0, uint lanes) {
 // its upstream, its ballot of the faces whose box meets its live pixels' and those faces'
 // contributions (see the header).
 void visit_group(uint group0, uint segments, Face f, uint face, uint o, uvec4 reach,
-                 uint per_row, uint tx, uint ty, uint gview, inout vec3 acc[3],
-                 inout vec3 cacc[3], inout uint written) {
+                 uint tx, uint ty, uint gview, inout vec3 acc[3], inout vec3 cacc[3],
+                 inout uint written) {
     uint lanes = subgroup_lanes();
     uint lane = gl_SubgroupInvocationID;
     uint pixels = tile_size() * tile_size();
     float inf = uintBitsToFloat(0x7f800000u);
+    uvec2 shape = segment_shape(lanes);
     uint count = min(32u, segments - group0);
     uint mine = 0u;
-    uint sx = group0 % per_row;
-    uint sy = group0 / per_row;
     for (uint s = 0u; s < count; ++s) {
-        bool in_reach = sx >= reach.x && sx <= reach.z && sy >= reach.y && sy <= reach.w;
+        uvec2 at = morton_pixel((group0 + s) * lanes, tile_size());
+        bool in_reach = reach.x <= reach.z && at.x <= reach.z && at.x + shape.x > reach.x
+                     && at.y <= reach.w && at.y + shape.y > reach.y;
         mine |= in_reach ? 1u << s : 0u;
-        sx += 1u;
-        bool wrap = sx == per_row;
-        sx = wrap ? 0u : sx;
-        sy += wrap ? 1u : 0u;
     }
     uint todo = lane_or(mine);
     while (todo != 0u) {
         uint base = (group0 + uint(findLSB(todo))) * lanes;
         todo &= todo - 1u;
         uint i = base + lane;
-        uvec2 at = segment_pixel(i, tile_size(), lanes);
+        uvec2 at = morton_pixel(i, tile_size());
         uint col = tx * tile_size() + at.x;
         uint row = (pc.first_row + ty) * tile_size() + at.y;
         bool live = i < pixels && lane < lanes && col < pc.width && row < pc.height;
@@ -195,11 +189,17 @@ void visit_group(uint group0, uint segments, Face f, uint face, uint o, uvec4 re
                 for (uint c = 0u; c < 3u; ++c) {
                     // With an alpha-only upstream no depth has a gradient: z stays +0.
                     if (ALPHA_ONLY) {
-                        vec2 sum = lane_sum(hit ? g.screen[c].xy : vec2(0.0));
-                        acc[c].xy += mine ? sum : vec2(0.0);
+                        vec2 quad = quad_sum(hit ? g.screen[c].xy : vec2(NEG_ZERO));
+                        for (uint j = 0u; j < lanes; j += 4u) {
+                            vec2 sum = subgroupShuffle(quad, j);
+                            acc[c].xy += mine ? sum : vec2(NEG_ZERO);
+                        }
                     } else {
-                        vec3 sum = lane_sum(hit ? g.screen[c] : vec3(0.0));
-                        acc[c] += mine ? sum : vec3(0.0);
+                        vec3 quad = quad_sum(hit ? g.screen[c] : vec3(NEG_ZERO));
+                        for (uint j = 0u; j < lanes; j += 4u) {
+                            vec3 sum = subgroupShuffle(quad, j);
+                            acc[c] += mine ? sum : vec3(NEG_ZERO);
+                        }
                     }
                 }
                 if (ALPHA_ONLY) {
@@ -208,43 +208,54 @@ void visit_group(uint group0, uint segments, Face f, uint face, uint o, uvec4 re
                 bool colored = hit && g.colored;
                 if (VERTEX_COLORS) {
                     for (uint c = 0u; c < 3u; ++c) {
-                        vec3 sum = lane_sum(colored ? g.color[c] : vec3(0.0));
-                        cacc[c] += mine ? sum : vec3(0.0);
+                        vec3 quad = quad_sum(colored ? g.color[c] : vec3(NEG_ZERO));
+                        for (uint j = 0u; j < lanes; j += 4u) {
+                            vec3 sum = subgroupShuffle(quad, j);
+                            cacc[c] += mine ? sum : vec3(NEG_ZERO);
+                        }
                     }
                 } else {
-                    // Texel slots: the segment's pixels that share a texel of face q are
-                    // summed in pixel order (one shuffle step per lane: texels are finer
-                    // than pixels, so most pixels have a texel of their own), and the
-                    // lowest of them adds the sum to the slot: one read-modify-write per
-                    // face and segment, each lane on its own texel, rather than one per
-                    // pixel (on llvmpipe each is a scalar loop over the lanes).
+                    // Texel slots: each of the segment's pixels on a texel of face q adds its
+                    // contribution to the texel's slot, one after another in pixel order. The
+                    // lowest of them does the adding (one read-modify-write per face and
+                    // segment, each lane on its own texel, rather than one per pixel: on
+                    // llvmpipe each is a scalar loop over the lanes): first it finds the lanes
+                    // on its texel, then it reads the slot and adds their values in lane order.
                     uint texel = colored ? g.texel : 0xFFFFFFFFu;
-                    vec3 sum = vec3(0.0);
+                    uint same = 0u; // the lanes (up to 32 of them) on this lane's texel
                     bool leader = colored;
                     for (uint k = 0u; k < lanes; ++k) {
-                        bool same = subgroupShuffle(texel, k) == texel;
-                        vec3 value = subgroupShuffle(g.color[0], k);
-                        sum += same ? value : vec3(0.0);
-                        leader = leader && !(same && k < lane);
+                        bool on = subgroupShuffle(texel, k) == texel;
+                        same |= on && k < 32u ? 1u << k : 0u;
+                        leader = leader && !(on && k < lane);
                     }
                     uint oq = subgroupShuffle(o, q);
+                    uint bit = leader ? 1u << texel : 0u;
+                    vec4 old = vec4(0.0);
                     if (TEXEL_MASKS) {
-                        // A slot face q's partial has not written yet is written, not
-                        // read (the read was a cache miss); then face q's lane notes the
-                        // slots its leaders wrote.
+                        // A slot face q's partial has not written yet is written, not read
+                        // (the read was a cache miss); then face q's lane notes the slots its
+                        // leaders wrote.
                         uint seen = subgroupShuffle(written, q);
-                        uint bit = leader ? 1u << texel : 0u;
-                        if (leader) {
-                            vec4 old = vec4(0.0);
-                            if ((seen & bit) != 0u) {
-                                old = partials[oq + PARTIAL_COLORS + texel];
-                            }
-                            partials[oq + PARTIAL_COLORS + texel] = old + vec4(sum, 0.0);
+                        if (leader && (seen & bit) != 0u) {
+                            old = partials[oq + PARTIAL_COLORS + texel];
                         }
+                    } else if (leader) {
+                        old = partials[oq + PARTIAL_COLORS + texel];
+                    }
+                    vec3 sum = old.xyz;
+                    for (uint k = 0u; k < lanes; ++k) {
+                        vec3 value = subgroupShuffle(g.color[0], k);
+                        bool on = k < 32u ? (same & (1u << k)) != 0u
+                                          : subgroupShuffle(texel, k) == texel;
+                        sum += on ? value : vec3(NEG_ZERO);
+                    }
+                    if (leader) {
+                        partials[oq + PARTIAL_COLORS + texel] = vec4(sum, old.w);
+                    }
+                    if (TEXEL_MASKS) {
                         uint bits = lane_or(bit);
                         written |= mine ? bits : 0u;
-                    } else if (leader) {
-                        partials[oq + PARTIAL_COLORS + texel] += vec4(sum, 0.0);
                     }
                 }
             }
@@ -310,18 +321,15 @@ void main() {
         // the subgroup takes the union; the loop below skips only segments whose ballot would
         // be empty, so every sum is the same, bit for bit.
         uint segments = (pixels + lanes - 1u) / lanes;
-        uvec4 reach = segment_rect(f, tx * tile_size(), (pc.first_row + ty) * tile_size(),
-                                   lanes);
-        uint per_row = max(tile_size() / max(segment_shape(lanes).x, 1u), 1u);
+        uvec4 reach = segment_rect(f, tx * tile_size(), (pc.first_row + ty) * tile_size());
         // With the tile and subgroup sizes known, one group needs no loop around it (a loop
         // level cost spot-256's backward 4 % on llvmpipe, even run once).
         if (TILE_SIZE != 0u && SUBGROUP_SIZE != 0u && segments <= 32u) {
-            visit_group(0u, segments, f, face, o, reach, per_row, tx, ty, gview, acc, cacc,
-                        written);
+            visit_group(0u, segments, f, face, o, reach, tx, ty, gview, acc, cacc, written);
         } else {
             for (uint group0 = 0u; group0 < segments; group0 += 32u) {
-                visit_group(group0, segments, f, face, o, reach, per_row, tx, ty, gview, acc,
-                            cacc, written);
+                visit_group(group0, segments, f, face, o, reach, tx, ty, gview, acc, cacc,
+                            written);
             }
         }
         if (has) {

@@ -66,35 +66,46 @@ uvec2 segment_pixel(uint i, uint size, uint lanes) {
                  (segment / per_row) * shape.y + lane / shape.x);
 }
 
+// Pixel `i` of a `size`-wide tile (a multiple of 8) in the backward's fixed order: 8 × 8 blocks
+// row-major, and in a block the Z (Morton) order of its 64 pixels (bits x0 y0 x1 y1 x2 y2). Any
+// power-of-two `lanes` from 4 to 64 then takes, `lanes` at a time, one `segment_shape` block (4
+// lanes: 2 × 2, 8: 4 × 2, 16: 4 × 4, ...), and the order of the pixels, which decides the order
+// of the sums, is the same whatever the lanes.
+uvec2 morton_pixel(uint i, uint size) {
+    uint block = i >> 6u;
+    uint m = i & 63u;
+    uint per_row = size / 8u;
+    uint x = (m & 1u) | ((m >> 1u) & 2u) | ((m >> 2u) & 4u);
+    uint y = ((m >> 1u) & 1u) | ((m >> 2u) & 2u) | ((m >> 3u) & 4u);
+    return uvec2((block % per_row) * 8u + x, (block / per_row) * 8u + y);
+}
+
+// -0.0, the exact identity of float addition: x + -0.0 == x for every x (+0.0 turns a -0.0 into
+// +0.0). What a lane with nothing to add adds, so that adding nothing changes no bit.
+#define NEG_ZERO uintBitsToFloat(0x80000000u)
+
+// The sum of `v` over each quad of lanes (lanes 4k .. 4k + 3), the same bits in its four lanes:
+// (v0 + v1) + (v2 + v3). With `morton_pixel`'s order a quad is the same 2 × 2 pixels for any
+// subgroup size, so its sum is too.
+#define SOFTVK_QUAD_SUM(T)                                                     \
+    T quad_sum(T v) {                                                          \
+        uint lane = gl_SubgroupInvocationID;                                   \
+        v += subgroupShuffle(v, lane ^ 1u);                                    \
+        v += subgroupShuffle(v, lane ^ 2u);                                    \
+        return v;                                                              \
+    }
+SOFTVK_QUAD_SUM(vec2)
+SOFTVK_QUAD_SUM(vec3)
+
 // Words of a subgroup ballot in use.
 uint ballot_words() {
     return ((SUBGROUP_SIZE != 0u ? SUBGROUP_SIZE : gl_SubgroupSize) + 31u) / 32u;
 }
 
-// The sum of `v` over the subgroup, the same bits in every lane. With a known size, a butterfly
-// of shuffles (each step adds a lane's value and its partner's; a + b == b + a exactly): on
-// llvmpipe a shuffle is one permute while `subgroupAdd` is a scalar loop over the lanes with a
-// branch per lane. Either way the order of the additions is fixed for a device.
-// One body for every vector type (GLSL has no generics). Unrolled by hand: a constant condition
-// is gone after specialization, while a loop over `m <<= 1` is not unrolled.
-#define SOFTVK_LANE_SUM(T)                                                     \
-    T lane_sum(T v) {                                                          \
-        if (SUBGROUP_SIZE == 0u) {                                             \
-            return subgroupAdd(v);                                             \
-        }                                                                      \
-        uint lane = gl_SubgroupInvocationID;                                   \
-        if (SUBGROUP_SIZE > 1u) v += subgroupShuffle(v, lane ^ 1u);            \
-        if (SUBGROUP_SIZE > 2u) v += subgroupShuffle(v, lane ^ 2u);            \
-        if (SUBGROUP_SIZE > 4u) v += subgroupShuffle(v, lane ^ 4u);            \
-        if (SUBGROUP_SIZE > 8u) v += subgroupShuffle(v, lane ^ 8u);            \
-        if (SUBGROUP_SIZE > 16u) v += subgroupShuffle(v, lane ^ 16u);          \
-        if (SUBGROUP_SIZE > 32u) v += subgroupShuffle(v, lane ^ 32u);          \
-        return v;                                                              \
-    }
-SOFTVK_LANE_SUM(vec2)
-SOFTVK_LANE_SUM(vec3)
-
-// The bitwise or of `v` over the subgroup, the same in every lane (see `lane_sum`).
+// The bitwise or of `v` over the subgroup, the same in every lane. With a known size, a
+// butterfly of shuffles: on llvmpipe a shuffle is one permute while `subgroupOr` is a scalar
+// loop over the lanes with a branch per lane. Unrolled by hand: a constant condition is gone
+// after specialization, while a loop over `m <<= 1` is not unrolled.
 uint lane_or(uint v) {
     if (SUBGROUP_SIZE == 0u) {
         return subgroupOr(v);

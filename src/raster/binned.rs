@@ -202,11 +202,11 @@ impl<'s> Binned<'s> {
                     }
                 }
                 // Backward: per batch of `lanes` faces, per segment of `lanes` pixels of the tile
-                // (`segment_pixel` blocks, those in the image), the batch's faces whose box
+                // (`morton_pixel`'s order, those in the image), the batch's faces whose box
                 // touches the segment.
                 let tile_pixels: Vec<(u32, u32)> = (0..tile * tile)
                     .map(|i| {
-                        let (x, y) = segment_pixel(i, tile, lanes);
+                        let (x, y) = morton_pixel(i, tile);
                         (x0 + x, y0 + y)
                     })
                     .collect();
@@ -428,6 +428,16 @@ fn segment_pixel(i: u32, size: u32, lanes: u32) -> (u32, u32) {
     )
 }
 
+/// `morton_pixel` of `kernels/include/subgroup_face.glsl`: pixel `i` of a `size`-wide tile (a
+/// multiple of 8) in the backward's order, 8 × 8 blocks row-major and Z order within a block.
+fn morton_pixel(i: u32, size: u32) -> (u32, u32) {
+    let (block, m) = (i >> 6, i & 63);
+    let per_row = size / 8;
+    let x = (m & 1) | ((m >> 1) & 2) | ((m >> 2) & 4);
+    let y = ((m >> 1) & 1) | ((m >> 2) & 2) | ((m >> 3) & 4);
+    ((block % per_row) * 8 + x, (block / per_row) * 8 + y)
+}
+
 /// Whether face box `f` can hold a pixel centre of box `p` (the kernels' ballot test).
 fn boxes_touch(f: [f32; 4], p: [f32; 4]) -> bool {
     !(p[2] < f[0] || p[3] < f[1] || p[0] > f[2] || p[1] > f[3])
@@ -435,7 +445,36 @@ fn boxes_touch(f: [f32; 4], p: [f32; 4]) -> bool {
 
 #[cfg(test)]
 mod tests {
-    use super::{segment_pixel, segment_shape};
+    use super::{morton_pixel, segment_pixel, segment_shape};
+
+    /// The backward's order covers each pixel of a tile once, and any power-of-two run of 4 to
+    /// 64 of its pixels is one `segment_shape` block whose quads (2 × 2) are the same pixels
+    /// whatever the run: what makes its sums independent of the subgroup size.
+    #[test]
+    fn the_backward_order_covers_each_pixel_once_in_blocks_of_any_lanes() {
+        for size in [8u32, 16, 24, 32] {
+            let mut seen = vec![false; (size * size) as usize];
+            for i in 0..size * size {
+                let (x, y) = morton_pixel(i, size);
+                assert!(x < size && y < size, "size {size}, i {i}");
+                assert!(!std::mem::replace(&mut seen[(y * size + x) as usize], true));
+            }
+            for lanes in [4u32, 8, 16, 32, 64] {
+                let (w, h) = segment_shape(lanes).unwrap();
+                for first in (0..size * size).step_by(lanes as usize) {
+                    let (x0, y0) = morton_pixel(first, size);
+                    assert!(x0 % w == 0 && y0 % h == 0, "lanes {lanes}: {x0}, {y0}");
+                    for i in first..first + lanes {
+                        let (x, y) = morton_pixel(i, size);
+                        assert!((x0..x0 + w).contains(&x) && (y0..y0 + h).contains(&y));
+                        // Quad k of the run: the pixels 4k .. 4k + 3, a 2 × 2 block.
+                        let (qx, qy) = morton_pixel(i & !3, size);
+                        assert!(qx % 2 == 0 && qy % 2 == 0 && x / 2 == qx / 2 && y / 2 == qy / 2);
+                    }
+                }
+            }
+        }
+    }
 
     /// Every pixel of a tile goes to exactly one lane of one segment, and a segment's pixels
     /// fill one `segment_shape` block, for every subgroup size a device may have.

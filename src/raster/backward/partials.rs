@@ -130,6 +130,16 @@ impl GradKernels {
     ) -> Result<()> {
         let scene = binned.scene();
         let grid = scene.grid(tile)?;
+        // Its sums go quad by quad in a pixel order every power of two from 4 to 64 lanes
+        // shares (`grad_tiled.comp`).
+        let lanes = rec.context().info().subgroup_size;
+        if !(lanes.is_power_of_two() && (4..=64).contains(&lanes)) {
+            return Err(Error::Limit(format!(
+                "the tiled backward needs subgroups of 4 to 64 lanes (a power of two); {} has \
+                 {lanes}: use the brute-force method",
+                rec.context().info().name
+            )));
+        }
         let limit = rec.context().info().shader_loop_limit();
         // The modes, then the tile size (constant 6 of `grad_tiled.comp`).
         let modes = gb
