@@ -2,6 +2,11 @@
 //! and generates `$OUT_DIR/kernels.rs`: one `KernelSpec` constant per kernel, holding the SPIR-V as
 //! `&[u32]` and the metadata reflected from it (workgroup size, bindings, push-constant size).
 //!
+//! Every float operation of every kernel is decorated `NoContraction` (`no_contraction`): what
+//! GLSL's `precise` says of one expression, said of all. Vulkan lets a driver fuse `a * b + c`
+//! into one rounding unless told not to, and drivers differ in where they do; without fusing,
+//! each operation is the correctly rounded IEEE one on every conformant device.
+//!
 //! A compile error fails the build with glslang's own message, rewritten to `path:line: message`
 //! so editors and humans can jump to it.
 
@@ -154,7 +159,65 @@ fn compile(compiler: &Compiler, path: &Path) -> Result<(Vec<u32>, BTreeSet<PathB
         glslang::error::GlslangError::LinkError(log) => rewrite(&log.log),
         other => format!("{shown}: {other}"),
     })?;
-    Ok((spirv, includer.seen))
+    Ok((no_contraction(&spirv), includer.seen))
+}
+
+/// `spirv` with every float arithmetic instruction decorated `NoContraction` (those already
+/// decorated, by `precise`, once): no driver may fuse two of them into one rounding.
+fn no_contraction(spirv: &[u32]) -> Vec<u32> {
+    use rspirv_reflect::rspirv::binary::Assemble;
+    use rspirv_reflect::rspirv::dr::{Instruction, Operand, load_words};
+    use rspirv_reflect::spirv::{Decoration, Op};
+    let mut module = load_words(spirv).expect("glslang's SPIR-V parses");
+    let decorated: BTreeSet<u32> = module
+        .annotations
+        .iter()
+        .filter(|i| {
+            i.class.opcode == Op::Decorate
+                && i.operands.get(1) == Some(&Operand::Decoration(Decoration::NoContraction))
+        })
+        .filter_map(|i| i.operands.first().and_then(Operand::id_ref_any))
+        .collect();
+    let arithmetic = [
+        Op::FAdd,
+        Op::FSub,
+        Op::FMul,
+        Op::FDiv,
+        Op::FRem,
+        Op::FMod,
+        Op::FNegate,
+        Op::VectorTimesScalar,
+        Op::MatrixTimesScalar,
+        Op::VectorTimesMatrix,
+        Op::MatrixTimesVector,
+        Op::MatrixTimesMatrix,
+        Op::OuterProduct,
+        Op::Dot,
+    ];
+    let mut targets = BTreeSet::new();
+    for function in &module.functions {
+        for block in &function.blocks {
+            for inst in &block.instructions {
+                if let Some(id) = inst.result_id {
+                    if arithmetic.contains(&inst.class.opcode) && !decorated.contains(&id) {
+                        targets.insert(id);
+                    }
+                }
+            }
+        }
+    }
+    for id in targets {
+        module.annotations.push(Instruction::new(
+            Op::Decorate,
+            None,
+            None,
+            vec![
+                Operand::IdRef(id),
+                Operand::Decoration(Decoration::NoContraction),
+            ],
+        ));
+    }
+    module.assemble()
 }
 
 /// glslang writes `ERROR: 0:12: 'x' : undeclared identifier` for the main file (string 0) and

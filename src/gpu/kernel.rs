@@ -253,3 +253,58 @@ impl Drop for Kernel {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::specs;
+
+    /// Every float operation of every kernel is decorated `NoContraction` (build.rs): no driver
+    /// may fuse `a * b + c` into one rounding, so each is the IEEE operation everywhere.
+    #[test]
+    fn no_kernel_lets_a_driver_fuse_float_operations() {
+        // SPIR-V opcodes: OpDecorate, and the float arithmetic whose result id is word 2.
+        const DECORATE: u32 = 71;
+        const NO_CONTRACTION: u32 = 42;
+        const FLOAT_OPS: [u32; 14] = [
+            127, // OpFNegate
+            129, // OpFAdd
+            131, // OpFSub
+            133, // OpFMul
+            136, // OpFDiv
+            140, // OpFRem
+            141, // OpFMod
+            142, // OpVectorTimesScalar
+            143, // OpMatrixTimesScalar
+            144, // OpVectorTimesMatrix
+            145, // OpMatrixTimesVector
+            146, // OpMatrixTimesMatrix
+            147, // OpOuterProduct
+            148, // OpDot
+        ];
+        let mut checked = 0;
+        for spec in specs::ALL {
+            let words = spec.spirv;
+            let (mut decorated, mut results) = (Vec::new(), Vec::new());
+            let mut at = 5; // after the header
+            while at < words.len() {
+                let (count, op) = ((words[at] >> 16) as usize, words[at] & 0xFFFF);
+                assert!(count > 0, "{}: malformed SPIR-V", spec.name);
+                if op == DECORATE && words[at + 2] == NO_CONTRACTION {
+                    decorated.push(words[at + 1]);
+                } else if FLOAT_OPS.contains(&op) {
+                    results.push(words[at + 2]);
+                }
+                at += count;
+            }
+            for id in &results {
+                assert!(
+                    decorated.contains(id),
+                    "{}: float operation %{id} may be contracted",
+                    spec.name
+                );
+            }
+            checked += results.len();
+        }
+        assert!(checked > 2_000, "only {checked} float operations seen");
+    }
+}
