@@ -140,8 +140,8 @@ pub struct ProbeSettings {
     /// τ for every ray). Under boundary-aware assignment the two kinds of rays use disjoint
     /// anchors, so each kind may have its own radius: a larger one outside lets each outside ray
     /// carve more next to the contour without widening an inside ray's tube. Measured on thin
-    /// shapes (`RESULTS.md`, "Thin structures, continued"), it thins the rim a fit leaves around
-    /// flat parts but also erodes sub-pixel ones; no default uses it.
+    /// shapes (`RESULTS.md`, "Thin structures", "Where the fit loses to the hull"), it thins the
+    /// rim a fit leaves around flat parts but also erodes sub-pixel ones; no default uses it.
     pub tau_outside: Option<f64>,
     /// G, how a ray combines its hits (default [`Aggregate::Max`]).
     pub aggregate: Aggregate,
