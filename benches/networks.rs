@@ -19,42 +19,18 @@
 //!
 //! Whole workloads (render scenes, fits, training iterations) are `softvk bench`'s.
 
-use std::time::{Duration, Instant};
+mod common;
 
+use std::time::Duration;
+
+use common::{context, time};
 use criterion::{
     BenchmarkId, Criterion, SamplingMode, Throughput, criterion_group, criterion_main,
 };
 use softvk::field::{Cube, Field, FieldKind};
-use softvk::gpu::{Context, ContextOptions, MemoryKind, Recorded, Timer};
+use softvk::gpu::{MemoryKind, Timer};
 use softvk::nn::Sequential;
 use softvk::recon::NetShape;
-
-fn context() -> Context {
-    Context::new(&ContextOptions::from_env()).expect("benchmarks need a Vulkan device")
-}
-
-/// Times `recorded` both ways for criterion's `iters`.
-fn time(
-    recorded: &Recorded<'_>,
-    timer: &Timer,
-    ctx: &Context,
-    gpu_clock: bool,
-    iters: u64,
-) -> Duration {
-    let mut total = Duration::ZERO;
-    for _ in 0..iters {
-        let start = Instant::now();
-        recorded.submit_and_wait().expect("submit");
-        let wall = start.elapsed();
-        total += if gpu_clock {
-            let ms = timer.total_ms(ctx).expect("timestamps");
-            Duration::from_secs_f64(ms * 1e-3)
-        } else {
-            wall
-        };
-    }
-    total
-}
 
 /// Points per MLP case.
 const POINTS: u32 = 32_768;

@@ -4,39 +4,15 @@
 //!
 //! Run: `cargo bench --bench primitives` (device from `SOFTVK_DEVICE`, as everywhere).
 
-use std::time::{Duration, Instant};
+mod common;
 
+use std::time::Duration;
+
+use common::{context, time};
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use softvk::gpu::{Context, ContextOptions, Recorded, Timer};
+use softvk::gpu::Timer;
 use softvk::primitives::sort::split_key;
 use softvk::primitives::{RadixSort, Scan, ScanScratch, SortScratch};
-
-fn context() -> Context {
-    Context::new(&ContextOptions::from_env()).expect("benchmarks need a Vulkan device")
-}
-
-/// Times `recorded` both ways for criterion's `iters`.
-fn time(
-    recorded: &Recorded<'_>,
-    timer: &Timer,
-    ctx: &Context,
-    gpu_clock: bool,
-    iters: u64,
-) -> Duration {
-    let mut total = Duration::ZERO;
-    for _ in 0..iters {
-        let start = Instant::now();
-        recorded.submit_and_wait().expect("submit");
-        let wall = start.elapsed();
-        total += if gpu_clock {
-            let ms = timer.total_ms(ctx).expect("timestamps");
-            Duration::from_secs_f64(ms * 1e-3)
-        } else {
-            wall
-        };
-    }
-    total
-}
 
 fn scan(c: &mut Criterion) {
     let ctx = context();

@@ -129,14 +129,7 @@ fn render(mesh: &Path, out: &Path, args: &[&str]) -> Output {
         .arg("--out")
         .arg(out)
         .args(args)
-        .env(
-            "SOFTVK_VALIDATION",
-            if common::validation_wanted() {
-                "1"
-            } else {
-                "0"
-            },
-        )
+        .env("SOFTVK_VALIDATION", common::validation_env())
         .output()
         .unwrap()
 }

@@ -439,14 +439,7 @@ fn bad_inputs_to_the_library_are_errors() {
 
 fn softvk() -> Command {
     let mut c = common::softvk();
-    c.env(
-        "SOFTVK_VALIDATION",
-        if common::validation_wanted() {
-            "1"
-        } else {
-            "0"
-        },
-    );
+    c.env("SOFTVK_VALIDATION", common::validation_env());
     c
 }
 

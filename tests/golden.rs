@@ -36,14 +36,7 @@ fn every_command_writes_the_golden_bytes() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let out = Command::new(root.join("tools/output-hashes"))
         .arg(env!("CARGO_BIN_EXE_softvk"))
-        .env(
-            "SOFTVK_VALIDATION",
-            if common::validation_wanted() {
-                "1"
-            } else {
-                "0"
-            },
-        )
+        .env("SOFTVK_VALIDATION", common::validation_env())
         .output()
         .expect("run tools/output-hashes");
     assert!(

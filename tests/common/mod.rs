@@ -87,6 +87,12 @@ pub fn validation_wanted() -> bool {
     std::env::var("SOFTVK_VALIDATION").map_or(true, |v| v.trim() != "0")
 }
 
+/// `SOFTVK_VALIDATION` for a `softvk` process a test starts: the test's own choice
+/// ([`validation_wanted`]).
+pub fn validation_env() -> &'static str {
+    if validation_wanted() { "1" } else { "0" }
+}
+
 /// A seeded generator for test data, the same on every platform.
 pub fn rng(seed: u64) -> rand_pcg::Pcg64 {
     rand::SeedableRng::seed_from_u64(seed)
