@@ -6,6 +6,9 @@
 //! - [`gpu`]: the Vulkan compute core — a [`gpu::Context`] (owned headless, or adopted from a host
 //!   engine with [`gpu::Context::from_raw`]), buffers, kernels compiled at build time, and a
 //!   [`gpu::Recorder`] that records dispatches into a command buffer the caller owns.
+//! - [`fmath`]: softvk's own `exp`, `log`, division, `sqrt`, `sin`, `cos`, ... built from
+//!   correctly rounded operations, which every kernel uses (`kernels/include/fmath.glsl`), so a
+//!   kernel's bits are the same on every conformant device; the CPU twin is bit-exact.
 //! - [`primitives`]: exclusive scan, stable radix sort, sums and tiled binning (which items each
 //!   screen tile must visit, exactly), with their CPU twins.
 //! - Inputs: [`mesh`] (OBJ and MTL, per-face textures, generated shapes), [`assets`] (the meshes
@@ -52,6 +55,7 @@ pub mod error;
 pub mod exr_io;
 pub mod field;
 pub mod fit;
+pub mod fmath;
 pub mod gpu;
 pub mod io;
 pub mod lighting;

@@ -307,4 +307,46 @@ mod tests {
         }
         assert!(checked > 2_000, "only {checked} float operations seen");
     }
+
+    /// Every kernel's float results are fixed by IEEE: no instruction whose precision or
+    /// evaluation order Vulkan leaves to the driver (division, `exp`, `log`, `sqrt`, `sin`, `dot`,
+    /// matrix products, `mix`, `length`, ...). softvk's own maths (`fmath.glsl`) replaces them.
+    #[test]
+    fn no_kernel_leaves_a_float_result_to_the_driver() {
+        const EXT_INST: u32 = 12;
+        // Core opcodes whose result a driver may choose: division, remainders, and the sums
+        // of dot and matrix products (their order is unspecified).
+        let core: [(u32, &str); 7] = [
+            (136, "OpFDiv"),
+            (140, "OpFRem"),
+            (141, "OpFMod"),
+            (144, "OpVectorTimesMatrix"),
+            (145, "OpMatrixTimesVector"),
+            (146, "OpMatrixTimesMatrix"),
+            (148, "OpDot"),
+        ];
+        // GLSL.std.450 instructions that are exact on every device (rounding to integers,
+        // sign, min/max/clamp, step, bit conversions, integer operations).
+        let exact: [u32; 27] = [
+            2, 3, 4, 5, 6, 7, 8, 9, 10, 37, 38, 39, 40, 41, 42, 43, 44, 45, 47, 48, 73, 74, 75, 79,
+            80, 81, 62,
+        ];
+        let mut found = Vec::new();
+        for spec in specs::ALL {
+            let words = spec.spirv;
+            let mut at = 5;
+            while at < words.len() {
+                let (count, op) = ((words[at] >> 16) as usize, words[at] & 0xFFFF);
+                assert!(count > 0, "{}: malformed SPIR-V", spec.name);
+                if let Some((_, name)) = core.iter().find(|(c, _)| *c == op) {
+                    found.push(format!("{} {name}", spec.name));
+                } else if op == EXT_INST && !exact.contains(&words[at + 4]) {
+                    found.push(format!("{} GLSL.std.450 #{}", spec.name, words[at + 4]));
+                }
+                at += count;
+            }
+        }
+        found.dedup();
+        assert!(found.is_empty(), "left to the driver:\n{}", found.join("\n"));
+    }
 }

@@ -1,0 +1,258 @@
+// softvk's own float maths: every function here is a fixed sequence of f32 additions,
+// subtractions and multiplications (correctly rounded on every conformant Vulkan device, and never
+// fused: build.rs decorates each NoContraction), comparisons, and exact integer bit operations.
+// None calls a builtin whose precision Vulkan leaves to the driver (`exp`, `log`, `pow`, division,
+// `sqrt`, `inversesqrt`, `sin`, `cos`, `tanh`) or whose summation order it leaves open (`dot`,
+// `length`, `normalize`, `cross`, `mix`, matrix products). So each returns the same bits on any
+// device, and `src/fmath.rs` is its CPU twin, operation for operation (`tests/fmath.rs` compares
+// them bit for bit).
+//
+// Subnormals: an input below 2^-126 in magnitude is read as a signed zero and a result that would
+// fall below 2^-126 is returned as zero, by comparisons made before any arithmetic can see them,
+// so a device that flushes subnormals and one that keeps them give the same bits. No intermediate
+// of a normal input is subnormal (range reduction keeps them near 1).
+//
+// Accuracy, measured against f64 by `tests/fmath.rs` (ulps of the f32 result): rcp ≤ 1, div ≤ 2,
+// sqrt ≤ 1, exp ≤ 2, expm1 ≤ 2, log ≤ 2, sin/cos ≤ 2 (|x| ≤ 8192, absolute 2^-24 near zeros).
+#ifndef SOFTVK_FMATH_GLSL
+#define SOFTVK_FMATH_GLSL
+
+const float FM_MIN_NORMAL = 1.17549435e-38;  // 2^-126
+#define FM_INF uintBitsToFloat(0x7f800000u)
+#define FM_NAN uintBitsToFloat(0x7fc00000u)
+
+// 2^k for -126 ≤ k ≤ 127, built from its bits.
+float fm_pow2(int k) {
+    return uintBitsToFloat(uint(k + 127) << 23);
+}
+
+// x, or a zero of x's sign when |x| is below the normal range.
+float fm_ftz(float x) {
+    return abs(x) < FM_MIN_NORMAL ? uintBitsToFloat(floatBitsToUint(x) & 0x80000000u) : x;
+}
+
+// 1 / x. Newton's iteration from a linear start on the mantissa m ∈ [1, 2), then the exponent.
+float fm_rcp(float x) {
+    uint bits = floatBitsToUint(x);
+    uint sign = bits & 0x80000000u;
+    float ax = abs(x);
+    if (!(ax >= FM_MIN_NORMAL)) {  // zero, subnormal or NaN
+        return isnan(x) ? x : uintBitsToFloat(sign | 0x7f800000u);
+    }
+    int e = int((bits >> 23) & 0xffu) - 127;
+    if (e >= 126) {  // |1/x| ≤ 2^-126 (or x infinite): zero
+        return uintBitsToFloat(sign);
+    }
+    float m = uintBitsToFloat((bits & 0x007fffffu) | 0x3f800000u);
+    float y = 1.4117647 - 0.47058824 * m;  // 24/17 − 8/17 m: |error| ≤ 1/17
+    y = y + y * (1.0 - m * y);
+    y = y + y * (1.0 - m * y);
+    y = y + y * (1.0 - m * y);  // |error| ≤ (1/17)^8 before rounding
+    // y ∈ (0.5, 1] and −e ≥ −125: y · 2^-e is normal.
+    return uintBitsToFloat(sign | floatBitsToUint(y * fm_pow2(-e)));
+}
+
+// a / b as a · (1 / b): within 1.5 ulps, the subnormal a and result read as zero.
+float fm_div(float a, float b) {
+    return fm_ftz(fm_ftz(a) * fm_rcp(b));
+}
+
+// sqrt(x): an inverse square root by Newton's iteration on m ∈ [1, 4), then one correction.
+float fm_sqrt(float x) {
+    if (!(x >= FM_MIN_NORMAL)) {  // zero, subnormal, negative or NaN
+        return (x >= 0.0 || abs(x) < FM_MIN_NORMAL) ? 0.0 : FM_NAN;
+    }
+    if (x == FM_INF) {
+        return x;
+    }
+    uint bits = floatBitsToUint(x);
+    int e = int(bits >> 23) - 127;
+    int odd = e & 1;  // e = 2 h + odd (arithmetic: −3 & 1 = 1)
+    float m = uintBitsToFloat((bits & 0x007fffffu) | 0x3f800000u);
+    m = odd == 1 ? 2.0 * m : m;  // m ∈ [1, 4)
+    float y = 1.0 - 0.15 * m;     // about 1 / sqrt(m) within 0.2
+    y = y * (1.5 - 0.5 * m * y * y);
+    y = y * (1.5 - 0.5 * m * y * y);
+    y = y * (1.5 - 0.5 * m * y * y);
+    y = y * (1.5 - 0.5 * m * y * y);  // relative error below 2^-28 before rounding
+    float s = m * y;
+    s = s + 0.5 * y * (m - s * s);
+    return s * fm_pow2((e - odd) / 2);
+}
+
+// exp(r) − 1 for |r| ≤ ln(2)/2 + a little, Taylor to r^8 (the omitted term below 2^-30).
+float fm_expm1_reduced(float r) {
+    float p = 2.48015873e-5;        // 1/8!
+    p = 1.98412698e-4 + r * p;      // 1/7!
+    p = 1.38888889e-3 + r * p;      // 1/6!
+    p = 8.33333333e-3 + r * p;      // 1/5!
+    p = 4.16666667e-2 + r * p;      // 1/4!
+    p = 1.66666667e-1 + r * p;      // 1/3!
+    p = 0.5 + r * p;
+    return r + (r * r) * p;
+}
+
+// ln 2 in two parts: k · FM_LN2_HI is exact for |k| < 2^9.
+const float FM_LN2_HI = 0.693145751953125;     // 0x3f317200
+const float FM_LN2_LO = 1.428606765330187e-06; // 0x35bfbe8e
+const float FM_LOG2E = 1.44269504;
+
+// k = round(x / ln 2) and r = x − k ln 2 (|x| < 2^8).
+float fm_reduce_ln2(float x, out int k) {
+    float kf = floor(x * FM_LOG2E + 0.5);
+    k = int(kf);
+    return (x - kf * FM_LN2_HI) - kf * FM_LN2_LO;
+}
+
+// exp(x); 0 below ln(2^-126) (no subnormal results), +inf above ln(FLT_MAX).
+float fm_exp(float x) {
+    if (isnan(x)) {
+        return x;
+    }
+    if (x > 88.7228394) {
+        return FM_INF;
+    }
+    if (x < -87.3365479) {
+        return 0.0;
+    }
+    int k;
+    float p = 1.0 + fm_expm1_reduced(fm_reduce_ln2(fm_ftz(x), k));
+    // k ∈ [−126, 128]; 2^128 in two factors.
+    float y = k > 127 ? (p * 2.0) * fm_pow2(k - 1) : p * fm_pow2(k);
+    return fm_ftz(y);
+}
+
+// exp(x) − 1, exact near zero (no cancellation).
+float fm_expm1(float x) {
+    if (isnan(x) || x > 88.7228394) {
+        return fm_exp(x);
+    }
+    if (x < -17.0) {  // exp(x) < 2^-24: −1 after rounding
+        return -1.0;
+    }
+    int k;
+    float q = fm_expm1_reduced(fm_reduce_ln2(fm_ftz(x), k));
+    if (k == 0) {
+        return q;
+    }
+    // 2^k (1 + q) − 1 = (2^k − 1) + 2^k q, each 2^k − 1 exact for −24 ≤ k ≤ 24.
+    float t = k > 127 ? 2.0 * fm_pow2(k - 1) : fm_pow2(k);
+    return k <= 24 ? (t - 1.0) + t * q : (t + t * q) - 1.0;
+}
+
+// ln(x), after FreeBSD's logf (s = f / (2 + f), a polynomial in s², the exponent in two parts):
+// −inf for zero and subnormal inputs, NaN below zero.
+const float FM_LOG_LN2_HI = 6.9313812256e-01;  // 0x3f317180
+const float FM_LOG_LN2_LO = 9.0580006145e-06;  // 0x3717f7d1
+float fm_log(float x) {
+    if (isnan(x) || x == FM_INF) {
+        return x;
+    }
+    if (!(x >= FM_MIN_NORMAL)) {
+        return abs(x) < FM_MIN_NORMAL ? -FM_INF : FM_NAN;
+    }
+    uint bits = floatBitsToUint(x);
+    int k = int(bits >> 23) - 127;
+    float m = uintBitsToFloat((bits & 0x007fffffu) | 0x3f800000u);
+    if (m > 1.41421354) {
+        m *= 0.5;
+        k += 1;
+    }
+    float f = m - 1.0;  // exact: m ∈ (0.707, 1.415]
+    float s = f * fm_rcp(2.0 + f);
+    float z = s * s;
+    float w = z * z;
+    float t1 = w * (0.40000972152 + w * 0.24279078841);
+    float t2 = z * (0.66666662693 + w * 0.28498786688);
+    float r = t2 + t1;
+    float hfsq = 0.5 * f * f;
+    float dk = float(k);
+    return dk * FM_LOG_LN2_HI - ((hfsq - (s * (hfsq + r) + dk * FM_LOG_LN2_LO)) - f);
+}
+
+// 1 / (1 + exp(−x)).
+float fm_sigmoid(float x) {
+    return fm_rcp(1.0 + fm_exp(-x));
+}
+
+// tanh(x) = e / (e + 2) with e = expm1(2|x|), odd; ±1 beyond |x| = 9.
+float fm_tanh(float x) {
+    float a = abs(x);
+    float t;
+    if (isnan(x)) {
+        return x;
+    } else if (a > 9.0) {
+        t = 1.0;
+    } else {
+        float e = fm_expm1(2.0 * a);
+        t = fm_div(e, e + 2.0);
+    }
+    return x < 0.0 ? -t : t;
+}
+
+// x^y for x ≥ 0 as exp(y ln x); 0^y is 0 for y > 0 and 1 for y = 0.
+float fm_pow(float x, float y) {
+    if (y == 0.0) {
+        return 1.0;
+    }
+    if (abs(x) < FM_MIN_NORMAL) {
+        return y > 0.0 ? 0.0 : FM_INF;
+    }
+    return fm_exp(y * fm_log(x));
+}
+
+// sin and cos of x: j = round(2x / π) and r = x − j π/2 in three parts (each product exact for
+// |j| < 2^13, so accurate to |x| ≈ 12 800; beyond, the same bits everywhere, less accurate), then
+// Cephes's polynomials on |r| ≤ π/4.
+const float FM_PIO2_1 = 1.5703125;                // 0x3fc90000
+const float FM_PIO2_2 = 4.837512969970703125e-4;  // 0x39fda000
+const float FM_PIO2_3 = 7.54978995489188216e-8;   // 0x33a22169
+vec2 fm_sincos(float x) {
+    if (isnan(x) || abs(x) == FM_INF) {
+        return vec2(FM_NAN);
+    }
+    float a = fm_ftz(x);
+    float jf = floor(a * 0.636619772 + 0.5);
+    float r = ((a - jf * FM_PIO2_1) - jf * FM_PIO2_2) - jf * FM_PIO2_3;
+    float z = r * r;
+    float s = ((-1.9515295891e-4 * z + 8.3321608736e-3) * z - 1.6666654611e-1) * z * r + r;
+    float c = ((2.443315711809948e-5 * z - 1.388731625493765e-3) * z + 4.166664568298827e-2) * z * z
+        - 0.5 * z + 1.0;
+    // Beyond 2^24 every float is even and the quadrant meaningless: take 0 (still one answer).
+    uint q = abs(jf) < 16777216.0 ? uint(int(jf) & 3) : 0u;
+    float sn = (q & 1u) == 0u ? s : c;
+    float cs = (q & 1u) == 0u ? c : s;
+    sn = (q & 2u) == 0u ? sn : -sn;
+    cs = ((q + 1u) & 2u) == 0u ? cs : -cs;
+    return vec2(sn, cs);
+}
+float fm_sin(float x) {
+    return fm_sincos(x).x;
+}
+float fm_cos(float x) {
+    return fm_sincos(x).y;
+}
+
+// Fixed-order vector maths: ((x + y) + z).
+float fm_dot3(vec3 a, vec3 b) {
+    return (a.x * b.x + a.y * b.y) + a.z * b.z;
+}
+float fm_dot2(vec2 a, vec2 b) {
+    return a.x * b.x + a.y * b.y;
+}
+vec3 fm_cross(vec3 a, vec3 b) {
+    return vec3(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+}
+float fm_length3(vec3 v) {
+    return fm_sqrt(fm_dot3(v, v));
+}
+// M v for a column-major 3 × 3 matrix: columns added in order.
+vec3 fm_mul33(mat3 m, vec3 v) {
+    return (m[0] * v.x + m[1] * v.y) + m[2] * v.z;
+}
+// M N, column by column.
+mat3 fm_mul33m(mat3 m, mat3 n) {
+    return mat3(fm_mul33(m, n[0]), fm_mul33(m, n[1]), fm_mul33(m, n[2]));
+}
+
+#endif

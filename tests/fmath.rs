@@ -1,0 +1,203 @@
+//! softvk's own maths (`kernels/include/fmath.glsl`) against its CPU twin (`softvk::fmath`), bit
+//! for bit, and the twin against f64.
+//!
+//! The device check covers, for every function, 2^24 inputs: every sign and exponent (all 512
+//! combinations of the top 9 bits) with 2^15 mantissas each, plus the specials (±0, subnormals,
+//! ±∞, NaN, the largest and smallest normals, the overflow and underflow thresholds). The run over
+//! all 2^32 inputs of each unary function is `exhaustive_unary_functions_equal_their_twin`
+//! (ignored: about a minute per function on lavapipe; `cargo test --release --test fmath --
+//! --ignored`).
+
+mod common;
+
+use softvk::fmath::{self, Eval, Function};
+
+/// 2^24 bit patterns: every sign and exponent, 2^15 mantissas each (a stride of 2^8, offset by a
+/// hash so that low bits vary).
+fn stratified() -> Vec<f32> {
+    let mut out = Vec::with_capacity(1 << 24);
+    for top in 0u32..512 {
+        for m in 0u32..(1 << 15) {
+            let low = m.wrapping_mul(2_654_435_761) >> 24; // 8 varying low bits
+            out.push(f32::from_bits((top << 23) | (m << 8) | low));
+        }
+    }
+    out
+}
+
+fn specials() -> Vec<f32> {
+    let mut v = vec![
+        0.0,
+        -0.0,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NAN,
+        f32::MIN_POSITIVE,
+        -f32::MIN_POSITIVE,
+        f32::from_bits(1),
+        f32::from_bits(0x8000_0001),
+        f32::from_bits(0x007f_ffff),
+        f32::MAX,
+        f32::MIN,
+        1.0,
+        -1.0,
+        88.722_839,
+        88.722_84,
+        -87.336_55,
+        -87.336_54,
+        -17.0,
+        9.0,
+        16_777_216.0,
+        -16_777_216.0,
+        2f32.powi(126),
+        2f32.powi(125),
+        2f32.powi(-126),
+    ];
+    // Neighbours of each.
+    let around: Vec<f32> = v
+        .iter()
+        .filter(|x| x.is_finite())
+        .flat_map(|x| [f32::from_bits(x.to_bits() + 1), f32::from_bits(x.to_bits().wrapping_sub(1))])
+        .collect();
+    v.extend(around);
+    v
+}
+
+/// The same bits, or both NaN (payloads are not promised).
+fn same(a: f32, b: f32) -> bool {
+    a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan())
+}
+
+fn check(eval: &Eval, gpu: &common::Gpu, f: Function, a: &[f32], b: &[f32]) -> usize {
+    let got = eval.run(gpu, f, a, b).expect("fmath on the device");
+    let mut bad = Vec::new();
+    for (i, &g) in got.iter().enumerate() {
+        let y = if b.is_empty() { 0.0 } else { b[i] };
+        let want = f.eval(a[i], y);
+        if !same(g, want) {
+            bad.push(format!("{}({:e} [{:#010x}], {y:e}): device {g:e} [{:#010x}], twin {want:e} [{:#010x}]", f.name(), a[i], a[i].to_bits(), g.to_bits(), want.to_bits()));
+        }
+    }
+    assert!(bad.is_empty(), "{} of {} differ, first: {}", bad.len(), a.len(), bad[..bad.len().min(5)].join("\n"));
+    a.len()
+}
+
+/// A second argument for each first: every exponent near the first's (so quotients and powers
+/// stay mostly finite) with hashed mantissas.
+fn partners(a: &[f32], f: Function) -> Vec<f32> {
+    a.iter()
+        .enumerate()
+        .map(|(i, x)| {
+            let h = (i as u32).wrapping_mul(2_246_822_519).rotate_left(13);
+            match f {
+                Function::Pow => f32::from_bits((h & 0x807f_ffff) | ((120 + (h >> 28)) << 23)) * 4.0,
+                _ => {
+                    let e = ((x.to_bits() >> 23) & 0xff) as i32 + (h >> 27) as i32 - 16;
+                    f32::from_bits((h & 0x807f_ffff) | ((e.clamp(0, 255) as u32) << 23))
+                }
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn every_function_equals_its_twin_on_the_device() {
+    let Some(gpu) = common::gpu() else { return };
+    let eval = Eval::new(&gpu).unwrap();
+    let mut inputs = stratified();
+    inputs.extend(specials());
+    for f in Function::ALL {
+        if f.binary() {
+            let b = partners(&inputs, f);
+            check(&eval, &gpu, f, &inputs, &b);
+            // Every special against every special.
+            let s = specials();
+            let (x, y): (Vec<f32>, Vec<f32>) =
+                s.iter().flat_map(|&x| s.iter().map(move |&y| (x, y))).unzip();
+            check(&eval, &gpu, f, &x, &y);
+        } else {
+            check(&eval, &gpu, f, &inputs, &[]);
+        }
+    }
+}
+
+#[test]
+#[ignore = "all 2^32 inputs of each unary function: minutes; run by hand"]
+fn exhaustive_unary_functions_equal_their_twin() {
+    let Some(gpu) = common::gpu() else { return };
+    let eval = Eval::new(&gpu).unwrap();
+    let chunk = 1u64 << 24;
+    for f in Function::ALL.into_iter().filter(|f| !f.binary()) {
+        let start = std::time::Instant::now();
+        let mut done = 0;
+        for c in 0..(1u64 << 32) / chunk {
+            let a: Vec<f32> = (c * chunk..(c + 1) * chunk).map(|b| f32::from_bits(b as u32)).collect();
+            done += check(&eval, &gpu, f, &a, &[]);
+        }
+        eprintln!("{}: all {done} inputs equal ({:.0} s)", f.name(), start.elapsed().as_secs_f64());
+    }
+}
+
+/// |y − reference| in units in the last place of the reference rounded to f32.
+fn ulps(y: f32, reference: f64) -> f64 {
+    let r = reference as f32;
+    let e = if r == 0.0 || r.abs() < f32::MIN_POSITIVE { -126 } else { ((r.to_bits() >> 23) & 0xff) as i32 - 127 };
+    (f64::from(y) - reference).abs() / 2f64.powi(e - 23)
+}
+
+/// The worst error in ulps over `inputs` (where the reference is finite and normal).
+fn worst(f: Function, inputs: impl Iterator<Item = (f32, f32)>) -> (f64, f32) {
+    let mut w = (0.0, 0.0);
+    for (x, y) in inputs {
+        let r = f.reference(f64::from(x), f64::from(y));
+        if !r.is_finite() || r.abs() < f64::from(f32::MIN_POSITIVE) || r.abs() > f64::from(f32::MAX) {
+            continue;
+        }
+        let u = if matches!(f, Function::Sin | Function::Cos) {
+            // Absolute, in units of 2^-24 (ulps of 1): relative error means nothing near a zero.
+            (f64::from(f.eval(x, y)) - r).abs() * 2f64.powi(24)
+        } else {
+            ulps(f.eval(x, y), r)
+        };
+        if u > w.0 {
+            w = (u, x);
+        }
+    }
+    w
+}
+
+/// Every float in [lo, hi) with bit-pattern step `step`.
+fn range(lo: f32, hi: f32, step: u32) -> impl Iterator<Item = f32> {
+    let (a, b) = (lo.to_bits(), hi.to_bits());
+    assert!(lo >= 0.0 && a < b);
+    (a..b).step_by(step as usize).map(f32::from_bits)
+}
+
+#[test]
+fn the_twin_is_accurate_against_f64() {
+    let all_pos = || range(f32::MIN_POSITIVE, f32::MAX, 97);
+    let signed = |lo, hi, step| range(lo, hi, step).flat_map(|x| [x, -x]);
+    let report = |f: Function, bound: f64, (u, at): (f64, f32)| {
+        eprintln!("{}: worst {u:.3} ulp at {at:e}", f.name());
+        assert!(u <= bound, "{}: {u} ulps at {at:e} (bound {bound})", f.name());
+    };
+    report(Function::Rcp, 1.2, worst(Function::Rcp, signed(f32::MIN_POSITIVE, 8.5e37, 97).map(|x| (x, 0.0))));
+    report(Function::Sqrt, 0.8, worst(Function::Sqrt, all_pos().map(|x| (x, 0.0))));
+    report(Function::Exp, 1.0, worst(Function::Exp, signed(f32::MIN_POSITIVE, 88.7, 61).map(|x| (x, 0.0))));
+    report(Function::Expm1, 1.5, worst(Function::Expm1, signed(f32::MIN_POSITIVE, 88.7, 61).map(|x| (x, 0.0))));
+    report(Function::Log, 1.0, worst(Function::Log, all_pos().map(|x| (x, 0.0))));
+    report(Function::Sigmoid, 3.0, worst(Function::Sigmoid, signed(f32::MIN_POSITIVE, 80.0, 61).map(|x| (x, 0.0))));
+    report(Function::Tanh, 3.5, worst(Function::Tanh, signed(f32::MIN_POSITIVE, 12.0, 61).map(|x| (x, 0.0))));
+    // sin and cos: absolute error in units of 2^-24.
+    report(Function::Sin, 2.0, worst(Function::Sin, signed(1e-30, 8192.0, 61).map(|x| (x, 0.0))));
+    report(Function::Cos, 2.0, worst(Function::Cos, signed(1e-30, 8192.0, 61).map(|x| (x, 0.0))));
+    let quotients = signed(1e-30, 1e30, 997).enumerate().map(|(i, x)| (x, 0.37 + (i % 1000) as f32 * 1.7));
+    report(Function::Div, 2.0, worst(Function::Div, quotients));
+    // exp(y ln x) carries ln x's rounding times |y ln x| (up to about 20 here): tens of ulps, as
+    // Vulkan's own pow (inherited from exp2(y log2 x)). Only the probe's p-norm uses it.
+    let powers = range(1e-3, 1e3, 97).enumerate().map(|(i, x)| (x, -3.0 + (i % 600) as f32 * 0.01));
+    report(Function::Pow, 32.0, worst(Function::Pow, powers));
+    // The vector helpers: a fixed order, no driver choice.
+    assert_eq!(fmath::dot3([1.0, 2.0, 3.0], [4.0, 5.0, 6.0]), 32.0);
+    assert_eq!(fmath::length3([3.0, 4.0, 12.0]), 13.0);
+}
