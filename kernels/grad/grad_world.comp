@@ -32,8 +32,8 @@ vec3 matrix_grad(View view, vec3 p, vec3 g) {
     float y = view.rows[1].x * p.x + view.rows[1].y * p.y + view.rows[1].z * p.z + view.rows[1].w;
     float z = view.rows[2].x * p.x + view.rows[2].y * p.y + view.rows[2].z * p.z + view.rows[2].w;
     float zs = z + 1e-5;
-    float x1 = x / zs;
-    float y1 = y / zs;
+    float x1 = fm_div(x, zs);
+    float y1 = fm_div(y, zs);
     float k1 = view.dist.x;
     float k2 = view.dist.y;
     float p1 = view.dist.z;
@@ -42,16 +42,16 @@ vec3 matrix_grad(View view, vec3 p, vec3 g) {
     float r2 = x1 * x1 + y1 * y1;
     float radial = 1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2;
     float d_radial = k1 + 2.0 * k2 * r2 + 3.0 * k3 * r2 * r2;
-    float half_size = view.param / 2.0;
-    float g_x2 = g.x / half_size;
-    float g_y2 = g.y / half_size;
+    float half_size = view.param * 0.5;
+    float g_x2 = fm_div(g.x, half_size);
+    float g_y2 = fm_div(g.y, half_size);
     float dx2_dx1 = radial + 2.0 * x1 * x1 * d_radial + 2.0 * p1 * y1 + 6.0 * p2 * x1;
     float dx2_dy1 = 2.0 * x1 * y1 * d_radial + 2.0 * p1 * x1 + 2.0 * p2 * y1;
     float dy2_dx1 = dx2_dy1;
     float dy2_dy1 = radial + 2.0 * y1 * y1 * d_radial + 6.0 * p1 * y1 + 2.0 * p2 * x1;
     float g_x1 = g_x2 * dx2_dx1 + g_y2 * dy2_dx1;
     float g_y1 = g_x2 * dx2_dy1 + g_y2 * dy2_dy1;
-    vec3 g_row = vec3(g_x1 / zs, g_y1 / zs, g.z - (g_x1 * x1 + g_y1 * y1) / zs);
+    vec3 g_row = vec3(fm_div(g_x1, zs), fm_div(g_y1, zs), g.z - fm_div(g_x1 * x1 + g_y1 * y1, zs));
     return g_row.x * view.rows[0].xyz + g_row.y * view.rows[1].xyz + g_row.z * view.rows[2].xyz;
 }
 
@@ -77,12 +77,12 @@ void main() {
                 world = matrix_grad(view, p, g);
             } else {
                 vec3 rel = p - view.eye.xyz;
-                vec3 pcam = vec3(dot(view.rows[0].xyz, rel), dot(view.rows[1].xyz, rel),
-                                 dot(view.rows[2].xyz, rel));
+                vec3 pcam = vec3(fm_dot3(view.rows[0].xyz, rel), fm_dot3(view.rows[1].xyz, rel),
+                                 fm_dot3(view.rows[2].xyz, rel));
                 if (view.projection == PROJ_PERSPECTIVE) {
-                    float k_xy = 1.0 / (pcam.z * view.param);
+                    float k_xy = fm_rcp(pcam.z * view.param);
                     d_cam = vec3(g.x * k_xy, g.y * k_xy,
-                                 g.z - (g.x * pcam.x + g.y * pcam.y) * k_xy / pcam.z);
+                                 g.z - fm_div((g.x * pcam.x + g.y * pcam.y) * k_xy, pcam.z));
                 } else {
                     d_cam = vec3(g.x * view.param, g.y * view.param, g.z);
                 }

@@ -3,6 +3,9 @@
 #ifndef SOFTVK_COMMON_GLSL
 #define SOFTVK_COMMON_GLSL
 
+// softvk's own maths, for every kernel: no builtin whose result a driver chooses.
+#include "fmath.glsl"
+
 uint linear_group_id() {
     return gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
 }

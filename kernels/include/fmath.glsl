@@ -31,53 +31,50 @@ float fm_ftz(float x) {
     return abs(x) < FM_MIN_NORMAL ? uintBitsToFloat(floatBitsToUint(x) & 0x80000000u) : x;
 }
 
+// The functions compute their main path for every input and choose the special cases by selects
+// at the end (on a SIMD device a branch costs as much as both sides); the main path's operands
+// are clamped where a special input would make them meaningless, never where they matter.
+
 // 1 / x. Newton's iteration from a linear start on the mantissa m ∈ [1, 2), then the exponent.
 float fm_rcp(float x) {
     uint bits = floatBitsToUint(x);
     uint sign = bits & 0x80000000u;
-    float ax = abs(x);
-    if (!(ax >= FM_MIN_NORMAL)) {  // zero, subnormal or NaN
-        return isnan(x) ? x : uintBitsToFloat(sign | 0x7f800000u);
-    }
     int e = int((bits >> 23) & 0xffu) - 127;
-    if (e >= 126) {  // |1/x| ≤ 2^-126 (or x infinite): zero
-        return uintBitsToFloat(sign);
-    }
     float m = uintBitsToFloat((bits & 0x007fffffu) | 0x3f800000u);
     float y = 1.4117647 - 0.47058824 * m;  // 24/17 − 8/17 m: |error| ≤ 1/17
     y = y + y * (1.0 - m * y);
     y = y + y * (1.0 - m * y);
     y = y + y * (1.0 - m * y);  // |error| ≤ (1/17)^8 before rounding
     // y ∈ (0.5, 1] and −e ≥ −125: y · 2^-e is normal.
-    return uintBitsToFloat(sign | floatBitsToUint(y * fm_pow2(-e)));
+    float r = uintBitsToFloat(sign | floatBitsToUint(y * fm_pow2(clamp(-e, -125, 126))));
+    float tiny = isnan(x) ? x : uintBitsToFloat(sign | 0x7f800000u);  // zero, subnormal, NaN
+    float huge = uintBitsToFloat(sign);  // |1/x| ≤ 2^-126, or x infinite: zero
+    return !(abs(x) >= FM_MIN_NORMAL) ? tiny : (e >= 126 ? huge : r);
 }
 
-// a / b as a · (1 / b): within 1.5 ulps, the subnormal a and result read as zero.
+// a / b as a · (1 / b): within 2 ulps; a subnormal a or result reads as zero.
 float fm_div(float a, float b) {
     return fm_ftz(fm_ftz(a) * fm_rcp(b));
 }
 
 // sqrt(x): an inverse square root by Newton's iteration on m ∈ [1, 4), then one correction.
 float fm_sqrt(float x) {
-    if (!(x >= FM_MIN_NORMAL)) {  // zero, subnormal, negative or NaN
-        return (x >= 0.0 || abs(x) < FM_MIN_NORMAL) ? 0.0 : FM_NAN;
-    }
-    if (x == FM_INF) {
-        return x;
-    }
     uint bits = floatBitsToUint(x);
-    int e = int(bits >> 23) - 127;
-    int odd = e & 1;  // e = 2 h + odd (arithmetic: −3 & 1 = 1)
+    int e = int((bits >> 23) & 0xffu) - 127;
+    int odd = e & 1;  // e = 2 h + odd (two's complement: −3 & 1 = 1)
     float m = uintBitsToFloat((bits & 0x007fffffu) | 0x3f800000u);
     m = odd == 1 ? 2.0 * m : m;  // m ∈ [1, 4)
-    float y = 1.0 - 0.15 * m;     // about 1 / sqrt(m) within 0.2
+    float y = 1.0 - 0.15 * m;     // 1 / sqrt(m) within 0.2
     y = y * (1.5 - 0.5 * m * y * y);
     y = y * (1.5 - 0.5 * m * y * y);
     y = y * (1.5 - 0.5 * m * y * y);
     y = y * (1.5 - 0.5 * m * y * y);  // relative error below 2^-28 before rounding
     float s = m * y;
     s = s + 0.5 * y * (m - s * s);
-    return s * fm_pow2((e - odd) / 2);
+    float r = s * fm_pow2(clamp(e - odd, -126, 126) / 2);
+    // Zero, subnormal, negative, NaN, infinite.
+    float special = x >= 0.0 || abs(x) < FM_MIN_NORMAL ? (x == FM_INF ? x : 0.0) : FM_NAN;
+    return x >= FM_MIN_NORMAL && x != FM_INF ? r : special;
 }
 
 // exp(r) − 1 for |r| ≤ ln(2)/2 + a little, Taylor to r^8 (the omitted term below 2^-30).
@@ -96,48 +93,35 @@ float fm_expm1_reduced(float r) {
 const float FM_LN2_HI = 0.693145751953125;     // 0x3f317200
 const float FM_LN2_LO = 1.428606765330187e-06; // 0x35bfbe8e
 const float FM_LOG2E = 1.44269504;
+const float FM_EXP_MAX = 88.7228394;   // above: exp overflows
+const float FM_EXP_MIN = -87.3365479;  // below: exp is subnormal
 
-// k = round(x / ln 2) and r = x − k ln 2 (|x| < 2^8).
+// k = round(x / ln 2) and r = x − k ln 2, for x clamped to [FM_EXP_MIN, FM_EXP_MAX]
+// (k ∈ [−126, 128]).
 float fm_reduce_ln2(float x, out int k) {
-    float kf = floor(x * FM_LOG2E + 0.5);
+    float kf = floor(clamp(x, FM_EXP_MIN, FM_EXP_MAX) * FM_LOG2E + 0.5);
     k = int(kf);
     return (x - kf * FM_LN2_HI) - kf * FM_LN2_LO;
 }
 
 // exp(x); 0 below ln(2^-126) (no subnormal results), +inf above ln(FLT_MAX).
 float fm_exp(float x) {
-    if (isnan(x)) {
-        return x;
-    }
-    if (x > 88.7228394) {
-        return FM_INF;
-    }
-    if (x < -87.3365479) {
-        return 0.0;
-    }
     int k;
     float p = 1.0 + fm_expm1_reduced(fm_reduce_ln2(fm_ftz(x), k));
     // k ∈ [−126, 128]; 2^128 in two factors.
-    float y = k > 127 ? (p * 2.0) * fm_pow2(k - 1) : p * fm_pow2(k);
-    return fm_ftz(y);
+    float y = k > 127 ? (p * 2.0) * fm_pow2(127) : p * fm_pow2(k);
+    return isnan(x) ? x : (x > FM_EXP_MAX ? FM_INF : (x < FM_EXP_MIN ? 0.0 : fm_ftz(y)));
 }
 
 // exp(x) − 1, exact near zero (no cancellation).
 float fm_expm1(float x) {
-    if (isnan(x) || x > 88.7228394) {
-        return fm_exp(x);
-    }
-    if (x < -17.0) {  // exp(x) < 2^-24: −1 after rounding
-        return -1.0;
-    }
     int k;
     float q = fm_expm1_reduced(fm_reduce_ln2(fm_ftz(x), k));
-    if (k == 0) {
-        return q;
-    }
     // 2^k (1 + q) − 1 = (2^k − 1) + 2^k q, each 2^k − 1 exact for −24 ≤ k ≤ 24.
-    float t = k > 127 ? 2.0 * fm_pow2(k - 1) : fm_pow2(k);
-    return k <= 24 ? (t - 1.0) + t * q : (t + t * q) - 1.0;
+    float t = k > 127 ? 2.0 * fm_pow2(127) : fm_pow2(k);
+    float y = k == 0 ? q : (k <= 24 ? (t - 1.0) + t * q : (t + t * q) - 1.0);
+    // exp(x) < 2^-24 below −17: −1 after rounding.
+    return isnan(x) ? x : (x > FM_EXP_MAX ? FM_INF : (x < -17.0 ? -1.0 : y));
 }
 
 // ln(x), after FreeBSD's logf (s = f / (2 + f), a polynomial in s², the exponent in two parts):
@@ -145,19 +129,12 @@ float fm_expm1(float x) {
 const float FM_LOG_LN2_HI = 6.9313812256e-01;  // 0x3f317180
 const float FM_LOG_LN2_LO = 9.0580006145e-06;  // 0x3717f7d1
 float fm_log(float x) {
-    if (isnan(x) || x == FM_INF) {
-        return x;
-    }
-    if (!(x >= FM_MIN_NORMAL)) {
-        return abs(x) < FM_MIN_NORMAL ? -FM_INF : FM_NAN;
-    }
     uint bits = floatBitsToUint(x);
-    int k = int(bits >> 23) - 127;
+    int k = int((bits >> 23) & 0xffu) - 127;
     float m = uintBitsToFloat((bits & 0x007fffffu) | 0x3f800000u);
-    if (m > 1.41421354) {
-        m *= 0.5;
-        k += 1;
-    }
+    bool high = m > 1.41421354;
+    m = high ? 0.5 * m : m;
+    k = high ? k + 1 : k;
     float f = m - 1.0;  // exact: m ∈ (0.707, 1.415]
     float s = f * fm_rcp(2.0 + f);
     float z = s * s;
@@ -167,7 +144,9 @@ float fm_log(float x) {
     float r = t2 + t1;
     float hfsq = 0.5 * f * f;
     float dk = float(k);
-    return dk * FM_LOG_LN2_HI - ((hfsq - (s * (hfsq + r) + dk * FM_LOG_LN2_LO)) - f);
+    float y = dk * FM_LOG_LN2_HI - ((hfsq - (s * (hfsq + r) + dk * FM_LOG_LN2_LO)) - f);
+    float special = isnan(x) || x == FM_INF ? x : (abs(x) < FM_MIN_NORMAL ? -FM_INF : FM_NAN);
+    return x >= FM_MIN_NORMAL && x != FM_INF ? y : special;
 }
 
 // 1 / (1 + exp(−x)).
@@ -178,27 +157,15 @@ float fm_sigmoid(float x) {
 // tanh(x) = e / (e + 2) with e = expm1(2|x|), odd; ±1 beyond |x| = 9.
 float fm_tanh(float x) {
     float a = abs(x);
-    float t;
-    if (isnan(x)) {
-        return x;
-    } else if (a > 9.0) {
-        t = 1.0;
-    } else {
-        float e = fm_expm1(2.0 * a);
-        t = fm_div(e, e + 2.0);
-    }
-    return x < 0.0 ? -t : t;
+    float e = fm_expm1(2.0 * min(a, 9.0));
+    float t = a > 9.0 ? 1.0 : fm_div(e, e + 2.0);
+    return isnan(x) ? x : (x < 0.0 ? -t : t);
 }
 
-// x^y for x ≥ 0 as exp(y ln x); 0^y is 0 for y > 0 and 1 for y = 0.
+// x^y for x ≥ 0 as exp(y ln x); 0^y is 0 for y > 0 (+inf for y < 0), and x^0 is 1.
 float fm_pow(float x, float y) {
-    if (y == 0.0) {
-        return 1.0;
-    }
-    if (abs(x) < FM_MIN_NORMAL) {
-        return y > 0.0 ? 0.0 : FM_INF;
-    }
-    return fm_exp(y * fm_log(x));
+    float r = fm_exp(y * fm_log(x));
+    return y == 0.0 ? 1.0 : (abs(x) < FM_MIN_NORMAL ? (y > 0.0 ? 0.0 : FM_INF) : r);
 }
 
 // sin and cos of x: j = round(2x / π) and r = x − j π/2 in three parts (each product exact for
@@ -208,9 +175,6 @@ const float FM_PIO2_1 = 1.5703125;                // 0x3fc90000
 const float FM_PIO2_2 = 4.837512969970703125e-4;  // 0x39fda000
 const float FM_PIO2_3 = 7.54978995489188216e-8;   // 0x33a22169
 vec2 fm_sincos(float x) {
-    if (isnan(x) || abs(x) == FM_INF) {
-        return vec2(FM_NAN);
-    }
     float a = fm_ftz(x);
     float jf = floor(a * 0.636619772 + 0.5);
     float r = ((a - jf * FM_PIO2_1) - jf * FM_PIO2_2) - jf * FM_PIO2_3;
@@ -224,13 +188,25 @@ vec2 fm_sincos(float x) {
     float cs = (q & 1u) == 0u ? c : s;
     sn = (q & 2u) == 0u ? sn : -sn;
     cs = ((q + 1u) & 2u) == 0u ? cs : -cs;
-    return vec2(sn, cs);
+    bool finite = !isnan(x) && abs(x) != FM_INF;
+    return finite ? vec2(sn, cs) : vec2(FM_NAN);
 }
 float fm_sin(float x) {
     return fm_sincos(x).x;
 }
 float fm_cos(float x) {
     return fm_sincos(x).y;
+}
+
+// Component by component.
+vec2 fm_div2(vec2 a, float b) {
+    return vec2(fm_div(a.x, b), fm_div(a.y, b));
+}
+vec3 fm_div3(vec3 a, float b) {
+    return vec3(fm_div(a.x, b), fm_div(a.y, b), fm_div(a.z, b));
+}
+vec4 fm_div4(vec4 a, float b) {
+    return vec4(fm_div(a.x, b), fm_div(a.y, b), fm_div(a.z, b), fm_div(a.w, b));
 }
 
 // Fixed-order vector maths: ((x + y) + z).

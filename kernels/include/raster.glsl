@@ -15,6 +15,8 @@
 #ifndef SOFTVK_RASTER_GLSL
 #define SOFTVK_RASTER_GLSL
 
+#include "fmath.glsl"
+
 #define DIST_EUCLIDEAN 0u
 #define DIST_BARYCENTRIC 1u
 #define DIST_HARD 2u
@@ -71,12 +73,12 @@ void face_reciprocals(inout Face f) {
         uint j = k == 2u ? 0u : k + 1u;
         vec2 e = f.v[j].xy - f.v[k].xy;
         float len2 = e.x * e.x + e.y * e.y;
-        f.inv_z[k] = 1.0 / f.v[k].z;
-        f.inv_len2[k] = len2 > 0.0 ? 1.0 / len2 : 0.0;
+        f.inv_z[k] = fm_rcp(f.v[k].z);
+        f.inv_len2[k] = len2 > 0.0 ? fm_rcp(len2) : 0.0;
     }
     // The determinant the face setup took (for a look-at view not the screen vertices' own:
     // `face_setup.comp`), clamped as there.
-    f.inv_det = 1.0 / (f.det > 0.0 ? max(f.det, MIN_DET) : min(f.det, -MIN_DET));
+    f.inv_det = fm_rcp(f.det > 0.0 ? max(f.det, MIN_DET) : min(f.det, -MIN_DET));
 }
 
 Face face_of(FaceSetup s) {
@@ -115,12 +117,12 @@ Face face_none() {
 }
 
 // `camera::pixel_center`: x_p = (2c + 1 - W) / S, y_p = (2(H - 1 - r) + 1 - H) / S, S = min(W, H).
-// Every operand is an integer below 2^24, so only the division rounds.
+// Every operand is an integer below 2^24, so only the division (`fm_div`) rounds.
 vec2 pixel_center(uint col, uint row, uint width, uint height) {
     float w = float(width);
     float h = float(height);
     float s = min(w, h);
-    return vec2((2.0 * float(col) + 1.0 - w) / s, (2.0 * (h - 1.0 - float(row)) + 1.0 - h) / s);
+    return vec2(fm_div(2.0 * float(col) + 1.0 - w, s), fm_div(2.0 * (h - 1.0 - float(row)) + 1.0 - h, s));
 }
 
 // `reference::outside_bbox` (strict, as SoftRas's check_border).
@@ -167,7 +169,7 @@ float euclidean_dist2(Face f, vec2 p) {
 }
 
 float sigmoid(float x) {
-    return 1.0 / (1.0 + exp(-x));
+    return fm_sigmoid(x);
 }
 
 // The squared distance to the nearest edge as `euclidean_dist2` computes it, and that edge:
@@ -231,7 +233,7 @@ bool coverage(Face f, vec3 w, vec2 p, uint dist, float inv_sigma, float t, out f
 // 1 / the clip's sum: `clip_barycentric(w)` is `clamp(w, 0, 1)` times it.
 float clip_inverse_sum(vec3 w) {
     vec3 c = clamp(w, 0.0, 1.0);
-    return 1.0 / max(c.x + c.y + c.z, CLIP_SUM_FLOOR);
+    return fm_rcp(max(c.x + c.y + c.z, CLIP_SUM_FLOOR));
 }
 
 // `reference::clip_barycentric`.
@@ -248,7 +250,7 @@ bool depth_in_range(Face f, vec3 wc, float near, float far, out float z) {
         z = 0.0;
         return false;
     }
-    z = 1.0 / inv_z;
+    z = fm_rcp(inv_z);
     return z >= near && z <= far;
 }
 
@@ -318,7 +320,7 @@ float alpha_resolve(Alpha a, uint mode, uint face_count) {
         return a.zeros > 0u ? 1.0 : 1.0 - a.acc;
     }
     if (mode == ALPHA_SUM) {
-        return a.acc / float(face_count);
+        return fm_div(a.acc, float(face_count));
     }
     return a.acc;
 }
@@ -350,18 +352,18 @@ Softmax softmax_init(vec3 background, float background_depth) {
 void softmax_add_if(inout Softmax s, float z, float d, vec3 color, float inv_gamma_range,
                     bool apply) {
     bool closer = apply && z < s.ref_depth;
-    float rescale = exp((z - s.ref_depth) * inv_gamma_range);
+    float rescale = fm_exp((z - s.ref_depth) * inv_gamma_range);
     float sum = closer ? s.sum * rescale : s.sum;
     vec3 rgb = closer ? s.rgb * rescale : s.rgb;
     float ref_depth = closer ? z : s.ref_depth;
-    float weight = d * exp((ref_depth - z) * inv_gamma_range);
+    float weight = d * fm_exp((ref_depth - z) * inv_gamma_range);
     s.sum = apply ? sum + weight : s.sum;
     s.rgb = apply ? rgb + weight * color : s.rgb;
     s.ref_depth = ref_depth;
 }
 
 vec3 softmax_resolve(Softmax s) {
-    return s.rgb / s.sum;
+    return s.rgb * fm_rcp(s.sum);
 }
 
 #endif

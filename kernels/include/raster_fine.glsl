@@ -145,7 +145,7 @@ layout(push_constant) uniform Push {
     uint height;
     uint face_count;
     uint view_count;       // views in this dispatch
-    float sigma;
+    float inv_sigma;       // 1 / σ (the host's, rounded once)
     float cutoff;          // T = σ ln(1/ε_d − 1)
     float near;
     float far;
@@ -222,7 +222,7 @@ void shade_face(inout PixelState s, Face f, uint j, vec2 p) {
     bool live = (f.flags & FACE_FINITE) != 0u && !(CULL && outside_bbox(f.bbox, p));
     vec3 w = barycentric(f, p);
     float d;
-    bool covered = coverage(f, w, p, MODE_DIST, 1.0 / pc.sigma, pc.cutoff, d);
+    bool covered = coverage(f, w, p, MODE_DIST, pc.inv_sigma, pc.cutoff, d);
     covered = covered && live;
     // Alpha counts every non-ignored face, whatever its depth or facing.
     alpha_add_if(s.alpha, MODE_ALPHA, d, covered);

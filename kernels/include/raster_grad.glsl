@@ -71,7 +71,7 @@ Upstream load_upstream(uint view, uint col, uint row) {
     vec4 g;
     if (ANTIALIAS) {
         g = d_image_at(view * pc.out_width * pc.out_height + (row / 2u) * pc.out_width
-                       + col / 2u) / 4.0;
+                       + col / 2u) * 0.25;
     } else {
         g = d_image_at(id);
     }
@@ -81,8 +81,8 @@ Upstream load_upstream(uint view, uint col, uint row) {
     u.p = pixel_center(col, row, pc.width, pc.height);
     u.d_rgb = g.rgb;
     u.d_alpha = g.a;
-    u.d_dot = dot(g.rgb, rgba.rgb);
-    u.inv_sum = 1.0 / a.softmax_sum;
+    u.d_dot = fm_dot3(g.rgb, rgba.rgb);
+    u.inv_sum = fm_rcp(a.softmax_sum);
     u.ref_depth = a.softmax_ref_depth;
     u.alpha_acc = a.alpha_acc;
     u.alpha_zeros = a.alpha_zeros;
@@ -95,19 +95,19 @@ float alpha_grad(Upstream u, float d) {
     if (MODE_ALPHA == ALPHA_PROD) {
         float factor = 1.0 - d;
         float others = factor == 0.0 ? (u.alpha_zeros == 1u ? u.alpha_acc : 0.0)
-                                     : (u.alpha_zeros == 0u ? u.alpha_acc / factor : 0.0);
+                                     : (u.alpha_zeros == 0u ? fm_div(u.alpha_acc, factor) : 0.0);
         return u.d_alpha * others;
     }
     if (MODE_ALPHA == ALPHA_SUM) {
-        return u.d_alpha / float(pc.face_count);
+        return fm_div(u.d_alpha, float(pc.face_count));
     }
     return 0.0;
 }
 
 // sigmoid'(x) without the cancellation of D (1 - D).
 float sigmoid_grad(float x) {
-    float e = exp(-abs(x));
-    return e / ((1.0 + e) * (1.0 + e));
+    float e = fm_exp(-abs(x));
+    return fm_div(e, (1.0 + e) * (1.0 + e));
 }
 
 // One (pixel, face) contribution: dL/d(screen vertex (x_s, y_s, z)) of each corner, and the
@@ -145,7 +145,7 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
     float t = 0.0;
     float d2 = MODE_DIST == DIST_EUCLIDEAN ? nearest_edge(f, p, ea_pos, edge, ea, eb, t) : 0.0;
     float d;
-    float inv_sigma = 1.0 / pc.sigma;
+    float inv_sigma = pc.inv_sigma;
     bool hit = coverage_from(d2, w, MODE_DIST, inv_sigma, pc.cutoff, d) && live;
     float inv_clip_sum = clip_inverse_sum(w);
     vec3 wc = clamp(w, 0.0, 1.0) * inv_clip_sum; // clip_barycentric(w)
@@ -159,9 +159,9 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
     if (!ALPHA_ONLY) {
         vec3 c = sample_color(f.mesh, j, wc);
         if (MODE_RGB == RGB_SOFTMAX) {
-            float e = exp((u.ref_depth - z) * pc.inv_gamma_range);
+            float e = fm_exp((u.ref_depth - z) * pc.inv_gamma_range);
             float weight = d * e;
-            float q = (dot(u.d_rgb, c) - u.d_dot) * u.inv_sum;
+            float q = (fm_dot3(u.d_rgb, c) - u.d_dot) * u.inv_sum;
             d_color = g.colored ? u.d_rgb * (weight * u.inv_sum) : vec3(0.0);
             d_cov = g.colored ? d_cov + q * e : d_cov;
             d_z = g.colored ? -q * weight * pc.inv_gamma_range : 0.0;
@@ -188,7 +188,7 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
                      + f.mesh * pc.vertex_count;
             for (uint k = 0u; k < 3u; ++k) {
                 vec3 ck = color_at(vi[k]);
-                d_wc[k] = g.colored ? d_wc[k] + dot(d_color, ck) : d_wc[k];
+                d_wc[k] = g.colored ? d_wc[k] + fm_dot3(d_color, ck) : d_wc[k];
                 g.color[k] = g.colored ? d_color * wc[k] : vec3(0.0);
             }
         } else {
@@ -199,7 +199,7 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
         // Clip: c = clamp(w, 0, 1), w̃ = c / max(Σc, floor).
         vec3 cl = clamp(w, 0.0, 1.0);
         float raw_sum = cl.x + cl.y + cl.z;
-        float renorm = raw_sum >= CLIP_SUM_FLOOR ? dot(d_wc, wc) : 0.0;
+        float renorm = raw_sum >= CLIP_SUM_FLOOR ? fm_dot3(d_wc, wc) : 0.0;
         for (uint k = 0u; k < 3u; ++k) {
             d_w[k] = (w[k] > 0.0 && w[k] < 1.0) ? (d_wc[k] - renorm) * inv_clip_sum : 0.0;
         }
@@ -239,7 +239,7 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
     vec2 d_xy[3] = vec2[3](vec2(0.0), vec2(0.0), vec2(0.0));
     if (!ALPHA_ONLY || MODE_DIST == DIST_BARYCENTRIC) {
         bool clamped = f.det > 0.0 ? f.det < MIN_DET : f.det > -MIN_DET;
-        float d_det = clamped ? 0.0 : -dot(d_w, w) * f.inv_det;
+        float d_det = clamped ? 0.0 : -fm_dot3(d_w, w) * f.inv_det;
         for (uint k = 0u; k < 3u; ++k) {
             uint ia = k == 2u ? 0u : k + 1u;
             uint ib = k == 0u ? 2u : k - 1u;

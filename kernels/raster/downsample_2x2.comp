@@ -32,5 +32,5 @@ void main() {
     vec4 b = big[top + 1u];
     vec4 c = big[top + big_w];
     vec4 d = big[top + big_w + 1u];
-    small[id] = (a + b + c + d) / 4.0;
+    small[id] = (a + b + c + d) * 0.25;
 }

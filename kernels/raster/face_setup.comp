@@ -46,7 +46,7 @@ vec3 to_screen(View view, vec3 p) {
                   view.rows[1].x * d.x + view.rows[1].y * d.y + view.rows[1].z * d.z,
                   view.rows[2].x * d.x + view.rows[2].y * d.y + view.rows[2].z * d.z);
     if (view.projection == PROJ_PERSPECTIVE) {
-        return vec3(c.x / c.z / view.param, c.y / c.z / view.param, c.z);
+        return vec3(fm_div(fm_div(c.x, c.z), view.param), fm_div(fm_div(c.y, c.z), view.param), c.z);
     }
     return vec3(c.x * view.param, c.y * view.param, c.z);
 }
@@ -87,7 +87,7 @@ float look_at_det(View view, vec3 q0, vec3 q1, vec3 q2, vec3 z) {
     precise float det_r = k.x * rz.x + k.y * rz.y + k.z * rz.z;
     precise float t2 = view.param * view.param;
     precise float zzz = z.x * z.y * z.z;
-    return det_r * triple / t2 / zzz;
+    return fm_div(fm_div(det_r * triple, t2), zzz);
 }
 
 bool finite3(vec3 v) {
@@ -129,9 +129,9 @@ void main() {
         ? screen_det
         : look_at_det(view, q0, q1, q2, vec3(p0.z, p1.z, p2.z));
     float clamped = det > 0.0 ? max(det, MIN_DET) : min(det, -MIN_DET);
-    s.inv[0] = vec4(p1.y - p2.y, p2.x - p1.x, p1.x * p2.y - p2.x * p1.y, 0.0) / clamped;
-    s.inv[1] = vec4(p2.y - p0.y, p0.x - p2.x, p2.x * p0.y - p0.x * p2.y, 0.0) / clamped;
-    s.inv[2] = vec4(p0.y - p1.y, p1.x - p0.x, p0.x * p1.y - p1.x * p0.y, 0.0) / clamped;
+    s.inv[0] = fm_div4(vec4(p1.y - p2.y, p2.x - p1.x, p1.x * p2.y - p2.x * p1.y, 0.0), clamped);
+    s.inv[1] = fm_div4(vec4(p2.y - p0.y, p0.x - p2.x, p2.x * p0.y - p0.x * p2.y, 0.0), clamped);
+    s.inv[2] = fm_div4(vec4(p0.y - p1.y, p1.x - p0.x, p0.x * p1.y - p1.x * p0.y, 0.0), clamped);
 
     bool finite = finite3(p0) && finite3(p1) && finite3(p2);
     // `reference::is_numerically_degenerate` at f32 rounding, with a wide margin: a face whose
@@ -162,10 +162,10 @@ void main() {
             // The triangle scaled about its centroid by 1 + 3√T/s, s = min(|det| / MIN_DET, 1);
             // bary_margin covers the f32 determinant's relative error (below 1/degenerate_k's
             // multiple for any face not flagged degenerate).
-            float sc = min(abs(det) / MIN_DET, 1.0);
-            float k = 1.0 + 3.0 * pc.radius * pc.bary_margin / sc;
-            float cx = (p0.x + p1.x + p2.x) / 3.0;
-            float cy = (p0.y + p1.y + p2.y) / 3.0;
+            float sc = min(fm_div(abs(det), MIN_DET), 1.0);
+            float k = 1.0 + fm_div(3.0 * pc.radius * pc.bary_margin, sc);
+            float cx = fm_div(p0.x + p1.x + p2.x, 3.0);
+            float cy = fm_div(p0.y + p1.y + p2.y, 3.0);
             b = vec4(cx + k * (x0 - cx), cy + k * (y0 - cy), cx + k * (x1 - cx), cy + k * (y1 - cy));
         }
         // f32 rounding in w and d² is relative to the coordinates' magnitude: pad by it.

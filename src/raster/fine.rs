@@ -52,7 +52,8 @@ pub(crate) struct RasterPush {
     pub height: u32,
     pub face_count: u32,
     pub view_count: u32,
-    pub sigma: f32,
+    /// 1 / σ, taken in f64 and rounded once.
+    pub inv_sigma: f32,
     pub cutoff: f32,
     pub near: f32,
     pub far: f32,
@@ -292,7 +293,7 @@ impl RasterPush {
             height,
             face_count,
             view_count,
-            sigma: if hard { 1.0 } else { s.sigma as f32 },
+            inv_sigma: if hard { 1.0 } else { (1.0 / s.sigma) as f32 },
             cutoff: if hard { 0.0 } else { s.cutoff() as f32 },
             near: s.near as f32,
             far: s.far as f32,
