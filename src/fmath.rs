@@ -64,6 +64,48 @@ pub fn div(a: f32, b: f32) -> f32 {
     ftz(ftz(a) * rcp(b))
 }
 
+/// Dekker's exact product: p + e = x y.
+fn two_product(x: f32, y: f32) -> (f32, f32) {
+    let p = x * y;
+    let cx = 4097.0 * x;
+    let xh = cx - (cx - x);
+    let xl = x - xh;
+    let cy = 4097.0 * y;
+    let yh = cy - (cy - y);
+    let yl = y - yh;
+    (p, ((xh * yh - p) + xh * yl + xl * yh) + xl * yl)
+}
+
+/// a / b correctly rounded where |a| and |b| are in [2⁻⁵⁰, 2⁵⁰] (and for a = 0), else [`div`]'s
+/// result: for kernels that must equal another library's IEEE division (PyTorch3D's).
+pub fn div_rn(a: f32, b: f32) -> f32 {
+    let (aa, ab) = (a.abs(), b.abs());
+    let (lo, hi) = (8.881_784_2e-16, 1.125_899_91e15);
+    if !(aa >= lo && aa <= hi && ab >= lo && ab <= hi) {
+        return div(a, b);
+    }
+    let r = rcp(ab);
+    let mut q = aa * r;
+    let (p, e) = two_product(q, ab);
+    q += ((aa - p) - e) * r;
+    let (p, e) = two_product(q, ab);
+    let rem = (aa - p) - e;
+    let bits = q.to_bits();
+    let up = f32::from_bits(bits + 1);
+    let down = f32::from_bits(bits - 1);
+    let above = rem - ((up - q) * 0.5) * ab;
+    let below = rem + ((q - down) * 0.5) * ab;
+    let odd = bits & 1 != 0;
+    let q = if rem > 0.0 {
+        if above > 0.0 || (above == 0.0 && odd) { up } else { q }
+    } else if below < 0.0 || (below == 0.0 && odd) {
+        down
+    } else {
+        q
+    };
+    if (a.to_bits() ^ b.to_bits()) >= 0x8000_0000 { -q } else { q }
+}
+
 /// √x: an inverse square root by Newton's iteration on m ∈ [1, 4), then one correction.
 pub fn sqrt(x: f32) -> f32 {
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -284,6 +326,7 @@ pub fn length3(v: [f32; 3]) -> f32 {
 pub enum Function {
     Rcp,
     Div,
+    DivRn,
     Sqrt,
     Exp,
     Expm1,
@@ -297,9 +340,10 @@ pub enum Function {
 
 impl Function {
     /// Every function, in the kernel's order.
-    pub const ALL: [Function; 11] = [
+    pub const ALL: [Function; 12] = [
         Function::Rcp,
         Function::Div,
+        Function::DivRn,
         Function::Sqrt,
         Function::Exp,
         Function::Expm1,
@@ -316,6 +360,7 @@ impl Function {
         match self {
             Function::Rcp => "rcp",
             Function::Div => "div",
+            Function::DivRn => "div_rn",
             Function::Sqrt => "sqrt",
             Function::Exp => "exp",
             Function::Expm1 => "expm1",
@@ -330,7 +375,7 @@ impl Function {
 
     /// Whether it reads its second argument.
     pub fn binary(self) -> bool {
-        matches!(self, Function::Div | Function::Pow)
+        matches!(self, Function::Div | Function::DivRn | Function::Pow)
     }
 
     /// The CPU twin: `f(x, y)` (`y` unused by unary functions).
@@ -338,6 +383,7 @@ impl Function {
         match self {
             Function::Rcp => rcp(x),
             Function::Div => div(x, y),
+            Function::DivRn => div_rn(x, y),
             Function::Sqrt => sqrt(x),
             Function::Exp => exp(x),
             Function::Expm1 => expm1(x),
@@ -354,7 +400,7 @@ impl Function {
     pub fn reference(self, x: f64, y: f64) -> f64 {
         match self {
             Function::Rcp => 1.0 / x,
-            Function::Div => x / y,
+            Function::Div | Function::DivRn => x / y,
             Function::Sqrt => x.sqrt(),
             Function::Exp => x.exp(),
             Function::Expm1 => x.exp_m1(),

@@ -57,6 +57,53 @@ float fm_div(float a, float b) {
     return fm_ftz(fm_ftz(a) * fm_rcp(b));
 }
 
+// Dekker's exact product: p + e = x y exactly (Veltkamp's split into 12-bit halves), for
+// operands whose products and halves stay normal.
+void fm_two_product(float x, float y, out float p, out float e) {
+    p = x * y;
+    float cx = 4097.0 * x;
+    float xh = cx - (cx - x);
+    float xl = x - xh;
+    float cy = 4097.0 * y;
+    float yh = cy - (cy - y);
+    float yl = y - yh;
+    e = ((xh * yh - p) + xh * yl + xl * yh) + xl * yl;
+}
+
+// a / b correctly rounded (to nearest, ties to even) where |a| and |b| are in [2^-50, 2^50]
+// (and for a = 0); elsewhere fm_div's result. For kernels that must equal another library's
+// IEEE division bit for bit (PyTorch3D's rasterizer). The quotient from the reciprocal is
+// corrected once by its remainder, then its exact remainder a − q b (Dekker's product; a − p
+// is exact by Sterbenz's lemma, and the remainder of a faithful quotient is a float) is compared
+// with the half-ulp steps on either side: each comparison's sign is exact.
+float fm_div_rn(float a, float b) {
+    float fallback = fm_div(a, b);
+    float aa = abs(a);
+    float ab = abs(b);
+    bool safe = aa >= 8.8817842e-16 && aa <= 1.12589991e15 && ab >= 8.8817842e-16
+        && ab <= 1.12589991e15;
+    float A = safe ? aa : 1.0;
+    float B = safe ? ab : 1.0;
+    float r = fm_rcp(B);
+    float q = A * r;
+    float p;
+    float e;
+    fm_two_product(q, B, p, e);
+    q = q + ((A - p) - e) * r;
+    fm_two_product(q, B, p, e);
+    float rem = (A - p) - e;
+    uint bits = floatBitsToUint(q);
+    float up = uintBitsToFloat(bits + 1u);
+    float down = uintBitsToFloat(bits - 1u);
+    float above = rem - ((up - q) * 0.5) * B;    // a/b − (q + ulp⁺/2), times b: its sign
+    float below = rem + ((q - down) * 0.5) * B;  // a/b − (q − ulp⁻/2), times b
+    bool odd = (bits & 1u) != 0u;
+    q = rem > 0.0 ? ((above > 0.0 || (above == 0.0 && odd)) ? up : q)
+                  : ((below < 0.0 || (below == 0.0 && odd)) ? down : q);
+    bool negative = (floatBitsToUint(a) ^ floatBitsToUint(b)) >= 0x80000000u;
+    return safe ? (negative ? -q : q) : fallback;
+}
+
 // sqrt(x): an inverse square root by Newton's iteration on m ∈ [1, 4), then one correction.
 float fm_sqrt(float x) {
     uint bits = floatBitsToUint(x);
