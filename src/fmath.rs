@@ -76,34 +76,63 @@ fn two_product(x: f32, y: f32) -> (f32, f32) {
     (p, ((xh * yh - p) + xh * yl + xl * yh) + xl * yl)
 }
 
-/// a / b correctly rounded where |a| and |b| are in [2⁻⁵⁰, 2⁵⁰] (and for a = 0), else [`div`]'s
-/// result: for kernels that must equal another library's IEEE division (PyTorch3D's).
-pub fn div_rn(a: f32, b: f32) -> f32 {
-    let (aa, ab) = (a.abs(), b.abs());
-    let (lo, hi) = (8.881_784_2e-16, 1.125_899_91e15);
-    if !(aa >= lo && aa <= hi && ab >= lo && ab <= hi) {
-        return div(a, b);
-    }
-    let r = rcp(ab);
-    let mut q = aa * r;
-    let (p, e) = two_product(q, ab);
-    q += ((aa - p) - e) * r;
-    let (p, e) = two_product(q, ab);
-    let rem = (aa - p) - e;
-    let bits = q.to_bits();
-    let up = f32::from_bits(bits + 1);
-    let down = f32::from_bits(bits - 1);
-    let above = rem - ((up - q) * 0.5) * ab;
-    let below = rem + ((q - down) * 0.5) * ab;
-    let odd = bits & 1 != 0;
-    let q = if rem > 0.0 {
-        if above > 0.0 || (above == 0.0 && odd) { up } else { q }
-    } else if below < 0.0 || (below == 0.0 && odd) {
-        down
+/// |x| = m · 2^e with m ∈ [1, 2), from the bits (subnormals normalised); x finite, nonzero.
+fn frexp(x: f32) -> (f32, i32) {
+    let bits = x.to_bits() & 0x7fff_ffff;
+    let field = bits >> 23;
+    let mant = bits & 0x007f_ffff;
+    if field == 0 {
+        let shift = 23 - (31 - (mant | 1).leading_zeros() as i32);
+        (f32::from_bits(((mant << shift) & 0x007f_ffff) | 0x3f80_0000), -126 - shift)
     } else {
-        q
+        (f32::from_bits(mant | 0x3f80_0000), field as i32 - 127)
+    }
+}
+
+/// a / b correctly rounded: IEEE division, for kernels that must equal another library's bit for
+/// bit (PyTorch3D's). Subnormal operands count; a quotient below 2⁻¹²⁶ is rounded twice.
+pub fn div_rn(a: f32, b: f32) -> f32 {
+    let (a_zero, b_zero) = (a.abs() == 0.0, b.abs() == 0.0);
+    let (a_inf, b_inf) = (a.is_infinite(), b.is_infinite());
+    let y = if a.is_nan() || b.is_nan() || (a_zero && b_zero) || (a_inf && b_inf) {
+        f32::NAN
+    } else if a_zero || b_inf {
+        0.0
+    } else if b_zero || a_inf {
+        f32::INFINITY
+    } else {
+        let ((aa, ea), (ab, eb)) = (frexp(a), frexp(b));
+        let r = rcp(ab);
+        let mut q = aa * r;
+        let (p, e) = two_product(q, ab);
+        q += ((aa - p) - e) * r;
+        let (p, e) = two_product(q, ab);
+        let rem = (aa - p) - e;
+        let bits = q.to_bits();
+        let up = f32::from_bits(bits + 1);
+        let down = f32::from_bits(bits - 1);
+        let above = rem - ((up - q) * 0.5) * ab;
+        let below = rem + ((q - down) * 0.5) * ab;
+        let odd = bits & 1 != 0;
+        let q = if rem > 0.0 {
+            if above > 0.0 || (above == 0.0 && odd) { up } else { q }
+        } else if below < 0.0 || (below == 0.0 && odd) {
+            down
+        } else {
+            q
+        };
+        let k = ea - eb;
+        if k < -189 {
+            0.0
+        } else if k > 127 {
+            (q * pow2(127)) * pow2((k - 127).min(127))
+        } else if k >= -126 {
+            q * pow2(k)
+        } else {
+            (q * pow2(k + 64)) * pow2(-64)
+        }
     };
-    if (a.to_bits() ^ b.to_bits()) >= 0x8000_0000 { -q } else { q }
+    if (a.to_bits() ^ b.to_bits()) >= 0x8000_0000 { -y } else { y }
 }
 
 /// √x: an inverse square root by Newton's iteration on m ∈ [1, 4), then one correction.

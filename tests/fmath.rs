@@ -193,20 +193,21 @@ fn the_twin_is_accurate_against_f64() {
     report(Function::Cos, 2.0, worst(Function::Cos, signed(1e-30, 8192.0, 61).map(|x| (x, 0.0))));
     let quotients = signed(1e-30, 1e30, 997).enumerate().map(|(i, x)| (x, 0.37 + (i % 1000) as f32 * 1.7));
     report(Function::Div, 2.0, worst(Function::Div, quotients));
-    // div_rn is correctly rounded: equal to IEEE f32 division, on 4 million pairs of hashed
-    // mantissas with exponents across its range [2^-50, 2^50], and on mantissas near 1 and 2.
+    // div_rn is IEEE division: equal to f32 `/` on 4 million pairs of hashed bit patterns (every
+    // exponent, subnormals included) and on mantissas near 1 and 2, except where the quotient is
+    // subnormal (rounded twice there, and zero on a flushing device: not promised).
     let hashed = |i: u32, salt: u32| {
-        let h = i.wrapping_mul(2_654_435_761).wrapping_add(salt).rotate_left(11).wrapping_mul(2_246_822_519);
-        let e = 127 - 50 + (h >> 25) % 100; // [2^-50, 2^50)
-        f32::from_bits((h & 0x807f_ffff) | (e << 23))
+        f32::from_bits(i.wrapping_mul(2_654_435_761).wrapping_add(salt).rotate_left(11).wrapping_mul(2_246_822_519))
     };
-    let edges = [1.0f32, 2.0, 3.0, 1.5, 1.999_999_9, 1.000_000_1, 0.75];
+    let edges = [1.0f32, 2.0, 3.0, 1.5, 1.999_999_9, 1.000_000_1, 0.75, 0.0, -0.0, f32::INFINITY, f32::MAX, f32::MIN_POSITIVE, f32::from_bits(1), f32::NAN];
     let pairs = (0..1u32 << 22)
         .map(|i| (hashed(i, 1), hashed(i, 7)))
-        .chain(edges.iter().flat_map(|&x| edges.iter().map(move |&y| (x, y))));
+        .chain(edges.iter().flat_map(|&x| edges.iter().map(move |&y| (x, y))))
+        .filter(|(x, y)| !((x / y).abs() < f32::MIN_POSITIVE && x / y != 0.0));
     for (x, y) in pairs {
         let got = fmath::div_rn(x, y);
-        assert_eq!(got.to_bits(), (x / y).to_bits(), "div_rn({x:e}, {y:e}) = {got:e}, IEEE {:e}", x / y);
+        let want = x / y;
+        assert!(got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()), "div_rn({x:e}, {y:e}) = {got:e}, IEEE {want:e}");
     }
     // exp(y ln x) carries ln x's rounding times |y ln x| (up to about 20 here): tens of ulps, as
     // Vulkan's own pow (inherited from exp2(y log2 x)). Only the probe's p-norm uses it.

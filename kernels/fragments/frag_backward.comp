@@ -49,7 +49,7 @@ void bary_backward(vec2 p, vec2 v0, vec2 v1, vec2 v2, vec3 g, out vec2 d0, out v
                    out vec2 d2) {
     precise float area = edge_fn(v2, v0, v1) + P3D_EPS;
     precise float area2 = area * area;
-    precise float area_inv = 1.0 / area;
+    precise float area_inv = fm_div_rn(1.0, area);
     precise float e0 = edge_fn(p, v1, v2);
     precise float e1 = edge_fn(p, v2, v0);
     precise float e2 = edge_fn(p, v0, v1);
@@ -58,7 +58,7 @@ void bary_backward(vec2 p, vec2 v0, vec2 v1, vec2 v2, vec3 g, out vec2 d0, out v
     vec2 c;
     vec2 d;
     // w0 = e0(p, v1, v2) / area(v2, v0, v1).
-    precise float g_area0 = g.x * (-e0 / area2);
+    precise float g_area0 = g.x * fm_div_rn(-e0, area2);
     precise float g_e0 = g.x * area_inv;
     edge_back(p, v1, v2, g_e0, a, b);
     // area's gradients: EdgeFunctionBackward(v2, v0, v1) gives (d v2, d v0, d v1).
@@ -68,7 +68,7 @@ void bary_backward(vec2 p, vec2 v0, vec2 v1, vec2 v2, vec3 g, out vec2 d0, out v
     precise vec2 dw0_v1 = a + d;
     precise vec2 dw0_v2 = b + ar2_0;
     // w1 = e1(p, v2, v0) / area.
-    precise float g_area1 = g.y * (-e1 / area2);
+    precise float g_area1 = g.y * fm_div_rn(-e1, area2);
     precise float g_e1 = g.y * area_inv;
     edge_back(p, v2, v0, g_e1, a, b);
     precise vec2 ar2_1 = vec2(g_area1 * (v1.y - v0.y), g_area1 * (v0.x - v1.x));
@@ -77,7 +77,7 @@ void bary_backward(vec2 p, vec2 v0, vec2 v1, vec2 v2, vec3 g, out vec2 d0, out v
     precise vec2 dw1_v1 = d;
     precise vec2 dw1_v2 = a + ar2_1;
     // w2 = e2(p, v0, v1) / area.
-    precise float g_area2 = g.z * (-e2 / area2);
+    precise float g_area2 = g.z * fm_div_rn(-e2, area2);
     precise float g_e2 = g.z * area_inv;
     edge_back(p, v0, v1, g_e2, a, b);
     precise vec2 ar2_2 = vec2(g_area2 * (v1.y - v0.y), g_area2 * (v0.x - v1.x));
@@ -100,10 +100,10 @@ void perspective_backward(vec3 b, vec3 z, vec3 g, out vec3 d_b, out vec3 d_z) {
     precise float t2 = b.z * z.x * z.y;
     precise float denom = max(t0 + t1 + t2, P3D_EPS);
     precise float g_denom_top = -t0 * g.x - t1 * g.y - t2 * g.z;
-    precise float g_denom = g_denom_top / (denom * denom);
-    precise float g0 = g_denom + g.x / denom;
-    precise float g1 = g_denom + g.y / denom;
-    precise float g2 = g_denom + g.z / denom;
+    precise float g_denom = fm_div_rn(g_denom_top, denom * denom);
+    precise float g0 = g_denom + fm_div_rn(g.x, denom);
+    precise float g1 = g_denom + fm_div_rn(g.y, denom);
+    precise float g2 = g_denom + fm_div_rn(g.z, denom);
     precise vec3 db = vec3(g0 * z.y * z.z, g1 * z.x * z.z, g2 * z.x * z.y);
     precise vec3 dz = vec3(g1 * b.y * z.z + g2 * b.z * z.y, g0 * b.x * z.z + g2 * b.z * z.x,
                            g0 * b.x * z.y + g1 * b.y * z.x);
@@ -121,9 +121,9 @@ vec3 clip_backward(vec3 b, vec3 g) {
         sum = 1e-5;
     }
     precise float sum2 = sum * sum;
-    precise vec3 gs = vec3(-w.x / sum2 * through_sum, -w.y / sum2 * through_sum,
-                           -w.z / sum2 * through_sum);
-    precise float inv = 1.0 / sum;
+    precise vec3 gs = vec3(fm_div_rn(-w.x, sum2) * through_sum, fm_div_rn(-w.y, sum2) * through_sum,
+                           fm_div_rn(-w.z, sum2) * through_sum);
+    precise float inv = fm_div_rn(1.0, sum);
     precise float gx = g.x * (inv + gs.x) + g.y * gs.y + g.z * gs.z;
     precise float gy = g.y * (inv + gs.y) + g.x * gs.x + g.z * gs.z;
     precise float gz = g.z * (inv + gs.z) + g.x * gs.x + g.y * gs.y;
@@ -134,7 +134,7 @@ vec3 clip_backward(vec3 b, vec3 g) {
 void segment_back(vec2 p, vec2 v0, vec2 v1, float g, out vec2 d_v0, out vec2 d_v1) {
     precise vec2 d = v1 - v0;
     precise vec2 pv = p - v0;
-    precise float t = (d.x * pv.x + d.y * pv.y) / (d.x * d.x + d.y * d.y);
+    precise float t = fm_div_rn(d.x * pv.x + d.y * pv.y, d.x * d.x + d.y * d.y);
     float tt = min(max(t, 0.0), 1.0);
     precise vec2 proj = (1.0 - tt) * v0 + tt * v1;
     precise vec2 r = proj - p;

@@ -70,20 +70,31 @@ void fm_two_product(float x, float y, out float p, out float e) {
     e = ((xh * yh - p) + xh * yl + xl * yh) + xl * yl;
 }
 
-// a / b correctly rounded (to nearest, ties to even) where |a| and |b| are in [2^-50, 2^50]
-// (and for a = 0); elsewhere fm_div's result. For kernels that must equal another library's
-// IEEE division bit for bit (PyTorch3D's rasterizer). The quotient from the reciprocal is
-// corrected once by its remainder, then its exact remainder a − q b (Dekker's product; a − p
-// is exact by Sterbenz's lemma, and the remainder of a faithful quotient is a float) is compared
-// with the half-ulp steps on either side: each comparison's sign is exact.
+// |x| = m · 2^e with m ∈ [1, 2), from the bits (a subnormal's normalised by its leading bit), for
+// x finite and nonzero.
+float fm_frexp(float x, out int e) {
+    uint bits = floatBitsToUint(x) & 0x7fffffffu;
+    uint field = bits >> 23;
+    uint mant = bits & 0x007fffffu;
+    int shift = 23 - findMSB(mant | 1u);
+    e = field == 0u ? -126 - shift : int(field) - 127;
+    uint m = field == 0u ? (mant << uint(shift)) & 0x007fffffu : mant;
+    return uintBitsToFloat(m | 0x3f800000u);
+}
+
+// a / b correctly rounded (to nearest, ties to even): IEEE division, for kernels that must equal
+// another library's bit for bit (PyTorch3D's rasterizer). Subnormal operands are read by their
+// bits, so they count; a quotient below 2^-126 is rounded twice (the last place may differ
+// from IEEE at a tie) and is zero on a device that flushes subnormals.
+// The mantissas' quotient (both in [1, 2)) from the reciprocal is corrected once by its
+// remainder; then its exact remainder A − q B (Dekker's product; A − p is exact by Sterbenz's
+// lemma, and the remainder of a faithful quotient is a float) is compared with the half-ulp
+// steps on either side, each comparison's sign exact; then the exponent.
 float fm_div_rn(float a, float b) {
-    float fallback = fm_div(a, b);
-    float aa = abs(a);
-    float ab = abs(b);
-    bool safe = aa >= 8.8817842e-16 && aa <= 1.12589991e15 && ab >= 8.8817842e-16
-        && ab <= 1.12589991e15;
-    float A = safe ? aa : 1.0;
-    float B = safe ? ab : 1.0;
+    int ea;
+    int eb;
+    float A = fm_frexp(a, ea);
+    float B = fm_frexp(b, eb);
     float r = fm_rcp(B);
     float q = A * r;
     float p;
@@ -95,13 +106,26 @@ float fm_div_rn(float a, float b) {
     uint bits = floatBitsToUint(q);
     float up = uintBitsToFloat(bits + 1u);
     float down = uintBitsToFloat(bits - 1u);
-    float above = rem - ((up - q) * 0.5) * B;    // a/b − (q + ulp⁺/2), times b: its sign
-    float below = rem + ((q - down) * 0.5) * B;  // a/b − (q − ulp⁻/2), times b
+    float above = rem - ((up - q) * 0.5) * B;    // (A/B − (q + ulp⁺/2)) B: its sign
+    float below = rem + ((q - down) * 0.5) * B;  // (A/B − (q − ulp⁻/2)) B
     bool odd = (bits & 1u) != 0u;
     q = rem > 0.0 ? ((above > 0.0 || (above == 0.0 && odd)) ? up : q)
                   : ((below < 0.0 || (below == 0.0 && odd)) ? down : q);
+    // q ∈ [0.5, 2]: scale by 2^k in steps that keep every product but the last normal.
+    int k = ea - eb;
+    float y = k > 127 ? (q * fm_pow2(127)) * fm_pow2(min(k - 127, 127))
+            : (k >= -126 ? q * fm_pow2(max(k, -126))
+                         : (q * fm_pow2(max(k + 64, -126))) * fm_pow2(-64));
+    y = k < -189 ? 0.0 : y;
+    // Zeros, infinities and NaN.
+    bool a_zero = (floatBitsToUint(a) & 0x7fffffffu) == 0u;
+    bool b_zero = (floatBitsToUint(b) & 0x7fffffffu) == 0u;
+    bool a_inf = abs(a) == FM_INF;
+    bool b_inf = abs(b) == FM_INF;
+    y = (a_zero || b_inf) ? 0.0 : ((b_zero || a_inf) ? FM_INF : y);
+    y = isnan(a) || isnan(b) || (a_zero && b_zero) || (a_inf && b_inf) ? FM_NAN : y;
     bool negative = (floatBitsToUint(a) ^ floatBitsToUint(b)) >= 0x80000000u;
-    return safe ? (negative ? -q : q) : fallback;
+    return negative ? -y : y;
 }
 
 // sqrt(x): an inverse square root by Newton's iteration on m ∈ [1, 4), then one correction.

@@ -47,10 +47,10 @@ const float P3D_EPS = 1e-8;
 float pix_ndc(uint i, uint s1, uint s2) {
     precise float range = 2.0;
     if (s1 > s2) {
-        range = (float(s1) * 2.0) / float(s2);
+        range = fm_div_rn(float(s1) * 2.0, float(s2));
     }
-    precise float offset = range / 2.0;
-    precise float x = -offset + (range * float(i) + offset) / float(s1);
+    precise float offset = range * 0.5;
+    precise float x = -offset + fm_div_rn(range * float(i) + offset, float(s1));
     return x;
 }
 
@@ -74,9 +74,9 @@ float face_area(vec2 v0, vec2 v1, vec2 v2) {
 // `BarycentricCoordinatesForward`.
 vec3 bary_forward(vec2 p, vec2 v0, vec2 v1, vec2 v2) {
     precise float area = edge_fn(v2, v0, v1) + P3D_EPS;
-    precise float w0 = edge_fn(p, v1, v2) / area;
-    precise float w1 = edge_fn(p, v2, v0) / area;
-    precise float w2 = edge_fn(p, v0, v1) / area;
+    precise float w0 = fm_div_rn(edge_fn(p, v1, v2), area);
+    precise float w1 = fm_div_rn(edge_fn(p, v2, v0), area);
+    precise float w2 = fm_div_rn(edge_fn(p, v0, v1), area);
     return vec3(w0, w1, w2);
 }
 
@@ -86,7 +86,7 @@ vec3 perspective_forward(vec3 b, vec3 z) {
     precise float t1 = b.y * z.x * z.z;
     precise float t2 = b.z * z.x * z.y;
     precise float denom = max(t0 + t1 + t2, P3D_EPS);
-    precise vec3 w = vec3(t0 / denom, t1 / denom, t2 / denom);
+    precise vec3 w = vec3(fm_div_rn(t0, denom), fm_div_rn(t1, denom), fm_div_rn(t2, denom));
     return w;
 }
 
@@ -94,7 +94,7 @@ vec3 perspective_forward(vec3 b, vec3 z) {
 vec3 clip_forward(vec3 b) {
     precise vec3 w = max(b, vec3(0.0));
     precise float sum = max(w.x + w.y + w.z, 1e-5);
-    precise vec3 c = vec3(w.x / sum, w.y / sum, w.z / sum);
+    precise vec3 c = vec3(fm_div_rn(w.x, sum), fm_div_rn(w.y, sum), fm_div_rn(w.z, sum));
     return c;
 }
 
@@ -108,7 +108,7 @@ float segment_dist2(vec2 p, vec2 v0, vec2 v1) {
         return rr;
     }
     precise vec2 pv = p - v0;
-    precise float t = (d.x * pv.x + d.y * pv.y) / l2;
+    precise float t = fm_div_rn(d.x * pv.x + d.y * pv.y, l2);
     float tt = min(max(t, 0.0), 1.0);
     precise vec2 proj = v0 + tt * d;
     precise vec2 r = p - proj;
