@@ -27,8 +27,8 @@ void main() {
     }
     for (uint k = 0u; k < 3u; ++k) {
         uint o = 3u * i + k;
-        float c = tanh(params[3u * pc.vertex_count + k]);
-        float s = 1.0 / (1.0 + exp(-(base[o] + params[o])));
+        float c = fm_tanh(params[3u * pc.vertex_count + k]);
+        float s = fm_sigmoid(base[o] + params[o]);
         float sign_t = signs[o];
         float v = s * sign_t;
         float g = d_positions[o];

@@ -24,8 +24,8 @@ void main() {
     }
     for (uint k = 0u; k < 3u; ++k) {
         uint o = 3u * i + k;
-        float c = tanh(params[3u * pc.vertex_count + k]);
-        float s = 1.0 / (1.0 + exp(-(base[o] + params[o])));
+        float c = fm_tanh(params[3u * pc.vertex_count + k]);
+        float s = fm_sigmoid(base[o] + params[o]);
         float v = s * signs[o];
         positions[o] = (max(v, 0.0) * (1.0 - c) - max(-v, 0.0) * (c + 1.0)) + c;
     }

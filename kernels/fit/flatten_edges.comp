@@ -45,11 +45,11 @@ struct Side {
 Side side_forward(vec3 a, float al1, float al2, vec3 b) {
     Side r;
     r.b = b;
-    r.bl1 = sqrt(dot3(b, b) + EPS);
+    r.bl1 = fm_sqrt(dot3(b, b) + EPS);
     r.ab = dot3(a, b);
-    r.cosk = r.ab / (al1 * r.bl1 + EPS);
-    r.sink = sqrt(1.0 - r.cosk * r.cosk + EPS);
-    r.s = r.ab / (al2 + EPS);
+    r.cosk = fm_div(r.ab, al1 * r.bl1 + EPS);
+    r.sink = fm_sqrt(1.0 - r.cosk * r.cosk + EPS);
+    r.s = fm_div(r.ab, al2 + EPS);
     r.cb = b - a * r.s;
     r.cbl1 = r.bl1 * r.sink;
     return r;
@@ -61,21 +61,21 @@ vec3 side_backward(Side r, vec3 a, float al1, float al2, vec3 g_cb, float g_cbl1
                    inout vec3 g_a, inout float g_al2) {
     float g_bl1 = g_cbl1 * r.sink;
     float g_sin = g_cbl1 * r.bl1;
-    float g_cos = -g_sin * r.cosk / r.sink;
+    float g_cos = fm_div(-g_sin * r.cosk, r.sink);
     vec3 g_b = g_cb;
     vec3 g_c = -g_cb;              // c = a s
     g_a += g_c * r.s;
     float g_s = dot3(g_c, a);
     float d2 = al2 + EPS;          // s = ab / d2
-    float g_ab = g_s / d2;
-    g_al2 -= g_s * r.ab / (d2 * d2);
+    float g_ab = fm_div(g_s, d2);
+    g_al2 -= fm_div(g_s * r.ab, d2 * d2);
     float d = al1 * r.bl1 + EPS;   // cos = ab / d
-    g_ab += g_cos / d;
-    float g_d = -g_cos * r.ab / (d * d);
+    g_ab += fm_div(g_cos, d);
+    float g_d = fm_div(-g_cos * r.ab, d * d);
     float g_al1 = g_d * r.bl1;
     g_bl1 += g_d * al1;
-    g_al2 += g_al1 / (2.0 * al1);  // al1 = sqrt(al2 + eps)
-    g_b += r.b * (g_bl1 / r.bl1);  // bl1 = sqrt(|b|² + eps): d/db = b / bl1
+    g_al2 += fm_div(g_al1, 2.0 * al1);  // al1 = sqrt(al2 + eps)
+    g_b += r.b * fm_div(g_bl1, r.bl1);  // bl1 = sqrt(|b|² + eps): d/db = b / bl1
     g_a += r.b * g_ab;             // ab = a·b
     g_b += a * g_ab;
     return g_b;
@@ -90,17 +90,17 @@ void main() {
     vec3 v0 = position(q.x);
     vec3 a = position(q.y) - v0;
     float al2 = dot3(a, a);
-    float al1 = sqrt(al2 + EPS);
+    float al1 = fm_sqrt(al2 + EPS);
     Side s1 = side_forward(a, al1, al2, position(q.z) - v0);
     Side s2 = side_forward(a, al1, al2, position(q.w) - v0);
     float num = dot3(s1.cb, s2.cb);
     float den = s1.cbl1 * s2.cbl1 + EPS;
-    float c = num / den;
+    float c = fm_div(num, den);
     edge_loss[e] = (c + 1.0) * (c + 1.0);
 
     float g_c = 2.0 * (c + 1.0);
-    float g_num = g_c / den;
-    float g_den = -g_c * num / (den * den);
+    float g_num = fm_div(g_c, den);
+    float g_den = fm_div(-g_c * num, den * den);
     vec3 g_a = vec3(0.0);
     float g_al2 = 0.0;
     vec3 g_b1 = side_backward(s1, a, al1, al2, s2.cb * g_num, s2.cbl1 * g_den, g_a, g_al2);

@@ -35,16 +35,16 @@ void main() {
     int size = int(pc.axis == 0u ? pc.width : pc.height);
     int stride = pc.axis == 0u ? 1 : int(pc.width);
     int r = int(pc.radius);
-    float inv = -0.5 / (pc.std_px * pc.std_px);
+    float inv = fm_div(-0.5, pc.std_px * pc.std_px);
     float norm = 0.0;
     vec4 acc = vec4(0.0);
     for (int t = -r; t <= r; t++) {
-        float w = exp(float(t * t) * inv);
+        float w = fm_exp(float(t * t) * inv);
         norm += w;
         int at = here + t;
         if (at >= 0 && at < size) {
             acc += w * src[int(i) + t * stride];
         }
     }
-    dst[i] = acc / norm;
+    dst[i] = fm_div4(acc, norm);
 }

@@ -25,7 +25,7 @@ void main() {
     }
     vec4 s = stats[id / pc.pixels];
     float t = targets[id];
-    float g = pc.coef * ((t * s.y - s.x * (1.0 - t)) / (s.y * s.y));
+    float g = pc.coef * fm_div(t * s.y - s.x * (1.0 - t), s.y * s.y);
     vec4 out_value = vec4(0.0, 0.0, 0.0, g);
     if (pc.accumulate != 0u) {
         out_value += d_image[id];

@@ -33,6 +33,6 @@ void main() {
     vec2 r = workgroup_sum(vec4(acc, 0.0, 0.0)).xy;
     if (gl_LocalInvocationIndex == 0u) {
         float u = r.y + 1e-6;
-        stats[view] = vec4(r.x, u, r.x / u, 0.0);
+        stats[view] = vec4(r.x, u, fm_div(r.x, u), 0.0);
     }
 }

@@ -34,7 +34,7 @@ void main() {
         for (uint k = begin; k < end; ++k) {
             s += position(neighbours[k]);
         }
-        y = position(i) - s / float(end - begin);
+        y = position(i) - fm_div3(s, float(end - begin));
     }
     applied[i] = vec4(y, (y.x * y.x + y.y * y.y) + y.z * y.z);
 }

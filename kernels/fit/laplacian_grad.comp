@@ -31,7 +31,7 @@ void main() {
     vec3 s = vec3(0.0);
     for (uint k = begin; k < end; ++k) {
         uint j = neighbours[k];
-        s += applied[j].xyz / float(offsets[j + 1u] - offsets[j]);
+        s += fm_div3(applied[j].xyz, float(offsets[j + 1u] - offsets[j]));
     }
     vec3 g = (2.0 * pc.weight) * (applied[i].xyz - s);
     for (uint c = 0u; c < 3u; ++c) {

@@ -25,7 +25,7 @@ void adam_update(inout vec4 p, vec4 g, inout vec4 m, inout vec4 v) {
     m = pc.lerp_weight < 0.5 ? m + pc.lerp_weight * (g - m)
                              : g - (g - m) * (1.0 - pc.lerp_weight);
     v = v * pc.beta2 + pc.one_minus_beta2 * (g * g);
-    p -= pc.step_size * (m / (sqrt(v) / pc.bias2_sqrt + pc.eps));
+    p -= pc.step_size * fm_div4v(m, fm_div4(fm_sqrt4(v), pc.bias2_sqrt) + pc.eps);
 }
 
 #endif

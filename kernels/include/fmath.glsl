@@ -279,6 +279,12 @@ vec3 fm_div3(vec3 a, float b) {
 vec4 fm_div4(vec4 a, float b) {
     return vec4(fm_div(a.x, b), fm_div(a.y, b), fm_div(a.z, b), fm_div(a.w, b));
 }
+vec4 fm_div4v(vec4 a, vec4 b) {
+    return vec4(fm_div(a.x, b.x), fm_div(a.y, b.y), fm_div(a.z, b.z), fm_div(a.w, b.w));
+}
+vec4 fm_sqrt4(vec4 x) {
+    return vec4(fm_sqrt(x.x), fm_sqrt(x.y), fm_sqrt(x.z), fm_sqrt(x.w));
+}
 
 // Fixed-order vector maths: ((x + y) + z).
 float fm_dot3(vec3 a, vec3 b) {

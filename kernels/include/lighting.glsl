@@ -12,18 +12,18 @@ const float NORMAL_EPS = 1e-6;
 
 // `face_normal_raw`: cross(v2 − v1, v0 − v1), twice the area.
 vec3 face_normal_raw(vec3 p0, vec3 p1, vec3 p2) {
-    return cross(p2 - p1, p0 - p1);
+    return fm_cross(p2 - p1, p0 - p1);
 }
 
 vec3 normalize_eps(vec3 v) {
-    return v / max(length(v), NORMAL_EPS);
+    return fm_div3(v, max(fm_length3(v), NORMAL_EPS));
 }
 
 // `Lighting::light`: the RGB factor for a unit normal over `directionals` lights.
 vec3 light_factor(vec3 n, uint directionals) {
     vec3 l = lights[0].rgb;
     for (uint i = 0u; i < directionals; ++i) {
-        l += lights[2u + 2u * i].rgb * max(dot(n, lights[1u + 2u * i].xyz), 0.0);
+        l += lights[2u + 2u * i].rgb * max(fm_dot3(n, lights[1u + 2u * i].xyz), 0.0);
     }
     return l;
 }
@@ -33,8 +33,8 @@ vec3 light_factor_grad(vec3 n, vec3 d_light, uint directionals) {
     vec3 g = vec3(0.0);
     for (uint i = 0u; i < directionals; ++i) {
         vec3 dir = lights[1u + 2u * i].xyz;
-        if (dot(n, dir) > 0.0) {
-            g += dir * dot(lights[2u + 2u * i].rgb, d_light);
+        if (fm_dot3(n, dir) > 0.0) {
+            g += dir * fm_dot3(lights[2u + 2u * i].rgb, d_light);
         }
     }
     return g;
@@ -42,12 +42,12 @@ vec3 light_factor_grad(vec3 n, vec3 d_light, uint directionals) {
 
 // `normalize_eps_grad`: dL/dv of v / max(|v|, eps) given dL/d(it).
 vec3 normalize_eps_grad(vec3 v, vec3 g) {
-    float len = length(v);
+    float len = fm_length3(v);
     if (len > NORMAL_EPS) {
-        vec3 n = v / len;
-        return (g - n * dot(n, g)) / len;
+        vec3 n = fm_div3(v, len);
+        return fm_div3(g - n * fm_dot3(n, g), len);
     }
-    return g / NORMAL_EPS;
+    return fm_div3(g, NORMAL_EPS);
 }
 
 #endif

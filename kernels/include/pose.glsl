@@ -16,34 +16,35 @@ mat3 cross_matrix(vec3 v) {
 
 // R(ω) = I + sin θ/θ [ω]× + (1 − cos θ)/θ² [ω]×².
 mat3 rotation_matrix(vec3 w) {
-    float t2 = dot(w, w);
-    float t = sqrt(t2);
-    float a = 1.0 - t2 / 6.0;
-    float b = 0.5 - t2 / 24.0;
+    float t2 = fm_dot3(w, w);
+    float t = fm_sqrt(t2);
+    float a = 1.0 - fm_div(t2, 6.0);
+    float b = 0.5 - fm_div(t2, 24.0);
     if (t >= 1e-3) {
-        float s = sin(0.5 * t);
-        a = sin(t) / t;
-        b = 2.0 * s * s / t2;
+        float s = fm_sin(0.5 * t);
+        a = fm_div(fm_sin(t), t);
+        b = fm_div(2.0 * s * s, t2);
     }
     mat3 k = cross_matrix(w);
-    return mat3(1.0) + a * k + b * (k * k);
+    return mat3(1.0) + a * k + b * fm_mul33m(k, k);
 }
 
 // J_l(ω) = I + (1 − cos θ)/θ² [ω]× + (θ − sin θ)/θ³ [ω]×².
 mat3 left_jacobian(vec3 w) {
-    float t2 = dot(w, w);
-    float t = sqrt(t2);
-    float a = 0.5 - t2 / 24.0;
-    float b = 1.0 / 6.0 - t2 / 120.0 + t2 * t2 / 5040.0 - t2 * t2 * t2 / 362880.0;
+    float t2 = fm_dot3(w, w);
+    float t = fm_sqrt(t2);
+    float a = 0.5 - fm_div(t2, 24.0);
+    float b = fm_div(1.0, 6.0) - fm_div(t2, 120.0) + fm_div(t2 * t2, 5040.0)
+            - fm_div(t2 * t2 * t2, 362880.0);
     if (t >= 1e-3) {
-        float s = sin(0.5 * t);
-        a = 2.0 * s * s / t2;
+        float s = fm_sin(0.5 * t);
+        a = fm_div(2.0 * s * s, t2);
     }
     if (t >= 0.5) {
-        b = (t - sin(t)) / (t2 * t);
+        b = fm_div(t - fm_sin(t), t2 * t);
     }
     mat3 k = cross_matrix(w);
-    return mat3(1.0) + a * k + b * (k * k);
+    return mat3(1.0) + a * k + b * fm_mul33m(k, k);
 }
 
 #endif

@@ -34,16 +34,16 @@ struct Skin {
 };
 
 vec3 bone_apply(Bone b, vec3 x) {
-    return vec3(dot(b.rows[0].xyz, x) + b.rows[0].w,
-                dot(b.rows[1].xyz, x) + b.rows[1].w,
-                dot(b.rows[2].xyz, x) + b.rows[2].w);
+    return vec3(fm_dot3(b.rows[0].xyz, x) + b.rows[0].w,
+                fm_dot3(b.rows[1].xyz, x) + b.rows[1].w,
+                fm_dot3(b.rows[2].xyz, x) + b.rows[2].w);
 }
 
 // R(a, θ) = I + sin θ [a]× + (1 − cos θ) [a]×² for a unit axis a; (1 − cos θ) as 2 sin²(θ/2).
 mat3 axis_rotation(vec3 a, float theta) {
     mat3 k = mat3(vec3(0.0, a.z, -a.y), vec3(-a.z, 0.0, a.x), vec3(a.y, -a.x, 0.0));
-    float h = sin(0.5 * theta);
-    return mat3(1.0) + sin(theta) * k + (2.0 * h * h) * (k * k);
+    float h = fm_sin(0.5 * theta);
+    return mat3(1.0) + fm_sin(theta) * k + (2.0 * h * h) * fm_mul33m(k, k);
 }
 
 // Twin of `SkinPush` (src/fit/articulated.rs).

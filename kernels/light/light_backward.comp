@@ -36,8 +36,8 @@ void write_corners(uint mesh, uint f, vec3 g) {
     vec3 p2 = world_position(mesh, faces[3u * f + 2u]);
     vec3 a = p2 - p1;
     vec3 b = p0 - p1;
-    vec3 g_a = cross(b, g);
-    vec3 g_b = cross(g, a);
+    vec3 g_a = fm_cross(b, g);
+    vec3 g_b = fm_cross(g, a);
     uint slot = 3u * (mesh * pc.face_count + f);
     corners[slot] = vec4(g_b, 0.0);
     corners[slot + 1u] = vec4(-g_a - g_b, 0.0);

@@ -29,7 +29,7 @@ void main() {
     uint ti = pc.translation_at;
     vec3 t = vec3(params[ti], params[ti + 1u], params[ti + 2u]);
     vec3 p = vec3(rest[3u * v], rest[3u * v + 1u], rest[3u * v + 2u]);
-    vec3 q = rotation_matrix(w) * (p - pc.centre) + pc.centre + t;
+    vec3 q = fm_mul33(rotation_matrix(w), p - pc.centre) + pc.centre + t;
     posed[3u * v] = q.x;
     posed[3u * v + 1u] = q.y;
     posed[3u * v + 2u] = q.z;

@@ -40,7 +40,7 @@ void main() {
     for (uint v = l; v < pc.vertex_count; v += 64u) {
         vec3 p = vec3(rest[3u * v], rest[3u * v + 1u], rest[3u * v + 2u]);
         vec3 g = vec3(d_posed[3u * v], d_posed[3u * v + 1u], d_posed[3u * v + 2u]);
-        torque += cross(r * (p - pc.centre), g);
+        torque += fm_cross(fm_mul33(r, p - pc.centre), g);
         force += g;
     }
     torques[l] = torque;
@@ -54,7 +54,7 @@ void main() {
         barrier();
     }
     if (l == 0u) {
-        vec3 d_w = transpose(left_jacobian(w)) * torques[0];
+        vec3 d_w = fm_mul33(transpose(left_jacobian(w)), torques[0]);
         vec3 d_t = forces[0];
         d_params[0] = d_w.x;
         d_params[1] = d_w.y;

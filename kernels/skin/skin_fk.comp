@@ -28,14 +28,14 @@ void main() {
         mat3 mp = transpose(mat3(p.rows[0].xyz, p.rows[1].xyz, p.rows[2].xyz));
         vec3 bp = vec3(p.rows[0].w, p.rows[1].w, p.rows[2].w);
         mat3 r = axis_rotation(d.axis, params[j]);
-        mat3 m = mp * r;
-        vec3 b = mp * (d.pivot - r * d.pivot) + bp;
+        mat3 m = fm_mul33m(mp, r);
+        vec3 b = fm_mul33(mp, d.pivot - fm_mul33(r, d.pivot)) + bp;
         Bone o;
         o.rows[0] = vec4(m[0][0], m[1][0], m[2][0], b.x);
         o.rows[1] = vec4(m[0][1], m[1][1], m[2][1], b.y);
         o.rows[2] = vec4(m[0][2], m[1][2], m[2][2], b.z);
-        o.world_axis = vec4(mp * d.axis, 0.0);
-        o.world_pivot = vec4(mp * d.pivot + bp, 0.0);
+        o.world_axis = vec4(fm_mul33(mp, d.axis), 0.0);
+        o.world_pivot = vec4(fm_mul33(mp, d.pivot) + bp, 0.0);
         bones[j + 1u] = o;
     }
 }

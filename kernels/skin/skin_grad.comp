@@ -45,7 +45,7 @@ void main() {
             bool moves = (below[k][word] & bit) != 0u;
             moved += moves ? s.weights[i] * (bone_apply(bones[k], p) - c) : vec3(0.0);
         }
-        torque += cross(moved, g);
+        torque += fm_cross(moved, g);
     }
     torques[l] = torque;
     barrier();
@@ -56,7 +56,7 @@ void main() {
         barrier();
     }
     if (l == 0u) {
-        d_params[j] = dot(own.world_axis.xyz, torques[0]);
+        d_params[j] = fm_dot3(own.world_axis.xyz, torques[0]);
         uint row = pc.log_index * (pc.joint_count + 1u);
         log_rows[row + 1u + j] = params[j];
         if (j == 0u) {
