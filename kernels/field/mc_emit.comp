@@ -58,7 +58,7 @@ void main() {
             b[axis] += 1u;
             float fa = phi[node_index(a)];
             float fb = phi[node_index(b)];
-            float s = (0.5 - fa) / (fb - fa);
+            float s = fm_div(0.5 - fa, fb - fa);
             vec3 pa = lattice_point(a, pc.cube, pc.res);
             vec3 pb = lattice_point(b, pc.cube, pc.res);
             uint at = 3u * (out_tri + t) + corner;

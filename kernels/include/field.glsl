@@ -4,12 +4,12 @@
 #define SOFTVK_FIELD_GLSL
 
 float field_sigmoid(float f) {
-    return 1.0 / (1.0 + exp(-f));
+    return fm_sigmoid(f);
 }
 
 // `cube` = (centre, half-size): the cube [-1, 1]^3 after normalisation.
 vec3 field_normalize(vec3 p, vec4 cube) {
-    return (p - cube.xyz) / cube.w;
+    return fm_div3(p - cube.xyz, cube.w);
 }
 
 #endif

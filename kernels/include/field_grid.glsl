@@ -39,7 +39,7 @@ float grid_logit(uvec3 cell, vec3 t, uint res) {
                      params[grid_node(cell, 2u, res)], params[grid_node(cell, 3u, res)]);
     vec4 v_hi = vec4(params[grid_node(cell, 4u, res)], params[grid_node(cell, 5u, res)],
                      params[grid_node(cell, 6u, res)], params[grid_node(cell, 7u, res)]);
-    return dot(lo, v_lo) + dot(hi, v_hi);
+    return fm_dot4(lo, v_lo) + fm_dot4(hi, v_hi);
 }
 #endif
 

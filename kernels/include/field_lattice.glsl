@@ -9,7 +9,7 @@ uvec3 lattice_coords(uint node, uint res) {
 }
 
 vec3 lattice_point(uvec3 q, vec4 cube, uint res) {
-    return cube.xyz + cube.w * (2.0 * vec3(q) / float(res - 1u) - 1.0);
+    return cube.xyz + cube.w * (fm_div3(2.0 * vec3(q), float(res - 1u)) - 1.0);
 }
 
 #endif

@@ -22,7 +22,7 @@
 float mlp_act[2u * MLP_HALF];
 
 float mlp_softplus(float z) {
-    return max(z, 0.0) + log(1.0 + exp(-pc.beta * abs(z))) / pc.beta;
+    return max(z, 0.0) + fm_div(fm_log(1.0 + fm_exp(-pc.beta * abs(z))), pc.beta);
 }
 
 // d softplus_β / dz = sigmoid(β z).
@@ -97,8 +97,11 @@ float mlp_forward(vec3 p, uint point) {
     mlp_act[2] = u.z;
     float freq = MLP_PI;
     [[unroll]] for (uint k = 0u; k < MLP_FREQS; ++k) {
-        vec3 s = sin(freq * u);
-        vec3 c = cos(freq * u);
+        vec2 sc_x = fm_sincos(freq * u.x);
+        vec2 sc_y = fm_sincos(freq * u.y);
+        vec2 sc_z = fm_sincos(freq * u.z);
+        vec3 s = vec3(sc_x.x, sc_y.x, sc_z.x);
+        vec3 c = vec3(sc_x.y, sc_y.y, sc_z.y);
         uint b = 3u + 6u * k;
         mlp_act[b] = s.x;
         mlp_act[b + 1u] = s.y;

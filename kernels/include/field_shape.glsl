@@ -12,7 +12,7 @@
 
 // x / y, or 0 where y is 0 (the measure-zero points where a distance has no gradient).
 float shape_ratio(float x, float y) {
-    return y > 0.0 ? x / y : 0.0;
+    return y > 0.0 ? fm_div(x, y) : 0.0;
 }
 
 float shape_sd(uint kind, vec3 p, out float g[SHAPE_MAX_PARAMS]) {
@@ -22,7 +22,7 @@ float shape_sd(uint kind, vec3 p, out float g[SHAPE_MAX_PARAMS]) {
         g[j] = 0.0;
     }
     if (kind == 0u) {
-        float len = length(d);
+        float len = fm_length3(d);
         g[0] = -shape_ratio(d.x, len);
         g[1] = -shape_ratio(d.y, len);
         g[2] = -shape_ratio(d.z, len);
@@ -37,7 +37,7 @@ float shape_sd(uint kind, vec3 p, out float g[SHAPE_MAX_PARAMS]) {
         float sd;
         if (m > 0.0) {
             vec3 qp = max(q, vec3(0.0));
-            float len = length(qp);
+            float len = fm_length3(qp);
             dq = vec3(shape_ratio(qp.x, len), shape_ratio(qp.y, len), shape_ratio(qp.z, len));
             sd = len;
         } else {
@@ -54,9 +54,9 @@ float shape_sd(uint kind, vec3 p, out float g[SHAPE_MAX_PARAMS]) {
         g[5] = -dq.z;
         return sd;
     }
-    float rho = length(d.xz);
+    float rho = fm_length2(d.xz);
     vec2 q = vec2(rho - params[3], d.y);
-    float len = length(q);
+    float len = fm_length2(q);
     float nx = shape_ratio(q.x, len);
     float ny = shape_ratio(q.y, len);
     g[0] = -nx * shape_ratio(d.x, rho);

@@ -293,11 +293,18 @@ float fm_dot3(vec3 a, vec3 b) {
 float fm_dot2(vec2 a, vec2 b) {
     return a.x * b.x + a.y * b.y;
 }
+// ((x + y) + z) + w.
+float fm_dot4(vec4 a, vec4 b) {
+    return ((a.x * b.x + a.y * b.y) + a.z * b.z) + a.w * b.w;
+}
 vec3 fm_cross(vec3 a, vec3 b) {
     return vec3(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
 }
 float fm_length3(vec3 v) {
     return fm_sqrt(fm_dot3(v, v));
+}
+float fm_length2(vec2 v) {
+    return fm_sqrt(fm_dot2(v, v));
 }
 // M v for a column-major 3 × 3 matrix: columns added in order.
 vec3 fm_mul33(mat3 m, vec3 v) {

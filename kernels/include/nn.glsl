@@ -21,11 +21,11 @@ float activate(float x) {
     } else if (ACT == ACT_LEAKY_RELU) {
         return x > 0.0 ? x : SLOPE * x;
     } else if (ACT == ACT_SIGMOID) {
-        return 1.0 / (1.0 + exp(-x));
+        return fm_sigmoid(x);
     } else if (ACT == ACT_TANH) {
         // |x| ≥ 10 is ±1 in f32; the clamp keeps exp finite.
-        float e = exp(2.0 * clamp(x, -10.0, 10.0));
-        return (e - 1.0) / (e + 1.0);
+        float e = fm_exp(2.0 * clamp(x, -10.0, 10.0));
+        return fm_div(e - 1.0, e + 1.0);
     }
     return x;
 }

@@ -169,11 +169,11 @@ void agg_add(inout Agg g, uint mode, float inv_t, float phi, uint anchor) {
             g.s = 1.0;
             g.aux = anchor;
         } else if (phi > g.m) {
-            g.s = g.s * exp((g.m - phi) * inv_t) + 1.0;
+            g.s = g.s * fm_exp((g.m - phi) * inv_t) + 1.0;
             g.m = phi;
             g.aux = anchor;
         } else {
-            g.s += exp((phi - g.m) * inv_t);
+            g.s += fm_exp((phi - g.m) * inv_t);
         }
     } else {
         float f = 1.0 - phi;
@@ -197,7 +197,7 @@ RayOut agg_finish(Agg g, uint mode, float temperature, float label) {
     } else if (mode == AGG_MAX) {
         r.psi = g.m;
     } else if (mode == AGG_LSE) {
-        r.psi = g.m + temperature * log(g.s);
+        r.psi = g.m + temperature * fm_log(g.s);
     } else {
         r.psi = g.aux > 0u ? 1.0 : 1.0 - g.s;
         r.aux_f = g.s;
@@ -210,12 +210,12 @@ RayOut agg_finish(Agg g, uint mode, float temperature, float label) {
 // dψ/dφ of one hit anchor with value `phi`, given the ray's forward result.
 float agg_grad(RayOut r, uint mode, float inv_t, float phi) {
     if (mode == AGG_LSE) {
-        return exp((phi - r.psi) * inv_t);
+        return fm_exp((phi - r.psi) * inv_t);
     }
     // Union: Π over the other hits of (1 − φ).
     float f = 1.0 - phi;
     if (r.aux == 0u) {
-        return r.aux_f / f;
+        return fm_div(r.aux_f, f);
     }
     if (r.aux == 1u && f == 0.0) {
         return r.aux_f;

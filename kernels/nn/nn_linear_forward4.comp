@@ -48,10 +48,10 @@ void main() {
         vec4 w1 = uintBitsToFloat(imageLoad(weights, int(w_at.y + t)));
         vec4 w2 = uintBitsToFloat(imageLoad(weights, int(w_at.z + t)));
         vec4 w3 = uintBitsToFloat(imageLoad(weights, int(w_at.w + t)));
-        acc0 += vec4(dot(w0, x0), dot(w0, x1), dot(w0, x2), dot(w0, x3));
-        acc1 += vec4(dot(w1, x0), dot(w1, x1), dot(w1, x2), dot(w1, x3));
-        acc2 += vec4(dot(w2, x0), dot(w2, x1), dot(w2, x2), dot(w2, x3));
-        acc3 += vec4(dot(w3, x0), dot(w3, x1), dot(w3, x2), dot(w3, x3));
+        acc0 += vec4(fm_dot4(w0, x0), fm_dot4(w0, x1), fm_dot4(w0, x2), fm_dot4(w0, x3));
+        acc1 += vec4(fm_dot4(w1, x0), fm_dot4(w1, x1), fm_dot4(w1, x2), fm_dot4(w1, x3));
+        acc2 += vec4(fm_dot4(w2, x0), fm_dot4(w2, x1), fm_dot4(w2, x2), fm_dot4(w2, x3));
+        acc3 += vec4(fm_dot4(w3, x0), fm_dot4(w3, x1), fm_dot4(w3, x2), fm_dot4(w3, x3));
     }
     mat4 acc = mat4(acc0, acc1, acc2, acc3);
     for (uint q = 0u; q < 4u; ++q) {

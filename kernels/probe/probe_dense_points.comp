@@ -46,15 +46,15 @@ void main() {
         float lo = pc.cube[a] - pc.cube.w;
         float hi = pc.cube[a] + pc.cube.w;
         if (d[a] != 0.0) {
-            float ta = (lo - o[a]) / d[a];
-            float tb = (hi - o[a]) / d[a];
+            float ta = fm_div(lo - o[a], d[a]);
+            float tb = fm_div(hi - o[a], d[a]);
             t0 = max(t0, min(ta, tb));
             t1 = min(t1, max(ta, tb));
         }
     }
     uint first = offsets[id];
     uint count = offsets[id + 1u] - first;
-    float dt = (t1 - t0) / float(max(count, 1u));
+    float dt = fm_div(t1 - t0, float(max(count, 1u)));
     for (uint k = 0u; k < count; ++k) {
         float t = t0 + (float(k) + 0.5) * dt;
         points[first + k] = vec4(o + t * d, 1.0);

@@ -32,13 +32,13 @@ float dpow(float x) {
     if (x == 0.0) {
         return 0.0; // p = 1: the subgradient 0 at the kink
     }
-    float a = pc.p == 1.0 ? 1.0 : pc.p * pow(abs(x), pc.p - 1.0);
+    float a = pc.p == 1.0 ? 1.0 : pc.p * fm_pow(abs(x), pc.p - 1.0);
     return x > 0.0 ? a : -a;
 }
 
 float powp(float x) {
     float a = abs(x);
-    return a == 0.0 ? 0.0 : (pc.p == 2.0 ? a * a : pow(a, pc.p));
+    return a == 0.0 ? 0.0 : (pc.p == 2.0 ? a * a : fm_pow(a, pc.p));
 }
 
 void main() {
@@ -54,8 +54,8 @@ void main() {
     for (uint c = 0u; c < 7u; ++c) {
         uint b = base + 7u * c;
         g[c] = vec3(phi[b + 1u] - phi[b + 2u], phi[b + 3u] - phi[b + 4u], phi[b + 5u] - phi[b + 6u]);
-        len[c] = length(g[c]);
-        n[c] = g[c] / max(len[c], pc.normal_eps);
+        len[c] = fm_length3(g[c]);
+        n[c] = fm_div3(g[c], max(len[c], pc.normal_eps));
         w[c] = abs(phi[b] - 0.5) < pc.epsilon;
     }
     float denom = 0.0;
@@ -74,11 +74,11 @@ void main() {
             }
             vec3 diff = n[0] - n[l];
             term += powp(diff.x) + powp(diff.y) + powp(diff.z);
-            vec3 gd = vec3(dpow(diff.x), dpow(diff.y), dpow(diff.z)) / denom;
+            vec3 gd = fm_div3(vec3(dpow(diff.x), dpow(diff.y), dpow(diff.z)), denom);
             dn[0] += gd;
             dn[l] -= gd;
         }
-        term /= denom;
+        term = fm_div(term, denom);
     }
     terms[j] = term;
     if (pc.write_grad == 0u) {
@@ -86,8 +86,8 @@ void main() {
     }
     for (uint c = 0u; c < 7u; ++c) {
         // d(g / max(|g|, eps))/dg: (I − n nᵀ) / |g| above eps, I / eps below.
-        vec3 dg = len[c] > pc.normal_eps ? (dn[c] - n[c] * dot(n[c], dn[c])) / len[c]
-                                         : dn[c] / pc.normal_eps;
+        vec3 dg = len[c] > pc.normal_eps ? fm_div3(dn[c] - n[c] * fm_dot3(n[c], dn[c]), len[c])
+                                         : fm_div3(dn[c], pc.normal_eps);
         dg *= pc.coef;
         uint b = base + 7u * c;
         float vals[7] = float[7](0.0, dg.x, -dg.x, dg.y, -dg.y, dg.z, -dg.z);

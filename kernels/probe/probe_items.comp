@@ -76,9 +76,9 @@ bool sphere_extent(vec4 a, vec4 a2, vec3 c, float tau, out vec2 ext) {
     if (!(qa > 0.0 && disc >= 0.0)) {
         return false;
     }
-    precise float r = sqrt(disc);
-    precise float lo = (qb - r) / qa;
-    precise float hi = (qb + r) / qa;
+    precise float r = fm_sqrt(disc);
+    precise float lo = fm_div(qb - r, qa);
+    precise float hi = fm_div(qb + r, qa);
     ext = vec2(lo, hi);
     return true;
 }
@@ -106,7 +106,7 @@ void main() {
         precise vec3 corner = p + pc.tau * sign;
         float den = affine(v.a2, corner);
         valid = valid && affine(v.depth, corner) > 0.0 && den > 0.0;
-        vec2 s = vec2(affine(v.a0, corner), affine(v.a1, corner)) / den;
+        vec2 s = fm_div2(vec2(affine(v.a0, corner), affine(v.a1, corner)), den);
         box = vec4(min(box.xy, s), max(box.zw, s));
     }
 
@@ -119,8 +119,8 @@ void main() {
     float h = float(pc.height);
     float smin = min(w, h);
     float den = affine(v.a2, p);
-    float sx = affine(v.a0, p) / den;
-    float sy = affine(v.a1, p) / den;
+    float sx = fm_div(affine(v.a0, p), den);
+    float sy = fm_div(affine(v.a1, p), den);
     // The pixel whose centre is nearest: c = floor((x S + W) / 2), r = floor((H − y S) / 2).
     precise float fc = floor((sx * smin + w) * 0.5);
     precise float fr = floor((h - sy * smin) * 0.5);

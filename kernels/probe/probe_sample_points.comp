@@ -50,11 +50,12 @@ void main() {
         p = q;
     } else {
         vec3 b = boundary[scale_u32(rand_u32(pc.key, id, 0u), pc.boundary_count)].xyz;
-        float r1 = sqrt(-2.0 * log(unit_float_open0(rand_u32(pc.key, id, 1u))));
+        float r1 = fm_sqrt(-2.0 * fm_log(unit_float_open0(rand_u32(pc.key, id, 1u))));
         float t1 = TWO_PI * unit_float(rand_u32(pc.key, id, 2u));
-        float r2 = sqrt(-2.0 * log(unit_float_open0(rand_u32(pc.key, id, 3u))));
+        float r2 = fm_sqrt(-2.0 * fm_log(unit_float_open0(rand_u32(pc.key, id, 3u))));
         float t2 = TWO_PI * unit_float(rand_u32(pc.key, id, 4u));
-        vec3 g = vec3(r1 * cos(t1), r1 * sin(t1), r2 * cos(t2));
+        vec2 sc1 = fm_sincos(t1);
+        vec3 g = vec3(r1 * sc1.y, r1 * sc1.x, r2 * fm_cos(t2));
         p = b + pc.sigma * g;
     }
     points[id] = vec4(clamp(p, lo, hi), 1.0);

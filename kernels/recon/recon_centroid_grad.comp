@@ -30,6 +30,6 @@ void main() {
         sum += partials[3u * (b * pc.vertex_count + i) + k];
     }
     uint slot = b * pc.stride + 3u * pc.vertex_count + k;
-    float c = tanh(0.1 * outputs[slot]);
+    float c = fm_tanh(0.1 * outputs[slot]);
     d_outputs[slot] = sum * ((1.0 - c * c) * 0.1);
 }

@@ -28,11 +28,11 @@ void main() {
     float total = 0.0;
     vec3 c = vec3(0.0);
     for (uint p = 0u; p < pc.palette; ++p) {
-        float e = exp(outputs[w0 + p] - m);
+        float e = fm_exp(outputs[w0 + p] - m);
         total += e;
         c += e * palette[b * pc.palette + p].rgb;
     }
-    c /= total;
+    c = fm_div3(c, total);
     for (uint k = 0u; k < pc.copies; ++k) {
         colors[(b * pc.copies + k) * pc.vertex_count + i] = vec4(c, 0.0);
     }

@@ -35,13 +35,13 @@ void main() {
     float total = 0.0;
     vec3 c = vec3(0.0);
     for (uint p = 0u; p < pc.palette; ++p) {
-        float e = exp(outputs[w0 + p] - m);
+        float e = fm_exp(outputs[w0 + p] - m);
         total += e;
         c += e * palette[b * pc.palette + p].rgb;
     }
-    c /= total;
+    c = fm_div3(c, total);
     for (uint p = 0u; p < pc.palette; ++p) {
-        float beta = exp(outputs[w0 + p] - m) / total;
-        d_outputs[w0 + p] = beta * dot(palette[b * pc.palette + p].rgb - c, g);
+        float beta = fm_div(fm_exp(outputs[w0 + p] - m), total);
+        d_outputs[w0 + p] = beta * fm_dot3(palette[b * pc.palette + p].rgb - c, g);
     }
 }

@@ -38,8 +38,8 @@ void main() {
     vec3 p;
     for (uint k = 0u; k < 3u; ++k) {
         uint t = 3u * i + k;
-        float c = tanh(0.1 * outputs[r0 + 3u * pc.vertex_count + k]);
-        float s = 1.0 / (1.0 + exp(-(base[t] + outputs[r0 + t])));
+        float c = fm_tanh(0.1 * outputs[r0 + 3u * pc.vertex_count + k]);
+        float s = fm_sigmoid(base[t] + outputs[r0 + t]);
         float v = s * signs[t];
         p[k] = 0.5 * ((max(v, 0.0) * (1.0 - c) - max(-v, 0.0) * (c + 1.0)) + c);
     }

@@ -46,8 +46,8 @@ void main() {
     uint r0 = b * pc.stride;
     for (uint k = 0u; k < 3u; ++k) {
         uint t = 3u * i + k;
-        float c = tanh(0.1 * outputs[r0 + 3u * pc.vertex_count + k]);
-        float s = 1.0 / (1.0 + exp(-(base[t] + outputs[r0 + t])));
+        float c = fm_tanh(0.1 * outputs[r0 + 3u * pc.vertex_count + k]);
+        float s = fm_sigmoid(base[t] + outputs[r0 + t]);
         float sign_t = signs[t];
         float v = s * sign_t;
         float gk = 0.5 * g[k];

@@ -28,9 +28,9 @@ void main() {
     float total = 0.0;
     vec3 c = vec3(0.0);
     for (uint k = 0u; k < cells; ++k) {
-        float e = exp(outputs[s0 + k] - m);
+        float e = fm_exp(outputs[s0 + k] - m);
         total += e;
         c += e * pooled[b * cells + k].rgb;
     }
-    palette[gid] = vec4(c / total, m + log(total));
+    palette[gid] = vec4(fm_div3(c, total), m + fm_log(total));
 }

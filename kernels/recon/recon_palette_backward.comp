@@ -38,15 +38,15 @@ void main() {
         }
         float total = 0.0;
         for (uint q = 0u; q < pc.palette; ++q) {
-            total += exp(outputs[w0 + q] - m);
+            total += fm_exp(outputs[w0 + q] - m);
         }
-        d_c += (exp(outputs[w0 + p] - m) / total) * g;
+        d_c += fm_div(fm_exp(outputs[w0 + p] - m), total) * g;
     }
     vec4 entry = palette[gid];
     uint cells = pc.grid * pc.grid;
     uint s0 = sampling_logit(b, p, 0u);
     for (uint k = 0u; k < cells; ++k) {
-        float a = exp(outputs[s0 + k] - entry.w);
-        d_outputs[s0 + k] = a * dot(pooled[b * cells + k].rgb - entry.rgb, d_c);
+        float a = fm_exp(outputs[s0 + k] - entry.w);
+        d_outputs[s0 + k] = a * fm_dot3(pooled[b * cells + k].rgb - entry.rgb, d_c);
     }
 }

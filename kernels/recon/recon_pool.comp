@@ -33,5 +33,5 @@ void main() {
                         images[(4u * b + 2u) * plane + p]);
         }
     }
-    pooled[gid] = vec4(sum / float(pc.pool * pc.pool), 0.0);
+    pooled[gid] = vec4(fm_div3(sum, float(pc.pool * pc.pool)), 0.0);
 }
