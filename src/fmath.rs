@@ -12,6 +12,10 @@
 //! it are returned as zero, decided by comparisons, so flushing and keeping devices agree.
 //! NaN results are NaN, but their payload bits are not promised.
 
+// The constants are written as in `fmath.glsl`, digit for digit, so that both round the same
+// decimal to the same f32.
+#![allow(clippy::excessive_precision)]
+
 const MIN_NORMAL: f32 = f32::MIN_POSITIVE;
 
 /// 2^k for −126 ≤ k ≤ 127, from its bits.
@@ -83,7 +87,10 @@ fn frexp(x: f32) -> (f32, i32) {
     let mant = bits & 0x007f_ffff;
     if field == 0 {
         let shift = 23 - (31 - (mant | 1).leading_zeros() as i32);
-        (f32::from_bits(((mant << shift) & 0x007f_ffff) | 0x3f80_0000), -126 - shift)
+        (
+            f32::from_bits(((mant << shift) & 0x007f_ffff) | 0x3f80_0000),
+            -126 - shift,
+        )
     } else {
         (f32::from_bits(mant | 0x3f80_0000), field as i32 - 127)
     }
@@ -115,7 +122,11 @@ pub fn div_rn(a: f32, b: f32) -> f32 {
         let below = rem + ((q - down) * 0.5) * ab;
         let odd = bits & 1 != 0;
         let q = if rem > 0.0 {
-            if above > 0.0 || (above == 0.0 && odd) { up } else { q }
+            if above > 0.0 || (above == 0.0 && odd) {
+                up
+            } else {
+                q
+            }
         } else if below < 0.0 || (below == 0.0 && odd) {
             down
         } else {
@@ -132,7 +143,11 @@ pub fn div_rn(a: f32, b: f32) -> f32 {
             (q * pow2(k + 64)) * pow2(-64)
         }
     };
-    if (a.to_bits() ^ b.to_bits()) >= 0x8000_0000 { -y } else { y }
+    if (a.to_bits() ^ b.to_bits()) >= 0x8000_0000 {
+        -y
+    } else {
+        y
+    }
 }
 
 /// √x: an inverse square root by Newton's iteration on m ∈ [1, 4), then one correction.
@@ -178,7 +193,7 @@ fn expm1_reduced(r: f32) -> f32 {
 
 const LN2_HI: f32 = 0.693_145_751_953_125;
 const LN2_LO: f32 = 1.428_606_765_330_187e-6;
-const LOG2E: f32 = 1.442_695_04;
+const LOG2E: f32 = std::f32::consts::LOG2_E; // GLSL's 1.44269504: the same f32
 
 /// k = round(x / ln 2) and r = x − k ln 2.
 fn reduce_ln2(x: f32) -> (f32, i32) {
@@ -304,7 +319,7 @@ pub fn sincos(x: f32) -> (f32, f32) {
         return (f32::NAN, f32::NAN);
     }
     let a = ftz(x);
-    let jf = (a * 0.636_619_772 + 0.5).floor();
+    let jf = (a * std::f32::consts::FRAC_2_PI + 0.5).floor(); // GLSL's 0.636619772
     let r = ((a - jf * PIO2_1) - jf * PIO2_2) - jf * PIO2_3;
     let z = r * r;
     let s = ((-1.951_529_589_1e-4 * z + 8.332_160_873_6e-3) * z - 1.666_665_461_1e-1) * z * r + r;
@@ -477,8 +492,14 @@ pub mod gpu {
         }
 
         /// `f(a[i], b[i])` for every i; `b` is empty for a unary function, else as long as `a`.
-        pub fn run(&self, ctx: &Context, function: Function, a: &[f32], b: &[f32]) -> Result<Vec<f32>> {
-            if function.binary() != !b.is_empty() || (function.binary() && a.len() != b.len()) {
+        pub fn run(
+            &self,
+            ctx: &Context,
+            function: Function,
+            a: &[f32],
+            b: &[f32],
+        ) -> Result<Vec<f32>> {
+            if function.binary() == b.is_empty() || (function.binary() && a.len() != b.len()) {
                 return Err(Error::Input(format!(
                     "fmath {}: {} first and {} second arguments",
                     function.name(),
@@ -500,7 +521,10 @@ pub mod gpu {
             let out = ctx.create_buffer("fmath out", bytes, crate::gpu::MemoryKind::Device)?;
             let push = Push {
                 n,
-                function: Function::ALL.iter().position(|f| *f == function).unwrap_or(0) as u32,
+                function: Function::ALL
+                    .iter()
+                    .position(|f| *f == function)
+                    .unwrap_or(0) as u32,
             };
             ctx.submit_and_wait(|rec| {
                 let bindings = specs::FmathEvalBindings {

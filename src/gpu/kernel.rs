@@ -347,6 +347,10 @@ mod tests {
             }
         }
         found.dedup();
-        assert!(found.is_empty(), "left to the driver:\n{}", found.join("\n"));
+        assert!(
+            found.is_empty(),
+            "left to the driver:\n{}",
+            found.join("\n")
+        );
     }
 }

@@ -13,6 +13,7 @@
 
 pub mod backward;
 pub mod binned;
+pub mod bits;
 pub mod brute;
 pub mod fine;
 pub mod fragments;
