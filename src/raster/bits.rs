@@ -11,6 +11,7 @@ use super::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
 use super::setup::{FACE_FINITE, FACE_FRONT, GpuFaceSetup};
 use crate::fmath;
 
+const MIN_DET: f32 = 1e-10;
 const CLIP_SUM_FLOOR: f32 = 1e-5;
 const TEXEL_TIE_ULPS: f32 = 8.0;
 const FLT_EPSILON: f32 = 1.192_092_9e-7;
@@ -42,8 +43,10 @@ struct Face {
     bbox: [f32; 4],
     flags: u32,
     mesh: u32,
+    det: f32,
     inv_z: V3,
     inv_len2: V3,
+    inv_det: f32,
 }
 
 fn face_of(s: &GpuFaceSetup) -> Face {
@@ -63,8 +66,14 @@ fn face_of(s: &GpuFaceSetup) -> Face {
         bbox: s.bbox,
         flags: s.flags,
         mesh: s.mesh,
+        det: s.det,
         inv_z,
         inv_len2,
+        inv_det: fmath::rcp(if s.det > 0.0 {
+            s.det.max(MIN_DET)
+        } else {
+            s.det.min(-MIN_DET)
+        }),
     }
 }
 
@@ -343,29 +352,486 @@ impl<'a> FineTwin<'a> {
         ([rgb[0], rgb[1], rgb[2], alpha], aux)
     }
 
+    /// Every rendered pixel of view `view`: RGBA (before any 2 × 2 average) and aux, row-major.
+    pub fn rendered(&self, view: u32) -> (Vec<[f32; 4]>, Vec<PixelAux>) {
+        let (w, h) = (self.push.width, self.push.height);
+        (0..h)
+            .flat_map(|row| (0..w).map(move |col| (col, row)))
+            .map(|(col, row)| self.pixel(view, col, row))
+            .unzip()
+    }
+
     /// Every output pixel of view `view` (after the 2 × 2 average with anti-aliasing) and every
     /// rendered pixel's aux, row-major.
     pub fn view(&self, view: u32) -> (Vec<[f32; 4]>, Vec<PixelAux>) {
         let (w, h) = (self.push.width, self.push.height);
-        let rendered: Vec<([f32; 4], PixelAux)> = (0..h)
-            .flat_map(|row| (0..w).map(move |col| (col, row)))
-            .map(|(col, row)| self.pixel(view, col, row))
-            .collect();
-        let aux = rendered.iter().map(|r| r.1).collect();
+        let (rendered, aux) = self.rendered(view);
         let images = if self.settings.antialias {
             let (ow, oh) = (w / 2, h / 2);
             (0..oh)
                 .flat_map(|row| (0..ow).map(move |col| (col, row)))
                 .map(|(col, row)| {
                     let at =
-                        |dc: u32, dr: u32| rendered[((2 * row + dr) * w + 2 * col + dc) as usize].0;
+                        |dc: u32, dr: u32| rendered[((2 * row + dr) * w + 2 * col + dc) as usize];
                     let (a, b, c, d) = (at(0, 0), at(1, 0), at(0, 1), at(1, 1));
                     [0, 1, 2, 3].map(|k| (((a[k] + b[k]) + c[k]) + d[k]) * 0.25)
                 })
                 .collect()
         } else {
-            rendered.iter().map(|r| r.0).collect()
+            rendered
         };
         (images, aux)
     }
+}
+
+/// One (pixel, face) contribution (`FaceGrad` of `raster_grad.glsl`).
+struct PairGrad {
+    screen: [V3; 3],
+    color: [V3; 3],
+    texel: u32,
+    colored: bool,
+}
+
+/// `Upstream` of `raster_grad.glsl`: what the backward reads of one rendered pixel.
+struct Upstream {
+    p: V2,
+    d_rgb: V3,
+    d_alpha: f32,
+    d_dot: f32,
+    inv_sum: f32,
+    ref_depth: f32,
+    alpha_acc: f32,
+    alpha_zeros: u32,
+    hard_face: u32,
+}
+
+/// `acc += x`, component by component.
+fn add3(acc: &mut V3, x: V3) {
+    *acc = [acc[0] + x[0], acc[1] + x[1], acc[2] + x[2]];
+}
+
+fn dot3(a: V3, b: V3) -> f32 {
+    fmath::dot3(a, b)
+}
+
+/// sigmoid'(x) = e / (1 + e)², e = exp(−|x|).
+fn sigmoid_grad(x: f32) -> f32 {
+    let e = fmath::exp(-x.abs());
+    fmath::div(e, (1.0 + e) * (1.0 + e))
+}
+
+/// The nearest edge as `nearest_edge` finds it: (d², a, e, ea, eb, t).
+fn nearest_edge(f: &Face, p: V2) -> (f32, V2, V2, usize, usize, f32) {
+    let mut best = (f32::INFINITY, [0.0; 2], [0.0; 2], 0, 1, 0.0);
+    for i in 0..3 {
+        let j = if i == 2 { 0 } else { i + 1 };
+        let va = [f.v[i][0], f.v[i][1]];
+        let ve = [f.v[j][0] - va[0], f.v[j][1] - va[1]];
+        let ti = clamp01(((p[0] - va[0]) * ve[0] + (p[1] - va[1]) * ve[1]) * f.inv_len2[i]);
+        let dx = va[0] + ti * ve[0] - p[0];
+        let dy = va[1] + ti * ve[1] - p[1];
+        let d2 = dx * dx + dy * dy;
+        if d2 < best.0 {
+            best = (d2, va, ve, i, j, ti);
+        }
+    }
+    best
+}
+
+/// The gradients the device's brute-force backward writes (`Renderer::backward` after a
+/// `Method::Brute` forward, read through an unlit lighting, whose share is exactly zero).
+pub struct BackwardTwin {
+    /// dL/d(world position) per vertex.
+    pub positions: Vec<V3>,
+    /// dL/d(lit colour) per texel slot (surface colours, face after face) or per vertex.
+    pub colors: Vec<V3>,
+}
+
+impl FineTwin<'_> {
+    fn upstream(
+        &self,
+        view: u32,
+        col: u32,
+        row: u32,
+        d_image: &[[f32; 4]],
+        rgba: [f32; 4],
+        aux: &PixelAux,
+    ) -> Upstream {
+        let pc = &self.push;
+        let g = if self.settings.antialias {
+            let (ow, oh) = (pc.width / 2, pc.height / 2);
+            d_image[(view * ow * oh + (row / 2) * ow + col / 2) as usize].map(|x| x * 0.25)
+        } else {
+            d_image[(view * pc.width * pc.height + row * pc.width + col) as usize]
+        };
+        Upstream {
+            p: pixel_center(col, row, pc.width, pc.height),
+            d_rgb: [g[0], g[1], g[2]],
+            d_alpha: g[3],
+            d_dot: dot3([g[0], g[1], g[2]], [rgba[0], rgba[1], rgba[2]]),
+            inv_sum: fmath::rcp(aux.softmax_sum),
+            ref_depth: aux.softmax_ref_depth,
+            alpha_acc: aux.alpha_acc,
+            alpha_zeros: aux.alpha_zeros,
+            hard_face: aux.hard_face,
+        }
+    }
+
+    fn alpha_grad(&self, u: &Upstream, d: f32) -> f32 {
+        match self.settings.alpha {
+            Alpha::Prod => {
+                let factor = 1.0 - d;
+                let others = if factor == 0.0 {
+                    if u.alpha_zeros == 1 { u.alpha_acc } else { 0.0 }
+                } else if u.alpha_zeros == 0 {
+                    fmath::div(u.alpha_acc, factor)
+                } else {
+                    0.0
+                };
+                u.d_alpha * others
+            }
+            Alpha::Sum => fmath::div(u.d_alpha, self.push.face_count as f32),
+            Alpha::Hard => 0.0,
+        }
+    }
+
+    /// `pixel_face_grad`: the face's contribution at the pixel, or `None` where it does not
+    /// touch it.
+    fn pixel_face_grad(&self, f: &Face, j: u32, u: &Upstream) -> Option<PairGrad> {
+        let pc = &self.push;
+        let s = &self.settings;
+        let alpha_only = self.alpha_only;
+        let p = u.p;
+        let b = f.bbox;
+        let outside = p[0] < b[0] || p[1] < b[1] || p[0] > b[2] || p[1] > b[3];
+        let live = (f.flags & FACE_FINITE) != 0 && !outside;
+        let w = barycentric(f, p);
+        let (d2, ea_pos, edge, ea, eb, t) = if s.dist == Dist::Euclidean {
+            nearest_edge(f, p)
+        } else {
+            (0.0, [0.0; 2], [0.0; 2], 0, 1, 0.0)
+        };
+        let inv_sigma = pc.inv_sigma;
+        let (covered, d) = match s.dist {
+            Dist::Hard => (inside_closed(w), 1.0),
+            Dist::Barycentric => {
+                let m = w[0].min(w[1]).min(w[2]);
+                let sm = m * m.abs();
+                (-sm < pc.cutoff, fmath::sigmoid(sm * inv_sigma))
+            }
+            Dist::Euclidean => {
+                let inside = strictly_inside(w);
+                let d = fmath::sigmoid((if inside { d2 } else { -d2 }) * inv_sigma);
+                (inside || d2 < pc.cutoff, d)
+            }
+        };
+        let hit = covered && live;
+        if !hit {
+            return None;
+        }
+        let c = w.map(clamp01);
+        let inv_clip_sum = fmath::rcp((c[0] + c[1] + c[2]).max(CLIP_SUM_FLOOR));
+        let wc = c.map(|x| x * inv_clip_sum);
+        let depth = if alpha_only {
+            None
+        } else {
+            depth_in_range(f, wc, pc.near, pc.far)
+        };
+        let z = depth.unwrap_or(0.0);
+        let colored = depth.is_some() && (s.double_sided || (f.flags & FACE_FRONT) != 0);
+        let mut g = PairGrad {
+            screen: [[0.0; 3]; 3],
+            color: [[0.0; 3]; 3],
+            texel: 0,
+            colored,
+        };
+
+        let mut d_cov = self.alpha_grad(u, d);
+        let mut d_color = [0.0; 3];
+        let mut d_z = 0.0;
+        if !alpha_only {
+            let cs = self.sample_color(f.mesh, j, wc);
+            match s.rgb {
+                Rgb::Softmax => {
+                    let e = fmath::exp((u.ref_depth - z) * pc.inv_gamma_range);
+                    let weight = d * e;
+                    let q = (dot3(u.d_rgb, cs) - u.d_dot) * u.inv_sum;
+                    if colored {
+                        d_color = u.d_rgb.map(|x| x * (weight * u.inv_sum));
+                        d_cov += q * e;
+                        d_z = -q * weight * pc.inv_gamma_range;
+                    }
+                }
+                Rgb::Hard => {
+                    if colored && u.hard_face == j {
+                        d_color = u.d_rgb;
+                    }
+                }
+            }
+        }
+
+        let mut d_w = [0.0f32; 3];
+        if !alpha_only {
+            let mut d_wc = [0.0f32; 3];
+            let depth = d_z != 0.0;
+            let d_inv = -z * z * d_z;
+            for k in 0..3 {
+                let izk = f.inv_z[k];
+                if depth {
+                    d_wc[k] += d_inv * izk;
+                    g.screen[k][2] -= d_inv * wc[k] * (izk * izk);
+                }
+            }
+            match s.color_mode {
+                ColorMode::Vertex => {
+                    let vi = self.inputs.faces[j as usize].map(|v| v + f.mesh * pc.vertex_count);
+                    for k in 0..3 {
+                        let ck = self.color_at(vi[k]);
+                        if colored {
+                            d_wc[k] += dot3(d_color, ck);
+                            g.color[k] = d_color.map(|x| x * wc[k]);
+                        }
+                    }
+                }
+                ColorMode::Surface => {
+                    g.texel = surface_texel_index(wc, pc.texture_res);
+                    if colored {
+                        g.color[0] = d_color;
+                    }
+                }
+            }
+            let raw_sum = c[0] + c[1] + c[2];
+            let renorm = if raw_sum >= CLIP_SUM_FLOOR {
+                dot3(d_wc, wc)
+            } else {
+                0.0
+            };
+            for k in 0..3 {
+                d_w[k] = if w[k] > 0.0 && w[k] < 1.0 {
+                    (d_wc[k] - renorm) * inv_clip_sum
+                } else {
+                    0.0
+                };
+            }
+        }
+
+        let mut d_xy_cov = [[0.0f32; 2]; 3];
+        let cov = alpha_only || d_cov != 0.0;
+        match s.dist {
+            Dist::Barycentric => {
+                let mut k = 0;
+                if w[1] < w[k] {
+                    k = 1;
+                }
+                if w[2] < w[k] {
+                    k = 2;
+                }
+                let m = w[k];
+                let x = m * m.abs() * inv_sigma;
+                let add = d_cov * sigmoid_grad(x) * 2.0 * m.abs() * inv_sigma;
+                if cov {
+                    d_w[k] += add;
+                }
+            }
+            Dist::Euclidean => {
+                let sgn: f32 = if strictly_inside(w) { 1.0 } else { -1.0 };
+                let d_d2 = d_cov * sigmoid_grad(sgn * d2 * inv_sigma) * sgn * inv_sigma;
+                let r = [
+                    ea_pos[0] + t * edge[0] - p[0],
+                    ea_pos[1] + t * edge[1] - p[1],
+                ];
+                let to_a = r.map(|x| d_d2 * 2.0 * (1.0 - t) * x);
+                let to_b = r.map(|x| d_d2 * 2.0 * t * x);
+                if cov {
+                    d_xy_cov[ea] = to_a;
+                    d_xy_cov[eb] = to_b;
+                }
+            }
+            Dist::Hard => {}
+        }
+
+        let mut d_xy = [[0.0f32; 2]; 3];
+        if !alpha_only || s.dist == Dist::Barycentric {
+            let clamped = if f.det > 0.0 {
+                f.det < MIN_DET
+            } else {
+                f.det > -MIN_DET
+            };
+            let d_det = if clamped {
+                0.0
+            } else {
+                -dot3(d_w, w) * f.inv_det
+            };
+            for k in 0..3 {
+                let ia = if k == 2 { 0 } else { k + 1 };
+                let ib = if k == 0 { 2 } else { k - 1 };
+                let va = [f.v[ia][0], f.v[ia][1]];
+                let vb = [f.v[ib][0], f.v[ib][1]];
+                let d_n = d_w[k] * f.inv_det;
+                d_xy[ia][0] += d_n * (vb[1] - p[1]);
+                d_xy[ia][1] += d_n * (p[0] - vb[0]);
+                d_xy[ib][0] += d_n * (p[1] - va[1]);
+                d_xy[ib][1] += d_n * (va[0] - p[0]);
+                d_xy[k][0] += d_det * (va[1] - vb[1]);
+                d_xy[k][1] += d_det * (vb[0] - va[0]);
+            }
+        }
+        for k in 0..3 {
+            g.screen[k][0] += d_xy[k][0] + d_xy_cov[k][0];
+            g.screen[k][1] += d_xy[k][1] + d_xy_cov[k][1];
+        }
+        Some(g)
+    }
+
+    /// The brute-force backward of views `0..views.len()` for `d_image` (output resolution,
+    /// view-major), given the forward's rendered images and aux of each view ([`FineTwin::view`]
+    /// at the rendered size: `rendered[v]`), the world positions (one mesh) and the views: each
+    /// face's pixels summed in row-major order in bands of `band_rows` rows, the bands in order,
+    /// then `grad_world.comp` and `grad_gather.comp`.
+    pub fn backward(
+        &self,
+        views: &[super::setup::GpuView],
+        positions: &[[f32; 3]],
+        d_image: &[[f32; 4]],
+        rendered: &[(Vec<[f32; 4]>, Vec<PixelAux>)],
+        band_rows: u32,
+    ) -> BackwardTwin {
+        let pc = &self.push;
+        let nf = pc.face_count as usize;
+        let vertex_colors = self.settings.color_mode == ColorMode::Vertex;
+        let slots = if vertex_colors {
+            3
+        } else {
+            (pc.texture_res * pc.texture_res) as usize
+        };
+        // Per (view, face): screen corners and colour slots.
+        let mut screen = vec![[[0.0f32; 3]; 3]; views.len() * nf];
+        let mut colors = vec![[0.0f32; 3]; views.len() * nf * slots];
+        for (v, (images, aux)) in rendered.iter().enumerate() {
+            let setups = &self.inputs.setups[v * nf..(v + 1) * nf];
+            for (j, setup) in setups.iter().enumerate() {
+                let f = face_of(setup);
+                if f.flags & FACE_FINITE == 0 {
+                    continue;
+                }
+                let item = v * nf + j;
+                let mut row0 = 0;
+                while row0 < pc.height {
+                    let mut acc = [[0.0f32; 3]; 3];
+                    let mut cacc = vec![[0.0f32; 3]; slots];
+                    for row in row0..(row0 + band_rows).min(pc.height) {
+                        for col in 0..pc.width {
+                            let id = (row * pc.width + col) as usize;
+                            let u =
+                                self.upstream(v as u32, col, row, d_image, images[id], &aux[id]);
+                            if u.d_alpha == 0.0 && (self.alpha_only || u.d_rgb == [0.0; 3]) {
+                                continue;
+                            }
+                            let Some(g) = self.pixel_face_grad(&f, j as u32, &u) else {
+                                continue;
+                            };
+                            for (acc, x) in acc.iter_mut().zip(g.screen) {
+                                add3(acc, x);
+                            }
+                            if g.colored {
+                                if vertex_colors {
+                                    for (acc, x) in cacc.iter_mut().zip(g.color) {
+                                        add3(acc, x);
+                                    }
+                                } else {
+                                    add3(&mut cacc[g.texel as usize], g.color[0]);
+                                }
+                            }
+                        }
+                    }
+                    // grad_reduce (and its texel twin): the bands in order onto zero.
+                    for (s, x) in screen[item].iter_mut().zip(acc) {
+                        add3(s, x);
+                    }
+                    for (s, &x) in colors[item * slots..(item + 1) * slots]
+                        .iter_mut()
+                        .zip(&cacc)
+                    {
+                        add3(s, x);
+                    }
+                    row0 += band_rows;
+                }
+            }
+        }
+        // grad_world.comp: each corner's screen gradient to world space.
+        let faces = self.inputs.faces;
+        let mut corner_world = vec![[[0.0f32; 3]; 3]; views.len() * nf];
+        for (v, view) in views.iter().enumerate() {
+            for j in 0..nf {
+                for c in 0..3 {
+                    let g = screen[v * nf + j][c];
+                    if g == [0.0; 3] {
+                        continue;
+                    }
+                    let p = positions[faces[j][c] as usize];
+                    corner_world[v * nf + j][c] = world_grad(view, p, g);
+                }
+            }
+        }
+        // grad_gather.comp: per vertex, its views in order, its (face, corner) slots in order.
+        let nv = pc.vertex_count as usize;
+        let adjacency = super::reference_grad::VertexFaces::new(faces, nv);
+        let mut out_pos = vec![[0.0f32; 3]; nv];
+        let mut out_col = if vertex_colors {
+            vec![[0.0f32; 3]; nv]
+        } else {
+            Vec::new()
+        };
+        for vtx in 0..nv {
+            let (b, e) = (
+                adjacency.offsets[vtx] as usize,
+                adjacency.offsets[vtx + 1] as usize,
+            );
+            for v in 0..views.len() {
+                for &slot in &adjacency.slots[b..e] {
+                    let (face, corner) = ((slot / 3) as usize, (slot % 3) as usize);
+                    let w = corner_world[v * nf + face][corner];
+                    add3(&mut out_pos[vtx], w);
+                    if vertex_colors {
+                        let c = colors[(v * nf + face) * slots + corner];
+                        add3(&mut out_col[vtx], c);
+                    }
+                }
+            }
+        }
+        if !vertex_colors {
+            // grad_reduce_texels: the views in order, onto zero.
+            out_col = vec![[0.0f32; 3]; nf * slots];
+            for v in 0..views.len() {
+                let view_colors = &colors[v * nf * slots..(v + 1) * nf * slots];
+                for (s, &x) in out_col.iter_mut().zip(view_colors) {
+                    add3(s, x);
+                }
+            }
+        }
+        BackwardTwin {
+            positions: out_pos,
+            colors: out_col,
+        }
+    }
+}
+
+/// `grad_world.comp` for a look-at view (perspective or orthographic).
+fn world_grad(view: &super::setup::GpuView, p: V3, g: V3) -> V3 {
+    use super::setup::PROJ_PERSPECTIVE;
+    let row = |k: usize| [view.rows[k][0], view.rows[k][1], view.rows[k][2]];
+    let rel = [p[0] - view.eye[0], p[1] - view.eye[1], p[2] - view.eye[2]];
+    let pcam = [dot3(row(0), rel), dot3(row(1), rel), dot3(row(2), rel)];
+    let d_cam = if view.projection == PROJ_PERSPECTIVE {
+        let k_xy = fmath::rcp(pcam[2] * view.param);
+        [
+            g[0] * k_xy,
+            g[1] * k_xy,
+            g[2] - fmath::div((g[0] * pcam[0] + g[1] * pcam[1]) * k_xy, pcam[2]),
+        ]
+    } else {
+        [g[0] * view.param, g[1] * view.param, g[2]]
+    };
+    let (r0, r1, r2) = (row(0), row(1), row(2));
+    [0, 1, 2].map(|a| (r0[a] * d_cam[0] + r1[a] * d_cam[1]) + r2[a] * d_cam[2])
 }
