@@ -179,15 +179,14 @@ pub fn sqrt(x: f32) -> f32 {
     s * pow2((e - odd) / 2)
 }
 
-/// exp(r) − 1 on the reduced range, Taylor to r⁸.
+/// exp(r) − 1 = r + r² P(r) on the reduced range, P Cephes's minimax.
 fn expm1_reduced(r: f32) -> f32 {
-    let mut p = 2.480_158_73e-5_f32;
-    p = 1.984_126_98e-4 + r * p;
-    p = 1.388_888_89e-3 + r * p;
-    p = 8.333_333_33e-3 + r * p;
-    p = 4.166_666_67e-2 + r * p;
-    p = 1.666_666_67e-1 + r * p;
-    p = 0.5 + r * p;
+    let mut p = 1.987_569_150_0e-4_f32;
+    p = 1.398_199_950_7e-3 + r * p;
+    p = 8.333_451_907_3e-3 + r * p;
+    p = 4.166_579_589_4e-2 + r * p;
+    p = 1.666_666_545_9e-1 + r * p;
+    p = 5.000_000_120_1e-1 + r * p;
     r + (r * r) * p
 }
 
@@ -201,7 +200,7 @@ fn reduce_ln2(x: f32) -> (f32, i32) {
     ((x - kf * LN2_HI) - kf * LN2_LO, kf as i32)
 }
 
-/// exp(x): 0 below ln(2⁻¹²⁶), +∞ above ln(f32::MAX).
+/// exp(x): 0 below −87 (no subnormal results), +∞ above ln(f32::MAX).
 pub fn exp(x: f32) -> f32 {
     if x.is_nan() {
         return x;
@@ -209,17 +208,16 @@ pub fn exp(x: f32) -> f32 {
     if x > 88.722_839_4 {
         return f32::INFINITY;
     }
-    if x < -87.336_547_9 {
+    if x < -87.0 {
         return 0.0;
     }
-    let (r, k) = reduce_ln2(ftz(x));
+    let (r, k) = reduce_ln2(x);
     let p = 1.0 + expm1_reduced(r);
-    let y = if k > 127 {
+    if k > 127 {
         (p * 2.0) * pow2(k - 1)
     } else {
         p * pow2(k)
-    };
-    ftz(y)
+    }
 }
 
 /// exp(x) − 1, without cancellation near zero.
@@ -278,9 +276,18 @@ pub fn log(x: f32) -> f32 {
     dk * LOG_LN2_HI - ((hfsq - (s * (hfsq + r) + dk * LOG_LN2_LO)) - f)
 }
 
-/// 1 / (1 + exp(−x)).
+/// 1 / (1 + exp(−x)) from e = exp(−|x|): 1 / (1 + e) for x ≥ 0, e / (1 + e) below.
 pub fn sigmoid(x: f32) -> f32 {
-    rcp(1.0 + exp(-x))
+    let e = exp(-x.abs());
+    let r = rcp(1.0 + e);
+    if x >= 0.0 { r } else { e * r }
+}
+
+/// sigmoid′(x) = e / (1 + e)², e = exp(−|x|).
+pub fn sigmoid_grad(x: f32) -> f32 {
+    let e = exp(-x.abs());
+    let r = rcp(1.0 + e);
+    e * r * r
 }
 
 /// tanh(x) = e / (e + 2) with e = expm1(2|x|), odd; ±1 beyond |x| = 9.
@@ -376,6 +383,7 @@ pub enum Function {
     Expm1,
     Log,
     Sigmoid,
+    SigmoidGrad,
     Tanh,
     Pow,
     Sin,
@@ -384,7 +392,7 @@ pub enum Function {
 
 impl Function {
     /// Every function, in the kernel's order.
-    pub const ALL: [Function; 12] = [
+    pub const ALL: [Function; 13] = [
         Function::Rcp,
         Function::Div,
         Function::DivRn,
@@ -393,6 +401,7 @@ impl Function {
         Function::Expm1,
         Function::Log,
         Function::Sigmoid,
+        Function::SigmoidGrad,
         Function::Tanh,
         Function::Pow,
         Function::Sin,
@@ -410,6 +419,7 @@ impl Function {
             Function::Expm1 => "expm1",
             Function::Log => "log",
             Function::Sigmoid => "sigmoid",
+            Function::SigmoidGrad => "sigmoid_grad",
             Function::Tanh => "tanh",
             Function::Pow => "pow",
             Function::Sin => "sin",
@@ -433,6 +443,7 @@ impl Function {
             Function::Expm1 => expm1(x),
             Function::Log => log(x),
             Function::Sigmoid => sigmoid(x),
+            Function::SigmoidGrad => sigmoid_grad(x),
             Function::Tanh => tanh(x),
             Function::Pow => pow(x, y),
             Function::Sin => sin(x),
@@ -450,6 +461,7 @@ impl Function {
             Function::Expm1 => x.exp_m1(),
             Function::Log => x.ln(),
             Function::Sigmoid => 1.0 / (1.0 + (-x).exp()),
+            Function::SigmoidGrad => (-x.abs()).exp() / (1.0 + (-x.abs()).exp()).powi(2),
             Function::Tanh => x.tanh(),
             Function::Pow => x.powf(y),
             Function::Sin => x.sin(),

@@ -34,9 +34,10 @@ void main() {
         case 5u: r = fm_expm1(x); break;
         case 6u: r = fm_log(x); break;
         case 7u: r = fm_sigmoid(x); break;
-        case 8u: r = fm_tanh(x); break;
-        case 9u: r = fm_pow(x, y); break;
-        case 10u: r = fm_sin(x); break;
+        case 8u: r = fm_sigmoid_grad(x); break;
+        case 9u: r = fm_tanh(x); break;
+        case 10u: r = fm_pow(x, y); break;
+        case 11u: r = fm_sin(x); break;
         default: r = fm_cos(x); break;
     }
     outputs[i] = r;

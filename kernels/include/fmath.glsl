@@ -148,15 +148,14 @@ float fm_sqrt(float x) {
     return x >= FM_MIN_NORMAL && x != FM_INF ? r : special;
 }
 
-// exp(r) − 1 for |r| ≤ ln(2)/2 + a little, Taylor to r^8 (the omitted term below 2^-30).
+// exp(r) − 1 = r + r² P(r) for |r| ≤ ln(2)/2 + a little, P Cephes's minimax (expf).
 float fm_expm1_reduced(float r) {
-    float p = 2.48015873e-5;        // 1/8!
-    p = 1.98412698e-4 + r * p;      // 1/7!
-    p = 1.38888889e-3 + r * p;      // 1/6!
-    p = 8.33333333e-3 + r * p;      // 1/5!
-    p = 4.16666667e-2 + r * p;      // 1/4!
-    p = 1.66666667e-1 + r * p;      // 1/3!
-    p = 0.5 + r * p;
+    float p = 1.9875691500e-4;
+    p = 1.3981999507e-3 + r * p;
+    p = 8.3334519073e-3 + r * p;
+    p = 4.1665795894e-2 + r * p;
+    p = 1.6666665459e-1 + r * p;
+    p = 5.0000001201e-1 + r * p;
     return r + (r * r) * p;
 }
 
@@ -164,8 +163,8 @@ float fm_expm1_reduced(float r) {
 const float FM_LN2_HI = 0.693145751953125;     // 0x3f317200
 const float FM_LN2_LO = 1.428606765330187e-06; // 0x35bfbe8e
 const float FM_LOG2E = 1.44269504;
-const float FM_EXP_MAX = 88.7228394;   // above: exp overflows
-const float FM_EXP_MIN = -87.3365479;  // below: exp is subnormal
+const float FM_EXP_MAX = 88.7228394;  // above: exp overflows
+const float FM_EXP_MIN = -87.0;       // below: 0 (exp(−87) = 1.6e-38, still normal)
 
 // k = round(x / ln 2) and r = x − k ln 2, for x clamped to [FM_EXP_MIN, FM_EXP_MAX]
 // (k ∈ [−126, 128]).
@@ -175,13 +174,14 @@ float fm_reduce_ln2(float x, out int k) {
     return (x - kf * FM_LN2_HI) - kf * FM_LN2_LO;
 }
 
-// exp(x); 0 below ln(2^-126) (no subnormal results), +inf above ln(FLT_MAX).
+// exp(x): 0 below −87 (no subnormal results), +inf above ln(FLT_MAX). A subnormal x needs no
+// flush: 1 + x and 1 + 0 are both 1.
 float fm_exp(float x) {
     int k;
-    float p = 1.0 + fm_expm1_reduced(fm_reduce_ln2(fm_ftz(x), k));
+    float p = 1.0 + fm_expm1_reduced(fm_reduce_ln2(x, k));
     // k ∈ [−126, 128]; 2^128 in two factors.
     float y = k > 127 ? (p * 2.0) * fm_pow2(127) : p * fm_pow2(k);
-    return isnan(x) ? x : (x > FM_EXP_MAX ? FM_INF : (x < FM_EXP_MIN ? 0.0 : fm_ftz(y)));
+    return isnan(x) ? x : (x > FM_EXP_MAX ? FM_INF : (x < FM_EXP_MIN ? 0.0 : y));
 }
 
 // exp(x) − 1, exact near zero (no cancellation).
@@ -220,9 +220,20 @@ float fm_log(float x) {
     return x >= FM_MIN_NORMAL && x != FM_INF ? y : special;
 }
 
-// 1 / (1 + exp(−x)).
+// 1 / (1 + exp(−x)), from e = exp(−|x|) (never overflows): 1 / (1 + e) for x ≥ 0, e / (1 + e)
+// below. `fm_sigmoid_grad` shares e and 1 / (1 + e), so a kernel that takes both pays for one
+// exp and one reciprocal (the compiler merges the identical operations).
 float fm_sigmoid(float x) {
-    return fm_rcp(1.0 + fm_exp(-x));
+    float e = fm_exp(-abs(x));
+    float r = fm_rcp(1.0 + e);
+    return x >= 0.0 ? r : e * r;
+}
+
+// sigmoid'(x) = e / (1 + e)² with e = exp(−|x|), without the cancellation of s (1 − s).
+float fm_sigmoid_grad(float x) {
+    float e = fm_exp(-abs(x));
+    float r = fm_rcp(1.0 + e);
+    return e * r * r;
 }
 
 // tanh(x) = e / (e + 2) with e = expm1(2|x|), odd; ±1 beyond |x| = 9.

@@ -9,9 +9,12 @@
 // - the softmax exponents are taken from depth differences, not from z̄ (`softmax_add_if`);
 // - a division by a per-face constant (1 / z_k, 1 / |edge|², 1 / det) is a multiplication by its
 //   reciprocal, taken once per face (`face_reciprocals`), and a division by σ or by the clip's
-//   sum a multiplication by 1 / σ or 1 / sum: a pair's steps divide 3 times (forward) or 5
-//   (backward) instead of 12 or 29. On llvmpipe a vector division is an 8-lane `vdivps`
-//   (throughput 5 cycles, latency 11) on the per-pair critical path.
+//   sum a multiplication by 1 / σ or 1 / sum: a pair's steps take 3 reciprocals (forward) or 4
+//   (backward) instead of 12 or 29 divisions;
+// - every exp, reciprocal and division is softvk's own (`fmath.glsl`), so the bits are the same
+//   on every device: a reciprocal is about 20 correctly rounded operations where a division was
+//   one instruction, so the fewer the better (the softmax takes one exp a pair, not two, and the
+//   coverage's sigmoid and its derivative share theirs).
 #ifndef SOFTVK_RASTER_GLSL
 #define SOFTVK_RASTER_GLSL
 
@@ -352,11 +355,14 @@ Softmax softmax_init(vec3 background, float background_depth) {
 void softmax_add_if(inout Softmax s, float z, float d, vec3 color, float inv_gamma_range,
                     bool apply) {
     bool closer = apply && z < s.ref_depth;
-    float rescale = fm_exp((z - s.ref_depth) * inv_gamma_range);
-    float sum = closer ? s.sum * rescale : s.sum;
-    vec3 rgb = closer ? s.rgb * rescale : s.rgb;
+    // One exp: a nearer face rescales the sums by e^{(z − ref) / ·} and weighs d e^0 = d; a
+    // farther one weighs d e^{(ref − z) / ·}. Both exponents are −|z − ref| · inv_gamma_range
+    // (exact negations), so this is the two-exp form's bits.
+    float e = fm_exp(-abs(z - s.ref_depth) * inv_gamma_range);
+    float sum = closer ? s.sum * e : s.sum;
+    vec3 rgb = closer ? s.rgb * e : s.rgb;
     float ref_depth = closer ? z : s.ref_depth;
-    float weight = d * fm_exp((ref_depth - z) * inv_gamma_range);
+    float weight = closer ? d : d * e;
     s.sum = apply ? sum + weight : s.sum;
     s.rgb = apply ? rgb + weight * color : s.rgb;
     s.ref_depth = ref_depth;

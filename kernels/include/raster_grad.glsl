@@ -106,8 +106,7 @@ float alpha_grad(Upstream u, float d) {
 
 // sigmoid'(x) without the cancellation of D (1 - D).
 float sigmoid_grad(float x) {
-    float e = fm_exp(-abs(x));
-    return fm_div(e, (1.0 + e) * (1.0 + e));
+    return fm_sigmoid_grad(x);
 }
 
 // One (pixel, face) contribution: dL/d(screen vertex (x_s, y_s, z)) of each corner, and the

@@ -280,13 +280,15 @@ impl<'a> FineTwin<'a> {
         match self.settings.rgb {
             Rgb::Softmax => {
                 let color = self.sample_color(f.mesh, j, wc);
-                if z < s.ref_depth {
-                    let rescale = fmath::exp((z - s.ref_depth) * pc.inv_gamma_range);
-                    s.sum *= rescale;
-                    s.rgb = s.rgb.map(|c| c * rescale);
+                let e = fmath::exp(-(z - s.ref_depth).abs() * pc.inv_gamma_range);
+                let weight = if z < s.ref_depth {
+                    s.sum *= e;
+                    s.rgb = s.rgb.map(|c| c * e);
                     s.ref_depth = z;
-                }
-                let weight = d * fmath::exp((s.ref_depth - z) * pc.inv_gamma_range);
+                    d
+                } else {
+                    d * e
+                };
                 s.sum += weight;
                 s.rgb = [0, 1, 2].map(|k| s.rgb[k] + weight * color[k]);
             }
@@ -412,12 +414,6 @@ fn add3(acc: &mut V3, x: V3) {
 
 fn dot3(a: V3, b: V3) -> f32 {
     fmath::dot3(a, b)
-}
-
-/// sigmoid'(x) = e / (1 + e)², e = exp(−|x|).
-fn sigmoid_grad(x: f32) -> f32 {
-    let e = fmath::exp(-x.abs());
-    fmath::div(e, (1.0 + e) * (1.0 + e))
 }
 
 /// The nearest edge as `nearest_edge` finds it: (d², a, e, ea, eb, t).
@@ -628,14 +624,14 @@ impl FineTwin<'_> {
                 }
                 let m = w[k];
                 let x = m * m.abs() * inv_sigma;
-                let add = d_cov * sigmoid_grad(x) * 2.0 * m.abs() * inv_sigma;
+                let add = d_cov * fmath::sigmoid_grad(x) * 2.0 * m.abs() * inv_sigma;
                 if cov {
                     d_w[k] += add;
                 }
             }
             Dist::Euclidean => {
                 let sgn: f32 = if strictly_inside(w) { 1.0 } else { -1.0 };
-                let d_d2 = d_cov * sigmoid_grad(sgn * d2 * inv_sigma) * sgn * inv_sigma;
+                let d_d2 = d_cov * fmath::sigmoid_grad(sgn * d2 * inv_sigma) * sgn * inv_sigma;
                 let r = [
                     ea_pos[0] + t * edge[0] - p[0],
                     ea_pos[1] + t * edge[1] - p[1],
