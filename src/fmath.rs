@@ -376,10 +376,12 @@ pub fn length3(v: [f32; 3]) -> f32 {
 #[allow(missing_docs)] // each is the function of the same name above
 pub enum Function {
     Rcp,
+    Rcp1To2,
     Div,
     DivRn,
     Sqrt,
     Exp,
+    ExpLe0,
     Expm1,
     Log,
     Sigmoid,
@@ -392,12 +394,14 @@ pub enum Function {
 
 impl Function {
     /// Every function, in the kernel's order.
-    pub const ALL: [Function; 13] = [
+    pub const ALL: [Function; 15] = [
         Function::Rcp,
+        Function::Rcp1To2,
         Function::Div,
         Function::DivRn,
         Function::Sqrt,
         Function::Exp,
+        Function::ExpLe0,
         Function::Expm1,
         Function::Log,
         Function::Sigmoid,
@@ -412,10 +416,12 @@ impl Function {
     pub fn name(self) -> &'static str {
         match self {
             Function::Rcp => "rcp",
+            Function::Rcp1To2 => "rcp_1_2",
             Function::Div => "div",
             Function::DivRn => "div_rn",
             Function::Sqrt => "sqrt",
             Function::Exp => "exp",
+            Function::ExpLe0 => "exp_le0",
             Function::Expm1 => "expm1",
             Function::Log => "log",
             Function::Sigmoid => "sigmoid",
@@ -427,6 +433,16 @@ impl Function {
         }
     }
 
+    /// Whether `x` is in its domain: the kernel's hot-path variants (`fm_rcp_1_2`, `fm_exp_le0`)
+    /// promise the general function's bits on theirs only.
+    pub fn domain(self, x: f32) -> bool {
+        match self {
+            Function::Rcp1To2 => (1.0..=2.0).contains(&x) || x.is_nan(),
+            Function::ExpLe0 => x <= 0.0 || x.is_nan(),
+            _ => true,
+        }
+    }
+
     /// Whether it reads its second argument.
     pub fn binary(self) -> bool {
         matches!(self, Function::Div | Function::DivRn | Function::Pow)
@@ -435,11 +451,11 @@ impl Function {
     /// The CPU twin: `f(x, y)` (`y` unused by unary functions).
     pub fn eval(self, x: f32, y: f32) -> f32 {
         match self {
-            Function::Rcp => rcp(x),
+            Function::Rcp | Function::Rcp1To2 => rcp(x),
             Function::Div => div(x, y),
             Function::DivRn => div_rn(x, y),
             Function::Sqrt => sqrt(x),
-            Function::Exp => exp(x),
+            Function::Exp | Function::ExpLe0 => exp(x),
             Function::Expm1 => expm1(x),
             Function::Log => log(x),
             Function::Sigmoid => sigmoid(x),
@@ -454,10 +470,10 @@ impl Function {
     /// The f64 function it approximates, for accuracy checks.
     pub fn reference(self, x: f64, y: f64) -> f64 {
         match self {
-            Function::Rcp => 1.0 / x,
+            Function::Rcp | Function::Rcp1To2 => 1.0 / x,
             Function::Div | Function::DivRn => x / y,
             Function::Sqrt => x.sqrt(),
-            Function::Exp => x.exp(),
+            Function::Exp | Function::ExpLe0 => x.exp(),
             Function::Expm1 => x.exp_m1(),
             Function::Log => x.ln(),
             Function::Sigmoid => 1.0 / (1.0 + (-x).exp()),

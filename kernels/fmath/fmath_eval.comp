@@ -27,17 +27,19 @@ void main() {
     float r;
     switch (pc.function) {
         case 0u: r = fm_rcp(x); break;
-        case 1u: r = fm_div(x, y); break;
-        case 2u: r = fm_div_rn(x, y); break;
-        case 3u: r = fm_sqrt(x); break;
-        case 4u: r = fm_exp(x); break;
-        case 5u: r = fm_expm1(x); break;
-        case 6u: r = fm_log(x); break;
-        case 7u: r = fm_sigmoid(x); break;
-        case 8u: r = fm_sigmoid_grad(x); break;
-        case 9u: r = fm_tanh(x); break;
-        case 10u: r = fm_pow(x, y); break;
-        case 11u: r = fm_sin(x); break;
+        case 1u: r = fm_rcp_1_2(x); break;
+        case 2u: r = fm_div(x, y); break;
+        case 3u: r = fm_div_rn(x, y); break;
+        case 4u: r = fm_sqrt(x); break;
+        case 5u: r = fm_exp(x); break;
+        case 6u: r = fm_exp_le0(x); break;
+        case 7u: r = fm_expm1(x); break;
+        case 8u: r = fm_log(x); break;
+        case 9u: r = fm_sigmoid(x); break;
+        case 10u: r = fm_sigmoid_grad(x); break;
+        case 11u: r = fm_tanh(x); break;
+        case 12u: r = fm_pow(x, y); break;
+        case 13u: r = fm_sin(x); break;
         default: r = fm_cos(x); break;
     }
     outputs[i] = r;

@@ -52,6 +52,18 @@ float fm_rcp(float x) {
     return !(abs(x) >= FM_MIN_NORMAL) ? tiny : (e >= 126 ? huge : r);
 }
 
+// fm_rcp(x) for x ∈ [1, 2] (or NaN), its bits without the exponent and special cases: for the
+// sigmoid's 1 / (1 + e), e ∈ [0, 1], taken at every (pixel, face) pair.
+float fm_rcp_1_2(float x) {
+    bool two = x >= 2.0;
+    float m = two ? 1.0 : x;  // the mantissa: 2 is 1 · 2^1
+    float y = 1.4117647 - 0.47058824 * m;
+    y = y + y * (1.0 - m * y);
+    y = y + y * (1.0 - m * y);
+    y = y + y * (1.0 - m * y);
+    return two ? y * 0.5 : y;
+}
+
 // a / b as a · (1 / b): within 2 ulps; a subnormal a or result reads as zero.
 float fm_div(float a, float b) {
     return fm_ftz(fm_ftz(a) * fm_rcp(b));
@@ -184,6 +196,14 @@ float fm_exp(float x) {
     return isnan(x) ? x : (x > FM_EXP_MAX ? FM_INF : (x < FM_EXP_MIN ? 0.0 : y));
 }
 
+// fm_exp(x) for x ≤ 0 (or NaN), its bits without the overflow cases: for the exponents of the
+// sigmoid and the softmax, taken at every (pixel, face) pair.
+float fm_exp_le0(float x) {
+    int k;
+    float p = 1.0 + fm_expm1_reduced(fm_reduce_ln2(x, k));
+    return isnan(x) ? x : (x < FM_EXP_MIN ? 0.0 : p * fm_pow2(min(k, 0)));
+}
+
 // exp(x) − 1, exact near zero (no cancellation).
 float fm_expm1(float x) {
     int k;
@@ -224,15 +244,15 @@ float fm_log(float x) {
 // below. `fm_sigmoid_grad` shares e and 1 / (1 + e), so a kernel that takes both pays for one
 // exp and one reciprocal (the compiler merges the identical operations).
 float fm_sigmoid(float x) {
-    float e = fm_exp(-abs(x));
-    float r = fm_rcp(1.0 + e);
+    float e = fm_exp_le0(-abs(x));
+    float r = fm_rcp_1_2(1.0 + e);
     return x >= 0.0 ? r : e * r;
 }
 
 // sigmoid'(x) = e / (1 + e)² with e = exp(−|x|), without the cancellation of s (1 − s).
 float fm_sigmoid_grad(float x) {
-    float e = fm_exp(-abs(x));
-    float r = fm_rcp(1.0 + e);
+    float e = fm_exp_le0(-abs(x));
+    float r = fm_rcp_1_2(1.0 + e);
     return e * r * r;
 }
 

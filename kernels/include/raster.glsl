@@ -358,7 +358,7 @@ void softmax_add_if(inout Softmax s, float z, float d, vec3 color, float inv_gam
     // One exp: a nearer face rescales the sums by e^{(z − ref) / ·} and weighs d e^0 = d; a
     // farther one weighs d e^{(ref − z) / ·}. Both exponents are −|z − ref| · inv_gamma_range
     // (exact negations), so this is the two-exp form's bits.
-    float e = fm_exp(-abs(z - s.ref_depth) * inv_gamma_range);
+    float e = fm_exp_le0(-abs(z - s.ref_depth) * inv_gamma_range);
     float sum = closer ? s.sum * e : s.sum;
     vec3 rgb = closer ? s.rgb * e : s.rgb;
     float ref_depth = closer ? z : s.ref_depth;

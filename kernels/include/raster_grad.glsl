@@ -158,7 +158,8 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
     if (!ALPHA_ONLY) {
         vec3 c = sample_color(f.mesh, j, wc);
         if (MODE_RGB == RGB_SOFTMAX) {
-            float e = fm_exp((u.ref_depth - z) * pc.inv_gamma_range);
+            // ref_depth ≤ z for every face the softmax took (it is the nearest depth seen).
+            float e = fm_exp_le0((u.ref_depth - z) * pc.inv_gamma_range);
             float weight = d * e;
             float q = (fm_dot3(u.d_rgb, c) - u.d_dot) * u.inv_sum;
             d_color = g.colored ? u.d_rgb * (weight * u.inv_sum) : vec3(0.0);
