@@ -18,7 +18,8 @@
 //!   oracle of the GPU kernels) and of the backward ([`raster::reference_grad`], checked by
 //!   finite differences); the GPU face setup, the tiled and brute-force fine passes and the
 //!   backward, driven by [`raster::gpu::Renderer`], with what a forward leaves for its backward
-//!   as types ([`raster::binned`]: an exact run, guarded bins); and PyTorch3D's rasterizer
+//!   as types ([`raster::binned`]: an exact run, guarded bins), the f32 bit twins of the fine
+//!   pass and the backward ([`raster::bits`]); and PyTorch3D's rasterizer
 //!   ([`raster::fragments`]: the K nearest faces of every pixel, forward and backward, with its
 //!   f64 twin).
 //! - [`fit`]: the fitting building blocks as kernels — silhouette losses, Laplacian and flatten

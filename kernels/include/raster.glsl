@@ -120,12 +120,13 @@ Face face_none() {
 }
 
 // `camera::pixel_center`: x_p = (2c + 1 - W) / S, y_p = (2(H - 1 - r) + 1 - H) / S, S = min(W, H).
-// Every operand is an integer below 2^24, so only the division (`fm_div`) rounds.
+// Every operand is an integer below 2^24, so only the division rounds: correctly (`fm_div_rn`),
+// once per pixel.
 vec2 pixel_center(uint col, uint row, uint width, uint height) {
     float w = float(width);
     float h = float(height);
     float s = min(w, h);
-    return vec2(fm_div(2.0 * float(col) + 1.0 - w, s), fm_div(2.0 * (h - 1.0 - float(row)) + 1.0 - h, s));
+    return vec2(fm_div_rn(2.0 * float(col) + 1.0 - w, s), fm_div_rn(2.0 * (h - 1.0 - float(row)) + 1.0 - h, s));
 }
 
 // `reference::outside_bbox` (strict, as SoftRas's check_border).

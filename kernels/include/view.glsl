@@ -24,8 +24,8 @@ vec3 project_matrix(View view, vec3 p) {
     float x = view.rows[0].x * p.x + view.rows[0].y * p.y + view.rows[0].z * p.z + view.rows[0].w;
     float y = view.rows[1].x * p.x + view.rows[1].y * p.y + view.rows[1].z * p.z + view.rows[1].w;
     float z = view.rows[2].x * p.x + view.rows[2].y * p.y + view.rows[2].z * p.z + view.rows[2].w;
-    float x1 = fm_div(x, z + 1e-5);
-    float y1 = fm_div(y, z + 1e-5);
+    float x1 = fm_div_rn(x, z + 1e-5);  // correctly rounded, as torch's composed projection
+    float y1 = fm_div_rn(y, z + 1e-5);
     float k1 = view.dist.x;
     float k2 = view.dist.y;
     float p1 = view.dist.z;
@@ -35,7 +35,7 @@ vec3 project_matrix(View view, vec3 p) {
     float x2 = x1 * radial + 2.0 * p1 * x1 * y1 + p2 * (r2 + 2.0 * x1 * x1);
     float y2 = y1 * radial + p1 * (r2 + 2.0 * y1 * y1) + 2.0 * p2 * x1 * y1;
     float half_size = view.param * 0.5;
-    return vec3(fm_div(x2 - half_size, half_size), fm_div(y2 - half_size, half_size), z);
+    return vec3(fm_div_rn(x2 - half_size, half_size), fm_div_rn(y2 - half_size, half_size), z);
 }
 
 #endif

@@ -46,7 +46,10 @@ vec3 to_screen(View view, vec3 p) {
                   view.rows[1].x * d.x + view.rows[1].y * d.y + view.rows[1].z * d.z,
                   view.rows[2].x * d.x + view.rows[2].y * d.y + view.rows[2].z * d.z);
     if (view.projection == PROJ_PERSPECTIVE) {
-        return vec3(fm_div(fm_div(c.x, c.z), view.param), fm_div(fm_div(c.y, c.z), view.param), c.z);
+        // Correctly rounded (as torch's composed projection and the f64 twin's rounding expect):
+        // per face, so its cost is nothing beside the fine pass.
+        return vec3(fm_div_rn(fm_div_rn(c.x, c.z), view.param),
+                    fm_div_rn(fm_div_rn(c.y, c.z), view.param), c.z);
     }
     return vec3(c.x * view.param, c.y * view.param, c.z);
 }
@@ -87,7 +90,7 @@ float look_at_det(View view, vec3 q0, vec3 q1, vec3 q2, vec3 z) {
     precise float det_r = k.x * rz.x + k.y * rz.y + k.z * rz.z;
     precise float t2 = view.param * view.param;
     precise float zzz = z.x * z.y * z.z;
-    return fm_div(fm_div(det_r * triple, t2), zzz);
+    return fm_div_rn(fm_div_rn(det_r * triple, t2), zzz);
 }
 
 bool finite3(vec3 v) {
@@ -129,9 +132,11 @@ void main() {
         ? screen_det
         : look_at_det(view, q0, q1, q2, vec3(p0.z, p1.z, p2.z));
     float clamped = det > 0.0 ? max(det, MIN_DET) : min(det, -MIN_DET);
-    s.inv[0] = fm_div4(vec4(p1.y - p2.y, p2.x - p1.x, p1.x * p2.y - p2.x * p1.y, 0.0), clamped);
-    s.inv[1] = fm_div4(vec4(p2.y - p0.y, p0.x - p2.x, p2.x * p0.y - p0.x * p2.y, 0.0), clamped);
-    s.inv[2] = fm_div4(vec4(p0.y - p1.y, p1.x - p0.x, p0.x * p1.y - p1.x * p0.y, 0.0), clamped);
+    // Correctly rounded, as every per-face division here: the setup is per face, and the
+    // barycentrics of a pixel near an edge are that sensitive.
+    s.inv[0] = fm_div_rn4(vec4(p1.y - p2.y, p2.x - p1.x, p1.x * p2.y - p2.x * p1.y, 0.0), clamped);
+    s.inv[1] = fm_div_rn4(vec4(p2.y - p0.y, p0.x - p2.x, p2.x * p0.y - p0.x * p2.y, 0.0), clamped);
+    s.inv[2] = fm_div_rn4(vec4(p0.y - p1.y, p1.x - p0.x, p0.x * p1.y - p1.x * p0.y, 0.0), clamped);
 
     bool finite = finite3(p0) && finite3(p1) && finite3(p2);
     // `reference::is_numerically_degenerate` at f32 rounding, with a wide margin: a face whose

@@ -1,10 +1,13 @@
-//! The bit twin of the forward's fine pass: `raster_fine.glsl`'s `shade_face` and `pixel_finish`
+//! The bit twins of the forward's fine pass and of the backward: `raster_fine.glsl`'s `shade_face` and `pixel_finish`
 //! (and `raster.glsl`'s functions they call, and the 2 × 2 downsampling) evaluated in f32,
 //! operation for operation, with softmax's `exp`, the sigmoid, reciprocals and divisions from
 //! [`crate::fmath`]. Given the face setups and lit colours a forward left on the device, it gives
-//! the device's image and aux byte for byte (`tests/raster_bits.rs`): the device's result is the
-//! IEEE evaluation of the written operations, which every conformant device reproduces. The f64
-//! twin ([`super::reference`]) stays the accuracy reference.
+//! the device's image and aux byte for byte (`tests/raster_bits.rs`); [`FineTwin::backward`] does
+//! the same for the backward (`raster_grad.glsl`'s per-pixel chain, the brute force's sums,
+//! `grad_world.comp` and `grad_gather.comp`) and the device's gradients. The device's result is
+//! then the IEEE evaluation of the written operations, which every conformant device
+//! reproduces. The f64 twins ([`super::reference`], [`super::reference_grad`]) stay the accuracy
+//! references.
 
 use super::fine::{PixelAux, RasterPush};
 use super::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
@@ -167,8 +170,8 @@ fn pixel_center(col: u32, row: u32, width: u32, height: u32) -> V2 {
     let h = height as f32;
     let s = w.min(h);
     [
-        fmath::div(2.0 * col as f32 + 1.0 - w, s),
-        fmath::div(2.0 * (h - 1.0 - row as f32) + 1.0 - h, s),
+        fmath::div_rn(2.0 * col as f32 + 1.0 - w, s),
+        fmath::div_rn(2.0 * (h - 1.0 - row as f32) + 1.0 - h, s),
     ]
 }
 
