@@ -41,26 +41,25 @@ fn mantissa(bits: u32) -> f32 {
 pub fn rcp(x: f32) -> f32 {
     let bits = x.to_bits();
     let sign = bits & 0x8000_0000;
-    let ax = x.abs();
-    // Written as GLSL's `!(ax >= MIN)`: true for zero, subnormal and NaN.
-    #[allow(clippy::neg_cmp_op_on_partial_ord)]
-    if !(ax >= MIN_NORMAL) {
-        return if x.is_nan() {
+    let mag = bits & 0x7fff_ffff;
+    if mag < 0x0080_0000 {
+        return f32::from_bits(sign | 0x7f80_0000); // zero and subnormal
+    }
+    if mag >= 0x7e80_0000 {
+        // From 2^126 (|1/x| ≤ 2^-126) and infinite: a signed zero; NaN stays.
+        return if mag > 0x7f80_0000 {
             x
         } else {
-            f32::from_bits(sign | 0x7f80_0000)
+            f32::from_bits(sign)
         };
-    }
-    let e = ((bits >> 23) & 0xff) as i32 - 127;
-    if e >= 126 {
-        return f32::from_bits(sign);
     }
     let m = mantissa(bits);
     let mut y = 1.411_764_7 - 0.470_588_24 * m;
     for _ in 0..3 {
         y = y + y * (1.0 - m * y);
     }
-    f32::from_bits(sign | (y * pow2(-e)).to_bits())
+    // y · 2^-e by y's exponent field: normal for e ≤ 125.
+    f32::from_bits(((y.to_bits() + 0x3f80_0000) - (bits & 0x7f80_0000)) | sign)
 }
 
 /// a / b as a · (1 / b).

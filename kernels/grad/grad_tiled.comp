@@ -92,6 +92,74 @@ float center_y(int r) {
     return pixel_center(0u, uint(r), pc.width, pc.height).y;
 }
 
+// The tile's pixel centres, taken once per tile instead of for every pixel of every segment a
+// subgroup visits, and eight per face by `segment_rect` (each coordinate of a centre is a
+// correctly rounded division, about 130 operations): lane k holds the x of the tile's column k and the y
+// of its row k in `x0` and `y0`, those of column and row L + k in `x1` and `y1` (L lanes), and a
+// lane finds any of them with one or two shuffles. Where the tile's side is at most 2 L and both
+// sizes are known (the default tile of 8 from 4 lanes up); elsewhere every pixel takes its own,
+// with the same function: the same bits.
+struct TileCentres {
+    float x0;
+    float x1;
+    float y0;
+    float y1;
+};
+
+bool centre_table() {
+    return TILE_SIZE != 0u && SUBGROUP_SIZE != 0u && TILE_SIZE <= 2u * subgroup_lanes();
+}
+
+TileCentres tile_centres(uint col0, uint row0) {
+    uint lanes = subgroup_lanes();
+    uint lane = gl_SubgroupInvocationID;
+    TileCentres t;
+    t.x0 = center_x(int(col0 + lane));
+    t.y0 = center_y(int(row0 + lane));
+    t.x1 = TILE_SIZE > lanes ? center_x(int(col0 + lanes + lane)) : 0.0;
+    t.y1 = TILE_SIZE > lanes ? center_y(int(row0 + lanes + lane)) : 0.0;
+    return t;
+}
+
+// Entry k (< the tile size) of a table's axis (`x0`, `x1` or `y0`, `y1`). Every lane must be
+// active.
+float centre_at(float s0, float s1, uint k) {
+    uint lanes = subgroup_lanes();
+    float a = subgroupShuffle(s0, k % lanes);
+    if (TILE_SIZE <= lanes) {
+        return a;
+    }
+    float b = subgroupShuffle(s1, k % lanes);
+    return k < lanes ? a : b;
+}
+
+// `segment_rect` from the tile's centres: the same rect (centres grow with the column and fall
+// with the row, so the columns in the box's x range are those past the ones left of it and up to
+// the last at most its right, counted over the tile's columns inside the image; rows likewise).
+uvec4 segment_rect_table(Face f, TileCentres t, uint col0, uint row0) {
+    if ((f.flags & FACE_FINITE) == 0u) {
+        return uvec4(1u, 0u, 0u, 0u);
+    }
+    uint left_of = 0u;  // tile columns whose centre is left of the box
+    uint up_to = 0u;    // tile columns whose centre is at most its right
+    uint above = 0u;    // tile rows whose centre is above the box
+    uint down_to = 0u;  // tile rows whose centre is at least its bottom
+    for (uint k = 0u; k < tile_size(); ++k) {
+        float x = centre_at(t.x0, t.x1, k);
+        float y = centre_at(t.y0, t.y1, k);
+        bool column = col0 + k < pc.width;
+        bool row = row0 + k < pc.height;
+        left_of += column && x < f.bbox.x ? 1u : 0u;
+        up_to += column && x <= f.bbox.z ? 1u : 0u;
+        above += row && y > f.bbox.w ? 1u : 0u;
+        down_to += row && y >= f.bbox.y ? 1u : 0u;
+    }
+    if (up_to <= left_of || down_to <= above) {
+        return uvec4(1u, 0u, 0u, 0u);
+    }
+    return uvec4(left_of, above, up_to - 1u, down_to - 1u);
+}
+
 // The pixels of the tile whose first pixel is (col0, row0) that a segment must hold for face
 // `f` to be kept there, as tile columns and rows x0, y0, x1, y1 (inclusive): those whose centres
 // lie in `f`'s box in x and in y. The first and last such column and row are found by the
@@ -145,8 +213,8 @@ uvec4 segment_rect(Face f, uint col0, uint row0) {
 // its upstream, its ballot of the faces whose box meets its live pixels' and those faces'
 // contributions (see the header).
 void visit_group(uint group0, uint segments, Face f, uint face, uint o, uvec4 reach,
-                 uint tx, uint ty, uint gview, inout vec3 acc[3], inout vec3 cacc[3],
-                 inout uint written) {
+                 TileCentres centres, uint tx, uint ty, uint gview, inout vec3 acc[3],
+                 inout vec3 cacc[3], inout uint written) {
     uint lanes = subgroup_lanes();
     uint lane = gl_SubgroupInvocationID;
     uint pixels = tile_size() * tile_size();
@@ -169,7 +237,13 @@ void visit_group(uint group0, uint segments, Face f, uint face, uint o, uvec4 re
         uint col = tx * tile_size() + at.x;
         uint row = (pc.first_row + ty) * tile_size() + at.y;
         bool live = i < pixels && lane < lanes && col < pc.width && row < pc.height;
-        Upstream u = live ? load_upstream(gview, col, row) : zero_upstream();
+        vec2 p;
+        if (centre_table()) {
+            p = vec2(centre_at(centres.x0, centres.x1, at.x), centre_at(centres.y0, centres.y1, at.y));
+        } else {
+            p = pixel_center(col, row, pc.width, pc.height);
+        }
+        Upstream u = live ? load_upstream_at(gview, col, row, p) : zero_upstream();
         live = live && !upstream_is_zero(u);
         vec2 lo = lane_min(live ? u.p : vec2(inf));
         vec2 hi = lane_max(live ? u.p : vec2(-inf));
@@ -295,6 +369,12 @@ void main() {
     uint pixels = tile_size() * tile_size();
 
     uint lane = gl_SubgroupInvocationID;
+    uint col0 = tx * tile_size();
+    uint row0 = (pc.first_row + ty) * tile_size();
+    TileCentres centres = TileCentres(0.0, 0.0, 0.0, 0.0);
+    if (centre_table()) {
+        centres = tile_centres(col0, row0);
+    }
     // The workgroup's faces go to its subgroups `lanes` at a time, round robin.
     for (uint start = first + gl_SubgroupID * lanes; start < last;
          start += gl_NumSubgroups * lanes) {
@@ -321,15 +401,17 @@ void main() {
         // the subgroup takes the union; the loop below skips only segments whose ballot would
         // be empty, so every sum is the same, bit for bit.
         uint segments = (pixels + lanes - 1u) / lanes;
-        uvec4 reach = segment_rect(f, tx * tile_size(), (pc.first_row + ty) * tile_size());
+        uvec4 reach = centre_table() ? segment_rect_table(f, centres, col0, row0)
+                                     : segment_rect(f, col0, row0);
         // With the tile and subgroup sizes known, one group needs no loop around it (a loop
         // level cost spot-256's backward 4 % on llvmpipe, even run once).
         if (TILE_SIZE != 0u && SUBGROUP_SIZE != 0u && segments <= 32u) {
-            visit_group(0u, segments, f, face, o, reach, tx, ty, gview, acc, cacc, written);
+            visit_group(0u, segments, f, face, o, reach, centres, tx, ty, gview, acc, cacc,
+                        written);
         } else {
             for (uint group0 = 0u; group0 < segments; group0 += 32u) {
-                visit_group(group0, segments, f, face, o, reach, tx, ty, gview, acc, cacc,
-                            written);
+                visit_group(group0, segments, f, face, o, reach, centres, tx, ty, gview, acc,
+                            cacc, written);
             }
         }
         if (has) {

@@ -39,21 +39,23 @@ float fm_ftz(float x) {
 // at the end (on a SIMD device a branch costs as much as both sides); the main path's operands
 // are clamped where a special input would make them meaningless, never where they matter.
 
-// 1 / x. Newton's iteration from a linear start on the mantissa m ∈ [1, 2), then the exponent.
+// 1 / x. Newton's iteration from a linear start on the mantissa m ∈ [1, 2), then the exponent
+// (by the bits: integer operations where a multiplication by 2^-e would need the power built).
 float fm_rcp(float x) {
     uint bits = floatBitsToUint(x);
-    uint sign = bits & 0x80000000u;
-    int e = int((bits >> 23) & 0xffu) - 127;
+    uint mag = bits & 0x7fffffffu;
     float m = uintBitsToFloat((bits & 0x007fffffu) | 0x3f800000u);
     float y = 1.4117647 - 0.47058824 * m;  // 24/17 − 8/17 m: |error| ≤ 1/17
     y = y + y * (1.0 - m * y);
     y = y + y * (1.0 - m * y);
     y = y + y * (1.0 - m * y);  // |error| ≤ (1/17)^8 before rounding
-    // y ∈ (0.5, 1] and −e ≥ −125: y · 2^-e is normal.
-    float r = uintBitsToFloat(sign | floatBitsToUint(y * fm_pow2(clamp(-e, -125, 126))));
-    float tiny = isnan(x) ? x : uintBitsToFloat(sign | 0x7f800000u);  // zero, subnormal, NaN
-    float huge = uintBitsToFloat(sign);  // |1/x| ≤ 2^-126, or x infinite: zero
-    return !(abs(x) >= FM_MIN_NORMAL) ? tiny : (e >= 126 ? huge : r);
+    // y ∈ (0.5, 1] times 2^-e, e = the exponent field − 127 ≤ 125 here: normal, so the exact
+    // product y · 2^-e, taken by subtracting e from y's exponent field.
+    uint sign = bits & 0x80000000u;
+    float r = uintBitsToFloat(((floatBitsToUint(y) + 0x3f800000u) - (bits & 0x7f800000u)) | sign);
+    // Zero and subnormal: ±inf. From 2^126 (e ≥ 126: |1/x| ≤ 2^-126) and infinite: ±0. NaN.
+    return mag < 0x00800000u ? uintBitsToFloat(sign | 0x7f800000u)
+         : (mag >= 0x7e800000u ? (mag > 0x7f800000u ? x : uintBitsToFloat(sign)) : r);
 }
 
 // fm_rcp(x) for x ∈ [1, 2] (or NaN), its bits without the exponent and special cases: for the

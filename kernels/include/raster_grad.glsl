@@ -64,9 +64,10 @@ bool upstream_is_zero(Upstream u) {
     return u.d_alpha == 0.0 && (ALPHA_ONLY || u.d_rgb == vec3(0.0));
 }
 
-// The upstream of rendered pixel (col, row) of view `view` (absolute): with anti-aliasing, the
-// output pixel's gradient / 4 (`reference_grad::upsample_grad_2x2`).
-Upstream load_upstream(uint view, uint col, uint row) {
+// The upstream of rendered pixel (col, row) of view `view` (absolute), centred at `p`
+// (`pixel_center(col, row, ...)`): with anti-aliasing, the output pixel's gradient / 4
+// (`reference_grad::upsample_grad_2x2`).
+Upstream load_upstream_at(uint view, uint col, uint row, vec2 p) {
     uint id = view * pc.width * pc.height + row * pc.width + col;
     vec4 g;
     if (ANTIALIAS) {
@@ -78,7 +79,7 @@ Upstream load_upstream(uint view, uint col, uint row) {
     vec4 rgba = image_at(id);
     PixelAux a = aux_at(id);
     Upstream u;
-    u.p = pixel_center(col, row, pc.width, pc.height);
+    u.p = p;
     u.d_rgb = g.rgb;
     u.d_alpha = g.a;
     u.d_dot = fm_dot3(g.rgb, rgba.rgb);
@@ -88,6 +89,10 @@ Upstream load_upstream(uint view, uint col, uint row) {
     u.alpha_zeros = a.alpha_zeros;
     u.hard_face = a.hard_face;
     return u;
+}
+
+Upstream load_upstream(uint view, uint col, uint row) {
+    return load_upstream_at(view, col, row, pixel_center(col, row, pc.width, pc.height));
 }
 
 // `PixelUpstream::alpha_grad`: dL/dA · ∂A/∂D_j, exact from the zero count.
