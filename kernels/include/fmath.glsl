@@ -316,8 +316,8 @@ vec3 fm_div3(vec3 a, float b) {
 vec4 fm_div4(vec4 a, float b) {
     return vec4(fm_div(a.x, b), fm_div(a.y, b), fm_div(a.z, b), fm_div(a.w, b));
 }
-vec4 fm_div_rn4(vec4 a, float b) {
-    return vec4(fm_div_rn(a.x, b), fm_div_rn(a.y, b), fm_div_rn(a.z, b), fm_div_rn(a.w, b));
+vec3 fm_div_rn3(vec3 a, float b) {
+    return vec3(fm_div_rn(a.x, b), fm_div_rn(a.y, b), fm_div_rn(a.z, b));
 }
 vec4 fm_div4v(vec4 a, vec4 b) {
     return vec4(fm_div(a.x, b.x), fm_div(a.y, b.y), fm_div(a.z, b.z), fm_div(a.w, b.w));

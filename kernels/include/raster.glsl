@@ -41,22 +41,24 @@ const float MIN_DET = 1e-10;
 const float CLIP_SUM_FLOOR = 1e-5;
 
 // One face in one view after setup. Twin of `GpuFaceSetup` (src/raster/setup.rs) and of
-// `reference::FaceSetup`. 128 bytes, std430.
+// `reference::FaceSetup`. 128 bytes, std430. The fourth words hold the reciprocals the per-pixel
+// steps multiply by (`face_reciprocals`), taken once per face by the setup rather than by every
+// kernel that loads the face (each is about 25 operations: the tiled kernels load a face once
+// per (face, tile) entry, brute force once per pair).
 struct FaceSetup {
-    vec4 v[3];    // screen-space vertices (x_s, y_s, z, 0)
-    vec4 inv[3];  // rows of M_j (clamped determinant), (a, b, c, 0): w_k = a x + b y + c
+    vec4 v[3];    // screen-space vertices and 1 / depth (x_s, y_s, z, 1 / z)
+    vec4 inv[3];  // rows of M_j (clamped determinant), (a, b, c, 1 / |edge k|²): w_k = a x + b y + c
     vec4 bbox;    // grown screen box (x_min, y_min, x_max, y_max)
     uint flags;   // FACE_FRONT | FACE_FINITE | FACE_DEGENERATE
     uint mesh;    // the batch's mesh the face belongs to (its view's)
     float det;    // the screen determinant, unclamped (`face_setup.comp`; its sign is FACE_FRONT's)
-    uint pad1;
+    float inv_det; // 1 / the clamped determinant
 };
 
-// What the per-pixel steps read of a `FaceSetup` (22 of its 32 words) and the reciprocals they
-// multiply by (`face_reciprocals`). The tiled kernels hold one face per lane and broadcast it
-// across the subgroup one word per shuffle (a shuffle is one permute on llvmpipe, a division
-// an 8-lane `vdivps`; a word no step reads is never shuffled: the compiler drops it); brute
-// force builds it from the setup per pair (`face_of`), with the same arithmetic.
+// What the per-pixel steps read of a `FaceSetup` (29 of its 32 words). The tiled kernels hold
+// one face per lane and broadcast it across the subgroup one word per shuffle (a shuffle is one
+// permute on llvmpipe; a word no step reads is never shuffled: the compiler drops it); brute
+// force builds it from the setup per pair (`face_of`).
 struct Face {
     vec3 v[3];      // screen-space vertices (x_s, y_s, z)
     vec2 inv[3];    // (a, b) of the rows of M_j
@@ -69,8 +71,8 @@ struct Face {
     float inv_det;  // 1 / the clamped determinant
 };
 
-// Fills the reciprocals of a face whose vertices are set. One function for every kernel, so
-// brute force and tiled get the same bits.
+// Fills the reciprocals of a face whose vertices and determinant are set: the face setup's,
+// stored in its record for every kernel that reads it.
 void face_reciprocals(inout Face f) {
     for (uint k = 0u; k < 3u; ++k) {
         uint j = k == 2u ? 0u : k + 1u;
@@ -96,7 +98,9 @@ Face face_of(FaceSetup s) {
     f.flags = s.flags;
     f.mesh = s.mesh;
     f.det = s.det;
-    face_reciprocals(f);
+    f.inv_z = vec3(s.v[0].w, s.v[1].w, s.v[2].w);
+    f.inv_len2 = vec3(s.inv[0].w, s.inv[1].w, s.inv[2].w);
+    f.inv_det = s.inv_det;
     return f;
 }
 

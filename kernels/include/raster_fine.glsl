@@ -38,15 +38,19 @@ Face load_face(uint index) {
     int t = int(index * 8u);
     Face f;
     for (int k = 0; k < 3; ++k) {
-        f.v[k] = uintBitsToFloat(imageLoad(setups, t + k).xyz);
-        f.inv[k] = uintBitsToFloat(imageLoad(setups, t + 3 + k).xy);
+        vec4 v = uintBitsToFloat(imageLoad(setups, t + k));
+        vec4 inv = uintBitsToFloat(imageLoad(setups, t + 3 + k));
+        f.v[k] = v.xyz;
+        f.inv_z[k] = v.w;
+        f.inv[k] = inv.xy;
+        f.inv_len2[k] = inv.w;
     }
     f.bbox = uintBitsToFloat(imageLoad(setups, t + 6));
     uvec4 last = imageLoad(setups, t + 7);
     f.flags = last.x;
     f.mesh = last.y;
     f.det = uintBitsToFloat(last.z);
-    face_reciprocals(f);
+    f.inv_det = uintBitsToFloat(last.w);
     return f;
 }
 

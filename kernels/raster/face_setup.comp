@@ -134,9 +134,9 @@ void main() {
     float clamped = det > 0.0 ? max(det, MIN_DET) : min(det, -MIN_DET);
     // Correctly rounded, as every per-face division here: the setup is per face, and the
     // barycentrics of a pixel near an edge are that sensitive.
-    s.inv[0] = fm_div_rn4(vec4(p1.y - p2.y, p2.x - p1.x, p1.x * p2.y - p2.x * p1.y, 0.0), clamped);
-    s.inv[1] = fm_div_rn4(vec4(p2.y - p0.y, p0.x - p2.x, p2.x * p0.y - p0.x * p2.y, 0.0), clamped);
-    s.inv[2] = fm_div_rn4(vec4(p0.y - p1.y, p1.x - p0.x, p0.x * p1.y - p1.x * p0.y, 0.0), clamped);
+    s.inv[0] = vec4(fm_div_rn3(vec3(p1.y - p2.y, p2.x - p1.x, p1.x * p2.y - p2.x * p1.y), clamped), 0.0);
+    s.inv[1] = vec4(fm_div_rn3(vec3(p2.y - p0.y, p0.x - p2.x, p2.x * p0.y - p0.x * p2.y), clamped), 0.0);
+    s.inv[2] = vec4(fm_div_rn3(vec3(p0.y - p1.y, p1.x - p0.x, p0.x * p1.y - p1.x * p0.y), clamped), 0.0);
 
     bool finite = finite3(p0) && finite3(p1) && finite3(p2);
     // `reference::is_numerically_degenerate` at f32 rounding, with a wide margin: a face whose
@@ -180,6 +180,17 @@ void main() {
     }
     s.mesh = view.mesh;
     s.det = det;
-    s.pad1 = 0u;
+    // The reciprocals every kernel that loads the face multiplies by, once.
+    Face f = face_none();
+    f.v[0] = p0;
+    f.v[1] = p1;
+    f.v[2] = p2;
+    f.det = det;
+    face_reciprocals(f);
+    for (uint k = 0u; k < 3u; ++k) {
+        s.v[k].w = f.inv_z[k];
+        s.inv[k].w = f.inv_len2[k];
+    }
+    s.inv_det = f.inv_det;
     setups[id] = s;
 }

@@ -82,12 +82,12 @@ void main() {
         uint row = row0 + by * 8u + at.y;
         bool valid = col < pc.width && row < pc.height;
         vec2 p = pixel_center(col, row, pc.width, pc.height);
-        // The box of this subgroup's pixel centres (lanes past the image's edge count as the
-        // edge).
-        vec2 edge = pixel_center(min(col, pc.width - 1u), min(row, pc.height - 1u), pc.width,
-                                 pc.height);
-        vec2 lo = lane_min(edge);
-        vec2 hi = lane_max(edge);
+        // The box of this subgroup's pixel centres inside the image: a lane past the image's
+        // edge writes nothing, so its centre need not be in the box (a face that misses the
+        // box changes no pixel that is written, the same bits).
+        float inf = uintBitsToFloat(0x7f800000u);
+        vec2 lo = lane_min(valid ? p : vec2(inf));
+        vec2 hi = lane_max(valid ? p : vec2(-inf));
 
         uint pixel = (pc.first_view + view) * pc.width * pc.height + row * pc.width + col;
         PixelState s = begin > 0u && valid ? carry_load(pixel) : pixel_init();

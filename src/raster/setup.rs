@@ -131,13 +131,17 @@ impl GpuView {
 }
 
 /// One face in one view after setup. Twin of `FaceSetup` in `kernels/include/raster.glsl` and of
-/// [`reference::FaceSetup`]; std430, 128 bytes.
+/// [`reference::FaceSetup`]; std430, 128 bytes. The fourth words of `v` and `inv`, and `inv_det`,
+/// are the reciprocals ([`crate::fmath::rcp`]) the fine and backward kernels multiply by, taken
+/// once per face here rather than by every kernel that loads the face.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuFaceSetup {
-    /// Screen-space vertices `(x_s, y_s, z, 0)`.
+    /// Screen-space vertices and their reciprocal depths `(x_s, y_s, z, 1 / z)`.
     pub v: [[f32; 4]; 3],
-    /// Rows `(a, b, c, 0)` of `M_j` (determinant clamped to ±1e-10): `w_k = a x + b y + c`.
+    /// Rows `(a, b, c, 1 / |e_k|²)` of `M_j` (determinant clamped to ±1e-10): `w_k = a x + b y
+    /// + c`; the fourth is the reciprocal squared length of edge k, from vertex k to the next (0
+    /// for a zero-length edge).
     pub inv: [[f32; 4]; 3],
     /// Grown screen box `[x_min, y_min, x_max, y_max]`.
     pub bbox: [f32; 4],
@@ -151,8 +155,8 @@ pub struct GpuFaceSetup {
     /// `face_setup.comp`), not from the f32 screen vertices, whose rounding can flip the sign of
     /// a face seen nearly edge-on.
     pub det: f32,
-    /// std430 padding.
-    pub pad: u32,
+    /// 1 / the clamped determinant.
+    pub inv_det: f32,
 }
 
 /// Push constants of `face_setup.comp`.
