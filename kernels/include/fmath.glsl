@@ -39,16 +39,20 @@ float fm_ftz(float x) {
 // at the end (on a SIMD device a branch costs as much as both sides); the main path's operands
 // are clamped where a special input would make them meaningless, never where they matter.
 
-// 1 / x. Newton's iteration from a linear start on the mantissa m ∈ [1, 2), then the exponent
-// (by the bits: integer operations where a multiplication by 2^-e would need the power built).
-float fm_rcp(float x) {
-    uint bits = floatBitsToUint(x);
-    uint mag = bits & 0x7fffffffu;
-    float m = uintBitsToFloat((bits & 0x007fffffu) | 0x3f800000u);
+// 1 / m for m ∈ [1, 2): Newton's iteration from a linear start, in (0.5, 1].
+float fm_rcp_mantissa(float m) {
     float y = 1.4117647 - 0.47058824 * m;  // 24/17 − 8/17 m: |error| ≤ 1/17
     y = y + y * (1.0 - m * y);
     y = y + y * (1.0 - m * y);
-    y = y + y * (1.0 - m * y);  // |error| ≤ (1/17)^8 before rounding
+    return y + y * (1.0 - m * y);  // |error| ≤ (1/17)^8 before rounding
+}
+
+// 1 / x: the mantissa's reciprocal, then the exponent (by the bits: integer operations where a
+// multiplication by 2^-e would need the power built).
+float fm_rcp(float x) {
+    uint bits = floatBitsToUint(x);
+    uint mag = bits & 0x7fffffffu;
+    float y = fm_rcp_mantissa(uintBitsToFloat((bits & 0x007fffffu) | 0x3f800000u));
     // y ∈ (0.5, 1] times 2^-e, e = the exponent field − 127 ≤ 125 here: normal, so the exact
     // product y · 2^-e, taken by subtracting e from y's exponent field.
     uint sign = bits & 0x80000000u;
@@ -62,11 +66,7 @@ float fm_rcp(float x) {
 // sigmoid's 1 / (1 + e), e ∈ [0, 1], taken at every (pixel, face) pair.
 float fm_rcp_1_2(float x) {
     bool two = x >= 2.0;
-    float m = two ? 1.0 : x;  // the mantissa: 2 is 1 · 2^1
-    float y = 1.4117647 - 0.47058824 * m;
-    y = y + y * (1.0 - m * y);
-    y = y + y * (1.0 - m * y);
-    y = y + y * (1.0 - m * y);
+    float y = fm_rcp_mantissa(two ? 1.0 : x);  // the mantissa: 2 is 1 · 2^1
     return two ? y * 0.5 : y;
 }
 
@@ -113,7 +113,7 @@ float fm_div_rn(float a, float b) {
     int eb;
     float A = fm_frexp(a, ea);
     float B = fm_frexp(b, eb);
-    float r = fm_rcp(B);
+    float r = fm_rcp_mantissa(B);  // fm_rcp(B)
     float q = A * r;
     float p;
     float e;
@@ -129,11 +129,12 @@ float fm_div_rn(float a, float b) {
     bool odd = (bits & 1u) != 0u;
     q = rem > 0.0 ? ((above > 0.0 || (above == 0.0 && odd)) ? up : q)
                   : ((below < 0.0 || (below == 0.0 && odd)) ? down : q);
-    // q ∈ [0.5, 2]: scale by 2^k in steps that keep every product but the last normal.
+    // q ∈ [0.5, 2]: scale by 2^k in two steps that keep every product but the last normal:
+    // 2^127 then the rest above the normal range, 2^(k + 64) then 2^-64 below it.
     int k = ea - eb;
-    float y = k > 127 ? (q * fm_pow2(127)) * fm_pow2(min(k - 127, 127))
-            : (k >= -126 ? q * fm_pow2(max(k, -126))
-                         : (q * fm_pow2(max(k + 64, -126))) * fm_pow2(-64));
+    int k1 = k > 127 ? 127 : (k >= -126 ? k : max(k + 64, -126));
+    int k2 = k > 127 ? min(k - 127, 127) : (k >= -126 ? 0 : -64);
+    float y = (q * fm_pow2(k1)) * fm_pow2(k2);
     y = k < -189 ? 0.0 : y;
     // Zeros, infinities and NaN.
     bool a_zero = (floatBitsToUint(a) & 0x7fffffffu) == 0u;
@@ -205,9 +206,13 @@ float fm_exp(float x) {
 // fm_exp(x) for x ≤ 0 (or NaN), its bits without the overflow cases: for the exponents of the
 // sigmoid and the softmax, taken at every (pixel, face) pair.
 float fm_exp_le0(float x) {
-    int k;
-    float p = 1.0 + fm_expm1_reduced(fm_reduce_ln2(x, k));
-    return isnan(x) ? x : (x < FM_EXP_MIN ? 0.0 : p * fm_pow2(min(k, 0)));
+    // fm_reduce_ln2 with x ≤ 0 needs no upper clamp: k ≤ 0.
+    float kf = floor(max(x, FM_EXP_MIN) * FM_LOG2E + 0.5);
+    float r = (x - kf * FM_LN2_HI) - kf * FM_LN2_LO;
+    float p = 1.0 + fm_expm1_reduced(r);
+    // p · 2^k by the exponent field: normal (exp(−87) is), so the exact product.
+    float y = uintBitsToFloat(floatBitsToUint(p) + uint(int(kf) << 23));
+    return isnan(x) ? x : (x < FM_EXP_MIN ? 0.0 : y);
 }
 
 // exp(x) − 1, exact near zero (no cancellation).

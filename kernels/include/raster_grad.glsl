@@ -219,7 +219,10 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
             if (w[1] < w[k]) k = 1u;
             if (w[2] < w[k]) k = 2u;
             float m = w[k];
-            float x = m * abs(m) * inv_sigma;
+            // The coverage's own argument (`coverage_from`: the same operations, so the
+            // compiler shares the sigmoid's exponential and reciprocal; ±0 alike there).
+            float least = min(min(w.x, w.y), w.z);
+            float x = least * abs(least) * inv_sigma;
             float add = d_cov * sigmoid_grad(x) * 2.0 * abs(m) * inv_sigma;
             for (uint c = 0u; c < 3u; ++c) {
                 d_w[c] = cov && c == k ? d_w[c] + add : d_w[c];
@@ -227,8 +230,11 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
         } else if (MODE_DIST == DIST_EUCLIDEAN) {
             // Through the nearest edge (a, b) as `euclidean_dist2` picks it, to its two
             // vertices (selects, not a per-lane index; 0 + x = x).
-            float sgn = strictly_inside(w) ? 1.0 : -1.0;
-            float d_d2 = d_cov * sigmoid_grad(sgn * d2 * inv_sigma) * sgn * inv_sigma;
+            // The coverage's own argument (`coverage_from`: the same operations, so the
+            // compiler shares the exponential and the reciprocal with the sigmoid's).
+            bool inside = strictly_inside(w);
+            float sgn = inside ? 1.0 : -1.0;
+            float d_d2 = d_cov * sigmoid_grad((inside ? d2 : -d2) * inv_sigma) * sgn * inv_sigma;
             vec2 r = vec2(ea_pos.x + t * edge.x - p.x, ea_pos.y + t * edge.y - p.y);
             vec2 to_a = d_d2 * 2.0 * (1.0 - t) * r;
             vec2 to_b = d_d2 * 2.0 * t * r;
