@@ -389,11 +389,12 @@ pub enum Function {
     Pow,
     Sin,
     Cos,
+    RcpPos,
 }
 
 impl Function {
     /// Every function, in the kernel's order.
-    pub const ALL: [Function; 15] = [
+    pub const ALL: [Function; 16] = [
         Function::Rcp,
         Function::Rcp1To2,
         Function::Div,
@@ -409,6 +410,7 @@ impl Function {
         Function::Pow,
         Function::Sin,
         Function::Cos,
+        Function::RcpPos,
     ];
 
     /// Its name, as in `fmath.glsl` without `fm_`.
@@ -429,14 +431,16 @@ impl Function {
             Function::Pow => "pow",
             Function::Sin => "sin",
             Function::Cos => "cos",
+            Function::RcpPos => "rcp_pos",
         }
     }
 
-    /// Whether `x` is in its domain: the kernel's hot-path variants (`fm_rcp_1_2`, `fm_exp_le0`)
-    /// promise the general function's bits on theirs only.
+    /// Whether `x` is in its domain: the kernel's hot-path variants (`fm_rcp_1_2`, `fm_rcp_pos`,
+    /// `fm_exp_le0`) promise the general function's bits on theirs only.
     pub fn domain(self, x: f32) -> bool {
         match self {
             Function::Rcp1To2 => (1.0..=2.0).contains(&x) || x.is_nan(),
+            Function::RcpPos => x > 0.0,
             Function::ExpLe0 => x <= 0.0 || x.is_nan(),
             _ => true,
         }
@@ -450,7 +454,7 @@ impl Function {
     /// The CPU twin: `f(x, y)` (`y` unused by unary functions).
     pub fn eval(self, x: f32, y: f32) -> f32 {
         match self {
-            Function::Rcp | Function::Rcp1To2 => rcp(x),
+            Function::Rcp | Function::Rcp1To2 | Function::RcpPos => rcp(x),
             Function::Div => div(x, y),
             Function::DivRn => div_rn(x, y),
             Function::Sqrt => sqrt(x),
@@ -469,7 +473,7 @@ impl Function {
     /// The f64 function it approximates, for accuracy checks.
     pub fn reference(self, x: f64, y: f64) -> f64 {
         match self {
-            Function::Rcp | Function::Rcp1To2 => 1.0 / x,
+            Function::Rcp | Function::Rcp1To2 | Function::RcpPos => 1.0 / x,
             Function::Div | Function::DivRn => x / y,
             Function::Sqrt => x.sqrt(),
             Function::Exp | Function::ExpLe0 => x.exp(),

@@ -40,7 +40,8 @@ void main() {
         case 11u: r = fm_tanh(x); break;
         case 12u: r = fm_pow(x, y); break;
         case 13u: r = fm_sin(x); break;
-        default: r = fm_cos(x); break;
+        case 14u: r = fm_cos(x); break;
+        default: r = fm_rcp_pos(x); break;
     }
     outputs[i] = r;
 }

@@ -62,6 +62,15 @@ float fm_rcp(float x) {
          : (mag >= 0x7e800000u ? (mag > 0x7f800000u ? x : uintBitsToFloat(sign)) : r);
 }
 
+// fm_rcp(x) for x > 0 (not NaN), its bits without the sign and NaN cases: for the depth's, the
+// clip's sum's and the alpha factor's reciprocals, taken at every (pixel, face) pair.
+float fm_rcp_pos(float x) {
+    uint bits = floatBitsToUint(x);
+    float y = fm_rcp_mantissa(uintBitsToFloat((bits & 0x007fffffu) | 0x3f800000u));
+    float r = uintBitsToFloat((floatBitsToUint(y) + 0x3f800000u) - (bits & 0x7f800000u));
+    return bits < 0x00800000u ? FM_INF : (bits >= 0x7e800000u ? 0.0 : r);
+}
+
 // fm_rcp(x) for x ∈ [1, 2] (or NaN), its bits without the exponent and special cases: for the
 // sigmoid's 1 / (1 + e), e ∈ [0, 1], taken at every (pixel, face) pair.
 float fm_rcp_1_2(float x) {
@@ -73,6 +82,11 @@ float fm_rcp_1_2(float x) {
 // a / b as a · (1 / b): within 2 ulps; a subnormal a or result reads as zero.
 float fm_div(float a, float b) {
     return fm_ftz(fm_ftz(a) * fm_rcp(b));
+}
+
+// fm_div(a, b) for b > 0 (not NaN).
+float fm_div_pos(float a, float b) {
+    return fm_ftz(fm_ftz(a) * fm_rcp_pos(b));
 }
 
 // Dekker's exact product: p + e = x y exactly (Veltkamp's split into 12-bit halves), for

@@ -241,7 +241,7 @@ bool coverage(Face f, vec3 w, vec2 p, uint dist, float inv_sigma, float t, out f
 // 1 / the clip's sum: `clip_barycentric(w)` is `clamp(w, 0, 1)` times it.
 float clip_inverse_sum(vec3 w) {
     vec3 c = clamp(w, 0.0, 1.0);
-    return fm_rcp(max(c.x + c.y + c.z, CLIP_SUM_FLOOR));
+    return fm_rcp_pos(max(c.x + c.y + c.z, CLIP_SUM_FLOOR));
 }
 
 // `reference::clip_barycentric`.
@@ -258,7 +258,7 @@ bool depth_in_range(Face f, vec3 wc, float near, float far, out float z) {
         z = 0.0;
         return false;
     }
-    z = fm_rcp(inv_z);
+    z = fm_rcp_pos(inv_z);
     return z >= near && z <= far;
 }
 
@@ -374,7 +374,7 @@ void softmax_add_if(inout Softmax s, float z, float d, vec3 color, float inv_gam
 }
 
 vec3 softmax_resolve(Softmax s) {
-    return s.rgb * fm_rcp(s.sum);
+    return s.rgb * fm_rcp_pos(s.sum);  // the sum is positive: it starts at 1 and adds D e ≥ 0
 }
 
 #endif

@@ -83,7 +83,7 @@ Upstream load_upstream_at(uint view, uint col, uint row, vec2 p) {
     u.d_rgb = g.rgb;
     u.d_alpha = g.a;
     u.d_dot = fm_dot3(g.rgb, rgba.rgb);
-    u.inv_sum = fm_rcp(a.softmax_sum);
+    u.inv_sum = fm_rcp_pos(a.softmax_sum);
     u.ref_depth = a.softmax_ref_depth;
     u.alpha_acc = a.alpha_acc;
     u.alpha_zeros = a.alpha_zeros;
@@ -100,7 +100,7 @@ float alpha_grad(Upstream u, float d) {
     if (MODE_ALPHA == ALPHA_PROD) {
         float factor = 1.0 - d;
         float others = factor == 0.0 ? (u.alpha_zeros == 1u ? u.alpha_acc : 0.0)
-                                     : (u.alpha_zeros == 0u ? fm_div(u.alpha_acc, factor) : 0.0);
+                                     : (u.alpha_zeros == 0u ? fm_div_pos(u.alpha_acc, factor) : 0.0);
         return u.d_alpha * others;
     }
     if (MODE_ALPHA == ALPHA_SUM) {
