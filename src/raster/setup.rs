@@ -139,9 +139,9 @@ impl GpuView {
 pub struct GpuFaceSetup {
     /// Screen-space vertices and their reciprocal depths `(x_s, y_s, z, 1 / z)`.
     pub v: [[f32; 4]; 3],
-    /// Rows `(a, b, c, 1 / |e_k|²)` of `M_j` (determinant clamped to ±1e-10): `w_k = a x + b y
-    /// + c`; the fourth is the reciprocal squared length of edge k, from vertex k to the next (0
-    /// for a zero-length edge).
+    /// Rows `(a, b, c, 1 / |e_k|²)` of `M_j` (determinant clamped to ±1e-10), where
+    /// `w_k = a x + b y + c`; the fourth is the reciprocal squared length of edge k, from vertex
+    /// k to the next (0 for a zero-length edge).
     pub inv: [[f32; 4]; 3],
     /// Grown screen box `[x_min, y_min, x_max, y_max]`.
     pub bbox: [f32; 4],
