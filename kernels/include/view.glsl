@@ -38,4 +38,23 @@ vec3 project_matrix(View view, vec3 p) {
     return vec3(fm_div_rn(x2 - half_size, half_size), fm_div_rn(y2 - half_size, half_size), z);
 }
 
+// `Camera::to_screen`: perspective p_c = R (p - eye), then (x / z / tan a, y / z / tan a, z);
+// orthographic (s x, s y, z); or the matrix projection.
+vec3 to_screen(View view, vec3 p) {
+    if (view.projection == PROJ_MATRIX) {
+        return project_matrix(view, p);
+    }
+    vec3 d = p - view.eye.xyz;
+    vec3 c = vec3(view.rows[0].x * d.x + view.rows[0].y * d.y + view.rows[0].z * d.z,
+                  view.rows[1].x * d.x + view.rows[1].y * d.y + view.rows[1].z * d.z,
+                  view.rows[2].x * d.x + view.rows[2].y * d.y + view.rows[2].z * d.z);
+    if (view.projection == PROJ_PERSPECTIVE) {
+        // Correctly rounded (as torch's composed projection and the f64 twin's rounding expect):
+        // once per vertex (`vertex_project.comp`), so its cost is small beside the fine pass.
+        return vec3(fm_div_rn(fm_div_rn(c.x, c.z), view.param),
+                    fm_div_rn(fm_div_rn(c.y, c.z), view.param), c.z);
+    }
+    return vec3(c.x * view.param, c.y * view.param, c.z);
+}
+
 #endif

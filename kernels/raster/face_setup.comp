@@ -1,8 +1,8 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
-// Face setup (SoftRas `forward_soft_rasterize_inv`), one invocation per (view, face): screen
-// vertices from world positions, the inverse barycentric matrix with the clamped determinant,
-// facing, and the grown screen box. Twin: `reference::project_faces` + `reference::setup_face`.
+// Face setup (SoftRas `forward_soft_rasterize_inv`), one invocation per (view, face): the screen
+// vertices (projected by `vertex_project.comp`), the inverse barycentric matrix with the clamped
+// determinant, facing, and the grown screen box. Twin: `reference::project_faces` + `reference::setup_face`.
 #include "common.glsl"
 #include "raster.glsl"
 
@@ -14,6 +14,8 @@ layout(std430, set = 0, binding = 0) readonly buffer Positions { float positions
 layout(std430, set = 0, binding = 1) readonly buffer Faces { uint faces[]; };
 layout(std430, set = 0, binding = 2) readonly buffer Views { View views[]; };
 layout(std430, set = 0, binding = 3) writeonly buffer Setups { FaceSetup setups[]; };
+// Every vertex of every view on screen (`vertex_project.comp`): (x_s, y_s, z, 0), view-major.
+layout(std430, set = 0, binding = 4) readonly buffer Screen { vec4 screen[]; };
 
 layout(push_constant) uniform Push {
     uint face_count;
@@ -33,25 +35,6 @@ vec3 world_position(View view, uint vertex) {
     uint v = view.mesh * pc.vertex_count + vertex;
     uint at = pc.position_offset + pc.position_stride * v;
     return vec3(positions[at], positions[at + 1u], positions[at + 2u]);
-}
-
-// `Camera::to_screen`: perspective p_c = R (p - eye), then (x / z / tan a, y / z / tan a, z);
-// orthographic (s x, s y, z); or the matrix projection.
-vec3 to_screen(View view, vec3 p) {
-    if (view.projection == PROJ_MATRIX) {
-        return project_matrix(view, p);
-    }
-    vec3 d = p - view.eye.xyz;
-    vec3 c = vec3(view.rows[0].x * d.x + view.rows[0].y * d.y + view.rows[0].z * d.z,
-                  view.rows[1].x * d.x + view.rows[1].y * d.y + view.rows[1].z * d.z,
-                  view.rows[2].x * d.x + view.rows[2].y * d.y + view.rows[2].z * d.z);
-    if (view.projection == PROJ_PERSPECTIVE) {
-        // Correctly rounded (as torch's composed projection and the f64 twin's rounding expect):
-        // per face, so its cost is nothing beside the fine pass.
-        return vec3(fm_div_rn(fm_div_rn(c.x, c.z), view.param),
-                    fm_div_rn(fm_div_rn(c.y, c.z), view.param), c.z);
-    }
-    return vec3(c.x * view.param, c.y * view.param, c.z);
 }
 
 // The screen determinant det [[x_s], [y_s], [1, 1, 1]] of a look-at view's face, from its world
@@ -108,9 +91,11 @@ void main() {
     vec3 q0 = world_position(view, faces[3u * face]);
     vec3 q1 = world_position(view, faces[3u * face + 1u]);
     vec3 q2 = world_position(view, faces[3u * face + 2u]);
-    vec3 p0 = to_screen(view, q0);
-    vec3 p1 = to_screen(view, q1);
-    vec3 p2 = to_screen(view, q2);
+    // The corners on screen, projected once per vertex (`to_screen`, `vertex_project.comp`).
+    uint first = view_index * pc.vertex_count;
+    vec3 p0 = screen[first + faces[3u * face]].xyz;
+    vec3 p1 = screen[first + faces[3u * face + 1u]].xyz;
+    vec3 p2 = screen[first + faces[3u * face + 2u]].xyz;
 
     FaceSetup s;
     s.v[0] = vec4(p0, 0.0);

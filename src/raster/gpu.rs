@@ -234,6 +234,10 @@ impl Renderer {
             ),
             ("colour", 12 * texels * batch),
             ("position", 12 * mesh.vertex_count() as u64 * batch),
+            (
+                "screen vertex",
+                16 * mesh.vertex_count() as u64 * u64::from(view_count),
+            ),
         ] {
             if bytes > max_range {
                 return Err(Error::Limit(format!(
@@ -268,6 +272,11 @@ impl Renderer {
             faces: ctx.upload_buffer("mesh faces", &faces)?,
             colors: ctx.upload_buffer("lit colours", &colors)?,
             views: ctx.upload_buffer("views", &gpu_views)?,
+            screen: ctx.create_buffer(
+                "screen vertices",
+                FaceSetupKernel::screen_bytes(vertex_count, view_count).max(16),
+                MemoryKind::Device,
+            )?,
             setups: ctx.create_buffer(
                 "face setups",
                 pairs * std::mem::size_of::<GpuFaceSetup>() as u64,
@@ -309,6 +318,7 @@ impl Renderer {
                 (scene.position_range()?, scene.position_layout),
                 scene.faces.whole(),
                 scene.views.whole(),
+                scene.screen.whole(),
                 scene.setups.whole(),
                 scene.vertex_count,
                 scene.face_count,

@@ -85,6 +85,8 @@ pub struct GpuScene {
     pub(crate) faces: Buffer,
     pub(crate) colors: Buffer,
     pub(crate) views: Buffer,
+    /// Every vertex of every view on screen: the face setup's scratch.
+    pub(crate) screen: Buffer,
     pub(crate) setups: Buffer,
     pub(crate) image: Buffer,
     pub(crate) aux: Buffer,

@@ -221,21 +221,42 @@ pub(crate) fn dist_code(dist: Dist) -> u32 {
     }
 }
 
-/// The face setup pipeline, made once per context.
+/// Push constants of `vertex_project.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ProjectPush {
+    vertex_count: u32,
+    view_count: u32,
+    position_offset: u32,
+    position_stride: u32,
+}
+
+/// The face setup pipelines, made once per context: the projection of every vertex, then the
+/// setup of every face from its projected corners.
 pub struct FaceSetupKernel {
+    project: Arc<Kernel>,
     kernel: Arc<Kernel>,
 }
 
 impl FaceSetupKernel {
-    /// Builds the pipeline.
+    /// Builds the pipelines.
     pub fn new(ctx: &Context) -> Result<Self> {
         Ok(Self {
+            project: ctx.kernel(&specs::VERTEX_PROJECT, &[])?,
             kernel: ctx.kernel(&specs::FACE_SETUP, &[])?,
         })
     }
 
+    /// Bytes of the screen-vertex buffer [`FaceSetupKernel::record`] needs: 16 per vertex and
+    /// view.
+    pub fn screen_bytes(vertex_count: u32, view_count: u32) -> u64 {
+        16 * u64::from(vertex_count) * u64::from(view_count)
+    }
+
     /// Records the setup of `face_count` faces in `view_count` views into `setups`
-    /// (`view_count * face_count` [`GpuFaceSetup`]s, view-major).
+    /// (`view_count * face_count` [`GpuFaceSetup`]s, view-major): first every vertex of every
+    /// view on screen into `screen` (scratch of [`FaceSetupKernel::screen_bytes`], `(x_s, y_s,
+    /// z, 0)` per vertex, view-major), then every face from its corners there.
     ///
     /// `positions` holds the world positions as packed `f32` triples (`vertex_count` per mesh of
     /// the batch, mesh after mesh), `faces` the vertex indices as packed `u32` triples, `views`
@@ -248,6 +269,7 @@ impl FaceSetupKernel {
         (positions, layout): (BufferRange<'_>, VertexLayout),
         faces: BufferRange<'_>,
         views: BufferRange<'_>,
+        screen: BufferRange<'_>,
         setups: BufferRange<'_>,
         vertex_count: u32,
         face_count: u32,
@@ -265,6 +287,34 @@ impl FaceSetupKernel {
                 setups.size
             )));
         }
+        let vertices = u64::from(vertex_count) * u64::from(view_count);
+        let screen_need = Self::screen_bytes(vertex_count, view_count);
+        if screen.size < screen_need || vertices > u64::from(u32::MAX) {
+            return Err(Error::Limit(format!(
+                "face setup of {vertex_count} vertices x {view_count} views needs {screen_need} \
+                 bytes of screen vertices; buffer `{}` has {}",
+                screen.buffer.name(),
+                screen.size
+            )));
+        }
+        let groups = vertices.div_ceil(u64::from(specs::VERTEX_PROJECT.workgroup_size[0]));
+        rec.dispatch(
+            &self.project,
+            &specs::VertexProjectBindings {
+                positions,
+                views,
+                screen,
+            }
+            .for_kernel(&self.project)?,
+            &ProjectPush {
+                vertex_count,
+                view_count,
+                position_offset: layout.offset,
+                position_stride: layout.stride,
+            },
+            groups as u32,
+        )?;
+        rec.barrier();
         let push = SetupPush {
             face_count,
             view_count,
@@ -289,6 +339,7 @@ impl FaceSetupKernel {
                 faces,
                 views,
                 setups,
+                screen,
             }
             .for_kernel(&self.kernel)?,
             &push,
@@ -316,7 +367,12 @@ mod tests {
         assert_eq!(std::mem::offset_of!(GpuFaceSetup, bbox), 96);
         assert_eq!(std::mem::offset_of!(GpuFaceSetup, flags), 112);
         assert_eq!(std::mem::offset_of!(GpuFaceSetup, det), 120);
-        assert_eq!(specs::FACE_SETUP.bindings.len(), 4);
+        assert_eq!(
+            std::mem::size_of::<ProjectPush>() as u32,
+            specs::VERTEX_PROJECT.push_constant_size
+        );
+        assert_eq!(specs::FACE_SETUP.bindings.len(), 5);
+        assert_eq!(specs::VERTEX_PROJECT.workgroup_size, [64, 1, 1]);
         assert_eq!(specs::FACE_SETUP.workgroup_size, [64, 1, 1]);
     }
 
