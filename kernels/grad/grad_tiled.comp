@@ -94,9 +94,9 @@ float center_y(int r) {
 
 // The tile's pixel centres, taken once per tile instead of for every pixel of every segment a
 // subgroup visits, and eight per face by `segment_rect` (each coordinate of a centre is a
-// correctly rounded division, about 130 operations): lane k holds the x of the tile's column k and the y
-// of its row k in `x0` and `y0`, those of column and row L + k in `x1` and `y1` (L lanes), and a
-// lane finds any of them with one or two shuffles. Where the tile's side is at most 2 L and both
+// correctly rounded division, about 110 operations): lane k holds the x of the tile's column k
+// and the y of its row k in `x0` and `y0`, those of column and row L + k in `x1` and `y1` (L
+// lanes), and a lane finds any of them with one or two shuffles. Where the tile's side is at most 2 L and both
 // sizes are known (the default tile of 8 from 4 lanes up); elsewhere every pixel takes its own,
 // with the same function: the same bits.
 struct TileCentres {
@@ -239,7 +239,8 @@ void visit_group(uint group0, uint segments, Face f, uint face, uint o, uvec4 re
         bool live = i < pixels && lane < lanes && col < pc.width && row < pc.height;
         vec2 p;
         if (centre_table()) {
-            p = vec2(centre_at(centres.x0, centres.x1, at.x), centre_at(centres.y0, centres.y1, at.y));
+            p = vec2(centre_at(centres.x0, centres.x1, at.x),
+                     centre_at(centres.y0, centres.y1, at.y));
         } else {
             p = pixel_center(col, row, pc.width, pc.height);
         }

@@ -47,7 +47,8 @@ const float CLIP_SUM_FLOOR = 1e-5;
 // per (face, tile) entry, brute force once per pair).
 struct FaceSetup {
     vec4 v[3];    // screen-space vertices and 1 / depth (x_s, y_s, z, 1 / z)
-    vec4 inv[3];  // rows of M_j (clamped determinant), (a, b, c, 1 / |edge k|²): w_k = a x + b y + c
+    vec4 inv[3];  // rows (a, b, c) of M_j (clamped determinant), w_k = a x + b y + c; and
+                  // 1 / |edge k|², edge k from vertex k to the next (0 for a zero-length edge)
     vec4 bbox;    // grown screen box (x_min, y_min, x_max, y_max)
     uint flags;   // FACE_FRONT | FACE_FINITE | FACE_DEGENERATE
     uint mesh;    // the batch's mesh the face belongs to (its view's)

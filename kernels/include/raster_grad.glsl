@@ -99,8 +99,9 @@ Upstream load_upstream(uint view, uint col, uint row) {
 float alpha_grad(Upstream u, float d) {
     if (MODE_ALPHA == ALPHA_PROD) {
         float factor = 1.0 - d;
-        float others = factor == 0.0 ? (u.alpha_zeros == 1u ? u.alpha_acc : 0.0)
-                                     : (u.alpha_zeros == 0u ? fm_div_pos(u.alpha_acc, factor) : 0.0);
+        float others = factor == 0.0
+                     ? (u.alpha_zeros == 1u ? u.alpha_acc : 0.0)
+                     : (u.alpha_zeros == 0u ? fm_div_pos(u.alpha_acc, factor) : 0.0);
         return u.d_alpha * others;
     }
     if (MODE_ALPHA == ALPHA_SUM) {

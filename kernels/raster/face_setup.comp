@@ -2,7 +2,8 @@
 #extension GL_GOOGLE_include_directive : require
 // Face setup (SoftRas `forward_soft_rasterize_inv`), one invocation per (view, face): the screen
 // vertices (projected by `vertex_project.comp`), the inverse barycentric matrix with the clamped
-// determinant, facing, and the grown screen box. Twin: `reference::project_faces` + `reference::setup_face`.
+// determinant, facing, and the grown screen box. Twin: `reference::project_faces` +
+// `reference::setup_face`.
 #include "common.glsl"
 #include "raster.glsl"
 
@@ -119,9 +120,12 @@ void main() {
     float clamped = det > 0.0 ? max(det, MIN_DET) : min(det, -MIN_DET);
     // Correctly rounded, as every per-face division here: the setup is per face, and the
     // barycentrics of a pixel near an edge are that sensitive.
-    s.inv[0] = vec4(fm_div_rn3(vec3(p1.y - p2.y, p2.x - p1.x, p1.x * p2.y - p2.x * p1.y), clamped), 0.0);
-    s.inv[1] = vec4(fm_div_rn3(vec3(p2.y - p0.y, p0.x - p2.x, p2.x * p0.y - p0.x * p2.y), clamped), 0.0);
-    s.inv[2] = vec4(fm_div_rn3(vec3(p0.y - p1.y, p1.x - p0.x, p0.x * p1.y - p1.x * p0.y), clamped), 0.0);
+    vec3 n0 = vec3(p1.y - p2.y, p2.x - p1.x, p1.x * p2.y - p2.x * p1.y);
+    vec3 n1 = vec3(p2.y - p0.y, p0.x - p2.x, p2.x * p0.y - p0.x * p2.y);
+    vec3 n2 = vec3(p0.y - p1.y, p1.x - p0.x, p0.x * p1.y - p1.x * p0.y);
+    s.inv[0] = vec4(fm_div_rn3(n0, clamped), 0.0);
+    s.inv[1] = vec4(fm_div_rn3(n1, clamped), 0.0);
+    s.inv[2] = vec4(fm_div_rn3(n2, clamped), 0.0);
 
     bool finite = finite3(p0) && finite3(p1) && finite3(p2);
     // `reference::is_numerically_degenerate` at f32 rounding, with a wide margin: a face whose

@@ -6,7 +6,6 @@
 // setup reads the corners from here; the same function on the same vertex, so the same bits.
 // Twin: `reference::project_faces`' projection of each vertex.
 #include "common.glsl"
-#include "raster.glsl"
 
 layout(local_size_x = 64) in;
 
