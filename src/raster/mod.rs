@@ -18,6 +18,7 @@ pub mod brute;
 pub mod fine;
 pub mod fragments;
 pub mod gpu;
+pub mod hard;
 pub mod light;
 pub(crate) mod loops;
 pub mod method;
