@@ -10,11 +10,18 @@
 //! purpose:
 //!
 //! - **Clip space.** Positions are OpenGL clip coordinates `(x, y, z, w)`; the view frustum is
-//!   `|x|, |y|, |z| ≤ w`. A triangle with a vertex outside it is clipped against the six planes
-//!   in homogeneous coordinates (Sutherland–Hodgman), and the pieces, fanned from the first
-//!   vertex, keep the original triangle's id; a triangle wholly outside one plane is dropped.
-//!   As nvdiffrast. Where two triangles share an edge, the clipper computes every intersection
-//!   from the edge's two ends in one canonical order, so both get the same point (no crack).
+//!   `|x|, |y|, |z| ≤ w`. A triangle wholly beyond one frustum plane is not drawn (as
+//!   nvdiffrast). One with every vertex in front of the eye (`w > 0`), inside the depth range
+//!   (`|z| ≤ w`) and within a guard band of 2048 viewports is snapped (below) as it is, also
+//!   where it leaves the viewport: nvdiffrast clips such a triangle to the viewport first and
+//!   snaps the pieces, so an edge leaving the viewport may differ by a sub-pixel step; here it
+//!   runs between its own snapped ends, the same for both triangles that share it. One that
+//!   crosses the near or far plane (or the guard band) is drawn where, at the pixel centre, its
+//!   three homogeneous edge functions have their sum's sign, the interpolated `w` is positive
+//!   and `|z/w| ≤ 1`: exactly the coverage of its clipped part, unsnapped (nvdiffrast snaps the
+//!   clipped pieces), so an edge it shares with a snapped neighbour can leave or double a
+//!   centre within 1/32 pixel of the edge. Either way every drawn pixel reports the original
+//!   triangle's id.
 //! - **Pixels.** Pixel `(x, y)` (column, row; **row 0 is the bottom row**) has its centre at NDC
 //!   `((2x + 1)/W − 1, (2y + 1)/H − 1)`. Outputs are `[B, H, W, 4]`, row-major from row 0.
 //! - **Coverage**, as nvdiffrast's rasterizer decides it: vertices projected to the viewport are
@@ -43,8 +50,9 @@
 //!   two agree wherever the barycentrics are in range. Sums are in a fixed order (no float
 //!   atomics): the same bits on every run.
 
-// pub mod antialias;
+pub mod antialias;
 pub mod dual;
+pub mod gpu;
 pub mod reference;
 
 use crate::error::{Error, Result};

@@ -48,71 +48,82 @@ impl DepthKey {
     }
 }
 
-/// Whether a vertex lies inside the view frustum (`|x|, |y|, |z| ≤ w`).
-pub fn inside_frustum(v: &Clip) -> bool {
-    v[3] >= v[0].abs().max(v[1].abs()).max(v[2].abs())
+/// How far outside the viewport (in viewport half-widths) a vertex may project and still be
+/// snapped: `8 W · GUARD_BAND` stays below 2^29 for every `W ≤ MAX_SIZE`, so snapped
+/// coordinates fit an i32 and edge functions an i64.
+pub const GUARD_BAND: f64 = 2048.0;
+
+/// How the rasterizer tests a triangle's coverage.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Coverage {
+    /// In front of the eye, inside the depth range and the guard band: snapped, integer edge
+    /// functions with the fill rule (nvdiffrast's rule).
+    Snapped(Snapped),
+    /// Crossing the near or far plane, or the guard band: the centre is inside where the
+    /// homogeneous edge functions all have their sum's sign, the interpolated w is positive and
+    /// `z/w` is in [−1, 1] (exactly the clipped triangle's coverage, unsnapped).
+    Homogeneous,
 }
 
-/// The six frustum planes as `(axis, sign)`: inside is `w + sign · v[axis] ≥ 0`.
-const PLANES: [(usize, f64); 6] = [
-    (0, 1.0),
-    (0, -1.0),
-    (1, 1.0),
-    (1, -1.0),
-    (2, 1.0),
-    (2, -1.0),
-];
-
-fn plane_distance(v: &Clip, (axis, sign): (usize, f64)) -> f64 {
-    v[3] + sign * v[axis]
+/// Whether every vertex lies beyond the same frustum plane (then nothing is drawn).
+pub fn outside_one_plane(tri: &[Clip; 3]) -> bool {
+    (0..3).any(|axis| tri.iter().all(|v| v[axis] > v[3]) || tri.iter().all(|v| -v[axis] > v[3]))
 }
 
-/// The part of a triangle inside the view frustum, as a convex polygon in order (the
-/// triangle itself when it is wholly inside, nothing when it is wholly outside one plane).
-/// Each intersection is computed from the edge's two ends taken in a canonical order (the
-/// lexicographically smaller first), so two triangles sharing an edge get the same point.
-pub fn clip_triangle(tri: [Clip; 3]) -> Vec<Clip> {
-    if tri.iter().all(inside_frustum) {
-        return tri.to_vec();
+/// Whether the triangle is snapped: every vertex has `w > 0`, `|z| ≤ w` and `|x|, |y| ≤ G w`.
+pub fn snappable(tri: &[Clip; 3]) -> bool {
+    tri.iter().all(|v| {
+        v[3] > 0.0 && v[2].abs() <= v[3] && v[0].abs().max(v[1].abs()) <= GUARD_BAND * v[3]
+    })
+}
+
+/// The coverage test of a triangle, or `None` when it draws nothing (wholly beyond one frustum
+/// plane, or of zero area once snapped).
+pub fn coverage(tri: [Clip; 3], width: u32, height: u32) -> Option<Coverage> {
+    if outside_one_plane(&tri) {
+        return None;
     }
-    let mut poly = tri.to_vec();
-    for plane in PLANES {
-        if poly.is_empty() {
-            break;
-        }
-        let mut out = Vec::with_capacity(poly.len() + 1);
-        for i in 0..poly.len() {
-            let a = poly[i];
-            let b = poly[(i + 1) % poly.len()];
-            let (da, db) = (plane_distance(&a, plane), plane_distance(&b, plane));
-            if da >= 0.0 {
-                out.push(a);
-            }
-            if (da >= 0.0) != (db >= 0.0) {
-                out.push(edge_crossing(a, b, plane));
-            }
-        }
-        poly = out;
+    if !snappable(&tri) {
+        return Some(Coverage::Homogeneous);
     }
-    poly
+    let snapped = tri.map(|v| snap(&v, width, height, SNAP_TOLERANCE));
+    Snapped::new(snapped.map(|c| c.0), snapped.iter().any(|c| c.1)).map(Coverage::Snapped)
 }
 
-/// Where segment `a b` crosses `plane` (its ends on opposite sides), from the ends in canonical
-/// order.
-pub fn edge_crossing(a: Clip, b: Clip, plane: (usize, f64)) -> Clip {
-    let (p, q) = if lex_less(&b, &a) { (b, a) } else { (a, b) };
-    let (dp, dq) = (plane_distance(&p, plane), plane_distance(&q, plane));
-    let t = dp / (dp - dq);
-    std::array::from_fn(|k| p[k] + t * (q[k] - p[k]))
+/// The homogeneous test of [`Coverage::Homogeneous`] at NDC `f`.
+pub fn homogeneous_covers(tri: &[Clip; 3], f: [f64; 2]) -> bool {
+    let rel: Vec<[f64; 2]> = tri
+        .iter()
+        .map(|v| [v[0] - f[0] * v[3], v[1] - f[1] * v[3]])
+        .collect();
+    let ar = |i: usize, j: usize| rel[i][0] * rel[j][1] - rel[i][1] * rel[j][0];
+    let a = [ar(1, 2), ar(2, 0), ar(0, 1)];
+    let at: f64 = a.iter().sum();
+    let wsum: f64 = (0..3).map(|k| a[k] * tri[k][3]).sum();
+    let zsum: f64 = (0..3).map(|k| a[k] * tri[k][2]).sum();
+    at != 0.0 && a.iter().all(|&ak| ak * at >= 0.0) && wsum * at > 0.0 && zsum.abs() <= wsum.abs()
 }
 
-fn lex_less(a: &Clip, b: &Clip) -> bool {
-    for k in 0..4 {
-        if a[k] != b[k] {
-            return a[k] < b[k];
-        }
-    }
-    false
+/// Whether f32 arithmetic may decide [`homogeneous_covers`] otherwise at `f`: an edge function,
+/// the interpolated w or the depth-range test within rounding of its threshold.
+pub fn homogeneous_uncertain(tri: &[Clip; 3], f: [f64; 2]) -> bool {
+    let rel: Vec<[f64; 2]> = tri
+        .iter()
+        .map(|v| [v[0] - f[0] * v[3], v[1] - f[1] * v[3]])
+        .collect();
+    let terms = |i: usize, j: usize| {
+        let (p, q) = (rel[i][0] * rel[j][1], rel[i][1] * rel[j][0]);
+        (p - q, p.abs() + q.abs())
+    };
+    let a = [terms(1, 2), terms(2, 0), terms(0, 1)];
+    let scale = a.iter().map(|t| t.1).fold(0.0, f64::max);
+    let wsum: f64 = (0..3).map(|k| a[k].0 * tri[k][3]).sum();
+    let wscale: f64 = (0..3).map(|k| (a[k].0 * tri[k][3]).abs()).sum();
+    let zsum: f64 = (0..3).map(|k| a[k].0 * tri[k][2]).sum();
+    let tol = HOMOGENEOUS_TOLERANCE;
+    a.iter().any(|t| t.0.abs() <= tol * scale)
+        || wsum.abs() <= tol * wscale
+        || (zsum.abs() - wsum.abs()).abs() <= tol * (zsum.abs() + wsum.abs())
 }
 
 /// A vertex projected to the viewport in sub-pixel units from the viewport's centre:
@@ -188,10 +199,9 @@ fn cross(a: [i64; 2], b: [i64; 2], c: [i64; 2]) -> i64 {
     edge_function(a, b, c)
 }
 
-/// Tolerance of [`snap`] for a vertex of the triangle as given, and for one the clipper made
-/// (whose f32 coordinates carry the intersection's rounding too), in sub-pixel units.
+/// Tolerance of [`snap`]: an f32 projection `x/w · 8 W` is within this many units of the f64
+/// one.
 const SNAP_TOLERANCE: f64 = 1e-3;
-const CLIPPED_SNAP_TOLERANCE: f64 = 1e-2;
 
 /// Two depths closer than this may be ordered either way by the f32 kernels.
 const DEPTH_TOLERANCE: f64 = 1e-5;
@@ -199,30 +209,9 @@ const DEPTH_TOLERANCE: f64 = 1e-5;
 /// Within this many sub-pixel units of an uncertain triangle's edges, coverage is ambiguous.
 const EDGE_TOLERANCE: f64 = 2.0;
 
-/// The snapped pieces of triangle `tri` as the rasterizer draws them: clipped to the frustum,
-/// fanned from the polygon's first vertex, snapped, those of zero area dropped.
-pub fn pieces(tri: [Clip; 3], width: u32, height: u32) -> Vec<Snapped> {
-    let poly = clip_triangle(tri);
-    if poly.len() < 3 {
-        return Vec::new();
-    }
-    let clipped = !tri.iter().all(inside_frustum);
-    let tolerance = if clipped {
-        CLIPPED_SNAP_TOLERANCE
-    } else {
-        SNAP_TOLERANCE
-    };
-    let snapped: Vec<_> = poly
-        .iter()
-        .map(|v| snap(v, width, height, tolerance))
-        .collect();
-    (1..poly.len() - 1)
-        .filter_map(|k| {
-            let corners = [snapped[0], snapped[k], snapped[k + 1]];
-            Snapped::new(corners.map(|c| c.0), corners.iter().any(|c| c.1))
-        })
-        .collect()
-}
+/// A homogeneous edge function within this fraction of the largest term of its sum may have
+/// the other sign in f32.
+const HOMOGENEOUS_TOLERANCE: f64 = 1e-5;
 
 /// Pixel `(x, y)`'s sample in sub-pixel units from the viewport centre.
 pub fn sample(x: u32, y: u32, width: u32, height: u32) -> [i64; 2] {
@@ -376,13 +365,12 @@ pub fn rasterize(
         ambiguous: vec![false; n],
     };
     for b in 0..shape.batch() {
-        let drawn: Vec<(u32, [Clip; 3], Vec<Snapped>)> = shape
+        let drawn: Vec<(u32, [Clip; 3], Coverage)> = shape
             .triangles_of(b)
-            .map(|t| {
+            .filter_map(|t| {
                 let c = corners(shape, pos, tri, b, t);
-                (t, c, pieces(c, w, h))
+                coverage(c, w, h).map(|cov| (t, c, cov))
             })
-            .filter(|(_, _, p)| !p.is_empty())
             .collect();
         for y in 0..h {
             for x in 0..w {
@@ -396,13 +384,21 @@ pub fn rasterize(
                 let mut best: Option<(DepthKey, [Clip; 3])> = None;
                 let mut ambiguous = false;
                 let mut zs = Vec::new();
-                for (t, c, p) in &drawn {
-                    let covered = p.iter().any(|q| q.covers(s));
-                    if p.iter()
-                        .any(|q| q.uncertain && q.boundary_distance(s).abs() < EDGE_TOLERANCE)
-                    {
-                        ambiguous = true;
-                    }
+                for (t, c, cov) in &drawn {
+                    let covered = match cov {
+                        Coverage::Snapped(q) => {
+                            if q.uncertain && q.boundary_distance(s).abs() < EDGE_TOLERANCE {
+                                ambiguous = true;
+                            }
+                            q.covers(s)
+                        }
+                        Coverage::Homogeneous => {
+                            if homogeneous_uncertain(c, f) {
+                                ambiguous = true;
+                            }
+                            homogeneous_covers(c, f)
+                        }
+                    };
                     if !covered {
                         continue;
                     }
@@ -687,6 +683,13 @@ mod tests {
         (pos, tri)
     }
 
+    fn clip(pos: &[f64], t: [u32; 3]) -> [Clip; 3] {
+        t.map(|v| {
+            let o = 4 * v as usize;
+            [pos[o], pos[o + 1], pos[o + 2], pos[o + 3]]
+        })
+    }
+
     #[test]
     fn edges_through_pixel_centres_draw_each_centre_once() {
         // 8×8 image, grid vertices on pixel centres: every inner edge passes through centres,
@@ -695,41 +698,24 @@ mod tests {
         let (w, h) = (8, 8);
         // Pixel centres at NDC (2x + 1)/8 − 1: x = 1 → −0.625, x = 6 → 0.625.
         let (pos, tri) = grid(5, 0.625, 0.5);
-        for (t, c) in tri.iter().enumerate() {
-            let c = c.map(|v| {
-                let o = 4 * v as usize;
-                [pos[o], pos[o + 1], pos[o + 2], pos[o + 3]]
-            });
-            assert_eq!(pieces(c, w, h).len(), 1, "triangle {t}");
-        }
-        let drawn: Vec<Vec<Snapped>> = tri
+        let drawn: Vec<Snapped> = tri
             .iter()
-            .map(|c| {
-                pieces(
-                    c.map(|v| {
-                        let o = 4 * v as usize;
-                        [pos[o], pos[o + 1], pos[o + 2], pos[o + 3]]
-                    }),
-                    w,
-                    h,
-                )
+            .map(|&t| match coverage(clip(&pos, t), w, h) {
+                Some(Coverage::Snapped(q)) => q,
+                other => panic!("triangle {t:?}: {other:?}"),
             })
             .collect();
         let mut edge_hits = 0;
         for y in 0..h {
             for x in 0..w {
                 let s = sample(x, y, w, h);
-                let count = drawn
-                    .iter()
-                    .filter(|p| p.iter().any(|q| q.covers(s)))
-                    .count();
+                let count = drawn.iter().filter(|q| q.covers(s)).count();
                 // The square's left and bottom sides (centres x = 1, y = 1) are in, its right
                 // and top sides (x = 6, y = 6) out.
                 let inside = (1..6).contains(&x) && (1..6).contains(&y);
                 assert_eq!(count, usize::from(inside), "pixel ({x}, {y})");
                 edge_hits += drawn
                     .iter()
-                    .flatten()
                     .filter(|q| (0..3).any(|k| edge_function(q.p[k], q.p[(k + 1) % 3], s) == 0))
                     .count();
             }
@@ -746,63 +732,91 @@ mod tests {
             !one.covers([16, 16]),
             "the hypotenuse (going up-left) is out"
         );
+        // Clockwise, the same triangle covers the same centres.
+        let cw = Snapped::new([[0, 0], [0, 32], [32, 0]], false).unwrap();
+        assert!(cw.covers([0, 16]) && cw.covers([16, 0]) && !cw.covers([16, 16]));
+    }
+
+    /// Sutherland–Hodgman against `w + z ≥ 0` (the near plane), for the test below.
+    fn clip_near(tri: &[Clip; 3]) -> Vec<Clip> {
+        let d = |v: &Clip| v[3] + v[2];
+        let mut out = Vec::new();
+        for i in 0..3 {
+            let (a, b) = (tri[i], tri[(i + 1) % 3]);
+            if d(&a) >= 0.0 {
+                out.push(a);
+            }
+            if (d(&a) >= 0.0) != (d(&b) >= 0.0) {
+                let t = d(&a) / (d(&a) - d(&b));
+                out.push(std::array::from_fn(|k| a[k] + t * (b[k] - a[k])));
+            }
+        }
+        out
     }
 
     #[test]
-    fn a_triangle_through_the_near_plane_is_clipped_not_dropped() {
-        // One vertex behind the eye (w < 0): the clipped piece must cover exactly the pixels
-        // whose centre the homogeneous edge functions put inside with −1 ≤ z/w ≤ 1.
+    fn a_triangle_through_the_near_plane_is_drawn_where_its_front_part_projects() {
+        // One vertex behind the eye (w < 0): the homogeneous test must draw exactly the centres
+        // inside the projection of the part in front of the near plane (clipped here by
+        // Sutherland–Hodgman and tested in 2D), away from that polygon's edges.
         let (w, h) = (16, 12);
         let tri = [
             [-0.8, -0.7, 0.2, 1.0],
             [0.9, -0.6, 0.5, 1.2],
             [0.1, 0.9, -2.0, -0.5],
         ];
-        let p = pieces(tri, w, h);
-        assert!(!p.is_empty());
+        assert_eq!(coverage(tri, w, h), Some(Coverage::Homogeneous));
+        let poly: Vec<[f64; 2]> = clip_near(&tri)
+            .iter()
+            .map(|v| [v[0] / v[3], v[1] / v[3]])
+            .collect();
+        assert_eq!(poly.len(), 4);
         let mut drawn = 0;
         let mut near_edge = 0;
         for y in 0..h {
             for x in 0..w {
                 let f = pixel_ndc(x, y, w, h);
-                let sh = shade_f64(&tri, f, w, h);
-                let rel: Vec<[f64; 2]> = tri
-                    .iter()
-                    .map(|v| [v[0] - f[0] * v[3], v[1] - f[1] * v[3]])
+                // Signed distances (NDC) to the polygon's edges, any winding.
+                let n = poly.len();
+                let d: Vec<f64> = (0..n)
+                    .map(|k| {
+                        let (a, b) = (poly[k], poly[(k + 1) % n]);
+                        let e = (b[0] - a[0]) * (f[1] - a[1]) - (b[1] - a[1]) * (f[0] - a[0]);
+                        e / (b[0] - a[0]).hypot(b[1] - a[1])
+                    })
                     .collect();
-                let ar = |i: usize, j: usize| rel[i][0] * rel[j][1] - rel[i][1] * rel[j][0];
-                let a = [ar(1, 2), ar(2, 0), ar(0, 1)];
-                let at: f64 = a.iter().sum();
-                let wsum: f64 = (0..3).map(|k| a[k] * tri[k][3]).sum();
-                let inside = a.iter().all(|&ak| ak * at > 0.0)
-                    && wsum * at > 0.0
-                    && (-1.0..=1.0).contains(&sh.zw);
-                let s = sample(x, y, w, h);
-                let covered = p.iter().any(|q| q.covers(s));
-                let margin = p
-                    .iter()
-                    .map(|q| q.boundary_distance(s).abs())
-                    .fold(f64::INFINITY, f64::min);
-                if margin < 2.0 {
+                if d.iter().any(|e| e.abs() < 1e-3) {
                     near_edge += 1;
                     continue;
                 }
-                assert_eq!(covered, inside, "pixel ({x}, {y})");
-                drawn += usize::from(covered);
+                let inside = d.iter().all(|&e| e > 0.0) || d.iter().all(|&e| e < 0.0);
+                assert_eq!(homogeneous_covers(&tri, f), inside, "pixel ({x}, {y})");
+                drawn += usize::from(inside);
             }
         }
         assert!(drawn > 20, "{drawn} pixels drawn");
-        assert!(near_edge < 20, "{near_edge} pixels near an edge");
+        assert!(near_edge < 5, "{near_edge} pixels near an edge");
     }
 
     #[test]
-    fn clipping_a_shared_edge_gives_both_triangles_the_same_point() {
-        let a = [0.3, -0.2, -3.0, 0.5];
-        let b = [-0.4, 0.6, 0.9, 1.5];
-        for plane in PLANES {
-            if (plane_distance(&a, plane) >= 0.0) != (plane_distance(&b, plane) >= 0.0) {
-                assert_eq!(edge_crossing(a, b, plane), edge_crossing(b, a, plane));
-            }
+    fn a_triangle_beyond_one_plane_is_not_drawn_and_one_past_the_far_plane_is_cut() {
+        let behind = [
+            [0.0, 0.0, -2.0, -1.0],
+            [0.5, 0.0, -2.0, -1.0],
+            [0.0, 0.5, -2.0, -1.5],
+        ];
+        assert_eq!(coverage(behind, 8, 8), None);
+        // Depth from −0.5 (left) to 3 (right): only the part with z/w ≤ 1 is drawn.
+        let far = [
+            [-1.0, -1.0, -0.5, 1.0],
+            [1.0, -1.0, 3.0, 1.0],
+            [-1.0, 1.0, -0.5, 1.0],
+        ];
+        assert_eq!(coverage(far, 8, 8), Some(Coverage::Homogeneous));
+        for x in 0..8 {
+            let f = pixel_ndc(x, 0, 8, 8);
+            let z = -0.5 + 3.5 * (f[0] + 1.0) / 2.0;
+            assert_eq!(homogeneous_covers(&far, f), z <= 1.0, "column {x}");
         }
     }
 
