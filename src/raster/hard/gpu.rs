@@ -1,8 +1,9 @@
 //! The hard rasterizer, `interpolate` and `antialias` on the GPU: [`HardRasterizer`].
 
 use super::Shape;
+use super::antialias::{self, AntialiasInput, ImageShape, PosLayout, TopologyHash};
 use super::reference::{self, AttrLayout};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::gpu::Context;
 
 /// One rasterized layer as the host gets it, `[B, H, W, 4]` f32 (nvdiffrast's layout).
@@ -26,6 +27,31 @@ pub struct InterpolateGrads32 {
     pub rast: Vec<f32>,
     /// `[B, H, W, 4]`.
     pub rast_db: Vec<f32>,
+}
+
+/// The arrays `antialias` reads, f32, in nvdiffrast's layouts.
+#[derive(Clone, Copy, Debug)]
+pub struct AntialiasArgs<'a> {
+    /// `[B, H, W, C]`.
+    pub color: &'a [f32],
+    /// `[B, H, W, 4]`, as `rasterize` wrote it.
+    pub rast: &'a [f32],
+    /// `[B, V, 4]` (instanced) or `[V, 4]`.
+    pub pos: &'a [f32],
+    /// Whether `pos` holds one set of vertices per minibatch item.
+    pub instanced: bool,
+    /// V.
+    pub vertex_count: u32,
+    /// `[T, 3]`.
+    pub tri: &'a [[u32; 3]],
+    /// B, H, W, C.
+    pub batch: u32,
+    /// H.
+    pub height: u32,
+    /// W.
+    pub width: u32,
+    /// C.
+    pub channels: u32,
 }
 
 /// nvdiffrast's primitives on the GPU.
@@ -162,5 +188,63 @@ impl HardRasterizer {
             rast: narrow(&g.rast),
             rast_db: narrow(&g.rast_db),
         })
+    }
+
+    /// `antialias`: the image with its silhouette edges blended by the coverage their geometry
+    /// gives.
+    pub fn antialias(
+        &mut self,
+        _ctx: &Context,
+        args: &AntialiasArgs<'_>,
+        topology: &TopologyHash,
+    ) -> Result<Vec<f32>> {
+        let (color, rast, pos) = (wide(args.color), wide(args.rast), wide(args.pos));
+        let input = antialias_input(args, &color, &rast, &pos);
+        antialias::antialias(&input, Some(topology))
+            .map(|v| narrow(&v))
+            .map_err(Error::Input)
+    }
+
+    /// The backward of [`HardRasterizer::antialias`]: `(grad_color, grad_pos)`.
+    pub fn antialias_grad(
+        &mut self,
+        _ctx: &Context,
+        args: &AntialiasArgs<'_>,
+        topology: &TopologyHash,
+        dy: &[f32],
+        pos_gradient_boost: f64,
+    ) -> Result<(Vec<f32>, Vec<f32>)> {
+        let (color, rast, pos) = (wide(args.color), wide(args.rast), wide(args.pos));
+        let input = antialias_input(args, &color, &rast, &pos);
+        let g =
+            antialias::antialias_backward(&input, Some(topology), &wide(dy), pos_gradient_boost)
+                .map_err(Error::Input)?;
+        Ok((narrow(&g.color), narrow(&g.pos)))
+    }
+}
+
+fn antialias_input<'a>(
+    args: &AntialiasArgs<'a>,
+    color: &'a [f64],
+    rast: &'a [f64],
+    pos: &'a [f64],
+) -> AntialiasInput<'a> {
+    let vertices = args.vertex_count as usize;
+    AntialiasInput {
+        color,
+        rast,
+        pos,
+        pos_layout: if args.instanced {
+            PosLayout::Instanced { vertices }
+        } else {
+            PosLayout::Range { vertices }
+        },
+        tri: args.tri,
+        shape: ImageShape {
+            batch: args.batch as usize,
+            height: args.height as usize,
+            width: args.width as usize,
+            channels: args.channels as usize,
+        },
     }
 }
