@@ -113,7 +113,12 @@ impl<const N: usize> Mul<f64> for Dual<N> {
 impl<const N: usize> Div for Dual<N> {
     type Output = Self;
     fn div(self, o: Self) -> Self {
-        self * o.recip()
+        let q = self.value / o.value;
+        let mut grad = [0.0; N];
+        for (i, g) in grad.iter_mut().enumerate() {
+            *g = (self.grad[i] - q * o.grad[i]) / o.value;
+        }
+        Self { value: q, grad }
     }
 }
 

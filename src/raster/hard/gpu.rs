@@ -1,10 +1,196 @@
-//! The hard rasterizer, `interpolate` and `antialias` on the GPU: [`HardRasterizer`].
+//! nvdiffrast's primitives on the GPU: [`HardRasterizer`].
+//!
+//! A rasterization is four steps over buffers the caller owns (positions, triangles and the
+//! range table in; keys, `rast` and `rast_db` out) and scratch the rasterizer owns (items,
+//! bins):
+//!
+//! 1. **Setup** (`kernels/hard/hard_setup.comp`): per (minibatch item, triangle slot) an item:
+//!    how its coverage is tested, its snapped corners and its box
+//!    ([`HardRasterizer::record_setup`], with the binning's count).
+//! 2. **Binning** ([`crate::primitives::binning`], 8-pixel tiles), exact: its count is read back
+//!    between two submissions ([`HardRasterizer::bin`], [`HardRasterizer::record_sort`]).
+//! 3. **Depth** (`hard_depth.comp`): per pixel the nearest surface's key, in passes over crowded
+//!    tiles where the driver caps loops; after a given layer's keys for depth peeling
+//!    ([`HardRasterizer::record_depth`]).
+//! 4. **Shade** (`hard_shade.comp`): `rast` and `rast_db` from the keys
+//!    ([`HardRasterizer::record_shade`]).
+//!
+//! [`HardRasterizer::rasterize`] does all of it from host slices.
 
-use super::Shape;
+use std::sync::Arc;
+
+use bytemuck::{Pod, Zeroable};
+
 use super::antialias::{self, AntialiasInput, ImageShape, PosLayout, TopologyHash};
 use super::reference::{self, AttrLayout};
-use crate::error::{Error, Result};
-use crate::gpu::Context;
+use super::{Shape, Topology};
+use crate::error::{Error, LimitKind, Result};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, groups, specs};
+use crate::primitives::binning::{BinJob, Binner, Bins, ItemLayout, TileGrid};
+
+/// Words of one rasterizer item (`ITEM_WORDS` in `kernels/include/hard.glsl`).
+const ITEM_WORDS: u32 = 16;
+
+/// Tile edge of the depth pass's workgroups (8×8 pixels).
+const TILE: u32 = 8;
+
+/// Push constants of every kernel of the family (`Push` in `kernels/include/hard.glsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct HardPush {
+    width: u32,
+    height: u32,
+    batch: u32,
+    tri_count: u32,
+    vertex_count: u32,
+    items_per_view: u32,
+    instanced: u32,
+    peel: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+    pass_begin: u32,
+    pass_end: u32,
+    box_scale: f32,
+    ndc_dx: f32,
+    ndc_dy: f32,
+    aux: u32,
+}
+
+/// What one rasterization is over, planned on the host: the shape, the range table the kernels
+/// read, the binning job and the depth pass's pass size. Made by [`HardPlan::new`], which
+/// checks everything the kernels rely on.
+#[derive(Clone, Debug)]
+pub struct HardPlan {
+    shape: Shape,
+    ranges: Vec<[u32; 2]>,
+    job: BinJob,
+    push: HardPush,
+    /// Entries of a tile's run one depth pass visits at most.
+    pass_items: u64,
+}
+
+impl HardPlan {
+    /// Plans the rasterization of `shape` on `ctx`'s device.
+    pub fn new(ctx: &Context, shape: &Shape) -> Result<Self> {
+        if shape.width == 0
+            || shape.height == 0
+            || shape.width > super::MAX_SIZE
+            || shape.height > super::MAX_SIZE
+        {
+            return Err(Error::Input(format!(
+                "rasterize: resolution {}x{} (height x width) is outside 1..={}",
+                shape.height,
+                shape.width,
+                super::MAX_SIZE
+            )));
+        }
+        let batch = shape.batch();
+        if batch == 0 {
+            return Err(Error::Input("rasterize: the minibatch is empty".into()));
+        }
+        let ranges = match &shape.topology {
+            Topology::Instanced { .. } => vec![[0, shape.triangle_count]; batch as usize],
+            Topology::Ranged(r) => r.clone(),
+        };
+        let items_per_view = ranges.iter().map(|r| r[1]).max().unwrap_or(0).max(1);
+        let pixels = shape.pixels() as u64;
+        let limit = u64::from(ctx.info().limits.max_storage_buffer_range);
+        if 16 * pixels > limit || pixels > u64::from(u32::MAX) {
+            return Err(Error::DeviceLimit {
+                kind: LimitKind::StorageBinding,
+                what: format!(
+                    "rasterize: rast of {batch} × {}x{} pixels",
+                    shape.height, shape.width
+                ),
+                need: 16 * pixels,
+                max: limit,
+                device: ctx.info().name.clone(),
+                hint: "rasterize fewer minibatch items at once or a smaller resolution",
+            });
+        }
+        let grid = TileGrid::new(shape.width, shape.height, TILE)?;
+        // The depth pass's loops per invocation: per batch of 64 staged entries one and three
+        // (the edges), per entry one.
+        let pass_items = match ctx.info().shader_loop_limit() {
+            Some(cap) => (cap - 64) * 64 / 68,
+            None => u64::from(u32::MAX),
+        };
+        let job = BinJob {
+            grid,
+            layout: ItemLayout {
+                stride_words: ITEM_WORDS,
+                box_offset: 0,
+                flag_offset: 4,
+                flag_mask: 1,
+            },
+            items_per_view,
+            views: batch,
+            first_item: 0,
+        };
+        let s = f64::from(shape.width.min(shape.height));
+        let push = HardPush {
+            width: shape.width,
+            height: shape.height,
+            batch,
+            tri_count: shape.triangle_count,
+            vertex_count: shape.vertex_count,
+            items_per_view,
+            instanced: u32::from(matches!(shape.topology, Topology::Instanced { .. })),
+            peel: 0,
+            tiles_x: grid.tiles_x,
+            tiles_y: grid.tiles_y,
+            pass_begin: 0,
+            pass_end: 0,
+            box_scale: (1.0 / (8.0 * s)) as f32,
+            ndc_dx: (2.0 / f64::from(shape.width)) as f32,
+            ndc_dy: (2.0 / f64::from(shape.height)) as f32,
+            aux: 0,
+        };
+        Ok(Self {
+            shape: shape.clone(),
+            ranges,
+            job,
+            push,
+            pass_items,
+        })
+    }
+
+    /// The shape planned for.
+    pub fn shape(&self) -> &Shape {
+        &self.shape
+    }
+
+    /// `(first triangle, count)` per minibatch item, as the kernels read them (one `[u32; 2]`
+    /// each): what the caller's ranges buffer must hold.
+    pub fn range_table(&self) -> &[[u32; 2]] {
+        &self.ranges
+    }
+
+    /// Pixels over the minibatch.
+    pub fn pixels(&self) -> u64 {
+        self.shape.pixels() as u64
+    }
+
+    fn items_bytes(&self) -> u64 {
+        self.job.item_count() * u64::from(ITEM_WORDS) * 4
+    }
+
+    /// The depth passes needed when no tile's run is longer than `longest` entries.
+    pub fn depth_passes(&self, longest: u64) -> u64 {
+        longest.div_ceil(self.pass_items).max(1)
+    }
+}
+
+/// The inputs every step reads, in the caller's buffers.
+#[derive(Clone, Copy)]
+pub struct HardInputs<'a> {
+    /// f32 clip-space positions, [`Shape::pos_len`] of them.
+    pub pos: BufferRange<'a>,
+    /// Three u32 vertex indices per triangle.
+    pub tri: BufferRange<'a>,
+    /// [`HardPlan::range_table`].
+    pub ranges: BufferRange<'a>,
+}
 
 /// One rasterized layer as the host gets it, `[B, H, W, 4]` f32 (nvdiffrast's layout).
 #[derive(Clone, Debug, PartialEq)]
@@ -54,9 +240,6 @@ pub struct AntialiasArgs<'a> {
     pub channels: u32,
 }
 
-/// nvdiffrast's primitives on the GPU.
-pub struct HardRasterizer {}
-
 fn wide(v: &[f32]) -> Vec<f64> {
     v.iter().map(|&x| f64::from(x)).collect()
 }
@@ -65,17 +248,268 @@ fn narrow(v: &[f64]) -> Vec<f32> {
     v.iter().map(|&x| x as f32).collect()
 }
 
+/// nvdiffrast's primitives on the GPU: their pipelines, the binning and scratch.
+pub struct HardRasterizer {
+    setup: Arc<Kernel>,
+    depth: Arc<Kernel>,
+    shade: Arc<Kernel>,
+    binner: Binner,
+    bins: Bins,
+    items: Option<Buffer>,
+    /// Read back by [`HardRasterizer::bin`]: the entries of the last binning.
+    entries: Option<u64>,
+    host: HostBuffers,
+}
+
+/// Host-visible buffers the slice entry points reuse (grown, never shrunk).
+#[derive(Default)]
+struct HostBuffers {
+    inputs: Option<Buffer>,
+    outputs: Option<Buffer>,
+}
+
+fn host_buffer<'a>(
+    ctx: &Context,
+    slot: &'a mut Option<Buffer>,
+    name: &str,
+    bytes: u64,
+    kind: MemoryKind,
+) -> Result<&'a mut Buffer> {
+    if slot.as_ref().is_none_or(|b| b.size() < bytes) {
+        *slot = None; // free the old one first
+        *slot = Some(ctx.create_buffer(name, bytes.max(256), kind)?);
+    }
+    Ok(slot.as_mut().expect("made above"))
+}
+
+/// Byte offsets of consecutive parts of one buffer, each 256-byte aligned (a storage binding's
+/// offset alignment on any device); the last entry is the total.
+fn layout(parts: &[u64]) -> Vec<u64> {
+    let mut at = vec![0u64];
+    for &p in parts {
+        let next = at.last().expect("non-empty") + p.max(4).next_multiple_of(256);
+        at.push(next);
+    }
+    at
+}
+
+fn put<T: Pod>(bytes: &mut [u8], at: u64, data: &[T]) {
+    let data: &[u8] = bytemuck::cast_slice(data);
+    bytes[at as usize..at as usize + data.len()].copy_from_slice(data);
+}
+
+fn get<T: Pod>(bytes: &[u8], at: u64, out: &mut [T]) {
+    let len = std::mem::size_of_val(out);
+    bytemuck::cast_slice_mut::<T, u8>(out).copy_from_slice(&bytes[at as usize..at as usize + len]);
+}
+
 impl HardRasterizer {
-    /// Builds the pipelines.
-    pub fn new(_ctx: &Context) -> Result<Self> {
-        Ok(Self {})
+    /// Builds the pipelines (from the context's cache) and empty scratch.
+    pub fn new(ctx: &Context) -> Result<Self> {
+        Ok(Self {
+            setup: ctx.kernel(&specs::HARD_SETUP, &[])?,
+            depth: ctx.kernel(&specs::HARD_DEPTH, &[])?,
+            shade: ctx.kernel(&specs::HARD_SHADE, &[])?,
+            binner: Binner::new(ctx)?,
+            bins: Bins::new(ctx)?,
+            items: None,
+            entries: None,
+            host: HostBuffers::default(),
+        })
+    }
+
+    /// Step 1 and the binning's count: records the setup of `plan`'s items and the count pass.
+    /// Submit it, then call [`HardRasterizer::bin`].
+    pub fn record_setup(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        plan: &HardPlan,
+        inputs: HardInputs<'_>,
+    ) -> Result<()> {
+        let ctx = rec.context();
+        let bytes = plan.items_bytes();
+        if self.items.as_ref().is_none_or(|b| b.size() < bytes) {
+            self.items = None;
+            self.items =
+                Some(ctx.create_buffer("hard rasterizer items", bytes, MemoryKind::Device)?);
+        }
+        self.bins.reserve(ctx, &plan.job)?;
+        self.entries = None;
+        Self::check_inputs(plan, &inputs)?;
+        let items = self.items.as_ref().expect("reserved above").range(0, bytes);
+        rec.pass("hard setup", |rec| {
+            rec.dispatch(
+                &self.setup,
+                &specs::HardSetupBindings {
+                    pos: inputs.pos,
+                    tri: inputs.tri,
+                    ranges: inputs.ranges,
+                    items,
+                }
+                .for_kernel(&self.setup)?,
+                &plan.push,
+                groups(plan.job.item_count(), 64)?,
+            )
+        })?;
+        rec.pass("hard binning count", |rec| {
+            self.binner.record_count(rec, &self.bins, items, &plan.job)
+        })
+    }
+
+    fn check_inputs(plan: &HardPlan, inputs: &HardInputs<'_>) -> Result<()> {
+        inputs
+            .pos
+            .require(4 * plan.shape.pos_len() as u64, "rasterize positions")?;
+        inputs.tri.require(
+            12 * u64::from(plan.shape.triangle_count).max(1),
+            "rasterize triangles",
+        )?;
+        inputs
+            .ranges
+            .require(8 * plan.ranges.len() as u64, "rasterize ranges")
+    }
+
+    /// Reads the binning's entry count back (after [`HardRasterizer::record_setup`]'s
+    /// submission completed) and sizes the entry buffers for it.
+    pub fn bin(&mut self, ctx: &Context) -> Result<u64> {
+        let total = self.bins.read_total(ctx)?;
+        self.bins.reserve_entries(ctx, total)?;
+        self.entries = Some(total);
+        Ok(total)
+    }
+
+    fn entry_count(&self) -> Result<u64> {
+        self.entries.ok_or_else(|| {
+            Error::Misuse("hard rasterizer: the binning's count is not read yet (bin)".into())
+        })
+    }
+
+    fn items_range(&self, plan: &HardPlan) -> Result<BufferRange<'_>> {
+        self.items
+            .as_ref()
+            .map(|b| b.range(0, plan.items_bytes()))
+            .ok_or_else(|| Error::Misuse("hard rasterizer: record_setup has not run".into()))
+    }
+
+    /// Step 2's second half: records the binning's lists (after [`HardRasterizer::bin`]).
+    pub fn record_sort(&self, rec: &mut Recorder<'_>, plan: &HardPlan) -> Result<()> {
+        self.entry_count()?;
+        let items = self.items_range(plan)?;
+        rec.pass("hard binning lists", |rec| {
+            self.binner.record_sort(rec, &self.bins, items, &plan.job)
+        })
+    }
+
+    /// The longest tile run the depth pass can meet without reading the ranges.
+    pub fn longest_run_bound(&self, plan: &HardPlan) -> Result<u64> {
+        Ok(u64::from(plan.job.items_per_view).min(self.entry_count()?))
+    }
+
+    /// Reads the binning's tile ranges back (after a submission of
+    /// [`HardRasterizer::record_sort`]) and returns the longest run.
+    pub fn longest_run(&self, ctx: &Context, plan: &HardPlan) -> Result<u64> {
+        let ranges: Vec<[u32; 2]> =
+            ctx.read_buffer(self.bins.ranges(), 0, plan.job.tile_count() as usize)?;
+        Ok(ranges
+            .iter()
+            .map(|r| u64::from(r[1].saturating_sub(r[0])))
+            .max()
+            .unwrap_or(0))
+    }
+
+    /// Step 3: records `passes` depth passes ([`HardPlan::depth_passes`]) into `keys` (8 bytes
+    /// a pixel), after [`HardRasterizer::record_sort`]; with `previous` (a layer's keys), the
+    /// next depth-peeling layer.
+    pub fn record_depth(
+        &self,
+        rec: &mut Recorder<'_>,
+        plan: &HardPlan,
+        inputs: HardInputs<'_>,
+        keys: BufferRange<'_>,
+        previous: Option<BufferRange<'_>>,
+        passes: u64,
+    ) -> Result<()> {
+        let total = self.entry_count()?;
+        let pixels = plan.pixels();
+        Self::check_inputs(plan, &inputs)?;
+        keys.require(8 * pixels, "rasterize keys")?;
+        if let Some(p) = &previous {
+            p.require(8 * pixels, "the previous layer's keys")?;
+        }
+        let items = self.items_range(plan)?;
+        let tiles = plan.job.tile_count();
+        let entries = total.max(1);
+        let keys = keys.sub(0, 8 * pixels);
+        rec.pass("hard depth", |rec| {
+            rec.fill(keys, 0);
+            for pass in 0..passes {
+                let begin = pass * plan.pass_items;
+                let end = (begin + plan.pass_items).min(u64::from(u32::MAX));
+                let push = HardPush {
+                    pass_begin: begin as u32,
+                    pass_end: end as u32,
+                    peel: u32::from(previous.is_some()),
+                    ..plan.push
+                };
+                rec.dispatch(
+                    &self.depth,
+                    &specs::HardDepthBindings {
+                        pos: inputs.pos,
+                        tri: inputs.tri,
+                        items,
+                        pairs: self.bins.entries().range(0, 4 * entries),
+                        pair_items: self.bins.entry_items().range(0, 4 * entries),
+                        tile_ranges: self.bins.ranges().range(0, 8 * tiles),
+                        keys,
+                        prev_keys: previous.unwrap_or(keys),
+                    }
+                    .for_kernel(&self.depth)?,
+                    &push,
+                    u32::try_from(tiles)
+                        .map_err(|_| Error::Input("rasterize: image too large".into()))?,
+                )?;
+            }
+            Ok(())
+        })
+    }
+
+    /// Step 4: records `rast` and `rast_db` (16 bytes a pixel each) from `keys`.
+    pub fn record_shade(
+        &self,
+        rec: &mut Recorder<'_>,
+        plan: &HardPlan,
+        inputs: HardInputs<'_>,
+        keys: BufferRange<'_>,
+        rast: BufferRange<'_>,
+        rast_db: BufferRange<'_>,
+    ) -> Result<()> {
+        let pixels = plan.pixels();
+        Self::check_inputs(plan, &inputs)?;
+        keys.require(8 * pixels, "rasterize keys")?;
+        rast.require(16 * pixels, "rast")?;
+        rast_db.require(16 * pixels, "rast_db")?;
+        rec.pass("hard shade", |rec| {
+            rec.dispatch(
+                &self.shade,
+                &specs::HardShadeBindings {
+                    pos: inputs.pos,
+                    tri: inputs.tri,
+                    keys: keys.sub(0, 8 * pixels),
+                    rast: rast.sub(0, 16 * pixels),
+                    rast_db: rast_db.sub(0, 16 * pixels),
+                }
+                .for_kernel(&self.shade)?,
+                &plan.push,
+                groups(pixels, 64)?,
+            )
+        })
     }
 
     /// Rasterizes `pos` (f32, [`Shape::pos_len`]) with `tri`; with `previous` (a layer's
-    /// keys), the next depth-peeling layer.
+    /// keys), the next depth-peeling layer. Waits for the device.
     pub fn rasterize(
         &mut self,
-        _ctx: &Context,
+        ctx: &Context,
         shape: &Shape,
         pos: &[f32],
         tri: &[[u32; 3]],
@@ -83,26 +517,93 @@ impl HardRasterizer {
     ) -> Result<HardLayer> {
         shape.check(tri)?;
         shape.check_pos(pos)?;
-        let prev: Option<Vec<Option<reference::DepthKey>>> = previous.map(|p| {
-            p.iter()
-                .map(|k| {
-                    (k[1] != 0).then(|| reference::DepthKey {
-                        zw: f64::from(f32::from_bits(k[0])),
-                        triangle: k[1] - 1,
-                    })
-                })
-                .collect()
-        });
-        let l = reference::rasterize(shape, &wide(pos), tri, prev.as_deref());
-        Ok(HardLayer {
-            rast: narrow(&l.rast),
-            rast_db: narrow(&l.rast_db),
-            keys: l
-                .keys
-                .iter()
-                .map(|k| k.map_or([0, 0], |k| [(k.zw as f32).to_bits(), k.triangle + 1]))
-                .collect(),
-        })
+        let plan = HardPlan::new(ctx, shape)?;
+        let pixels = plan.pixels();
+        if let Some(p) = previous {
+            if p.len() as u64 != pixels {
+                return Err(Error::Input(format!(
+                    "rasterize: the previous layer has {} pixels, this one {pixels}",
+                    p.len()
+                )));
+            }
+        }
+        let at = layout(&[
+            4 * pos.len() as u64,
+            12 * tri.len() as u64,
+            8 * plan.ranges.len() as u64,
+            8 * pixels,
+        ]);
+        let input = host_buffer(
+            ctx,
+            &mut self.host.inputs,
+            "hard inputs",
+            at[4],
+            MemoryKind::Upload,
+        )?;
+        {
+            let bytes = input
+                .mapped_mut()
+                .ok_or_else(|| Error::Misuse("upload memory is not host-mapped".into()))?;
+            put(bytes, at[0], pos);
+            put(bytes, at[1], tri);
+            put(bytes, at[2], &plan.ranges);
+            if let Some(p) = previous {
+                put(bytes, at[3], p);
+            }
+        }
+        let out_at = layout(&[8 * pixels, 16 * pixels, 16 * pixels]);
+        host_buffer(
+            ctx,
+            &mut self.host.outputs,
+            "hard outputs",
+            out_at[3],
+            MemoryKind::Readback,
+        )?;
+        let input = self.host.inputs.take().expect("made above");
+        let output = self.host.outputs.take().expect("made above");
+        let result = (|| {
+            let inputs = HardInputs {
+                pos: input.range(at[0], 4 * (pos.len() as u64).max(1)),
+                tri: input.range(at[1], 12 * (tri.len() as u64).max(1)),
+                ranges: input.range(at[2], 8 * plan.ranges.len() as u64),
+            };
+            let prev = previous.map(|_| input.range(at[3], 8 * pixels));
+            let keys = output.range(out_at[0], 8 * pixels);
+            let rast = output.range(out_at[1], 16 * pixels);
+            let rast_db = output.range(out_at[2], 16 * pixels);
+            ctx.submit_and_wait(|rec| self.record_setup(rec, &plan, inputs))?;
+            self.bin(ctx)?;
+            let bound = self.longest_run_bound(&plan)?;
+            let sorted_first = plan.depth_passes(bound) > 1;
+            let mut passes = 1;
+            if sorted_first {
+                ctx.submit_and_wait(|rec| self.record_sort(rec, &plan))?;
+                passes = plan.depth_passes(self.longest_run(ctx, &plan)?);
+            }
+            ctx.submit_and_wait(|rec| {
+                if !sorted_first {
+                    self.record_sort(rec, &plan)?;
+                }
+                self.record_depth(rec, &plan, inputs, keys, prev, passes)?;
+                self.record_shade(rec, &plan, inputs, keys, rast, rast_db)
+            })?;
+            let bytes = output
+                .mapped()
+                .ok_or_else(|| Error::Misuse("readback memory is not host-mapped".into()))?;
+            let n = pixels as usize;
+            let mut layer = HardLayer {
+                rast: vec![0.0; 4 * n],
+                rast_db: vec![0.0; 4 * n],
+                keys: vec![[0, 0]; n],
+            };
+            get(bytes, out_at[0], &mut layer.keys);
+            get(bytes, out_at[1], &mut layer.rast);
+            get(bytes, out_at[2], &mut layer.rast_db);
+            Ok(layer)
+        })();
+        self.host.inputs = Some(input);
+        self.host.outputs = Some(output);
+        result
     }
 
     /// The gradient of `pos` given the upstream gradients of `rast` (`dy`, `[B, H, W, 4]`) and

@@ -1,0 +1,383 @@
+//! nvdiffrast's rasterizer on the GPU (`softvk::raster::hard::gpu`) against its f64 twin
+//! (`softvk::raster::hard::reference`): ids exactly wherever the twin does not flag a pixel as
+//! one f32 may decide otherwise (counted and bounded), `u, v, z/w` within 1e-5 and `rast_db`
+//! within 1e-5 relative; in instanced and range mode, square and not, with triangles through
+//! the near and far planes, behind the eye and beyond the viewport; depth peeling layer by
+//! layer; and the fill rule on closed meshes from 50 random views (every pixel centre inside
+//! the silhouette drawn once by a front face and once by a back face, none twice).
+
+mod common;
+
+use glam::{Mat4, Vec3, Vec4};
+use rand::RngExt;
+use softvk::mesh::Mesh;
+use softvk::raster::hard::gpu::{HardLayer, HardRasterizer};
+use softvk::raster::hard::reference::{self, Coverage, DepthKey, Layer};
+use softvk::raster::hard::{Shape, Topology};
+
+/// Random triangles in clip space: most in front and in view, some through the near plane,
+/// behind the eye, past the far plane or far outside the viewport.
+fn random_scene(seed: u64, vertices: usize, triangles: usize) -> (Vec<f32>, Vec<[u32; 3]>) {
+    let mut rng = common::rng(seed);
+    let mut pos = Vec::with_capacity(4 * vertices);
+    for i in 0..vertices {
+        let w: f32 = if i % 17 == 5 {
+            rng.random_range(-0.8..-0.1)
+        } else {
+            rng.random_range(0.5..2.0)
+        };
+        let spread = if i % 13 == 7 { 4.0 } else { 1.1 };
+        let x = rng.random_range(-spread..spread) * w.abs();
+        let y = rng.random_range(-spread..spread) * w.abs();
+        let z = rng.random_range(-1.2..1.2) * w.abs();
+        pos.extend([x, y, z, w]);
+    }
+    let tri = (0..triangles)
+        .map(|_| {
+            let a = rng.random_range(0..vertices as u32);
+            let b = rng.random_range(0..vertices as u32);
+            let c = rng.random_range(0..vertices as u32);
+            [a, b, c]
+        })
+        .collect();
+    (pos, tri)
+}
+
+fn wide(v: &[f32]) -> Vec<f64> {
+    v.iter().map(|&x| f64::from(x)).collect()
+}
+
+/// How much f32 rounding the pixel's barycentrics carry: the sum of the magnitudes of the
+/// products in the three edge functions over their sum (1 for a centre well inside a large
+/// triangle; large for a centre far from a tiny one, where nvdiffrast's own f32 arithmetic is
+/// as inexact).
+fn condition(shape: &Shape, pos: &[f64], tri: &[[u32; 3]], i: usize, t: u32) -> f64 {
+    let (w, h) = (shape.width as usize, shape.height as usize);
+    let b = i / (w * h);
+    let (x, y) = ((i % (w * h)) % w, (i % (w * h)) / w);
+    let f = reference::pixel_ndc(x as u32, y as u32, shape.width, shape.height);
+    let base = shape.vertex_base(b as u32);
+    let r: Vec<[f64; 2]> = tri[t as usize]
+        .iter()
+        .map(|&v| {
+            let o = 4 * (base + v as usize);
+            [pos[o] - f[0] * pos[o + 3], pos[o + 1] - f[1] * pos[o + 3]]
+        })
+        .collect();
+    let (mut mag, mut sum) = (0.0, 0.0);
+    for (i, j) in [(1, 2), (2, 0), (0, 1)] {
+        let (p, q) = (r[i][0] * r[j][1], r[i][1] * r[j][0]);
+        mag += p.abs() + q.abs();
+        sum += p - q;
+    }
+    mag / sum.abs()
+}
+
+/// Compares a GPU layer with the twin's: ids exactly except at pixels the twin flags as
+/// ambiguous (returns how many of those differ); `u, v, z/w` within 1e-5 and `rast_db` within
+/// 1e-5 relative, plus f32's own floor: 4e-7 (seven roundings) times the pixel's
+/// [`condition`], and the pixel derivatives times two ulps of the image's half size (where
+/// f32 puts the centre).
+fn compare(
+    gpu: &HardLayer,
+    twin: &Layer,
+    scene: (&Shape, &[f64], &[[u32; 3]]),
+    what: &str,
+) -> usize {
+    let pixels = twin.keys.len();
+    let mut differ = 0;
+    let (mut worst_uvz, mut worst_db, mut worst_cond) = (0.0f64, 0.0f64, 0.0f64);
+    for i in 0..pixels {
+        let (g, t) = (&gpu.rast[4 * i..4 * i + 4], &twin.rast[4 * i..4 * i + 4]);
+        if f64::from(g[3]) != t[3] {
+            assert!(
+                twin.ambiguous[i],
+                "{what}: pixel {i}: GPU id {} twin {} (not an ambiguous pixel)",
+                g[3], t[3]
+            );
+            differ += 1;
+            continue;
+        }
+        let Some(k) = twin.keys[i] else {
+            assert!(
+                g.iter()
+                    .chain(&gpu.rast_db[4 * i..4 * i + 4])
+                    .all(|&v| v == 0.0)
+            );
+            continue;
+        };
+        let cond = condition(scene.0, scene.1, scene.2, i, k.triangle);
+        worst_cond = worst_cond.max(cond);
+        // f32 places the centre (and each p_k − f w_k) within a few ulps of NDC: that moves
+        // u and v by their pixel derivatives times a few ulps of the image's half size.
+        let db: f64 = twin.rast_db[4 * i..4 * i + 4].iter().map(|d| d.abs()).sum();
+        let half = f64::from(scene.0.width.max(scene.0.height)) / 2.0;
+        let tol = 1e-5 + 4e-7 * cond + 2.0 * f64::from(f32::EPSILON) * half * db;
+        for c in 0..3 {
+            let e = (f64::from(g[c]) - t[c]).abs() / tol;
+            if e > 0.5 && std::env::var("HARD_DEBUG").is_ok() {
+                eprintln!("{what}: pixel {i} channel {c}: gpu {} twin {} cond {cond}", g[c], t[c]);
+            }
+            worst_uvz = worst_uvz.max(e);
+        }
+        for c in 0..4 {
+            let (gd, td) = (f64::from(gpu.rast_db[4 * i + c]), twin.rast_db[4 * i + c]);
+            worst_db = worst_db.max((gd - td).abs() / (1.0 + td.abs()) / tol);
+        }
+    }
+    assert!(
+        worst_uvz <= 1.0,
+        "{what}: u, v, z/w at {worst_uvz} of their bound"
+    );
+    assert!(
+        worst_db <= 1.0,
+        "{what}: rast_db at {worst_db} of its bound"
+    );
+    eprintln!(
+        "{what}: {differ} ambiguous pixels differ; u, v, z/w at {worst_uvz:.2}, rast_db at \
+         {worst_db:.2} of their bounds (largest condition {worst_cond:.0})"
+    );
+    differ
+}
+
+fn drawn(layer: &Layer) -> usize {
+    layer.keys.iter().filter(|k| k.is_some()).count()
+}
+
+#[test]
+fn random_scenes_match_the_twin_in_instanced_and_range_mode() {
+    let Some(ctx) = common::gpu() else { return };
+    let mut hard = HardRasterizer::new(&ctx).unwrap();
+    for (seed, width, height) in [(1u64, 37u32, 29u32), (2, 32, 32), (3, 20, 45)] {
+        let (pos, tri) = random_scene(seed, 60, 90);
+        // Instanced: two minibatch items over different vertices (the second scaled).
+        let mut pos2 = pos.clone();
+        pos2.extend(
+            pos.chunks(4)
+                .flat_map(|v| [v[0] * 0.7, v[1] * 0.8, v[2], v[3]]),
+        );
+        let shape = Shape {
+            width,
+            height,
+            vertex_count: 60,
+            triangle_count: tri.len() as u32,
+            topology: Topology::Instanced { batch: 2 },
+        };
+        let gpu = hard.rasterize(&ctx, &shape, &pos2, &tri, None).unwrap();
+        let twin = reference::rasterize(&shape, &wide(&pos2), &tri, None);
+        assert!(
+            drawn(&twin) > (width * height) as usize / 2,
+            "the scene draws most pixels"
+        );
+        let differ = compare(
+            &gpu,
+            &twin,
+            (&shape, &wide(&pos2), &tri),
+            &format!("instanced {width}x{height}"),
+        );
+        assert!(
+            differ * 200 < twin.keys.len(),
+            "{differ} ambiguous pixels differ"
+        );
+        // Range mode: item 0 the first 50 triangles, item 1 triangles 30..90 (overlapping).
+        let ranged = Shape {
+            topology: Topology::Ranged(vec![[0, 50], [30, 60]]),
+            ..shape.clone()
+        };
+        let gpu = hard.rasterize(&ctx, &ranged, &pos, &tri, None).unwrap();
+        let twin = reference::rasterize(&ranged, &wide(&pos), &tri, None);
+        compare(
+            &gpu,
+            &twin,
+            (&ranged, &wide(&pos), &tri),
+            &format!("ranged {width}x{height}"),
+        );
+        // Triangles of other ranges never appear.
+        for (i, k) in twin.keys.iter().enumerate() {
+            if let Some(k) = k {
+                let item = i / (width * height) as usize;
+                assert!(if item == 0 {
+                    k.triangle < 50
+                } else {
+                    k.triangle >= 30
+                });
+            }
+        }
+    }
+}
+
+#[test]
+fn depth_peeling_returns_every_layer_in_order_then_nothing() {
+    let Some(ctx) = common::gpu() else { return };
+    let mut hard = HardRasterizer::new(&ctx).unwrap();
+    let (pos, tri) = random_scene(7, 40, 60);
+    let shape = Shape {
+        width: 24,
+        height: 20,
+        vertex_count: 40,
+        triangle_count: 60,
+        topology: Topology::Instanced { batch: 1 },
+    };
+    let pos64 = wide(&pos);
+    let mut gpu_prev: Option<Vec<[u32; 2]>> = None;
+    let mut twin_prev: Option<Vec<Option<DepthKey>>> = None;
+    let mut layers = 0;
+    loop {
+        let gpu = hard
+            .rasterize(&ctx, &shape, &pos, &tri, gpu_prev.as_deref())
+            .unwrap();
+        let twin = reference::rasterize(&shape, &pos64, &tri, twin_prev.as_deref());
+        // Where an earlier layer differed, the two peel from different surfaces: compare only
+        // layers that agree so far (the scene is drawn clear of ambiguity in every test run).
+        let differ = compare(
+            &gpu,
+            &twin,
+            (&shape, &pos64, &tri),
+            &format!("layer {layers}"),
+        );
+        assert_eq!(differ, 0, "layer {layers}");
+        if let Some(prev) = &twin_prev {
+            for (i, k) in twin.keys.iter().enumerate() {
+                if let Some(k) = k {
+                    let p = prev[i].expect("a surface behind one that was drawn");
+                    assert!(
+                        p.before(k),
+                        "pixel {i}: layer {layers} is not behind the last"
+                    );
+                }
+            }
+        }
+        if drawn(&twin) == 0 {
+            assert!(gpu.rast.iter().all(|&v| v == 0.0));
+            break;
+        }
+        layers += 1;
+        gpu_prev = Some(gpu.keys);
+        twin_prev = Some(twin.keys);
+        assert!(layers < 60, "peeling does not end");
+    }
+    assert!(layers >= 4, "the scene has {layers} layers");
+}
+
+/// Clip-space positions of `mesh` seen from `eye` towards the origin (OpenGL perspective, 40°
+/// vertical field of view, near 0.5, far 10), as nvdiffrast's samples build them.
+fn clip(mesh: &Mesh, eye: Vec3, aspect: f32) -> Vec<f32> {
+    let f = (-eye).normalize();
+    let up = if f.y.abs() > 0.99 { Vec3::X } else { Vec3::Y };
+    let s = f.cross(up).normalize();
+    let u = s.cross(f);
+    let view = Mat4::from_cols(
+        Vec4::new(s.x, u.x, -f.x, 0.0),
+        Vec4::new(s.y, u.y, -f.y, 0.0),
+        Vec4::new(s.z, u.z, -f.z, 0.0),
+        Vec4::new(-s.dot(eye), -u.dot(eye), f.dot(eye), 1.0),
+    );
+    let (near, far) = (0.5f32, 10.0f32);
+    let g = 1.0 / (20f32.to_radians()).tan();
+    let proj = Mat4::from_cols(
+        Vec4::new(g / aspect, 0.0, 0.0, 0.0),
+        Vec4::new(0.0, g, 0.0, 0.0),
+        Vec4::new(0.0, 0.0, (far + near) / (near - far), -1.0),
+        Vec4::new(0.0, 0.0, 2.0 * far * near / (near - far), 0.0),
+    );
+    let m = proj * view;
+    mesh.positions
+        .iter()
+        .flat_map(|p| (m * Vec4::new(p[0], p[1], p[2], 1.0)).to_array())
+        .collect()
+}
+
+#[test]
+fn a_closed_mesh_from_fifty_views_has_no_hole_and_no_pixel_drawn_twice() {
+    let Some(ctx) = common::gpu() else { return };
+    let mut hard = HardRasterizer::new(&ctx).unwrap();
+    let assets = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets");
+    let mesh = Mesh::load_obj(&assets.join("spot_triangulated.obj"), 1).unwrap();
+    let tri = mesh.faces.clone();
+    let (w, h) = (40u32, 32u32);
+    let mut rng = common::rng(11);
+    let (mut inside_total, mut on_edges, mut compared) = (0usize, 0usize, 0usize);
+    for view in 0..50 {
+        let dir = Vec3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        )
+        .normalize_or(Vec3::Z);
+        let pos = clip(&mesh, dir * 3.2, w as f32 / h as f32);
+        let pos64 = wide(&pos);
+        // Per pixel: how many front-facing and back-facing snapped triangles cover its centre.
+        let mut front = vec![0u32; (w * h) as usize];
+        let mut back = vec![0u32; (w * h) as usize];
+        for t in &tri {
+            let c = t.map(|v| {
+                let o = 4 * v as usize;
+                [pos64[o], pos64[o + 1], pos64[o + 2], pos64[o + 3]]
+            });
+            let q = match reference::coverage(c, w, h) {
+                Some(Coverage::Snapped(q)) => q,
+                None => continue, // zero area once snapped: draws nothing
+                Some(Coverage::Homogeneous) => panic!("view {view}: the mesh is in view"),
+            };
+            // Screen-space winding of the snapped corners as given (Snapped is reordered).
+            let s = c.map(|v| reference::snap(&v, w, h, 0.0).0);
+            let area = (s[1][0] - s[0][0]) * (s[2][1] - s[0][1])
+                - (s[1][1] - s[0][1]) * (s[2][0] - s[0][0]);
+            for y in 0..h {
+                for x in 0..w {
+                    if q.covers(reference::sample(x, y, w, h)) {
+                        on_edges += usize::from((0..3).any(|k| {
+                            reference::edge_function(
+                                q.p[k],
+                                q.p[(k + 1) % 3],
+                                reference::sample(x, y, w, h),
+                            ) == 0
+                        }));
+                        let i = (y * w + x) as usize;
+                        if area > 0 {
+                            front[i] += 1
+                        } else {
+                            back[i] += 1
+                        }
+                    }
+                }
+            }
+        }
+        // spot is closed: along every ray as many front faces as back faces. Pixels of its
+        // silhouette are covered once each way or more (folds), never unevenly.
+        for i in 0..(w * h) as usize {
+            assert_eq!(
+                front[i], back[i],
+                "view {view}, pixel {i}: a hole or a pixel drawn twice"
+            );
+            inside_total += usize::from(front[i] > 0);
+        }
+        let shape = Shape {
+            width: w,
+            height: h,
+            vertex_count: mesh.positions.len() as u32,
+            triangle_count: tri.len() as u32,
+            topology: Topology::Instanced { batch: 1 },
+        };
+        let gpu = hard.rasterize(&ctx, &shape, &pos, &tri, None).unwrap();
+        let twin = reference::rasterize(&shape, &pos64, &tri, None);
+        for i in 0..(w * h) as usize {
+            assert_eq!(
+                twin.keys[i].is_some(),
+                front[i] > 0,
+                "view {view}: pixel {i}"
+            );
+        }
+        compared += (w * h) as usize
+            - compare(
+                &gpu,
+                &twin,
+                (&shape, &pos64, &tri),
+                &format!("spot view {view}"),
+            );
+    }
+    eprintln!(
+        "{inside_total} centres inside the silhouettes, {on_edges} covers exactly on an edge, {compared} pixels agree"
+    );
+    assert!(inside_total > 50 * 200);
+}
