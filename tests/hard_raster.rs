@@ -116,7 +116,10 @@ fn compare(
         for c in 0..3 {
             let e = (f64::from(g[c]) - t[c]).abs() / tol;
             if e > 0.5 && std::env::var("HARD_DEBUG").is_ok() {
-                eprintln!("{what}: pixel {i} channel {c}: gpu {} twin {} cond {cond}", g[c], t[c]);
+                eprintln!(
+                    "{what}: pixel {i} channel {c}: gpu {} twin {} cond {cond}",
+                    g[c], t[c]
+                );
             }
             worst_uvz = worst_uvz.max(e);
         }
@@ -380,4 +383,136 @@ fn a_closed_mesh_from_fifty_views_has_no_hole_and_no_pixel_drawn_twice() {
         "{inside_total} centres inside the silhouettes, {on_edges} covers exactly on an edge, {compared} pixels agree"
     );
     assert!(inside_total > 50 * 200);
+}
+
+/// `Σ dy·rast + ddb·rast_db` of a twin layer over the pixels `keep` allows.
+fn loss(layer: &Layer, dy: &[f64], ddb: &[f64], keep: &[bool]) -> f64 {
+    let mut sum = 0.0;
+    for (i, &k) in keep.iter().enumerate() {
+        if k {
+            for c in 0..2 {
+                sum += dy[4 * i + c] * layer.rast[4 * i + c];
+            }
+            for c in 0..4 {
+                sum += ddb[4 * i + c] * layer.rast_db[4 * i + c];
+            }
+        }
+    }
+    sum
+}
+
+#[test]
+fn the_backward_matches_the_twin_which_matches_central_differences() {
+    let Some(ctx) = common::gpu() else { return };
+    let mut hard = HardRasterizer::new(&ctx).unwrap();
+    let (pos, tri) = random_scene(21, 24, 30);
+    let mut pos2 = pos.clone();
+    pos2.extend(pos.chunks(4).flat_map(|v| [v[1] * 0.9, v[0], v[2], v[3]]));
+    for shape in [
+        Shape {
+            width: 19,
+            height: 16,
+            vertex_count: 24,
+            triangle_count: 30,
+            topology: Topology::Instanced { batch: 2 },
+        },
+        Shape {
+            width: 16,
+            height: 21,
+            vertex_count: 24,
+            triangle_count: 30,
+            topology: Topology::Ranged(vec![[0, 20], [10, 20]]),
+        },
+    ] {
+        let pos = if shape.pos_len() == pos2.len() {
+            &pos2
+        } else {
+            &pos
+        };
+        let pos64 = wide(pos);
+        let n = shape.pixels();
+        let mut rng = common::rng(5);
+        let dy: Vec<f32> = (0..4 * n).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let ddb: Vec<f32> = (0..4 * n).map(|_| rng.random_range(-0.05..0.05)).collect();
+        let layer = hard.rasterize(&ctx, &shape, pos, &tri, None).unwrap();
+        let gpu = hard
+            .rasterize_grad(&ctx, &shape, pos, &tri, &layer.rast, &dy, Some(&ddb))
+            .unwrap();
+        let gpu_again = hard
+            .rasterize_grad(&ctx, &shape, pos, &tri, &layer.rast, &dy, Some(&ddb))
+            .unwrap();
+        assert_eq!(
+            bytemuck::cast_slice::<f32, u8>(&gpu),
+            bytemuck::cast_slice::<f32, u8>(&gpu_again),
+            "the same bits twice"
+        );
+        let (dy64, ddb64) = (wide(&dy), wide(&ddb));
+        let twin = reference::rasterize_grad(
+            &shape,
+            &pos64,
+            &tri,
+            &wide(&layer.rast),
+            &dy64,
+            Some(&ddb64),
+        );
+        let scale = twin.iter().fold(0.0f64, |m, g| m.max(g.abs()));
+        let mut worst = 0.0f64;
+        for (k, (&g, &t)) in gpu.iter().zip(&twin).enumerate() {
+            if k % 4 == 2 {
+                assert_eq!(g, 0.0, "z takes no gradient");
+            }
+            worst = worst.max((f64::from(g) - t).abs() / (1e-4 * (1.0 + t.abs()) + 1e-6 * scale));
+        }
+        assert!(
+            worst <= 1.0,
+            "GPU backward at {worst} of its bound against the twin"
+        );
+        // The twin against central differences of its own forward, for fixed visibility:
+        // pixels whose triangle changes under the step are left out of both sides.
+        let base = reference::rasterize(&shape, &pos64, &tri, None);
+        let h = 1e-6;
+        let (mut fd_worst, mut skipped) = (0.0f64, 0);
+        for k in (0..pos64.len()).filter(|k| k % 4 != 2) {
+            let moved = |d: f64| {
+                let mut p = pos64.clone();
+                p[k] += d;
+                reference::rasterize(&shape, &p, &tri, None)
+            };
+            let (plus, minus) = (moved(h), moved(-h));
+            let keep: Vec<bool> = (0..n)
+                .map(|i| {
+                    base.keys[i].map(|k| k.triangle) == plus.keys[i].map(|k| k.triangle)
+                        && base.keys[i].map(|k| k.triangle) == minus.keys[i].map(|k| k.triangle)
+                })
+                .collect();
+            let mut masked = dy64.clone();
+            let mut masked_db = ddb64.clone();
+            for (i, &kp) in keep.iter().enumerate() {
+                if !kp {
+                    skipped += 1;
+                    masked[4 * i..4 * i + 4].fill(0.0);
+                    masked_db[4 * i..4 * i + 4].fill(0.0);
+                }
+            }
+            let fd = (loss(&plus, &dy64, &ddb64, &keep) - loss(&minus, &dy64, &ddb64, &keep))
+                / (2.0 * h);
+            let g = reference::rasterize_grad(
+                &shape,
+                &pos64,
+                &tri,
+                &base.rast,
+                &masked,
+                Some(&masked_db),
+            )[k];
+            fd_worst = fd_worst.max((fd - g).abs() / (1.0 + g.abs()));
+        }
+        eprintln!(
+            "{:?}: GPU at {worst:.3} of its bound; twin − central differences {fd_worst:.1e} ({skipped} pixel steps left out)",
+            shape.topology
+        );
+        assert!(
+            fd_worst < 1e-5,
+            "twin against central differences: {fd_worst:e}"
+        );
+    }
 }

@@ -22,7 +22,15 @@ layout(push_constant) uniform Push {
     float box_scale;      // 1 / (8 min(W, H)): snapped units to the binning's coordinates
     float ndc_dx;         // 2 / W and 2 / H (f64 on the host, rounded once)
     float ndc_dy;
-    uint aux;             // kernel-specific: A (interpolate), D (reductions), ...
+    uint rows;            // gradients: output rows (vertex sets × V)
+    uint slots;           // gradients: (item, tile) slots
+    uint dims;            // gradients: floats per item (3 corners × per-vertex floats)
+    uint attr_count;      // interpolate: A
+    uint diff_count;      // interpolate: N differentiated attributes
+    uint grow;            // gradients: pixels a visible box is widened by
+    uint channels;        // antialias: C
+    uint items;           // gradients: items (B × items per view)
+    uint pad0;
 } pc;
 
 // A rasterizer item (one per (minibatch item, triangle slot)): the binning's box and flag, the
