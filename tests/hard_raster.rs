@@ -516,3 +516,122 @@ fn the_backward_matches_the_twin_which_matches_central_differences() {
         );
     }
 }
+
+#[test]
+fn interpolate_and_its_backward_match_the_twin() {
+    use softvk::raster::hard::reference::AttrLayout;
+    let Some(ctx) = common::gpu() else { return };
+    let mut hard = HardRasterizer::new(&ctx).unwrap();
+    let (pos, tri) = random_scene(31, 30, 40);
+    let mut pos2 = pos.clone();
+    pos2.extend(pos.chunks(4).flat_map(|v| [v[0] * 0.8, v[1], v[2], v[3]]));
+    let shape = Shape {
+        width: 23,
+        height: 18,
+        vertex_count: 30,
+        triangle_count: 40,
+        topology: Topology::Instanced { batch: 2 },
+    };
+    let layer = hard.rasterize(&ctx, &shape, &pos2, &tri, None).unwrap();
+    let n = shape.pixels();
+    let mut rng = common::rng(9);
+    for (per_item, a, diff) in [
+        (false, 3u32, vec![2u32, 0]),
+        (true, 2, vec![1, 1, 0]),
+        (false, 1, vec![]),
+    ] {
+        let layout = AttrLayout {
+            vertex_count: 30,
+            attr_count: a,
+            per_item,
+        };
+        let rows = if per_item { 60 } else { 30 };
+        let attr: Vec<f32> = (0..rows * a as usize)
+            .map(|_| rng.random_range(-1.0..1.0))
+            .collect();
+        let db = (!diff.is_empty()).then_some(&layer.rast_db[..]);
+        let (out, out_da) = hard
+            .interpolate(&ctx, &attr, layout, &layer.rast, &tri, [18, 23], db, &diff)
+            .unwrap();
+        let (tout, tda) = reference::interpolate(
+            &wide(&attr),
+            layout,
+            &wide(&layer.rast),
+            &tri,
+            23 * 18,
+            db.map(wide).as_deref(),
+            &diff,
+        );
+        let err = |g: &[f32], t: &[f64]| {
+            assert_eq!(g.len(), t.len());
+            g.iter()
+                .zip(t)
+                .map(|(&g, &t)| (f64::from(g) - t).abs() / (1.0 + t.abs()))
+                .fold(0.0, f64::max)
+        };
+        let (e_out, e_da) = (err(&out, &tout), err(&out_da, &tda));
+        assert!(
+            e_out < 1e-6 && e_da < 1e-5,
+            "interpolate: {e_out:e}, {e_da:e}"
+        );
+        let dy: Vec<f32> = (0..n * a as usize)
+            .map(|_| rng.random_range(-1.0..1.0))
+            .collect();
+        let dda: Vec<f32> = (0..n * 2 * diff.len())
+            .map(|_| rng.random_range(-0.1..0.1))
+            .collect();
+        let dda_opt = (!diff.is_empty()).then_some(&dda[..]);
+        let g = hard
+            .interpolate_grad(
+                &ctx,
+                &attr,
+                layout,
+                &layer.rast,
+                &tri,
+                [18, 23],
+                db,
+                &diff,
+                &dy,
+                dda_opt,
+            )
+            .unwrap();
+        let again = hard
+            .interpolate_grad(
+                &ctx,
+                &attr,
+                layout,
+                &layer.rast,
+                &tri,
+                [18, 23],
+                db,
+                &diff,
+                &dy,
+                dda_opt,
+            )
+            .unwrap();
+        assert_eq!(g, again, "the same gradients twice");
+        let t = reference::interpolate_grad(
+            &wide(&attr),
+            layout,
+            &wide(&layer.rast),
+            &tri,
+            23 * 18,
+            db.map(wide).as_deref(),
+            &diff,
+            &wide(&dy),
+            dda_opt.map(wide).as_deref(),
+        );
+        let (ea, er, ed) = (
+            err(&g.attr, &t.attr),
+            err(&g.rast, &t.rast),
+            err(&g.rast_db, &t.rast_db),
+        );
+        eprintln!(
+            "interpolate A = {a}, per item {per_item}, diff {diff:?}: out {e_out:.1e}, da {e_da:.1e}; grads attr {ea:.1e} rast {er:.1e} rast_db {ed:.1e}"
+        );
+        assert!(
+            ea < 1e-5 && er < 1e-5 && ed < 1e-5,
+            "interpolate backward: {ea:e} {er:e} {ed:e}"
+        );
+    }
+}

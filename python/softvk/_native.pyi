@@ -14,6 +14,8 @@ __version__: str
 F32 = npt.NDArray[np.float32]
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
+I32 = npt.NDArray[np.int32]
+U32 = npt.NDArray[np.uint32]
 U8 = npt.NDArray[np.uint8]
 _Path = Union[str, "PathLike[str]"]
 _Vec3 = Tuple[float, float, float]
@@ -134,6 +136,81 @@ def fragments_time_passes() -> None:
 
 def fragments_pass_times() -> List[Tuple[str, int, float]]:
     """``(name, depth, ms)`` of every fragment pass timed since the last call."""
+
+class NvTopologyHash:
+    """The edge adjacency of a triangle array (:func:`nv_topology_hash`), for
+    :func:`nv_antialias`."""
+
+    @property
+    def triangle_count(self) -> int:
+        """The number of triangles it was built from."""
+
+def nv_rasterize(
+    pos: F32,
+    tri: I32,
+    height: int,
+    width: int,
+    ranges: Optional[I32] = None,
+    previous: Optional[U32] = None,
+) -> Tuple[F32, F32, U32]:
+    """nvdiffrast's ``rasterize``: clip-space ``pos`` ``[B, V, 4]`` (instanced) or ``[V, 4]``
+    with ``ranges`` ``[B, 2]``, ``tri`` ``[T, 3]``, to ``(rast, rast_db, keys)``: ``(u, v, z/w,
+    id + 1)`` and ``(du/dX, du/dY, dv/dX, dv/dY)`` ``[B, H, W, 4]`` (row 0 at the bottom) and
+    each pixel's depth key ``[B, H, W, 2]``; with a layer's keys as ``previous``, the next
+    depth-peeling layer."""
+
+def nv_rasterize_grad(
+    pos: F32,
+    tri: I32,
+    rast: F32,
+    dy: F32,
+    ddb: Optional[F32] = None,
+    ranges: Optional[I32] = None,
+) -> F32:
+    """The backward of :func:`nv_rasterize` to ``pos`` (its shape), given the gradients of
+    ``rast`` (``dy``) and of ``rast_db`` (``ddb``), ``[B, H, W, 4]``."""
+
+def nv_interpolate(
+    attr: F32,
+    rast: F32,
+    tri: I32,
+    rast_db: Optional[F32] = None,
+    diff: Sequence[int] = (),
+) -> Tuple[F32, F32]:
+    """nvdiffrast's ``interpolate``: ``attr`` ``[V, A]``, ``[1, V, A]`` or ``[B, V, A]`` to
+    ``(out [B, H, W, A], out_da [B, H, W, 2 len(diff)])`` (``out_da`` needs ``rast_db``)."""
+
+def nv_interpolate_grad(
+    attr: F32,
+    rast: F32,
+    tri: I32,
+    dy: F32,
+    rast_db: Optional[F32] = None,
+    dda: Optional[F32] = None,
+    diff: Sequence[int] = (),
+) -> Tuple[F32, F32, Optional[F32]]:
+    """The backward of :func:`nv_interpolate`: dL/d(attr), dL/d(rast) and (with ``rast_db``)
+    dL/d(rast_db)."""
+
+def nv_topology_hash(tri: I32) -> NvTopologyHash:
+    """nvdiffrast's ``antialias_construct_topology_hash``."""
+
+def nv_antialias(
+    color: F32, rast: F32, pos: F32, tri: I32, topology: NvTopologyHash
+) -> F32:
+    """nvdiffrast's ``antialias`` of ``color`` ``[B, H, W, C]`` (same shape out)."""
+
+def nv_antialias_grad(
+    color: F32,
+    rast: F32,
+    pos: F32,
+    tri: I32,
+    topology: NvTopologyHash,
+    dy: F32,
+    pos_gradient_boost: float,
+) -> Tuple[F32, F32]:
+    """The backward of :func:`nv_antialias`: dL/d(color) and dL/d(pos) (times
+    ``pos_gradient_boost``)."""
 
 def render_mesh(
     vertices: F32,

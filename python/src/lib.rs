@@ -14,6 +14,8 @@
 //!   faces and cameras in, images out.
 //! - [`fragments`] is PyTorch3D's rasterizer (`softvk.pytorch3d`): the fragment kernels and
 //!   their f64 twin, on packed projected faces.
+//! - `nv_*` ([`nvdiffrast`]) are nvdiffrast's primitives (`softvk.nvdiffrast.torch`): hard
+//!   rasterization with depth peeling, `interpolate` and `antialias`, forward and backward.
 //! - [`reference_rasterize`] and [`reference_rasterize_grad`] are the f64 CPU twin of
 //!   [`rasterize`] and its backward: the oracle of the tests, and what `soft_rasterize` computes
 //!   for float64 tensors.
@@ -46,6 +48,7 @@ use softvk::mesh::Mesh;
 use softvk::raster::backward::GradBuffers;
 use softvk::raster::fragments::gpu::FragmentRasterizer;
 use softvk::raster::gpu::{GpuScene, Method, Renderer};
+use softvk::raster::hard::gpu::HardRasterizer;
 use softvk::raster::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
 use softvk::raster::{reference, reference_grad};
 
@@ -53,6 +56,7 @@ use softvk::raster::{reference, reference_grad};
 type PyLighting = (f64, [f64; 3], Vec<(f64, [f64; 3], [f64; 3])>);
 
 mod fragments;
+mod nvdiffrast;
 
 /// The process's engine, made on first use.
 struct Engine {
@@ -60,6 +64,8 @@ struct Engine {
     renderer: Renderer,
     /// PyTorch3D's rasterizer, made on its first use.
     fragments: Mutex<Option<FragmentRasterizer>>,
+    /// nvdiffrast's primitives, made on their first use.
+    hard: Mutex<Option<HardRasterizer>>,
 }
 
 /// The engine's fragment rasterizer, made on first use.
@@ -112,6 +118,7 @@ fn engine() -> PyResult<MutexGuard<'static, Option<Engine>>> {
             ctx,
             renderer,
             fragments: Mutex::new(None),
+            hard: Mutex::new(None),
         });
         OWNER.store(std::process::id(), Ordering::Release);
     }
@@ -1097,6 +1104,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(write_png, m)?)?;
     m.add_function(wrap_pyfunction!(is_forked_child, m)?)?;
     fragments::register(m)?;
+    nvdiffrast::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }
