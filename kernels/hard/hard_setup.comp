@@ -57,7 +57,7 @@ uint inclusive(ivec2 a, ivec2 b) {
 }
 
 void write_item(uint o, bool binned, vec4 box, uint t, uint mode, uint inc, ivec2 q0, ivec2 q1,
-                ivec2 q2) {
+                ivec2 q2, vec3 plane) {
     items[o] = box.x;
     items[o + 1u] = box.y;
     items[o + 2u] = box.z;
@@ -72,8 +72,28 @@ void write_item(uint o, bool binned, vec4 box, uint t, uint mode, uint inc, ivec
     items[o + 11u] = intBitsToFloat(q1.y);
     items[o + 12u] = intBitsToFloat(q2.x);
     items[o + 13u] = intBitsToFloat(q2.y);
-    items[o + 14u] = 0.0;
-    items[o + 15u] = 0.0;
+    items[o + 14u] = plane.x;
+    items[o + 15u] = plane.y;
+    items[o + 16u] = plane.z;
+    items[o + 17u] = 0.0;
+    items[o + 18u] = 0.0;
+    items[o + 19u] = 0.0;
+}
+
+// The plane z/w = C + A x + B y through the corners' NDC points, as (A, B, C): z/w is affine in
+// NDC over a triangle in front of the eye (a projective map keeps planes). Edge-on corners (no
+// such plane) give a non-finite plane, which the depth pass never draws.
+vec3 depth_plane(vec4 p0, vec4 p1, vec4 p2) {
+    precise vec3 q0 = vec3(fm_div_rn(p0.x, p0.w), fm_div_rn(p0.y, p0.w), fm_div_rn(p0.z, p0.w));
+    precise vec3 q1 = vec3(fm_div_rn(p1.x, p1.w), fm_div_rn(p1.y, p1.w), fm_div_rn(p1.z, p1.w));
+    precise vec3 q2 = vec3(fm_div_rn(p2.x, p2.w), fm_div_rn(p2.y, p2.w), fm_div_rn(p2.z, p2.w));
+    precise vec3 e1 = q1 - q0;
+    precise vec3 e2 = q2 - q0;
+    vec3 n = fm_cross(e1, e2);
+    float a = fm_div(-n.x, n.z);
+    float b = fm_div(-n.y, n.z);
+    precise float c = q0.z - a * q0.x - b * q0.y;
+    return vec3(a, b, c);
 }
 
 void main() {
@@ -87,7 +107,7 @@ void main() {
     uvec2 range = ranges[b];
     ivec2 zero = ivec2(0);
     if (j >= range.y) {
-        write_item(o, false, vec4(0.0), 0u, 0u, 0u, zero, zero, zero);
+        write_item(o, false, vec4(0.0), 0u, 0u, 0u, zero, zero, zero, vec3(0.0));
         return;
     }
     uint t = range.x + j;
@@ -95,7 +115,7 @@ void main() {
     vec4 p1 = corner(b, t, 1u);
     vec4 p2 = corner(b, t, 2u);
     if (beyond(p0, p1, p2)) {
-        write_item(o, false, vec4(0.0), t, 0u, 0u, zero, zero, zero);
+        write_item(o, false, vec4(0.0), t, 0u, 0u, zero, zero, zero, vec3(0.0));
         return;
     }
     if (snappable(p0) && snappable(p1) && snappable(p2)) {
@@ -106,7 +126,7 @@ void main() {
         uint lo;
         mul_sub64(q1.x - q0.x, q2.y - q0.y, q1.y - q0.y, q2.x - q0.x, hi, lo);
         if (hi == 0 && lo == 0u) {
-            write_item(o, false, vec4(0.0), t, 0u, 0u, zero, zero, zero);
+            write_item(o, false, vec4(0.0), t, 0u, 0u, zero, zero, zero, vec3(0.0));
             return;
         }
         if (hi < 0) {
@@ -119,7 +139,7 @@ void main() {
         ivec2 hi_corner = max(q0, max(q1, q2));
         precise vec4 box = vec4(float(lo_corner.x) * pc.box_scale, float(lo_corner.y) * pc.box_scale,
                                 float(hi_corner.x) * pc.box_scale, float(hi_corner.y) * pc.box_scale);
-        write_item(o, true, box, t, MODE_SNAPPED, inc, q0, q1, q2);
+        write_item(o, true, box, t, MODE_SNAPPED, inc, q0, q1, q2, depth_plane(p0, p1, p2));
         return;
     }
     vec4 box = vec4(-1e30, -1e30, 1e30, 1e30);
@@ -132,5 +152,5 @@ void main() {
         box = vec4(min(xs.x, min(xs.y, xs.z)), min(ys.x, min(ys.y, ys.z)),
                    max(xs.x, max(xs.y, xs.z)), max(ys.x, max(ys.y, ys.z)));
     }
-    write_item(o, true, box, t, MODE_HOMOGENEOUS, 0u, zero, zero, zero);
+    write_item(o, true, box, t, MODE_HOMOGENEOUS, 0u, zero, zero, zero, vec3(0.0));
 }

@@ -33,9 +33,11 @@ layout(push_constant) uniform Push {
     uint pad0;
 } pc;
 
-// A rasterizer item (one per (minibatch item, triangle slot)): the binning's box and flag, the
-// triangle, how its coverage is tested, and its snapped corners. Twin: `ITEM_WORDS` in gpu.rs.
-const uint ITEM_WORDS = 16u;
+// A rasterizer item (one per (minibatch item, triangle slot)): the binning's box and flag (words
+// 0–4), the triangle (5), how its coverage is tested (6), its edges' fill-rule bits (7), its
+// snapped corners (8–13) and, snapped, its depth plane z/w = C + A x + B y in NDC (14–16: A, B,
+// C). Twin: `ITEM_WORDS` in gpu.rs.
+const uint ITEM_WORDS = 20u;
 const uint ITEM_BINNED = 1u;
 const uint MODE_SNAPPED = 0u;     // integer edge functions on corners snapped to 1/16 pixel
 const uint MODE_HOMOGENEOUS = 1u; // homogeneous edge functions, w > 0 and |z/w| <= 1

@@ -29,12 +29,16 @@ use crate::raster::gpu::{Method, PairCounts};
 mod backward;
 mod fits;
 mod forward;
+mod hard;
 mod recon;
 mod scenes;
 
 pub use backward::run_backward;
 pub use fits::{fit_pass_share, run_fit};
 pub use forward::{loop_limit, ns_per_visited_pair, run};
+#[cfg(feature = "json")]
+pub use hard::hard_to_json;
+pub use hard::{HARD_SCENES, HardRecord, run_hard};
 pub use scenes::Scene;
 
 /// The scenes of SPEC §6, in the order a plain `softvk bench` runs them.
@@ -127,12 +131,14 @@ impl BenchOptions {
         for name in &self.scenes {
             if let Some(s) = SCENES.iter().chain(&LARGE_SCENES).find(|s| *s == name) {
                 render.push(*s);
-            } else if !FIT_SCENES.contains(&name.as_str()) {
+            } else if !FIT_SCENES.contains(&name.as_str()) && !HARD_SCENES.contains(&name.as_str())
+            {
                 return Err(Error::Input(format!(
-                    "bench: unknown scene `{name}`; the scenes are {}, {}, {}",
+                    "bench: unknown scene `{name}`; the scenes are {}, {}, {}, {}",
                     SCENES.join(", "),
                     LARGE_SCENES.join(", "),
-                    FIT_SCENES.join(", ")
+                    FIT_SCENES.join(", "),
+                    HARD_SCENES.join(", ")
                 )));
             }
         }

@@ -27,7 +27,8 @@ pub struct BenchArgs {
     /// times a mesh-fitting iteration at SoftRas's demo setting, `fit-field` a `softvk
     /// fit-field` iteration at its defaults on spot, `fit-pose` a `softvk fit-pose` iteration
     /// at its defaults on spot, `train-recon` a `softvk train-recon` iteration at its defaults,
-    /// `train-recon-field` one of `softvk train-recon --field` (each only when named).
+    /// `train-recon-field` one of `softvk train-recon --field`; `nv-spot-256`, `nv-512` and
+    /// `nv-1024` nvdiffrast's primitives on spot (each only when named, the nv-… ones alone).
     #[arg(long = "scene", value_name = "NAME")]
     pub scenes: Vec<String>,
     /// Timed submissions per (scene, method, pass); times are medians.
@@ -72,10 +73,35 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         assets: args.assets.clone(),
     };
     let render_scenes = opts.checked_scenes()?;
+    let hard_scenes: Vec<&str> = bench::HARD_SCENES
+        .iter()
+        .copied()
+        .filter(|s| opts.scenes.iter().any(|n| n == s))
+        .collect();
+    if !hard_scenes.is_empty() && hard_scenes.len() != opts.scenes.len() {
+        return Err(softvk::Error::Input(
+            "bench: name the nv-… scenes on their own (their records have other fields)".into(),
+        ));
+    }
     let fit_scenes = opts.checked_fit_scenes()?;
     let out = args.json.as_deref().map(AtomicFile::create).transpose()?;
     let ctx = Context::new(&ContextOptions::from_env())?;
     eprintln!("device: {} / {}", ctx.info().name, ctx.info().driver);
+    if !hard_scenes.is_empty() {
+        let assets = opts.assets.clone().unwrap_or_else(softvk::assets::dir);
+        let records = bench::run_hard(&ctx, &hard_scenes, opts.repeat, &assets, |line| {
+            eprintln!("{line}")
+        })?;
+        ctx.check_validation()?;
+        let json = bench::hard_to_json(&records);
+        return match out {
+            Some(file) => file.commit(json.as_bytes()),
+            None => {
+                print!("{json}");
+                Ok(())
+            }
+        };
+    }
     let mut records = Vec::new();
     if !render_scenes.is_empty() {
         if !args.backward_only {

@@ -27,12 +27,14 @@ use super::antialias::{AntialiasInput, ImageShape, PosLayout};
 use super::reference::AttrLayout;
 use super::{Shape, Topology};
 use crate::error::{Error, LimitKind, Result};
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, groups, specs};
+use crate::gpu::{
+    Buffer, BufferRange, Context, Kernel, MemoryKind, PassTime, Recorder, Timer, groups, specs,
+};
 use crate::primitives::binning::{BinJob, Binner, Bins, ItemLayout, TileGrid};
 use crate::primitives::scan::{Scan, ScanScratch};
 
 /// Words of one rasterizer item (`ITEM_WORDS` in `kernels/include/hard.glsl`).
-const ITEM_WORDS: u32 = 16;
+const ITEM_WORDS: u32 = 20;
 
 /// Tile edge of the depth pass's workgroups (8×8 pixels).
 const TILE: u32 = 8;
@@ -340,6 +342,8 @@ pub struct HardRasterizer {
     interp: Arc<Kernel>,
     interp_pixel_grad: Arc<Kernel>,
     interp_grad: Arc<Kernel>,
+    /// `antialias`'s kernels and scratch.
+    aa: antialias::AntialiasKernels,
     scan: Scan,
     grads: GradScratch,
     binner: Binner,
@@ -348,6 +352,9 @@ pub struct HardRasterizer {
     /// Read back by [`HardRasterizer::bin`]: the entries of the last binning.
     entries: Option<u64>,
     host: HostBuffers,
+    /// GPU timestamps of the slice entry points' passes ([`HardRasterizer::time_passes`]).
+    timer: Option<Timer>,
+    timings: Vec<PassTime>,
 }
 
 /// Host-visible buffers the slice entry points reuse (grown, never shrunk).
@@ -407,6 +414,7 @@ impl HardRasterizer {
             interp: ctx.kernel(&specs::HARD_INTERP, &[])?,
             interp_pixel_grad: ctx.kernel(&specs::HARD_INTERP_PIXEL_GRAD, &[])?,
             interp_grad: ctx.kernel(&specs::HARD_INTERP_GRAD, &[])?,
+            aa: antialias::AntialiasKernels::new(ctx)?,
             scan: Scan::new(ctx)?,
             grads: GradScratch::default(),
             binner: Binner::new(ctx)?,
@@ -414,7 +422,45 @@ impl HardRasterizer {
             items: None,
             entries: None,
             host: HostBuffers::default(),
+            timer: None,
+            timings: Vec::new(),
         })
+    }
+
+    /// Times every pass of the slice entry points with GPU timestamps from now on: what
+    /// benchmarks read with [`HardRasterizer::take_timings`].
+    pub fn time_passes(&mut self, ctx: &Context) -> Result<()> {
+        self.timer = Some(Timer::new(ctx, 32)?);
+        Ok(())
+    }
+
+    /// The pass times recorded since the last call, in order.
+    pub fn take_timings(&mut self) -> Vec<PassTime> {
+        std::mem::take(&mut self.timings)
+    }
+
+    /// The (item, tile) entries of the last binning (after [`HardRasterizer::bin`]): each is
+    /// 64 (pixel, triangle) pairs the depth pass visits.
+    pub fn entries(&self) -> Option<u64> {
+        self.entries
+    }
+
+    /// Submits what `f` records and waits, timed when [`HardRasterizer::time_passes`] asked.
+    fn submit(
+        &mut self,
+        ctx: &Context,
+        f: impl FnOnce(&mut Self, &mut Recorder<'_>) -> Result<()>,
+    ) -> Result<()> {
+        let mut timer = self.timer.take();
+        let result = ctx.submit_and_wait_timed(timer.as_mut(), |rec| f(self, rec));
+        let times = match (&result, &timer) {
+            (Ok(()), Some(t)) => t.results(ctx),
+            _ => Ok(Vec::new()),
+        };
+        self.timer = timer;
+        result?;
+        self.timings.extend(times?);
+        Ok(())
     }
 
     /// Step 1 and the binning's count: records the setup of `plan`'s items and the count pass.
@@ -670,21 +716,21 @@ impl HardRasterizer {
             let keys = output.range(out_at[0], 8 * pixels);
             let rast = output.range(out_at[1], 16 * pixels);
             let rast_db = output.range(out_at[2], 16 * pixels);
-            ctx.submit_and_wait(|rec| self.record_setup(rec, &plan, inputs))?;
+            self.submit(ctx, |s, rec| s.record_setup(rec, &plan, inputs))?;
             self.bin(ctx)?;
             let bound = self.longest_run_bound(&plan)?;
             let sorted_first = plan.depth_passes(bound) > 1;
             let mut passes = 1;
             if sorted_first {
-                ctx.submit_and_wait(|rec| self.record_sort(rec, &plan))?;
+                self.submit(ctx, |s, rec| s.record_sort(rec, &plan))?;
                 passes = plan.depth_passes(self.longest_run(ctx, &plan)?);
             }
-            ctx.submit_and_wait(|rec| {
+            self.submit(ctx, |s, rec| {
                 if !sorted_first {
-                    self.record_sort(rec, &plan)?;
+                    s.record_sort(rec, &plan)?;
                 }
-                self.record_depth(rec, &plan, inputs, keys, prev, passes)?;
-                self.record_shade(rec, &plan, inputs, keys, rast, rast_db)
+                s.record_depth(rec, &plan, inputs, keys, prev, passes)?;
+                s.record_shade(rec, &plan, inputs, keys, rast, rast_db)
             })?;
             let bytes = output
                 .mapped()
@@ -1025,8 +1071,8 @@ impl HardRasterizer {
                 ranges: input.range(at[2], 8 * plan.ranges.len() as u64),
             };
             let rast_r = input.range(at[3], 16 * pixels);
-            ctx.submit_and_wait(|rec| {
-                self.record_visible_tiles(rec, &plan, rast_r, inputs.ranges, 0)
+            self.submit(ctx, |s, rec| {
+                s.record_visible_tiles(rec, &plan, rast_r, inputs.ranges, 0)
             })?;
             self.read_slots(ctx)?;
             let lists = (
@@ -1034,8 +1080,8 @@ impl HardRasterizer {
                 input.range(at[7], 4 * (row_entries.len() as u64).max(1)),
             );
             let out = output.range(0, out_bytes.max(4));
-            ctx.submit_and_wait(|rec| {
-                self.record_rasterize_grad(
+            self.submit(ctx, |s, rec| {
+                s.record_rasterize_grad(
                     rec,
                     &plan,
                     inputs,
@@ -1212,8 +1258,8 @@ impl HardRasterizer {
         let input = self.host.inputs.take().expect("made above");
         let output = self.host.outputs.take().expect("made above");
         let result = (|| {
-            ctx.submit_and_wait(|rec| {
-                self.record_interpolate(
+            self.submit(ctx, |s, rec| {
+                s.record_interpolate(
                     rec,
                     &plan,
                     layout,
@@ -1430,7 +1476,9 @@ impl HardRasterizer {
         let result = (|| {
             let rast_r = input.range(at[3], 16 * pixels);
             let ranges = input.range(at[2], 8 * plan.ranges.len() as u64);
-            ctx.submit_and_wait(|rec| self.record_visible_tiles(rec, &plan, rast_r, ranges, 0))?;
+            self.submit(ctx, |s, rec| {
+                s.record_visible_tiles(rec, &plan, rast_r, ranges, 0)
+            })?;
             self.read_slots(ctx)?;
             let bufs = InterpolateGradBuffers {
                 attr: input.range(at[0], (4 * attr.len() as u64).max(4)),
@@ -1446,8 +1494,8 @@ impl HardRasterizer {
                 input.range(at[8], 4 * row_offsets.len() as u64),
                 input.range(at[9], (4 * row_entries.len() as u64).max(4)),
             );
-            ctx.submit_and_wait(|rec| {
-                self.record_interpolate_grad(
+            self.submit(ctx, |s, rec| {
+                s.record_interpolate_grad(
                     rec,
                     &plan,
                     layout,
