@@ -635,3 +635,101 @@ fn interpolate_and_its_backward_match_the_twin() {
         );
     }
 }
+
+/// FNV-1a over the bytes of `data`: a hash that the tests, not the standard library, define.
+fn fnv1a(data: &[f32]) -> u64 {
+    bytemuck::cast_slice::<f32, u8>(data)
+        .iter()
+        .fold(0xcbf29ce484222325u64, |h, &b| (h ^ u64::from(b)).wrapping_mul(0x100000001b3))
+}
+
+/// Every output of every primitive, forward and backward, on spot from two views at 40×28
+/// with depth peeling, hashed: the same bytes on every run and, since no sum's order depends on
+/// the lanes or the workgroups, at 4, 8 and 16 lanes and with GPU workgroup shapes (CI reruns
+/// this file in each), against `tests/data/hard-golden.txt`. A change that alters an output on
+/// purpose regenerates that list (`HARD_GOLDEN=print` prints it) and says why in its commit.
+#[test]
+fn every_primitive_writes_the_golden_bytes() {
+    use softvk::raster::hard::antialias::TopologyHash;
+    use softvk::raster::hard::gpu::AntialiasArgs;
+    use softvk::raster::hard::reference::AttrLayout;
+    let Some(ctx) = common::gpu() else { return };
+    let mut hard = HardRasterizer::new(&ctx).unwrap();
+    let assets = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets");
+    let mesh = Mesh::load_obj(&assets.join("spot_triangulated.obj"), 1).unwrap();
+    let tri = mesh.faces.clone();
+    let (w, h) = (40u32, 28u32);
+    let mut pos = clip(&mesh, Vec3::new(1.5, 1.0, 2.5), w as f32 / h as f32);
+    pos.extend(clip(&mesh, Vec3::new(-2.8, 0.4, -1.2), w as f32 / h as f32));
+    let v = mesh.positions.len() as u32;
+    let shape = Shape {
+        width: w,
+        height: h,
+        vertex_count: v,
+        triangle_count: tri.len() as u32,
+        topology: Topology::Instanced { batch: 2 },
+    };
+    let n = shape.pixels();
+    let mut hashes: Vec<(String, u64)> = Vec::new();
+    let first = hard.rasterize(&ctx, &shape, &pos, &tri, None).unwrap();
+    let second = hard
+        .rasterize(&ctx, &shape, &pos, &tri, Some(&first.keys))
+        .unwrap();
+    hashes.push(("rast".into(), fnv1a(&first.rast)));
+    hashes.push(("rast_db".into(), fnv1a(&first.rast_db)));
+    hashes.push(("rast layer 2".into(), fnv1a(&second.rast)));
+    let colors: Vec<f32> = mesh
+        .positions
+        .iter()
+        .flat_map(|p| [0.5 + 0.5 * p[0], 0.5 + 0.5 * p[1], 0.5 + 0.5 * p[2]])
+        .collect();
+    let layout = AttrLayout {
+        vertex_count: v,
+        attr_count: 3,
+        per_item: false,
+    };
+    let (color, color_da) = hard
+        .interpolate(&ctx, &colors, layout, &first.rast, &tri, [h, w], Some(&first.rast_db), &[0, 2])
+        .unwrap();
+    hashes.push(("interpolate".into(), fnv1a(&color)));
+    hashes.push(("interpolate derivatives".into(), fnv1a(&color_da)));
+    let topology = TopologyHash::new(&tri);
+    let args = AntialiasArgs {
+        color: &color,
+        rast: &first.rast,
+        pos: &pos,
+        instanced: true,
+        vertex_count: v,
+        tri: &tri,
+        batch: 2,
+        height: h,
+        width: w,
+        channels: 3,
+    };
+    let aa = hard.antialias(&ctx, &args, &topology).unwrap();
+    hashes.push(("antialias".into(), fnv1a(&aa)));
+    let dy: Vec<f32> = aa.iter().map(|c| 2.0 * (c - 0.3) / n as f32).collect();
+    let (g_color, g_pos_aa) = hard.antialias_grad(&ctx, &args, &topology, &dy, 1.0).unwrap();
+    hashes.push(("antialias grad color".into(), fnv1a(&g_color)));
+    hashes.push(("antialias grad pos".into(), fnv1a(&g_pos_aa)));
+    let dda: Vec<f32> = (0..4 * n).map(|i| ((i % 7) as f32 - 3.0) * 1e-3).collect();
+    let g = hard
+        .interpolate_grad(
+            &ctx, &colors, layout, &first.rast, &tri, [h, w], Some(&first.rast_db), &[0, 2],
+            &g_color, Some(&dda),
+        )
+        .unwrap();
+    hashes.push(("interpolate grad attr".into(), fnv1a(&g.attr)));
+    hashes.push(("interpolate grad rast".into(), fnv1a(&g.rast)));
+    hashes.push(("interpolate grad rast_db".into(), fnv1a(&g.rast_db)));
+    let g_pos = hard
+        .rasterize_grad(&ctx, &shape, &pos, &tri, &first.rast, &g.rast, Some(&g.rast_db))
+        .unwrap();
+    hashes.push(("rasterize grad pos".into(), fnv1a(&g_pos)));
+    let listing: String = hashes.iter().map(|(k, h)| format!("{h:016x}  {k}\n")).collect();
+    if std::env::var("HARD_GOLDEN").is_ok_and(|v| v == "print") {
+        print!("{listing}");
+    }
+    let golden = include_str!("data/hard-golden.txt");
+    assert_eq!(listing, golden, "the primitives' bytes differ from tests/data/hard-golden.txt");
+}
