@@ -61,9 +61,13 @@ bool key_before(float zw, uint id, uvec2 k) {
     return zw < kz || (zw == kz && id > k.y);
 }
 
+// The subgroup size when the host knows it (`known_subgroup_size`): as a constant it lets the
+// driver unroll the loops over lanes and ballot words. 0: unknown, the built-in decides.
+layout(constant_id = 0) const uint SUBGROUP_SIZE = 0u;
+
 // Lanes of this subgroup within the 64-invocation workgroup.
 uint lanes() {
-    return min(gl_SubgroupSize, 64u);
+    return min(SUBGROUP_SIZE != 0u ? SUBGROUP_SIZE : gl_SubgroupSize, 64u);
 }
 
 // The compact block of pixels lane runs of `n` lanes cover (4 × 2 for 8 lanes, ...).
@@ -159,7 +163,7 @@ void main() {
             }
         }
         uvec4 kept = subgroupBallot(touches);
-        uint words = (gl_SubgroupSize + 31u) / 32u;
+        uint words = ((SUBGROUP_SIZE != 0u ? SUBGROUP_SIZE : gl_SubgroupSize) + 31u) / 32u;
         for (uint word = 0u; word < words; ++word) {
             uint mask = kept[word];
             while (mask != 0u) {

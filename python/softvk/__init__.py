@@ -3,6 +3,8 @@
 - :mod:`softvk.torch`: ``soft_rasterize`` (SoftRas's own operation) and ``render_mesh`` (camera,
   lighting and face set-up on the device) as ``torch.autograd.Function`` s.
 - :mod:`softvk.soft_renderer`: SoftRas's Python interface (``import softvk.soft_renderer as sr``).
+- :mod:`softvk.pytorch3d`: PyTorch3D's ``MeshRasterizer`` and ``rasterize_meshes``.
+- :mod:`softvk.nvdiffrast.torch`: nvdiffrast's primitives (``import softvk.nvdiffrast.torch as dr``).
 
 numpy is the one required dependency; torch is imported only by those two modules. The Vulkan
 loader (libvulkan) is opened on the first render, on the device ``SOFTVK_DEVICE`` names (an

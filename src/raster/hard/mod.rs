@@ -144,6 +144,12 @@ impl Shape {
         if self.batch() == 0 {
             return Err(Error::Input(format!("{what}: the minibatch is empty")));
         }
+        if self.triangle_count >= 1 << 24 {
+            return Err(Error::Input(format!(
+                "{what}: {} triangles; rast holds ids as float32, exact below 2^24",
+                self.triangle_count
+            )));
+        }
         if tri.len() != self.triangle_count as usize {
             return Err(Error::Input(format!(
                 "{what}: {} triangles given for {}",

@@ -406,6 +406,9 @@ pub fn rasterize(
                         zw: shade_f64(c, f, w, h).zw,
                         triangle: *t,
                     };
+                    if !key.zw.is_finite() {
+                        continue; // edge-on at this centre: not drawn
+                    }
                     zs.push(key.zw);
                     if let Some(prev) = after {
                         if key.triangle != prev.triangle
