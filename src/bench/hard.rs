@@ -9,8 +9,10 @@
 //! - `nv-512`, `nv-1024`: spot subdivided twice (93 696 faces) at 512² and 1024².
 //!
 //! Every time is a median over the repeats after one untimed run. The rasterizer's depth pass
-//! visits 64 (pixel, triangle) pairs per binned (triangle, tile) entry; `ns_per_visited_pair`
-//! is its GPU time over them (multiply by the driver's threads for CPU-ns on lavapipe).
+//! bins 64 (pixel, triangle) pairs per (triangle, tile) entry and visits those of the subgroups
+//! whose pixels the triangle's box meets ([`visited_pairs`], BENCHMARKS.md's definition);
+//! `ns_per_visited_pair` is its GPU time over the visited pairs (GPU ns; on lavapipe, which
+//! runs on every core, CPU-ns are that times the cores).
 
 use std::path::Path;
 
@@ -40,7 +42,11 @@ pub struct HardRecord {
     pub faces: u32,
     /// Image side (square).
     pub size: u32,
-    /// The depth pass's visited (pixel, triangle) pairs (rasterize only).
+    /// The depth pass's binned (pixel, triangle) pairs: 64 per (triangle, tile) entry
+    /// (rasterize only).
+    pub binned_pairs: Option<u64>,
+    /// The pairs it visits: per subgroup, its lanes × the binned triangles whose box meets its
+    /// pixels ([`visited_pairs`]; rasterize only).
     pub visited_pairs: Option<u64>,
     /// The depth pass's GPU time per visited pair, ns (rasterize only).
     pub ns_per_visited_pair: Option<f64>,
@@ -104,6 +110,76 @@ fn scene(assets: &Path, times: u32) -> Result<(Vec<f32>, Vec<[u32; 3]>)> {
         })
         .collect();
     Ok((pos, mesh.faces))
+}
+
+/// The (pixel, triangle) pairs the depth pass visits for one minibatch item: per binned
+/// (triangle, tile) entry, each subgroup's block of `lanes` pixels (`hard_depth.comp`'s
+/// `block_pixel`) whose sample box the snapped triangle's box meets, times `lanes` (every block
+/// for a homogeneous triangle). Counted with the f64 twin's snapping.
+pub fn visited_pairs(shape: &Shape, pos: &[f32], tri: &[[u32; 3]], lanes: u32) -> Result<u64> {
+    use crate::primitives::binning::{TileGrid, cpu::tile_rect};
+    use crate::raster::hard::reference::{Coverage, coverage};
+    let (w, h) = (shape.width, shape.height);
+    let grid = TileGrid::new(w, h, 8)?;
+    let s = f64::from(w.min(h));
+    let scale = (1.0 / (8.0 * s)) as f32;
+    let (bw, bh) = if lanes.is_power_of_two() && lanes <= 64 {
+        let bw = 1u32 << (lanes.trailing_zeros().div_ceil(2));
+        (bw, lanes / bw)
+    } else {
+        (8, 1)
+    };
+    let sample = |col: u32, row_top: u32| {
+        (
+            16 * i64::from(col) + 8 - 8 * i64::from(w),
+            16 * (i64::from(h) - 1 - i64::from(row_top)) + 8 - 8 * i64::from(h),
+        )
+    };
+    let mut visited = 0u64;
+    for t in tri {
+        let c = t.map(|v| {
+            let o = 4 * v as usize;
+            [pos[o], pos[o + 1], pos[o + 2], pos[o + 3]].map(f64::from)
+        });
+        let Some(cov) = coverage(c, w, h) else {
+            continue;
+        };
+        let (boxf, snapped) = match cov {
+            Coverage::Snapped(q) => {
+                let lo = [0, 1].map(|k| q.p.iter().map(|p| p[k]).min().unwrap_or(0));
+                let hi = [0, 1].map(|k| q.p.iter().map(|p| p[k]).max().unwrap_or(0));
+                let b = [
+                    lo[0] as f32 * scale,
+                    lo[1] as f32 * scale,
+                    hi[0] as f32 * scale,
+                    hi[1] as f32 * scale,
+                ];
+                (b, Some((lo, hi)))
+            }
+            Coverage::Homogeneous => ([-1e30, -1e30, 1e30, 1e30], None),
+        };
+        let Some(r) = tile_rect(boxf, &grid) else {
+            continue;
+        };
+        for ty in r[1]..=r[3] {
+            for tx in r[0]..=r[2] {
+                for by in 0..8 / bh {
+                    for bx in 0..8 / bw {
+                        let Some((lo, hi)) = snapped else {
+                            visited += u64::from(lanes);
+                            continue;
+                        };
+                        let (x0, y0) = sample(8 * tx + bx * bw, 8 * ty + by * bh + bh - 1);
+                        let (x1, y1) = sample(8 * tx + bx * bw + bw - 1, 8 * ty + by * bh);
+                        if !(x1 < lo[0] || y1 < lo[1] || x0 > hi[0] || y0 > hi[1]) {
+                            visited += u64::from(lanes);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    Ok(visited)
 }
 
 /// Runs the named scenes of [`HARD_SCENES`] (`repeat` timed calls each).
@@ -171,6 +247,8 @@ pub fn run_hard(
         };
         let layer = hard.rasterize(ctx, &shape, &pos, &tri, None)?;
         let entries = hard.entries().unwrap_or(0);
+        let lanes = crate::raster::fine::known_subgroup_size(ctx).max(1);
+        let visited_count = visited_pairs(&shape, &pos, &tri, lanes)?;
         let (color, _) = hard.interpolate(
             ctx,
             &colors,
@@ -334,15 +412,15 @@ pub fn run_hard(
                     (name, median(per_run))
                 })
                 .collect();
-            let (visited, ns) = if what == "rasterize" {
-                let visited = entries * 64;
+            let (binned, visited, ns) = if what == "rasterize" {
                 let depth = passes.iter().find(|p| p.0 == "hard depth").map(|p| p.1);
                 (
-                    Some(visited),
-                    depth.map(|ms| ms * 1e6 / visited.max(1) as f64),
+                    Some(entries * 64),
+                    Some(visited_count),
+                    depth.map(|ms| ms * 1e6 / visited_count.max(1) as f64),
                 )
             } else {
-                (None, None)
+                (None, None, None)
             };
             let record = HardRecord {
                 scene: name.to_string(),
@@ -351,6 +429,7 @@ pub fn run_hard(
                 passes,
                 faces: tri.len() as u32,
                 size,
+                binned_pairs: binned,
                 visited_pairs: visited,
                 ns_per_visited_pair: ns,
                 device: ctx.info().name.clone(),
@@ -383,7 +462,7 @@ pub fn hard_to_json(records: &[HardRecord]) -> String {
                 .collect();
             json!({
                 "scene": r.scene, "pass": r.pass, "wall_ms": r.wall_ms, "faces": r.faces,
-                "size": r.size, "visited_pairs": r.visited_pairs,
+                "size": r.size, "binned_pairs": r.binned_pairs, "visited_pairs": r.visited_pairs,
                 "ns_per_visited_pair": r.ns_per_visited_pair, "device": r.device,
                 "repeats": r.repeats, "passes": passes,
             })
