@@ -364,12 +364,8 @@ fn a_closed_mesh_from_fifty_views_has_no_hole_and_no_pixel_drawn_twice() {
         };
         let gpu = hard.rasterize(&ctx, &shape, &pos, &tri, None).unwrap();
         let twin = reference::rasterize(&shape, &pos64, &tri, None);
-        for i in 0..(w * h) as usize {
-            assert_eq!(
-                twin.keys[i].is_some(),
-                front[i] > 0,
-                "view {view}: pixel {i}"
-            );
+        for (i, (k, f)) in twin.keys.iter().zip(&front).enumerate() {
+            assert_eq!(k.is_some(), *f > 0, "view {view}: pixel {i}");
         }
         compared += (w * h) as usize
             - compare(
@@ -640,7 +636,9 @@ fn interpolate_and_its_backward_match_the_twin() {
 fn fnv1a(data: &[f32]) -> u64 {
     bytemuck::cast_slice::<f32, u8>(data)
         .iter()
-        .fold(0xcbf29ce484222325u64, |h, &b| (h ^ u64::from(b)).wrapping_mul(0x100000001b3))
+        .fold(0xcbf29ce484222325u64, |h, &b| {
+            (h ^ u64::from(b)).wrapping_mul(0x100000001b3)
+        })
 }
 
 /// Every output of every primitive, forward and backward, on spot from two views at 40×28
@@ -689,7 +687,16 @@ fn every_primitive_writes_the_golden_bytes() {
         per_item: false,
     };
     let (color, color_da) = hard
-        .interpolate(&ctx, &colors, layout, &first.rast, &tri, [h, w], Some(&first.rast_db), &[0, 2])
+        .interpolate(
+            &ctx,
+            &colors,
+            layout,
+            &first.rast,
+            &tri,
+            [h, w],
+            Some(&first.rast_db),
+            &[0, 2],
+        )
         .unwrap();
     hashes.push(("interpolate".into(), fnv1a(&color)));
     hashes.push(("interpolate derivatives".into(), fnv1a(&color_da)));
@@ -709,27 +716,51 @@ fn every_primitive_writes_the_golden_bytes() {
     let aa = hard.antialias(&ctx, &args, &topology).unwrap();
     hashes.push(("antialias".into(), fnv1a(&aa)));
     let dy: Vec<f32> = aa.iter().map(|c| 2.0 * (c - 0.3) / n as f32).collect();
-    let (g_color, g_pos_aa) = hard.antialias_grad(&ctx, &args, &topology, &dy, 1.0).unwrap();
+    let (g_color, g_pos_aa) = hard
+        .antialias_grad(&ctx, &args, &topology, &dy, 1.0)
+        .unwrap();
     hashes.push(("antialias grad color".into(), fnv1a(&g_color)));
     hashes.push(("antialias grad pos".into(), fnv1a(&g_pos_aa)));
     let dda: Vec<f32> = (0..4 * n).map(|i| ((i % 7) as f32 - 3.0) * 1e-3).collect();
     let g = hard
         .interpolate_grad(
-            &ctx, &colors, layout, &first.rast, &tri, [h, w], Some(&first.rast_db), &[0, 2],
-            &g_color, Some(&dda),
+            &ctx,
+            &colors,
+            layout,
+            &first.rast,
+            &tri,
+            [h, w],
+            Some(&first.rast_db),
+            &[0, 2],
+            &g_color,
+            Some(&dda),
         )
         .unwrap();
     hashes.push(("interpolate grad attr".into(), fnv1a(&g.attr)));
     hashes.push(("interpolate grad rast".into(), fnv1a(&g.rast)));
     hashes.push(("interpolate grad rast_db".into(), fnv1a(&g.rast_db)));
     let g_pos = hard
-        .rasterize_grad(&ctx, &shape, &pos, &tri, &first.rast, &g.rast, Some(&g.rast_db))
+        .rasterize_grad(
+            &ctx,
+            &shape,
+            &pos,
+            &tri,
+            &first.rast,
+            &g.rast,
+            Some(&g.rast_db),
+        )
         .unwrap();
     hashes.push(("rasterize grad pos".into(), fnv1a(&g_pos)));
-    let listing: String = hashes.iter().map(|(k, h)| format!("{h:016x}  {k}\n")).collect();
+    let listing: String = hashes
+        .iter()
+        .map(|(k, h)| format!("{h:016x}  {k}\n"))
+        .collect();
     if std::env::var("HARD_GOLDEN").is_ok_and(|v| v == "print") {
         print!("{listing}");
     }
     let golden = include_str!("data/hard-golden.txt");
-    assert_eq!(listing, golden, "the primitives' bytes differ from tests/data/hard-golden.txt");
+    assert_eq!(
+        listing, golden,
+        "the primitives' bytes differ from tests/data/hard-golden.txt"
+    );
 }

@@ -56,6 +56,9 @@ pub struct HardRecord {
     pub repeats: u32,
 }
 
+/// A timed call's name, wall times and per-run pass times.
+type Timed = (&'static str, Vec<f64>, Vec<Vec<(String, f64)>>);
+
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
@@ -221,7 +224,7 @@ pub fn run_hard(
         };
         let topology = TopologyHash::new(&tri);
         let target = vec![0.25f32; 3 * n];
-        let mut timed: Vec<(&'static str, Vec<f64>, Vec<Vec<(String, f64)>>)> = Vec::new();
+        let mut timed: Vec<Timed> = Vec::new();
         let mut time = |what: &'static str,
                         run: &mut dyn FnMut(&mut HardRasterizer) -> Result<()>,
                         hard: &mut HardRasterizer|

@@ -23,7 +23,6 @@ use std::sync::Arc;
 
 use bytemuck::{Pod, Zeroable};
 
-use super::antialias::{AntialiasInput, ImageShape, PosLayout};
 use super::reference::AttrLayout;
 use super::{Shape, Topology};
 use crate::error::{Error, LimitKind, Result};
@@ -261,14 +260,6 @@ pub struct AntialiasArgs<'a> {
     pub channels: u32,
 }
 
-fn wide(v: &[f32]) -> Vec<f64> {
-    v.iter().map(|&x| f64::from(x)).collect()
-}
-
-fn narrow(v: &[f64]) -> Vec<f32> {
-    v.iter().map(|&x| x as f32).collect()
-}
-
 /// Scratch of the backward's fixed-order reduction (`kernels/include/hard_grads.glsl`): the
 /// items' visible boxes, their slot counts and first slots, the per-slot partials and the
 /// per-item sums.
@@ -404,7 +395,10 @@ impl HardRasterizer {
     pub fn new(ctx: &Context) -> Result<Self> {
         Ok(Self {
             setup: ctx.kernel(&specs::HARD_SETUP, &[])?,
-            depth: ctx.kernel(&specs::HARD_DEPTH, &[])?,
+            depth: ctx.kernel(
+                &specs::HARD_DEPTH,
+                &[crate::raster::fine::known_subgroup_size(ctx)],
+            )?,
             shade: ctx.kernel(&specs::HARD_SHADE, &[])?,
             grad_boxes: ctx.kernel(&specs::HARD_GRAD_BOXES, &[])?,
             grad_count: ctx.kernel(&specs::HARD_GRAD_COUNT, &[])?,
@@ -1591,31 +1585,4 @@ fn check_attr(
         )));
     }
     Ok(())
-}
-
-/// The twin's view of [`AntialiasArgs`] over f64 copies of its arrays.
-pub(super) fn antialias_input<'a>(
-    args: &AntialiasArgs<'a>,
-    color: &'a [f64],
-    rast: &'a [f64],
-    pos: &'a [f64],
-) -> AntialiasInput<'a> {
-    let vertices = args.vertex_count as usize;
-    AntialiasInput {
-        color,
-        rast,
-        pos,
-        pos_layout: if args.instanced {
-            PosLayout::Instanced { vertices }
-        } else {
-            PosLayout::Range { vertices }
-        },
-        tri: args.tri,
-        shape: ImageShape {
-            batch: args.batch as usize,
-            height: args.height as usize,
-            width: args.width as usize,
-            channels: args.channels as usize,
-        },
-    }
 }
