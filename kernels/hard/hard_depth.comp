@@ -3,7 +3,6 @@
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_ballot : require
 #extension GL_KHR_shader_subgroup_shuffle : require
-#extension GL_KHR_shader_subgroup_arithmetic : require
 // The hard rasterizer, step 3 (after setup and binning): the nearest surface of every pixel, as
 // its depth key (z/w bits, triangle + 1) in `keys` (zero: none; the host clears them before the
 // first pass). One workgroup per 8×8 tile (rows counted from the image's top, as the binning's),
@@ -110,14 +109,22 @@ void main() {
     uvec2 best = valid ? keys[i] : uvec2(0u);
     uvec2 prev = (valid && pc.peel != 0u) ? prev_keys[i] : uvec2(0u);
     bool live = valid && (pc.peel == 0u || prev.y != 0u);
-    vec2 f = pixel_ndc(col, y);
+    // The centre in NDC for the depth planes and the homogeneous test, as (x + ½)·(2/W) − 1:
+    // within an ulp of `pixel_ndc`'s correctly rounded one, which `hard_shade.comp` uses for the
+    // outputs (the depth kernel only orders surfaces; the twin flags pixels this can decide
+    // otherwise).
+    precise vec2 f = vec2((float(col) + 0.5) * pc.ndc_dx - 1.0, (float(y) + 0.5) * pc.ndc_dy - 1.0);
     // The tile's first sample: its top-left pixel, in sub-pixel units from the centre.
     ivec2 first = ivec2(16 * int(8u * tx) + 8 - 8 * int(pc.width),
                         16 * int(pc.height - 1u - 8u * ty) + 8 - 8 * int(pc.height));
-    // The box of the subgroup's samples (pixels past the image's edge count where they lie).
-    ivec2 sample_at = first + ivec2(16 * int(lx), -16 * int(ly));
-    ivec2 slo = ivec2(subgroupMin(sample_at.x), subgroupMin(sample_at.y));
-    ivec2 shi = ivec2(subgroupMax(sample_at.x), subgroupMax(sample_at.y));
+    // The box of the subgroup's samples (pixels past the image's edge count where they lie):
+    // its block's, from the block's shape (no subgroup operation: on llvmpipe a subgroup
+    // min or max is a scalar loop over the lanes).
+    uvec2 block = pow2 ? uvec2(1u << ((uint(findMSB(n)) + 1u) / 2u), 0u) : uvec2(8u, 1u);
+    block.y = pow2 ? n / block.x : 1u;
+    uvec2 corner0 = (at / block) * block;
+    ivec2 slo = first + ivec2(16 * int(corner0.x), -16 * int(corner0.y + block.y - 1u));
+    ivec2 shi = first + ivec2(16 * int(corner0.x + block.x - 1u), -16 * int(corner0.y));
     ivec3 lxv = ivec3(int(lx));
     ivec3 lyv = ivec3(int(ly));
     uint begin = range.x + pc.pass_begin;
