@@ -764,3 +764,69 @@ fn every_primitive_writes_the_golden_bytes() {
         "the primitives' bytes differ from tests/data/hard-golden.txt"
     );
 }
+
+#[test]
+fn snapping_the_fill_rule_the_clamps_and_depth_ties_decide_as_nvdiffrast() {
+    let Some(ctx) = common::gpu() else { return };
+    let mut hard = HardRasterizer::new(&ctx).unwrap();
+    // 8×8: pixel (3, 3)'s centre is at NDC x = −0.125. The triangle's left edge runs 1/40 pixel
+    // to its right (x = −0.11875), so the exact triangle misses the centre; snapped to the
+    // 1/16-pixel grid the edge passes through it (x·8W = −7.6 → −8 units, the centre's sample),
+    // and the fill rule gives a centre on a left edge to the triangle. There u + v > 1 before
+    // the clamps (the third corner's weight is negative): nvdiffrast scales both to sum to 1.
+    let x_edge = -0.11875f32;
+    let pos = vec![
+        x_edge, 0.9, 0.2, 1.0, x_edge, -0.9, 0.2, 1.0, 0.9, 0.0, 0.2, 1.0, //
+        x_edge, 0.9, 0.2, 1.0, x_edge, -0.9, 0.2, 1.0, 0.9, 0.0, 0.2, 1.0,
+    ];
+    let shape = Shape {
+        width: 8,
+        height: 8,
+        vertex_count: 6,
+        triangle_count: 2,
+        topology: Topology::Instanced { batch: 1 },
+    };
+    // The same triangle twice: of two equal depths the later (id 2) wins.
+    let tri = [[0u32, 1, 2], [3, 4, 5]];
+    let gpu = hard.rasterize(&ctx, &shape, &pos, &tri, None).unwrap();
+    let twin = reference::rasterize(&shape, &wide(&pos), &tri, None);
+    let i = 4 * (3 * 8 + 3);
+    for (what, r) in [
+        (
+            "GPU",
+            gpu.rast[i..i + 4]
+                .iter()
+                .map(|&v| f64::from(v))
+                .collect::<Vec<_>>(),
+        ),
+        ("twin", twin.rast[i..i + 4].to_vec()),
+    ] {
+        assert_eq!(
+            r[3], 2.0,
+            "{what}: the snapped edge's centre goes to the later triangle"
+        );
+        assert!(
+            r[0] >= 0.0 && r[1] >= 0.0,
+            "{what}: u, v clamped at 0: {r:?}"
+        );
+        assert!(
+            (r[0] + r[1] - 1.0).abs() < 1e-6,
+            "{what}: u + v scaled to 1: {r:?}"
+        );
+    }
+    // One pixel to the left is not drawn, and without snapping (the exact edge) (3, 3) would
+    // not be either.
+    let j = 4 * (3 * 8 + 2);
+    assert_eq!(gpu.rast[j + 3], 0.0);
+    let f = reference::pixel_ndc(3, 3, 8, 8);
+    assert!(f[0] < f64::from(x_edge), "the exact edge misses the centre");
+    // A second layer: the earlier triangle at the same depth, then nothing.
+    let second = hard
+        .rasterize(&ctx, &shape, &pos, &tri, Some(&gpu.keys))
+        .unwrap();
+    assert_eq!(second.rast[i + 3], 1.0);
+    let third = hard
+        .rasterize(&ctx, &shape, &pos, &tri, Some(&second.keys))
+        .unwrap();
+    assert!(third.rast.iter().all(|&v| v == 0.0));
+}
