@@ -31,8 +31,9 @@
 //!   edge when the triangle is taken counter-clockwise (y up): an edge shared by two triangles
 //!   draws each of its centres once. Both windings are drawn; a triangle of zero snapped area is
 //!   not.
-//! - **Depth.** The nearest `z/w` wins, computed (like the outputs) from the unclipped, unsnapped
-//!   vertices at the pixel centre; of two equal depths the triangle later in the draw order (the
+//! - **Depth.** The nearest `z/w` wins, computed from the unclipped, unsnapped vertices at the
+//!   pixel centre (for a snapped triangle, from the plane its corners' NDC points span: z/w is
+//!   affine in NDC over a triangle in front of the eye); of two equal depths the triangle later in the draw order (the
 //!   higher id) wins, as in nvdiffrast's ROP. softvk compares f32 `z/w` where nvdiffrast compares
 //!   a 32-bit fixed-point depth from a plane equation, so two surfaces within one fixed-point
 //!   step may be ordered differently.
