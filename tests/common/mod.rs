@@ -1,6 +1,7 @@
 //! Shared test support: a validated GPU context that fails the test on any validation message.
 #![allow(dead_code)] // each test binary uses a different subset
 
+pub mod hard;
 pub mod host;
 pub mod recon;
 
