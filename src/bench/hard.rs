@@ -250,7 +250,9 @@ pub fn run_hard(
         };
         let layer = hard.rasterize(ctx, &shape, &pos, &tri, None)?;
         let entries = hard.entries().unwrap_or(0);
-        let lanes = crate::raster::fine::known_subgroup_size(ctx).max(1);
+        // The lanes the depth pass runs with (a size that is not a power of two up to 64 runs
+        // as rows of 8: `visited_pairs` counts it so).
+        let lanes = ctx.info().subgroup_size.clamp(1, 64);
         let visited_count = visited_pairs(&shape, &pos, &tri, lanes)?;
         let (color, _) = hard.interpolate(
             ctx,
