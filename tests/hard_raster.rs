@@ -772,3 +772,72 @@ fn snapping_the_fill_rule_the_clamps_and_depth_ties_decide_as_nvdiffrast() {
         .unwrap();
     assert!(third.rast.iter().all(|&v| v == 0.0));
 }
+
+#[test]
+fn the_guard_band_decides_snapping_as_the_kernel_does() {
+    use softvk::raster::hard::reference::SNAP_LIMIT;
+    let Some(ctx) = common::gpu() else { return };
+    let mut hard = HardRasterizer::new(&ctx).unwrap();
+    // 32×24: a vertex may project to |x/w| ≤ 2^21 / (8·32) = 8192 and still be snapped. Two
+    // long slivers reaching far out of the viewport, one just inside that band (snapped), one
+    // just past it (homogeneous), each crossing the image: the GPU must draw what the twin
+    // draws, ids and values.
+    let (w, h) = (32u32, 24u32);
+    let limit = (SNAP_LIMIT / (8.0 * f64::from(w))) as f32;
+    let pos = vec![
+        -0.9,
+        -0.8,
+        0.1,
+        1.0,
+        0.98 * limit,
+        0.3,
+        0.1,
+        1.0,
+        -0.9,
+        0.2,
+        0.1,
+        1.0, //
+        -0.9,
+        0.3,
+        0.4,
+        1.0,
+        1.02 * limit,
+        0.9,
+        0.4,
+        1.0,
+        -0.9,
+        0.9,
+        0.4,
+        1.0,
+    ];
+    let tri = [[0u32, 1, 2], [3, 4, 5]];
+    let c = |t: usize| {
+        tri[t].map(|v| {
+            let o = 4 * v as usize;
+            [pos[o], pos[o + 1], pos[o + 2], pos[o + 3]].map(f64::from)
+        })
+    };
+    assert!(matches!(
+        reference::coverage(c(0), w, h),
+        Some(Coverage::Snapped(_))
+    ));
+    assert_eq!(reference::coverage(c(1), w, h), Some(Coverage::Homogeneous));
+    let shape = Shape {
+        width: w,
+        height: h,
+        vertex_count: 6,
+        triangle_count: 2,
+        topology: Topology::Instanced { batch: 1 },
+    };
+    let gpu = hard.rasterize(&ctx, &shape, &pos, &tri, None).unwrap();
+    let twin = reference::rasterize(&shape, &wide(&pos), &tri, None);
+    let drawn = |id: f64| twin.rast.chunks(4).filter(|p| p[3] == id).count();
+    assert!(
+        drawn(1.0) > 20 && drawn(2.0) > 20,
+        "both slivers cross the image"
+    );
+    assert_eq!(
+        compare(&gpu, &twin, (&shape, &wide(&pos), &tri), "guard band"),
+        0
+    );
+}

@@ -12,9 +12,10 @@
 //! - **Clip space.** Positions are OpenGL clip coordinates `(x, y, z, w)`; the view frustum is
 //!   `|x|, |y|, |z| ≤ w`. A triangle wholly beyond one frustum plane is not drawn (as
 //!   nvdiffrast). One with every vertex in front of the eye (`w > 0`), inside the depth range
-//!   (`|z| ≤ w`) and within a guard band of 2048 viewports is snapped (below) as it is, also
-//!   where it leaves the viewport: nvdiffrast clips such a triangle to the viewport first and
-//!   snaps the pieces, so an edge leaving the viewport may differ by a sub-pixel step; here it
+//!   (`|z| ≤ w`) and projecting within 2^21 sub-pixel units of the centre (a guard band of
+//!   2^18 / W viewport half-widths) is snapped (below) as it is, also where it leaves the
+//!   viewport: nvdiffrast clips such a triangle to the viewport first and snaps the pieces, so
+//!   an edge leaving the viewport may differ by a sub-pixel step; here it
 //!   runs between its own snapped ends, the same for both triangles that share it. One that
 //!   crosses the near or far plane (or the guard band) is drawn where, at the pixel centre, its
 //!   three homogeneous edge functions have their sum's sign, the interpolated `w` is positive

@@ -48,11 +48,12 @@ impl DepthKey {
     }
 }
 
-/// How far outside the viewport (in viewport half-widths) a vertex may project and still be
-/// snapped: `8 W · GUARD_BAND` stays below 2^29 for every `W ≤ MAX_SIZE`, so snapped
-/// coordinates fit an i32 and edge functions an i64.
-pub const GUARD_BAND: f64 = 2048.0;
-
+/// How far from the viewport's centre, in sub-pixel units, a vertex may project and still be
+/// snapped (`SNAP_LIMIT` in `kernels/include/hard.glsl`): 2^21, i.e. 2^18 / W viewport
+/// half-widths. A snapped triangle's edges then span less than 2^22 units, so an edge function's
+/// step across an 8-pixel tile stays below 2^30 and the depth pass's clamped 32-bit edge
+/// functions keep their signs.
+pub const SNAP_LIMIT: f64 = 2_097_152.0;
 /// How the rasterizer tests a triangle's coverage.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Coverage {
@@ -70,10 +71,15 @@ pub fn outside_one_plane(tri: &[Clip; 3]) -> bool {
     (0..3).any(|axis| tri.iter().all(|v| v[axis] > v[3]) || tri.iter().all(|v| -v[axis] > v[3]))
 }
 
-/// Whether the triangle is snapped: every vertex has `w > 0`, `|z| ≤ w` and `|x|, |y| ≤ G w`.
-pub fn snappable(tri: &[Clip; 3]) -> bool {
+/// Whether the triangle is snapped: every vertex has `w > 0`, `|z| ≤ w` and
+/// `|x| · 8W, |y| · 8H ≤ SNAP_LIMIT · w` (the kernel's test, `hard_setup.comp`).
+pub fn snappable(tri: &[Clip; 3], width: u32, height: u32) -> bool {
+    let (sx, sy) = (8.0 * f64::from(width), 8.0 * f64::from(height));
     tri.iter().all(|v| {
-        v[3] > 0.0 && v[2].abs() <= v[3] && v[0].abs().max(v[1].abs()) <= GUARD_BAND * v[3]
+        v[3] > 0.0
+            && v[2].abs() <= v[3]
+            && v[0].abs() * sx <= SNAP_LIMIT * v[3]
+            && v[1].abs() * sy <= SNAP_LIMIT * v[3]
     })
 }
 
@@ -83,7 +89,7 @@ pub fn coverage(tri: [Clip; 3], width: u32, height: u32) -> Option<Coverage> {
     if outside_one_plane(&tri) {
         return None;
     }
-    if !snappable(&tri) {
+    if !snappable(&tri, width, height) {
         return Some(Coverage::Homogeneous);
     }
     let snapped = tri.map(|v| snap(&v, width, height, SNAP_TOLERANCE));
