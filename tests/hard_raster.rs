@@ -13,7 +13,7 @@ use common::hard::{clip, random_scene, wide};
 use glam::Vec3;
 use rand::RngExt;
 use softvk::mesh::Mesh;
-use softvk::raster::hard::gpu::{HardLayer, HardRasterizer};
+use softvk::raster::hard::gpu::{HardLayer, HardPlan, HardRasterizer};
 use softvk::raster::hard::reference::{self, Coverage, DepthKey, Layer};
 use softvk::raster::hard::{Shape, Topology};
 
@@ -230,6 +230,61 @@ fn depth_peeling_returns_every_layer_in_order_then_nothing() {
         assert!(layers < 60, "peeling does not end");
     }
     assert!(layers >= 4, "the scene has {layers} layers");
+}
+
+/// A tile whose run is longer than one depth pass visits (the driver's loop cap on lavapipe,
+/// `HardPlan::depth_passes`) is finished by the later passes, from the keys the earlier left,
+/// in the first layer and the next; partial tiles on the right and at the bottom.
+#[test]
+fn tiles_crowded_past_one_depth_pass_match_the_twin() {
+    let Some(ctx) = common::gpu() else { return };
+    let mut hard = HardRasterizer::new(&ctx).unwrap();
+    let (pos, tri) = random_scene(11, 300, 9000);
+    let shape = Shape {
+        width: 13,
+        height: 9,
+        vertex_count: 300,
+        triangle_count: tri.len() as u32,
+        topology: Topology::Instanced { batch: 1 },
+    };
+    let pos64 = wide(&pos);
+    // The tile holding the image's centre (snapped (0, 0)) is binned every homogeneous item and
+    // every snapped one whose box holds the centre.
+    let crowd =
+        tri.iter()
+            .filter(|t| {
+                let c = t.map(|v| std::array::from_fn(|k| pos64[4 * v as usize + k]));
+                match reference::coverage(c, shape.width, shape.height) {
+                    Some(Coverage::Snapped(q)) => (0..2)
+                        .all(|k| q.p.iter().any(|p| p[k] <= 0) && q.p.iter().any(|p| p[k] >= 0)),
+                    Some(Coverage::Homogeneous) => true,
+                    None => false,
+                }
+            })
+            .count() as u64;
+    if ctx.info().shader_loop_limit().is_some() {
+        let plan = HardPlan::new(&ctx, &shape).unwrap();
+        assert!(
+            plan.depth_passes(crowd) >= 2,
+            "{crowd} items in the centre's tile fit one depth pass: the test crowds none past it"
+        );
+    }
+    let first = hard.rasterize(&ctx, &shape, &pos, &tri, None).unwrap();
+    let twin = reference::rasterize(&shape, &pos64, &tri, None);
+    assert!(drawn(&twin) == 13 * 9, "the scene covers the image");
+    let differ = compare(&first, &twin, (&shape, &pos64, &tri), "crowded, layer 0");
+    assert_eq!(differ, 0, "crowded, layer 0");
+    let next = hard
+        .rasterize(&ctx, &shape, &pos, &tri, Some(&first.keys))
+        .unwrap();
+    let twin_next = reference::rasterize(&shape, &pos64, &tri, Some(&twin.keys));
+    let differ = compare(
+        &next,
+        &twin_next,
+        (&shape, &pos64, &tri),
+        "crowded, layer 1",
+    );
+    assert_eq!(differ, 0, "crowded, layer 1");
 }
 
 #[test]

@@ -8,7 +8,7 @@
 // - every corner with w > 0, |z| <= w and |x|·8W, |y|·8H <= 2^21 w: snapped, corners
 //   round-half-even(x/w · 8W) (sub-pixel units from the viewport centre), counter-clockwise
 //   (corners 1 and 2 swapped when clockwise), with each edge's fill-rule bit (left or bottom
-//   edges are inclusive), boxed by its snapped corners;
+//   edges are inclusive), boxed by its snapped corners (shrunk by the binning's widening);
 // - else the homogeneous test, boxed by its projection when every w > 0 and by the whole image
 //   when a corner is behind the eye.
 // Boxes are in the binning's pixel-centre coordinates (`binning.glsl`: x/S·W, y/S·H in NDC
@@ -22,6 +22,9 @@ layout(std430, set = 0, binding = 1) readonly buffer Tri { uint tri[]; };
 // Per minibatch item: (first triangle, count).
 layout(std430, set = 0, binding = 2) readonly buffer Ranges { uvec2 ranges[]; };
 layout(std430, set = 0, binding = 3) writeonly buffer Items { float items[]; };
+// How many items take the homogeneous test (the host clears it): with none, the depth pass
+// runs without its loop over them.
+layout(std430, set = 0, binding = 4) buffer Counts { uint homogeneous_items; };
 
 #include "hard.glsl"
 
@@ -135,8 +138,12 @@ void main() {
             q2 = swap;
         }
         uint inc = inclusive(q0, q1) | (inclusive(q1, q2) << 1u) | (inclusive(q2, q0) << 2u);
-        ivec2 lo_corner = min(q0, min(q1, q2));
-        ivec2 hi_corner = max(q0, max(q1, q2));
+        // The box shrunk by 30 units (1 7/8 pixels) on each side: the binning widens it by two
+        // pixels (`binning.glsl`: one for its rounding out, one more), so its tiles are those
+        // holding the pixel centres within 1/8 pixel of the snapped corners' box, and a
+        // triangle whose box holds no centre (lo > hi after shrinking) is binned nowhere.
+        ivec2 lo_corner = min(q0, min(q1, q2)) + 30;
+        ivec2 hi_corner = max(q0, max(q1, q2)) - 30;
         precise vec4 box = vec4(float(lo_corner.x) * pc.box_scale, float(lo_corner.y) * pc.box_scale,
                                 float(hi_corner.x) * pc.box_scale, float(hi_corner.y) * pc.box_scale);
         write_item(o, true, box, t, MODE_SNAPPED, inc, q0, q1, q2, depth_plane(p0, p1, p2));
@@ -153,4 +160,5 @@ void main() {
                    max(xs.x, max(xs.y, xs.z)), max(ys.x, max(ys.y, ys.z)));
     }
     write_item(o, true, box, t, MODE_HOMOGENEOUS, 0u, zero, zero, zero, vec3(0.0));
+    atomicAdd(homogeneous_items, 1u);
 }

@@ -42,11 +42,12 @@ pub struct HardRecord {
     pub faces: u32,
     /// Image side (square).
     pub size: u32,
-    /// The depth pass's binned (pixel, triangle) pairs: 64 per (triangle, tile) entry
-    /// (rasterize only).
+    /// The depth pass's binned (pixel, triangle) pairs: 64 per (triangle, tile) entry, each of
+    /// which it tests (rasterize only).
     pub binned_pairs: Option<u64>,
-    /// The pairs it visits: per subgroup, its lanes × the binned triangles whose box meets its
-    /// pixels ([`visited_pairs`]; rasterize only).
+    /// The visited pairs, the per-pair figure's fixed denominator: per block of a subgroup's
+    /// lanes, its pixels × the triangles whose snapped box meets it ([`visited_pairs`];
+    /// rasterize only).
     pub visited_pairs: Option<u64>,
     /// The depth pass's GPU time per visited pair, ns (rasterize only).
     pub ns_per_visited_pair: Option<f64>,
@@ -115,10 +116,13 @@ fn scene(assets: &Path, times: u32) -> Result<(Vec<f32>, Vec<[u32; 3]>)> {
     Ok((pos, mesh.faces))
 }
 
-/// The (pixel, triangle) pairs the depth pass visits for one minibatch item: per binned
-/// (triangle, tile) entry, each subgroup's block of `lanes` pixels (`hard_depth.comp`'s
-/// `block_pixel`) whose sample box the snapped triangle's box meets, times `lanes` (every block
-/// for a homogeneous triangle). Counted with the f64 twin's snapping.
+/// The visited (pixel, triangle) pairs of one minibatch item: over the 8×8 tiles a triangle's
+/// box is binned to, each block of `lanes` pixels (4 × 2 for 8 lanes) whose sample box the
+/// snapped triangle's box meets, times `lanes` (every block for a homogeneous triangle);
+/// counted with the f64 twin's snapping. It is what the first depth kernel visited (a subgroup
+/// a block, each testing the binned triangles its ballot kept) and is kept as the per-pair
+/// figure's denominator, so that figures compare across kernels: the kernel of today tests
+/// every binned pair (a lane a row of a tile, every binned triangle at all 64 pixels).
 pub fn visited_pairs(shape: &Shape, pos: &[f32], tri: &[[u32; 3]], lanes: u32) -> Result<u64> {
     use crate::primitives::binning::{TileGrid, cpu::tile_rect};
     use crate::raster::hard::reference::{Coverage, coverage};

@@ -121,10 +121,15 @@ impl HardPlan {
             });
         }
         let grid = TileGrid::new(shape.width, shape.height, TILE)?;
-        // The depth pass's loops per invocation: per batch of 64 staged entries one and three
-        // (the edges), per entry one.
+        // The depth pass's loops per invocation, counted as if the driver unrolled none: per
+        // batch of `m` staged entries (m = min(8, subgroup size), 1 when unknown) one, three
+        // (the edges) and per entry 2 × (1 + 8) (snapped and homogeneous, each over a row's
+        // eight pixels); 64 spare for the loops outside the batches.
         let pass_items = match ctx.info().shader_loop_limit() {
-            Some(cap) => (cap - 64) * 64 / 68,
+            Some(cap) => {
+                let m = u64::from(crate::raster::fine::known_subgroup_size(ctx).clamp(1, 8));
+                (cap - 64) * m / (4 + 18 * m)
+            }
             None => u64::from(u32::MAX),
         };
         let job = BinJob {
@@ -323,7 +328,12 @@ pub fn vertex_lists(plan: &HardPlan, tri: &[[u32; 3]], per_item: bool) -> (Vec<u
 /// nvdiffrast's primitives on the GPU: their pipelines, the binning and scratch.
 pub struct HardRasterizer {
     setup: Arc<Kernel>,
-    depth: Arc<Kernel>,
+    /// Tiles per workgroup of `depth` ([`depth_tiles_per_group`]).
+    depth_tiles: u32,
+    /// The set-up's count of homogeneous items (one `u32`).
+    counts: Buffer,
+    /// Whether any item of the last set-up is homogeneous, once [`HardRasterizer::bin`] read it.
+    homogeneous: Option<bool>,
     shade: Arc<Kernel>,
     grad_boxes: Arc<Kernel>,
     grad_count: Arc<Kernel>,
@@ -390,15 +400,22 @@ fn get<T: Pod>(bytes: &[u8], at: u64, out: &mut [T]) {
     bytemuck::cast_slice_mut::<T, u8>(out).copy_from_slice(&bytes[at as usize..at as usize + len]);
 }
 
+/// Tiles per workgroup of `hard_depth.comp` (eight invocations each, one per row): one on a CPU
+/// device ([`Context::cpu_workgroups`]: one llvmpipe subgroup, which stages each binned item
+/// once and keeps a row's eight keys in registers), eight elsewhere (64 invocations, whole warps
+/// and waves). The same bits either way.
+fn depth_tiles_per_group(ctx: &Context) -> u32 {
+    if ctx.cpu_workgroups() { 1 } else { 8 }
+}
+
 impl HardRasterizer {
     /// Builds the pipelines (from the context's cache) and empty scratch.
     pub fn new(ctx: &Context) -> Result<Self> {
         Ok(Self {
             setup: ctx.kernel(&specs::HARD_SETUP, &[])?,
-            depth: ctx.kernel(
-                &specs::HARD_DEPTH,
-                &[crate::raster::fine::known_subgroup_size(ctx)],
-            )?,
+            depth_tiles: depth_tiles_per_group(ctx),
+            counts: ctx.create_buffer("hard rasterizer counts", 4, MemoryKind::Device)?,
+            homogeneous: None,
             shade: ctx.kernel(&specs::HARD_SHADE, &[])?,
             grad_boxes: ctx.kernel(&specs::HARD_GRAD_BOXES, &[])?,
             grad_count: ctx.kernel(&specs::HARD_GRAD_COUNT, &[])?,
@@ -475,8 +492,11 @@ impl HardRasterizer {
         self.bins.reserve(ctx, &plan.job)?;
         self.entries = None;
         Self::check_inputs(plan, &inputs)?;
+        self.homogeneous = None;
         let items = self.items.as_ref().expect("reserved above").range(0, bytes);
         rec.pass("hard setup", |rec| {
+            let counts = self.counts.range(0, 4);
+            rec.fill(counts, 0);
             rec.dispatch(
                 &self.setup,
                 &specs::HardSetupBindings {
@@ -484,6 +504,7 @@ impl HardRasterizer {
                     tri: inputs.tri,
                     ranges: inputs.ranges,
                     items,
+                    counts,
                 }
                 .for_kernel(&self.setup)?,
                 &plan.push,
@@ -509,11 +530,18 @@ impl HardRasterizer {
     }
 
     /// Reads the binning's entry count back (after [`HardRasterizer::record_setup`]'s
-    /// submission completed) and sizes the entry buffers for it.
+    /// submission completed) and sizes the entry buffers for it; reads too whether any item
+    /// takes the homogeneous test, so that [`HardRasterizer::record_depth`] can record the
+    /// depth pass specialized for none (on llvmpipe a loop's body runs at least once, over
+    /// no lanes or not).
     pub fn bin(&mut self, ctx: &Context) -> Result<u64> {
         let total = self.bins.read_total(ctx)?;
         self.bins.reserve_entries(ctx, total)?;
+        let [homogeneous] = ctx.read_buffer::<u32>(&self.counts, 0, 1)?[..] else {
+            unreachable!("one word read")
+        };
         self.entries = Some(total);
+        self.homogeneous = Some(homogeneous > 0);
         Ok(total)
     }
 
@@ -579,6 +607,20 @@ impl HardRasterizer {
         let tiles = plan.job.tile_count();
         let entries = total.max(1);
         let keys = keys.sub(0, 8 * pixels);
+        let homogeneous = self.homogeneous.unwrap_or(true);
+        // `hard_depth.comp` specialized for peeling or not and for homogeneous items or none
+        // (the context keeps each pipeline once made).
+        let depth = &rec.context().kernel(
+            &specs::HARD_DEPTH,
+            &[
+                crate::raster::fine::known_subgroup_size(rec.context()),
+                8 * self.depth_tiles,
+                u32::from(previous.is_some()),
+                u32::from(homogeneous),
+            ],
+        )?;
+        // Entries are fetched as 16-byte texels: whole ones (the bins hold whole texels).
+        let entry_bytes = (4 * entries).next_multiple_of(16);
         rec.pass("hard depth", |rec| {
             rec.fill(keys, 0);
             for pass in 0..passes {
@@ -591,20 +633,20 @@ impl HardRasterizer {
                     ..plan.push
                 };
                 rec.dispatch(
-                    &self.depth,
+                    depth,
                     &specs::HardDepthBindings {
                         pos: inputs.pos,
                         tri: inputs.tri,
                         items,
-                        pairs: self.bins.entries().range(0, 4 * entries),
-                        pair_items: self.bins.entry_items().range(0, 4 * entries),
+                        pairs: self.bins.entries().range(0, entry_bytes),
+                        pair_items: self.bins.entry_items().range(0, entry_bytes),
                         tile_ranges: self.bins.ranges().range(0, 8 * tiles),
                         keys,
                         prev_keys: previous.unwrap_or(keys),
                     }
-                    .for_kernel(&self.depth)?,
+                    .for_kernel(depth)?,
                     &push,
-                    u32::try_from(tiles)
+                    u32::try_from(tiles.div_ceil(u64::from(self.depth_tiles)))
                         .map_err(|_| Error::Input("rasterize: image too large".into()))?,
                 )?;
             }
