@@ -44,12 +44,7 @@ impl Bins {
     }
 
     fn with_capacity(ctx: &Context, items: u64, entries: u64, tiles: u64) -> Result<Self> {
-        // Entries in whole 16-byte texels, as `allocate_entries` keeps them.
-        let (items, entries, tiles) = (
-            items.max(1),
-            entries.max(1).next_multiple_of(4),
-            tiles.max(1),
-        );
+        let (items, entries, tiles) = (items.max(1), entries.max(1), tiles.max(1));
         Ok(Self {
             counts: ctx.create_buffer("bin counts", 4 * (items + 1), MemoryKind::Device)?,
             scan_scratch: ScanScratch::new(ctx, items)?,
@@ -144,9 +139,6 @@ impl Bins {
     }
 
     fn allocate_entries(&mut self, ctx: &Context, cap: u64) -> Result<()> {
-        // Whole 16-byte texels of entries and entry items, for kernels that fetch them as
-        // texels (`hard_depth.comp`).
-        let cap = cap.next_multiple_of(4);
         self.keys = ctx.create_buffer("bin keys", 8 * cap, MemoryKind::Device)?;
         self.pairs = ctx.create_buffer("bin entries", 4 * cap, MemoryKind::Device)?;
         self.pair_items = ctx.create_buffer("bin entry items", 4 * cap, MemoryKind::Device)?;

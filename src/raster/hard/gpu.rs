@@ -536,7 +536,9 @@ impl HardRasterizer {
     /// no lanes or not).
     pub fn bin(&mut self, ctx: &Context) -> Result<u64> {
         let total = self.bins.read_total(ctx)?;
-        self.bins.reserve_entries(ctx, total)?;
+        // The depth pass fetches the entries as whole 16-byte texels.
+        self.bins
+            .reserve_entries(ctx, total.max(1).next_multiple_of(4))?;
         let [homogeneous] = ctx.read_buffer::<u32>(&self.counts, 0, 1)?[..] else {
             unreachable!("one word read")
         };
@@ -619,7 +621,7 @@ impl HardRasterizer {
                 u32::from(homogeneous),
             ],
         )?;
-        // Entries are fetched as 16-byte texels: whole ones (the bins hold whole texels).
+        // Entries are fetched as 16-byte texels: whole ones (`bin` reserved them).
         let entry_bytes = (4 * entries).next_multiple_of(16);
         rec.pass("hard depth", |rec| {
             rec.fill(keys, 0);
