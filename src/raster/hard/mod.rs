@@ -56,6 +56,7 @@ pub mod antialias;
 pub mod dual;
 pub mod gpu;
 pub mod reference;
+pub mod texture;
 
 use crate::error::{Error, Result};
 
