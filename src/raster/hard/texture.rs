@@ -1,5 +1,6 @@
-//! The f64 twin of nvdiffrast's `texture` and `texture_construct_mip` for 2D textures, forward:
-//! the reference the texture kernels will be held to. Cube maps and the backward come next.
+//! The f64 twin of nvdiffrast's `texture` and `texture_construct_mip` for 2D textures, forward
+//! ([`sample`]) and backward ([`sample_backward`], [`MipStack::pyramid_backward`]): the
+//! reference the texture kernels will be held to. Cube maps come next.
 //!
 //! nvdiffrast's behaviour, as its documentation and source show it (softvk's code is its own):
 //!
@@ -104,6 +105,15 @@ impl Filter {
     pub fn uses_mips(self) -> bool {
         matches!(self, Self::LinearMipmapNearest | Self::LinearMipmapLinear)
     }
+}
+
+/// The filter and boundary modes of a lookup.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Mode {
+    /// How texels are filtered.
+    pub filter: Filter,
+    /// How `uv` outside the texture reads it.
+    pub boundary: Boundary,
 }
 
 /// One level of a texture: `[items, height, width, channels]`, row-major.
@@ -262,9 +272,9 @@ pub fn sample(
     item: usize,
     uv: [f64; 2],
     level: LevelInput,
-    filter: Filter,
-    boundary: Boundary,
+    mode: Mode,
 ) -> Vec<f64> {
+    let Mode { filter, boundary } = mode;
     let c = stack.channels;
     let base = &stack.levels[0];
     match filter {
@@ -363,6 +373,283 @@ fn bilinear(
         .collect()
 }
 
+/// One pixel's gradients to its own inputs (`texture`'s backward, besides the texels').
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PixelGrad {
+    /// To `uv`.
+    pub uv: [f64; 2],
+    /// To `uv_da` (linear-mipmap-linear only: the level's fraction is its one dependence).
+    pub uv_da: [f64; 4],
+    /// To `mip_level_bias` (linear-mipmap-linear only).
+    pub bias: f64,
+}
+
+/// The backward of [`sample`] for one pixel with output gradient `dy` (`C` values): adds the
+/// texels' gradients into `tex_grad` (one vector a level, laid out as the stack's levels) and
+/// returns the pixel's own. The exact derivative of the forward, piecewise: at a texel
+/// centre's kink, at a level's integer `λ` and where the footprint is isotropic (where
+/// nvdiffrast's expression is 0/0 and it takes no gradient, as here) the side taken is the
+/// forward's.
+pub fn sample_backward(
+    stack: &MipStack,
+    item: usize,
+    uv: [f64; 2],
+    level: LevelInput,
+    mode: Mode,
+    dy: &[f64],
+    tex_grad: &mut [Vec<f64>],
+) -> PixelGrad {
+    let Mode { filter, boundary } = mode;
+    let base = &stack.levels[0];
+    let mut grad = PixelGrad::default();
+    match filter {
+        Filter::Nearest => {
+            let (mut u, mut v) = (uv[0], uv[1]);
+            if boundary == Boundary::Wrap {
+                u -= u.floor();
+                v -= v.floor();
+            }
+            let (w, h) = (base.width as f64, base.height as f64);
+            let (x, y) = ((u * w).floor(), (v * h).floor());
+            let outside = x < 0.0 || x >= w || y < 0.0 || y >= h;
+            if !(x.is_finite() && y.is_finite()) || (boundary == Boundary::Zero && outside) {
+                return grad;
+            }
+            let (x, y) = (
+                x.clamp(0.0, w - 1.0) as usize,
+                y.clamp(0.0, h - 1.0) as usize,
+            );
+            add_texel(stack, tex_grad, 0, item, x, y, dy, 1.0);
+        }
+        Filter::Linear => {
+            grad.uv = bilinear_backward(stack, item, 0, uv, boundary, dy, 1.0, tex_grad)
+        }
+        Filter::LinearMipmapNearest | Filter::LinearMipmapLinear => {
+            let max = stack.max_level() as f64;
+            let raw = level_of_detail(level, base.width, base.height);
+            let lambda = if raw.is_nan() {
+                0.0
+            } else {
+                raw.clamp(0.0, max)
+            };
+            let l0 = lambda.floor();
+            if filter == Filter::LinearMipmapNearest || lambda <= 0.0 {
+                grad.uv =
+                    bilinear_backward(stack, item, l0 as usize, uv, boundary, dy, 1.0, tex_grad);
+                return grad;
+            }
+            let l1 = (l0 + 1.0).min(max);
+            let f = lambda - l0;
+            let g0 = bilinear_backward(
+                stack,
+                item,
+                l0 as usize,
+                uv,
+                boundary,
+                dy,
+                1.0 - f,
+                tex_grad,
+            );
+            let g1 = bilinear_backward(stack, item, l1 as usize, uv, boundary, dy, f, tex_grad);
+            grad.uv = [g0[0] + g1[0], g0[1] + g1[1]];
+            // Through the fraction: d/dλ = Σ dy (b − a), where λ is not clamped.
+            if raw > 0.0 && raw < max {
+                let a = bilinear(stack, item, l0 as usize, uv, boundary);
+                let b = bilinear(stack, item, l1 as usize, uv, boundary);
+                let dl: f64 = dy
+                    .iter()
+                    .zip(a.iter().zip(&b))
+                    .map(|(d, (a, b))| d * (b - a))
+                    .sum();
+                if level.bias.is_some() {
+                    grad.bias = dl;
+                }
+                if let Some(da) = level.uv_da {
+                    let d = level_gradient(da, base.width, base.height);
+                    grad.uv_da = d.map(|d| dl * d);
+                }
+            }
+        }
+    }
+    grad
+}
+
+/// dλ/d`uv_da` of [`level_of_detail`], zero where it is not finite (an isotropic or empty
+/// footprint), as nvdiffrast takes it.
+pub fn level_gradient(uv_da: [f64; 4], width: usize, height: usize) -> [f64; 4] {
+    let (ws, hs) = (width as f64, height as f64);
+    let [ux, uy, vx, vy] = uv_da;
+    let (sx, sy, tx, ty) = (ux * ws, uy * ws, vx * hs, vy * hs);
+    let a = sx * sx + tx * tx;
+    let b = sy * sy + ty * ty;
+    let c = sx * sy + tx * ty;
+    let root = (0.25 * (a - b) * (a - b) + c * c).sqrt();
+    let major = 0.5 * (a + b) + root;
+    // λ = ½ log2 M: dλ/dM = 1 / (2 M ln 2); M's derivatives in A, B and C.
+    let k = 1.0 / (2.0 * major * std::f64::consts::LN_2);
+    let (da, db, dc) = (
+        k * (0.5 + 0.5 * (a - b) / (2.0 * root)),
+        k * (0.5 - 0.5 * (a - b) / (2.0 * root)),
+        k * c / root,
+    );
+    let g = [
+        ws * (2.0 * sx * da + sy * dc),
+        ws * (2.0 * sy * db + sx * dc),
+        hs * (2.0 * tx * da + ty * dc),
+        hs * (2.0 * ty * db + tx * dc),
+    ];
+    if g.iter().all(|v| v.is_finite()) {
+        g
+    } else {
+        [0.0; 4]
+    }
+}
+
+/// Adds `scale · dy` into texel `(x, y)` of `level` in `tex_grad`.
+#[allow(clippy::too_many_arguments)]
+fn add_texel(
+    stack: &MipStack,
+    tex_grad: &mut [Vec<f64>],
+    level: usize,
+    item: usize,
+    x: usize,
+    y: usize,
+    dy: &[f64],
+    scale: f64,
+) {
+    let l = &stack.levels[level];
+    let item = if stack.items == 1 { 0 } else { item };
+    let o = ((item * l.height + y) * l.width + x) * stack.channels;
+    for (g, d) in tex_grad[level][o..o + stack.channels].iter_mut().zip(dy) {
+        *g += scale * d;
+    }
+}
+
+/// The backward of [`bilinear`] scaled by `scale`: texel gradients into `tex_grad`, and the
+/// gradient to `uv` returned.
+#[allow(clippy::too_many_arguments)]
+fn bilinear_backward(
+    stack: &MipStack,
+    item: usize,
+    level: usize,
+    uv: [f64; 2],
+    boundary: Boundary,
+    dy: &[f64],
+    scale: f64,
+    tex_grad: &mut [Vec<f64>],
+) -> [f64; 2] {
+    let l = &stack.levels[level];
+    let (w, h) = (l.width as f64, l.height as f64);
+    let (mut u, mut v) = (uv[0], uv[1]);
+    if boundary == Boundary::Wrap {
+        u -= u.floor();
+        v -= v.floor();
+    }
+    let (mut s, mut t) = (u * w - 0.5, v * h - 0.5);
+    // ds/du and dt/dv: zero where the clamp holds the coordinate.
+    let (mut ds, mut dt) = (w, h);
+    let (mut hold_s, mut hold_t) = (false, false);
+    if boundary == Boundary::Clamp {
+        if !(0.0..=w - 1.0).contains(&s) {
+            ds = 0.0;
+        }
+        if !(0.0..=h - 1.0).contains(&t) {
+            dt = 0.0;
+        }
+        s = s.clamp(0.0, w - 1.0);
+        t = t.clamp(0.0, h - 1.0);
+        hold_s = s == 0.0 || s == w - 1.0;
+        hold_t = t == 0.0 || t == h - 1.0;
+    }
+    if !(s.is_finite() && t.is_finite()) {
+        return [0.0; 2];
+    }
+    let (s0, t0) = (s.floor(), t.floor());
+    let (fs, ft) = (s - s0, t - t0);
+    let xs = [s0 as i64, s0 as i64 + i64::from(!hold_s)];
+    let ys = [t0 as i64, t0 as i64 + i64::from(!hold_t)];
+    let (wi, hi) = (l.width as i64, l.height as i64);
+    let tap = |x: i64, y: i64| -> Option<(usize, usize)> {
+        let (x, y) = match boundary {
+            Boundary::Wrap => (x.rem_euclid(wi), y.rem_euclid(hi)),
+            _ => (x, y),
+        };
+        ((0..wi).contains(&x) && (0..hi).contains(&y)).then_some((x as usize, y as usize))
+    };
+    let weights = [
+        (1.0 - fs) * (1.0 - ft),
+        fs * (1.0 - ft),
+        (1.0 - fs) * ft,
+        fs * ft,
+    ];
+    let corners = [
+        (xs[0], ys[0]),
+        (xs[1], ys[0]),
+        (xs[0], ys[1]),
+        (xs[1], ys[1]),
+    ];
+    let mut dfs = 0.0;
+    let mut dft = 0.0;
+    for (k, d) in dy.iter().enumerate() {
+        let [a00, a10, a01, a11] =
+            corners.map(|(x, y)| tap(x, y).map_or(0.0, |(x, y)| stack.texel(level, item, x, y)[k]));
+        dfs += d * ((a10 - a00) * (1.0 - ft) + (a11 - a01) * ft);
+        dft += d * ((a01 + fs * (a11 - a01)) - (a00 + fs * (a10 - a00)));
+    }
+    for (i, &(x, y)) in corners.iter().enumerate() {
+        if let Some((x, y)) = tap(x, y) {
+            add_texel(stack, tex_grad, level, item, x, y, dy, scale * weights[i]);
+        }
+    }
+    [scale * dfs * ds, scale * dft * dt]
+}
+
+impl MipStack {
+    /// Gradients of zero for every texel of every level (what [`sample_backward`] adds into).
+    pub fn zero_grads(&self) -> Vec<Vec<f64>> {
+        self.levels
+            .iter()
+            .map(|l| vec![0.0; l.texels.len()])
+            .collect()
+    }
+
+    /// The backward of [`MipStack::build`]: the levels' texel gradients carried down to the
+    /// base (each level's into the 2 × 2, or 2 × 1, texels it averaged), last level first.
+    pub fn pyramid_backward(&self, mut grads: Vec<Vec<f64>>) -> Vec<f64> {
+        let c = self.channels;
+        for level in (1..self.levels.len()).rev() {
+            let (lo, hi) = grads.split_at_mut(level);
+            let (above, this) = (&self.levels[level - 1], &self.levels[level]);
+            let (w, h) = (above.width, above.height);
+            let parent = &mut lo[level - 1];
+            for item in 0..self.items {
+                for y in 0..this.height {
+                    for x in 0..this.width {
+                        for k in 0..c {
+                            let g = hi[0][((item * this.height + y) * this.width + x) * c + k];
+                            let mut add = |px: usize, py: usize, share: f64| {
+                                parent[((item * h + py) * w + px) * c + k] += share * g;
+                            };
+                            if h == 1 {
+                                add(2 * x, 0, 0.5);
+                                add(2 * x + 1, 0, 0.5);
+                            } else if w == 1 {
+                                add(0, 2 * y, 0.5);
+                                add(0, 2 * y + 1, 0.5);
+                            } else {
+                                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                                    add(2 * x + dx, 2 * y + dy, 0.25);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        grads.swap_remove(0)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -373,7 +660,13 @@ mod tests {
     }
 
     fn one(stack: &MipStack, uv: [f64; 2], filter: Filter, boundary: Boundary) -> f64 {
-        sample(stack, 0, uv, LevelInput::default(), filter, boundary)[0]
+        sample(
+            stack,
+            0,
+            uv,
+            LevelInput::default(),
+            Mode { filter, boundary },
+        )[0]
     }
 
     #[test]
@@ -485,7 +778,16 @@ mod tests {
                 uv_da: None,
                 bias: Some(bias),
             };
-            sample(&s, 0, uv, level, filter, Boundary::Clamp)[0]
+            sample(
+                &s,
+                0,
+                uv,
+                level,
+                Mode {
+                    filter,
+                    boundary: Boundary::Clamp,
+                },
+            )[0]
         };
         // λ = 1.5: the floor's level alone, or the two mixed halfway.
         assert_eq!(with(1.5, Filter::LinearMipmapNearest), at(1));
@@ -499,7 +801,16 @@ mod tests {
             bias: None,
         };
         assert_eq!(
-            sample(&s, 0, uv, zero, Filter::LinearMipmapLinear, Boundary::Clamp)[0],
+            sample(
+                &s,
+                0,
+                uv,
+                zero,
+                Mode {
+                    filter: Filter::LinearMipmapLinear,
+                    boundary: Boundary::Clamp
+                }
+            )[0],
             at(0)
         );
         // Linear never reads the levels.
@@ -526,6 +837,163 @@ mod tests {
         assert!(MipStack::base(1, 0, 2, 1, vec![]).is_err());
     }
 
+    /// A deterministic pseudo-random stream in [0, 1).
+    fn stream(seed: u64) -> impl FnMut() -> f64 {
+        let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    /// Whether `x` lies within `margin` of an integer (a kink of the piecewise forward).
+    fn near_integer(x: f64, margin: f64) -> bool {
+        (x - x.round()).abs() < margin
+    }
+
+    /// Every gradient of one pixel against central differences of the forward, per component,
+    /// on an 8 × 4 texture of 3 channels and its mip stack, in every filter and boundary mode,
+    /// away from the kinks (counted: the draws skipped).
+    #[test]
+    fn the_backward_matches_central_differences_in_every_mode() {
+        let mut rnd = stream(7);
+        let (w, h, c) = (8usize, 4usize, 3usize);
+        let base: Vec<f64> = (0..w * h * c).map(|_| rnd()).collect();
+        let stack_of = |texels: Vec<f64>, filter: Filter| {
+            let s = MipStack::base(1, h, w, c, texels).unwrap();
+            if filter.uses_mips() {
+                s.build(None).unwrap()
+            } else {
+                s
+            }
+        };
+        let eps = 1e-6;
+        let bound = |analytic: f64, numeric: f64| {
+            (analytic - numeric).abs() <= 1e-6 * (1.0 + numeric.abs())
+        };
+        let (mut checked, mut skipped) = (0, 0);
+        for filter in [
+            Filter::Nearest,
+            Filter::Linear,
+            Filter::LinearMipmapNearest,
+            Filter::LinearMipmapLinear,
+        ] {
+            for boundary in [Boundary::Wrap, Boundary::Clamp, Boundary::Zero] {
+                let stack = stack_of(base.clone(), filter);
+                for _ in 0..12 {
+                    let uv = [rnd() * 1.6 - 0.3, rnd() * 1.6 - 0.3];
+                    let level = LevelInput {
+                        uv_da: Some([
+                            (rnd() - 0.3) * 0.6,
+                            (rnd() - 0.5) * 0.2,
+                            (rnd() - 0.5) * 0.2,
+                            (rnd() - 0.3) * 0.9,
+                        ]),
+                        bias: Some(rnd() - 0.5),
+                    };
+                    let dy: Vec<f64> = (0..c).map(|_| rnd() - 0.5).collect();
+                    // The kinks: texel-centre fractions at every level, integer λ, the clamp.
+                    let lambda = level_of_detail(level, w, h);
+                    let kinked = (0..stack.levels.len()).any(|l| {
+                        let lw = stack.levels[l].width as f64;
+                        let lh = stack.levels[l].height as f64;
+                        let (u, v) = (uv[0] - uv[0].floor(), uv[1] - uv[1].floor());
+                        near_integer(uv[0] * lw - 0.5, 1e-3)
+                            || near_integer(uv[1] * lh - 0.5, 1e-3)
+                            || near_integer(u * lw, 1e-3)
+                            || near_integer(v * lh, 1e-3)
+                            || near_integer(uv[0] * lw, 1e-3)
+                            || near_integer(uv[1] * lh, 1e-3)
+                    }) || near_integer(lambda, 1e-3)
+                        || near_integer(lambda - stack.max_level() as f64, 1e-3);
+                    if kinked {
+                        skipped += 1;
+                        continue;
+                    }
+                    let loss = |stack: &MipStack, uv: [f64; 2], level: LevelInput| -> f64 {
+                        sample(stack, 0, uv, level, Mode { filter, boundary })
+                            .iter()
+                            .zip(&dy)
+                            .map(|(a, b)| a * b)
+                            .sum()
+                    };
+                    let mut tex_grad = stack.zero_grads();
+                    let g = sample_backward(
+                        &stack,
+                        0,
+                        uv,
+                        level,
+                        Mode { filter, boundary },
+                        &dy,
+                        &mut tex_grad,
+                    );
+                    let what = format!("{filter:?} {boundary:?} uv {uv:?}");
+                    for k in 0..2 {
+                        let (mut a, mut b) = (uv, uv);
+                        a[k] += eps;
+                        b[k] -= eps;
+                        let n = (loss(&stack, a, level) - loss(&stack, b, level)) / (2.0 * eps);
+                        assert!(
+                            bound(g.uv[k], n),
+                            "{what}: d/duv[{k}] {} numeric {n}",
+                            g.uv[k]
+                        );
+                    }
+                    for k in 0..4 {
+                        let (mut a, mut b) = (level, level);
+                        a.uv_da.as_mut().unwrap()[k] += eps;
+                        b.uv_da.as_mut().unwrap()[k] -= eps;
+                        let n = (loss(&stack, uv, a) - loss(&stack, uv, b)) / (2.0 * eps);
+                        assert!(
+                            bound(g.uv_da[k], n),
+                            "{what}: d/duv_da[{k}] {} numeric {n}",
+                            g.uv_da[k]
+                        );
+                    }
+                    let (mut a, mut b) = (level, level);
+                    a.bias = a.bias.map(|x| x + eps);
+                    b.bias = b.bias.map(|x| x - eps);
+                    let n = (loss(&stack, uv, a) - loss(&stack, uv, b)) / (2.0 * eps);
+                    assert!(bound(g.bias, n), "{what}: d/dbias {} numeric {n}", g.bias);
+                    // The base texture's texels, through the pyramid (the stack rebuilt each time).
+                    let to_base = stack.pyramid_backward(tex_grad);
+                    for i in 0..base.len() {
+                        let (mut a, mut b) = (base.clone(), base.clone());
+                        a[i] += eps;
+                        b[i] -= eps;
+                        let n = (loss(&stack_of(a, filter), uv, level)
+                            - loss(&stack_of(b, filter), uv, level))
+                            / (2.0 * eps);
+                        assert!(
+                            bound(to_base[i], n),
+                            "{what}: d/dtex[{i}] {} numeric {n}",
+                            to_base[i]
+                        );
+                    }
+                    checked += 1;
+                }
+            }
+        }
+        assert!(
+            checked >= 100 && skipped * 4 < checked,
+            "{checked} checked, {skipped} skipped"
+        );
+    }
+
+    /// The level's gradient is zero where the footprint is isotropic (0/0), as nvdiffrast's.
+    #[test]
+    fn an_isotropic_footprint_gives_the_level_no_gradient() {
+        assert_eq!(level_gradient([0.25, 0.0, 0.0, 0.25], 8, 8), [0.0; 4]);
+        assert_eq!(level_gradient([0.0; 4], 8, 8), [0.0; 4]);
+        assert!(
+            level_gradient([0.25, 0.0, 0.0, 0.5], 8, 8)
+                .iter()
+                .any(|g| *g != 0.0)
+        );
+    }
+
     #[test]
     fn a_shared_texture_serves_every_minibatch_item() {
         let t = quad();
@@ -534,16 +1002,20 @@ mod tests {
             0,
             [0.4, 0.6],
             LevelInput::default(),
-            Filter::Linear,
-            Boundary::Wrap,
+            Mode {
+                filter: Filter::Linear,
+                boundary: Boundary::Wrap,
+            },
         );
         let b = sample(
             &t,
             3,
             [0.4, 0.6],
             LevelInput::default(),
-            Filter::Linear,
-            Boundary::Wrap,
+            Mode {
+                filter: Filter::Linear,
+                boundary: Boundary::Wrap,
+            },
         );
         assert_eq!(a, b);
     }
