@@ -267,6 +267,45 @@ pub fn level_of_detail(input: LevelInput, width: usize, height: usize) -> f64 {
     level + input.bias.unwrap_or(0.0)
 }
 
+/// The base level's texel `nearest` reads, by the boundary mode (`None`: zero).
+fn nearest_texel(stack: &MipStack, uv: [f64; 2], boundary: Boundary) -> Option<(usize, usize)> {
+    let base = &stack.levels[0];
+    let (mut u, mut v) = (uv[0], uv[1]);
+    if boundary == Boundary::Wrap {
+        u -= u.floor();
+        v -= v.floor();
+    }
+    let (w, h) = (base.width as f64, base.height as f64);
+    let (x, y) = ((u * w).floor(), (v * h).floor());
+    let outside = x < 0.0 || x >= w || y < 0.0 || y >= h;
+    if !(x.is_finite() && y.is_finite()) || (boundary == Boundary::Zero && outside) {
+        return None;
+    }
+    Some((
+        x.clamp(0.0, w - 1.0) as usize,
+        y.clamp(0.0, h - 1.0) as usize,
+    ))
+}
+
+/// The mipmap modes' levels: `(λ unclamped, ⌊λ⌋, ⌊λ⌋ + 1 within the stack, λ's fraction)`,
+/// the fraction 0 for `linear-mipmap-nearest` and where λ is clamped to 0.
+fn mip_levels(stack: &MipStack, level: LevelInput, filter: Filter) -> (f64, usize, usize, f64) {
+    let base = &stack.levels[0];
+    let max = stack.max_level() as f64;
+    let raw = level_of_detail(level, base.width, base.height);
+    // NaN clamps to 0 (a zero footprint gives −∞, which the clamp takes to 0 too).
+    let lambda = if raw.is_nan() {
+        0.0
+    } else {
+        raw.clamp(0.0, max)
+    };
+    let l0 = lambda.floor();
+    if filter == Filter::LinearMipmapNearest || lambda <= 0.0 {
+        return (raw, l0 as usize, l0 as usize, 0.0);
+    }
+    (raw, l0 as usize, (l0 + 1.0).min(max) as usize, lambda - l0)
+}
+
 /// One pixel's sample of minibatch item `item`: `C` values.
 pub fn sample(
     stack: &MipStack,
@@ -276,52 +315,95 @@ pub fn sample(
     mode: Mode,
 ) -> Vec<f64> {
     let Mode { filter, boundary } = mode;
-    let c = stack.channels;
-    let base = &stack.levels[0];
     match filter {
-        Filter::Nearest => {
-            let (mut u, mut v) = (uv[0], uv[1]);
-            if boundary == Boundary::Wrap {
-                u -= u.floor();
-                v -= v.floor();
-            }
-            let (w, h) = (base.width as f64, base.height as f64);
-            let (x, y) = ((u * w).floor(), (v * h).floor());
-            if !(x.is_finite() && y.is_finite()) {
-                return vec![0.0; c];
-            }
-            if boundary == Boundary::Zero && (x < 0.0 || x >= w || y < 0.0 || y >= h) {
-                return vec![0.0; c];
-            }
-            let x = x.clamp(0.0, w - 1.0) as usize;
-            let y = y.clamp(0.0, h - 1.0) as usize;
-            stack.texel(0, item, x, y).to_vec()
-        }
+        Filter::Nearest => nearest_texel(stack, uv, boundary).map_or_else(
+            || vec![0.0; stack.channels],
+            |(x, y)| stack.texel(0, item, x, y).to_vec(),
+        ),
         Filter::Linear => bilinear(stack, item, 0, uv, boundary),
         Filter::LinearMipmapNearest | Filter::LinearMipmapLinear => {
-            let max = stack.max_level() as f64;
-            let lambda = level_of_detail(level, base.width, base.height);
-            // NaN (a zero footprint without a bias gives −∞, which clamps to 0) clamps to 0.
-            let lambda = if lambda.is_nan() {
-                0.0
-            } else {
-                lambda.clamp(0.0, max)
-            };
-            let l0 = lambda.floor();
-            let a = bilinear(stack, item, l0 as usize, uv, boundary);
-            if filter == Filter::LinearMipmapNearest || lambda <= 0.0 {
+            let (_, l0, l1, f) = mip_levels(stack, level, filter);
+            let a = bilinear(stack, item, l0, uv, boundary);
+            if f == 0.0 && l0 == l1 {
                 return a;
             }
-            let l1 = (l0 + 1.0).min(max);
-            let f = lambda - l0;
-            let b = bilinear(stack, item, l1 as usize, uv, boundary);
+            let b = bilinear(stack, item, l1, uv, boundary);
             a.iter().zip(&b).map(|(a, b)| a + f * (b - a)).collect()
         }
     }
 }
 
-/// Bilinear filtering on `level`: the four taps around `(u w − ½, v h − ½)`, weights by the
-/// fraction, each tap by the boundary mode.
+/// The four taps of bilinear filtering on one level, around `(u w − ½, v h − ½)`.
+struct Taps {
+    /// Texels `(x, y)` of the taps `00, 10, 01, 11` (`None`: outside, read as zero).
+    texels: [Option<(usize, usize)>; 4],
+    /// The weights' fractions along `s` and `t`.
+    frac: [f64; 2],
+    /// `ds/du` and `dt/dv`: zero where the clamp holds the coordinate.
+    scale: [f64; 2],
+}
+
+impl Taps {
+    /// The taps by the boundary mode: `wrap` wraps `uv` and the taps, `clamp` holds the
+    /// coordinate within the edge texels' centres (on one, both taps of that axis are it, so
+    /// that no gradient crosses the edge), `zero` leaves taps outside. `None` where `uv` is not
+    /// finite (the sample is zero).
+    fn new(level: &Level, uv: [f64; 2], boundary: Boundary) -> Option<Self> {
+        let (w, h) = (level.width as f64, level.height as f64);
+        let (mut u, mut v) = (uv[0], uv[1]);
+        if boundary == Boundary::Wrap {
+            u -= u.floor();
+            v -= v.floor();
+        }
+        let (mut s, mut t) = (u * w - 0.5, v * h - 0.5);
+        let mut scale = [w, h];
+        let (mut hold_s, mut hold_t) = (false, false);
+        if boundary == Boundary::Clamp {
+            if !(0.0..=w - 1.0).contains(&s) {
+                scale[0] = 0.0;
+            }
+            if !(0.0..=h - 1.0).contains(&t) {
+                scale[1] = 0.0;
+            }
+            s = s.clamp(0.0, w - 1.0);
+            t = t.clamp(0.0, h - 1.0);
+            hold_s = s == 0.0 || s == w - 1.0;
+            hold_t = t == 0.0 || t == h - 1.0;
+        }
+        if !(s.is_finite() && t.is_finite()) {
+            return None;
+        }
+        let (s0, t0) = (s.floor(), t.floor());
+        let xs = [s0 as i64, s0 as i64 + i64::from(!hold_s)];
+        let ys = [t0 as i64, t0 as i64 + i64::from(!hold_t)];
+        let (wi, hi) = (level.width as i64, level.height as i64);
+        let tap = |x: i64, y: i64| -> Option<(usize, usize)> {
+            let (x, y) = match boundary {
+                Boundary::Wrap => (x.rem_euclid(wi), y.rem_euclid(hi)),
+                _ => (x, y),
+            };
+            ((0..wi).contains(&x) && (0..hi).contains(&y)).then_some((x as usize, y as usize))
+        };
+        Some(Self {
+            texels: [
+                tap(xs[0], ys[0]),
+                tap(xs[1], ys[0]),
+                tap(xs[0], ys[1]),
+                tap(xs[1], ys[1]),
+            ],
+            frac: [s - s0, t - t0],
+            scale,
+        })
+    }
+
+    /// Channel `k` of the four taps.
+    fn values(&self, stack: &MipStack, level: usize, item: usize, k: usize) -> [f64; 4] {
+        self.texels
+            .map(|t| t.map_or(0.0, |(x, y)| stack.texel(level, item, x, y)[k]))
+    }
+}
+
+/// Bilinear filtering on `level`.
 fn bilinear(
     stack: &MipStack,
     item: usize,
@@ -329,46 +411,15 @@ fn bilinear(
     uv: [f64; 2],
     boundary: Boundary,
 ) -> Vec<f64> {
-    let c = stack.channels;
-    let l = &stack.levels[level];
-    let (w, h) = (l.width as f64, l.height as f64);
-    let (mut u, mut v) = (uv[0], uv[1]);
-    if boundary == Boundary::Wrap {
-        u -= u.floor();
-        v -= v.floor();
-    }
-    let (mut s, mut t) = (u * w - 0.5, v * h - 0.5);
-    let (mut hold_s, mut hold_t) = (false, false);
-    if boundary == Boundary::Clamp {
-        s = s.clamp(0.0, w - 1.0);
-        t = t.clamp(0.0, h - 1.0);
-        // On an edge texel's centre both taps are that texel (no gradient across the edge).
-        hold_s = s == 0.0 || s == w - 1.0;
-        hold_t = t == 0.0 || t == h - 1.0;
-    }
-    if !(s.is_finite() && t.is_finite()) {
-        return vec![0.0; c];
-    }
-    let (s0, t0) = (s.floor(), t.floor());
-    let (fs, ft) = (s - s0, t - t0);
-    let xs = [s0 as i64, s0 as i64 + i64::from(!hold_s)];
-    let ys = [t0 as i64, t0 as i64 + i64::from(!hold_t)];
-    let (wi, hi) = (l.width as i64, l.height as i64);
-    let tap = |x: i64, y: i64| -> Option<(usize, usize)> {
-        let (x, y) = match boundary {
-            Boundary::Wrap => (x.rem_euclid(wi), y.rem_euclid(hi)),
-            _ => (x, y),
-        };
-        ((0..wi).contains(&x) && (0..hi).contains(&y)).then_some((x as usize, y as usize))
+    let Some(taps) = Taps::new(&stack.levels[level], uv, boundary) else {
+        return vec![0.0; stack.channels];
     };
-    let read = |x: i64, y: i64, k: usize| {
-        tap(x, y).map_or(0.0, |(x, y)| stack.texel(level, item, x, y)[k])
-    };
-    (0..c)
+    let [fs, ft] = taps.frac;
+    (0..stack.channels)
         .map(|k| {
-            let top = read(xs[0], ys[0], k) + fs * (read(xs[1], ys[0], k) - read(xs[0], ys[0], k));
-            let bottom =
-                read(xs[0], ys[1], k) + fs * (read(xs[1], ys[1], k) - read(xs[0], ys[1], k));
+            let [a00, a10, a01, a11] = taps.values(stack, level, item, k);
+            let top = a00 + fs * (a10 - a00);
+            let bottom = a01 + fs * (a11 - a01);
             top + ft * (bottom - top)
         })
         .collect()
@@ -401,62 +452,29 @@ pub fn sample_backward(
     tex_grad: &mut [Vec<f64>],
 ) -> PixelGrad {
     let Mode { filter, boundary } = mode;
-    let base = &stack.levels[0];
     let mut grad = PixelGrad::default();
     match filter {
         Filter::Nearest => {
-            let (mut u, mut v) = (uv[0], uv[1]);
-            if boundary == Boundary::Wrap {
-                u -= u.floor();
-                v -= v.floor();
+            if let Some((x, y)) = nearest_texel(stack, uv, boundary) {
+                add_texel(stack, tex_grad, 0, item, x, y, dy, 1.0);
             }
-            let (w, h) = (base.width as f64, base.height as f64);
-            let (x, y) = ((u * w).floor(), (v * h).floor());
-            let outside = x < 0.0 || x >= w || y < 0.0 || y >= h;
-            if !(x.is_finite() && y.is_finite()) || (boundary == Boundary::Zero && outside) {
-                return grad;
-            }
-            let (x, y) = (
-                x.clamp(0.0, w - 1.0) as usize,
-                y.clamp(0.0, h - 1.0) as usize,
-            );
-            add_texel(stack, tex_grad, 0, item, x, y, dy, 1.0);
         }
         Filter::Linear => {
-            grad.uv = bilinear_backward(stack, item, 0, uv, boundary, dy, 1.0, tex_grad)
+            grad.uv = bilinear_backward(stack, item, 0, uv, boundary, dy, 1.0, tex_grad);
         }
         Filter::LinearMipmapNearest | Filter::LinearMipmapLinear => {
-            let max = stack.max_level() as f64;
-            let raw = level_of_detail(level, base.width, base.height);
-            let lambda = if raw.is_nan() {
-                0.0
-            } else {
-                raw.clamp(0.0, max)
-            };
-            let l0 = lambda.floor();
-            if filter == Filter::LinearMipmapNearest || lambda <= 0.0 {
-                grad.uv =
-                    bilinear_backward(stack, item, l0 as usize, uv, boundary, dy, 1.0, tex_grad);
+            let (raw, l0, l1, f) = mip_levels(stack, level, filter);
+            if f == 0.0 && l0 == l1 {
+                grad.uv = bilinear_backward(stack, item, l0, uv, boundary, dy, 1.0, tex_grad);
                 return grad;
             }
-            let l1 = (l0 + 1.0).min(max);
-            let f = lambda - l0;
-            let g0 = bilinear_backward(
-                stack,
-                item,
-                l0 as usize,
-                uv,
-                boundary,
-                dy,
-                1.0 - f,
-                tex_grad,
-            );
-            let g1 = bilinear_backward(stack, item, l1 as usize, uv, boundary, dy, f, tex_grad);
+            let g0 = bilinear_backward(stack, item, l0, uv, boundary, dy, 1.0 - f, tex_grad);
+            let g1 = bilinear_backward(stack, item, l1, uv, boundary, dy, f, tex_grad);
             grad.uv = [g0[0] + g1[0], g0[1] + g1[1]];
             // Through the fraction: d/dλ = Σ dy (b − a), where λ is not clamped.
-            if raw > 0.0 && raw < max {
-                let a = bilinear(stack, item, l0 as usize, uv, boundary);
-                let b = bilinear(stack, item, l1 as usize, uv, boundary);
+            if raw > 0.0 && raw < stack.max_level() as f64 {
+                let a = bilinear(stack, item, l0, uv, boundary);
+                let b = bilinear(stack, item, l1, uv, boundary);
                 let dl: f64 = dy
                     .iter()
                     .zip(a.iter().zip(&b))
@@ -466,8 +484,8 @@ pub fn sample_backward(
                     grad.bias = dl;
                 }
                 if let Some(da) = level.uv_da {
-                    let d = level_gradient(da, base.width, base.height);
-                    grad.uv_da = d.map(|d| dl * d);
+                    let base = &stack.levels[0];
+                    grad.uv_da = level_gradient(da, base.width, base.height).map(|d| dl * d);
                 }
             }
         }
@@ -539,70 +557,28 @@ fn bilinear_backward(
     scale: f64,
     tex_grad: &mut [Vec<f64>],
 ) -> [f64; 2] {
-    let l = &stack.levels[level];
-    let (w, h) = (l.width as f64, l.height as f64);
-    let (mut u, mut v) = (uv[0], uv[1]);
-    if boundary == Boundary::Wrap {
-        u -= u.floor();
-        v -= v.floor();
-    }
-    let (mut s, mut t) = (u * w - 0.5, v * h - 0.5);
-    // ds/du and dt/dv: zero where the clamp holds the coordinate.
-    let (mut ds, mut dt) = (w, h);
-    let (mut hold_s, mut hold_t) = (false, false);
-    if boundary == Boundary::Clamp {
-        if !(0.0..=w - 1.0).contains(&s) {
-            ds = 0.0;
-        }
-        if !(0.0..=h - 1.0).contains(&t) {
-            dt = 0.0;
-        }
-        s = s.clamp(0.0, w - 1.0);
-        t = t.clamp(0.0, h - 1.0);
-        hold_s = s == 0.0 || s == w - 1.0;
-        hold_t = t == 0.0 || t == h - 1.0;
-    }
-    if !(s.is_finite() && t.is_finite()) {
+    let Some(taps) = Taps::new(&stack.levels[level], uv, boundary) else {
         return [0.0; 2];
-    }
-    let (s0, t0) = (s.floor(), t.floor());
-    let (fs, ft) = (s - s0, t - t0);
-    let xs = [s0 as i64, s0 as i64 + i64::from(!hold_s)];
-    let ys = [t0 as i64, t0 as i64 + i64::from(!hold_t)];
-    let (wi, hi) = (l.width as i64, l.height as i64);
-    let tap = |x: i64, y: i64| -> Option<(usize, usize)> {
-        let (x, y) = match boundary {
-            Boundary::Wrap => (x.rem_euclid(wi), y.rem_euclid(hi)),
-            _ => (x, y),
-        };
-        ((0..wi).contains(&x) && (0..hi).contains(&y)).then_some((x as usize, y as usize))
     };
+    let [fs, ft] = taps.frac;
+    let (mut dfs, mut dft) = (0.0, 0.0);
+    for (k, d) in dy.iter().enumerate() {
+        let [a00, a10, a01, a11] = taps.values(stack, level, item, k);
+        dfs += d * ((a10 - a00) * (1.0 - ft) + (a11 - a01) * ft);
+        dft += d * ((a01 + fs * (a11 - a01)) - (a00 + fs * (a10 - a00)));
+    }
     let weights = [
         (1.0 - fs) * (1.0 - ft),
         fs * (1.0 - ft),
         (1.0 - fs) * ft,
         fs * ft,
     ];
-    let corners = [
-        (xs[0], ys[0]),
-        (xs[1], ys[0]),
-        (xs[0], ys[1]),
-        (xs[1], ys[1]),
-    ];
-    let mut dfs = 0.0;
-    let mut dft = 0.0;
-    for (k, d) in dy.iter().enumerate() {
-        let [a00, a10, a01, a11] =
-            corners.map(|(x, y)| tap(x, y).map_or(0.0, |(x, y)| stack.texel(level, item, x, y)[k]));
-        dfs += d * ((a10 - a00) * (1.0 - ft) + (a11 - a01) * ft);
-        dft += d * ((a01 + fs * (a11 - a01)) - (a00 + fs * (a10 - a00)));
-    }
-    for (i, &(x, y)) in corners.iter().enumerate() {
-        if let Some((x, y)) = tap(x, y) {
-            add_texel(stack, tex_grad, level, item, x, y, dy, scale * weights[i]);
+    for (tap, weight) in taps.texels.iter().zip(weights) {
+        if let Some((x, y)) = *tap {
+            add_texel(stack, tex_grad, level, item, x, y, dy, scale * weight);
         }
     }
-    [scale * dfs * ds, scale * dft * dt]
+    [scale * dfs * taps.scale[0], scale * dft * taps.scale[1]]
 }
 
 impl MipStack {
