@@ -14,7 +14,7 @@ layout(push_constant) uniform Push {
     uint vertex_count;    // V (per item when instanced)
     uint items_per_view;  // rasterizer items per minibatch item (T, or the longest range)
     uint instanced;       // 1: pos [B, V, 4]; 0: pos [V, 4] with ranges
-    uint peel;            // depth: 1 when the previous layer's keys bound the search
+    uint peel;            // 1: the previous layer's keys bound the search (hard_depth's PEEL)
     uint tiles_x;         // 8-pixel tiles
     uint tiles_y;
     uint pass_begin;      // depth: this pass's part [pass_begin, pass_end) of each tile's run
