@@ -19,18 +19,18 @@
 // item is loaded and staged once per tile (per cluster) and every test is plain vector
 // arithmetic with no branch (on llvmpipe an `if` runs both sides under a mask, a load in a loop
 // is a scalar loop over the lanes, a shuffle one permute). Homogeneous items (rare: those the
-// snapping cannot hold) go through a loop of their own over the ballot of the batch's ones:
-// `homogeneous_covers`, z/w = Σ z_k a_k / Σ w_k a_k. The key kept is the first in the pixel's
+// snapping cannot hold) go through a loop of their own over the ballot of the batch's ones,
+// compiled in only when the set-up counted any (`HOMOGENEOUS`): `homogeneous_covers`, z/w = Σ z_k a_k / Σ w_k a_k. The key kept is the first in the pixel's
 // depth order (nearest z/w, then the highest triangle: `DepthKey::before`), whatever the order
 // items come in, so neither the lanes nor the workgroup shape change a bit. Not finite z/w: not
-// drawn. With `peel`, only surfaces after the previous layer's key count (`prev_keys`), and a
+// drawn. With `PEEL`, only surfaces after the previous layer's key count (`prev_keys`), and a
 // pixel with none there stays empty. A crowded tile's run is visited in passes over consecutive
 // parts [pass_begin, pass_end) (the driver's loop cap), each resuming from the keys the last
 // left. Twin: `reference::rasterize`.
 #include "common.glsl"
 
 // Invocations per workgroup, 8 per tile: 8 on a CPU device (one tile, one llvmpipe subgroup),
-// 64 elsewhere (`raster::hard::gpu::depth_workgroup`).
+// 64 elsewhere (`depth_tiles_per_group` in src/raster/hard/gpu.rs).
 layout(local_size_x = 64, local_size_x_id = 1) in;
 
 layout(std430, set = 0, binding = 0) readonly buffer Pos { float pos[]; };
