@@ -330,7 +330,8 @@ pub struct HardRasterizer {
     setup: Arc<Kernel>,
     /// Tiles per workgroup of `depth` ([`depth_tiles_per_group`]).
     depth_tiles: u32,
-    /// The set-up's count of homogeneous items (one `u32`).
+    /// The set-up's count of homogeneous items (one `u32`, host-mapped: [`HardRasterizer::bin`]
+    /// reads it with no submission of its own).
     counts: Buffer,
     /// Whether any item of the last set-up is homogeneous, once [`HardRasterizer::bin`] read it.
     homogeneous: Option<bool>,
@@ -414,7 +415,7 @@ impl HardRasterizer {
         Ok(Self {
             setup: ctx.kernel(&specs::HARD_SETUP, &[])?,
             depth_tiles: depth_tiles_per_group(ctx),
-            counts: ctx.create_buffer("hard rasterizer counts", 4, MemoryKind::Device)?,
+            counts: ctx.create_buffer("hard rasterizer counts", 4, MemoryKind::Readback)?,
             homogeneous: None,
             shade: ctx.kernel(&specs::HARD_SHADE, &[])?,
             grad_boxes: ctx.kernel(&specs::HARD_GRAD_BOXES, &[])?,
@@ -539,9 +540,11 @@ impl HardRasterizer {
         // The depth pass fetches the entries as whole 16-byte texels.
         self.bins
             .reserve_entries(ctx, total.max(1).next_multiple_of(4))?;
-        let [homogeneous] = ctx.read_buffer::<u32>(&self.counts, 0, 1)?[..] else {
-            unreachable!("one word read")
-        };
+        let bytes = self
+            .counts
+            .mapped()
+            .ok_or_else(|| Error::Misuse("readback memory is not host-mapped".into()))?;
+        let homogeneous = u32::from_ne_bytes(bytes[..4].try_into().expect("four bytes"));
         self.entries = Some(total);
         self.homogeneous = Some(homogeneous > 0);
         Ok(total)

@@ -1196,26 +1196,12 @@ mod tests {
     #[test]
     fn a_shared_texture_serves_every_minibatch_item() {
         let t = quad();
-        let a = sample(
-            &t,
-            0,
-            [0.4, 0.6],
-            LevelInput::default(),
-            Mode {
-                filter: Filter::Linear,
-                boundary: Boundary::Wrap,
-            },
-        );
-        let b = sample(
-            &t,
-            3,
-            [0.4, 0.6],
-            LevelInput::default(),
-            Mode {
-                filter: Filter::Linear,
-                boundary: Boundary::Wrap,
-            },
-        );
+        let mode = Mode {
+            filter: Filter::Linear,
+            boundary: Boundary::Wrap,
+        };
+        let at = |item| sample(&t, item, [0.4, 0.6], LevelInput::default(), mode);
+        let (a, b) = (at(0), at(3));
         assert_eq!(a, b);
     }
 }
