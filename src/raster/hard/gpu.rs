@@ -18,6 +18,7 @@
 //! [`HardRasterizer::rasterize`] does all of it from host slices.
 
 mod antialias;
+pub mod texture;
 
 use std::sync::Arc;
 
