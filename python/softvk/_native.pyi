@@ -212,6 +212,43 @@ def nv_antialias_grad(
     """The backward of :func:`nv_antialias`: dL/d(color) and dL/d(pos) (times
     ``pos_gradient_boost``)."""
 
+class NvTextureMip:
+    """A texture's mip levels (:func:`nv_texture_construct_mip`), for :func:`nv_texture`."""
+
+    texture_shape: List[int]
+    max_mip_level: int
+
+def nv_texture_construct_mip(tex: F32, max_mip_level: Optional[int] = None) -> NvTextureMip:
+    """nvdiffrast's ``texture_construct_mip`` of a ``[B, H, W, C]`` texture."""
+
+def nv_texture(
+    tex: F32,
+    uv: F32,
+    filter: str,
+    boundary: str,
+    uv_da: Optional[F32] = None,
+    mip_level_bias: Optional[F32] = None,
+    mip: Optional[NvTextureMip] = None,
+    mip_levels: Optional[List[F32]] = None,
+    max_mip_level: Optional[int] = None,
+) -> F32:
+    """nvdiffrast's ``texture``: ``[B, h, w, C]``."""
+
+def nv_texture_grad(
+    tex: F32,
+    uv: F32,
+    dy: F32,
+    filter: str,
+    boundary: str,
+    uv_da: Optional[F32] = None,
+    mip_level_bias: Optional[F32] = None,
+    mip: Optional[NvTextureMip] = None,
+    mip_levels: Optional[List[F32]] = None,
+    max_mip_level: Optional[int] = None,
+) -> Tuple[F32, F32, Optional[F32], Optional[F32], List[F32]]:
+    """The backward of :func:`nv_texture`: dL/d(tex), dL/d(uv), dL/d(uv_da),
+    dL/d(mip_level_bias) (None where not an input) and one per custom mip level."""
+
 def render_mesh(
     vertices: F32,
     faces: I64,

@@ -49,6 +49,7 @@ use softvk::raster::backward::GradBuffers;
 use softvk::raster::fragments::gpu::FragmentRasterizer;
 use softvk::raster::gpu::{GpuScene, Method, Renderer};
 use softvk::raster::hard::gpu::HardRasterizer;
+use softvk::raster::hard::gpu::texture::TextureSampler;
 use softvk::raster::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
 use softvk::raster::{reference, reference_grad};
 
@@ -57,6 +58,7 @@ type PyLighting = (f64, [f64; 3], Vec<(f64, [f64; 3], [f64; 3])>);
 
 mod fragments;
 mod nvdiffrast;
+mod nvtexture;
 
 /// The process's engine, made on first use.
 struct Engine {
@@ -66,6 +68,8 @@ struct Engine {
     fragments: Mutex<Option<FragmentRasterizer>>,
     /// nvdiffrast's primitives, made on their first use.
     hard: Mutex<Option<HardRasterizer>>,
+    /// nvdiffrast's texture sampling, made on its first use.
+    texture: Mutex<Option<TextureSampler>>,
 }
 
 /// The engine's fragment rasterizer, made on first use.
@@ -119,6 +123,7 @@ fn engine() -> PyResult<MutexGuard<'static, Option<Engine>>> {
             renderer,
             fragments: Mutex::new(None),
             hard: Mutex::new(None),
+            texture: Mutex::new(None),
         });
         OWNER.store(std::process::id(), Ordering::Release);
     }
@@ -1105,6 +1110,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(is_forked_child, m)?)?;
     fragments::register(m)?;
     nvdiffrast::register(m)?;
+    nvtexture::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

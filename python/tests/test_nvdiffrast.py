@@ -530,13 +530,13 @@ def test_contexts_check_their_arguments(gpu):
     assert dr.RasterizeCudaContext(device="cuda:1").device == "cuda:1"
 
 
-def test_texture_raises_not_implemented():
-    tex = torch.ones(1, 4, 4, 3)
-    uv = torch.zeros(1, 2, 2, 2)
-    with pytest.raises(NotImplementedError, match="texture"):
-        dr.texture(tex, uv, filter_mode="linear", boundary_mode="clamp")
-    with pytest.raises(NotImplementedError, match="texture"):
-        dr.texture_construct_mip(tex, max_mip_level=2, cube_mode=False)
+def test_cube_maps_raise_not_implemented():
+    cube = torch.ones(1, 6, 4, 4, 3)
+    uv = torch.zeros(1, 2, 2, 3)
+    with pytest.raises(NotImplementedError, match="cube"):
+        dr.texture(cube, uv, filter_mode="linear", boundary_mode="cube")
+    with pytest.raises(NotImplementedError, match="cube"):
+        dr.texture_construct_mip(cube, max_mip_level=2, cube_mode=True)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -39,8 +39,9 @@ What softvk does differently, and only this:
   propagates no ``rast_db`` gradient, as nvdiffrast's OpenGL rasterizer did; it warns of no
   deprecation, and ``set_context()`` / ``release_context()`` do nothing (there is no OpenGL
   context to make current).
-- ``texture`` and ``texture_construct_mip`` are not there yet: they raise
-  ``NotImplementedError``.
+- ``texture`` and ``texture_construct_mip`` take 2D textures; cube maps
+  (``boundary_mode='cube'``) are not there yet and raise ``NotImplementedError``. NaN or
+  infinite textures, coordinates, derivatives and biases are refused (nvdiffrast reads them).
 - The log level is kept (``get_log_level`` returns what ``set_log_level`` set, 1 at first);
   softvk has no messages of its own to print at any level.
 """
@@ -597,21 +598,199 @@ def interpolate(attr, rast, tri, rast_db=None, diff_attrs=None):
 # Texture.
 
 
+_FILTER_MODES = ("nearest", "linear", "linear-mipmap-nearest", "linear-mipmap-linear")
+_BOUNDARY_MODES = ("wrap", "clamp", "zero", "cube")
+# The largest texture side (nvdiffrast's TEX_MAX_MIP_LEVEL: 2^16).
+_MAX_TEXTURE = 1 << 16
+
+
+def _max_mip_level(what, max_mip_level):
+    """``None`` or an int >= 0."""
+    if max_mip_level is None:
+        return None
+    if isinstance(max_mip_level, (bool, np.bool_)):
+        raise _type_error(what, f"max_mip_level must be an int, got {max_mip_level!r}")
+    try:
+        level = operator.index(max_mip_level)
+    except TypeError:
+        raise _type_error(what, f"max_mip_level must be an int, got {max_mip_level!r}") from None
+    if level < 0:
+        raise _value_error(what, f"max_mip_level must be >= 0, got {level}")
+    return int(level)
+
+
+def _texture_shape(what, tex, cube):
+    """``tex`` float32 ``[>0, >0, >0, >0]`` (2D) of a size nvdiffrast takes."""
+    _tensor(what, "tex", tex, torch.float32)
+    if cube:
+        raise NotImplementedError(
+            "softvk.nvdiffrast: cube maps (boundary_mode='cube', cube_mode=True) are not in "
+            "softvk yet; 2D textures are"
+        )
+    if tex.dim() != 4 or not _positive(tex.shape):
+        raise _shape_error(what, "tex", tex, "[>0, >0, >0, >0]")
+    if tex.shape[1] > _MAX_TEXTURE or tex.shape[2] > _MAX_TEXTURE:
+        raise _value_error(
+            what, f"texture size too large: {list(tex.shape[1:3])} (at most {_MAX_TEXTURE})"
+        )
+
+
+class _TextureFunction(torch.autograd.Function):
+    """``texture``: gradients to ``tex`` (through the mip stack built from it), ``uv`` (but for
+    'nearest'), ``uv_da`` and ``mip_level_bias`` ('linear-mipmap-linear'), and each level of a
+    custom mip stack."""
+
+    @staticmethod
+    def forward(ctx, filter_mode, boundary_mode, mip, max_mip_level, tex, uv, uv_da, bias,
+                *levels):
+        ctx.args = (filter_mode, boundary_mode, mip, max_mip_level)
+        ctx.has_levels = bool(levels)
+        ctx.save_for_backward(tex, uv, uv_da, bias, *levels)
+        out = _native.nv_texture(*_texture_native_args(ctx.args, tex, uv, uv_da, bias, levels))
+        return torch.from_numpy(out).to(uv.device)
+
+    @staticmethod
+    def backward(ctx, dy):
+        tex, uv, uv_da, bias, *levels = ctx.saved_tensors
+        filter_mode = ctx.args[0]
+        args = list(_texture_native_args(ctx.args, tex, uv, uv_da, bias, levels))
+        args.insert(2, _host(dy, np.float32))
+        g_tex, g_uv, g_uv_da, g_bias, g_levels = _native.nv_texture_grad(*args)
+        need = ctx.needs_input_grad
+
+        def back(grad, like, k):
+            return torch.from_numpy(grad).to(like.device) if grad is not None and need[k] else None
+
+        lml = filter_mode == "linear-mipmap-linear"
+        return (
+            None,
+            None,
+            None,
+            None,
+            back(g_tex, tex, 4),
+            back(g_uv, uv, 5) if filter_mode != "nearest" else None,
+            back(g_uv_da, uv_da, 6) if lml and uv_da is not None else None,
+            back(g_bias, bias, 7) if lml and bias is not None else None,
+            *(back(g, t, 8 + k) for k, (g, t) in enumerate(zip(g_levels, levels))),
+        )
+
+
+def _texture_native_args(args, tex, uv, uv_da, bias, levels):
+    filter_mode, boundary_mode, mip, max_mip_level = args
+    return (
+        _host(tex, np.float32),
+        _host(uv, np.float32),
+        filter_mode,
+        boundary_mode,
+        None if uv_da is None else _host(uv_da, np.float32),
+        None if bias is None else _host(bias, np.float32),
+        mip,
+        [_host(t, np.float32) for t in levels] if levels else None,
+        max_mip_level,
+    )
+
+
 def texture(tex, uv, uv_da=None, mip_level_bias=None, mip=None, filter_mode="auto",
             boundary_mode="wrap", max_mip_level=None):
-    """nvdiffrast's texture sampling: not in softvk yet (raises ``NotImplementedError``)."""
-    raise NotImplementedError(
-        "softvk.nvdiffrast: texture() is not implemented yet; softvk has rasterize, "
-        "DepthPeeler, interpolate and antialias so far"
+    """Samples a texture at per-pixel coordinates, as nvdiffrast's ``texture``.
+
+    Args:
+        tex: float32 texture ``[minibatch, height, width, channels]`` (a minibatch of 1
+            broadcasts); any size and channel count (the mipmap modes need each extent to halve
+            evenly down to the levels used, as nvdiffrast's).
+        uv: float32 coordinates ``[minibatch, height, width, 2]``, ``u`` across the texture's
+            width and ``v`` down its rows, the texture spanning [0, 1].
+        uv_da: float32 ``[minibatch, height, width, 4]``: ``(du/dX, du/dY, dv/dX, dv/dY)``,
+            the pixel derivatives of ``uv`` that pick the mip level (``interpolate``'s
+            ``out_da``).
+        mip_level_bias: float32 ``[minibatch, height, width]``, added to the level (the
+            level itself without ``uv_da``).
+        mip: ``texture_construct_mip``'s result, or a list of float32 tensors, one per mip
+            level below ``tex`` (their gradients their own); built here when omitted.
+        filter_mode: 'auto' (the best ``uv_da`` and ``mip_level_bias`` allow), 'nearest',
+            'linear', 'linear-mipmap-nearest' or 'linear-mipmap-linear'.
+        boundary_mode: 'wrap', 'clamp' or 'zero' ('cube': not in softvk yet).
+        max_mip_level: the most mip levels to build and use (0: none).
+
+    Returns:
+        ``[minibatch, height, width, channels]`` float32.
+    """
+    what = "texture"
+    if not isinstance(filter_mode, str) or filter_mode not in ("auto",) + _FILTER_MODES:
+        raise _value_error(
+            what, f"filter_mode must be 'auto' or one of {_FILTER_MODES}, got {filter_mode!r}"
+        )
+    if not isinstance(boundary_mode, str) or boundary_mode not in _BOUNDARY_MODES:
+        raise _value_error(
+            what, f"boundary_mode must be one of {_BOUNDARY_MODES}, got {boundary_mode!r}"
+        )
+    max_mip_level = _max_mip_level(what, max_mip_level)
+    if filter_mode == "auto":
+        has_level = uv_da is not None or mip_level_bias is not None
+        filter_mode = "linear-mipmap-linear" if has_level else "linear"
+    mipmaps = "mipmap" in filter_mode
+    if mipmaps and uv_da is None and mip_level_bias is None:
+        raise _value_error(
+            what, "mipmapping filter mode requires uv_da and/or mip_level_bias input"
+        )
+    if mipmaps and max_mip_level == 0:
+        filter_mode, mipmaps = "linear", False
+    _texture_shape(what, tex, boundary_mode == "cube")
+    _tensor(what, "uv", uv, torch.float32)
+    if uv.dim() != 4 or not _positive(uv.shape) or uv.shape[3] != 2:
+        raise _shape_error(what, "uv", uv, "[>0, >0, >0, 2]")
+    batch, height, width = (int(s) for s in uv.shape[:3])
+    if tex.shape[0] not in (1, batch):
+        raise _value_error(
+            what,
+            f"minibatch size mismatch between inputs tex, uv: {tex.shape[0]} and {batch}",
+        )
+    levels = []
+    if not mipmaps:
+        uv_da, mip_level_bias, mip = None, None, None
+    else:
+        if uv_da is not None:
+            _tensor(what, "uv_da", uv_da, torch.float32)
+            if tuple(uv_da.shape) != (batch, height, width, 4):
+                raise _shape_error(what, "uv_da", uv_da, f"[{batch}, {height}, {width}, 4]")
+        if mip_level_bias is not None:
+            _tensor(what, "mip_level_bias", mip_level_bias, torch.float32)
+            if tuple(mip_level_bias.shape) != (batch, height, width):
+                raise _shape_error(
+                    what, "mip_level_bias", mip_level_bias, f"[{batch}, {height}, {width}]"
+                )
+        if isinstance(mip, (list, tuple)):
+            for k, level in enumerate(mip):
+                _tensor(what, f"mip[{k}]", level, torch.float32)
+            levels, mip = list(mip), None
+        elif mip is not None and not isinstance(mip, _native.NvTextureMip):
+            raise _type_error(
+                what,
+                "mip must be texture_construct_mip's result or a list of tensors, got "
+                f"{type(mip).__name__}",
+            )
+    _same_device(what, tex=tex, uv=uv, uv_da=uv_da, mip_level_bias=mip_level_bias)
+    return _TextureFunction.apply(
+        filter_mode, boundary_mode, mip, max_mip_level, tex, uv, uv_da, mip_level_bias, *levels
     )
 
 
 def texture_construct_mip(tex, max_mip_level=None, cube_mode=False):
-    """nvdiffrast's mipmap construction: not in softvk yet (raises ``NotImplementedError``)."""
-    raise NotImplementedError(
-        "softvk.nvdiffrast: texture_construct_mip() is not implemented yet (texture() is "
-        "not either)"
-    )
+    """Builds a texture's mip stack once, for a texture that stays the same between calls, as
+    nvdiffrast's ``texture_construct_mip``: an opaque object for ``texture(mip=...)``, whose
+    gradients still reach ``tex``.
+
+    Args:
+        tex: as ``texture``'s.
+        max_mip_level: the most mip levels to build (``None``: down to 1 x 1).
+        cube_mode: True for a cube map (not in softvk yet).
+    """
+    what = "texture_construct_mip"
+    if cube_mode is not True and cube_mode is not False:
+        raise _type_error(what, f"cube_mode must be True or False, got {cube_mode!r}")
+    max_mip_level = _max_mip_level(what, max_mip_level)
+    _texture_shape(what, tex, cube_mode)
+    return _native.nv_texture_construct_mip(_host(tex, np.float32), max_mip_level)
 
 
 # ---------------------------------------------------------------------------------------------

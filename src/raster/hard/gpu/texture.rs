@@ -33,8 +33,8 @@ use crate::raster::hard::texture::{Boundary, Filter, Mode};
 /// `kernels/include/texture.glsl`).
 pub const PARTIAL_BLOCK: u64 = 256;
 
-/// The largest texture extent the kernels address (as nvdiffrast's, far beyond any binding).
-pub const MAX_EXTENT: u32 = 1 << 15;
+/// The largest texture extent (nvdiffrast's; a binding's size limits a texture long before).
+pub const MAX_EXTENT: u32 = 1 << 16;
 
 /// Push constants of every texture kernel (`Push` in `kernels/include/texture.glsl`).
 #[repr(C)]
@@ -208,15 +208,27 @@ pub struct TextureGradOutputs<'a> {
     pub bias: Option<BufferRange<'a>>,
 }
 
-/// A stack handed to the host entry points: its base alone, the mip levels built on the device
-/// (`texture_construct_mip` and the gradient carried through it), or every level given (a
-/// prebuilt or user stack, each level's gradient its own).
+/// A stack handed to the host entry points: its base alone, the mip levels built on the device;
+/// every level, built from the base before (nvdiffrast's `texture_construct_mip`); or every
+/// level given by the caller. The first two carry the levels' gradients into the base's, as
+/// nvdiffrast does through its mip stack; a given stack's levels keep their own.
 #[derive(Clone, Copy, Debug)]
 pub enum Levels<'a> {
     /// Level 0, [`TexLayout::level_texels`]`(0) × channels` f32.
     Build(&'a [f32]),
-    /// Every level, [`TexLayout::floats`] f32.
+    /// Every level, [`TexLayout::floats`] f32, the mip levels built from level 0.
+    Built(&'a [f32]),
+    /// Every level, [`TexLayout::floats`] f32, each the caller's own.
     Given(&'a [f32]),
+}
+
+impl<'a> Levels<'a> {
+    /// The floats handed over.
+    fn floats(&self) -> &'a [f32] {
+        match *self {
+            Levels::Build(t) | Levels::Built(t) | Levels::Given(t) => t,
+        }
+    }
 }
 
 /// One call's lookups on host slices.
@@ -235,7 +247,7 @@ pub struct Lookup<'a> {
 /// The gradients [`TextureSampler::sample_grad`] returns.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TextureGrads32 {
-    /// Every level's texel gradients, laid out as the stack; for [`Levels::Build`], level 0
+    /// Every level's texel gradients, laid out as the stack; but for [`Levels::Given`], level 0
     /// holds the texture's whole gradient (the levels' carried through the pyramid).
     pub stack: Vec<f32>,
     /// To `uv`.
@@ -638,7 +650,7 @@ fn check_host(layout: &TexLayout, levels: Levels<'_>, lookup: &Lookup<'_>) -> Re
             layout.level_texels(0) * u64::from(layout.channels),
             "tex",
         ),
-        Levels::Given(t) => (t, layout.floats(), "the mip stack"),
+        Levels::Built(t) | Levels::Given(t) => (t, layout.floats(), "the mip stack"),
     };
     if stack.len() as u64 != need {
         return Err(Error::Input(format!(
@@ -647,9 +659,19 @@ fn check_host(layout: &TexLayout, levels: Levels<'_>, lookup: &Lookup<'_>) -> Re
         )));
     }
     if let Some(i) = stack.iter().position(|v| !v.is_finite()) {
+        let level = (1..layout.levels)
+            .take_while(|&l| layout.level_offset(l) <= i as u64)
+            .last()
+            .unwrap_or(0);
+        let name = if level == 0 {
+            "tex".to_string()
+        } else {
+            format!("mip level {level}")
+        };
         return Err(Error::Input(format!(
-            "texture: {what} has a value that is not finite ({}) at float {i}",
-            stack[i]
+            "texture: {name} has a value that is not finite ({}) at float {}",
+            stack[i],
+            i as u64 - layout.level_offset(level)
         )));
     }
     let points = lookup.grid.points();
@@ -695,9 +717,7 @@ impl TextureSampler {
         lookup: &Lookup<'_>,
         dy: &[f32],
     ) -> Result<Vec<u64>> {
-        let base = match levels {
-            Levels::Build(t) | Levels::Given(t) => t,
-        };
+        let base = levels.floats();
         let at = layout_of(&[
             4 * base.len() as u64,
             4 * lookup.uv.len() as u64,
@@ -737,9 +757,7 @@ impl TextureSampler {
         input: &Buffer,
     ) -> Result<()> {
         let stack = self.stack.as_ref().expect("made by upload");
-        let base = match levels {
-            Levels::Build(t) | Levels::Given(t) => t,
-        };
+        let base = levels.floats();
         rec.copy(input, 0, stack, 0, 4 * base.len() as u64);
         if matches!(levels, Levels::Build(_)) {
             self.record_construct_mip(rec, layout, stack.range(0, 4 * layout.floats()))?;
@@ -846,9 +864,9 @@ impl TextureSampler {
         result
     }
 
-    /// `texture`'s backward on host slices for the output gradient `dy` (`[B, h, w, C]`); for
-    /// [`Levels::Build`] the levels' gradients are carried into the texture's. Waits for the
-    /// device.
+    /// `texture`'s backward on host slices for the output gradient `dy` (`[B, h, w, C]`); but
+    /// for [`Levels::Given`], the levels' gradients are carried into the texture's. Waits for
+    /// the device.
     pub fn sample_grad(
         &mut self,
         ctx: &Context,
@@ -892,7 +910,7 @@ impl TextureSampler {
         )?;
         let input = self.host.inputs.take().expect("made by upload");
         let output = self.host.outputs.take().expect("made above");
-        let pyramid = matches!(levels, Levels::Build(_));
+        let pyramid = !matches!(levels, Levels::Given(_));
         let result = (|| {
             ctx.submit_and_wait(|rec| {
                 self.record_stack(rec, layout, levels, &input)?;
