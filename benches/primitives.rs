@@ -1,4 +1,6 @@
-//! Scan and radix-sort throughput. Each case is recorded once; an iteration is one submit + wait.
+//! Scan and radix-sort throughput, and nvdiffrast's `texture` (forward with its mip levels built,
+//! and backward, linear-mipmap-linear on a 1024² RGB texture) per lookup. Each case is recorded
+//! once; an iteration is one submit + wait.
 //! Two series per case: `wall` (submit to fence, host clock) and `gpu` (GPU timestamps around the
 //! work), both as elements/s through criterion's throughput.
 //!
@@ -83,5 +85,109 @@ fn sort(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, scan, sort);
+/// `texture`, linear-mipmap-linear with wrap, a 1024² RGB texture: the forward (the mip levels
+/// built, then the lookups) and the backward (after its own mip levels), per lookup, at 512²
+/// lookups (three texels a pixel: λ ≈ 1.6) and 1024² (λ ≈ 0.6).
+fn texture(c: &mut Criterion) {
+    use softvk::gpu::MemoryKind;
+    use softvk::raster::hard::gpu::texture::{
+        Lookups, TexLayout, TextureGradOutputs, TextureInputs, TextureSampler,
+    };
+    use softvk::raster::hard::texture::{Boundary, Filter, Mode};
+    let ctx = context();
+    let mut sampler = TextureSampler::new(&ctx).unwrap();
+    let mut group = c.benchmark_group(format!("texture/{}", ctx.info().name));
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(4));
+    let layout = TexLayout::with_mips(1, 1024, 1024, 3, None).unwrap();
+    let mut tex = vec![0.0f32; layout.floats() as usize];
+    for (i, v) in tex.iter_mut().enumerate().take(layout.level_texels(0) as usize * 3) {
+        *v = ((i as u32).wrapping_mul(2_654_435_761) >> 8) as f32 / 16_777_216.0;
+    }
+    let stack = ctx.upload_buffer("bench texture stack", &tex).unwrap();
+    let mode = Mode {
+        filter: Filter::LinearMipmapLinear,
+        boundary: Boundary::Wrap,
+    };
+    for side in [512u32, 1024] {
+        let grid = Lookups {
+            batch: 1,
+            height: side,
+            width: side,
+            uv_da: true,
+            bias: false,
+        };
+        let n = grid.points();
+        // A slightly rotated, magnified-then-minified grid: 1.5 turns of the texture across.
+        let k = 1.5 / f64::from(side);
+        let (mut uv, mut da) = (Vec::new(), Vec::new());
+        for y in 0..side {
+            for x in 0..side {
+                let (fx, fy) = (f64::from(x) + 0.5, f64::from(y) + 0.5);
+                uv.extend([(k * (fx + 0.1 * fy)) as f32, (k * (fy - 0.1 * fx)) as f32]);
+                da.extend([k as f32, (0.1 * k) as f32, (-0.1 * k) as f32, k as f32]);
+            }
+        }
+        let uv = ctx.upload_buffer("bench uv", &uv).unwrap();
+        let da = ctx.upload_buffer("bench uv_da", &da).unwrap();
+        let dy = ctx.upload_buffer("bench dy", &vec![1e-3f32; 3 * n as usize]).unwrap();
+        let out = ctx
+            .create_buffer("bench out", 12 * n, MemoryKind::Device)
+            .unwrap();
+        let g_stack = ctx
+            .create_buffer("bench grad stack", 4 * layout.floats(), MemoryKind::Device)
+            .unwrap();
+        let g_uv = ctx
+            .create_buffer("bench grad uv", 8 * n, MemoryKind::Device)
+            .unwrap();
+        let g_da = ctx
+            .create_buffer("bench grad uv_da", 16 * n, MemoryKind::Device)
+            .unwrap();
+        let inputs = TextureInputs {
+            stack: stack.whole(),
+            uv: uv.whole(),
+            uv_da: Some(da.whole()),
+            bias: None,
+        };
+        group.throughput(Throughput::Elements(n));
+        for backward in [false, true] {
+            let mut timer = Timer::new(&ctx, 2).unwrap();
+            let recorded = ctx
+                .record(Some(&mut timer), |rec| {
+                    sampler.record_construct_mip(rec, &layout, stack.whole())?;
+                    if backward {
+                        sampler.record_sample_grad(
+                            rec,
+                            &layout,
+                            mode,
+                            &grid,
+                            inputs,
+                            dy.whole(),
+                            TextureGradOutputs {
+                                stack: g_stack.whole(),
+                                uv: g_uv.whole(),
+                                uv_da: Some(g_da.whole()),
+                                bias: None,
+                            },
+                            true,
+                        )
+                    } else {
+                        sampler.record_sample(rec, &layout, mode, &grid, inputs, out.whole())
+                    }
+                })
+                .unwrap();
+            let what = if backward { "backward" } else { "forward" };
+            for (clock, gpu_clock) in [("wall", false), ("gpu", true)] {
+                group.bench_function(
+                    BenchmarkId::new(clock, format!("{what} {side}² lookups")),
+                    |b| b.iter_custom(|iters| time(&recorded, &timer, &ctx, gpu_clock, iters)),
+                );
+            }
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, scan, sort, texture);
 criterion_main!(benches);
