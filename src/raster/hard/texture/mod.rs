@@ -1,7 +1,7 @@
 //! The f64 twin of nvdiffrast's `texture` and `texture_construct_mip` for 2D textures, forward
-//! ([`sample`]) and backward ([`sample_backward`], [`MipStack::pyramid_backward`]), and of
-//! cube-map lookups without mipmaps, forward ([`sample_cube`]): the reference the texture
-//! kernels will be held to. Cube maps' mipmaps and backward come next.
+//! ([`sample`]) and backward ([`sample_backward`], [`MipStack::pyramid_backward`]), and, in
+//! [`cube`], for cube maps (`boundary_mode='cube'`): the reference the texture kernels will be
+//! held to.
 //!
 //! nvdiffrast's behaviour, as its documentation and source show it (softvk's code is its own):
 //!
@@ -21,15 +21,22 @@
 //! - **The level.** From `uv_da = (du/dX, du/dY, dv/dX, dv/dY)` in texels of the base level
 //!   (`s = u W`, `t = v H`): the footprint's major axis, squared, is
 //!   `(A + B)/2 + √((A − B)²/4 + C²)` with `A = s_X² + t_X²`, `B = s_Y² + t_Y²`,
-//!   `C = s_X s_Y + t_X t_Y`, and `λ = ½ log2` of it; without `uv_da`, `λ = 0`. `mip_level_bias` is added, and `λ` clamped to
-//!   `[0, the last level]`.
+//!   `C = s_X s_Y + t_X t_Y`, and `λ = ½ log2` of it; without `uv_da`, `λ = 0`.
+//!   `mip_level_bias` is added, and `λ` clamped to `[0, the last level]` (NaN to 0).
 //! - **The mip stack** ([`MipStack::build`]). Each level halves each extent above 1 (an extent
 //!   of 1 stays 1), averaging 2 × 2 texels (2 × 1 where the level above is one texel high or
 //!   wide), until both extents are 1 or `max_mip_level` levels are built; an odd extent above 1
 //!   cannot be halved and is an error, as in nvdiffrast (resize the texture, or limit
-//!   `max_mip_level`).
+//!   `max_mip_level`). A cube map's stack halves each face apart ([`MipStack::cube`]).
 
 use crate::error::{Error, Result};
+
+pub mod cube;
+
+pub use cube::{
+    CubeGrad, CubeLevelGrad, CubeLevelInput, cube_direction, cube_face, cube_face_derivatives,
+    cube_level_gradient, cube_level_of_detail, sample_cube, sample_cube_backward,
+};
 
 /// How `uv` outside `[0, 1)` reads the texture.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -50,7 +57,9 @@ impl Boundary {
             "clamp" => Ok(Self::Clamp),
             "zero" => Ok(Self::Zero),
             "cube" => Err(Error::Input(
-                "texture: boundary_mode 'cube' (cube maps) is not supported yet".into(),
+                "texture: boundary_mode 'cube' is a cube map's, looked up by direction \
+                 (texture::sample_cube), not a 2D texture's boundary"
+                    .into(),
             )),
             _ => Err(Error::Input(format!(
                 "texture: boundary_mode must be 'wrap', 'clamp', 'zero' or 'cube', not {name:?}"
@@ -291,8 +300,16 @@ fn nearest_texel(stack: &MipStack, uv: [f64; 2], boundary: Boundary) -> Option<(
 /// the fraction 0 for `linear-mipmap-nearest` and where λ is clamped to 0.
 fn mip_levels(stack: &MipStack, level: LevelInput, filter: Filter) -> (f64, usize, usize, f64) {
     let base = &stack.levels[0];
-    let max = stack.max_level() as f64;
     let raw = level_of_detail(level, base.width, base.height);
+    let (l0, l1, f) = pick_levels(stack, raw, filter);
+    (raw, l0, l1, f)
+}
+
+/// The levels an unclamped `λ` picks: `(⌊λ⌋, ⌊λ⌋ + 1 within the stack, λ's fraction)`, `λ`
+/// clamped to `[0, the last level]` (NaN to 0), the fraction 0 for `linear-mipmap-nearest`
+/// and where λ is clamped to 0.
+fn pick_levels(stack: &MipStack, raw: f64, filter: Filter) -> (usize, usize, f64) {
+    let max = stack.max_level() as f64;
     // NaN clamps to 0 (a zero footprint gives −∞, which the clamp takes to 0 too).
     let lambda = if raw.is_nan() {
         0.0
@@ -301,9 +318,9 @@ fn mip_levels(stack: &MipStack, level: LevelInput, filter: Filter) -> (f64, usiz
     };
     let l0 = lambda.floor();
     if filter == Filter::LinearMipmapNearest || lambda <= 0.0 {
-        return (raw, l0 as usize, l0 as usize, 0.0);
+        return (l0 as usize, l0 as usize, 0.0);
     }
-    (raw, l0 as usize, (l0 + 1.0).min(max) as usize, lambda - l0)
+    (l0 as usize, (l0 + 1.0).min(max) as usize, lambda - l0)
 }
 
 /// One pixel's sample of minibatch item `item`: `C` values.
@@ -627,139 +644,6 @@ impl MipStack {
     }
 }
 
-/// The cube-map face a direction looks at and its face coordinates `(s, t)` in `[0, 1]`, by
-/// OpenGL's cube-map table (faces +x, −x, +y, −y, +z, −z; ties go to x, then y, as
-/// nvdiffrast's `indexCubeMap` breaks them); `None` for a direction with no finite face
-/// coordinates (zero, or not finite).
-pub fn cube_face(dir: [f64; 3]) -> Option<(usize, f64, f64)> {
-    let [x, y, z] = dir;
-    let (ax, ay, az) = (x.abs(), y.abs(), z.abs());
-    // (face, major, s numerator, t numerator), each numerator's sign as the table takes it.
-    let (face, major, sn, tn) = if az > ax.max(ay) {
-        if z >= 0.0 {
-            (4, az, x, -y)
-        } else {
-            (5, az, -x, -y)
-        }
-    } else if ay > ax {
-        if y >= 0.0 {
-            (2, ay, x, z)
-        } else {
-            (3, ay, x, -z)
-        }
-    } else if x >= 0.0 {
-        (0, ax, -z, -y)
-    } else {
-        (1, ax, z, -y)
-    };
-    let s = sn / (2.0 * major) + 0.5;
-    let t = tn / (2.0 * major) + 0.5;
-    (s.is_finite() && t.is_finite()).then(|| (face, s.clamp(0.0, 1.0), t.clamp(0.0, 1.0)))
-}
-
-/// The direction of face coordinates `(s, t)` on `face` (the point on the unit cube's face
-/// plane; `(s, t)` may lie outside `[0, 1]`, continuing the plane): `cube_face`'s inverse.
-pub fn cube_direction(face: usize, s: f64, t: f64) -> [f64; 3] {
-    let (a, b) = (2.0 * s - 1.0, 2.0 * t - 1.0);
-    match face {
-        0 => [1.0, -b, -a],
-        1 => [-1.0, -b, a],
-        2 => [a, 1.0, b],
-        3 => [a, -1.0, -b],
-        4 => [a, -b, 1.0],
-        _ => [-a, -b, -1.0],
-    }
-}
-
-/// Texel `(x, y)` of `face` of cube map `item` on `level` (the stack's items are faces, six
-/// per cube, `[cubes × 6, S, S, C]`; six: one cube shared by every item).
-fn cube_texel(
-    stack: &MipStack,
-    level: usize,
-    item: usize,
-    face: usize,
-    x: usize,
-    y: usize,
-) -> &[f64] {
-    let l = &stack.levels[level];
-    let cube = if stack.items == 6 { 0 } else { item };
-    let o = (((cube * 6 + face) * l.height + y) * l.width + x) * stack.channels;
-    &l.texels[o..o + stack.channels]
-}
-
-/// One pixel's cube-map sample, `nearest` or `linear`, seamless: a linear tap past a face's
-/// edge reads the neighbouring face's texel across it (the tap's centre continued on the face
-/// plane, looked up again), and a tap past two edges at once (beyond a cube corner, where no
-/// texel is) reads the mean of the other three, as nvdiffrast fills it.
-pub fn sample_cube(
-    stack: &MipStack,
-    item: usize,
-    dir: [f64; 3],
-    filter: Filter,
-) -> Result<Vec<f64>> {
-    let c = stack.channels;
-    let l = &stack.levels[0];
-    if l.width != l.height || stack.items % 6 != 0 {
-        return Err(Error::Input(format!(
-            "texture: a cube map is [B, 6, S, S, C]; this one has {} faces of {}x{}",
-            stack.items, l.height, l.width
-        )));
-    }
-    let Some((face, s, t)) = cube_face(dir) else {
-        return Ok(vec![0.0; c]);
-    };
-    let n = l.width as f64;
-    match filter {
-        Filter::Nearest => {
-            let x = (s * n).floor().clamp(0.0, n - 1.0) as usize;
-            let y = (t * n).floor().clamp(0.0, n - 1.0) as usize;
-            Ok(cube_texel(stack, 0, item, face, x, y).to_vec())
-        }
-        Filter::Linear => {
-            let (u, v) = (s * n - 0.5, t * n - 0.5);
-            let (u0, v0) = (u.floor(), v.floor());
-            let (fu, fv) = (u - u0, v - v0);
-            let inside = |i: f64| (0.0..n).contains(&i);
-            let tap = |x: f64, y: f64| -> Option<Vec<f64>> {
-                match (inside(x), inside(y)) {
-                    (true, true) => {
-                        Some(cube_texel(stack, 0, item, face, x as usize, y as usize).to_vec())
-                    }
-                    (false, false) => None,
-                    _ => {
-                        let d = cube_direction(face, (x + 0.5) / n, (y + 0.5) / n);
-                        let (f, s, t) = cube_face(d).expect("a finite direction");
-                        let x = (s * n).floor().clamp(0.0, n - 1.0) as usize;
-                        let y = (t * n).floor().clamp(0.0, n - 1.0) as usize;
-                        Some(cube_texel(stack, 0, item, f, x, y).to_vec())
-                    }
-                }
-            };
-            let taps = [
-                tap(u0, v0),
-                tap(u0 + 1.0, v0),
-                tap(u0, v0 + 1.0),
-                tap(u0 + 1.0, v0 + 1.0),
-            ];
-            let known: Vec<&Vec<f64>> = taps.iter().flatten().collect();
-            let mean: Vec<f64> = (0..c)
-                .map(|k| known.iter().map(|t| t[k]).sum::<f64>() / known.len() as f64)
-                .collect();
-            let [a00, a10, a01, a11] = taps.map(|t| t.unwrap_or_else(|| mean.clone()));
-            Ok((0..c)
-                .map(|k| {
-                    let top = a00[k] + fu * (a10[k] - a00[k]);
-                    let bottom = a01[k] + fu * (a11[k] - a01[k]);
-                    top + fv * (bottom - top)
-                })
-                .collect())
-        }
-        _ => Err(Error::Input(
-            "texture: cube maps with mipmaps are not supported yet".into(),
-        )),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -948,7 +832,7 @@ mod tests {
     }
 
     /// A deterministic pseudo-random stream in [0, 1).
-    fn stream(seed: u64) -> impl FnMut() -> f64 {
+    pub(super) fn stream(seed: u64) -> impl FnMut() -> f64 {
         let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
         move || {
             state ^= state << 13;
@@ -959,7 +843,7 @@ mod tests {
     }
 
     /// Whether `x` lies within `margin` of an integer (a kink of the piecewise forward).
-    fn near_integer(x: f64, margin: f64) -> bool {
+    pub(super) fn near_integer(x: f64, margin: f64) -> bool {
         (x - x.round()).abs() < margin
     }
 
@@ -1101,95 +985,6 @@ mod tests {
             level_gradient([0.25, 0.0, 0.0, 0.5], 8, 8)
                 .iter()
                 .any(|g| *g != 0.0)
-        );
-    }
-
-    #[test]
-    fn cube_faces_follow_the_opengl_table() {
-        assert_eq!(cube_face([1.0, 0.0, 0.0]), Some((0, 0.5, 0.5)));
-        assert_eq!(cube_face([2.0, 1.0, -1.0]), Some((0, 0.75, 0.25)));
-        assert_eq!(cube_face([-2.0, 1.0, -1.0]), Some((1, 0.25, 0.25)));
-        assert_eq!(cube_face([0.5, 2.0, 1.0]), Some((2, 0.625, 0.75)));
-        assert_eq!(cube_face([0.5, -2.0, 1.0]), Some((3, 0.625, 0.25)));
-        assert_eq!(cube_face([0.5, 1.0, 2.0]), Some((4, 0.625, 0.25)));
-        assert_eq!(cube_face([0.5, 1.0, -2.0]), Some((5, 0.375, 0.25)));
-        assert_eq!(cube_face([0.0; 3]), None);
-        // cube_direction inverts it on every face.
-        for face in 0..6 {
-            let (f, s, t) = cube_face(cube_direction(face, 0.3, 0.8)).unwrap();
-            assert_eq!(f, face);
-            assert!(
-                (s - 0.3).abs() < 1e-15 && (t - 0.8).abs() < 1e-15,
-                "{face}: {s} {t}"
-            );
-        }
-    }
-
-    /// A direction sweeping across each of the cube's twelve edges gives a continuous linear
-    /// sample: no step between neighbouring directions larger than the texture's own slope
-    /// allows, where sampling each face on its own (clamped at its edge) jumps.
-    #[test]
-    fn a_cube_map_has_no_seam_across_any_edge() {
-        let mut rnd = stream(3);
-        let (n, c) = (6usize, 2usize);
-        let texels: Vec<f64> = (0..6 * n * n * c).map(|_| rnd()).collect();
-        let cube = MipStack::base(6, n, n, c, texels).unwrap();
-        // Clamped per face: the seam a cube map must not have.
-        let per_face = |dir: [f64; 3]| {
-            let (f, s, t) = cube_face(dir).unwrap();
-            let o = f * n * n * c;
-            let face = MipStack::base(1, n, n, c, cube.levels[0].texels[o..o + n * n * c].to_vec())
-                .unwrap();
-            let mode = Mode {
-                filter: Filter::Linear,
-                boundary: Boundary::Clamp,
-            };
-            sample(&face, 0, [s, t], LevelInput::default(), mode)
-        };
-        let steps = 400;
-        let mut seams = 0;
-        for face in 0..6 {
-            for (s, t, ds, dt) in [(0.5, 0.3, 1.0, 0.0), (0.3, 0.5, 0.0, 1.0)] {
-                // From the face's centre line out across its edge (s or t from 0.8 to 1.2 and
-                // from 0.2 to −0.2), directions continued on the face plane.
-                for sign in [1.0, -1.0] {
-                    let at = |k: usize| {
-                        let x = 0.4 * (k as f64 / steps as f64) - 0.2;
-                        let (a, b) = (
-                            0.5 + sign * (0.5 + x) * ds + (1.0 - ds) * (s - 0.5),
-                            0.5 + sign * (0.5 + x) * dt + (1.0 - dt) * (t - 0.5),
-                        );
-                        cube_direction(face, a, b)
-                    };
-                    let (mut worst, mut worst_face) = (0.0f64, 0.0f64);
-                    for k in 0..steps {
-                        let (a, b) = (at(k), at(k + 1));
-                        let (va, vb) = (
-                            sample_cube(&cube, 0, a, Filter::Linear).unwrap(),
-                            sample_cube(&cube, 0, b, Filter::Linear).unwrap(),
-                        );
-                        let (pa, pb) = (per_face(a), per_face(b));
-                        for k in 0..c {
-                            worst = worst.max((va[k] - vb[k]).abs());
-                            worst_face = worst_face.max((pa[k] - pb[k]).abs());
-                        }
-                    }
-                    // One step moves the lookup by at most 0.4 n / steps · 1.2 texels, and a
-                    // unit texel difference at most changes a linear sample by that much.
-                    let bound = 0.4 * n as f64 / steps as f64 * 1.5;
-                    assert!(
-                        worst <= bound,
-                        "face {face} ({ds}, {dt}) {sign}: step {worst} > {bound}"
-                    );
-                    if worst_face > 10.0 * bound {
-                        seams += 1;
-                    }
-                }
-            }
-        }
-        assert!(
-            seams >= 20,
-            "per-face sampling shows only {seams} of 24 crossings as seams"
         );
     }
 
