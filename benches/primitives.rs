@@ -102,7 +102,11 @@ fn texture(c: &mut Criterion) {
         .measurement_time(Duration::from_secs(4));
     let layout = TexLayout::with_mips(1, 1024, 1024, 3, None).unwrap();
     let mut tex = vec![0.0f32; layout.floats() as usize];
-    for (i, v) in tex.iter_mut().enumerate().take(layout.level_texels(0) as usize * 3) {
+    for (i, v) in tex
+        .iter_mut()
+        .enumerate()
+        .take(layout.level_texels(0) as usize * 3)
+    {
         *v = ((i as u32).wrapping_mul(2_654_435_761) >> 8) as f32 / 16_777_216.0;
     }
     let stack = ctx.upload_buffer("bench texture stack", &tex).unwrap();
@@ -131,7 +135,9 @@ fn texture(c: &mut Criterion) {
         }
         let uv = ctx.upload_buffer("bench uv", &uv).unwrap();
         let da = ctx.upload_buffer("bench uv_da", &da).unwrap();
-        let dy = ctx.upload_buffer("bench dy", &vec![1e-3f32; 3 * n as usize]).unwrap();
+        let dy = ctx
+            .upload_buffer("bench dy", &vec![1e-3f32; 3 * n as usize])
+            .unwrap();
         let out = ctx
             .create_buffer("bench out", 12 * n, MemoryKind::Device)
             .unwrap();
