@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::hard::{clip, random_scene, wide};
+use common::hard::{clip, fnv1a, random_scene, wide};
 
 use glam::Vec3;
 use rand::RngExt;
@@ -627,15 +627,6 @@ fn interpolate_and_its_backward_match_the_twin() {
             "interpolate backward: {ea:e} {er:e} {ed:e}"
         );
     }
-}
-
-/// FNV-1a over the bytes of `data`: a hash that the tests, not the standard library, define.
-fn fnv1a(data: &[f32]) -> u64 {
-    bytemuck::cast_slice::<f32, u8>(data)
-        .iter()
-        .fold(0xcbf29ce484222325u64, |h, &b| {
-            (h ^ u64::from(b)).wrapping_mul(0x100000001b3)
-        })
 }
 
 /// Every output of every primitive, forward and backward, on spot from two views at 40×28

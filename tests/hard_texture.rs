@@ -12,6 +12,8 @@
 
 mod common;
 
+use common::hard::fnv1a;
+
 use rand::RngExt;
 use softvk::raster::hard::gpu::texture::{
     Levels, Lookup, Lookups, TexLayout, TextureGrads32, TextureSampler,
@@ -492,14 +494,6 @@ fn a_texel_read_by_more_lookups_than_one_loop_may_run_gets_every_one() {
         "GPU {} want {want}",
         stack[0]
     );
-}
-
-fn fnv1a(data: &[f32]) -> u64 {
-    bytemuck::cast_slice::<f32, u8>(data)
-        .iter()
-        .fold(0xcbf29ce484222325u64, |h, &b| {
-            (h ^ u64::from(b)).wrapping_mul(0x100000001b3)
-        })
 }
 
 /// Every output of every mode, forward and backward, hashed: the same bytes on every run and,

@@ -67,23 +67,45 @@ uint tex_item(uint i) {
     return pc.tex_items == 1u ? 0u : i / pc.item_points;
 }
 
+// The footprint of uv_da in texels of the base level: (s_X, s_Y, t_X, t_Y), A = s_X² + t_X²,
+// B = s_Y² + t_Y², C = s_X s_Y + t_X t_Y, the root √((A − B)²/4 + C²) and the major axis squared
+// (A + B)/2 + root (twin: `level_of_detail`).
+struct Footprint {
+    vec4 st;
+    float a;
+    float b;
+    float c;
+    float root;
+    float major;
+};
+
+Footprint footprint(vec4 da) {
+    Footprint f;
+    float w = float(pc.width);
+    float h = float(pc.height);
+    precise vec4 st = vec4(da.x * w, da.y * w, da.z * h, da.w * h);
+    precise float a = st.x * st.x + st.z * st.z;
+    precise float b = st.y * st.y + st.w * st.w;
+    precise float c = st.x * st.y + st.z * st.w;
+    precise float d = a - b;
+    precise float root = fm_sqrt(0.25 * d * d + c * c);
+    precise float major = 0.5 * (a + b) + root;
+    f.st = st;
+    f.a = a;
+    f.b = b;
+    f.c = c;
+    f.root = root;
+    f.major = major;
+    return f;
+}
+
 // The level λ before the clamp (twin: `level_of_detail`): ½ log2 of the footprint's major axis
 // squared, in texels of the base level, plus the bias.
 float raw_level(vec4 da, float bias) {
     precise float level = 0.0;
     if (pc.has_uv_da != 0u) {
-        float w = float(pc.width);
-        float h = float(pc.height);
-        precise float sx = da.x * w;
-        precise float sy = da.y * w;
-        precise float tx = da.z * h;
-        precise float ty = da.w * h;
-        precise float a = sx * sx + tx * tx;
-        precise float b = sy * sy + ty * ty;
-        precise float c = sx * sy + tx * ty;
-        precise float d = a - b;
-        precise float major = 0.5 * (a + b) + fm_sqrt(0.25 * d * d + c * c);
-        level = 0.5 * LOG2_E * fm_log(major);
+        Footprint f = footprint(da);
+        level = 0.5 * LOG2_E * fm_log(f.major);
     }
     if (pc.has_bias != 0u) {
         level = level + bias;
@@ -94,28 +116,20 @@ float raw_level(vec4 da, float bias) {
 // dλ/d(uv_da) (twin: `level_gradient`), zero where it is not finite (an isotropic or empty
 // footprint).
 vec4 level_gradient(vec4 da) {
+    Footprint f = footprint(da);
     float w = float(pc.width);
     float h = float(pc.height);
-    precise float sx = da.x * w;
-    precise float sy = da.y * w;
-    precise float tx = da.z * h;
-    precise float ty = da.w * h;
-    precise float a = sx * sx + tx * tx;
-    precise float b = sy * sy + ty * ty;
-    precise float c = sx * sy + tx * ty;
-    precise float d = a - b;
-    precise float root = fm_sqrt(0.25 * d * d + c * c);
-    precise float major = 0.5 * (a + b) + root;
-    precise float k = fm_rcp(2.0 * major * 0.693147181);
-    precise float q = fm_rcp(root);
-    precise float half_d = 0.25 * d * q;
+    precise float k = fm_rcp(2.0 * f.major * 0.693147181);
+    precise float q = fm_rcp(f.root);
+    precise float half_d = 0.25 * (f.a - f.b) * q;
     precise float da_ = k * (0.5 + half_d);
     precise float db_ = k * (0.5 - half_d);
-    precise float dc_ = k * c * q;
-    precise vec4 g = vec4(w * (2.0 * sx * da_ + sy * dc_), w * (2.0 * sy * db_ + sx * dc_),
-                          h * (2.0 * tx * da_ + ty * dc_), h * (2.0 * ty * db_ + tx * dc_));
+    precise float dc_ = k * f.c * q;
+    vec4 st = f.st;  // (s_X, s_Y, t_X, t_Y)
+    precise vec4 g = vec4(w * (2.0 * st.x * da_ + st.y * dc_), w * (2.0 * st.y * db_ + st.x * dc_),
+                          h * (2.0 * st.z * da_ + st.w * dc_), h * (2.0 * st.w * db_ + st.z * dc_));
     bool finite = !any(isnan(g)) && !any(isinf(g));
-    return root > 0.0 && major > 0.0 && finite ? g : vec4(0.0);
+    return f.root > 0.0 && f.major > 0.0 && finite ? g : vec4(0.0);
 }
 
 // The mipmap modes' levels (twin: `mip_levels`): ⌊λ⌋, the level above it within the stack and

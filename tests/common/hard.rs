@@ -1,9 +1,18 @@
 //! Scenes for the tests of nvdiffrast's primitives (`tests/hard_raster.rs`,
-//! `tests/hard_antialias.rs`).
+//! `tests/hard_antialias.rs`, `tests/hard_texture.rs`).
 
 use glam::{Mat4, Vec3, Vec4};
 use rand::RngExt;
 use softvk::mesh::Mesh;
+
+/// FNV-1a over the bytes of `data`: a hash that the tests, not the standard library, define.
+pub fn fnv1a(data: &[f32]) -> u64 {
+    bytemuck::cast_slice::<f32, u8>(data)
+        .iter()
+        .fold(0xcbf29ce484222325u64, |h, &b| {
+            (h ^ u64::from(b)).wrapping_mul(0x100000001b3)
+        })
+}
 
 /// f64 copies of f32 values (the twins' inputs).
 pub fn wide(v: &[f32]) -> Vec<f64> {
