@@ -91,7 +91,7 @@ fn sort(c: &mut Criterion) {
 fn texture(c: &mut Criterion) {
     use softvk::gpu::MemoryKind;
     use softvk::raster::hard::gpu::texture::{
-        Lookups, TexLayout, TextureGradOutputs, TextureInputs, TextureSampler,
+        Lookups, TexLayout, TexMode, TextureGradOutputs, TextureInputs, TextureSampler,
     };
     use softvk::raster::hard::texture::{Boundary, Filter, Mode};
     let ctx = context();
@@ -110,10 +110,10 @@ fn texture(c: &mut Criterion) {
         *v = ((i as u32).wrapping_mul(2_654_435_761) >> 8) as f32 / 16_777_216.0;
     }
     let stack = ctx.upload_buffer("bench texture stack", &tex).unwrap();
-    let mode = Mode {
+    let mode = TexMode::Flat(Mode {
         filter: Filter::LinearMipmapLinear,
         boundary: Boundary::Wrap,
-    };
+    });
     for side in [512u32, 1024] {
         let grid = Lookups {
             batch: 1,

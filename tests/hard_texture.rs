@@ -234,7 +234,7 @@ fn every_mode_samples_as_the_twin() {
                     .sample(
                         &ctx,
                         &case.layout,
-                        mode,
+                        mode.into(),
                         Levels::Build(&case.tex),
                         &case.lookup(),
                     )
@@ -243,7 +243,7 @@ fn every_mode_samples_as_the_twin() {
                     .sample(
                         &ctx,
                         &case.layout,
-                        mode,
+                        mode.into(),
                         Levels::Given(&stack),
                         &case.lookup(),
                     )
@@ -356,7 +356,7 @@ fn every_gradient_matches_the_twin() {
                     .sample_grad(
                         &ctx,
                         &case.layout,
-                        mode,
+                        mode.into(),
                         Levels::Given(&stack),
                         &case.lookup(),
                         &dy,
@@ -366,7 +366,7 @@ fn every_gradient_matches_the_twin() {
                     .sample_grad(
                         &ctx,
                         &case.layout,
-                        mode,
+                        mode.into(),
                         Levels::Build(&case.tex),
                         &case.lookup(),
                         &dy,
@@ -486,7 +486,14 @@ fn a_texel_read_by_more_lookups_than_one_loop_may_run_gets_every_one() {
         boundary: Boundary::Wrap,
     };
     let TextureGrads32 { stack, .. } = sampler
-        .sample_grad(&ctx, &layout, mode, Levels::Given(&[0.5]), &lookup, &dy)
+        .sample_grad(
+            &ctx,
+            &layout,
+            mode.into(),
+            Levels::Given(&[0.5]),
+            &lookup,
+            &dy,
+        )
         .unwrap();
     let want: f64 = dy.iter().map(|&v| f64::from(v)).sum();
     assert!(
@@ -519,7 +526,7 @@ fn every_mode_writes_the_golden_bytes() {
                 .sample(
                     &ctx,
                     &case.layout,
-                    mode,
+                    mode.into(),
                     Levels::Build(&case.tex),
                     &case.lookup(),
                 )
@@ -528,7 +535,7 @@ fn every_mode_writes_the_golden_bytes() {
                 .sample_grad(
                     &ctx,
                     &case.layout,
-                    mode,
+                    mode.into(),
                     Levels::Build(&case.tex),
                     &case.lookup(),
                     &dy,

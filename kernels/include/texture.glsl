@@ -34,9 +34,15 @@ const uint FILTER_MIPMAP_LINEAR = 3u;
 const uint BOUNDARY_WRAP = 0u;
 const uint BOUNDARY_CLAMP = 1u;
 const uint BOUNDARY_ZERO = 2u;
+const uint BOUNDARY_CUBE = 3u;  // a cube map: `items` are faces, six a cube; uv a direction
 
 layout(constant_id = 0) const uint FILTER = FILTER_LINEAR;
 layout(constant_id = 1) const uint BOUNDARY = BOUNDARY_WRAP;
+
+const bool CUBE = BOUNDARY == BOUNDARY_CUBE;
+// Floats of a lookup's uv (a 2D coordinate, or a cube map's direction) and uv_da.
+const uint UV_DIM = CUBE ? 3u : 2u;
+const uint DA_DIM = CUBE ? 6u : 4u;
 
 // Texel entries a lookup gives the backward: one texel for nearest, four taps for the bilinear
 // modes, four on each of two levels for linear-mipmap-linear.
@@ -157,6 +163,7 @@ struct Taps {
     bool read[4];
     vec2 frac;
     vec2 scale;
+    uint corner;  // a cube map's tap beyond a cube corner (its value the mean of the others); 4: none
 };
 
 Taps bilinear_taps(uint l, uint item, vec2 uv) {
@@ -173,6 +180,7 @@ Taps bilinear_taps(uint l, uint item, vec2 uv) {
     precise float s = u * w - 0.5;
     precise float t = v * h - 0.5;
     taps.scale = vec2(w, h);
+    taps.corner = 4u;
     bool hold_s = false;
     bool hold_t = false;
     if (BOUNDARY == BOUNDARY_CLAMP) {
@@ -229,17 +237,226 @@ uint nearest_texel(uint item, vec2 uv, out bool read) {
     return (item * pc.height + uint(y)) * pc.width + uint(x);
 }
 
+// ---- Cube maps (twin: `texture::cube`) ----
+
+// A direction's face by OpenGL's cube-map table (twin: `Projection`): the major axis (ties to
+// x, then y; a zero is positive), the face +x, −x, +y, −y, +z, −z, the axes and signs of the
+// numerators of s and t, and `ok`: whether (s, t) are finite.
+struct Projection {
+    uint face;
+    uint major;
+    uvec2 axes;
+    vec2 signs;
+    bool ok;
+    vec2 st;  // (s, t) clamped to [0, 1]
+};
+
+Projection projection(vec3 d) {
+    Projection p;
+    vec3 a = abs(d);
+    p.major = a.z > max(a.x, a.y) ? 2u : (a.y > a.x ? 1u : 0u);
+    p.face = 2u * p.major + (d[p.major] < 0.0 ? 1u : 0u);
+    // s: (axis, sign) +x (z, −), −x (z, +), ±y (x, +), +z (x, +), −z (x, −);
+    // t: ±x (y, −), +y (z, +), −y (z, −), ±z (y, −).
+    uint f = p.face;
+    p.axes = uvec2(p.major == 0u ? 2u : 0u, p.major == 1u ? 2u : 1u);
+    p.signs = vec2(f == 0u || f == 5u ? -1.0 : 1.0, f == 2u ? 1.0 : -1.0);
+    precise float r = fm_rcp(2.0 * a[p.major]);
+    precise float s = p.signs.x * d[p.axes.x] * r + 0.5;
+    precise float t = p.signs.y * d[p.axes.y] * r + 0.5;
+    p.ok = !isnan(s) && !isinf(s) && !isnan(t) && !isinf(t);
+    p.st = p.ok ? clamp(vec2(s, t), 0.0, 1.0) : vec2(0.0);
+    return p;
+}
+
+// The point (s, t) of `face`'s plane, (s, t) outside [0, 1] continuing it (twin:
+// `cube_direction`).
+vec3 cube_direction(uint face, float s, float t) {
+    precise float a = 2.0 * s - 1.0;
+    precise float b = 2.0 * t - 1.0;
+    switch (face) {
+        case 0u: return vec3(1.0, -b, -a);
+        case 1u: return vec3(-1.0, -b, a);
+        case 2u: return vec3(a, 1.0, b);
+        case 3u: return vec3(a, -1.0, -b);
+        case 4u: return vec3(a, -b, 1.0);
+        default: return vec3(-a, -b, -1.0);
+    }
+}
+
+// ∂s/∂d (j = 0) or ∂t/∂d, the face held fixed (twin: `Projection::jacobian`).
+vec3 face_jacobian(Projection p, uint j, vec3 d) {
+    uint a = j == 0u ? p.axes.x : p.axes.y;
+    float m = d[p.major];
+    precise float k = 0.5 * (j == 0u ? p.signs.x : p.signs.y) * (m < 0.0 ? -1.0 : 1.0);
+    precise float r = fm_rcp(m);
+    precise float ga = k * r;
+    precise float gm = -(k * d[a]) * (r * r);
+    vec3 g = vec3(0.0);
+    g[a] = ga;
+    g[p.major] = gm;
+    return g;
+}
+
+// s's (j = 0) or t's second derivatives in d times v, the face held fixed (twin:
+// `Projection::hessians`).
+vec3 face_hessian_times(Projection p, uint j, vec3 d, vec3 v) {
+    uint a = j == 0u ? p.axes.x : p.axes.y;
+    uint mj = p.major;
+    float m = d[mj];
+    precise float k = 0.5 * (j == 0u ? p.signs.x : p.signs.y) * (m < 0.0 ? -1.0 : 1.0);
+    precise float r = fm_rcp(m);
+    precise float h = -k * (r * r);
+    precise float hmm = 2.0 * k * d[a] * (r * r * r);
+    precise float oa = h * v[mj];
+    precise float om = h * v[a] + hmm * v[mj];
+    vec3 o = vec3(0.0);
+    o[a] = oa;
+    o[mj] = om;
+    return o;
+}
+
+// uv_da (dx/dX, dx/dY, dy/dX, dy/dY, dz/dX, dz/dY) carried onto the face: (ds/dX, ds/dY, dt/dX,
+// dt/dY), zero where not finite (twin: `cube_face_derivatives`).
+vec4 face_derivatives(Projection p, vec3 d, float da[6]) {
+    if (!p.ok) {
+        return vec4(0.0);
+    }
+    vec3 js = face_jacobian(p, 0u, d);
+    vec3 jt = face_jacobian(p, 1u, d);
+    vec3 dx = vec3(da[0], da[2], da[4]);
+    vec3 dy = vec3(da[1], da[3], da[5]);
+    precise vec4 w = vec4(dot(js, dx), dot(js, dy), dot(jt, dx), dot(jt, dy));
+    return any(isnan(w)) || any(isinf(w)) ? vec4(0.0) : w;
+}
+
+// The texel a face coordinate falls in, on a face n texels across (twin: `texel_of`).
+uint texel_of(float x, float n) {
+    precise float xn = x * n;
+    return uint(clamp(floor(xn), 0.0, n - 1.0));
+}
+
+// The four taps of seamless bilinear filtering of cube `cube`'s `face` on level l (twin:
+// `CubeTaps::new`): a tap past one edge reads the neighbouring face's texel its centre, on
+// this face's plane, projects into; one past two (beyond a cube corner) is `corner`.
+Taps cube_taps(uint l, uint cube, uint face, vec2 st) {
+    Taps taps;
+    uint n = level_size(l).x;
+    float nf = float(n);
+    precise float u = st.x * nf - 0.5;
+    precise float v = st.y * nf - 0.5;
+    float u0 = floor(u);
+    float v0 = floor(v);
+    precise float fu = u - u0;
+    precise float fv = v - v0;
+    taps.frac = vec2(fu, fv);
+    taps.scale = vec2(nf);
+    taps.corner = 4u;
+    float inv = fm_rcp(nf);
+    uint base = level_base(l) + cube * 6u * n * n;
+    for (uint k = 0u; k < 4u; ++k) {
+        float x = u0 + float(k & 1u);
+        float y = v0 + float(k >> 1u);
+        bool ix = x >= 0.0 && x < nf;
+        bool iy = y >= 0.0 && y < nf;
+        taps.read[k] = ix || iy;
+        if (ix && iy) {
+            taps.texel[k] = base + (face * n + uint(y)) * n + uint(x);
+        } else if (ix || iy) {
+            precise float cs = (x + 0.5) * inv;
+            precise float ct = (y + 0.5) * inv;
+            Projection q = projection(cube_direction(face, cs, ct));
+            taps.texel[k] = base + (q.face * n + texel_of(q.st.y, nf)) * n + texel_of(q.st.x, nf);
+        } else {
+            taps.corner = k;
+            taps.texel[k] = base;
+        }
+    }
+    return taps;
+}
+
+// The base level's texel `nearest` reads on a cube map (twin: `sample_cube`).
+uint cube_nearest_texel(uint cube, Projection p) {
+    float n = float(pc.width);
+    return ((cube * 6u + p.face) * pc.width + texel_of(p.st.y, n)) * pc.width + texel_of(p.st.x, n);
+}
+
 #ifdef TEXTURE_READS
-// Channel k of bilinear filtering over `taps`, from the stack the kernel binds as `tex` (twin:
-// `bilinear`).
-float bilerp(Taps taps, uint k) {
+// One lookup as the filters take it, from the `uv`, `uv_da` and `bias` the kernel binds (float
+// arrays, UV_DIM and DA_DIM a lookup): the texture item (a 2D texture's, or the cube's), the
+// coordinate (uv, or the face's (s, t)), `ok` (false: a direction with no face, read as zero),
+// and the level's inputs (uv_da, or the face's derivatives).
+struct Lookup {
+    uint item;
+    vec2 uv;
+    bool ok;
+    Projection p;
+    vec3 dir;
+    float da[6];
+    vec4 level_da;
+    float bias;
+};
+
+Lookup lookup(uint i) {
+    Lookup q;
+    q.item = pc.tex_items == (CUBE ? 6u : 1u) ? 0u : i / pc.item_points;
+    q.ok = true;
+    for (uint k = 0u; k < 6u; ++k) {
+        q.da[k] = 0.0;
+    }
+    bool da = pc.has_uv_da != 0u;
+    for (uint k = 0u; da && k < DA_DIM; ++k) {
+        q.da[k] = uv_da[i * DA_DIM + k];
+    }
+    q.bias = pc.has_bias != 0u ? bias[i] : 0.0;
+    if (CUBE) {
+        q.dir = vec3(uv[3u * i], uv[3u * i + 1u], uv[3u * i + 2u]);
+        q.p = projection(q.dir);
+        q.ok = q.p.ok;
+        q.uv = q.p.st;
+        q.level_da = da ? face_derivatives(q.p, q.dir, q.da) : vec4(0.0);
+    } else {
+        q.dir = vec3(0.0);
+        q.uv = vec2(uv[2u * i], uv[2u * i + 1u]);
+        q.level_da = vec4(q.da[0], q.da[1], q.da[2], q.da[3]);
+    }
+    return q;
+}
+
+// The bilinear taps of a lookup on level l.
+Taps lookup_taps(Lookup q, uint l) {
+    return CUBE ? cube_taps(l, q.item, q.p.face, q.uv) : bilinear_taps(l, q.item, q.uv);
+}
+
+// The base level's texel `nearest` reads; `read` false: zero.
+uint lookup_nearest(Lookup q, out bool read) {
+    if (CUBE) {
+        read = q.ok;
+        return cube_nearest_texel(q.item, q.p);
+    }
+    return nearest_texel(q.item, q.uv, read);
+}
+
+// Channel k of the four taps from the stack the kernel binds as `tex`, a corner's the mean of
+// the other three (twin: `CubeTaps::values`).
+vec4 tap_values(Taps taps, uint k) {
     uint c = pc.channels;
-    float a00 = taps.read[0] ? tex[taps.texel[0] * c + k] : 0.0;
-    float a10 = taps.read[1] ? tex[taps.texel[1] * c + k] : 0.0;
-    float a01 = taps.read[2] ? tex[taps.texel[2] * c + k] : 0.0;
-    float a11 = taps.read[3] ? tex[taps.texel[3] * c + k] : 0.0;
-    precise float top = a00 + taps.frac.x * (a10 - a00);
-    precise float bottom = a01 + taps.frac.x * (a11 - a01);
+    float a[4];
+    for (uint j = 0u; j < 4u; ++j) {
+        a[j] = taps.read[j] ? tex[taps.texel[j] * c + k] : 0.0;
+    }
+    if (CUBE && taps.corner < 4u) {
+        precise float sum = a[0] + a[1] + a[2] + a[3];
+        a[taps.corner] = sum / 3.0;
+    }
+    return vec4(a[0], a[1], a[2], a[3]);
+}
+
+// Channel k of bilinear filtering over `taps` (twin: `bilinear`).
+float bilerp(Taps taps, uint k) {
+    vec4 a = tap_values(taps, k);
+    precise float top = a.x + taps.frac.x * (a.y - a.x);
+    precise float bottom = a.z + taps.frac.x * (a.w - a.z);
     precise float value = top + taps.frac.y * (bottom - top);
     return value;
 }

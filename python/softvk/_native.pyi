@@ -217,9 +217,13 @@ class NvTextureMip:
 
     texture_shape: List[int]
     max_mip_level: int
+    cube_mode: bool
 
-def nv_texture_construct_mip(tex: F32, max_mip_level: Optional[int] = None) -> NvTextureMip:
-    """nvdiffrast's ``texture_construct_mip`` of a ``[B, H, W, C]`` texture."""
+def nv_texture_construct_mip(
+    tex: F32, max_mip_level: Optional[int] = None, cube_mode: bool = False
+) -> NvTextureMip:
+    """nvdiffrast's ``texture_construct_mip`` of a ``[B, H, W, C]`` texture, or with
+    ``cube_mode`` of a ``[B, 6, S, S, C]`` cube map."""
 
 def nv_texture(
     tex: F32,

@@ -12,8 +12,10 @@ use std::sync::MutexGuard;
 use numpy::{IntoPyArray, PyArrayMethods, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 use softvk::gpu::Context;
-use softvk::raster::hard::gpu::texture::{Levels, Lookup, Lookups, TexLayout, TextureSampler};
-use softvk::raster::hard::texture::{Boundary, Filter, Mode};
+use softvk::raster::hard::gpu::texture::{
+    Levels, Lookup, Lookups, TexLayout, TexMode, TextureSampler,
+};
+use softvk::raster::hard::texture::Filter;
 
 use super::{Engine, checked, value_error, with_engine};
 
@@ -41,8 +43,11 @@ fn with_sampler<T: Send>(
 /// shape, built once for a texture that stays the same between calls.
 #[pyclass(frozen, module = "softvk._native")]
 pub struct NvTextureMip {
-    /// `[items, height, width, channels]` of the texture it was built from.
-    shape: [usize; 4],
+    /// The shape of the texture it was built from: `[B, H, W, C]`, or a cube map's
+    /// `[B, 6, S, S, C]`.
+    shape: Vec<usize>,
+    /// Whether it is a cube map's.
+    cube: bool,
     /// The stack's layout (the base included).
     layout: TexLayout,
     /// Levels 1 and below, as the stack lays them out.
@@ -54,7 +59,13 @@ impl NvTextureMip {
     /// The shape of the texture it was built from.
     #[getter]
     fn texture_shape(&self) -> Vec<usize> {
-        self.shape.to_vec()
+        self.shape.clone()
+    }
+
+    /// Whether it was built for a cube map.
+    #[getter]
+    fn cube_mode(&self) -> bool {
+        self.cube
     }
 
     /// Mip levels below the texture.
@@ -72,18 +83,35 @@ impl NvTextureMip {
     }
 }
 
-/// A `[B, H, W, C]` float32 texture's data and its dimensions.
+/// A float32 texture's data, its shape and the stack's `[items, height, width, channels]`: a
+/// 2D texture `[B, H, W, C]`, or a cube map `[B, 6, S, S, C]` (items: its `6 B` faces).
 fn texture_dims<'a>(
     name: &str,
     tex: &'a PyReadonlyArrayDyn<'_, f32>,
-) -> PyResult<(&'a [f32], [usize; 4])> {
-    let (data, shape) = checked(name, tex, &[None; 4])?;
+    cube: bool,
+) -> PyResult<(&'a [f32], Vec<usize>, [usize; 4])> {
+    let want: &[Option<usize>] = if cube {
+        &[None, Some(6), None, None, None]
+    } else {
+        &[None; 4]
+    };
+    let (data, shape) = checked(name, tex, want)?;
     if shape.contains(&0) {
         return Err(value_error(format!(
             "{name} has shape {shape:?}; every extent must be > 0"
         )));
     }
-    Ok((data, [shape[0], shape[1], shape[2], shape[3]]))
+    let dims = if cube {
+        if shape[2] != shape[3] {
+            return Err(value_error(format!(
+                "{name} has shape {shape:?}; a cube map's faces must be square"
+            )));
+        }
+        [6 * shape[0], shape[2], shape[3], shape[4]]
+    } else {
+        [shape[0], shape[1], shape[2], shape[3]]
+    };
+    Ok((data, shape, dims))
 }
 
 fn u32_of(what: &str, v: usize) -> PyResult<u32> {
@@ -102,21 +130,34 @@ fn with_mips(dims: [usize; 4], max_mip_level: Option<u32>) -> PyResult<TexLayout
     .map_err(super::to_py)
 }
 
-/// `nv_texture_construct_mip(tex, max_mip_level=None)`: nvdiffrast's `texture_construct_mip`.
+/// The Python shape of level `level` of a stack over a texture of `shape`.
+fn level_shape(shape: &[usize], layout: &TexLayout, level: u32) -> Vec<usize> {
+    let [w, h] = layout.level_size(level).map(|v| v as usize);
+    let mut s = shape.to_vec();
+    let n = s.len();
+    s[n - 3] = h;
+    s[n - 2] = w;
+    s
+}
+
+/// `nv_texture_construct_mip(tex, max_mip_level=None, cube_mode=False)`: nvdiffrast's
+/// `texture_construct_mip`.
 #[pyfunction]
-#[pyo3(signature = (tex, max_mip_level = None))]
+#[pyo3(signature = (tex, max_mip_level = None, cube_mode = false))]
 pub fn nv_texture_construct_mip(
     py: Python<'_>,
     tex: PyReadonlyArrayDyn<'_, f32>,
     max_mip_level: Option<u32>,
+    cube_mode: bool,
 ) -> PyResult<NvTextureMip> {
-    let (data, shape) = texture_dims("tex", &tex)?;
-    let layout = with_mips(shape, max_mip_level)?;
+    let (data, shape, dims) = texture_dims("tex", &tex, cube_mode)?;
+    let layout = with_mips(dims, max_mip_level)?;
     let data = data.to_vec();
     let mut stack = with_sampler(py, |ctx, s| s.construct_mip(ctx, &layout, &data))?;
     let below = stack.split_off(data.len());
     Ok(NvTextureMip {
         shape,
+        cube: cube_mode,
         layout,
         below,
     })
@@ -135,8 +176,10 @@ enum Source {
 
 /// One call's checked inputs.
 struct TextureCall {
+    /// `tex`'s shape.
+    shape: Vec<usize>,
     layout: TexLayout,
-    mode: Mode,
+    mode: TexMode,
     source: Source,
     /// The base alone ([`Source::Build`]) or every level.
     stack: Vec<f32>,
@@ -159,15 +202,18 @@ impl TextureCall {
         mip_levels: Option<&[PyReadonlyArrayDyn<'_, f32>]>,
         max_mip_level: Option<u32>,
     ) -> PyResult<Self> {
-        let (tex_data, dims) = texture_dims("tex", tex)?;
-        let (uv_data, uv_shape) = checked("uv", uv, &[None, None, None, Some(2)])?;
-        let [b, h, w] = [uv_shape[0], uv_shape[1], uv_shape[2]];
         let filter = Filter::parse(filter, uv_da.is_some() || bias.is_some(), max_mip_level)
             .map_err(super::to_py)?;
-        let boundary = Boundary::parse(boundary).map_err(super::to_py)?;
+        let mode = TexMode::parse(filter, boundary).map_err(super::to_py)?;
+        let cube = matches!(mode, TexMode::Cube(_));
+        let (tex_data, shape, dims) = texture_dims("tex", tex, cube)?;
+        let n_uv = mode.uv_floats() as usize;
+        let (uv_data, uv_shape) = checked("uv", uv, &[None, None, None, Some(n_uv)])?;
+        let [b, h, w] = [uv_shape[0], uv_shape[1], uv_shape[2]];
         let mips = filter.uses_mips();
+        let n_da = mode.uv_da_floats() as usize;
         let uv_da = match uv_da.filter(|_| mips) {
-            Some(d) => Some(checked("uv_da", d, &[b, h, w, 4].map(Some))?.0.to_vec()),
+            Some(d) => Some(checked("uv_da", d, &[b, h, w, n_da].map(Some))?.0.to_vec()),
             None => None,
         };
         let bias = match bias.filter(|_| mips) {
@@ -192,10 +238,13 @@ impl TextureCall {
         let (layout, source, stack) = match (mips, mip, mip_levels) {
             (false, ..) => (base()?, Source::Custom, tex_data.to_vec()),
             (true, Some(m), _) => {
-                if m.shape != dims {
+                if m.shape != shape || m.cube != cube {
+                    let kind = |c: bool| if c { "cube map" } else { "2D texture" };
                     return Err(value_error(format!(
-                        "mip was built for a {:?} texture, tex is {dims:?}",
-                        m.shape
+                        "mip was built for a {:?} {}, tex is a {shape:?} {}",
+                        m.shape,
+                        kind(m.cube),
+                        kind(cube)
                     )));
                 }
                 let mut stack = tex_data.to_vec();
@@ -214,8 +263,10 @@ impl TextureCall {
                 .map_err(super::to_py)?;
                 let mut stack = tex_data.to_vec();
                 for (k, level) in levels.iter().enumerate() {
-                    let [lw, lh] = layout.level_size(1 + k as u32);
-                    let want = [dims[0], lh as usize, lw as usize, dims[3]].map(Some);
+                    let want: Vec<_> = level_shape(&shape, &layout, 1 + k as u32)
+                        .into_iter()
+                        .map(Some)
+                        .collect();
                     stack.extend_from_slice(
                         checked(&format!("mip level {}", k + 1), level, &want)?.0,
                     );
@@ -229,8 +280,9 @@ impl TextureCall {
             ),
         };
         Ok(Self {
+            shape,
             layout,
-            mode: Mode { filter, boundary },
+            mode,
             source,
             stack,
             grid: Lookups {
@@ -370,8 +422,7 @@ pub fn nv_texture_grad<'py>(
     if call.source == Source::Custom && layout.levels > 1 {
         for l in (1..layout.levels).rev() {
             let part = g.stack.split_off(layout.level_offset(l) as usize);
-            let [w, h] = layout.level_size(l);
-            let shape = [layout.items as usize, h as usize, w as usize, c];
+            let shape = level_shape(&call.shape, &layout, l);
             levels.push(part.into_pyarray(py).reshape(shape)?.into_any());
         }
         levels.reverse();
@@ -379,18 +430,18 @@ pub fn nv_texture_grad<'py>(
     // Level 0: the texture's own gradient (with the levels' carried into it but for a custom
     // stack).
     g.stack.truncate(layout.level_texels(0) as usize * c);
-    let base = [
-        layout.items as usize,
-        layout.height as usize,
-        layout.width as usize,
-        c,
-    ];
+    let (n_uv, n_da) = (call.mode.uv_floats(), call.mode.uv_da_floats());
     Ok((
-        g.stack.into_pyarray(py).reshape(base)?.into_any(),
-        g.uv.into_pyarray(py).reshape(call.dims(2))?.into_any(),
+        g.stack
+            .into_pyarray(py)
+            .reshape(call.shape.clone())?
+            .into_any(),
+        g.uv.into_pyarray(py)
+            .reshape(call.dims(n_uv as usize))?
+            .into_any(),
         call.grid
             .uv_da
-            .then(|| g.uv_da.into_pyarray(py).reshape(call.dims(4)))
+            .then(|| g.uv_da.into_pyarray(py).reshape(call.dims(n_da as usize)))
             .transpose()?
             .map(|a| a.into_any()),
         call.grid

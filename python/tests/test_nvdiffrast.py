@@ -530,25 +530,6 @@ def test_contexts_check_their_arguments(gpu):
     assert dr.RasterizeCudaContext(device="cuda:1").device == "cuda:1"
 
 
-def test_cube_maps_raise_not_implemented():
-    cube = torch.ones(1, 6, 4, 4, 3)
-    uv = torch.zeros(1, 2, 2, 3)
-    with pytest.raises(NotImplementedError, match="cube"):
-        dr.texture(cube, uv, filter_mode="linear", boundary_mode="cube")
-    with pytest.raises(NotImplementedError, match="cube"):
-        dr.texture_construct_mip(cube, max_mip_level=2, cube_mode=True)
-
-
-# ---------------------------------------------------------------------------------------------
-# An nvdiffrast program, with only its import changed.
-
-SAMPLE = '''
-import os
-
-import numpy as np
-import torch
-import nvdiffrast.torch as dr
-
 def render(glctx, pos, pos_idx, vtx_col, resolution):
     rast_out, _ = dr.rasterize(glctx, pos, pos_idx, resolution=[resolution, resolution])
     color, _ = dr.interpolate(vtx_col[None, ...], rast_out, pos_idx)

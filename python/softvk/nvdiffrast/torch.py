@@ -620,18 +620,24 @@ def _max_mip_level(what, max_mip_level):
 
 
 def _texture_shape(what, tex, cube):
-    """``tex`` float32 ``[>0, >0, >0, >0]`` (2D) of a size nvdiffrast takes."""
+    """``tex`` float32 ``[>0, >0, >0, >0]`` (2D), or a cube map's ``[>0, 6, S, S, >0]``, of a
+    size nvdiffrast takes."""
     _tensor(what, "tex", tex, torch.float32)
     if cube:
-        raise NotImplementedError(
-            "softvk.nvdiffrast: cube maps (boundary_mode='cube', cube_mode=True) are not in "
-            "softvk yet; 2D textures are"
-        )
-    if tex.dim() != 4 or not _positive(tex.shape):
-        raise _shape_error(what, "tex", tex, "[>0, >0, >0, >0]")
-    if tex.shape[1] > _MAX_TEXTURE or tex.shape[2] > _MAX_TEXTURE:
+        if tex.dim() != 5 or not _positive(tex.shape) or tex.shape[1] != 6:
+            raise _shape_error(what, "tex", tex, "[>0, 6, >0, >0, >0] (a cube map)")
+        if tex.shape[2] != tex.shape[3]:
+            raise _value_error(
+                what, f"cube map faces must be square, got {list(tex.shape[2:4])}"
+            )
+        size = tex.shape[2:4]
+    else:
+        if tex.dim() != 4 or not _positive(tex.shape):
+            raise _shape_error(what, "tex", tex, "[>0, >0, >0, >0]")
+        size = tex.shape[1:3]
+    if size[0] > _MAX_TEXTURE or size[1] > _MAX_TEXTURE:
         raise _value_error(
-            what, f"texture size too large: {list(tex.shape[1:3])} (at most {_MAX_TEXTURE})"
+            what, f"texture size too large: {list(size)} (at most {_MAX_TEXTURE})"
         )
 
 
@@ -697,19 +703,23 @@ def texture(tex, uv, uv_da=None, mip_level_bias=None, mip=None, filter_mode="aut
     Args:
         tex: float32 texture ``[minibatch, height, width, channels]`` (a minibatch of 1
             broadcasts); any size and channel count (the mipmap modes need each extent to halve
-            evenly down to the levels used, as nvdiffrast's).
+            evenly down to the levels used, as nvdiffrast's). With ``boundary_mode='cube'`` a
+            cube map ``[minibatch, 6, size, size, channels]``, faces +x, -x, +y, -y, +z, -z.
         uv: float32 coordinates ``[minibatch, height, width, 2]``, ``u`` across the texture's
-            width and ``v`` down its rows, the texture spanning [0, 1].
+            width and ``v`` down its rows, the texture spanning [0, 1]; for a cube map,
+            directions ``[minibatch, height, width, 3]`` of any length.
         uv_da: float32 ``[minibatch, height, width, 4]``: ``(du/dX, du/dY, dv/dX, dv/dY)``,
             the pixel derivatives of ``uv`` that pick the mip level (``interpolate``'s
-            ``out_da``).
+            ``out_da``); for a cube map ``[minibatch, height, width, 6]``, ``(dx/dX, dx/dY,
+            dy/dX, dy/dY, dz/dX, dz/dY)``.
         mip_level_bias: float32 ``[minibatch, height, width]``, added to the level (the
             level itself without ``uv_da``).
         mip: ``texture_construct_mip``'s result, or a list of float32 tensors, one per mip
             level below ``tex`` (their gradients their own); built here when omitted.
         filter_mode: 'auto' (the best ``uv_da`` and ``mip_level_bias`` allow), 'nearest',
             'linear', 'linear-mipmap-nearest' or 'linear-mipmap-linear'.
-        boundary_mode: 'wrap', 'clamp' or 'zero' ('cube': not in softvk yet).
+        boundary_mode: 'wrap', 'clamp', 'zero', or 'cube' (a cube map, seamless across its
+            faces).
         max_mip_level: the most mip levels to build and use (0: none).
 
     Returns:
@@ -735,10 +745,12 @@ def texture(tex, uv, uv_da=None, mip_level_bias=None, mip=None, filter_mode="aut
         )
     if mipmaps and max_mip_level == 0:
         filter_mode, mipmaps = "linear", False
-    _texture_shape(what, tex, boundary_mode == "cube")
+    cube = boundary_mode == "cube"
+    _texture_shape(what, tex, cube)
+    n_uv, n_da = (3, 6) if cube else (2, 4)
     _tensor(what, "uv", uv, torch.float32)
-    if uv.dim() != 4 or not _positive(uv.shape) or uv.shape[3] != 2:
-        raise _shape_error(what, "uv", uv, "[>0, >0, >0, 2]")
+    if uv.dim() != 4 or not _positive(uv.shape) or uv.shape[3] != n_uv:
+        raise _shape_error(what, "uv", uv, f"[>0, >0, >0, {n_uv}]")
     batch, height, width = (int(s) for s in uv.shape[:3])
     if tex.shape[0] not in (1, batch):
         raise _value_error(
@@ -751,8 +763,10 @@ def texture(tex, uv, uv_da=None, mip_level_bias=None, mip=None, filter_mode="aut
     else:
         if uv_da is not None:
             _tensor(what, "uv_da", uv_da, torch.float32)
-            if tuple(uv_da.shape) != (batch, height, width, 4):
-                raise _shape_error(what, "uv_da", uv_da, f"[{batch}, {height}, {width}, 4]")
+            if tuple(uv_da.shape) != (batch, height, width, n_da):
+                raise _shape_error(
+                    what, "uv_da", uv_da, f"[{batch}, {height}, {width}, {n_da}]"
+                )
         if mip_level_bias is not None:
             _tensor(what, "mip_level_bias", mip_level_bias, torch.float32)
             if tuple(mip_level_bias.shape) != (batch, height, width):
@@ -769,6 +783,12 @@ def texture(tex, uv, uv_da=None, mip_level_bias=None, mip=None, filter_mode="aut
                 "mip must be texture_construct_mip's result or a list of tensors, got "
                 f"{type(mip).__name__}",
             )
+        elif mip is not None and mip.cube_mode != cube:
+            raise _value_error(
+                what,
+                "mip was built with cube_mode=" + str(mip.cube_mode) + ", but boundary_mode "
+                f"is {boundary_mode!r}",
+            )
     _same_device(what, tex=tex, uv=uv, uv_da=uv_da, mip_level_bias=mip_level_bias)
     return _TextureFunction.apply(
         filter_mode, boundary_mode, mip, max_mip_level, tex, uv, uv_da, mip_level_bias, *levels
@@ -783,14 +803,14 @@ def texture_construct_mip(tex, max_mip_level=None, cube_mode=False):
     Args:
         tex: as ``texture``'s.
         max_mip_level: the most mip levels to build (``None``: down to 1 x 1).
-        cube_mode: True for a cube map (not in softvk yet).
+        cube_mode: True for a cube map ``[minibatch, 6, size, size, channels]``.
     """
     what = "texture_construct_mip"
     if cube_mode is not True and cube_mode is not False:
         raise _type_error(what, f"cube_mode must be True or False, got {cube_mode!r}")
     max_mip_level = _max_mip_level(what, max_mip_level)
     _texture_shape(what, tex, cube_mode)
-    return _native.nv_texture_construct_mip(_host(tex, np.float32), max_mip_level)
+    return _native.nv_texture_construct_mip(_host(tex, np.float32), max_mip_level, cube_mode)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -19,6 +19,10 @@
 //!    from its base, each level's gradient carried into the level above it, from the last up
 //!    (`hard_tex_mip_grad.comp`).
 //!
+//! A cube map ([`TexMode::Cube`]) is a stack of `6 B` items, the faces +x, −x, +y, −y, +z, −z
+//! of each cube, `S × S` texels (twin: [`crate::raster::hard::texture::cube`]); its lookups'
+//! `uv` are directions, three floats, and `uv_da` six. The kernels are the same, specialized.
+//!
 //! No float atomics anywhere: the same bits on every run, whatever the workgroup shape.
 
 use bytemuck::{Pod, Zeroable};
@@ -35,6 +39,54 @@ pub const PARTIAL_BLOCK: u64 = 256;
 
 /// The largest texture extent (nvdiffrast's; a binding's size limits a texture long before).
 pub const MAX_EXTENT: u32 = 1 << 16;
+
+/// What a lookup does: a 2D texture's filter and boundary modes, or a cube map's filter
+/// (nvdiffrast's `boundary_mode='cube'`: seamless across faces, `uv` a direction).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TexMode {
+    /// A 2D texture.
+    Flat(Mode),
+    /// A cube map.
+    Cube(Filter),
+}
+
+impl TexMode {
+    /// nvdiffrast's `boundary_mode` with a filter: `'cube'` a cube map, the others a 2D mode.
+    pub fn parse(filter: Filter, boundary: &str) -> Result<Self> {
+        if boundary == "cube" {
+            return Ok(Self::Cube(filter));
+        }
+        Boundary::parse(boundary).map(|boundary| Self::Flat(Mode { filter, boundary }))
+    }
+
+    /// The filter mode.
+    pub fn filter(&self) -> Filter {
+        match *self {
+            Self::Flat(m) => m.filter,
+            Self::Cube(f) => f,
+        }
+    }
+
+    /// Floats of a lookup's `uv`: 2, or a direction's 3.
+    pub fn uv_floats(&self) -> u64 {
+        if self.is_cube() { 3 } else { 2 }
+    }
+
+    /// Floats of a lookup's `uv_da`: 4, or a direction's 6.
+    pub fn uv_da_floats(&self) -> u64 {
+        if self.is_cube() { 6 } else { 4 }
+    }
+
+    fn is_cube(&self) -> bool {
+        matches!(self, Self::Cube(_))
+    }
+}
+
+impl From<Mode> for TexMode {
+    fn from(mode: Mode) -> Self {
+        Self::Flat(mode)
+    }
+}
 
 /// Push constants of every texture kernel (`Push` in `kernels/include/texture.glsl`).
 #[repr(C)]
@@ -159,8 +211,9 @@ impl TexLayout {
     }
 }
 
-/// What a lookup grid is: `batch × height × width` lookups (`uv [B, h, w, 2]`), with `uv_da`
-/// (`[B, h, w, 4]`) and `mip_level_bias` (`[B, h, w]`) bound or not.
+/// What a lookup grid is: `batch × height × width` lookups (`uv [B, h, w, 2]`, a cube map's
+/// `[B, h, w, 3]`), with `uv_da` (`[B, h, w, 4]`, a cube map's `[B, h, w, 6]`) and
+/// `mip_level_bias` (`[B, h, w]`) bound or not.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Lookups {
     /// Minibatch items B.
@@ -187,9 +240,9 @@ impl Lookups {
 pub struct TextureInputs<'a> {
     /// The stack, [`TexLayout::floats`] f32.
     pub stack: BufferRange<'a>,
-    /// Two f32 a lookup.
+    /// [`TexMode::uv_floats`] f32 a lookup.
     pub uv: BufferRange<'a>,
-    /// Four f32 a lookup, when [`Lookups::uv_da`].
+    /// [`TexMode::uv_da_floats`] f32 a lookup, when [`Lookups::uv_da`].
     pub uv_da: Option<BufferRange<'a>>,
     /// One f32 a lookup, when [`Lookups::bias`].
     pub bias: Option<BufferRange<'a>>,
@@ -200,9 +253,9 @@ pub struct TextureInputs<'a> {
 pub struct TextureGradOutputs<'a> {
     /// Every level's texel gradients, laid out as the stack.
     pub stack: BufferRange<'a>,
-    /// Two f32 a lookup.
+    /// [`TexMode::uv_floats`] f32 a lookup.
     pub uv: BufferRange<'a>,
-    /// Four f32 a lookup, when [`Lookups::uv_da`].
+    /// [`TexMode::uv_da_floats`] f32 a lookup, when [`Lookups::uv_da`].
     pub uv_da: Option<BufferRange<'a>>,
     /// One f32 a lookup, when [`Lookups::bias`].
     pub bias: Option<BufferRange<'a>>,
@@ -236,9 +289,9 @@ impl<'a> Levels<'a> {
 pub struct Lookup<'a> {
     /// The grid, and which level inputs it has.
     pub grid: Lookups,
-    /// `[B, h, w, 2]`.
+    /// `[B, h, w, 2]` (a cube map's `[B, h, w, 3]`).
     pub uv: &'a [f32],
-    /// `[B, h, w, 4]`.
+    /// `[B, h, w, 4]` (a cube map's `[B, h, w, 6]`).
     pub uv_da: Option<&'a [f32]>,
     /// `[B, h, w]`.
     pub bias: Option<&'a [f32]>,
@@ -278,17 +331,20 @@ pub struct TextureSampler {
 }
 
 /// The kernels' specialization constants of a mode: `[FILTER, BOUNDARY]`.
-fn mode_constants(mode: Mode) -> [u32; 2] {
-    let filter = match mode.filter {
+fn mode_constants(mode: TexMode) -> [u32; 2] {
+    let filter = match mode.filter() {
         Filter::Nearest => 0,
         Filter::Linear => 1,
         Filter::LinearMipmapNearest => 2,
         Filter::LinearMipmapLinear => 3,
     };
-    let boundary = match mode.boundary {
-        Boundary::Wrap => 0,
-        Boundary::Clamp => 1,
-        Boundary::Zero => 2,
+    let boundary = match mode {
+        TexMode::Flat(m) => match m.boundary {
+            Boundary::Wrap => 0,
+            Boundary::Clamp => 1,
+            Boundary::Zero => 2,
+        },
+        TexMode::Cube(_) => 3,
     };
     [filter, boundary]
 }
@@ -304,28 +360,46 @@ fn taps(filter: Filter) -> u64 {
 
 /// The push constants of a call, checked: the grid against the stack, the sizes against the
 /// kernels' 32-bit indices and the device's bindings.
-fn push_for(ctx: &Context, layout: &TexLayout, mode: Mode, grid: &Lookups) -> Result<TexPush> {
+fn push_for(ctx: &Context, layout: &TexLayout, mode: TexMode, grid: &Lookups) -> Result<TexPush> {
     if grid.batch == 0 || grid.height == 0 || grid.width == 0 {
         return Err(Error::Input(format!(
-            "texture: uv must have a positive size, not [{}, {}, {}, 2]",
-            grid.batch, grid.height, grid.width
+            "texture: uv must have a positive size, not [{}, {}, {}, {}]",
+            grid.batch,
+            grid.height,
+            grid.width,
+            mode.uv_floats()
         )));
     }
-    if layout.items != 1 && layout.items != grid.batch {
+    if mode.is_cube() {
+        let cubes = layout.items / 6;
+        if layout.width != layout.height || layout.items % 6 != 0 {
+            return Err(Error::Input(format!(
+                "texture: a cube map is [B, 6, S, S, C]: a stack of 6 B square faces, not {} of \
+                 {}x{}",
+                layout.items, layout.height, layout.width
+            )));
+        }
+        if cubes != 1 && cubes != grid.batch {
+            return Err(Error::Input(format!(
+                "texture: tex has {cubes} minibatch items, uv {}: they must match, or tex have 1",
+                grid.batch
+            )));
+        }
+    } else if layout.items != 1 && layout.items != grid.batch {
         return Err(Error::Input(format!(
             "texture: tex has {} minibatch items, uv {}: they must match, or tex have 1",
             layout.items, grid.batch
         )));
     }
-    if mode.filter.uses_mips() && !grid.uv_da && !grid.bias {
+    if mode.filter().uses_mips() && !grid.uv_da && !grid.bias {
         return Err(Error::Input(
             "texture: the mipmap filter modes need uv_da or mip_level_bias".into(),
         ));
     }
     let points = grid.points();
     let limit = u64::from(ctx.info().limits.max_storage_buffer_range);
-    let widest = (16 * points).max(4 * layout.floats());
-    if widest > limit || points * taps(mode.filter) > u64::from(u32::MAX) {
+    let widest = (4 * mode.uv_da_floats() * points).max(4 * layout.floats());
+    if widest > limit || points * taps(mode.filter()) > u64::from(u32::MAX) {
         return Err(Error::DeviceLimit {
             kind: LimitKind::StorageBinding,
             what: format!(
@@ -356,6 +430,7 @@ fn push_for(ctx: &Context, layout: &TexLayout, mode: Mode, grid: &Lookups) -> Re
 
 /// Checks that the optional level inputs are bound exactly when the grid says so.
 fn check_level_inputs(
+    mode: TexMode,
     grid: &Lookups,
     uv_da: Option<&BufferRange<'_>>,
     bias: Option<&BufferRange<'_>>,
@@ -363,7 +438,7 @@ fn check_level_inputs(
 ) -> Result<()> {
     let points = grid.points();
     match (grid.uv_da, uv_da) {
-        (true, Some(r)) => r.require(16 * points, what)?,
+        (true, Some(r)) => r.require(4 * mode.uv_da_floats() * points, what)?,
         (false, None) => {}
         _ => {
             return Err(Error::Misuse(format!(
@@ -437,7 +512,7 @@ impl TextureSampler {
         &self,
         rec: &mut Recorder<'_>,
         layout: &TexLayout,
-        mode: Mode,
+        mode: TexMode,
         grid: &Lookups,
         inputs: TextureInputs<'_>,
         out: BufferRange<'_>,
@@ -446,8 +521,16 @@ impl TextureSampler {
         let push = push_for(ctx, layout, mode, grid)?;
         let points = grid.points();
         inputs.stack.require(4 * layout.floats(), "texture stack")?;
-        inputs.uv.require(8 * points, "texture uv")?;
-        check_level_inputs(grid, inputs.uv_da.as_ref(), inputs.bias.as_ref(), "texture")?;
+        inputs
+            .uv
+            .require(4 * mode.uv_floats() * points, "texture uv")?;
+        check_level_inputs(
+            mode,
+            grid,
+            inputs.uv_da.as_ref(),
+            inputs.bias.as_ref(),
+            "texture",
+        )?;
         let c = u64::from(layout.channels);
         out.require(4 * c * points, "texture output")?;
         let kernel = ctx.kernel(&specs::HARD_TEX, &mode_constants(mode))?;
@@ -456,7 +539,7 @@ impl TextureSampler {
                 &kernel,
                 &specs::HardTexBindings {
                     tex: inputs.stack.sub(0, 4 * layout.floats()),
-                    uv: inputs.uv.sub(0, 8 * points),
+                    uv: inputs.uv.sub(0, 4 * mode.uv_floats() * points),
                     uv_da: inputs.uv_da.unwrap_or(inputs.uv),
                     bias: inputs.bias.unwrap_or(inputs.uv),
                     out: out.sub(0, 4 * c * points),
@@ -478,7 +561,7 @@ impl TextureSampler {
         &mut self,
         rec: &mut Recorder<'_>,
         layout: &TexLayout,
-        mode: Mode,
+        mode: TexMode,
         grid: &Lookups,
         inputs: TextureInputs<'_>,
         dy: BufferRange<'_>,
@@ -491,9 +574,18 @@ impl TextureSampler {
         let c = u64::from(layout.channels);
         let floats = layout.floats();
         inputs.stack.require(4 * floats, "texture stack")?;
-        inputs.uv.require(8 * points, "texture uv")?;
-        check_level_inputs(grid, inputs.uv_da.as_ref(), inputs.bias.as_ref(), "texture")?;
+        inputs
+            .uv
+            .require(4 * mode.uv_floats() * points, "texture uv")?;
         check_level_inputs(
+            mode,
+            grid,
+            inputs.uv_da.as_ref(),
+            inputs.bias.as_ref(),
+            "texture",
+        )?;
+        check_level_inputs(
+            mode,
             grid,
             grads.uv_da.as_ref(),
             grads.bias.as_ref(),
@@ -501,8 +593,10 @@ impl TextureSampler {
         )?;
         dy.require(4 * c * points, "the output's gradient")?;
         grads.stack.require(4 * floats, "the stack's gradient")?;
-        grads.uv.require(8 * points, "the gradient of uv")?;
-        let entries = points * taps(mode.filter);
+        grads
+            .uv
+            .require(4 * mode.uv_floats() * points, "the gradient of uv")?;
+        let entries = points * taps(mode.filter());
         let texels = layout.texels();
         let limit = u64::from(ctx.info().limits.max_storage_buffer_range);
         if 4 * entries * c > limit || texels >= u64::from(u32::MAX) {
@@ -566,11 +660,11 @@ impl TextureSampler {
                 &grad,
                 &specs::HardTexGradBindings {
                     tex: inputs.stack.sub(0, 4 * floats),
-                    uv: inputs.uv.sub(0, 8 * points),
+                    uv: inputs.uv.sub(0, 4 * mode.uv_floats() * points),
                     uv_da: inputs.uv_da.unwrap_or(inputs.uv),
                     bias: inputs.bias.unwrap_or(inputs.uv),
                     dy: dy.sub(0, 4 * c * points),
-                    grad_uv: grads.uv.sub(0, 8 * points),
+                    grad_uv: grads.uv.sub(0, 4 * mode.uv_floats() * points),
                     grad_uv_da: grads.uv_da.unwrap_or(grads.uv),
                     grad_bias: grads.bias.unwrap_or(grads.uv),
                     keys: keys.range(0, 8 * entries),
@@ -643,7 +737,12 @@ impl TextureSampler {
 }
 
 /// Checks a host call's arrays against its layout and grid: lengths, and every value finite.
-fn check_host(layout: &TexLayout, levels: Levels<'_>, lookup: &Lookup<'_>) -> Result<()> {
+fn check_host(
+    layout: &TexLayout,
+    mode: TexMode,
+    levels: Levels<'_>,
+    lookup: &Lookup<'_>,
+) -> Result<()> {
     let (stack, need, what) = match levels {
         Levels::Build(t) => (
             t,
@@ -676,8 +775,8 @@ fn check_host(layout: &TexLayout, levels: Levels<'_>, lookup: &Lookup<'_>) -> Re
     }
     let points = lookup.grid.points();
     let arrays = [
-        ("uv", Some(lookup.uv), 2),
-        ("uv_da", lookup.uv_da, 4),
+        ("uv", Some(lookup.uv), mode.uv_floats()),
+        ("uv_da", lookup.uv_da, mode.uv_da_floats()),
         ("mip_level_bias", lookup.bias, 1),
     ];
     for (name, array, per) in arrays {
@@ -786,7 +885,15 @@ impl TextureSampler {
             uv_da: None,
             bias: None,
         };
-        check_host(layout, Levels::Build(tex), &lookup)?;
+        check_host(
+            layout,
+            TexMode::Flat(Mode {
+                filter: Filter::Linear,
+                boundary: Boundary::Wrap,
+            }),
+            Levels::Build(tex),
+            &lookup,
+        )?;
         self.upload(ctx, layout, Levels::Build(tex), &lookup, &[])?;
         let floats = layout.floats();
         host_buffer(
@@ -822,11 +929,11 @@ impl TextureSampler {
         &mut self,
         ctx: &Context,
         layout: &TexLayout,
-        mode: Mode,
+        mode: TexMode,
         levels: Levels<'_>,
         lookup: &Lookup<'_>,
     ) -> Result<Vec<f32>> {
-        check_host(layout, levels, lookup)?;
+        check_host(layout, mode, levels, lookup)?;
         push_for(ctx, layout, mode, &lookup.grid)?;
         let at = self.upload(ctx, layout, levels, lookup, &[])?;
         let out_len = lookup.grid.points() * u64::from(layout.channels);
@@ -848,7 +955,7 @@ impl TextureSampler {
                     layout,
                     mode,
                     &lookup.grid,
-                    host_inputs(stack, &input, &at, layout, lookup),
+                    host_inputs(stack, &input, &at, layout, mode, lookup),
                     output.range(0, 4 * out_len),
                 )
             })?;
@@ -871,12 +978,12 @@ impl TextureSampler {
         &mut self,
         ctx: &Context,
         layout: &TexLayout,
-        mode: Mode,
+        mode: TexMode,
         levels: Levels<'_>,
         lookup: &Lookup<'_>,
         dy: &[f32],
     ) -> Result<TextureGrads32> {
-        check_host(layout, levels, lookup)?;
+        check_host(layout, mode, levels, lookup)?;
         push_for(ctx, layout, mode, &lookup.grid)?;
         let points = lookup.grid.points();
         let c = u64::from(layout.channels);
@@ -897,8 +1004,12 @@ impl TextureSampler {
         let floats = layout.floats();
         let out_at = layout_of(&[
             4 * floats,
-            8 * points,
-            if lookup.grid.uv_da { 16 * points } else { 0 },
+            4 * mode.uv_floats() * points,
+            if lookup.grid.uv_da {
+                4 * mode.uv_da_floats() * points
+            } else {
+                0
+            },
             if lookup.grid.bias { 4 * points } else { 0 },
         ]);
         host_buffer(
@@ -920,15 +1031,15 @@ impl TextureSampler {
                     layout,
                     mode,
                     &lookup.grid,
-                    host_inputs(&stack, &input, &at, layout, lookup),
+                    host_inputs(&stack, &input, &at, layout, mode, lookup),
                     input.range(at[4], 4 * points * c),
                     TextureGradOutputs {
                         stack: output.range(out_at[0], 4 * floats),
-                        uv: output.range(out_at[1], 8 * points),
+                        uv: output.range(out_at[1], 4 * mode.uv_floats() * points),
                         uv_da: lookup
                             .grid
                             .uv_da
-                            .then(|| output.range(out_at[2], 16 * points)),
+                            .then(|| output.range(out_at[2], 4 * mode.uv_da_floats() * points)),
                         bias: lookup
                             .grid
                             .bias
@@ -944,11 +1055,11 @@ impl TextureSampler {
                 .ok_or_else(|| Error::Misuse("readback memory is not host-mapped".into()))?;
             let mut g = TextureGrads32 {
                 stack: vec![0.0; floats as usize],
-                uv: vec![0.0; 2 * points as usize],
+                uv: vec![0.0; (mode.uv_floats() * points) as usize],
                 uv_da: vec![
                     0.0;
                     if lookup.grid.uv_da {
-                        4 * points as usize
+                        (mode.uv_da_floats() * points) as usize
                     } else {
                         0
                     }
@@ -973,13 +1084,17 @@ fn host_inputs<'a>(
     input: &'a Buffer,
     at: &[u64],
     layout: &TexLayout,
+    mode: TexMode,
     lookup: &Lookup<'_>,
 ) -> TextureInputs<'a> {
     let points = lookup.grid.points();
     TextureInputs {
         stack: stack.range(0, 4 * layout.floats()),
-        uv: input.range(at[1], 8 * points),
-        uv_da: lookup.grid.uv_da.then(|| input.range(at[2], 16 * points)),
+        uv: input.range(at[1], 4 * mode.uv_floats() * points),
+        uv_da: lookup
+            .grid
+            .uv_da
+            .then(|| input.range(at[2], 4 * mode.uv_da_floats() * points)),
         bias: lookup.grid.bias.then(|| input.range(at[3], 4 * points)),
     }
 }
