@@ -530,6 +530,16 @@ def test_contexts_check_their_arguments(gpu):
     assert dr.RasterizeCudaContext(device="cuda:1").device == "cuda:1"
 
 
+# ---------------------------------------------------------------------------------------------
+# An nvdiffrast program, with only its import changed.
+
+SAMPLE = '''
+import os
+
+import numpy as np
+import torch
+import nvdiffrast.torch as dr
+
 def render(glctx, pos, pos_idx, vtx_col, resolution):
     rast_out, _ = dr.rasterize(glctx, pos, pos_idx, resolution=[resolution, resolution])
     color, _ = dr.interpolate(vtx_col[None, ...], rast_out, pos_idx)
