@@ -1,5 +1,6 @@
-"""Smoke versions of the nvdiffrast-style samples in python/examples/nvdiffrast (cube.py, pose.py):
-a few seconds each, on tiny images. The full runs and their numbers are in RESULTS.md."""
+"""Smoke versions of the nvdiffrast-style samples in python/examples/nvdiffrast (cube.py, pose.py,
+albedo.py, envphong.py): a few seconds each, on tiny images. The full runs and their numbers
+are in RESULTS.md."""
 
 import argparse
 import importlib.util
@@ -27,6 +28,16 @@ def cube():
 @pytest.fixture(scope="module")
 def pose():
     return load("pose")
+
+
+@pytest.fixture(scope="module")
+def albedo():
+    return load("albedo")
+
+
+@pytest.fixture(scope="module")
+def envphong():
+    return load("envphong")
 
 
 def test_cube_is_closed_and_wound_outwards(cube):
@@ -94,3 +105,36 @@ def test_pose_search_then_descent(gpu, pose):
     result = pose.fit_pose(scene, target_q, rng, args)
     assert result["search_err"] < result["uniform_best_err"], result
     assert result["final_err"] < 1.0, result
+
+
+def test_albedo_error_falls_at_32x32(gpu, albedo):
+    result = albedo.fit_albedo(resolution=32, iters=20, tex_size=32, eval_views=2, log_every=10,
+                               quiet=True)
+    first, last = result["rows"][0], result["rows"][-1]
+    assert result["chart_texels"] > 0.3 * 32 * 32
+    assert last["albedo_rms"] < 0.8 * first["albedo_rms"], (first, last)
+    assert last["image_mse"] < 0.5 * first["image_mse"], (first, last)
+
+
+def test_the_sample_cube_map_faces_are_the_ones_texture_reads(gpu, envphong):
+    """A cube map whose texels hold their own directions, looked up at random directions,
+    returns those directions (up to bilinear filtering of a curved field): the sample builds its
+    environment with the face table texture() reads."""
+    import torch
+
+    import softvk.nvdiffrast.torch as dr
+
+    env = torch.from_numpy(envphong.face_directions(32).astype(np.float32))[None].contiguous()
+    d = torch.from_numpy(np.random.default_rng(0).standard_normal((1, 16, 16, 3)))
+    d = d.float().contiguous()
+    got = dr.texture(env, d, filter_mode="linear", boundary_mode="cube")
+    want = d / torch.linalg.norm(d, dim=-1, keepdim=True)
+    assert float((got - want).abs().max()) < 0.01
+
+
+def test_envphong_error_falls_at_32x32(gpu, envphong):
+    result = envphong.fit_envphong(resolution=32, iters=20, env_size=8, eval_views=2,
+                                   log_every=10, quiet=True)
+    first, last = result["rows"][0], result["rows"][-1]
+    assert last["image_mse"] < 0.5 * first["image_mse"], (first, last)
+    assert last["env_rms"] < first["env_rms"], (first, last)
