@@ -85,9 +85,12 @@ fn sort(c: &mut Criterion) {
     group.finish();
 }
 
-/// `texture`, linear-mipmap-linear with wrap, a 1024² RGB texture: the forward (the mip levels
-/// built, then the lookups) and the backward (after its own mip levels), per lookup, at 512²
-/// lookups (three texels a pixel: λ ≈ 1.6) and 1024² (λ ≈ 0.6).
+/// `texture`, linear-mipmap-linear: the forward (the mip levels built, then the lookups) and
+/// the backward (after its own mip levels), per lookup, at 512² and 1024² lookups. 2D: a 1024²
+/// RGB texture with wrap, a slightly rotated grid 1.5 turns of the texture across (three
+/// texels a pixel at 512²: λ ≈ 1.6; λ ≈ 0.6 at 1024²). Cube: a cube map of 512² RGB faces (1.5
+/// times the 2D texels), the whole sphere as a panorama with its pixel derivatives as `uv_da`
+/// (λ ≈ 2 along the equator at 512², 1 at 1024²).
 fn texture(c: &mut Criterion) {
     use softvk::gpu::MemoryKind;
     use softvk::raster::hard::gpu::texture::{
@@ -100,99 +103,145 @@ fn texture(c: &mut Criterion) {
     group
         .sample_size(10)
         .measurement_time(Duration::from_secs(4));
-    let layout = TexLayout::with_mips(1, 1024, 1024, 3, None).unwrap();
-    let mut tex = vec![0.0f32; layout.floats() as usize];
-    for (i, v) in tex
-        .iter_mut()
-        .enumerate()
-        .take(layout.level_texels(0) as usize * 3)
-    {
-        *v = ((i as u32).wrapping_mul(2_654_435_761) >> 8) as f32 / 16_777_216.0;
-    }
-    let stack = ctx.upload_buffer("bench texture stack", &tex).unwrap();
-    let mode = TexMode::Flat(Mode {
+    let flat = TexMode::Flat(Mode {
         filter: Filter::LinearMipmapLinear,
         boundary: Boundary::Wrap,
     });
-    for side in [512u32, 1024] {
-        let grid = Lookups {
-            batch: 1,
-            height: side,
-            width: side,
-            uv_da: true,
-            bias: false,
+    let cube = TexMode::Cube(Filter::LinearMipmapLinear);
+    for mode in [flat, cube] {
+        let (layout, kind) = if mode == flat {
+            (TexLayout::with_mips(1, 1024, 1024, 3, None).unwrap(), "")
+        } else {
+            (TexLayout::with_mips(6, 512, 512, 3, None).unwrap(), "cube ")
         };
-        let n = grid.points();
-        // A slightly rotated, magnified-then-minified grid: 1.5 turns of the texture across.
-        let k = 1.5 / f64::from(side);
-        let (mut uv, mut da) = (Vec::new(), Vec::new());
-        for y in 0..side {
-            for x in 0..side {
-                let (fx, fy) = (f64::from(x) + 0.5, f64::from(y) + 0.5);
-                uv.extend([(k * (fx + 0.1 * fy)) as f32, (k * (fy - 0.1 * fx)) as f32]);
-                da.extend([k as f32, (0.1 * k) as f32, (-0.1 * k) as f32, k as f32]);
-            }
+        let mut tex = vec![0.0f32; layout.floats() as usize];
+        for (i, v) in tex
+            .iter_mut()
+            .enumerate()
+            .take(layout.level_texels(0) as usize * 3)
+        {
+            *v = ((i as u32).wrapping_mul(2_654_435_761) >> 8) as f32 / 16_777_216.0;
         }
-        let uv = ctx.upload_buffer("bench uv", &uv).unwrap();
-        let da = ctx.upload_buffer("bench uv_da", &da).unwrap();
-        let dy = ctx
-            .upload_buffer("bench dy", &vec![1e-3f32; 3 * n as usize])
-            .unwrap();
-        let out = ctx
-            .create_buffer("bench out", 12 * n, MemoryKind::Device)
-            .unwrap();
-        let g_stack = ctx
-            .create_buffer("bench grad stack", 4 * layout.floats(), MemoryKind::Device)
-            .unwrap();
-        let g_uv = ctx
-            .create_buffer("bench grad uv", 8 * n, MemoryKind::Device)
-            .unwrap();
-        let g_da = ctx
-            .create_buffer("bench grad uv_da", 16 * n, MemoryKind::Device)
-            .unwrap();
-        let inputs = TextureInputs {
-            stack: stack.whole(),
-            uv: uv.whole(),
-            uv_da: Some(da.whole()),
-            bias: None,
-        };
-        group.throughput(Throughput::Elements(n));
-        for backward in [false, true] {
-            let mut timer = Timer::new(&ctx, 2).unwrap();
-            let recorded = ctx
-                .record(Some(&mut timer), |rec| {
-                    sampler.record_construct_mip(rec, &layout, stack.whole())?;
-                    if backward {
-                        sampler.record_sample_grad(
-                            rec,
-                            &layout,
-                            mode,
-                            &grid,
-                            inputs,
-                            dy.whole(),
-                            TextureGradOutputs {
-                                stack: g_stack.whole(),
-                                uv: g_uv.whole(),
-                                uv_da: Some(g_da.whole()),
-                                bias: None,
-                            },
-                            true,
-                        )
-                    } else {
-                        sampler.record_sample(rec, &layout, mode, &grid, inputs, out.whole())
-                    }
-                })
+        let stack = ctx.upload_buffer("bench texture stack", &tex).unwrap();
+        for side in [512u32, 1024] {
+            let grid = Lookups {
+                batch: 1,
+                height: side,
+                width: side,
+                uv_da: true,
+                bias: false,
+            };
+            let n = grid.points();
+            let (uv, da) = if mode == flat {
+                flat_lookups(side)
+            } else {
+                cube_lookups(side)
+            };
+            let uv = ctx.upload_buffer("bench uv", &uv).unwrap();
+            let da = ctx.upload_buffer("bench uv_da", &da).unwrap();
+            let dy = ctx
+                .upload_buffer("bench dy", &vec![1e-3f32; 3 * n as usize])
                 .unwrap();
-            let what = if backward { "backward" } else { "forward" };
-            for (clock, gpu_clock) in [("wall", false), ("gpu", true)] {
-                group.bench_function(
-                    BenchmarkId::new(clock, format!("{what} {side}² lookups")),
-                    |b| b.iter_custom(|iters| time(&recorded, &timer, &ctx, gpu_clock, iters)),
-                );
+            let out = ctx
+                .create_buffer("bench out", 12 * n, MemoryKind::Device)
+                .unwrap();
+            let g_stack = ctx
+                .create_buffer("bench grad stack", 4 * layout.floats(), MemoryKind::Device)
+                .unwrap();
+            let g_uv = ctx
+                .create_buffer(
+                    "bench grad uv",
+                    4 * mode.uv_floats() * n,
+                    MemoryKind::Device,
+                )
+                .unwrap();
+            let g_da = ctx
+                .create_buffer(
+                    "bench grad uv_da",
+                    4 * mode.uv_da_floats() * n,
+                    MemoryKind::Device,
+                )
+                .unwrap();
+            let inputs = TextureInputs {
+                stack: stack.whole(),
+                uv: uv.whole(),
+                uv_da: Some(da.whole()),
+                bias: None,
+            };
+            group.throughput(Throughput::Elements(n));
+            for backward in [false, true] {
+                let mut timer = Timer::new(&ctx, 2).unwrap();
+                let recorded = ctx
+                    .record(Some(&mut timer), |rec| {
+                        sampler.record_construct_mip(rec, &layout, stack.whole())?;
+                        if backward {
+                            sampler.record_sample_grad(
+                                rec,
+                                &layout,
+                                mode,
+                                &grid,
+                                inputs,
+                                dy.whole(),
+                                TextureGradOutputs {
+                                    stack: g_stack.whole(),
+                                    uv: g_uv.whole(),
+                                    uv_da: Some(g_da.whole()),
+                                    bias: None,
+                                },
+                                true,
+                            )
+                        } else {
+                            sampler.record_sample(rec, &layout, mode, &grid, inputs, out.whole())
+                        }
+                    })
+                    .unwrap();
+                let what = if backward { "backward" } else { "forward" };
+                for (clock, gpu_clock) in [("wall", false), ("gpu", true)] {
+                    group.bench_function(
+                        BenchmarkId::new(clock, format!("{kind}{what} {side}² lookups")),
+                        |b| b.iter_custom(|iters| time(&recorded, &timer, &ctx, gpu_clock, iters)),
+                    );
+                }
             }
         }
     }
     group.finish();
+}
+
+/// The 2D bench's `uv` and `uv_da` on a `side²` grid.
+fn flat_lookups(side: u32) -> (Vec<f32>, Vec<f32>) {
+    let k = 1.5 / f64::from(side);
+    let (mut uv, mut da) = (Vec::new(), Vec::new());
+    for y in 0..side {
+        for x in 0..side {
+            let (fx, fy) = (f64::from(x) + 0.5, f64::from(y) + 0.5);
+            uv.extend([(k * (fx + 0.1 * fy)) as f32, (k * (fy - 0.1 * fx)) as f32]);
+            da.extend([k as f32, (0.1 * k) as f32, (-0.1 * k) as f32, k as f32]);
+        }
+    }
+    (uv, da)
+}
+
+/// The cube bench's directions and their pixel derivatives on a `side²` grid: the whole
+/// sphere by longitude across and latitude down (an environment map's panorama), every face
+/// read, about `4 · 512 / side` texels a pixel along the equator.
+fn cube_lookups(side: u32) -> (Vec<f32>, Vec<f32>) {
+    use std::f64::consts::PI;
+    let n = f64::from(side);
+    let (mut dir, mut da) = (Vec::new(), Vec::new());
+    for y in 0..side {
+        for x in 0..side {
+            let phi = 2.0 * PI * (f64::from(x) + 0.5) / n;
+            let theta = PI * (f64::from(y) + 0.5) / n - 0.5 * PI;
+            let (sp, cp, st, ct) = (phi.sin(), phi.cos(), theta.sin(), theta.cos());
+            dir.extend([ct * sp, st, ct * cp].map(|v| v as f32));
+            let (kx, ky) = (2.0 * PI / n, PI / n);
+            let d_phi = [ct * cp, 0.0, -ct * sp].map(|v| v * kx);
+            let d_theta = [-st * sp, ct, -st * cp].map(|v| v * ky);
+            da.extend((0..3).flat_map(|k| [d_phi[k] as f32, d_theta[k] as f32]));
+        }
+    }
+    (dir, da)
 }
 
 criterion_group!(benches, scan, sort, texture);

@@ -1,7 +1,12 @@
 //! nvdiffrast's primitives as a workload (`softvk bench --scene nv-…`): each primitive forward
 //! and backward through [`HardRasterizer`]'s host-slice entry points (what the Python package
 //! calls: the host copies are part of the cost), and a whole iteration rasterize →
-//! interpolate → antialias → L2 → backward, on spot seen by a perspective camera.
+//! interpolate → antialias → L2 → backward, on spot seen by a perspective camera; then
+//! `texture` (linear-mipmap-linear, the mip levels built in each call as nvdiffrast builds them
+//! without a prebuilt stack) forward and backward, and the textured iteration rasterize →
+//! interpolate (uv with its pixel derivatives) → texture → antialias → L2 → backward, through
+//! [`TextureSampler`]'s host-slice entry points. The texture is 1024² RGB with wrap; each
+//! vertex's uv is its screen position scaled 1.2 (λ ≈ 2.3 at 512²).
 //!
 //! - `nv-spot-256`: spot (5 856 faces, centred, longest side 2) at 256², the scene of
 //!   BENCHMARKS.md's PyTorch3D comparison (distance 2, elevation 10°, azimuth 30°, 60° field
@@ -20,8 +25,12 @@ use crate::error::{Error, Result};
 use crate::gpu::Context;
 use crate::mesh::Mesh;
 use crate::raster::hard::antialias::TopologyHash;
+use crate::raster::hard::gpu::texture::{
+    Levels, Lookup, Lookups, TexLayout, TexMode, TextureSampler,
+};
 use crate::raster::hard::gpu::{AntialiasArgs, HardRasterizer};
 use crate::raster::hard::reference::AttrLayout;
+use crate::raster::hard::texture::{Boundary, Filter, Mode};
 use crate::raster::hard::{Shape, Topology};
 
 /// The scenes, run only when named.
@@ -198,7 +207,19 @@ struct IterationScene<'a> {
     layout: AttrLayout,
     topology: &'a TopologyHash,
     target: &'a [f32],
+    /// Two floats a vertex: the textured iteration's uv.
+    uv: &'a [f32],
+    uv_layout: AttrLayout,
+    tex_layout: TexLayout,
+    /// The texture's base level.
+    tex: &'a [f32],
 }
+
+/// The textured iteration's texture mode.
+const TEX_MODE: TexMode = TexMode::Flat(Mode {
+    filter: Filter::LinearMipmapLinear,
+    boundary: Boundary::Wrap,
+});
 
 /// Everything one iteration computes.
 struct Iteration {
@@ -281,6 +302,101 @@ impl IterationScene<'_> {
             g_interp,
         })
     }
+
+    /// `texture`'s lookups at a layer's interpolated uv and its pixel derivatives.
+    fn lookup<'b>(&self, uv: &'b [f32], uv_da: &'b [f32]) -> Lookup<'b> {
+        Lookup {
+            grid: Lookups {
+                batch: 1,
+                height: self.shape.height,
+                width: self.shape.width,
+                uv_da: true,
+                bias: false,
+            },
+            uv,
+            uv_da: Some(uv_da),
+            bias: None,
+        }
+    }
+
+    /// rasterize → interpolate uv (with rast_db, its derivatives) → texture → antialias → L2
+    /// → antialias, texture, interpolate and rasterize backward; the interpolated uv and
+    /// `uv_da`, and the texture's output gradient, for the timed texture calls.
+    fn iterate_textured(
+        &self,
+        ctx: &Context,
+        h: &mut HardRasterizer,
+        t: &mut TextureSampler,
+    ) -> Result<Textured> {
+        let s = self.shape;
+        let size = [s.height, s.width];
+        let layer = h.rasterize(ctx, s, self.pos, self.tri, None)?;
+        let (uv, uv_da) = h.interpolate(
+            ctx,
+            self.uv,
+            self.uv_layout,
+            &layer.rast,
+            self.tri,
+            size,
+            Some(&layer.rast_db),
+            &[0, 1],
+        )?;
+        let lookup = self.lookup(&uv, &uv_da);
+        let color = t.sample(
+            ctx,
+            &self.tex_layout,
+            TEX_MODE,
+            Levels::Build(self.tex),
+            &lookup,
+        )?;
+        let args = self.antialias_args(&layer.rast, &color);
+        let out = h.antialias(ctx, &args, self.topology)?;
+        let n = out.len() as f32 / 3.0;
+        let dy: Vec<f32> = out
+            .iter()
+            .zip(self.target)
+            .map(|(o, t)| 2.0 * (o - t) / n)
+            .collect();
+        let (g_color, g_pos_antialias) = h.antialias_grad(ctx, &args, self.topology, &dy, 1.0)?;
+        let g = t.sample_grad(
+            ctx,
+            &self.tex_layout,
+            TEX_MODE,
+            Levels::Build(self.tex),
+            &lookup,
+            &g_color,
+        )?;
+        let g_interp = h.interpolate_grad(
+            ctx,
+            self.uv,
+            self.uv_layout,
+            &layer.rast,
+            self.tri,
+            size,
+            Some(&layer.rast_db),
+            &[0, 1],
+            &g.uv,
+            Some(&g.uv_da),
+        )?;
+        let g_pos = h.rasterize_grad(
+            ctx,
+            s,
+            self.pos,
+            self.tri,
+            &layer.rast,
+            &g_interp.rast,
+            Some(&g_interp.rast_db),
+        )?;
+        std::hint::black_box((g_pos, g_pos_antialias, g.stack));
+        Ok(Textured { uv, uv_da, g_color })
+    }
+}
+
+/// What the textured iteration leaves for the timed texture calls.
+struct Textured {
+    uv: Vec<f32>,
+    uv_da: Vec<f32>,
+    g_color: Vec<f32>,
 }
 
 /// Runs the named scenes of [`HARD_SCENES`] (`repeat` timed calls each).
@@ -293,6 +409,12 @@ pub fn run_hard(
 ) -> Result<Vec<HardRecord>> {
     let mut hard = HardRasterizer::new(ctx)?;
     hard.time_passes(ctx)?;
+    let mut sampler = TextureSampler::new(ctx)?;
+    sampler.time_passes(ctx)?;
+    let tex_layout = TexLayout::with_mips(1, 1024, 1024, 3, None)?;
+    let tex: Vec<f32> = (0..tex_layout.level_texels(0) as u32 * 3)
+        .map(|i| (i.wrapping_mul(2_654_435_761) >> 8) as f32 / 16_777_216.0)
+        .collect();
     let mut records = Vec::new();
     for &name in scenes {
         let (times, size) = match name {
@@ -320,24 +442,36 @@ pub fn run_hard(
             attr_count: 3,
             per_item: false,
         };
+        let uv: Vec<f32> = pos
+            .chunks(4)
+            .flat_map(|p| [0.5 + 1.2 * p[0] / p[3], 0.5 + 1.2 * p[1] / p[3]])
+            .collect();
+        let uv_layout = AttrLayout {
+            attr_count: 2,
+            ..layout
+        };
         let topology = TopologyHash::new(&tri);
         let target = vec![0.25f32; 3 * n];
         let mut timed: Vec<Timed> = Vec::new();
+        type Run<'r> = dyn FnMut(&mut HardRasterizer, &mut TextureSampler) -> Result<()> + 'r;
         let mut time = |what: &'static str,
-                        run: &mut dyn FnMut(&mut HardRasterizer) -> Result<()>,
-                        hard: &mut HardRasterizer|
+                        run: &mut Run<'_>,
+                        hard: &mut HardRasterizer,
+                        sampler: &mut TextureSampler|
          -> Result<()> {
-            run(hard)?; // warm-up: buffers grown, pipelines made
+            run(hard, sampler)?; // warm-up: buffers grown, pipelines made
             hard.take_timings();
+            sampler.take_timings();
             let mut walls = Vec::new();
             let mut passes = Vec::new();
             for _ in 0..repeat {
                 let start = std::time::Instant::now();
-                run(hard)?;
+                run(hard, sampler)?;
                 walls.push(start.elapsed().as_secs_f64() * 1e3);
                 passes.push(
                     hard.take_timings()
                         .into_iter()
+                        .chain(sampler.take_timings())
                         .filter(|p| p.depth == 0)
                         .map(|p| (p.name, p.ms))
                         .collect(),
@@ -358,6 +492,10 @@ pub fn run_hard(
             layout,
             topology: &topology,
             target: &target,
+            uv: &uv,
+            uv_layout,
+            tex_layout,
+            tex: &tex,
         };
         // One untimed iteration gives every timed call its inputs.
         let it = scene.iterate(ctx, &mut hard)?;
@@ -367,21 +505,23 @@ pub fn run_hard(
         let (layer, dy, g_color, g_interp) = (&it.layer, &it.dy, &it.g_color, &it.g_interp);
         time(
             "rasterize",
-            &mut |h| h.rasterize(ctx, &shape, &pos, &tri, None).map(drop),
+            &mut |h, _| h.rasterize(ctx, &shape, &pos, &tri, None).map(drop),
             &mut hard,
+            &mut sampler,
         )?;
         let dy_rast = g_interp.rast.clone();
         time(
             "rasterize backward",
-            &mut |h| {
+            &mut |h, _| {
                 h.rasterize_grad(ctx, &shape, &pos, &tri, &layer.rast, &dy_rast, None)
                     .map(drop)
             },
             &mut hard,
+            &mut sampler,
         )?;
         time(
             "interpolate",
-            &mut |h| {
+            &mut |h, _| {
                 h.interpolate(
                     ctx,
                     &colors,
@@ -395,10 +535,11 @@ pub fn run_hard(
                 .map(drop)
             },
             &mut hard,
+            &mut sampler,
         )?;
         time(
             "interpolate backward",
-            &mut |h| {
+            &mut |h, _| {
                 h.interpolate_grad(
                     ctx,
                     &colors,
@@ -414,25 +555,66 @@ pub fn run_hard(
                 .map(drop)
             },
             &mut hard,
+            &mut sampler,
         )?;
         time(
             "antialias",
-            &mut |h| h.antialias(ctx, &args, &topology).map(drop),
+            &mut |h, _| h.antialias(ctx, &args, &topology).map(drop),
             &mut hard,
+            &mut sampler,
         )?;
         time(
             "antialias backward",
-            &mut |h| h.antialias_grad(ctx, &args, &topology, dy, 1.0).map(drop),
+            &mut |h, _| h.antialias_grad(ctx, &args, &topology, dy, 1.0).map(drop),
             &mut hard,
+            &mut sampler,
         )?;
         time(
             "iteration",
-            &mut |h| {
+            &mut |h, _| {
                 scene
                     .iterate(ctx, h)
                     .map(|it| drop(std::hint::black_box(it)))
             },
             &mut hard,
+            &mut sampler,
+        )?;
+        let textured = scene.iterate_textured(ctx, &mut hard, &mut sampler)?;
+        let lookup = scene.lookup(&textured.uv, &textured.uv_da);
+        time(
+            "texture",
+            &mut |_, t| {
+                t.sample(ctx, &tex_layout, TEX_MODE, Levels::Build(&tex), &lookup)
+                    .map(drop)
+            },
+            &mut hard,
+            &mut sampler,
+        )?;
+        time(
+            "texture backward",
+            &mut |_, t| {
+                t.sample_grad(
+                    ctx,
+                    &tex_layout,
+                    TEX_MODE,
+                    Levels::Build(&tex),
+                    &lookup,
+                    &textured.g_color,
+                )
+                .map(drop)
+            },
+            &mut hard,
+            &mut sampler,
+        )?;
+        time(
+            "textured iteration",
+            &mut |h, t| {
+                scene
+                    .iterate_textured(ctx, h, t)
+                    .map(|it| drop(std::hint::black_box(it)))
+            },
+            &mut hard,
+            &mut sampler,
         )?;
         for (what, walls, passes) in timed {
             let mut names: Vec<String> = Vec::new();

@@ -2,18 +2,22 @@
 random views, in the style of nvdiffrast's samples, on softvk's nvdiffrast API
 (``softvk.nvdiffrast.torch``): rasterize -> interpolate the reflection vector with its pixel
 derivatives -> texture (a cube map, 'linear-mipmap-linear', the level from those derivatives) ->
-Phong highlight -> antialias -> L2 -> backward.
+diffuse and Blinn-Phong terms -> antialias -> L2 -> backward.
 
     SOFTVK_VALIDATION=0 /usr/bin/python3 python/examples/nvdiffrast/envphong.py \
         --resolution 256 --iters 300 --out /tmp/nvsamples/envphong
 
 The mesh is known and fixed (Spot, with area-weighted vertex normals). A pixel's colour is what
-its reflection direction sees in the environment plus a Phong highlight from one light of known
-direction: ``env(r) + ks · max(r · l, 0)^e``, where ``r`` is the view direction reflected about
-the normal at each vertex, interpolated. The true environment is made here: a sky-to-ground
-gradient with three coloured lights; the true ``ks`` is (0.9, 0.8, 0.6) and ``e`` 40. The
-learned environment starts a uniform grey (0.5) and the Phong parameters at ks 0.2, e 8 (``e``
-learned through its logarithm).
+its reflection direction sees in the environment plus a diffuse and a Blinn-Phong term from one
+light of known direction ``l``: ``env(r) + kd · max(n · l, 0) + ks · max(n · h, 0)^e``, where
+``r`` is the view direction reflected about the normal at each vertex (interpolated, with its
+pixel derivatives), ``n`` the interpolated normal and ``h`` the half vector of ``l`` and the
+direction to the eye. (A highlight of ``r · l`` alone would be a function of ``r``, which the
+environment absorbs: its parameters could not be told from the map. These terms depend on the
+normal and the view, so they can.) The true environment is made here: a sky-to-ground gradient
+with three coloured lights; the true ``kd`` is (0.3, 0.2, 0.1), ``ks`` (0.9, 0.8, 0.6) and ``e``
+40. The learned environment starts a uniform grey (0.5), ``kd`` and ``ks`` at 0.2 and ``e`` at 8
+(learned through its logarithm).
 
 Each iteration draws a random camera orbiting the cow and takes one Adam step on the mean
 squared pixel difference. The image error is the mean squared difference over
@@ -39,6 +43,7 @@ import mesh  # noqa: E402  (this folder's mesh.py: Spot and the cameras)
 import softvk.nvdiffrast.torch as dr  # noqa: E402
 
 LIGHT = np.array([-0.3, 0.9, 0.3]) / np.linalg.norm([-0.3, 0.9, 0.3])
+TRUE_KD = (0.3, 0.2, 0.1)
 TRUE_KS = (0.9, 0.8, 0.6)
 TRUE_EXPONENT = 40.0
 
@@ -88,9 +93,9 @@ class Scene:
         self.light = torch.from_numpy(LIGHT.astype(np.float32))
         self.topology = dr.antialias_construct_topology_hash(self.tri)
 
-    def render(self, mvp, eye, env, ks, log_e):
-        """The antialiased image [1, H, W, 3] of Spot reflecting ``env`` with highlight
-        ``ks``, exponent ``exp(log_e)``, seen from ``eye`` by ``mvp``."""
+    def render(self, mvp, eye, env, kd, ks, log_e):
+        """The antialiased image [1, H, W, 3] of Spot reflecting ``env``, with diffuse ``kd``
+        and highlight ``ks``, exponent ``exp(log_e)``, seen from ``eye`` by ``mvp``."""
         clip = mesh.to_clip(mvp, self.pos)
         res = [self.resolution, self.resolution]
         rast, rast_db = dr.rasterize(self.glctx, clip, self.tri, resolution=res)
@@ -101,10 +106,18 @@ class Scene:
         r, r_da = dr.interpolate(refl[None].contiguous(), rast, self.tri, rast_db=rast_db,
                                  diff_attrs="all")
         seen = dr.texture(env, r, r_da, filter_mode="linear-mipmap-linear", boundary_mode="cube")
-        r_unit = r / torch.linalg.norm(r, dim=-1, keepdim=True).clamp_min(1e-6)
-        spec = torch.clamp((r_unit * self.light).sum(-1, keepdim=True), min=0.0)
-        highlight = ks * torch.pow(spec.clamp_min(1e-8), torch.exp(log_e))
-        colour = (seen + highlight) * (rast[..., 3:] > 0)
+        # The normal and the direction to the eye, per pixel.
+        n_eye, _ = dr.interpolate(torch.cat([n, -view], 1)[None].contiguous(), rast, self.tri)
+
+        def unit(v):
+            return v / torch.linalg.norm(v, dim=-1, keepdim=True).clamp_min(1e-6)
+
+        n_pix, to_eye = unit(n_eye[..., :3]), unit(n_eye[..., 3:])
+        half = unit(to_eye + self.light)
+        diffuse = torch.clamp((n_pix * self.light).sum(-1, keepdim=True), min=0.0)
+        spec = torch.clamp((n_pix * half).sum(-1, keepdim=True), min=1e-8)
+        colour = seen + kd * diffuse + ks * torch.pow(spec, torch.exp(log_e))
+        colour = colour * (rast[..., 3:] > 0)
         return dr.antialias(colour.contiguous(), rast, clip, self.tri,
                             topology_hash=self.topology)
 
@@ -115,21 +128,24 @@ def fit_envphong(resolution=256, iters=300, env_size=64, lr=0.03, eval_views=4, 
     rng = np.random.default_rng(seed)
     scene = Scene(resolution)
     true_env = true_environment(env_size)
+    true_kd = torch.tensor(TRUE_KD)
     true_ks = torch.tensor(TRUE_KS)
     true_log_e = torch.tensor(np.log(TRUE_EXPONENT), dtype=torch.float32)
     env = torch.full_like(true_env, 0.5).requires_grad_()
+    kd = torch.full((3,), 0.2).requires_grad_()
     ks = torch.full((3,), 0.2).requires_grad_()
     log_e = torch.tensor(np.log(8.0), dtype=torch.float32).requires_grad_()
-    optimizer = torch.optim.Adam([env, ks, log_e], lr=lr)
+    optimizer = torch.optim.Adam([env, kd, ks, log_e], lr=lr)
     cameras = [mesh.random_camera(np.random.default_rng(2000 + k)) for k in range(eval_views)]
     with torch.no_grad():
-        targets = [scene.render(mvp, eye, true_env, true_ks, true_log_e) for mvp, eye in cameras]
+        targets = [scene.render(mvp, eye, true_env, true_kd, true_ks, true_log_e)
+                   for mvp, eye in cameras]
 
     def errors():
         with torch.no_grad():
             env_rms = float(torch.sqrt(((env - true_env) ** 2).mean()))
             image = float(np.mean([
-                float(torch.mean((scene.render(mvp, eye, env, ks, log_e) - t) ** 2))
+                float(torch.mean((scene.render(mvp, eye, env, kd, ks, log_e) - t) ** 2))
                 for (mvp, eye), t in zip(cameras, targets)
             ]))
         return env_rms, image
@@ -141,11 +157,13 @@ def fit_envphong(resolution=256, iters=300, env_size=64, lr=0.03, eval_views=4, 
         if it % log_every == 0 or it == iters:
             env_rms, image = errors()
             row = {"iteration": it, "image_mse": image, "env_rms": env_rms,
+                   "kd_r": float(kd[0]), "kd_g": float(kd[1]), "kd_b": float(kd[2]),
                    "ks_r": float(ks[0]), "ks_g": float(ks[1]), "ks_b": float(ks[2]),
                    "exponent": float(torch.exp(log_e)), "step_seconds": step_seconds}
             rows.append(row)
             if not quiet:
                 print(f"it={it} image_mse={image:.6f} env_rms={env_rms:.4f} "
+                      f"kd={[round(float(k), 3) for k in kd]} "
                       f"ks={[round(float(k), 3) for k in ks]} e={row['exponent']:.1f} "
                       f"steps={step_seconds:.1f}s", flush=True)
         if it == iters:
@@ -153,13 +171,14 @@ def fit_envphong(resolution=256, iters=300, env_size=64, lr=0.03, eval_views=4, 
         t0 = time.perf_counter()
         mvp, eye = mesh.random_camera(rng)
         with torch.no_grad():
-            target = scene.render(mvp, eye, true_env, true_ks, true_log_e)
-        loss = torch.mean((scene.render(mvp, eye, env, ks, log_e) - target) ** 2)
+            target = scene.render(mvp, eye, true_env, true_kd, true_ks, true_log_e)
+        loss = torch.mean((scene.render(mvp, eye, env, kd, ks, log_e) - target) ** 2)
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
         with torch.no_grad():
             env.clamp_(min=0.0)
+            kd.clamp_(min=0.0)
             ks.clamp_(min=0.0)
         step_seconds += time.perf_counter() - t0
 
@@ -193,7 +212,8 @@ def main():
     print(
         f"envphong {args.resolution}²: image MSE {first['image_mse']:.5f} -> "
         f"{last['image_mse']:.5f} ({last['image_mse'] / first['image_mse']:.3f} of the start), "
-        f"environment RMS {first['env_rms']:.4f} -> {last['env_rms']:.4f}, ks "
+        f"environment RMS {first['env_rms']:.4f} -> {last['env_rms']:.4f}, kd "
+        f"{[round(last[k], 3) for k in ('kd_r', 'kd_g', 'kd_b')]} (true {list(TRUE_KD)}), ks "
         f"{[round(last[k], 3) for k in ('ks_r', 'ks_g', 'ks_b')]} (true {list(TRUE_KS)}), "
         f"e {last['exponent']:.1f} (true {TRUE_EXPONENT}), {args.iters} iterations, "
         f"{r['step_s']:.0f} s of steps ({1e3 * r['step_s'] / args.iters:.0f} ms each)"

@@ -29,7 +29,9 @@ use bytemuck::{Pod, Zeroable};
 
 use super::{HostBuffers, device_buffer, get, host_buffer, layout_of, put};
 use crate::error::{Error, LimitKind, Result};
-use crate::gpu::{Buffer, BufferRange, Context, MemoryKind, Recorder, groups, specs};
+use crate::gpu::{
+    Buffer, BufferRange, Context, MemoryKind, PassTime, Recorder, Timer, groups, specs,
+};
 use crate::primitives::sort::{RadixSort, SortScratch};
 use crate::raster::hard::texture::{Boundary, Filter, Mode};
 
@@ -328,6 +330,8 @@ pub struct TextureSampler {
     scratch: GradScratch,
     stack: Option<Buffer>,
     host: HostBuffers,
+    timer: Option<Timer>,
+    timings: Vec<PassTime>,
 }
 
 /// The kernels' specialization constants of a mode: `[FILTER, BOUNDARY]`.
@@ -469,7 +473,38 @@ impl TextureSampler {
             scratch: GradScratch::default(),
             stack: None,
             host: HostBuffers::default(),
+            timer: None,
+            timings: Vec::new(),
         })
+    }
+
+    /// Times every pass of the host entry points from now on (for `softvk bench`).
+    pub fn time_passes(&mut self, ctx: &Context) -> Result<()> {
+        self.timer = Some(Timer::new(ctx, 16)?);
+        Ok(())
+    }
+
+    /// The pass times the host entry points recorded since the last call, in order.
+    pub fn take_timings(&mut self) -> Vec<PassTime> {
+        std::mem::take(&mut self.timings)
+    }
+
+    /// Submits what `f` records and waits, timed when [`TextureSampler::time_passes`] asked.
+    fn submit(
+        &mut self,
+        ctx: &Context,
+        f: impl FnOnce(&mut Self, &mut Recorder<'_>) -> Result<()>,
+    ) -> Result<()> {
+        let mut timer = self.timer.take();
+        let result = ctx.submit_and_wait_timed(timer.as_mut(), |rec| f(self, rec));
+        let times = match (&result, &timer) {
+            (Ok(()), Some(t)) => t.results(ctx),
+            _ => Ok(Vec::new()),
+        };
+        self.timer = timer;
+        result?;
+        self.timings.extend(times?);
+        Ok(())
     }
 
     /// Records `texture_construct_mip` in place: levels 1 and below of `stack` from level 0.
@@ -655,7 +690,9 @@ impl TextureSampler {
             .range(0, 4 * entries * c);
         let run_table = s.runs.as_ref().expect("made above").range(0, 8 * texels);
         let stack_grad = grads.stack.sub(0, 4 * floats);
-        rec.pass("texture backward", |rec| {
+        // Four top-level passes, so that each has its time: the entries, their sort, the sums,
+        // the pyramid.
+        rec.pass("texture backward entries", |rec| {
             rec.dispatch(
                 &grad,
                 &specs::HardTexGradBindings {
@@ -674,7 +711,9 @@ impl TextureSampler {
                 .for_kernel(&grad)?,
                 &push,
                 groups(points, 64)?,
-            )?;
+            )
+        })?;
+        rec.pass("texture backward sort", |rec| {
             self.sort.record(
                 rec,
                 s.sort.as_ref().expect("made above"),
@@ -682,7 +721,9 @@ impl TextureSampler {
                 values,
                 entries,
                 key_bits,
-            )?;
+            )
+        })?;
+        rec.pass("texture backward sums", |rec| {
             rec.fill(run_table, 0);
             rec.dispatch(
                 &runs,
@@ -717,8 +758,13 @@ impl TextureSampler {
                 .for_kernel(&reduce)?,
                 &push,
                 groups(texels * c, 64)?,
-            )?;
-            if pyramid {
+            )
+        })?;
+        if !pyramid {
+            return Ok(());
+        }
+        rec.pass("texture backward pyramid", |rec| {
+            {
                 for level in (0..layout.levels - 1).rev() {
                     rec.dispatch(
                         &mip_grad,
@@ -906,9 +952,9 @@ impl TextureSampler {
         let input = self.host.inputs.take().expect("made by upload");
         let output = self.host.outputs.take().expect("made above");
         let result = (|| {
-            ctx.submit_and_wait(|rec| {
-                self.record_stack(rec, layout, Levels::Build(tex), &input)?;
-                let stack = self.stack.as_ref().expect("made by upload");
+            self.submit(ctx, |this, rec| {
+                this.record_stack(rec, layout, Levels::Build(tex), &input)?;
+                let stack = this.stack.as_ref().expect("made by upload");
                 rec.copy(stack, 0, &output, 0, 4 * floats);
                 Ok(())
             })?;
@@ -947,10 +993,10 @@ impl TextureSampler {
         let input = self.host.inputs.take().expect("made by upload");
         let output = self.host.outputs.take().expect("made above");
         let result = (|| {
-            ctx.submit_and_wait(|rec| {
-                self.record_stack(rec, layout, levels, &input)?;
-                let stack = self.stack.as_ref().expect("made by upload");
-                self.record_sample(
+            self.submit(ctx, |this, rec| {
+                this.record_stack(rec, layout, levels, &input)?;
+                let stack = this.stack.as_ref().expect("made by upload");
+                this.record_sample(
                     rec,
                     layout,
                     mode,
@@ -1023,10 +1069,10 @@ impl TextureSampler {
         let output = self.host.outputs.take().expect("made above");
         let pyramid = !matches!(levels, Levels::Given(_));
         let result = (|| {
-            ctx.submit_and_wait(|rec| {
-                self.record_stack(rec, layout, levels, &input)?;
-                let stack = self.stack.take().expect("made by upload");
-                let result = self.record_sample_grad(
+            self.submit(ctx, |this, rec| {
+                this.record_stack(rec, layout, levels, &input)?;
+                let stack = this.stack.take().expect("made by upload");
+                let result = this.record_sample_grad(
                     rec,
                     layout,
                     mode,
@@ -1047,7 +1093,7 @@ impl TextureSampler {
                     },
                     pyramid,
                 );
-                self.stack = Some(stack);
+                this.stack = Some(stack);
                 result
             })?;
             let bytes = output
