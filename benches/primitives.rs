@@ -170,7 +170,7 @@ fn texture(c: &mut Criterion) {
             };
             group.throughput(Throughput::Elements(n));
             for backward in [false, true] {
-                let mut timer = Timer::new(&ctx, 2).unwrap();
+                let mut timer = Timer::new(&ctx, 8).unwrap();
                 let recorded = ctx
                     .record(Some(&mut timer), |rec| {
                         sampler.record_construct_mip(rec, &layout, stack.whole())?;

@@ -46,8 +46,8 @@ void tap_entries(uint i, uint first, Taps taps, float scale) {
     precise float w11 = fs * ft;
     if (CUBE && taps.corner < 4u) {
         // The corner's weight, a third each to the three texels its mean reads.
-        float w[4] = float[4](w00, w10, w01, w11);
-        precise float share = w[taps.corner] / 3.0;
+        uint j = taps.corner;
+        precise float share = (j == 0u ? w00 : (j == 1u ? w10 : (j == 2u ? w01 : w11))) / 3.0;
         w00 = taps.corner == 0u ? 0.0 : w00 + share;
         w10 = taps.corner == 1u ? 0.0 : w10 + share;
         w01 = taps.corner == 2u ? 0.0 : w01 + share;
@@ -112,8 +112,8 @@ void own_grads(uint i, Lookup q, vec2 g_st, float dl, bool through_level) {
         if (through_level && has_da) {
             // Twin: `cube_level_gradient`, both parts zero where either is not finite.
             vec4 g = level_gradient(q.level_da);
-            vec3 dx = vec3(q.da[0], q.da[2], q.da[4]);
-            vec3 dy = vec3(q.da[1], q.da[3], q.da[5]);
+            vec3 dx = vec3(q.da.x, q.da.z, q.dz.x);
+            vec3 dy = vec3(q.da.y, q.da.w, q.dz.y);
             precise vec3 ld = g.x * face_hessian_times(q.p, 0u, q.dir, dx)
                             + g.y * face_hessian_times(q.p, 0u, q.dir, dy)
                             + g.z * face_hessian_times(q.p, 1u, q.dir, dx)

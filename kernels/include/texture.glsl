@@ -316,16 +316,17 @@ vec3 face_hessian_times(Projection p, uint j, vec3 d, vec3 v) {
     return o;
 }
 
-// uv_da (dx/dX, dx/dY, dy/dX, dy/dY, dz/dX, dz/dY) carried onto the face: (ds/dX, ds/dY, dt/dX,
-// dt/dY), zero where not finite (twin: `cube_face_derivatives`).
-vec4 face_derivatives(Projection p, vec3 d, float da[6]) {
+// uv_da (dx/dX, dx/dY, dy/dX, dy/dY, dz/dX, dz/dY), held as `da` (its first four) and `dz`
+// (its last two), carried onto the face: (ds/dX, ds/dY, dt/dX, dt/dY), zero where not finite
+// (twin: `cube_face_derivatives`).
+vec4 face_derivatives(Projection p, vec3 d, vec4 da, vec2 dz) {
     if (!p.ok) {
         return vec4(0.0);
     }
     vec3 js = face_jacobian(p, 0u, d);
     vec3 jt = face_jacobian(p, 1u, d);
-    vec3 dx = vec3(da[0], da[2], da[4]);
-    vec3 dy = vec3(da[1], da[3], da[5]);
+    vec3 dx = vec3(da.x, da.z, dz.x);
+    vec3 dy = vec3(da.y, da.w, dz.y);
     precise vec4 w = vec4(dot(js, dx), dot(js, dy), dot(jt, dx), dot(jt, dy));
     return any(isnan(w)) || any(isinf(w)) ? vec4(0.0) : w;
 }
@@ -392,7 +393,8 @@ struct Lookup {
     bool ok;
     Projection p;
     vec3 dir;
-    float da[6];
+    vec4 da;  // uv_da's first four floats (a 2D texture's all)
+    vec2 dz;  // a cube map's last two (dz/dX, dz/dY)
     vec4 level_da;
     float bias;
 };
@@ -401,24 +403,21 @@ Lookup lookup(uint i) {
     Lookup q;
     q.item = pc.tex_items == (CUBE ? 6u : 1u) ? 0u : i / pc.item_points;
     q.ok = true;
-    for (uint k = 0u; k < 6u; ++k) {
-        q.da[k] = 0.0;
-    }
-    bool da = pc.has_uv_da != 0u;
-    for (uint k = 0u; da && k < DA_DIM; ++k) {
-        q.da[k] = uv_da[i * DA_DIM + k];
-    }
+    bool has_da = pc.has_uv_da != 0u;
+    uint at = i * DA_DIM;
+    q.da = has_da ? vec4(uv_da[at], uv_da[at + 1u], uv_da[at + 2u], uv_da[at + 3u]) : vec4(0.0);
+    q.dz = CUBE && has_da ? vec2(uv_da[at + 4u], uv_da[at + 5u]) : vec2(0.0);
     q.bias = pc.has_bias != 0u ? bias[i] : 0.0;
     if (CUBE) {
         q.dir = vec3(uv[3u * i], uv[3u * i + 1u], uv[3u * i + 2u]);
         q.p = projection(q.dir);
         q.ok = q.p.ok;
         q.uv = q.p.st;
-        q.level_da = da ? face_derivatives(q.p, q.dir, q.da) : vec4(0.0);
+        q.level_da = has_da ? face_derivatives(q.p, q.dir, q.da, q.dz) : vec4(0.0);
     } else {
         q.dir = vec3(0.0);
         q.uv = vec2(uv[2u * i], uv[2u * i + 1u]);
-        q.level_da = vec4(q.da[0], q.da[1], q.da[2], q.da[3]);
+        q.level_da = q.da;
     }
     return q;
 }
@@ -441,15 +440,18 @@ uint lookup_nearest(Lookup q, out bool read) {
 // the other three (twin: `CubeTaps::values`).
 vec4 tap_values(Taps taps, uint k) {
     uint c = pc.channels;
-    float a[4];
-    for (uint j = 0u; j < 4u; ++j) {
-        a[j] = taps.read[j] ? tex[taps.texel[j] * c + k] : 0.0;
-    }
+    vec4 a = vec4(taps.read[0] ? tex[taps.texel[0] * c + k] : 0.0,
+                  taps.read[1] ? tex[taps.texel[1] * c + k] : 0.0,
+                  taps.read[2] ? tex[taps.texel[2] * c + k] : 0.0,
+                  taps.read[3] ? tex[taps.texel[3] * c + k] : 0.0);
     if (CUBE && taps.corner < 4u) {
-        precise float sum = a[0] + a[1] + a[2] + a[3];
-        a[taps.corner] = sum / 3.0;
+        precise float sum = a.x + a.y + a.z + a.w;
+        precise float mean = sum / 3.0;
+        uint j = taps.corner;
+        a = vec4(j == 0u ? mean : a.x, j == 1u ? mean : a.y, j == 2u ? mean : a.z,
+                 j == 3u ? mean : a.w);
     }
-    return vec4(a[0], a[1], a[2], a[3]);
+    return a;
 }
 
 // Channel k of bilinear filtering over `taps` (twin: `bilinear`).

@@ -236,7 +236,8 @@ def nv_texture(
     mip_levels: Optional[List[F32]] = None,
     max_mip_level: Optional[int] = None,
 ) -> F32:
-    """nvdiffrast's ``texture``: ``[B, h, w, C]``."""
+    """nvdiffrast's ``texture``: ``[B, h, w, C]`` (``boundary='cube'``: ``tex`` a cube map
+    ``[B, 6, S, S, C]``, ``uv`` directions ``[B, h, w, 3]``, ``uv_da`` ``[B, h, w, 6]``)."""
 
 def nv_texture_grad(
     tex: F32,

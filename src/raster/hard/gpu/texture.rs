@@ -110,7 +110,8 @@ struct TexPush {
 
 /// A mip stack as the kernels address it: `items` textures (1: shared by every minibatch item)
 /// of `height × width` texels of `channels` floats, and `levels` levels (the base included),
-/// level `l` being `max(width >> l, 1) × max(height >> l, 1)`.
+/// level `l` being `max(width >> l, 1) × max(height >> l, 1)`. A cube map's items are its
+/// faces: `6 B` (6: one cube shared by every minibatch item) square faces, each halved apart.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TexLayout {
     /// Textures in the stack.
