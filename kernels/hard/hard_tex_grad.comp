@@ -47,7 +47,7 @@ void tap_entries(uint i, uint first, Taps taps, float scale) {
     if (CUBE && taps.corner < 4u) {
         // The corner's weight, a third each to the three texels its mean reads.
         uint j = taps.corner;
-        precise float share = (j == 0u ? w00 : (j == 1u ? w10 : (j == 2u ? w01 : w11))) / 3.0;
+        precise float share = (j == 0u ? w00 : (j == 1u ? w10 : (j == 2u ? w01 : w11))) * ONE_THIRD;
         w00 = taps.corner == 0u ? 0.0 : w00 + share;
         w10 = taps.corner == 1u ? 0.0 : w10 + share;
         w01 = taps.corner == 2u ? 0.0 : w01 + share;

@@ -1,7 +1,8 @@
 // nvdiffrast's `texture` (`softvk::raster::hard::texture`), what its kernels share: the push
 // constants, the mip stack's addressing, the level of detail and the bilinear taps, in f32 on
-// softvk's maths, every intermediate `precise`. Twin: `src/raster/hard/texture.rs` (f64), whose
-// module docs give the behaviour; each function here names the twin function it follows.
+// softvk's maths, every intermediate `precise`; then a cube map's face projection and seamless
+// taps. Twins: `src/raster/hard/texture/mod.rs` and `cube.rs` (f64), whose module docs give the
+// behaviour; each function here names the twin function it follows.
 //
 // The stack is one float array: level 0 (the texture, `tex_items` items of H × W texels of C
 // floats), then each mip level the same way, level l being max(W >> l, 1) × max(H >> l, 1).
@@ -52,6 +53,7 @@ const uint TAPS = FILTER == FILTER_NEAREST ? 1u : (FILTER == FILTER_MIPMAP_LINEA
 const uint PARTIAL_BLOCK = 256u;
 
 const float LOG2_E = 1.44269504;  // 1 / ln 2
+const float ONE_THIRD = 0.333333343;  // 1/3 rounded: a cube corner tap's share (no division)
 
 // Level l's texels across and down.
 uvec2 level_size(uint l) {
@@ -66,11 +68,6 @@ uint level_base(uint l) {
         base += pc.tex_items * s.x * s.y;
     }
     return base;
-}
-
-// The texture item lookup i reads.
-uint tex_item(uint i) {
-    return pc.tex_items == 1u ? 0u : i / pc.item_points;
 }
 
 // The footprint of uv_da in texels of the base level: (s_X, s_Y, t_X, t_Y), A = s_X² + t_X²,
@@ -316,6 +313,12 @@ vec3 face_hessian_times(Projection p, uint j, vec3 d, vec3 v) {
     return o;
 }
 
+// a · b summed x, y, z in order (GLSL's dot leaves the order to the driver).
+float dot3(vec3 a, vec3 b) {
+    precise float r = a.x * b.x + a.y * b.y + a.z * b.z;
+    return r;
+}
+
 // uv_da (dx/dX, dx/dY, dy/dX, dy/dY, dz/dX, dz/dY), held as `da` (its first four) and `dz`
 // (its last two), carried onto the face: (ds/dX, ds/dY, dt/dX, dt/dY), zero where not finite
 // (twin: `cube_face_derivatives`).
@@ -327,7 +330,7 @@ vec4 face_derivatives(Projection p, vec3 d, vec4 da, vec2 dz) {
     vec3 jt = face_jacobian(p, 1u, d);
     vec3 dx = vec3(da.x, da.z, dz.x);
     vec3 dy = vec3(da.y, da.w, dz.y);
-    precise vec4 w = vec4(dot(js, dx), dot(js, dy), dot(jt, dx), dot(jt, dy));
+    precise vec4 w = vec4(dot3(js, dx), dot3(js, dy), dot3(jt, dx), dot3(jt, dy));
     return any(isnan(w)) || any(isinf(w)) ? vec4(0.0) : w;
 }
 
@@ -446,7 +449,7 @@ vec4 tap_values(Taps taps, uint k) {
                   taps.read[3] ? tex[taps.texel[3] * c + k] : 0.0);
     if (CUBE && taps.corner < 4u) {
         precise float sum = a.x + a.y + a.z + a.w;
-        precise float mean = sum / 3.0;
+        precise float mean = sum * ONE_THIRD;
         uint j = taps.corner;
         a = vec4(j == 0u ? mean : a.x, j == 1u ? mean : a.y, j == 2u ? mean : a.z,
                  j == 3u ? mean : a.w);
