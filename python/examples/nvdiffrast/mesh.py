@@ -8,8 +8,13 @@ triangle lists, as nvdiffrast's samples keep them (``tri`` and ``uv_idx``).
 
 import pathlib
 
+import sys
+
 import numpy as np
 import torch
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import cube  # noqa: E402  (this folder's cube.py: the projection and the quaternions)
 
 ASSETS = pathlib.Path(__file__).resolve().parents[3] / "assets"
 
@@ -52,40 +57,15 @@ def vertex_normals(pos, tri):
     return (out / np.linalg.norm(out, axis=1, keepdims=True)).astype(np.float32)
 
 
-def perspective(fov_y_deg=45.0, near=0.5, far=20.0):
-    """An OpenGL-style perspective projection (camera down -z) into clip space, float64
-    [4, 4]."""
-    f = 1.0 / np.tan(np.radians(fov_y_deg) / 2.0)
-    m = np.zeros((4, 4))
-    m[0, 0] = f
-    m[1, 1] = f
-    m[2, 2] = (far + near) / (near - far)
-    m[2, 3] = 2.0 * far * near / (near - far)
-    m[3, 2] = -1.0
-    return m
-
-
-def random_rotation(rng):
-    """A uniformly random rotation [3, 3] (a normalised 4-D Gaussian as a quaternion)."""
-    w, x, y, z = rng.standard_normal(4) / 1.0
-    n = np.sqrt(w * w + x * x + y * y + z * z)
-    w, x, y, z = w / n, x / n, y / n, z / n
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
-
-
 def random_camera(rng, distance=2.8, centre=(0.0, 0.1, 0.2)):
     """A camera orbiting ``centre`` at ``distance``, in a uniformly random direction:
     ``(mvp [4, 4] float32 tensor, eye [3] float32 tensor)``, the world fixed."""
-    r = random_rotation(rng)  # world to camera
+    r = cube.quat_to_matrix_np(cube.random_quaternion(rng))  # world to camera, uniform
     view = np.eye(4)
     view[:3, :3] = r
     view[:3, 3] = -r @ np.asarray(centre) + np.array([0.0, 0.0, -distance])
     eye = r.T @ (np.array([0.0, 0.0, distance])) + np.asarray(centre)
-    mvp = perspective() @ view
+    mvp = cube.perspective(45.0, near=0.5, far=20.0) @ view
     return torch.from_numpy(mvp.astype(np.float32)), torch.from_numpy(eye.astype(np.float32))
 
 
