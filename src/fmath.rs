@@ -199,7 +199,10 @@ fn reduce_ln2(x: f32) -> (f32, i32) {
     ((x - kf * LN2_HI) - kf * LN2_LO, kf as i32)
 }
 
-/// exp(x): 0 below −87 (no subnormal results), +∞ above ln(f32::MAX).
+/// The least float whose exp is normal, just above −126 ln 2 (`FM_EXP_MIN`).
+const EXP_MIN: f32 = -87.336_540_2;
+
+/// exp(x): 0 below [`EXP_MIN`] (no subnormal results), +∞ above ln(f32::MAX).
 pub fn exp(x: f32) -> f32 {
     if x.is_nan() {
         return x;
@@ -207,7 +210,7 @@ pub fn exp(x: f32) -> f32 {
     if x > 88.722_839_4 {
         return f32::INFINITY;
     }
-    if x < -87.0 {
+    if x < EXP_MIN {
         return 0.0;
     }
     let (r, k) = reduce_ln2(x);

@@ -8,14 +8,14 @@
 // them bit for bit).
 //
 // Subnormals: an input below 2^-126 in magnitude is read as a signed zero (or, in fm_div_rn, by
-// its bits) and a result that would fall below 2^-126 is returned as zero (exp: below −87;
+// its bits) and a result that would fall below 2^-126 is returned as zero (exp: below −126 ln 2;
 // rcp: from |x| ≥ 2^126), decided by comparisons, so a device that flushes subnormals and one
 // that keeps them give the same bits. No intermediate of a normal input is subnormal (range
 // reduction keeps them near 1). The arithmetic of the kernels around these functions is not
 // guarded so: an intermediate below 2^-126 there may still differ between such devices.
 //
 // Accuracy, worst measured against f64 by `tests/fmath.rs` (ulps of the result): rcp 1.2, div
-// 1.8 (div_rn: correctly rounded), sqrt 0.8, exp 1.0, expm1 1.5, log 0.8, sigmoid 3.0, its
+// 1.8 (div_rn: correctly rounded), sqrt 0.8, exp 1.0, expm1 1.53, log 0.8, sigmoid 2.9, its
 // derivative 5.5, tanh 3.3, pow 27 (exp(y ln x), as Vulkan's own), sin and cos 1.3 · 2^-24
 // absolute for |x| ≤ 8192.
 #ifndef SOFTVK_FMATH_GLSL
@@ -197,7 +197,10 @@ const float FM_LN2_HI = 0.693145751953125;     // 0x3f317200
 const float FM_LN2_LO = 1.428606765330187e-06; // 0x35bfbe8e
 const float FM_LOG2E = 1.44269504;
 const float FM_EXP_MAX = 88.7228394;  // above: exp overflows
-const float FM_EXP_MIN = -87.0;       // below: 0 (exp(−87) = 1.6e-38, still normal)
+// The least float whose exp is normal: the float just above −126 ln 2 = −87.3365447...
+// (0xc2aeac4f); below it exp(x) < 2^-126, returned as 0. At it k = −126 and r ≥ 0, so the
+// result p · 2^-126 has p ≥ 1: normal.
+const float FM_EXP_MIN = -87.3365402;
 
 // k = round(x / ln 2) and r = x − k ln 2, for x clamped to [FM_EXP_MIN, FM_EXP_MAX]
 // (k ∈ [−126, 128]).
@@ -207,7 +210,7 @@ float fm_reduce_ln2(float x, out int k) {
     return (x - kf * FM_LN2_HI) - kf * FM_LN2_LO;
 }
 
-// exp(x): 0 below −87 (no subnormal results), +inf above ln(FLT_MAX). A subnormal x needs no
+// exp(x): 0 below FM_EXP_MIN (no subnormal results), +inf above ln(FLT_MAX). A subnormal x needs no
 // flush: 1 + x and 1 + 0 are both 1.
 float fm_exp(float x) {
     int k;
@@ -224,7 +227,8 @@ float fm_exp_le0(float x) {
     float kf = floor(max(x, FM_EXP_MIN) * FM_LOG2E + 0.5);
     float r = (x - kf * FM_LN2_HI) - kf * FM_LN2_LO;
     float p = 1.0 + fm_expm1_reduced(r);
-    // p · 2^k by the exponent field: normal (exp(−87) is), so the exact product.
+    // p · 2^k by the exponent field: normal (k ≥ −126 and p ≥ 1 at k = −126), so the exact
+    // product.
     float y = uintBitsToFloat(floatBitsToUint(p) + uint(int(kf) << 23));
     return isnan(x) ? x : (x < FM_EXP_MIN ? 0.0 : y);
 }
