@@ -11,9 +11,11 @@
 //! PyTorch3D computes in f32 (its CPU kernels take float only), the twin in f64 from the same
 //! f32 inputs. The random scenes were drawn clear of every decision f32 rounding could flip
 //! (the script redraws one that is not), and the tied depths are exact in both, so
-//! `pix_to_face` must be equal in every slot; `zbuf`, `bary_coords` and `dists` within 1e-5
-//! (measured: 2.8e-6 at most); the vertex gradients within 1e-4 of each component plus
-//! [`GRAD_FLOOR`] of the scene's largest.
+//! `pix_to_face` must be equal in every slot; the twin's `zbuf`, `bary_coords` and `dists`
+//! within 1e-5 (measured: 2.8e-6 at most) and its vertex gradients within 1e-4 of each
+//! component plus [`GRAD_FLOOR`] of the scene's largest. The kernels, f32 as PyTorch3D, must
+//! give PyTorch3D's `zbuf`, `bary_coords` and `dists` bit for bit, and their vertex gradients
+//! within [`KERNEL_GRAD_REL`] of each component plus [`KERNEL_GRAD_FLOOR`] of the largest.
 
 mod common;
 
@@ -57,7 +59,15 @@ fn flag(path: &Path, name: &str) -> bool {
     floats(path, name)[0] != 0.0
 }
 
-/// Components whose |PyTorch3D gradient| is below 0.1 of the scene's largest are held to this
+/// The kernels' vertex gradients against PyTorch3D's: each component within KERNEL_GRAD_REL of
+/// itself plus KERNEL_GRAD_FLOOR of the scene's largest, about 3 times what the thirteen scenes
+/// measure on lavapipe (7.6e-7 relative where |w| > 0.1 of the largest, 6.9e-8 of the largest
+/// nearer zero: the f32 sums' rounding, PyTorch3D's and softvk's in their own orders).
+const KERNEL_GRAD_REL: f64 = 2.4e-6;
+const KERNEL_GRAD_FLOOR: f64 = 2.1e-7;
+
+/// The f64 twin's bars (the twin is not f32: it differs from PyTorch3D's f32 sums by their
+/// rounding alone). Components whose |PyTorch3D gradient| is below 0.1 of the scene's largest are held to this
 /// fraction of the largest rather than to 1e-4 of themselves: PyTorch3D sums a vertex's terms
 /// over pixels in f32, whose rounding where terms cancel is relative to the terms, not to the
 /// sum. Measured over the twelve scenes: the worst component uses 3 % of these bars.
@@ -265,6 +275,7 @@ fn the_kernels_give_pytorch3d_fragments_and_gradients_on_every_golden_scene() {
     let Some(ctx) = common::gpu() else { return };
     let mut raster = FragmentRasterizer::new(&ctx).unwrap();
     let (mut worst_value, mut worst_grad) = (0.0f64, 0.0f64);
+    let (mut differ_bits, mut worst_rel, mut worst_floor) = (0usize, 0.0f64, 0.0f64);
     for path in goldens() {
         let s = scene(&path);
         let plan = FragmentPlan::new(&ctx, s.face_verts.len(), &s.meshes, &s.settings).unwrap();
@@ -283,14 +294,14 @@ fn the_kernels_give_pytorch3d_fragments_and_gradients_on_every_golden_scene() {
                 floats(&path, "bary_coords"),
             ),
         ] {
+            // PyTorch3D's outputs are f32: the same bits (README's claim), both NaN-free.
             for (i, (&g, &w)) in got.iter().zip(&want).enumerate() {
-                let e = (f64::from(g) - w).abs();
-                worst_value = worst_value.max(e);
-                assert!(
-                    e <= 1e-5,
-                    "{} {name}[{i}]: {g} against PyTorch3D's {w}",
-                    s.name
-                );
+                let w32 = w as f32;
+                if g.to_bits() != w32.to_bits() {
+                    differ_bits += 1;
+                    worst_value = worst_value.max((f64::from(g) - w).abs());
+                    eprintln!("{} {name}[{i}]: {g:e} against PyTorch3D's {w32:e}", s.name);
+                }
             }
         }
         let as_f32 = |v: Vec<f64>| v.into_iter().map(|x| x as f32).collect::<Vec<f32>>();
@@ -312,8 +323,13 @@ fn the_kernels_give_pytorch3d_fragments_and_gradients_on_every_golden_scene() {
         let scale = want.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         for (i, w) in want.iter().enumerate() {
             let g = got[i / 3][i % 3];
-            let bar = 1e-4 * w.abs() + GRAD_FLOOR * scale;
+            let bar = KERNEL_GRAD_REL * w.abs() + KERNEL_GRAD_FLOOR * scale;
             worst_grad = worst_grad.max((g - w).abs() / bar);
+            if w.abs() > 0.1 * scale {
+                worst_rel = worst_rel.max((g - w).abs() / w.abs());
+            } else {
+                worst_floor = worst_floor.max((g - w).abs() / scale);
+            }
             assert!(
                 (g - w).abs() <= bar,
                 "{} vertex {} axis {}: {g} against PyTorch3D's {w} (largest {scale})",
@@ -324,9 +340,14 @@ fn the_kernels_give_pytorch3d_fragments_and_gradients_on_every_golden_scene() {
         }
     }
     eprintln!(
-        "kernels against PyTorch3D: values within {worst_value:.2e}, gradients use {:.3} % of \
-         their bars",
+        "kernels against PyTorch3D: {differ_bits} values differ in their bits (worst {worst_value:.2e}), \
+         gradients use {:.1} % of their bars; relative {worst_rel:.2e} (|w| > 0.1 of the largest), \
+         near zero {worst_floor:.2e} of the largest",
         100.0 * worst_grad
+    );
+    assert_eq!(
+        differ_bits, 0,
+        "zbuf, dists and bary_coords are PyTorch3D's bits"
     );
 }
 

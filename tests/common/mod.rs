@@ -83,6 +83,35 @@ pub fn rel_err3(a: &[[f64; 3]], b: &[[f64; 3]]) -> (f64, f64) {
     (err / scale.max(1e-30), scale)
 }
 
+/// Each component of `a` against its reference in `b`, held to `rel` of itself plus `floor`
+/// (absolute: the measured error of components near zero): the largest share of its bound any
+/// component uses (at most 1 passes) and that component's index.
+pub fn worst_share(a: &[f64], b: &[f64], rel: f64, floor: f64) -> (f64, usize) {
+    assert_eq!(a.len(), b.len());
+    assert!(rel > 0.0 && floor > 0.0);
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs() / (rel * y.abs() + floor))
+        .enumerate()
+        .fold(
+            (0.0, 0),
+            |w, (i, s)| if s > w.0 || s.is_nan() { (s, i) } else { w },
+        )
+}
+
+/// What [`worst_share`]'s bounds are measured from: the largest |a − b| over components whose
+/// |b| is below `cut` (the floor near zero) and the largest |a − b| / |b| over the others.
+pub fn measured(a: &[f64], b: &[f64], cut: f64) -> (f64, f64) {
+    a.iter().zip(b).fold((0.0, 0.0), |(near, rel), (x, y)| {
+        let e = (x - y).abs();
+        if y.abs() < cut {
+            (f64::max(near, e), rel)
+        } else {
+            (near, f64::max(rel, e / y.abs()))
+        }
+    })
+}
+
 /// Tests validate unless `SOFTVK_VALIDATION=0` says otherwise.
 pub fn validation_wanted() -> bool {
     std::env::var("SOFTVK_VALIDATION").map_or(true, |v| v.trim() != "0")
