@@ -13,11 +13,14 @@ What softvk does differently, and only this:
 
 - **Where it runs**: on softvk's Vulkan device (any GPU, or lavapipe on a CPU), tiled, with
   exact binning: ``bin_size`` and ``max_faces_per_bin`` are accepted and change nothing, and no
-  bin ever overflows. Tensors come back on the device they came from.
+  bin ever overflows. Tensors come back on the device they came from (through host copies,
+  ``softvk._host.round_trip``).
 - **Determinism**: the backward sums each face's gradient in a fixed order (per tile in pixel
   order, then tile by tile), with no float atomics: the same bits on every run.
 - **Non-finite faces** (a NaN or infinite coordinate) raise ``ValueError`` naming the face;
-  PyTorch3D's arithmetic makes NaN fragments of them.
+  PyTorch3D's arithmetic makes NaN fragments of them. So do face indices outside their mesh's
+  vertices (negative, or another mesh's: PyTorch3D's indexing wraps or reads them), and float
+  indices raise ``TypeError``.
 - **float64** face vertices run softvk's f64 CPU twin, forward and backward (for
   ``gradcheck``); float32 the kernels. Other dtypes raise ``TypeError``.
 
@@ -39,7 +42,8 @@ from typing import Optional
 import numpy as np
 import torch
 
-from . import _native
+from . import _checks, _native
+from ._host import like, round_trip
 
 __all__ = ["MeshRasterizer", "RasterizationSettings", "rasterize_meshes", "Fragments"]
 
@@ -115,17 +119,31 @@ def _image_size(image_size):
             raise ValueError("Image sizes must be integers; got %r" % (tuple(image_size),))
         if v <= 0:
             raise ValueError("Image sizes must be greater than 0; got %r" % (tuple(image_size),))
-    return int(h), int(w)
+    return _checks.image_size((int(h), int(w)))
 
 
 def _meshes_table(first_idx, num_faces):
-    first = [int(x) for x in first_idx.detach().cpu().tolist()]
-    count = [int(x) for x in num_faces.detach().cpu().tolist()]
+    first = [int(x) for x in first_idx.detach().tolist()]
+    count = [int(x) for x in num_faces.detach().tolist()]
     return list(zip(first, count))
 
 
-def _numpy(t, dtype):
-    return np.ascontiguousarray(t.detach().cpu().numpy(), dtype=dtype)
+def _check_faces(meshes, verts_packed, faces_packed):
+    """Integer packed faces, each index within its own mesh's vertices where the meshes say
+    where those are (PyTorch3D's ``Meshes`` do), else within all of them."""
+    _checks.integer_faces("faces_packed", faces_packed)
+    first_vert = getattr(meshes, "mesh_to_verts_packed_first_idx", None)
+    verts_per_mesh = getattr(meshes, "num_verts_per_mesh", None)
+    if first_vert is None or verts_per_mesh is None or faces_packed.numel() == 0:
+        _checks.face_indices("faces_packed", faces_packed, int(verts_packed.shape[0]))
+        return
+    device = faces_packed.device
+    counts = meshes.num_faces_per_mesh().to(device)
+    mesh_of_face = torch.repeat_interleave(torch.arange(len(counts), device=device), counts)
+    first = first_vert().to(device)[mesh_of_face]
+    own = faces_packed - first[:, None].to(faces_packed.dtype)
+    _checks.face_indices("faces_packed", own, verts_per_mesh().to(device)[mesh_of_face],
+                         meshes=mesh_of_face)
 
 
 class _RasterizeFaceVerts(torch.autograd.Function):
@@ -135,14 +153,11 @@ class _RasterizeFaceVerts(torch.autograd.Function):
     @staticmethod
     def forward(ctx, face_verts, meshes, neighbors, settings):
         f64 = face_verts.dtype == torch.float64
-        nb = None if neighbors is None else _numpy(neighbors, np.int64)
-        if f64:
-            out = _native.reference_fragments(
-                _numpy(face_verts, np.float64), meshes, nb, settings
-            )
-        else:
-            out = _native.rasterize_fragments(_numpy(face_verts, np.float32), meshes, nb, settings)
-        pix_to_face, zbuf, bary, dists = (torch.from_numpy(a).to(face_verts.device) for a in out)
+        nb = None if neighbors is None else neighbors.long()
+        call = _native.reference_fragments if f64 else _native.rasterize_fragments
+        on_device = like(face_verts, dtype=False)
+        pix_to_face, zbuf, bary, dists = round_trip(call, face_verts, meshes, nb, settings,
+                                                    back=(on_device,) * 4)
         ctx.save_for_backward(face_verts, pix_to_face)
         ctx.meshes = meshes
         ctx.settings = settings
@@ -153,25 +168,26 @@ class _RasterizeFaceVerts(torch.autograd.Function):
     def backward(ctx, _grad_pix_to_face, grad_zbuf, grad_bary, grad_dists):
         face_verts, pix_to_face = ctx.saved_tensors
         f64 = face_verts.dtype == torch.float64
-        np_dtype = np.float64 if f64 else np.float32
         shape = tuple(pix_to_face.shape)
 
         def upstream(g, extra=()):
             if g is None:
-                return np.zeros(shape + extra, dtype=np_dtype)
-            return _numpy(g, np_dtype)
+                return np.zeros(shape + extra, dtype=np.float64 if f64 else np.float32)
+            return g.to(face_verts.dtype)
 
         call = _native.reference_fragments_grad if f64 else _native.rasterize_fragments_grad
-        out = call(
-            _numpy(face_verts, np_dtype),
+        grad = round_trip(
+            call,
+            face_verts,
             ctx.meshes,
-            _numpy(pix_to_face, np.int64),
+            pix_to_face.long(),
             upstream(grad_zbuf),
             upstream(grad_bary, (3,)),
             upstream(grad_dists),
             ctx.settings,
+            back=like(face_verts, dtype=False),
         )
-        return torch.from_numpy(out).to(face_verts.device), None, None, None
+        return grad, None, None, None
 
 
 def _rasterize_face_verts(face_verts, meshes, neighbors, image_size, blur_radius,
@@ -220,6 +236,7 @@ def rasterize_meshes(
     h, w = _image_size(image_size)
     verts_packed = meshes.verts_packed()
     faces_packed = meshes.faces_packed()
+    _check_faces(meshes, verts_packed, faces_packed)
     face_verts = verts_packed[faces_packed]
     first_idx = meshes.mesh_to_faces_packed_first_idx()
     num_faces = meshes.num_faces_per_mesh()

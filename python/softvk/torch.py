@@ -14,23 +14,19 @@ with no float atomics. Gradients go only to the inputs that ask for them; an ups
 that is zero on RGB (a silhouette loss) takes the alpha-only backward.
 
 Tensors may live on any device: the engine reads host copies and the results go back to the
-device of the input (CUDA tensors work, through those copies).
+device of the input (``softvk._host.round_trip``, the package's one round trip; CUDA tensors
+work through those copies, though no CUDA machine has tried them yet). Bad input is one clear
+error on every path (``softvk._checks``); meshes without faces render the background, as
+SoftRas's.
 """
 
 import numpy as np
 import torch
 
-from . import _native
+from . import _checks, _native
+from ._host import Like, like, round_trip
 
 __all__ = ["soft_rasterize", "render_mesh", "render", "rasterize_settings"]
-
-
-def _size(image_size):
-    """``(height, width)`` from an int (square, as SoftRas) or a ``(height, width)`` pair."""
-    if isinstance(image_size, (tuple, list)):
-        height, width = image_size
-        return int(height), int(width)
-    return int(image_size), int(image_size)
 
 
 def rasterize_settings(
@@ -54,7 +50,7 @@ def rasterize_settings(
     """The engine's settings from SoftRas's rasterizer arguments (validated here, once).
     ``silhouettes=True`` renders alpha alone (RGB left zero), without the depth and colour
     work."""
-    height, width = _size(image_size)
+    height, width = _checks.image_size(image_size)
     background = tuple(float(c) for c in _as_list(background_color))
     if len(background) != 3:
         raise ValueError(f"softvk: background_color needs 3 values, got {background_color!r}")
@@ -80,42 +76,62 @@ def rasterize_settings(
 
 
 def _as_list(value):
+    """A setting (a tensor on any device, a numpy array, a list) as a flat list of numbers."""
     if isinstance(value, torch.Tensor):
-        return value.detach().cpu().reshape(-1).tolist()
+        return value.detach().reshape(-1).tolist()
     if isinstance(value, np.ndarray):
         return value.reshape(-1).tolist()
     return list(value)
 
 
-def _host(tensor, dtype=np.float32):
-    """A C-contiguous numpy copy (or view) of ``tensor`` on the host."""
-    array = tensor.detach().cpu().numpy()
-    return np.ascontiguousarray(array, dtype=dtype)
-
-
 def _upstream(grad_images):
-    """dL/d(images) ``[B, 4, H, W]`` as the engine takes it (``[B, H, W, 4]`` float32), and
-    whether its RGB part is zero everywhere (then the backward skips the colour terms)."""
+    """dL/d(images) ``[B, 4, H, W]`` as the engine takes it (``[B, H, W, 4]``), and whether its
+    RGB part is zero everywhere (then the backward skips the colour terms)."""
     grad = grad_images.detach()
     alpha_only = not bool(torch.any(grad[:, :3] != 0))
-    return _host(grad.permute(0, 2, 3, 1)), alpha_only
+    return grad.permute(0, 2, 3, 1), alpha_only
 
 
-def _images(array, like):
-    """Engine images ``[B, H, W, 4]`` as ``[B, 4, H, W]`` on ``like``'s device and dtype."""
-    images = torch.from_numpy(array).permute(0, 3, 1, 2).contiguous()
-    return images.to(device=like.device, dtype=like.dtype)
+def _images(images):
+    """Engine images ``[B, H, W, 4]`` (already on their device) as ``[B, 4, H, W]``."""
+    return images.permute(0, 3, 1, 2).contiguous()
 
 
-def _like(tensor):
-    """What a gradient must match of an input: device, dtype and shape (not the tensor itself,
-    which the autograd context should not hold)."""
-    return tensor.device, tensor.dtype, tensor.shape
+def _wanted(likes, needs):
+    """The ``round_trip`` entries of gradients: each input's :class:`Like` where its gradient
+    is asked for, ``None`` (left on the host, then dropped by :func:`_picked`) where not."""
+    return tuple(lk if need else None for lk, need in zip(likes, needs))
 
 
-def _grad(array, like):
-    device, dtype, shape = like
-    return torch.from_numpy(array).reshape(shape).to(device=device, dtype=dtype)
+def _picked(grads, needs):
+    """The gradients asked for; ``None`` for the others."""
+    return tuple(g if need else None for g, need in zip(grads, needs))
+
+
+class NothingToRender(torch.autograd.Function):
+    """What SoftRas renders of meshes without faces (or of an empty batch): the background
+    colour, alpha 0, and gradients of zero for every input. RGB is zero too where only alpha
+    is rendered (``silhouettes``), as the engine leaves it."""
+
+    @staticmethod
+    def forward(ctx, shape, background, dtype, device, *inputs):
+        ctx.likes = [like(t) for t in inputs]
+        batch, height, width = shape
+        images = torch.zeros(batch, 4, height, width, dtype=dtype, device=device)
+        images[:, :3] = torch.tensor(background, dtype=dtype, device=device)[:, None, None]
+        return images
+
+    @staticmethod
+    def backward(ctx, grad_images):
+        zeros = (torch.zeros(lk.shape, dtype=lk.dtype, device=lk.device) for lk in ctx.likes)
+        return (None, None, None, None, *zeros)
+
+
+def _nothing(batch, settings, background, like_tensor, *inputs):
+    """:class:`NothingToRender`'s images for ``batch`` meshes with ``settings``."""
+    height, width = settings.shape
+    return NothingToRender.apply((batch, height, width), background, like_tensor.dtype,
+                                 like_tensor.device, *inputs)
 
 
 class SoftRasterizeFunction(torch.autograd.Function):
@@ -125,36 +141,34 @@ class SoftRasterizeFunction(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, face_vertices, textures, settings):
-        ctx.like = (_like(face_vertices), _like(textures))
+        ctx.likes = (like(face_vertices), like(textures))
+        images_like = Like(face_vertices.device, face_vertices.dtype, None)
         if face_vertices.dtype == torch.float64:
-            host = (_host(face_vertices, np.float64), _host(textures, np.float64))
-            ctx.double = (host, settings)
-            return _images(_native.reference_rasterize(*host, settings), face_vertices)
+            ctx.double = (face_vertices.detach(), textures.detach(), settings)
+            return _images(round_trip(_native.reference_rasterize, face_vertices, textures,
+                                      settings, back=images_like))
         ctx.double = None
-        images, raster = _native.rasterize(_host(face_vertices), _host(textures), settings)
-        ctx.raster = raster
-        return _images(images, face_vertices)
+        images, ctx.raster = round_trip(_native.rasterize, face_vertices, textures, settings,
+                                        back=(images_like, None))
+        return _images(images)
 
     @staticmethod
     def backward(ctx, grad_images):
-        need_vertices, need_textures = ctx.needs_input_grad[:2]
-        if not (need_vertices or need_textures):
+        needs = ctx.needs_input_grad[:2]
+        if not any(needs):
             return None, None, None
+        wanted = _wanted(ctx.likes, needs)
         if ctx.double is not None:
-            (face_vertices, textures), settings = ctx.double
-            upstream = _host(grad_images.detach().permute(0, 2, 3, 1), np.float64)
-            d_vertices, d_textures = _native.reference_rasterize_grad(
-                face_vertices, textures, settings, upstream
+            face_vertices, textures, settings = ctx.double
+            d_vertices, d_textures = round_trip(
+                _native.reference_rasterize_grad, face_vertices, textures, settings,
+                grad_images.detach().permute(0, 2, 3, 1), back=wanted,
             )
         else:
             upstream, alpha_only = _upstream(grad_images)
-            d_vertices, d_textures, _ = ctx.raster.backward(upstream, alpha_only)
-        face_vertices, textures = ctx.like
-        return (
-            _grad(d_vertices, face_vertices) if need_vertices else None,
-            _grad(d_textures, textures) if need_textures else None,
-            None,
-        )
+            d_vertices, d_textures, _ = round_trip(ctx.raster.backward, upstream, alpha_only,
+                                                   back=wanted)
+        return (*_picked((d_vertices, d_textures), needs), None)
 
 
 def soft_rasterize(
@@ -181,6 +195,10 @@ def soft_rasterize(
     (``texture_type='surface'``) or ``[B, F, 3, 3]`` per-corner colours (``'vertex'``), already
     lit. Returns RGBA ``[B, 4, H, W]``, row 0 at the top. ``image_size`` may also be a
     ``(height, width)`` pair.
+
+    Faces or textures that are not finite, and image sizes out of range or too large for the
+    device, raise ``ValueError``; no faces render what SoftRas renders of them, the background
+    with alpha 0 (gradients zero).
     """
     settings = rasterize_settings(
         image_size,
@@ -199,6 +217,15 @@ def soft_rasterize(
     )
     _check_dtypes("soft_rasterize", (torch.float32, torch.float64),
                   face_vertices=face_vertices, textures=textures)
+    # Positions first: non-finite ones make non-finite lit textures on the composed steps.
+    _checks.finite("face_vertices", face_vertices)
+    _checks.finite("textures", textures)
+    if face_vertices.dim() == 4 and 0 in face_vertices.shape[:2]:
+        if textures.dim() != 4 or tuple(textures.shape[:2]) != tuple(face_vertices.shape[:2]):
+            raise ValueError(f"softvk: textures has shape {list(textures.shape)}; expected "
+                             f"[{face_vertices.shape[0]}, {face_vertices.shape[1]}, *, 3]")
+        return _nothing(face_vertices.shape[0], settings, _as_list(background_color),
+                        face_vertices, face_vertices, textures)
     return SoftRasterizeFunction.apply(face_vertices, textures, settings)
 
 
@@ -219,36 +246,22 @@ class RenderMeshFunction(torch.autograd.Function):
     @staticmethod
     def forward(ctx, vertices, textures, eyes, faces, cameras, lighting, settings):
         view_mesh = np.arange(vertices.shape[0], dtype=np.int64)
-        images, raster = _native.render_mesh(
-            _host(vertices),
-            _host(faces, np.int64),
-            _host(textures),
-            view_mesh,
-            cameras,
-            lighting,
-            settings,
+        images, ctx.raster = round_trip(
+            _native.render_mesh, vertices, faces.long(), textures, view_mesh, cameras, lighting,
+            settings, back=(Like(vertices.device, vertices.dtype, None), None),
         )
-        ctx.raster = raster
-        ctx.like = (_like(vertices), _like(textures), _like(eyes))
-        return _images(images, vertices)
+        ctx.likes = (like(vertices), like(textures), like(eyes))
+        return _images(images)
 
     @staticmethod
     def backward(ctx, grad_images):
-        need_vertices, need_textures, need_eyes = ctx.needs_input_grad[:3]
-        if not (need_vertices or need_textures or need_eyes):
+        needs = ctx.needs_input_grad[:3]
+        if not any(needs):
             return (None,) * 7
         upstream, alpha_only = _upstream(grad_images)
-        d_vertices, d_textures, d_eyes = ctx.raster.backward(upstream, alpha_only, need_eyes)
-        vertices, textures, eyes = ctx.like
-        return (
-            _grad(d_vertices, vertices) if need_vertices else None,
-            _grad(d_textures, textures) if need_textures else None,
-            _grad(d_eyes, eyes) if need_eyes else None,
-            None,
-            None,
-            None,
-            None,
-        )
+        grads = round_trip(ctx.raster.backward, upstream, alpha_only, needs[2],
+                           back=_wanted(ctx.likes, needs))
+        return (*_picked(grads, needs), None, None, None, None)
 
 
 def _batched(tensor, batch, name):
@@ -306,6 +319,10 @@ def render_mesh(
     as ``SoftRenderer``'s. Returns RGBA ``[B, 4, H, W]``; with ``silhouettes=True`` only its
     alpha is rendered (RGB is zero), which saves the depth and colour work forward and
     backward. Gradients flow to ``vertices``, ``textures`` and (look_at) ``eyes``.
+
+    Float face indices raise ``TypeError``; indices outside the vertices, textures or lights
+    that are not finite, and image sizes out of range or too large for the device raise
+    ``ValueError``. No faces render the background with alpha 0 (gradients zero).
     """
     if vertices.dim() == 2:
         vertices = vertices.unsqueeze(0)
@@ -314,16 +331,18 @@ def render_mesh(
     _check_dtypes("render_mesh", (torch.float32,), vertices=vertices, textures=textures)
     batch = vertices.shape[0]
     faces = faces.detach()
+    _checks.face_indices("faces", faces, int(vertices.shape[1]))
     if faces.dim() == 3:
         if bool(torch.any(faces != faces[:1])):
             raise ValueError("softvk: render_mesh needs the same faces for every mesh of a batch")
-        faces = faces[0]
+        faces = faces[0] if faces.shape[0] else faces.reshape(-1, 3)
     if textures is None:
         if texture_type == "vertex":
             textures = torch.ones(batch, vertices.shape[1], 3, dtype=vertices.dtype)
         else:
             textures = torch.ones(batch, faces.shape[0], 1, 3, dtype=vertices.dtype)
         textures = textures.to(vertices.device)
+    _checks.finite("textures", textures)
     textures = _batched(textures, batch, "textures") if textures.dim() == 3 else textures
     if textures.dim() == 4 and textures.shape[0] == 1 and batch > 1:
         textures = textures.expand(batch, *textures.shape[1:])
@@ -339,8 +358,8 @@ def render_mesh(
             raise ValueError(f"softvk: {len(angles)} viewing angles for a batch of {batch} meshes")
         if eyes is None:
             distance = 1.0 / np.tan(np.radians(angles)) + 1
-            eyes = torch.from_numpy(np.stack([0 * distance, 0 * distance, -distance], axis=1))
-            eyes = eyes.to(vertices.device, vertices.dtype)
+            eyes = np.stack([0 * distance, 0 * distance, -distance], axis=1)
+            eyes = torch.tensor(eyes.tolist(), dtype=vertices.dtype, device=vertices.device)
         eyes = eyes.reshape(-1, 3)
         if eyes.shape[0] == 1 and batch > 1:
             eyes = eyes.expand(batch, 3)
@@ -349,7 +368,7 @@ def render_mesh(
         cameras = [
             ("look_at", tuple(e), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0),
              float(a) if perspective else None, float(viewing_scale))
-            for e, a in zip(eyes.detach().cpu().double().tolist(), angles)
+            for e, a in zip(eyes.detach().double().tolist(), angles)
         ]
     elif camera_mode == "projection":
         if P is None:
@@ -361,12 +380,19 @@ def render_mesh(
             coeffs = np.repeat(coeffs, batch, axis=0)
         cameras = [
             ("projection", tuple(m), tuple(c), float(orig_size))
-            for m, c in zip(matrices.detach().cpu().double().reshape(batch, 12).tolist(), coeffs.tolist())
+            for m, c in zip(matrices.detach().double().reshape(batch, 12).tolist(), coeffs.tolist())
         ]
         eyes = torch.zeros(batch, 3, dtype=vertices.dtype, device=vertices.device)
     else:
         raise ValueError(f"softvk: unknown camera_mode {camera_mode!r}")
 
+    lights = dict(light_intensity_ambient=light_intensity_ambient,
+                  light_color_ambient=light_color_ambient,
+                  light_intensity_directionals=light_intensity_directionals,
+                  light_color_directionals=light_color_directionals,
+                  light_directions=light_directions)
+    for name, value in lights.items():
+        _checks.finite(name, value)
     lighting = (
         float(light_intensity_ambient),
         tuple(float(c) for c in _as_list(light_color_ambient)),
@@ -388,6 +414,9 @@ def render_mesh(
         texture_type,
         silhouettes=silhouettes,
     )
+    if batch == 0 or faces.shape[0] == 0:
+        background = [0.0] * 3 if silhouettes else _as_list(background_color)
+        return _nothing(batch, settings, background, vertices, vertices, textures, eyes)
     return RenderMeshFunction.apply(vertices, textures, eyes, faces, cameras, lighting, settings)
 
 

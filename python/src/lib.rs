@@ -153,6 +153,11 @@ fn to_py(e: Error) -> PyErr {
         Error::Input(_) | Error::Mesh(_) | Error::Render(_) | Error::Parse { .. } => {
             PyValueError::new_err(message)
         }
+        // An input too large for the device (an image, a batch): refused before any work, as
+        // the input's fault, the same ValueError as any other bad input.
+        Error::Limit(_) | Error::DeviceLimit { .. } | Error::BufferTooLarge { .. } => {
+            PyValueError::new_err(message)
+        }
         Error::Allocation { .. } => PyMemoryError::new_err(message),
         _ => PyRuntimeError::new_err(message),
     }

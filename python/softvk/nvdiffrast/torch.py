@@ -16,8 +16,9 @@ What softvk does differently, and only this:
 
 - **Where it runs**: on softvk's Vulkan device (any GPU, or lavapipe on a CPU); no CUDA, no
   OpenGL. Tensors may live on any device: the engine reads host copies, and the results come
-  back on the device of the inputs. A context is a handle of softvk's one engine per process
-  (opened when the first context is made); ``device`` is accepted and recorded, nothing more.
+  back on the device of the inputs (``softvk._host.round_trip``). A context is a handle of
+  softvk's one engine per process (opened when the first context is made); ``device`` is
+  accepted and recorded, nothing more.
 - **Inputs are checked before anything runs**, one clear error each: a wrong dtype raises
   ``TypeError``, a wrong shape or value ``ValueError`` (both also ``RuntimeError``, what
   nvdiffrast's own checks raise). softvk also refuses what nvdiffrast leaves undefined:
@@ -52,6 +53,7 @@ import numpy as np
 import torch
 
 from .. import _native
+from .._host import like, round_trip
 
 __all__ = [
     "RasterizeCudaContext",
@@ -159,12 +161,12 @@ class RasterizeGLContext(RasterizeCudaContext):
 
 
 # ---------------------------------------------------------------------------------------------
-# Checks and host copies.
+# Checks (on the tensors' own device; the engine's host copies are ``round_trip``'s).
 
 
-def _host(tensor, dtype):
-    """A C-contiguous numpy array of ``tensor``'s values on the host (a view where it can be)."""
-    return np.ascontiguousarray(tensor.detach().cpu().numpy(), dtype=dtype)
+def _back(tensor):
+    """Where a result of the engine goes: onto ``tensor``'s device (the engine's dtype kept)."""
+    return like(tensor, dtype=False)
 
 
 def _tensor(what, name, value, dtype):
@@ -191,31 +193,30 @@ def _positive(shape):
 
 
 def _triangles(what, tri, vertices, vertices_of):
-    """``tri`` ``[>0, 3]`` int32 with every index in ``0..vertices``; its host copy."""
+    """``tri`` ``[>0, 3]`` int32 with every index in ``0..vertices``."""
     _tensor(what, "tri", tri, torch.int32)
     if tri.dim() != 2 or tri.shape[0] == 0 or tri.shape[1] != 3:
         raise _shape_error(what, "tri", tri, "[>0, 3]")
-    host = _host(tri, np.int32)
-    low, high = int(host.min()), int(host.max())
+    low, high = int(tri.min()), int(tri.max())
     if low < 0 or high >= vertices:
         bad = low if low < 0 else high
-        t = int(np.argwhere((host < 0) | (host >= vertices))[0, 0])
+        t = int(((tri < 0) | (tri >= vertices)).any(dim=1).nonzero()[0, 0])
         raise _value_error(
             what,
             f"triangle {t} has vertex index {bad}, outside the {vertices} vertices of "
             f"{vertices_of}",
         )
-    return host
 
 
-def _finite_positions(what, host):
-    """Every coordinate of ``host`` (positions ``[..., 4]``) must be finite."""
-    finite = np.isfinite(host)
-    if not finite.all():
-        i = int(np.argwhere(~finite.reshape(-1))[0, 0])
+def _finite_positions(what, pos):
+    """Every coordinate of ``pos`` (positions ``[..., 4]``) must be finite."""
+    flat = pos.detach().reshape(-1)
+    finite = torch.isfinite(flat)
+    if not bool(finite.all()):
+        i = int((~finite).nonzero()[0, 0])
         raise _value_error(
             what,
-            f"pos has a coordinate that is not finite: {host.reshape(-1)[i]} at vertex "
+            f"pos has a coordinate that is not finite: {float(flat[i])} at vertex "
             f"{i // 4} (flattened), coordinate {i % 4}",
         )
 
@@ -249,7 +250,7 @@ def _resolution(what, resolution):
 
 
 class _Raster:
-    """One rasterization's checked inputs and their host copies."""
+    """One rasterization's checked inputs."""
 
     def __init__(self, what, glctx, pos, tri, resolution, ranges, grad_db):
         if not isinstance(glctx, RasterizeCudaContext):
@@ -282,11 +283,11 @@ class _Raster:
             vertices, batch = int(pos.shape[0]), int(ranges.shape[0])
         _tensor(what, "tri", tri, torch.int32)
         _same_device(what, pos=pos, tri=tri)
-        self.tri = _triangles(what, tri, vertices, "pos")
+        _triangles(what, tri, vertices, "pos")
         self.ranges = None
         if not self.instanced:
-            r = _host(ranges, np.int32)
-            count = self.tri.shape[0]
+            r = ranges.detach()
+            count = int(tri.shape[0])
             for b, (first, n) in enumerate(r.tolist()):
                 if first < 0 or n < 0 or first + n > count:
                     raise _value_error(
@@ -296,8 +297,7 @@ class _Raster:
                     )
             self.ranges = r
         self.height, self.width = _resolution(what, resolution)
-        self.pos = _host(pos, np.float32)
-        _finite_positions(what, self.pos)
+        _finite_positions(what, pos)
         self.batch = batch
         self.output_db = bool(glctx.output_db)
         self.grad_db = grad_db and self.output_db
@@ -316,15 +316,13 @@ class _RasterizeFunction(torch.autograd.Function):
     @staticmethod
     def forward(ctx, pos, tri, raster, peel):
         previous = None if peel is None else peel.keys
-        rast, rast_db, keys = _native.nv_rasterize(
-            raster.pos, raster.tri, raster.height, raster.width, raster.ranges, previous
+        rast, rast_db, keys = round_trip(
+            _native.nv_rasterize, pos, tri, raster.height, raster.width, raster.ranges,
+            previous, back=(_back(pos), _back(pos) if raster.output_db else None, None),
         )
         if peel is not None:
             peel.keys = keys
-        rast = torch.from_numpy(rast).to(pos.device)
-        if raster.output_db:
-            rast_db = torch.from_numpy(rast_db).to(pos.device)
-        else:
+        if not raster.output_db:
             rast_db = torch.zeros(
                 (raster.batch, raster.height, raster.width, 0), dtype=torch.float32,
                 device=pos.device,
@@ -343,16 +341,10 @@ class _RasterizeFunction(torch.autograd.Function):
             grad_rast = torch.zeros_like(rast)
         ddb = None
         if ctx.grad_db and grad_rast_db is not None and grad_rast_db.shape[-1] == 4:
-            ddb = _host(grad_rast_db, np.float32)
-        grad = _native.nv_rasterize_grad(
-            _host(pos, np.float32),
-            _host(tri, np.int32),
-            _host(rast, np.float32),
-            _host(grad_rast, np.float32),
-            ddb,
-            ctx.ranges,
-        )
-        return torch.from_numpy(grad).to(pos.device), None, None, None
+            ddb = grad_rast_db
+        grad = round_trip(_native.nv_rasterize_grad, pos, tri, rast, grad_rast, ddb, ctx.ranges,
+                          back=_back(pos))
+        return grad, None, None, None
 
 
 def rasterize(glctx, pos, tri, resolution, ranges=None, grad_db=True):
@@ -470,7 +462,7 @@ def _diff_attrs(diff_attrs, count):
             )
         return list(range(count))
     if isinstance(diff_attrs, torch.Tensor):
-        diff_attrs = diff_attrs.detach().cpu().numpy()
+        diff_attrs = np.asarray(diff_attrs.detach().tolist())
     try:
         values = diff_attrs if isinstance(diff_attrs, np.ndarray) else np.asarray(
             diff_attrs, dtype=object)
@@ -502,14 +494,11 @@ class _InterpolateFunction(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, attr, rast, rast_db, tri, diff):
-        db = None if rast_db is None else _host(rast_db, np.float32)
-        out, out_da = _native.nv_interpolate(
-            _host(attr, np.float32), _host(rast, np.float32), _host(tri, np.int32), db, diff
-        )
+        out, out_da = round_trip(_native.nv_interpolate, attr, rast, tri, rast_db, diff,
+                                 back=(_back(attr), _back(attr)))
         ctx.save_for_backward(attr, rast, rast_db, tri)
         ctx.diff = diff
-        device = attr.device
-        return torch.from_numpy(out).to(device), torch.from_numpy(out_da).to(device)
+        return out, out_da
 
     @staticmethod
     def backward(ctx, grad_out, grad_out_da):
@@ -518,27 +507,21 @@ class _InterpolateFunction(torch.autograd.Function):
             return None, None, None, None, None
         attr, rast, rast_db, tri = ctx.saved_tensors
         diff = ctx.diff
-        device = attr.device
         if grad_out is None:
             grad_out = torch.zeros(
-                tuple(rast.shape[:3]) + (attr.shape[-1],), dtype=torch.float32
+                tuple(rast.shape[:3]) + (attr.shape[-1],), dtype=torch.float32,
+                device=rast.device,
             )
-        dda = None
-        if rast_db is not None and grad_out_da is not None:
-            dda = _host(grad_out_da, np.float32)
-        g_attr, g_rast, g_db = _native.nv_interpolate_grad(
-            _host(attr, np.float32),
-            _host(rast, np.float32),
-            _host(tri, np.int32),
-            _host(grad_out, np.float32),
-            None if rast_db is None else _host(rast_db, np.float32),
-            dda,
-            diff,
+        dda = grad_out_da if rast_db is not None else None
+        g_attr, g_rast, g_db = round_trip(
+            _native.nv_interpolate_grad, attr, rast, tri, grad_out, rast_db, dda, diff,
+            back=(_back(attr) if need_attr else None, _back(attr) if need_rast else None,
+                  _back(attr) if need_db else None),
         )
         return (
-            torch.from_numpy(g_attr).to(device) if need_attr else None,
-            torch.from_numpy(g_rast).to(device) if need_rast else None,
-            torch.from_numpy(g_db).to(device) if need_db and g_db is not None else None,
+            g_attr if need_attr else None,
+            g_rast if need_rast else None,
+            g_db if need_db else None,
             None,
             None,
         )
@@ -652,46 +635,51 @@ class _TextureFunction(torch.autograd.Function):
         ctx.args = (filter_mode, boundary_mode, mip, max_mip_level)
         ctx.has_levels = bool(levels)
         ctx.save_for_backward(tex, uv, uv_da, bias, *levels)
-        out = _native.nv_texture(*_texture_native_args(ctx.args, tex, uv, uv_da, bias, levels))
-        return torch.from_numpy(out).to(uv.device)
+        return round_trip(_native.nv_texture,
+                          *_texture_native_args(ctx.args, tex, uv, uv_da, bias, levels),
+                          back=_back(uv))
 
     @staticmethod
     def backward(ctx, dy):
         tex, uv, uv_da, bias, *levels = ctx.saved_tensors
         filter_mode = ctx.args[0]
         args = list(_texture_native_args(ctx.args, tex, uv, uv_da, bias, levels))
-        args.insert(2, _host(dy, np.float32))
-        g_tex, g_uv, g_uv_da, g_bias, g_levels = _native.nv_texture_grad(*args)
+        args.insert(2, dy)
         need = ctx.needs_input_grad
-
-        def back(grad, like, k):
-            return torch.from_numpy(grad).to(like.device) if grad is not None and need[k] else None
-
         lml = filter_mode == "linear-mipmap-linear"
+        wanted = (
+            _back(tex) if need[4] else None,
+            _back(uv) if need[5] and filter_mode != "nearest" else None,
+            _back(uv_da) if need[6] and lml and uv_da is not None else None,
+            _back(bias) if need[7] and lml and bias is not None else None,
+            [_back(t) if need[8 + k] else None for k, t in enumerate(levels)],
+        )
+        g_tex, g_uv, g_uv_da, g_bias, g_levels = round_trip(_native.nv_texture_grad, *args,
+                                                             back=wanted)
+        picked = [g if w is not None else None for g, w in zip((g_tex, g_uv, g_uv_da, g_bias),
+                                                                 wanted)]
+        g_levels = g_levels or []
         return (
             None,
             None,
             None,
             None,
-            back(g_tex, tex, 4),
-            back(g_uv, uv, 5) if filter_mode != "nearest" else None,
-            back(g_uv_da, uv_da, 6) if lml and uv_da is not None else None,
-            back(g_bias, bias, 7) if lml and bias is not None else None,
-            *(back(g, t, 8 + k) for k, (g, t) in enumerate(zip(g_levels, levels))),
+            *picked,
+            *(g if w is not None else None for g, w in zip(g_levels, wanted[4])),
         )
 
 
 def _texture_native_args(args, tex, uv, uv_da, bias, levels):
     filter_mode, boundary_mode, mip, max_mip_level = args
     return (
-        _host(tex, np.float32),
-        _host(uv, np.float32),
+        tex,
+        uv,
         filter_mode,
         boundary_mode,
-        None if uv_da is None else _host(uv_da, np.float32),
-        None if bias is None else _host(bias, np.float32),
+        uv_da,
+        bias,
         mip,
-        [_host(t, np.float32) for t in levels] if levels else None,
+        list(levels) if levels else None,
         max_mip_level,
     )
 
@@ -810,7 +798,7 @@ def texture_construct_mip(tex, max_mip_level=None, cube_mode=False):
         raise _type_error(what, f"cube_mode must be True or False, got {cube_mode!r}")
     max_mip_level = _max_mip_level(what, max_mip_level)
     _texture_shape(what, tex, cube_mode)
-    return _native.nv_texture_construct_mip(_host(tex, np.float32), max_mip_level, cube_mode)
+    return round_trip(_native.nv_texture_construct_mip, tex, max_mip_level, cube_mode)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -824,10 +812,9 @@ def antialias_construct_topology_hash(tri):
     _tensor(what, "tri", tri, torch.int32)
     if tri.dim() != 2 or tri.shape[0] == 0 or tri.shape[1] != 3:
         raise _shape_error(what, "tri", tri, "[>0, 3]")
-    host = _host(tri, np.int32)
-    if int(host.min()) < 0:
+    if int(tri.min()) < 0:
         raise _value_error(what, "tri has a negative vertex index")
-    return _native.nv_topology_hash(host)
+    return round_trip(_native.nv_topology_hash, tri)
 
 
 class _AntialiasFunction(torch.autograd.Function):
@@ -835,14 +822,12 @@ class _AntialiasFunction(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, color, rast, pos, tri, topology, pos_gradient_boost):
-        out = _native.nv_antialias(
-            _host(color, np.float32), _host(rast, np.float32), _host(pos, np.float32),
-            _host(tri, np.int32), topology,
-        )
+        out = round_trip(_native.nv_antialias, color, rast, pos, tri, topology,
+                         back=_back(color))
         ctx.save_for_backward(color, rast, pos, tri)
         ctx.topology = topology
         ctx.boost = pos_gradient_boost
-        return torch.from_numpy(out).to(color.device)
+        return out
 
     @staticmethod
     def backward(ctx, grad_out):
@@ -850,14 +835,14 @@ class _AntialiasFunction(torch.autograd.Function):
         if not (need_color or need_pos):
             return (None,) * 6
         color, rast, pos, tri = ctx.saved_tensors
-        g_color, g_pos = _native.nv_antialias_grad(
-            _host(color, np.float32), _host(rast, np.float32), _host(pos, np.float32),
-            _host(tri, np.int32), ctx.topology, _host(grad_out, np.float32), ctx.boost,
+        g_color, g_pos = round_trip(
+            _native.nv_antialias_grad, color, rast, pos, tri, ctx.topology, grad_out, ctx.boost,
+            back=(_back(color) if need_color else None, _back(pos) if need_pos else None),
         )
         return (
-            torch.from_numpy(g_color).to(color.device) if need_color else None,
+            g_color if need_color else None,
             None,
-            torch.from_numpy(g_pos).to(pos.device) if need_pos else None,
+            g_pos if need_pos else None,
             None,
             None,
             None,
@@ -900,8 +885,8 @@ def antialias(color, rast, pos, tri, topology_hash=None, pos_gradient_boost=1.0)
         raise _shape_error(what, "pos", pos, "[>0, 4] (range mode) or [minibatch, >0, 4]")
     _tensor(what, "tri", tri, torch.int32)
     _same_device(what, color=color, rast=rast, pos=pos, tri=tri)
-    tri_host = _triangles(what, tri, int(pos.shape[-2]), "pos")
-    _finite_positions(what, _host(pos, np.float32))
+    _triangles(what, tri, int(pos.shape[-2]), "pos")
+    _finite_positions(what, pos)
     if isinstance(pos_gradient_boost, bool):
         raise _type_error(what, f"pos_gradient_boost must be a number, got {pos_gradient_boost!r}")
     try:
@@ -913,17 +898,17 @@ def antialias(color, rast, pos, tri, topology_hash=None, pos_gradient_boost=1.0)
     if not np.isfinite(boost):
         raise _value_error(what, f"pos_gradient_boost must be finite, got {boost}")
     if topology_hash is None:
-        topology_hash = _native.nv_topology_hash(tri_host)
+        topology_hash = round_trip(_native.nv_topology_hash, tri)
     elif not isinstance(topology_hash, _native.NvTopologyHash):
         raise _type_error(
             what,
             "topology_hash must come from antialias_construct_topology_hash, got "
             f"{type(topology_hash).__name__}",
         )
-    if topology_hash.triangle_count != tri_host.shape[0]:
+    if topology_hash.triangle_count != tri.shape[0]:
         raise _value_error(
             what,
             f"topology_hash was built from {topology_hash.triangle_count} triangles, tri has "
-            f"{tri_host.shape[0]}",
+            f"{tri.shape[0]}",
         )
     return _AntialiasFunction.apply(color, rast, pos, tri, topology_hash, boost)

@@ -6,6 +6,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from .. import _checks
 from . import functional as srf
 from .functional._convert import float_dtype
 
@@ -45,6 +46,7 @@ class Mesh(object):
         if isinstance(vertices, np.ndarray):
             vertices = torch.from_numpy(vertices).float()
         if isinstance(faces, np.ndarray):
+            _checks.integer_faces("faces", faces)  # .int() would truncate float indices
             faces = torch.from_numpy(faces).int().to(vertices.device)
         if vertices.ndimension() == 2:
             vertices = vertices[None, :, :]

@@ -4,6 +4,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
+from .. import _checks
 from . import functional as srf
 
 __all__ = ["SoftRasterizer"]
@@ -76,11 +77,10 @@ class SoftRasterizer(nn.Module):
 
 
 def scaled_size(image_size, factor):
-    """``image_size`` (an int, or a ``(height, width)`` pair) times ``factor``."""
-    if isinstance(image_size, (tuple, list)):
-        height, width = image_size
-        return (int(height) * factor, int(width) * factor)
-    return int(image_size) * factor
+    """``image_size`` (an int, or a ``(height, width)`` pair) times ``factor``, checked
+    (``softvk._checks.image_size``)."""
+    height, width = _checks.image_size(image_size, factor)
+    return (height, width) if isinstance(image_size, (tuple, list)) else height
 
 
 def _rasterize(rasterizer, face_vertices, textures, texture_type, aggr_func_rgb,

@@ -84,14 +84,18 @@ def _stock(module, cls):
 
 def _stock_steps(renderer):
     """Whether the renderer's lighting, camera and rasterizer are SoftRas's own, unreplaced,
-    and call SoftRas's own functions: only then does the engine's path compute what they do."""
+    and call SoftRas's own functions: only then does the engine's path compute what they do.
+    A module is recognised before any of its attributes is read: one of the user's need have
+    none of SoftRas's (``ambient``, ``transformer``), as SoftRas only calls it."""
     lighting, transform = renderer.lighting, renderer.transform
-    modules = [(lighting, Lighting), (lighting.ambient, AmbientLighting),
-               (transform, Transform), (renderer.rasterizer, SoftRasterizer)]
+    steps = [(lighting, Lighting), (transform, Transform), (renderer.rasterizer, SoftRasterizer)]
+    if not all(_stock(m, cls) for m, cls in steps):
+        return False
     if type(lighting.directionals) is not nn.ModuleList:
         return False
-    modules += [(d, DirectionalLighting) for d in lighting.directionals]
-    if not all(_stock(m, cls) for m, cls in modules):
+    parts = [(lighting.ambient, AmbientLighting)]
+    parts += [(d, DirectionalLighting) for d in lighting.directionals]
+    if not all(_stock(m, cls) for m, cls in parts):
         return False
     if type(transform.transformer) not in (LookAt, Projection):
         return False

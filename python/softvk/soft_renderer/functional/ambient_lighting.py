@@ -1,5 +1,6 @@
 """Ambient light (SPEC §2, lighting)."""
 
+from ... import _checks
 from ._convert import as_tensor
 
 __all__ = ["ambient_lighting"]
@@ -16,7 +17,9 @@ def ambient_lighting(light, light_intensity=0.5, light_color=(1, 1, 1)):
     Returns:
         ``light``.
     """
+    _checks.finite("light_intensity", light_intensity)
     light_color = as_tensor(light_color, light)
+    _checks.finite("light_color", light_color)
     if light_color.ndimension() == 1:
         light_color = light_color[None, :]
     light += light_intensity * light_color[:, None, :]

@@ -3,6 +3,7 @@
 import torch
 import torch.nn.functional as F
 
+from ... import _checks
 from ._convert import as_tensor
 
 __all__ = ["directional_lighting"]
@@ -24,8 +25,11 @@ def directional_lighting(light, normals, light_intensity=0.5, light_color=(1, 1,
     Returns:
         ``light``.
     """
+    _checks.finite("light_intensity", light_intensity)
     light_color = as_tensor(light_color, light)
     light_direction = as_tensor(light_direction, light)
+    _checks.finite("light_color", light_color)
+    _checks.finite("light_direction", light_direction)
     if light_color.ndimension() == 1:
         light_color = light_color[None, :]
     if light_direction.ndimension() == 1:

@@ -3,6 +3,7 @@
 import torch
 import torch.nn.functional as F
 
+from ... import _checks
 from ._convert import check_batched
 
 __all__ = ["vertex_normals"]
@@ -17,7 +18,8 @@ def vertex_normals(vertices, faces):
 
     Args:
         vertices: [batch, V, 3].
-        faces: [batch, F, 3] integer indices.
+        faces: [batch, F, 3] integer indices, each within its own mesh's vertices (else
+            ``ValueError``; float indices: ``TypeError``).
 
     Returns:
         [batch, V, 3], differentiable in ``vertices``.
@@ -30,6 +32,8 @@ def vertex_normals(vertices, faces):
             % (vertices.shape[0], faces.shape[0])
         )
     bs, nv = vertices.shape[:2]
+    # Each face's indices within its own mesh's vertices: the gather below spans the batch.
+    _checks.face_indices("faces", faces, int(nv))
     offsets = torch.arange(bs, device=vertices.device) * nv
     index = faces.to(device=vertices.device, dtype=torch.long) + offsets[:, None, None]
     index = index.reshape(-1, 3)
