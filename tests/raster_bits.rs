@@ -1,17 +1,24 @@
-//! The bit twins (`raster::bits`): the forward's fine pass and the backward evaluated in f32 on
-//! the CPU, operation for operation, equal the device's images, aux and gradients byte for byte,
-//! in every SoftRas mode. What the device computes is then the IEEE evaluation of the written
-//! operations (softvk's own `exp`, sigmoid and reciprocal included), which every conformant
-//! device must reproduce.
+//! The bit twins (`raster::bits`): the projection and face set-up, the lit colours (the host's
+//! f64 lighting as uploaded, and the lighting kernels), the forward's fine pass and the backward
+//! (brute force and the tiled default) evaluated in f32 on the CPU, operation for operation,
+//! from the mesh, the cameras and the lighting, equal the device's set-ups, colours, images, aux
+//! and gradients byte for byte, in every SoftRas mode. What the device computes is then the IEEE
+//! evaluation of the written operations (softvk's own `exp`, sigmoid, square root and reciprocal
+//! included), which every conformant device must reproduce.
 
 mod common;
 
 use softvk::camera::Camera;
-use softvk::lighting::Lighting;
+use softvk::gpu::MemoryKind;
+use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
-use softvk::raster::bits::{FineInputs, FineTwin};
+use softvk::raster::backward::GradBuffers;
+use softvk::raster::bits::{
+    FineInputs, FineTwin, GpuLightTwin, SumOrder, face_setups, host_lit_colors,
+};
 use softvk::raster::fine::PixelAux;
-use softvk::raster::gpu::{Method, Renderer};
+use softvk::raster::gpu::{DEFAULT_TILE, Method, Renderer};
+use softvk::raster::light::SceneLight;
 use softvk::raster::scene::GpuScene;
 use softvk::raster::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
 use softvk::raster::setup::{GpuFaceSetup, GpuView};
@@ -90,13 +97,115 @@ fn every_mode<'a>(
     out
 }
 
-/// What the twin reads of a scene after its forward: the face setups and the lit colours.
-fn device_inputs(gpu: &common::Gpu, scene: &GpuScene) -> (Vec<GpuFaceSetup>, Vec<[f32; 4]>) {
-    let setups = scene.read_setups(gpu).unwrap();
-    let colors = gpu
-        .read_buffer(scene.colors(), 0, (scene.colors().size() / 16) as usize)
-        .unwrap();
-    (setups, colors)
+/// Where a scene's lit colours come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Light {
+    /// `Renderer::prepare`'s: the host's f64 lighting, rounded to f32 and uploaded.
+    Host,
+    /// The lighting kernels (`SceneLight`, what the pose fits record), run over the scene's
+    /// colours before the forward.
+    Gpu,
+}
+
+impl Light {
+    /// The lighting of a scene lit this way: SoftRas's default (ambient 0.5, one white light
+    /// from +y) through the host; through the kernels, coloured lights from two oblique
+    /// directions, so that every term of `n · d` and of its gradient is nonzero.
+    fn lighting(self) -> Lighting {
+        match self {
+            Light::Host => Lighting::default(),
+            Light::Gpu => Lighting {
+                ambient_intensity: 0.4,
+                ambient_color: [1.0, 0.9, 0.8],
+                directionals: vec![
+                    Directional {
+                        intensity: 0.6,
+                        color: [1.0, 1.0, 0.9],
+                        direction: [0.3, 0.8, 0.52],
+                    },
+                    Directional {
+                        intensity: 0.3,
+                        color: [0.5, 0.7, 1.0],
+                        direction: [-0.6, 0.2, -0.77],
+                    },
+                ],
+            },
+        }
+    }
+}
+
+fn gpu_views(cams: &[Camera]) -> Vec<GpuView> {
+    cams.iter().map(|c| GpuView::new(c).unwrap()).collect()
+}
+
+/// Every word of a set-up, as bits.
+fn setup_bits(s: &GpuFaceSetup) -> Vec<u32> {
+    bytemuck::cast_slice(bytemuck::bytes_of(s)).to_vec()
+}
+
+/// A scene of `mesh` from `cams` lit by `lighting` as `light` says, ready to render, and the
+/// twin's lit colours for it (from the mesh and the lighting, not the device's).
+fn lit_scene(
+    r: &Renderer,
+    gpu: &common::Gpu,
+    mesh: &Mesh,
+    cams: &[Camera],
+    lighting: &Lighting,
+    s: &RasterSettings,
+    light: Light,
+) -> (GpuScene, Vec<[f32; 4]>) {
+    let scene = r.prepare(gpu, mesh, cams, lighting, s).unwrap();
+    let colors = match light {
+        Light::Host => host_lit_colors(mesh, lighting, s.color_mode),
+        Light::Gpu => {
+            let l = SceneLight::new(gpu, &scene).unwrap();
+            gpu.submit_and_wait(|rec| {
+                l.record_forward(
+                    rec,
+                    scene.positions().whole(),
+                    scene.position_layout(),
+                    scene.colors().whole(),
+                )
+            })
+            .unwrap();
+            GpuLightTwin::new(mesh, &mesh.positions, lighting, s.color_mode).forward()
+        }
+    };
+    (scene, colors)
+}
+
+/// The twin's inputs against the device's after a forward: every face set-up of every view and
+/// every lit colour, bit for bit (so that a failure says which stage differs). Returns the
+/// components compared.
+fn check_inputs(
+    gpu: &common::Gpu,
+    what: &str,
+    scene: &GpuScene,
+    setups: &[GpuFaceSetup],
+    colors: &[[f32; 4]],
+) -> usize {
+    let device = scene.read_setups(gpu).unwrap();
+    assert_eq!(device.len(), setups.len(), "{what}: set-ups");
+    for (i, (got, want)) in device.iter().zip(setups).enumerate() {
+        assert_eq!(
+            setup_bits(got),
+            setup_bits(want),
+            "{what}: face set-up {i}: device {got:?}, twin {want:?}"
+        );
+    }
+    // (The buffer may be larger than its colours.)
+    assert!(
+        scene.colors().size() >= 16 * colors.len() as u64,
+        "{what}: lit colours"
+    );
+    let device: Vec<[f32; 4]> = gpu.read_buffer(scene.colors(), 0, colors.len()).unwrap();
+    for (i, (got, want)) in device.iter().zip(colors).enumerate() {
+        assert!(
+            got.map(f32::to_bits) == want.map(f32::to_bits),
+            "{what}: lit colour {i}: device {got:?}, twin {want:?}"
+        );
+    }
+    setups.len() * 32 + colors.len() * 4
 }
 
 fn twin<'a>(
@@ -118,29 +227,15 @@ fn twin<'a>(
     FineTwin::new(inputs, s, silhouette, cull)
 }
 
-/// Renders `mesh` from `cams` with `s` (tiled, the renderer's default) and compares every output
-/// pixel and every rendered pixel's aux with the twin's. Returns the covered pixels compared.
-fn check_forward(
-    r: &Renderer,
-    gpu: &common::Gpu,
-    what: &str,
-    mesh: &Mesh,
-    s: &RasterSettings,
-    silhouette: bool,
-) -> usize {
-    let cams = cameras();
-    let mut scene = r
-        .prepare(gpu, mesh, &cams, &Lighting::default(), s)
-        .unwrap();
-    scene.set_silhouette_only(silhouette);
-    r.run(gpu, &mut scene, Method::default()).unwrap();
+/// The device's frames against the twin's: every output pixel and every rendered pixel's aux.
+/// Returns the covered output pixels.
+fn check_frames(gpu: &common::Gpu, what: &str, scene: &GpuScene, twin: &FineTwin<'_>) -> usize {
+    let views = scene.view_count() as usize;
     let frames = scene.read_frames(gpu).unwrap();
-    let (setups, colors) = device_inputs(gpu, &scene);
-    let twin = twin(mesh, &setups, &colors, s, silhouette, true);
-    let out_n = frames.images.len() / cams.len();
-    let rendered_n = frames.aux.len() / cams.len();
+    let out_n = frames.images.len() / views;
+    let rendered_n = frames.aux.len() / views;
     let mut covered = 0;
-    for v in 0..cams.len() {
+    for v in 0..views {
         let (images, aux) = twin.view(v as u32);
         let device = &frames.images[v * out_n..(v + 1) * out_n];
         for (i, (got, want)) in device.iter().zip(&images).enumerate() {
@@ -163,11 +258,51 @@ fn check_forward(
     covered
 }
 
-/// The brute-force backward against the twin's, byte for byte: every vertex's position gradient
-/// and every colour gradient (the per-pixel chain, the brute force's row-major sums, the view
-/// transform and the gather), for an upstream gradient on every output pixel. Unlit, so the
-/// host's f64 lighting share is exactly zero and the device's f32 results come through as they
-/// are. Returns the nonzero gradient components compared.
+/// Renders `mesh` from the cameras with `s` (tiled, the renderer's default), lit by
+/// [`Light::lighting`] as `light` says, and compares the device's face set-ups and lit colours
+/// with the twins' (from the mesh, cameras and lighting), then every output pixel and every
+/// rendered pixel's aux with the fine pass's twin over those. Returns the covered pixels
+/// compared.
+fn check_forward(
+    r: &Renderer,
+    gpu: &common::Gpu,
+    what: &str,
+    mesh: &Mesh,
+    s: &RasterSettings,
+    silhouette: bool,
+    light: Light,
+) -> usize {
+    let what = format!("{what} ({light:?} lighting)");
+    let cams = cameras();
+    let lighting = light.lighting();
+    let (mut scene, colors) = lit_scene(r, gpu, mesh, &cams, &lighting, s, light);
+    scene.set_silhouette_only(silhouette);
+    r.run(gpu, &mut scene, Method::default()).unwrap();
+    let setups = face_setups(&[&mesh.positions], &mesh.faces, &gpu_views(&cams), s);
+    check_inputs(gpu, &what, &scene, &setups, &colors);
+    let twin = twin(mesh, &setups, &colors, s, silhouette, true);
+    check_frames(gpu, &what, &scene, &twin)
+}
+
+/// What one backward check compared.
+#[derive(Default)]
+struct Compared {
+    /// Nonzero gradient components compared (raster backward, and lighting's).
+    nonzero: usize,
+    /// Gradient components compared.
+    components: usize,
+}
+
+/// A backward (`method`, lit by [`Light::lighting`] as `light` says) against the twin's,
+/// byte for byte: the device's f32 results, dL/d(world position) and dL/d(lit colour) (the
+/// per-pixel chain, `method`'s sums, the reductions, the view transform and the gather), for an
+/// upstream gradient on every output pixel, with every twin input (set-ups, lit colours,
+/// rendered images and aux, all checked against the device first) from the mesh, cameras and
+/// lighting. Host lighting's share of the gradients is the host's, in f64
+/// (`GradKernels::finish`): not compared here. With the lighting kernels, their backward
+/// (`SceneLight::record_backward`: dL/d(unlit colour), and the normals' share added to the
+/// positions') is compared too.
+#[allow(clippy::too_many_arguments)]
 fn check_backward(
     r: &Renderer,
     gpu: &common::Gpu,
@@ -175,11 +310,24 @@ fn check_backward(
     mesh: &Mesh,
     s: &RasterSettings,
     silhouette: bool,
-) -> usize {
+    method: Method,
+    light: Light,
+) -> Compared {
+    let what = format!("{what} ({method:?}, {light:?} lighting)");
     let cams = cameras();
-    let mut scene = r.prepare(gpu, mesh, &cams, &Lighting::unlit(), s).unwrap();
+    let lighting = light.lighting();
+    let (mut scene, colors) = lit_scene(r, gpu, mesh, &cams, &lighting, s, light);
     scene.set_silhouette_only(silhouette);
-    let run = r.run(gpu, &mut scene, Method::Brute).unwrap();
+    r.run(gpu, &mut scene, method).unwrap();
+    let run = scene.last_run().unwrap();
+    let binned = run.binned();
+    let scene = binned.scene();
+    let views = gpu_views(&cams);
+    let setups = face_setups(&[&mesh.positions], &mesh.faces, &views, s);
+    check_inputs(gpu, &what, scene, &setups, &colors);
+    let twin = twin(mesh, &setups, &colors, s, silhouette, false);
+    check_frames(gpu, &what, scene, &twin);
+
     let n = (s.width * s.height) as usize * cams.len();
     let d_image: Vec<[f32; 4]> = (0..n)
         .map(|i| {
@@ -191,91 +339,208 @@ fn check_backward(
             }
         })
         .collect();
-    let grads = r.backward(gpu, &run.binned(), &d_image, false).unwrap();
-    let (setups, colors) = device_inputs(gpu, &scene);
-    let twin = twin(mesh, &setups, &colors, s, silhouette, false);
-    let views: Vec<GpuView> = cams.iter().map(|c| GpuView::new(c).unwrap()).collect();
+    let gb = GradBuffers::new(gpu, &binned).unwrap();
+    gb.set_d_image(gpu, scene, &d_image).unwrap();
+    let io = gb.io();
+    gpu.submit_and_wait(|rec| r.grad_kernels().record(rec, &binned, &gb, &io))
+        .unwrap();
+    let nv = mesh.positions.len();
+    let nc = colors.len();
+    let device_positions: Vec<[f32; 3]> = gpu
+        .read_buffer(io.positions.buffer, io.positions.offset, nv)
+        .unwrap();
+    let device_colors: Vec<[f32; 3]> = gpu
+        .read_buffer(io.colors.buffer, io.colors.offset, nc)
+        .unwrap();
+
     let rendered: Vec<_> = (0..cams.len()).map(|v| twin.rendered(v as u32)).collect();
-    let rows = if s.antialias { 2 * s.height } else { s.height };
-    let want = twin.backward(&views, &mesh.positions, &d_image, &rendered, rows);
-    let mut nonzero = 0;
-    let pairs = [
-        ("vertex", &grads.positions, &want.positions),
-        ("colour", &grads.colors, &want.colors),
-    ];
-    for (kind, got, want) in pairs {
+    let order = match method {
+        Method::Brute => {
+            // One band of every rendered row: these scenes are far under any loop cap.
+            assert_eq!(gb.bands(), 1, "{what}: brute-force bands");
+            SumOrder::Brute {
+                band_rows: scene.rendered_size().1,
+            }
+        }
+        Method::Tiled { tile } => SumOrder::Tiled { tile },
+    };
+    let want = twin.backward(&views, &mesh.positions, &d_image, &rendered, order);
+    let mut compared = Compared::default();
+    let mut compare = |kind: &str, got: &[[f32; 3]], want: &[[f32; 3]]| {
         assert_eq!(got.len(), want.len(), "{what}: {kind} gradients");
         for (i, (got, want)) in got.iter().zip(want).enumerate() {
-            let got = got.map(|x| x as f32); // widened from f32 by the host: exact
             assert!(
                 got.map(f32::to_bits) == want.map(f32::to_bits),
                 "{what}: {kind} {i}: device {got:?}, twin {want:?}"
             );
-            nonzero += got.iter().filter(|x| **x != 0.0).count();
+            compared.nonzero += got.iter().filter(|x| **x != 0.0).count();
+            compared.components += 3;
         }
+    };
+    compare("vertex", &device_positions, &want.positions);
+    compare("lit colour", &device_colors, &want.colors);
+
+    if light == Light::Gpu {
+        // The lighting kernels' backward over the raster backward's results, as a fit records it.
+        let l = SceneLight::new(gpu, scene).unwrap();
+        let d_base = gpu
+            .create_buffer("d base", 12 * nc as u64, MemoryKind::Device)
+            .unwrap();
+        gpu.submit_and_wait(|rec| {
+            l.record_backward(
+                rec,
+                scene.positions().whole(),
+                scene.position_layout(),
+                io.colors,
+                d_base.whole(),
+                io.positions,
+            )
+        })
+        .unwrap();
+        let got_base: Vec<[f32; 3]> = gpu.read_buffer(&d_base, 0, nc).unwrap();
+        let got_positions: Vec<[f32; 3]> = gpu
+            .read_buffer(io.positions.buffer, io.positions.offset, nv)
+            .unwrap();
+        let light_twin = GpuLightTwin::new(mesh, &mesh.positions, &lighting, s.color_mode);
+        let (want_base, want_positions) = light_twin.backward(&want.colors, &want.positions);
+        compare("unlit colour", &got_base, &want_base);
+        compare("lit vertex", &got_positions, &want_positions);
     }
     // Every mode has gradients (hard coverage, colour and alpha leave the colours' at least).
     assert!(
-        nonzero > mesh.positions.len() / 2,
-        "{what}: only {nonzero} nonzero gradient components"
+        compared.nonzero > nv / 2,
+        "{what}: only {} nonzero gradient components",
+        compared.nonzero
     );
-    nonzero
+    compared
 }
 
 #[test]
-fn the_fine_pass_equals_its_bit_twin_in_every_mode() {
+fn the_fine_pass_and_its_setups_equal_their_bit_twins_in_every_mode() {
     let Some(gpu) = common::gpu() else { return };
     let r = Renderer::new(&gpu).unwrap();
     let (textured, colored) = meshes(2);
     let mut compared = 0;
-    for (what, mesh, s) in every_mode(&textured, &colored, 24, 20, 1e-3) {
-        compared += check_forward(&r, &gpu, &what, mesh, &s, false);
+    for light in [Light::Host, Light::Gpu] {
+        for (what, mesh, s) in every_mode(&textured, &colored, 24, 20, 1e-3) {
+            compared += check_forward(&r, &gpu, &what, mesh, &s, false, light);
+        }
+        // Double-sided, anti-aliased, SoftRas's own σ and γ, and silhouettes.
+        let s = RasterSettings {
+            width: 16,
+            height: 16,
+            double_sided: true,
+            antialias: true,
+            ..RasterSettings::default()
+        };
+        compared += check_forward(
+            &r,
+            &gpu,
+            "double-sided, anti-aliased",
+            &textured,
+            &s,
+            false,
+            light,
+        );
+        let s = RasterSettings {
+            width: 24,
+            height: 24,
+            sigma: 1e-4,
+            ..RasterSettings::default()
+        };
+        compared += check_forward(&r, &gpu, "silhouette", &colored, &s, true, light);
     }
-    // Double-sided, anti-aliased, SoftRas's own σ and γ, and silhouettes.
-    let s = RasterSettings {
-        width: 16,
-        height: 16,
-        double_sided: true,
-        antialias: true,
-        ..RasterSettings::default()
+    assert!(compared > 10_000, "{compared} covered pixels compared");
+}
+
+/// `method`'s backward against the twin in every differentiable mode, anti-aliased and for a
+/// silhouette, under each of `lights`.
+fn backward_in_every_mode(method: Method, lights: &[Light]) -> Compared {
+    let Some(gpu) = common::gpu() else {
+        return Compared::default();
     };
-    compared += check_forward(&r, &gpu, "double-sided, anti-aliased", &textured, &s, false);
-    let s = RasterSettings {
-        width: 24,
-        height: 24,
-        sigma: 1e-4,
-        ..RasterSettings::default()
+    let r = Renderer::new(&gpu).unwrap();
+    let (textured, colored) = meshes(1);
+    let mut total = Compared::default();
+    let mut add = |c: Compared| {
+        total.nonzero += c.nonzero;
+        total.components += c.components;
     };
-    compared += check_forward(&r, &gpu, "silhouette", &colored, &s, true);
-    assert!(compared > 5_000, "{compared} covered pixels compared");
+    for &light in lights {
+        for (what, mesh, s) in every_mode(&textured, &colored, 16, 14, 1e-2) {
+            add(check_backward(
+                &r, &gpu, &what, mesh, &s, false, method, light,
+            ));
+        }
+        let s = RasterSettings {
+            width: 12,
+            height: 12,
+            sigma: 1e-3,
+            antialias: true,
+            ..RasterSettings::default()
+        };
+        add(check_backward(
+            &r,
+            &gpu,
+            "anti-aliased",
+            &textured,
+            &s,
+            false,
+            method,
+            light,
+        ));
+        let s = RasterSettings {
+            width: 16,
+            height: 16,
+            sigma: 1e-3,
+            ..RasterSettings::default()
+        };
+        add(check_backward(
+            &r,
+            &gpu,
+            "silhouette",
+            &colored,
+            &s,
+            true,
+            method,
+            light,
+        ));
+    }
+    println!(
+        "{method:?}: {} gradient components compared, {} nonzero",
+        total.components, total.nonzero
+    );
+    assert!(
+        total.nonzero > 5_000 * lights.len(),
+        "{} nonzero gradient components compared",
+        total.nonzero
+    );
+    total
 }
 
 #[test]
-fn the_backward_equals_its_bit_twin_in_every_differentiable_mode() {
+fn the_brute_force_backward_equals_its_bit_twin_in_every_differentiable_mode() {
+    backward_in_every_mode(Method::Brute, &[Light::Host]);
+}
+
+#[test]
+fn the_tiled_backward_equals_its_bit_twin_in_every_differentiable_mode() {
+    assert_eq!(Method::default(), Method::Tiled { tile: DEFAULT_TILE });
+    backward_in_every_mode(Method::default(), &[Light::Host, Light::Gpu]);
+}
+
+/// The tiled backward's order is the pixels', whatever the tile: on 16-pixel tiles (four 8 × 8
+/// blocks each) too.
+#[test]
+fn the_tiled_backward_on_larger_tiles_equals_its_bit_twin() {
     let Some(gpu) = common::gpu() else { return };
     let r = Renderer::new(&gpu).unwrap();
     let (textured, colored) = meshes(1);
-    let mut compared = 0;
-    for (what, mesh, s) in every_mode(&textured, &colored, 16, 14, 1e-2) {
-        compared += check_backward(&r, &gpu, &what, mesh, &s, false);
+    for (what, mesh, s) in every_mode(&textured, &colored, 20, 18, 1e-2)
+        .into_iter()
+        .filter(|(_, _, s)| s.dist != Dist::Hard && s.alpha == Alpha::Prod)
+    {
+        let method = Method::Tiled { tile: 16 };
+        check_backward(&r, &gpu, &what, mesh, &s, false, method, Light::Gpu);
     }
-    let s = RasterSettings {
-        width: 12,
-        height: 12,
-        sigma: 1e-3,
-        antialias: true,
-        ..RasterSettings::default()
-    };
-    compared += check_backward(&r, &gpu, "anti-aliased", &textured, &s, false);
-    let s = RasterSettings {
-        width: 16,
-        height: 16,
-        sigma: 1e-3,
-        ..RasterSettings::default()
-    };
-    compared += check_backward(&r, &gpu, "silhouette", &colored, &s, true);
-    assert!(
-        compared > 5_000,
-        "{compared} nonzero gradient components compared"
-    );
 }

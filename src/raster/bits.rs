@@ -1,13 +1,29 @@
-//! The bit twins of the forward's fine pass and of the backward: `raster_fine.glsl`'s `shade_face` and `pixel_finish`
-//! (and `raster.glsl`'s functions they call, and the 2 × 2 downsampling) evaluated in f32,
-//! operation for operation, with softmax's `exp`, the sigmoid, reciprocals and divisions from
-//! [`crate::fmath`]. Given the face setups and lit colours a forward left on the device, it gives
-//! the device's image and aux byte for byte (`tests/raster_bits.rs`); [`FineTwin::backward`] does
-//! the same for the backward (`raster_grad.glsl`'s per-pixel chain, the brute force's sums,
-//! `grad_world.comp` and `grad_gather.comp`) and the device's gradients. The device's result is
-//! then the IEEE evaluation of the written operations, which every conformant device
-//! reproduces. The f64 twins ([`super::reference`], [`super::reference_grad`]) stay the accuracy
-//! references.
+//! The bit twins of the device's forward and backward, in f32 operation for operation, with
+//! softmax's `exp`, the sigmoid, square roots, reciprocals and divisions from [`crate::fmath`]:
+//!
+//! - [`face_setups`]: the projection and face set-up (`vertex_project.comp`, `face_setup.comp`)
+//!   from the world positions and the views;
+//! - [`host_lit_colors`] and [`GpuLightTwin`]: the lit colours, as the renderer's host f64
+//!   lighting rounds them, or as the lighting kernels (`light_forward.comp`; backward
+//!   `light_backward.comp`, `light_gather.comp`) compute them;
+//! - [`FineTwin`]: the fine pass (`raster_fine.glsl`'s `shade_face` and `pixel_finish`, the
+//!   `raster.glsl` functions they call, and the 2 × 2 downsampling): the device's image and aux;
+//! - [`FineTwin::backward`]: the backward (`raster_grad.glsl`'s per-pixel chain, summed in the
+//!   order of `grad_brute.comp` or of the tiled `grad_tiled.comp` ([`SumOrder`]), reduced as
+//!   `grad_reduce.comp` and `grad_reduce_texels.comp` do, then `grad_world.comp` and
+//!   `grad_gather.comp`): the device's gradients.
+//!
+//! `tests/raster_bits.rs` checks each against the device byte for byte, from the mesh, the
+//! cameras and the lighting. The device's result is then the IEEE evaluation of the written
+//! operations (every float operation of every kernel is `NoContraction`), which every
+//! conformant device reproduces. The f64 twins ([`super::reference`], [`super::reference_grad`])
+//! stay the accuracy references.
+
+mod face_setup;
+mod lighting;
+
+pub use face_setup::{face_setups, to_screen};
+pub use lighting::{GpuLightTwin, host_lit_colors};
 
 use super::fine::{PixelAux, RasterPush};
 use super::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
@@ -52,8 +68,9 @@ struct Face {
     inv_det: f32,
 }
 
-fn face_of(s: &GpuFaceSetup) -> Face {
-    let v = [0, 1, 2].map(|k| [s.v[k][0], s.v[k][1], s.v[k][2]]);
+/// `face_reciprocals` of `raster.glsl`: 1 / z_k, 1 / |edge k|² (0 for a zero-length edge)
+/// and 1 / the clamped determinant of a face with screen vertices `v` and determinant `det`.
+fn reciprocals(v: &[V3; 3], det: f32) -> (V3, V3, f32) {
     let mut inv_z = [0.0; 3];
     let mut inv_len2 = [0.0; 3];
     for k in 0..3 {
@@ -63,6 +80,17 @@ fn face_of(s: &GpuFaceSetup) -> Face {
         inv_z[k] = fmath::rcp(v[k][2]);
         inv_len2[k] = if len2 > 0.0 { fmath::rcp(len2) } else { 0.0 };
     }
+    let inv_det = fmath::rcp(if det > 0.0 {
+        det.max(MIN_DET)
+    } else {
+        det.min(-MIN_DET)
+    });
+    (inv_z, inv_len2, inv_det)
+}
+
+fn face_of(s: &GpuFaceSetup) -> Face {
+    let v = [0, 1, 2].map(|k| [s.v[k][0], s.v[k][1], s.v[k][2]]);
+    let (inv_z, inv_len2, inv_det) = reciprocals(&v, s.det);
     Face {
         v,
         inv: [0, 1, 2].map(|k| [s.inv[k][0], s.inv[k][1]]),
@@ -72,11 +100,7 @@ fn face_of(s: &GpuFaceSetup) -> Face {
         det: s.det,
         inv_z,
         inv_len2,
-        inv_det: fmath::rcp(if s.det > 0.0 {
-            s.det.max(MIN_DET)
-        } else {
-            s.det.min(-MIN_DET)
-        }),
+        inv_det,
     }
 }
 
@@ -437,8 +461,8 @@ fn nearest_edge(f: &Face, p: V2) -> (f32, V2, V2, usize, usize, f32) {
     best
 }
 
-/// The gradients the device's brute-force backward writes (`Renderer::backward` after a
-/// `Method::Brute` forward, read through an unlit lighting, whose share is exactly zero).
+/// The gradients the device's backward writes (`GradIo::positions` and `GradIo::colors`): before
+/// the host adds the lighting's share (exactly zero with an unlit lighting).
 pub struct BackwardTwin {
     /// dL/d(world position) per vertex.
     pub positions: Vec<V3>,
@@ -682,18 +706,24 @@ impl FineTwin<'_> {
         Some(g)
     }
 
-    /// The brute-force backward of views `0..views.len()` for `d_image` (output resolution,
-    /// view-major), given the forward's rendered images and aux of each view ([`FineTwin::view`]
-    /// at the rendered size: `rendered[v]`), the world positions (one mesh) and the views: each
-    /// face's pixels summed in row-major order in bands of `band_rows` rows, the bands in order,
-    /// then `grad_world.comp` and `grad_gather.comp`.
+    /// The backward of views `0..views.len()` for `d_image` (output resolution, view-major),
+    /// given the forward's rendered images and aux of each view ([`FineTwin::rendered`]:
+    /// `rendered[v]`), the world positions (one mesh) and the views: each face's per-pixel terms
+    /// summed into partials in `order` (the device's backward kernel for that method), the
+    /// partials reduced in unit order (`grad_reduce.comp`, `grad_reduce_texels.comp`), then
+    /// `grad_world.comp` and `grad_gather.comp`. The results are what the device writes to
+    /// `GradIo::positions` and `GradIo::colors` (dL/d(lit colour)): with [`Lighting::unlit`]
+    /// exactly what [`Renderer::backward`] returns, the host's f64 lighting share being zero.
+    ///
+    /// [`Lighting::unlit`]: crate::lighting::Lighting::unlit
+    /// [`Renderer::backward`]: super::gpu::Renderer::backward
     pub fn backward(
         &self,
         views: &[super::setup::GpuView],
         positions: &[[f32; 3]],
         d_image: &[[f32; 4]],
         rendered: &[(Vec<[f32; 4]>, Vec<PixelAux>)],
-        band_rows: u32,
+        order: SumOrder,
     ) -> BackwardTwin {
         let pc = &self.push;
         let nf = pc.face_count as usize;
@@ -703,57 +733,56 @@ impl FineTwin<'_> {
         } else {
             (pc.texture_res * pc.texture_res) as usize
         };
-        // Per (view, face): screen corners and colour slots.
+        // Per (view, face): the screen corners (and vertex colours) after `grad_reduce.comp`;
+        // per (face, texel): the texel gradients after `grad_reduce_texels.comp`, one running
+        // sum over the views in order and each view's units in order.
         let mut screen = vec![[[0.0f32; 3]; 3]; views.len() * nf];
-        let mut colors = vec![[0.0f32; 3]; views.len() * nf * slots];
+        let mut colors = vec![
+            [0.0f32; 3];
+            if vertex_colors {
+                views.len() * nf * slots
+            } else {
+                0
+            }
+        ];
+        let mut texels = vec![[0.0f32; 3]; if vertex_colors { 0 } else { nf * slots }];
         for (v, (images, aux)) in rendered.iter().enumerate() {
             let setups = &self.inputs.setups[v * nf..(v + 1) * nf];
             for (j, setup) in setups.iter().enumerate() {
                 let f = face_of(setup);
-                if f.flags & FACE_FINITE == 0 {
-                    continue;
-                }
+                // The pair's contribution at rendered pixel (col, row), where it has one.
+                let pair = |col: u32, row: u32| -> Option<PairGrad> {
+                    let id = (row * pc.width + col) as usize;
+                    let u = self.upstream(v as u32, col, row, d_image, images[id], &aux[id]);
+                    if u.d_alpha == 0.0 && (self.alpha_only || u.d_rgb == [0.0; 3]) {
+                        return None;
+                    }
+                    self.pixel_face_grad(&f, j as u32, &u)
+                };
+                let units = match order {
+                    SumOrder::Brute { band_rows } => self.brute_units(&f, slots, band_rows, pair),
+                    SumOrder::Tiled { tile } => self.tiled_units(slots, tile, pair),
+                };
                 let item = v * nf + j;
-                let mut row0 = 0;
-                while row0 < pc.height {
-                    let mut acc = [[0.0f32; 3]; 3];
-                    let mut cacc = vec![[0.0f32; 3]; slots];
-                    for row in row0..(row0 + band_rows).min(pc.height) {
-                        for col in 0..pc.width {
-                            let id = (row * pc.width + col) as usize;
-                            let u =
-                                self.upstream(v as u32, col, row, d_image, images[id], &aux[id]);
-                            if u.d_alpha == 0.0 && (self.alpha_only || u.d_rgb == [0.0; 3]) {
-                                continue;
-                            }
-                            let Some(g) = self.pixel_face_grad(&f, j as u32, &u) else {
-                                continue;
-                            };
-                            for (acc, x) in acc.iter_mut().zip(g.screen) {
-                                add3(acc, x);
-                            }
-                            if g.colored {
-                                if vertex_colors {
-                                    for (acc, x) in cacc.iter_mut().zip(g.color) {
-                                        add3(acc, x);
-                                    }
-                                } else {
-                                    add3(&mut cacc[g.texel as usize], g.color[0]);
-                                }
+                for unit in &units {
+                    for (s, x) in screen[item].iter_mut().zip(unit.screen) {
+                        add3(s, x);
+                    }
+                    if vertex_colors {
+                        for (s, &x) in colors[item * slots..(item + 1) * slots]
+                            .iter_mut()
+                            .zip(&unit.colors)
+                        {
+                            add3(s, x);
+                        }
+                    } else {
+                        let face_texels = &mut texels[j * slots..(j + 1) * slots];
+                        for (t, s) in face_texels.iter_mut().enumerate() {
+                            if unit.written[t] {
+                                add3(s, unit.colors[t]);
                             }
                         }
                     }
-                    // grad_reduce (and its texel twin): the bands in order onto zero.
-                    for (s, x) in screen[item].iter_mut().zip(acc) {
-                        add3(s, x);
-                    }
-                    for (s, &x) in colors[item * slots..(item + 1) * slots]
-                        .iter_mut()
-                        .zip(&cacc)
-                    {
-                        add3(s, x);
-                    }
-                    row0 += band_rows;
                 }
             }
         }
@@ -779,7 +808,7 @@ impl FineTwin<'_> {
         let mut out_col = if vertex_colors {
             vec![[0.0f32; 3]; nv]
         } else {
-            Vec::new()
+            texels
         };
         for vtx in 0..nv {
             let (b, e) = (
@@ -798,21 +827,170 @@ impl FineTwin<'_> {
                 }
             }
         }
-        if !vertex_colors {
-            // grad_reduce_texels: the views in order, onto zero.
-            out_col = vec![[0.0f32; 3]; nf * slots];
-            for v in 0..views.len() {
-                let view_colors = &colors[v * nf * slots..(v + 1) * nf * slots];
-                for (s, &x) in out_col.iter_mut().zip(view_colors) {
-                    add3(s, x);
-                }
-            }
-        }
         BackwardTwin {
             positions: out_pos,
             colors: out_col,
         }
     }
+
+    /// `grad_brute.comp`'s units of one (view, face): bands of `band_rows` rows from the top,
+    /// each the running sum of its pixels' contributions in row-major order.
+    fn brute_units(
+        &self,
+        f: &Face,
+        slots: usize,
+        band_rows: u32,
+        pair: impl Fn(u32, u32) -> Option<PairGrad>,
+    ) -> Vec<Partial> {
+        let pc = &self.push;
+        let vertex_colors = self.settings.color_mode == ColorMode::Vertex;
+        let mut units = Vec::new();
+        let mut row0 = 0;
+        while row0 < pc.height {
+            let mut unit = Partial::new(slots);
+            if f.flags & FACE_FINITE != 0 {
+                for row in row0..(row0 + band_rows).min(pc.height) {
+                    for col in 0..pc.width {
+                        let Some(g) = pair(col, row) else { continue };
+                        for (acc, x) in unit.screen.iter_mut().zip(g.screen) {
+                            add3(acc, x);
+                        }
+                        if g.colored {
+                            if vertex_colors {
+                                for (acc, x) in unit.colors.iter_mut().zip(g.color) {
+                                    add3(acc, x);
+                                }
+                            } else {
+                                add3(&mut unit.colors[g.texel as usize], g.color[0]);
+                                unit.written[g.texel as usize] = true;
+                            }
+                        }
+                    }
+                }
+            }
+            units.push(unit);
+            row0 += band_rows;
+        }
+        units
+    }
+
+    /// `grad_tiled.comp`'s units of one (view, face): one per `tile × tile` tile, tiles in
+    /// row-major order (the order binning's scatter gives a face's entries). A tile's partial
+    /// adds, one 2 × 2 quad after another in [`morton_pixel`]'s order, each quad's sum
+    /// `(v0 + v1) + (v2 + v3)` of its pixels' contributions, a pixel with none adding -0.0;
+    /// a texel slot adds its pixels' contributions one at a time in the same order. That order
+    /// is the pixels', not the subgroup's or the workgroup's: the same bits at any subgroup
+    /// size and workgroup shape. Every tile is a unit here, where the device has units only for
+    /// the tiles binning gave the face: a tile without any contribution sums to +0.0, and adding
+    /// +0.0 to a running sum that starts at +0.0 changes no bit (such a sum is never -0.0).
+    fn tiled_units(
+        &self,
+        slots: usize,
+        tile: u32,
+        pair: impl Fn(u32, u32) -> Option<PairGrad>,
+    ) -> Vec<Partial> {
+        const NEG_ZERO: f32 = -0.0;
+        let pc = &self.push;
+        let vertex_colors = self.settings.color_mode == ColorMode::Vertex;
+        let alpha_only = self.alpha_only;
+        // With an alpha-only upstream the device adds only x and y of each corner.
+        let axes = if alpha_only { 2 } else { 3 };
+        let quad_sum = |v: [f32; 4]| (v[0] + v[1]) + (v[2] + v[3]);
+        let mut units = Vec::new();
+        for ty in 0..pc.height.div_ceil(tile) {
+            for tx in 0..pc.width.div_ceil(tile) {
+                let mut unit = Partial::new(slots);
+                for quad in 0..tile * tile / 4 {
+                    let g: [Option<PairGrad>; 4] = std::array::from_fn(|k| {
+                        let (x, y) = morton_pixel(4 * quad + k as u32, tile);
+                        let (col, row) = (tx * tile + x, ty * tile + y);
+                        (col < pc.width && row < pc.height)
+                            .then(|| pair(col, row))
+                            .flatten()
+                    });
+                    for c in 0..3 {
+                        for a in 0..axes {
+                            let v = g
+                                .each_ref()
+                                .map(|g| g.as_ref().map_or(NEG_ZERO, |g| g.screen[c][a]));
+                            unit.screen[c][a] += quad_sum(v);
+                        }
+                    }
+                    if alpha_only {
+                        continue;
+                    }
+                    fn colored(g: &Option<PairGrad>) -> Option<&PairGrad> {
+                        g.as_ref().filter(|g| g.colored)
+                    }
+                    if vertex_colors {
+                        for c in 0..3 {
+                            for a in 0..3 {
+                                let v = g
+                                    .each_ref()
+                                    .map(|g| colored(g).map_or(NEG_ZERO, |g| g.color[c][a]));
+                                unit.colors[c][a] += quad_sum(v);
+                            }
+                        }
+                    } else {
+                        for g in g.iter().filter_map(colored) {
+                            add3(&mut unit.colors[g.texel as usize], g.color[0]);
+                            unit.written[g.texel as usize] = true;
+                        }
+                    }
+                }
+                units.push(unit);
+            }
+        }
+        units
+    }
+}
+
+/// One unit's partial gradient (a band of a face, or a (face, tile) entry): the screen corners,
+/// the colour slots (3 vertex colours or R² texels) and which texel slots were written.
+struct Partial {
+    screen: [V3; 3],
+    colors: Vec<V3>,
+    written: Vec<bool>,
+}
+
+impl Partial {
+    fn new(slots: usize) -> Self {
+        Self {
+            screen: [[0.0; 3]; 3],
+            colors: vec![[0.0; 3]; slots],
+            written: vec![false; slots],
+        }
+    }
+}
+
+/// `morton_pixel` of `subgroup_face.glsl`: where pixel `i` of a `size`-wide tile lies in the
+/// tiled backward's order (8 × 8 blocks row-major; in a block the Z order of its 64 pixels).
+pub fn morton_pixel(i: u32, size: u32) -> (u32, u32) {
+    let block = i >> 6;
+    let m = i & 63;
+    let per_row = size / 8;
+    let x = (m & 1) | ((m >> 1) & 2) | ((m >> 2) & 4);
+    let y = ((m >> 1) & 1) | ((m >> 2) & 2) | ((m >> 3) & 4);
+    ((block % per_row) * 8 + x, (block / per_row) * 8 + y)
+}
+
+/// The order in which a backward sums each face's per-pixel terms: the device's backward
+/// kernel for each [`Method`](super::gpu::Method).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SumOrder {
+    /// `grad_brute.comp` (`Method::Brute`): one unit per band of `band_rows` rows (the
+    /// backward's band; the whole rendered height unless a driver's loop cap splits it), its
+    /// pixels in row-major order.
+    Brute {
+        /// Rows per band.
+        band_rows: u32,
+    },
+    /// `grad_tiled.comp` (`Method::Tiled`, the default): one unit per (face, tile), its pixels
+    /// in [`morton_pixel`]'s order, summed a 2 × 2 quad at a time.
+    Tiled {
+        /// The forward's tile edge in pixels.
+        tile: u32,
+    },
 }
 
 /// `grad_world.comp` for a look-at view (perspective or orthographic).
