@@ -202,7 +202,7 @@ fn reduce_ln2(x: f32) -> (f32, i32) {
 /// The least float whose exp is normal, just above −126 ln 2 (`FM_EXP_MIN`).
 const EXP_MIN: f32 = -87.336_540_2;
 
-/// exp(x): 0 below [`EXP_MIN`] (no subnormal results), +∞ above ln(f32::MAX).
+/// exp(x): 0 below `EXP_MIN`, just above −126 ln 2 (no subnormal results), +∞ above ln(f32::MAX).
 pub fn exp(x: f32) -> f32 {
     if x.is_nan() {
         return x;
