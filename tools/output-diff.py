@@ -443,11 +443,25 @@ def sketch(path):
     os.remove(path)
 
 
+class Sketched:
+    """The arrays of a sketch, as the NPZ's would be read for the comparison: small ones whole,
+    large ones as (shape, sample, block digests)."""
+
+    def __init__(self, path):
+        self.sk = np.load(path, allow_pickle=False)
+        self.files = sorted({k.split(":", 1)[1] for k in self.sk.files if ":" in k})
+
+    def __getitem__(self, name):
+        if "full:" + name in self.sk.files:
+            return self.sk["full:" + name]
+        return (tuple(self.sk["shape:" + name]), self.sk["sample:" + name], self.sk["blocks:" + name])
+
+
 def diff_sketch(sketch_path, new):
-    """An NPZ against the sketch of the other side's: the sampled values' largest difference and
-    how many blocks of values differ by their digests."""
+    """An NPZ, or another sketch, against the sketch of the other side's: the sampled values'
+    largest difference and how many blocks of values differ by their digests."""
     sk = np.load(sketch_path, allow_pickle=False)
-    z = np.load(new, allow_pickle=False)
+    z = Sketched(new) if new.endswith(SKETCH) else np.load(new, allow_pickle=False)
     names = sorted({k.split(":", 1)[1] for k in sk.files if ":" in k})
     if names != sorted(z.files):
         return f"arrays {names} -> {sorted(z.files)}"
@@ -463,15 +477,21 @@ def diff_sketch(sketch_path, new):
             continue
         shape = tuple(sk["shape:" + name])
         x = sk["sample:" + name]
-        if shape != y.shape or x.dtype != y.dtype:
-            rows.append((math.inf, f"{name}: {x.dtype}{list(shape)} -> {y.dtype}{list(y.shape)}"))
+        if isinstance(y, tuple):  # the other side's sketch
+            y_shape, sample, digests = y
+            y_dtype = sample.dtype
+        else:
+            y_shape, y_dtype = y.shape, y.dtype
+        if shape != y_shape or x.dtype != y_dtype:
+            rows.append((math.inf, f"{name}: {x.dtype}{list(shape)} -> {y_dtype}{list(y_shape)}"))
             continue
-        flat = np.ascontiguousarray(y).ravel()
-        blocks = int(np.count_nonzero((sk["blocks:" + name] != block_digests(flat)).any(axis=1)))
+        if not isinstance(y, tuple):
+            flat = np.ascontiguousarray(y).ravel()
+            digests, sample = block_digests(flat), flat[::SKETCH_STRIDE]
+        blocks = int(np.count_nonzero((sk["blocks:" + name] != digests).any(axis=1)))
         nblocks = len(sk["blocks:" + name])
         if blocks == 0:
             continue
-        sample = flat[::SKETCH_STRIDE]
         note = f"{blocks} of {nblocks} blocks of {SKETCH_BLOCK} values differ"
         if x.tobytes() == sample.tobytes():
             rows.append((0.0, f"{name}: {note}; none of the reference's sampled values (1 in {SKETCH_STRIDE}) does"))
@@ -559,6 +579,8 @@ def same_bytes(pa, pb):
 
     if pa.endswith(SKETCH):
         sha = np.load(pa, allow_pickle=False)["sha256"].tobytes()
+        if pb.endswith(SKETCH):
+            return np.load(pb, allow_pickle=False)["sha256"].tobytes() == sha
         return hashlib.sha256(open(pb, "rb").read()).digest() == sha
     if pb.endswith(SKETCH):
         return same_bytes(pb, pa)
@@ -592,7 +614,7 @@ def main():
     old_name, new_name = args.names.split(",", 1)
     fa, fb = files_under(args.old), files_under(args.new)
     paths = sorted(set(fa) | set(fb))
-    width = max((len(p) for p in paths), default=4) + 2
+    width = max((len(p) for p in paths), default=4) + 4  # "./", the path and two spaces
     print(f"{'file':<{width}}{'bytes':<14}largest difference ({old_name} -> {new_name})")
     differing = 0
     for p in paths:
