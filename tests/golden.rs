@@ -9,12 +9,15 @@
 //! `exp`, `log`, division, square root, `sin` and `cos`, `kernels/include/fmath.glsl`; no fused
 //! operations; fixed-order dot and matrix products), so any conformant device must write these
 //! bytes. A device that differs has found a case this reasoning missed (`.ci/gpu-check` lists
-//! the files, OUT/golden-diff.txt).
+//! the files and measures each one's difference from llvmpipe's output, OUT/golden-diff.txt).
 //!
 //! A change that alters an output on purpose (new arithmetic, a new summation order, a new
 //! default) regenerates the list with the binary of that change,
-//! `tools/output-hashes target/release/softvk > tests/data/golden-hashes.txt`, and says why in its
-//! commit.
+//! `tools/output-hashes target/release/softvk > tests/data/golden-hashes.txt`, and its commit
+//! says why and carries the table of `tools/output-hashes --compare OLD_BINARY NEW_BINARY` (the
+//! binaries before and after the change): which files changed and by how much, images in 1/255
+//! or units in the last place, gradients, losses and weights relative to each number. A list is
+//! not re-blessed without it.
 
 mod common;
 
