@@ -1,7 +1,8 @@
 """Called as SoftRas is called, ``softvk.soft_renderer`` returns what SoftRas returns, or raises one
 clear error: never something else in silence.
 
-- ``mode=`` is ignored, as SoftRas ignores it (test_compat_renderer.py, with a fake engine);
+- ``mode=`` is ignored, as SoftRas ignores it (here with the engine, test_compat_renderer.py
+  with a fake);
 - ``SoftRenderer`` takes the engine's fast path only when it computes what SoftRas's composed
   steps compute: replaced, subclassed or hooked modules, replaced functions and float64 meshes
   take the composed steps; attributes changed after construction are read at each call;
@@ -9,6 +10,11 @@ clear error: never something else in silence.
 - a tensor ``viewing_angle`` (batched, or requiring a gradient), non-square images with and
   without anti-aliasing, ``fill_back``, ``near``/``far``, ``background_color`` and ``eps`` hold in
   every path.
+
+What "what SoftRas returns" is: besides one path against another (the engine's against the
+composed steps), the composed steps, the f64 twin and the fall-backs are held against SoftRas's
+steps written out below in plain torch from SPEC §1–2 (``softras_render``, ``softras_rasterize``,
+``nearest_depth``; test_fast_path.py uses them too), which share no code with softvk.
 """
 
 import math
@@ -27,7 +33,10 @@ import softvk.torch as st
 # --- SoftRas's steps written out in plain torch (SPEC §1, §2): the independent reference ---------
 #
 # Nothing of softvk is used here: the camera, the lights and the rasterizer are SPEC's formulas in
-# float64, differentiable by autograd. The renderer's paths are held against them below.
+# float64, differentiable by autograd. The renderer's paths are held against them below. On
+# this file's sphere the rasterizer agrees with the f64 twin to 1e-13 (image), across the
+# settings of test_each_setting_holds_in_every_path; its one borrowing is the tie rule of
+# SoftRas's texel lookup, where SoftRas itself flips between two texels (see below).
 
 def _size(image_size):
     return (image_size, image_size) if isinstance(image_size, int) else tuple(image_size)
@@ -390,11 +399,11 @@ def test_mode_is_ignored_and_render_gives_softras_s_alpha_and_depth(gpu, assets,
     silhouettes = st.render(renderer, mesh, "silhouettes")
     np.testing.assert_allclose(silhouettes.numpy(), softras[:, 3].numpy(), atol=ATOL, rtol=0)
     assert len(engine_calls) == 6
-    # Depth: measured 2.4e-6 off the reference (the composed steps' f32 camera, depths 1.9–3.5).
+    # Measured: 3.9e-6 (images, alpha); 1.6e-6 (depths of 1.8 to 2.6, against nearest_depth).
     depth = st.render(renderer, mesh, "depth")
     want = nearest_depth(vertices, faces, EYES, 24)
-    assert 50 < (want < 100).sum() < want.numel()
-    np.testing.assert_allclose(depth.numpy(), want.numpy(), atol=1e-5, rtol=0)
+    assert 200 < (want < 100).sum() < want.numel()
+    np.testing.assert_allclose(depth.numpy(), want.numpy(), atol=5e-6, rtol=0)
 
 
 # --- float64 is computed in double ---------------------------------------------------------------
