@@ -64,6 +64,22 @@ def triangle_mesh(dtype=torch.float64):
     return sr.Mesh(vertices, faces, textures=textures)
 
 
+def fake_image(colour, size, background=(0.0, 0.0, 0.0)):
+    """FakeEngine's image written out from what should reach it: ``colour`` (the first face's
+    first colour, lit) and alpha 1 on the left half, the background and alpha 0 on the right."""
+    image = torch.zeros(1, 4, size, size, dtype=torch.float64)
+    image[:, :3] = torch.tensor(background, dtype=torch.float64)[:, None, None]
+    image[:, :3, :, : size // 2] = torch.tensor(colour, dtype=torch.float64)[:, None, None]
+    image[:, 3, :, : size // 2] = 1
+    return image
+
+
+# triangle_mesh's first colour, and lit: face 0's normal is +y, which SoftRas's default lights
+# (ambient 0.5, directional 0.5 from +y) give 0.5 + 0.5 · 1.
+FACE0_UNLIT = [0.2, 0.4, 0.6]
+FACE0_LIT = [c * (0.5 + 0.5 * 1.0) for c in FACE0_UNLIT]
+
+
 def test_softrenderer_keeps_softras_defaults():
     renderer = sr.SoftRenderer(camera_mode="look_at")
     for name, value in SOFTRAS_RASTER_DEFAULTS.items():
@@ -111,6 +127,7 @@ def test_render_mesh_leaves_the_mesh_as_it_was(engine):
     second = renderer.render_mesh(mesh)  # no reset_() needed between renders
     assert torch.equal(mesh.vertices, vertices) and torch.equal(mesh.textures, textures)
     assert torch.equal(first, second)
+    assert torch.equal(first, fake_image(FACE0_LIT, 256))
     assert torch.equal(engine.calls[0]["face_vertices"], engine.calls[1]["face_vertices"])
 
 
@@ -160,10 +177,14 @@ def test_mode_is_ignored_as_softras_ignores_it(engine):
     mesh = triangle_mesh()
     rgba = rasterizer(mesh)
     assert rgba.shape == (1, 4, 4, 4)
+    # The engine's RGBA itself (not another mode's output): the fake's image of the unlit mesh.
+    # test_softras_divergences.py checks the same with the engine against SoftRas's formulas.
+    assert torch.equal(rgba, fake_image(FACE0_UNLIT, 4))
     for mode in ("rgb", "silhouettes", "depth", "normals"):
         assert torch.equal(rasterizer(mesh, mode), rgba)
     renderer = sr.SoftRenderer(image_size=4, camera_mode="look_at")
     images = renderer(mesh.vertices, mesh.faces, mesh.textures)
+    assert torch.equal(images, fake_image(FACE0_LIT, 4))
     for mode in ("rgb", "silhouettes", "depth"):
         assert torch.equal(renderer(mesh.vertices, mesh.faces, mesh.textures, mode=mode), images)
         assert torch.equal(renderer.render_mesh(mesh, mode), images)
@@ -177,8 +198,10 @@ def test_softvk_render_gives_alpha_and_depth(engine):
     renderer = sr.SoftRenderer(image_size=4, camera_mode="look_at", far=80)
     mesh = triangle_mesh()
     rgba = renderer.render_mesh(mesh)
-    assert torch.equal(st.render(renderer, mesh), rgba)
-    assert torch.equal(st.render(renderer, mesh, "silhouettes"), rgba[:, 3])
+    expected = fake_image(FACE0_LIT, 4)
+    assert torch.equal(rgba, expected)
+    assert torch.equal(st.render(renderer, mesh), expected)
+    assert torch.equal(st.render(renderer, mesh, "silhouettes"), expected[:, 3])
     with pytest.raises(ValueError, match="mode"):
         st.render(renderer, mesh, "rgb")
 
