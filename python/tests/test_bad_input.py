@@ -28,6 +28,7 @@ import softvk.pytorch3d as sp
 import softvk.soft_renderer as sr
 import softvk.soft_renderer.functional as srf
 import softvk.torch as st
+from test_pytorch3d import StandInMeshes
 
 SIZE = 16
 BACKGROUND = (0.25, 0.5, 0.75)
@@ -97,25 +98,9 @@ def render(path, vertices, faces, textures=None, texture_type="surface", image_s
     return renderer(vertices, faces, textures, texture_type=texture_type)
 
 
-class PackedMeshes:
-    """What ``softvk.pytorch3d.rasterize_meshes`` reads of PyTorch3D's ``Meshes``: packed
-    vertices and faces, and each mesh's first face and vertex and their counts."""
-
-    def __init__(self, verts, faces, face_counts, vert_counts):
-        self.verts, self.faces = verts, faces
-        self.face_counts, self.vert_counts = list(face_counts), list(vert_counts)
-
-    def verts_packed(self):
-        return self.verts
-
-    def faces_packed(self):
-        return self.faces
-
-    def mesh_to_faces_packed_first_idx(self):
-        return torch.tensor(np.cumsum([0] + self.face_counts[:-1]), dtype=torch.int64)
-
-    def num_faces_per_mesh(self):
-        return torch.tensor(self.face_counts, dtype=torch.int64)
+class PackedMeshes(StandInMeshes):
+    """``test_pytorch3d``'s stand-in for PyTorch3D's ``Meshes``, also saying where each mesh's
+    vertices are (its first vertex and count), as ``Meshes`` does."""
 
     def mesh_to_verts_packed_first_idx(self):
         return torch.tensor(np.cumsum([0] + self.vert_counts[:-1]), dtype=torch.int64)
