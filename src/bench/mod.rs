@@ -24,21 +24,23 @@
 use std::path::PathBuf;
 
 use crate::error::{Error, Result};
+use crate::gpu::Context;
 use crate::raster::gpu::{Method, PairCounts};
 
 mod backward;
 mod fits;
 mod forward;
 mod hard;
+mod iteration;
 mod recon;
 mod scenes;
 
 pub use backward::run_backward;
-pub use fits::{fit_pass_share, run_fit};
 pub use forward::{loop_limit, ns_per_visited_pair, run};
 #[cfg(feature = "json")]
 pub use hard::hard_to_json;
 pub use hard::{HARD_SCENES, HardRecord, run_hard};
+pub use iteration::fit_pass_share;
 pub use scenes::Scene;
 
 /// The scenes of SPEC §6, in the order a plain `softvk bench` runs them.
@@ -305,6 +307,32 @@ impl serde_json::ser::Formatter for Spaced {
     ) -> std::io::Result<()> {
         if first { Ok(()) } else { w.write_all(b", ") }
     }
+}
+
+/// The fitting benchmarks (`softvk bench --scene fit-120` and the rest of [`FIT_SCENES`]): each
+/// named scene's records, in the order asked ([`fits`]'s for the fits, [`recon`]'s for the
+/// trainers). Each times one iteration per submission with its passes after an untimed one,
+/// and the mesh fit also its loop at 1 and [`FIT_BATCH`] iterations per submission.
+pub fn run_fit(
+    ctx: &Context,
+    opts: &BenchOptions,
+    mut progress: impl FnMut(&str),
+) -> Result<Vec<BenchRecord>> {
+    let assets = opts.assets.clone().unwrap_or_else(crate::assets::dir);
+    let mut records = Vec::new();
+    for name in opts.checked_fit_scenes()? {
+        match name {
+            "fit-field" => records.push(fits::run_field_fit(ctx, opts, &assets, &mut progress)?),
+            "fit-pose" => records.extend(fits::run_pose_fit(ctx, opts, &assets, &mut progress)?),
+            "train-recon" => records.push(recon::run_recon_train(ctx, opts, &mut progress)?),
+            "train-recon-field" => {
+                records.push(recon::run_field_recon_train(ctx, opts, &mut progress)?)
+            }
+            // `fit-120`, the one left of FIT_SCENES.
+            _ => records.extend(fits::run_mesh_fit(ctx, opts, name, &mut progress)?),
+        }
+    }
+    Ok(records)
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 //! `--scene train-recon-field`): where a `softvk train-recon` iteration at its defaults spends
 //! its time, pass by pass, for the mesh network and the conditioned field.
 
-use super::fits::{Shape, time_fit_iteration};
+use super::iteration::{Shape, time_fit_iteration};
 use super::{BenchOptions, BenchRecord};
 use crate::error::Result;
 use crate::gpu::Context;
