@@ -170,8 +170,7 @@ fn a_mesh_fit_resumed_from_any_checkpoint_ends_bit_for_bit_as_the_uninterrupted_
 /// parameters.
 fn mesh_checkpoint(fingerprint: u64, n: usize) -> Checkpoint {
     let mut w = Writer::default();
-    w.u32(1);
-    FitLog {
+    let row = FitLog {
         iteration: 2,
         silhouette: 0.5,
         laplacian: 0.25,
@@ -179,8 +178,8 @@ fn mesh_checkpoint(fingerprint: u64, n: usize) -> Checkpoint {
         total: 0.875,
         entries: 40,
         seconds: 1.0,
-    }
-    .write(&mut w);
+    };
+    softvk::fit::log::write_log(&mut w, &[row]);
     w.u32(0); // no validations
     for value in [0.5, 0.25, 0.125] {
         w.f32s(&vec![value; n]);
@@ -257,17 +256,20 @@ fn foreign_or_broken_checkpoints_are_refused_with_one_line() {
     let v = dir.path("version.ckpt");
     std::fs::write(&v, sealed(&version)).unwrap();
     refused(&v, FitKind::Mesh, fp, "written by softvk");
-    // An earlier format (the format number follows the magic).
-    let mut old = body.to_vec();
-    old[8..12].copy_from_slice(&2u32.to_le_bytes());
-    let o = dir.path("old.ckpt");
-    std::fs::write(&o, sealed(&old)).unwrap();
-    refused(
-        &o,
-        FitKind::Mesh,
-        fp,
-        "checkpoint format 2, this softvk reads format 3",
-    );
+    // An earlier format (the format number follows the magic): 3 stored the log without its
+    // columns.
+    for format in [2u32, 3] {
+        let mut old = body.to_vec();
+        old[8..12].copy_from_slice(&format.to_le_bytes());
+        let o = dir.path("old.ckpt");
+        std::fs::write(&o, sealed(&old)).unwrap();
+        refused(
+            &o,
+            FitKind::Mesh,
+            fp,
+            &format!("checkpoint format {format}, this softvk reads format 4 (written by another"),
+        );
+    }
     refused(&dir.path("missing.ckpt"), FitKind::Mesh, fp, "missing.ckpt");
     // A log cut short after a valid header.
     let cut = dir.path("cut.ckpt");

@@ -947,6 +947,7 @@ fn checkpoint_cases() -> Vec<(&'static str, Vec<u8>, CheckpointReader)> {
         Checkpoint, FitKind, Reader, Writer, read_adam, read_f64_state, write_f64_state,
     };
     use softvk::fit::field_fit::{FieldFitLog, FieldFitOptions};
+    use softvk::fit::log::write_log;
     use softvk::fit::mesh_fit::FitLog;
     use softvk::fit::pose::{Pose, PoseLog};
     use softvk::fit::session::{LogRow, Resume};
@@ -970,12 +971,6 @@ fn checkpoint_cases() -> Vec<(&'static str, Vec<u8>, CheckpointReader)> {
         .unwrap();
         std::fs::read(&path).unwrap()
     };
-    let rows = |w: &mut Writer, rows: &[&dyn Fn(&mut Writer)]| {
-        w.u32(rows.len() as u32);
-        for r in rows {
-            r(w);
-        }
-    };
     // What a resume reads: the log, then the state, all of it.
     fn read<R: LogRow>(
         p: &Path,
@@ -992,24 +987,19 @@ fn checkpoint_cases() -> Vec<(&'static str, Vec<u8>, CheckpointReader)> {
     }
 
     let n_mesh = 3 * Mesh::icosphere(1).vertex_count() + 3;
-    let mesh_row = |i: u32| {
-        move |w: &mut Writer| {
-            FitLog {
-                iteration: i,
-                silhouette: 0.5 / i as f32,
-                laplacian: 0.1,
-                flatten: 0.2,
-                total: 0.8,
-                entries: 1000 + u64::from(i),
-                seconds: 0.1 * f64::from(i),
-            }
-            .write(w)
-        }
+    let mesh_row = |i: u32| FitLog {
+        iteration: i,
+        silhouette: 0.5 / i as f32,
+        laplacian: 0.1,
+        flatten: 0.2,
+        total: 0.8,
+        entries: 1000 + u64::from(i),
+        seconds: 0.1 * f64::from(i),
     };
     let mesh = checkpoint(
         FitKind::Mesh,
         3,
-        &|w| rows(w, &[&mesh_row(1), &mesh_row(2), &mesh_row(3)]),
+        &|w| write_log(w, &[mesh_row(1), mesh_row(2), mesh_row(3)]),
         &|w| {
             w.f32s(&ramp(n_mesh, 0.01));
             w.f32s(&ramp(n_mesh, -0.001));
@@ -1017,40 +1007,32 @@ fn checkpoint_cases() -> Vec<(&'static str, Vec<u8>, CheckpointReader)> {
         },
     );
     let n_field = FieldFitOptions::default().field.param_count();
-    let field_row = |i: u32| {
-        move |w: &mut Writer| {
-            FieldFitLog {
-                iteration: i,
-                silhouette: 0.3,
-                geo: 0.01,
-                total: 0.31,
-                seconds: 0.5,
-            }
-            .write(w)
-        }
+    let field_row = |i: u32| FieldFitLog {
+        iteration: i,
+        silhouette: 0.3,
+        geo: 0.01,
+        total: 0.31,
+        seconds: 0.5,
     };
     let field = checkpoint(
         FitKind::Field,
         2,
-        &|w| rows(w, &[&field_row(1), &field_row(2)]),
+        &|w| write_log(w, &[field_row(1), field_row(2)]),
         &|w| {
             w.f32s(&ramp(n_field, 1e-3));
             w.f32s(&ramp(n_field, 1e-4));
             w.f32s(&ramp(n_field, 1e-8));
         },
     );
-    let pose_row = |w: &mut Writer| {
-        PoseLog {
-            iteration: 1,
-            loss: 0.2,
-            sigma: 1e-4,
-            gamma: 1e-4,
-            pose: Pose::from_array([0.1, -0.2, 0.3, 0.0, 0.05, 2.0]),
-            seconds: 0.2,
-        }
-        .write(w)
+    let pose_row = PoseLog {
+        iteration: 1,
+        loss: 0.2,
+        sigma: 1e-4,
+        gamma: 1e-4,
+        pose: Pose::from_array([0.1, -0.2, 0.3, 0.0, 0.05, 2.0]),
+        seconds: 0.2,
     };
-    let pose = checkpoint(FitKind::Pose, 1, &|w| rows(w, &[&pose_row]), &|w| {
+    let pose = checkpoint(FitKind::Pose, 1, &|w| write_log(w, &[pose_row]), &|w| {
         write_f64_state(w, &[[0.1, -0.2, 0.3, 0.0, 0.05, 2.0], [0.01; 6], [1e-4; 6]])
     });
     vec![

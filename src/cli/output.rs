@@ -46,7 +46,7 @@ impl ImageFormat {
     ) -> std::result::Result<Vec<u8>, String> {
         assert_eq!(pixels.len(), width as usize * height as usize);
         match self {
-            ImageFormat::Png => encode_png(pixels, width, height),
+            ImageFormat::Png => png_bytes(pixels, width, height),
             ImageFormat::Exr => softvk::exr_io::encode_rgba(pixels, width, height),
         }
     }
@@ -74,11 +74,25 @@ pub fn encode_sheet_png(sheet: &image::RgbaImage, path: &Path) -> Result<Vec<u8>
     Ok(out)
 }
 
-fn encode_png(
-    pixels: &[[f32; 4]],
-    width: u32,
-    height: u32,
-) -> std::result::Result<Vec<u8>, String> {
+/// The 8-bit PNG of `pixels` at `size`, the error naming `path`, where it will go.
+pub fn encode_png(pixels: &[[f32; 4]], (w, h): (u32, u32), path: &Path) -> Result<Vec<u8>> {
+    ImageFormat::Png
+        .encode(pixels, w, h)
+        .map_err(|e| Error::Input(format!("{}: {e}", path.display())))
+}
+
+/// The PNG of labelled `images` at `size` side by side (a fit's target, start and result), the
+/// error naming `path`.
+pub fn encode_compare(
+    images: &[(&str, &Vec<[f32; 4]>)],
+    (w, h): (u32, u32),
+    path: &Path,
+) -> Result<Vec<u8>> {
+    let images: Vec<(&str, &[[f32; 4]])> = images.iter().map(|(n, i)| (*n, i.as_slice())).collect();
+    encode_sheet_png(&softvk::fit::report::side_by_side(&images, w, h), path)
+}
+
+fn png_bytes(pixels: &[[f32; 4]], width: u32, height: u32) -> std::result::Result<Vec<u8>, String> {
     use image::ImageEncoder;
     let bytes: Vec<u8> = pixels.iter().flatten().map(|&v| to_u8(v)).collect();
     let mut out = Vec::new();

@@ -33,9 +33,10 @@ use super::adam::{Adam, AdamOptions};
 use super::blur::{BlurredMse, MAX_BLUR_STD};
 use super::checkpoint::{Fingerprint, FitKind, Reader, Writer, restore_adam, save_adam};
 use super::driver::{self, Fitter};
+use super::log::Columns;
 use super::pose::{PoseTarget, Schedule};
 use super::posed::{self, PoseModel, PosedFit, PosedView, Stages};
-use super::rig::{MAX_JOINTS, Rig, bone_of};
+use super::rig::{Rig, bone_of};
 use super::session::{LogRow, Session, Trainee};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -256,7 +257,7 @@ struct SkinDef {
 const BONE_BYTES: u64 = 5 * 16;
 
 /// One logged iteration.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct ArticulatedLog {
     /// Iteration, from 1.
     pub iteration: u32,
@@ -590,6 +591,8 @@ pub struct ArticulatedFitResult {
     pub log: Vec<ArticulatedLog>,
     /// Iterations run.
     pub iterations: u32,
+    /// The first iteration this run ran (after a resume, the checkpoint's + 1).
+    pub first_iteration: u32,
     /// Wall time of the iterations (without the final evaluation).
     pub seconds: f64,
 }
@@ -628,6 +631,7 @@ pub fn fit_articulated<'c>(
         image,
         log: end.log,
         iterations: end.last,
+        first_iteration: end.first,
         seconds: end.seconds,
     })
 }
@@ -639,36 +643,14 @@ impl LogRow for ArticulatedLog {
     fn loss(&self) -> f64 {
         self.loss
     }
-    fn write(&self, w: &mut Writer) {
-        w.u32(self.iteration);
-        for x in [self.loss, self.sigma, self.gamma, self.blur] {
-            w.f64(x);
-        }
-        w.u32(self.angles.len() as u32);
-        for &a in &self.angles {
-            w.f64(a);
-        }
-        w.f64(self.seconds);
-    }
-    fn read(r: &mut Reader<'_>) -> Result<Self> {
-        let iteration = r.u32()?;
-        let (loss, sigma, gamma, blur) = (r.f64()?, r.f64()?, r.f64()?, r.f64()?);
-        let n = r.u32()?;
-        if n as usize > MAX_JOINTS {
-            return Err(Error::Input(format!(
-                "checkpoint row of {n} angles, at most {MAX_JOINTS} expected"
-            )));
-        }
-        let angles = (0..n).map(|_| r.f64()).collect::<Result<Vec<f64>>>()?;
-        Ok(Self {
-            iteration,
-            loss,
-            sigma,
-            gamma,
-            blur,
-            angles,
-            seconds: r.f64()?,
-        })
+    fn columns(&mut self, c: &mut dyn Columns) {
+        c.u32("iteration", &mut self.iteration);
+        c.f64("loss", &mut self.loss);
+        c.f64("sigma", &mut self.sigma);
+        c.f64("gamma", &mut self.gamma);
+        c.f64("blur", &mut self.blur);
+        c.f64s("angle", &mut self.angles);
+        c.f64("seconds", &mut self.seconds);
     }
 }
 

@@ -12,7 +12,8 @@
 //!
 //! ```text
 //! b"SOFTVKCK", format u32, version (u32 length + UTF-8), kind u32, fingerprint u64,
-//! iteration u32, seconds f64, then the payload: the log (u32 rows, then each row), the
+//! iteration u32, seconds f64, then the payload: the log (its columns, then the rows:
+//! [`super::log::write_log`]), the
 //! validations (u32 count, then u32 iteration and f64 score each) and the fit's state (arrays
 //! as u64 length + values), then a checksum u64 (FNV-1a of every byte before it)
 //! ```
@@ -28,7 +29,9 @@ use crate::error::{Error, Result};
 use crate::gpu::{Buffer, Context};
 
 const MAGIC: &[u8; 8] = b"SOFTVKCK";
-const FORMAT: u32 = 3;
+/// The format this softvk writes and reads: 4 since the log is stored by its columns
+/// ([`super::log`]).
+const FORMAT: u32 = 4;
 
 /// The kind of fit a checkpoint belongs to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -151,7 +154,8 @@ impl Checkpoint {
         let format = r.u32().map_err(|_| bad("truncated checkpoint"))?;
         if format != FORMAT {
             return Err(bad(&format!(
-                "checkpoint format {format}, this softvk reads format {FORMAT}"
+                "checkpoint format {format}, this softvk reads format {FORMAT} (written by \
+                 another softvk: start the fit again, or resume it with the softvk that wrote it)"
             )));
         }
         let len = r.u32().map_err(|_| bad("truncated checkpoint"))? as usize;
@@ -238,7 +242,8 @@ impl<'a> Reader<'a> {
         }
     }
 
-    fn take(&mut self, n: usize) -> Result<&'a [u8]> {
+    /// The next `n` bytes.
+    pub fn take(&mut self, n: usize) -> Result<&'a [u8]> {
         let end = self
             .at
             .checked_add(n)

@@ -39,6 +39,7 @@ use glam::DVec3;
 
 use super::checkpoint::{Fingerprint, FitKind, Reader, Writer, restore_adam, save_adam};
 use super::driver::{Fit, Fitter};
+use super::log::Columns;
 use super::session::{LogRow, Session, Trainee, to_next_log};
 use super::{Adam, AdamOptions};
 use crate::camera::Camera;
@@ -313,7 +314,7 @@ fn frame_hull_contains(targets: &Targets, p: DVec3, min_seen: usize) -> bool {
 }
 
 /// One logged iteration.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FieldFitLog {
     /// Iteration (1-based) after which the values were read.
     pub iteration: u32,
@@ -348,6 +349,8 @@ pub struct FieldFitResult {
     pub log: Vec<FieldFitLog>,
     /// Iterations run (fewer than asked when the progress callback stopped the fit).
     pub iterations: u32,
+    /// The first iteration this run ran (after a resume, the checkpoint's + 1).
+    pub first_iteration: u32,
     /// Wall times.
     pub timings: FieldFitTimings,
 }
@@ -658,6 +661,7 @@ pub fn fit_field(
         field: fitter.into_field(),
         log: end.log,
         iterations: end.last,
+        first_iteration: end.first,
     })
 }
 
@@ -668,21 +672,12 @@ impl LogRow for FieldFitLog {
     fn loss(&self) -> f64 {
         f64::from(self.total)
     }
-    fn write(&self, w: &mut Writer) {
-        w.u32(self.iteration);
-        w.f32(self.silhouette);
-        w.f32(self.geo);
-        w.f32(self.total);
-        w.f64(self.seconds);
-    }
-    fn read(r: &mut Reader<'_>) -> Result<Self> {
-        Ok(Self {
-            iteration: r.u32()?,
-            silhouette: r.f32()?,
-            geo: r.f32()?,
-            total: r.f32()?,
-            seconds: r.f64()?,
-        })
+    fn columns(&mut self, c: &mut dyn Columns) {
+        c.u32("iteration", &mut self.iteration);
+        c.f32("l_sil", &mut self.silhouette);
+        c.f32("l_geo", &mut self.geo);
+        c.f32("total", &mut self.total);
+        c.f64("seconds", &mut self.seconds);
     }
 }
 

@@ -28,6 +28,7 @@ use glam::{DMat3, DVec3};
 
 use super::checkpoint::{Fingerprint, FitKind, Reader, Writer, restore_adam, save_adam};
 use super::driver::{Fit, Fitter};
+use super::log::Columns;
 use super::session::{LogRow, Session, Trainee, to_next_log};
 use super::{Adam, AdamOptions, Deform, Regularizers, SilhouetteLoss, with_headroom};
 use crate::camera::Camera;
@@ -96,7 +97,7 @@ impl Default for MeshFitOptions {
 }
 
 /// One logged iteration.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct FitLog {
     /// Iteration (1-based) after which the values were read.
     pub iteration: u32,
@@ -251,25 +252,14 @@ impl LogRow for FitLog {
     fn loss(&self) -> f64 {
         f64::from(self.total)
     }
-    fn write(&self, w: &mut Writer) {
-        w.u32(self.iteration);
-        w.f32(self.silhouette);
-        w.f32(self.laplacian);
-        w.f32(self.flatten);
-        w.f32(self.total);
-        w.u64(self.entries);
-        w.f64(self.seconds);
-    }
-    fn read(r: &mut Reader<'_>) -> Result<Self> {
-        Ok(Self {
-            iteration: r.u32()?,
-            silhouette: r.f32()?,
-            laplacian: r.f32()?,
-            flatten: r.f32()?,
-            total: r.f32()?,
-            entries: r.u64()?,
-            seconds: r.f64()?,
-        })
+    fn columns(&mut self, c: &mut dyn Columns) {
+        c.u32("iteration", &mut self.iteration);
+        c.f32("total", &mut self.total);
+        c.f32("silhouette", &mut self.silhouette);
+        c.f32("laplacian", &mut self.laplacian);
+        c.f32("flatten", &mut self.flatten);
+        c.u64("entries", &mut self.entries);
+        c.f64("seconds", &mut self.seconds);
     }
 }
 

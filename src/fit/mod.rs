@@ -61,6 +61,7 @@ pub mod driver;
 pub mod field_fit;
 pub mod flatten;
 pub mod laplacian;
+pub mod log;
 pub mod mesh_fit;
 pub mod pose;
 mod posed;

@@ -2,8 +2,8 @@
 //! the log, checkpoints and resume, the hooks a caller watches through (progress, interrupt),
 //! and the stopping rule.
 //!
-//! A fit says only what is its own: its iterations ([`Fit`], run by [`Fitter`]), its log row
-//! ([`LogRow`]), and the state a resumed fit needs ([`Trainee::save_state`] /
+//! A fit says only what is its own: its iterations ([`Fit`], run by [`Fitter`]), its log row's
+//! columns ([`LogRow`], [`super::log`]), and the state a resumed fit needs ([`Trainee::save_state`] /
 //! [`Trainee::restore_state`]: parameters and Adam's moments). [`Session::run`] does the rest:
 //!
 //! - **Submissions**: from the first iteration to the last, each ending where the fit's plan
@@ -34,21 +34,10 @@ use std::time::Instant;
 
 use super::checkpoint::{Checkpoint, FitKind, Reader, Writer};
 use super::driver::{self, Fit, Fitter};
+pub use super::log::LogRow;
+use super::log::{read_log, write_log};
 use crate::error::{Error, Result};
 use crate::gpu::Context;
-
-/// A log row a session keeps and a checkpoint carries: one per logged iteration (or, for the
-/// pose fits, per iteration).
-pub trait LogRow: Clone {
-    /// The iteration it logs (from 1).
-    fn iteration(&self) -> u32;
-    /// The loss the stopping rule watches (the fit's total).
-    fn loss(&self) -> f64;
-    /// Appends the row to a checkpoint.
-    fn write(&self, w: &mut Writer);
-    /// Reads a row [`LogRow::write`] wrote.
-    fn read(r: &mut Reader<'_>) -> Result<Self>;
-}
 
 /// What a [`Fit`] adds to run in a [`Session`]: its log row, and its state.
 pub trait Trainee: Fit {
@@ -141,16 +130,8 @@ impl<R: LogRow> Resume<R> {
     pub fn read(path: &Path, kind: FitKind, fingerprint: u64) -> Result<Self> {
         let c = Checkpoint::read(path, kind, fingerprint)?;
         let mut r = Reader::new(&c.payload);
-        let n = r.u32()?;
-        if n > c.iteration {
-            return Err(Error::Input(format!(
-                "{}: checkpoint log longer than its iterations",
-                path.display()
-            )));
-        }
-        let log = (0..n)
-            .map(|_| R::read(&mut r))
-            .collect::<Result<Vec<R>>>()?;
+        let log: Vec<R> = read_log(&mut r, c.iteration)
+            .map_err(|e| Error::Input(format!("{}: {e}", path.display())))?;
         let n = r.u32()?;
         if n > c.iteration {
             return Err(Error::Input(format!(
@@ -470,10 +451,7 @@ fn write_checkpoint<F: Trainee>(
     validations: &[(u32, f64)],
 ) -> Result<()> {
     let mut w = Writer::default();
-    w.u32(log.len() as u32);
-    for row in log {
-        row.write(&mut w);
-    }
+    write_log(&mut w, log);
     w.u32(validations.len() as u32);
     for &(it, score) in validations {
         w.u32(it);
@@ -499,7 +477,7 @@ pub fn to_next_log<F>(every: u32) -> impl FnMut(&mut F, u32) -> Result<u32> {
 mod tests {
     use super::*;
 
-    #[derive(Clone)]
+    #[derive(Clone, Default)]
     struct Row(u32, f64);
 
     impl LogRow for Row {
@@ -509,12 +487,9 @@ mod tests {
         fn loss(&self) -> f64 {
             self.1
         }
-        fn write(&self, w: &mut Writer) {
-            w.u32(self.0);
-            w.f64(self.1);
-        }
-        fn read(r: &mut Reader<'_>) -> Result<Self> {
-            Ok(Row(r.u32()?, r.f64()?))
+        fn columns(&mut self, c: &mut dyn super::super::log::Columns) {
+            c.u32("iteration", &mut self.0);
+            c.f64("loss", &mut self.1);
         }
     }
 

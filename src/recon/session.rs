@@ -14,12 +14,13 @@ use super::train::{NetShape, ReconTraining, TrainOptions, TrainedParams};
 use crate::error::{Error, Result};
 use crate::field::MlpLayout;
 use crate::fit::checkpoint::{Fingerprint, FitKind, Reader, Writer, read_adam};
+use crate::fit::log::Columns;
 use crate::fit::session::{LogRow, Resume, Trainee};
 use crate::gpu::Context;
 
 /// One logged iteration of either trainer: its losses (a conditioned field has only the
 /// silhouette loss: the others are 0 and its total is it).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct TrainRow {
     /// The iteration (from 1).
     pub iteration: u32,
@@ -42,27 +43,13 @@ impl LogRow for TrainRow {
     fn loss(&self) -> f64 {
         self.total
     }
-    fn write(&self, w: &mut Writer) {
-        w.u32(self.iteration);
-        for x in [
-            self.silhouette,
-            self.color,
-            self.laplacian,
-            self.flatten,
-            self.total,
-        ] {
-            w.f64(x);
-        }
-    }
-    fn read(r: &mut Reader<'_>) -> Result<Self> {
-        Ok(Self {
-            iteration: r.u32()?,
-            silhouette: r.f64()?,
-            color: r.f64()?,
-            laplacian: r.f64()?,
-            flatten: r.f64()?,
-            total: r.f64()?,
-        })
+    fn columns(&mut self, c: &mut dyn Columns) {
+        c.u32("iteration", &mut self.iteration);
+        c.f64("silhouette", &mut self.silhouette);
+        c.f64("color", &mut self.color);
+        c.f64("laplacian", &mut self.laplacian);
+        c.f64("flatten", &mut self.flatten);
+        c.f64("total", &mut self.total);
     }
 }
 

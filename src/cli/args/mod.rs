@@ -118,6 +118,29 @@ impl Default for ViewArgs {
 }
 
 impl ViewArgs {
+    /// Whether the image size was given (`--size` or `--width`/`--height`).
+    pub fn sized(&self) -> bool {
+        self.size.is_some() || self.width.is_some()
+    }
+
+    /// The target image at `path` (a PNG with alpha, [`load_target`]) and the image size: the
+    /// target's, which the size flags, where given, must agree with.
+    ///
+    /// [`load_target`]: crate::cli::output::load_target
+    pub fn target(&self, path: &Path) -> Result<((u32, u32), Vec<[f32; 4]>)> {
+        let (tw, th, pixels) = crate::cli::output::load_target(path)?;
+        let size = if self.sized() { self.size() } else { (tw, th) };
+        if size != (tw, th) {
+            return Err(Error::Input(format!(
+                "the target {} is {tw}x{th} but the image is {}x{}",
+                path.display(),
+                size.0,
+                size.1
+            )));
+        }
+        Ok((size, pixels))
+    }
+
     /// `(width, height)`: `--size`, or `--width`/`--height`, or 256².
     pub fn size(&self) -> (u32, u32) {
         match (self.size, self.width, self.height) {
@@ -182,6 +205,14 @@ pub fn finite(s: &str) -> std::result::Result<f64, String> {
         Ok(v)
     } else {
         Err(format!("`{s}` is not a finite number"))
+    }
+}
+
+/// Layers a flag over its default: `flag`, where given, in place of `*default`. Each command
+/// layers its flags over the library's defaults once, in its options function.
+pub fn overlay<T>(default: &mut T, flag: Option<T>) {
+    if let Some(v) = flag {
+        *default = v;
     }
 }
 

@@ -1,8 +1,16 @@
 //! The flags of `softvk fit-articulated`.
 
-use crate::cli::args::{CheckpointArgs, RasterArgs, ViewArgs, non_negative, positive};
-use clap::Args;
 use std::path::PathBuf;
+
+use clap::Args;
+use softvk::fit::articulated::ArticulatedFitOptions;
+use softvk::fit::rig::Rig;
+use softvk::raster::gpu::Method;
+use softvk::{Error, Result};
+
+use crate::cli::args::{CheckpointArgs, RasterArgs, ViewArgs, non_negative, overlay, positive};
+use crate::cli::output::{SideFile, side_files};
+use crate::cli::session::Outputs;
 
 /// The flags of `softvk fit-articulated`.
 #[derive(Args, Clone, Debug)]
@@ -91,6 +99,99 @@ pub struct FitArticulatedArgs {
 
     #[command(flatten)]
     pub checkpoints: CheckpointArgs,
+}
+
+impl FitArticulatedArgs {
+    /// The start (`--init-angles`, default the rest pose) and the target's angles
+    /// (`--target-angles`), radians, one per joint of `rig`.
+    pub fn angles(&self, rig: &Rig) -> Result<(Vec<f64>, Option<Vec<f64>>)> {
+        let init = match &self.init_angles {
+            Some(a) => joint_angles(rig, "--init-angles", &a.0)?,
+            None => vec![0.0; rig.joint_count()],
+        };
+        let target = self.target_angles.as_ref();
+        let target = target.map(|a| joint_angles(rig, "--target-angles", &a.0));
+        Ok((init, target.transpose()?))
+    }
+
+    /// The image size and the `--target` image: the target's size (the size flags must agree),
+    /// else the flags', else the defaults'.
+    pub fn size_and_target(&self) -> Result<((u32, u32), Option<Vec<[f32; 4]>>)> {
+        let d = self.defaults().settings;
+        Ok(match &self.target {
+            Some(path) => self.view.target(path).map(|(size, t)| (size, Some(t)))?,
+            None if self.view.sized() => (self.view.size(), None),
+            None => ((d.width, d.height), None),
+        })
+    }
+
+    /// `--out`, `--render` and `--compare`, created ([`Outputs`]), and the path of
+    /// `--mesh-out` (which its writer commits itself).
+    pub fn outputs(&self) -> Result<(Outputs, PathBuf)> {
+        let side = |flag, path, suffix| SideFile { flag, path, suffix };
+        let [render, compare, mesh]: [PathBuf; 3] = side_files(
+            &self.out,
+            "angles",
+            &[
+                side("--render", self.render.as_deref(), "-render.png"),
+                side("--compare", self.compare.as_deref(), "-compare.png"),
+                side("--mesh-out", self.mesh_out.as_deref(), "-posed.obj"),
+            ],
+        )?
+        .try_into()
+        .expect("three side files");
+        Ok((Outputs::create([self.out.clone(), render, compare])?, mesh))
+    }
+
+    /// The library's defaults for this kind of target: a target re-rendered per stage can
+    /// start softer than a fixed image.
+    pub fn defaults(&self) -> ArticulatedFitOptions {
+        if self.target_angles.is_some() {
+            ArticulatedFitOptions::for_rendered_target()
+        } else {
+            ArticulatedFitOptions::default()
+        }
+    }
+
+    /// The fit's options at image `size`: the library's defaults for this kind of target
+    /// ([`ArticulatedFitOptions::for_rendered_target`] with `--target-angles`, else
+    /// [`ArticulatedFitOptions::default`]), each flag given in place of its default.
+    pub fn options(&self, size: (u32, u32)) -> Result<ArticulatedFitOptions> {
+        let mut o = self.defaults();
+        overlay(&mut o.iterations, self.iterations);
+        overlay(&mut o.lr, self.lr);
+        overlay(&mut o.lr_final, self.lr_final);
+        overlay(&mut o.tile, self.tile);
+        Method::check_tile(o.tile)?;
+        o.schedule = (!self.no_schedule).then(|| {
+            let mut s = o.schedule.unwrap_or_default();
+            overlay(&mut s.sigma_start, self.sigma_start);
+            overlay(&mut s.gamma_start, self.gamma_start);
+            overlay(&mut s.stages, self.stages);
+            s
+        });
+        let mut blur = o.blur.unwrap_or_default();
+        overlay(&mut blur.start, self.blur);
+        overlay(&mut blur.stages, self.stages);
+        o.blur = Some(blur).filter(|b| b.start > 0.0);
+        o.settings = self.raster.settings(size)?;
+        o.validate()?;
+        Ok(o)
+    }
+}
+
+/// Degrees to radians, one per joint of `rig` ([`Error::Input`] naming `flag` otherwise).
+fn joint_angles(rig: &Rig, flag: &str, degrees: &[f64]) -> Result<Vec<f64>> {
+    if degrees.len() != rig.joint_count() {
+        let names: Vec<&str> = rig.joints.iter().map(|j| j.name.as_str()).collect();
+        return Err(Error::Input(format!(
+            "{flag}: the figure has {} joints ({}); got {} angles",
+            rig.joint_count(),
+            names.join(", "),
+            degrees.len()
+        )));
+    }
+    Ok(degrees.iter().map(|d| d.to_radians()).collect())
 }
 
 /// The checkpoint's file in `--checkpoint DIR` / `--resume DIR`.

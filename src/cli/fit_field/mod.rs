@@ -15,17 +15,15 @@ use softvk::field::mcubes::MarchingCubes;
 use softvk::field::preview::{PreviewOptions, render_preview, surfaces_side_by_side};
 use softvk::field::voxel::visual_hull_surface;
 use softvk::fit::field_fit::{
-    FieldFit, FieldFitLog, FieldFitOptions, auto_cube, check_cameras_outside, fit_field,
-    scaled_to_cube,
+    FieldFit, FieldFitOptions, auto_cube, check_cameras_outside, fit_field, scaled_to_cube,
 };
-use softvk::fit::report::{self, Series};
+use softvk::fit::report;
 use softvk::gpu::{Context, ContextOptions};
 use softvk::probe::Targets;
 use softvk::{Error, Result};
 
 use crate::cli::args::{default_report, load_silhouette_views};
-use crate::cli::output::AtomicFile;
-use crate::cli::session::Watch;
+use crate::cli::session::{LossPlot, Watch, curve, summary, write_loss_report};
 use softvk::fit::session::Progress;
 
 mod args;
@@ -107,60 +105,44 @@ pub fn run(args: &FitFieldArgs) -> Result<()> {
     )?;
     ctx.check_validation()?;
     let lambda = opts.probe.geo_lambda;
-    let series = |name: &str, color, f: &dyn Fn(&FieldFitLog) -> f64| Series {
-        name: name.into(),
-        points: result
-            .log
-            .iter()
-            .map(|l| (f64::from(l.iteration), f(l)))
-            .collect(),
-        color,
-    };
     // Without the regularizer the total is L_sil: one curve.
-    let curves = if lambda > 0.0 {
+    let log = &result.log;
+    let series = if lambda > 0.0 {
         vec![
-            series("total", [0, 0, 0], &|l| f64::from(l.total)),
-            series("L_sil", [220, 40, 40], &|l| f64::from(l.silhouette)),
-            series("lambda L_geo", [40, 120, 220], &|l| {
-                lambda * f64::from(l.geo)
-            }),
+            curve(log, "total", "total", [0, 0, 0], 1.0),
+            curve(log, "l_sil", "L_sil", [220, 40, 40], 1.0),
+            curve(log, "l_geo", "lambda L_geo", [40, 120, 220], lambda),
         ]
     } else {
-        vec![series("L_sil", [220, 40, 40], &|l| f64::from(l.silhouette))]
+        vec![curve(log, "l_sil", "L_sil", [220, 40, 40], 1.0)]
     };
-    let plot = report::loss_plot(&curves, 800, 500, true);
-    let mut csv = String::from("iteration,l_sil,l_geo,total,seconds\n");
-    for l in &result.log {
-        csv.push_str(&format!(
-            "{},{},{},{},{:.3}\n",
-            l.iteration, l.silhouette, l.geo, l.total, l.seconds
-        ));
-    }
+    let plot = LossPlot {
+        series,
+        width: 800,
+        height: 500,
+        log_y: true,
+    };
 
     std::fs::create_dir_all(&report_dir)
         .map_err(|e| Error::Input(format!("cannot create {}: {e}", report_dir.display())))?;
     report::write_png(&report_dir.join("preview.png"), &preview)?;
     report::write_png(&report_dir.join("compare.png"), &compare)?;
-    report::write_png(&report_dir.join("loss.png"), &plot)?;
-    AtomicFile::create(&report_dir.join("loss.csv"))?.commit(csv.as_bytes())?;
-    super::session::write_interrupted(&report_dir, result.iterations, opts.iterations)?;
+    write_loss_report(&report_dir, log, &plot, result.iterations, opts.iterations)?;
     iso.write_obj(&args.out)?;
     let t = &result.timings;
-    println!(
-        "{} iterations in {:.1} s ({:.1} ms per iteration) on the cube centre ({:.4}, {:.4}, \
-         {:.4}) half-edge {:.4}; final L_sil {:.5}; {} vertices, {} faces; wrote {} and {}",
-        result.iterations,
-        t.iterations_s,
-        1e3 * t.iterations_s / f64::from(result.iterations.max(1)),
+    let what = format!(
+        " on the cube centre ({:.4}, {:.4}, {:.4}) half-edge {:.4}; final L_sil {:.5}; {} \
+         vertices, {} faces",
         cube.center[0],
         cube.center[1],
         cube.center[2],
         cube.half,
-        result.log.last().map_or(f32::NAN, |l| l.silhouette),
+        log.last().map_or(f32::NAN, |l| l.silhouette),
         iso.positions.len(),
         iso.faces.len(),
-        args.out.display(),
-        report_dir.display()
     );
+    let wrote = [args.out.as_path(), &report_dir];
+    let (first, done) = (result.first_iteration, result.iterations);
+    println!("{}", summary(first, done, t.iterations_s, &what, &wrote));
     Ok(())
 }

@@ -6,8 +6,8 @@
 //! `-report/`): `ious.csv` (final per-view IoU of the hard silhouettes), `contact_sheet.png`
 //! (predicted vs target at 3× the view size, labelled with each view's IoU: white both, red
 //! predicted only, cyan target only), `turntable.gif` (the fitted mesh shaded, turning; beside
-//! the target's for `demo`), `loss.png` (the loss curves), `loss.csv` (the logged losses and
-//! each logged iteration's (face, tile) entries) and `progress.gif` (the contact sheet every
+//! the target's for `demo`), `loss.png` (the loss curves), `loss.csv` (the logged losses,
+//! each logged iteration's (face, tile) entries and the seconds) and `progress.gif` (the contact sheet every
 //! logged iteration). Defaults are
 //! SoftRas's deformation demo: σ 1e-4, hard colour aggregation, viewing angle 15°, Adam lr 0.01
 //! with betas 0.5, 0.99, 1 − IoU + 0.03 Laplacian + 0.0003 flatten.
@@ -17,10 +17,9 @@ use std::path::{Path, PathBuf};
 use clap::Args;
 use softvk::camera::Camera;
 use softvk::fit::mesh_fit::{
-    FitLog, MeshFit, default_template, demo_target, fit_mesh, icosphere_template,
-    normalize_template,
+    MeshFit, default_template, demo_target, fit_mesh, icosphere_template, normalize_template,
 };
-use softvk::fit::report::{self, GifWriter, Series};
+use softvk::fit::report::{self, GifWriter};
 use softvk::fit::session::Progress;
 use softvk::gpu::{Context, ContextOptions};
 use softvk::io::{self, Silhouettes};
@@ -32,7 +31,7 @@ use softvk::{Error, Result};
 
 use crate::cli::args::{default_report, load_silhouette_views};
 use crate::cli::output::AtomicFile;
-use crate::cli::session::{Watch, write_interrupted};
+use crate::cli::session::{LossPlot, Watch, curve, summary, write_loss_report};
 
 mod args;
 pub use args::*;
@@ -143,49 +142,25 @@ fn fit_and_report(
         target_mesh,
         &cams[0],
     )?;
-    let series = |name: &str, color, f: &dyn Fn(&FitLog) -> f32| Series {
-        name: name.into(),
-        points: result
-            .log
-            .iter()
-            .map(|l| (f64::from(l.iteration), f64::from(f(l))))
-            .collect(),
-        color,
-    };
-    report::write_png(
-        &report_dir.join("loss.png"),
-        &report::loss_plot(
-            &[
-                series("total", [0, 0, 0], &|l| l.total),
-                series("1 - IoU", [220, 40, 40], &|l| l.silhouette),
-                series("laplacian", [40, 120, 220], &|l| l.laplacian),
-            ],
-            800,
-            500,
-            true,
-        ),
-    )?;
-    let mut log = String::from("iteration,total,silhouette,laplacian,flatten,entries\n");
-    for l in &result.log {
-        log.push_str(&format!(
-            "{},{},{},{},{},{}\n",
-            l.iteration, l.total, l.silhouette, l.laplacian, l.flatten, l.entries
-        ));
-    }
-    AtomicFile::create(&report_dir.join("loss.csv"))?.commit(log.as_bytes())?;
     let its = result.log.last().map_or(0, |l| l.iteration);
-    write_interrupted(report_dir, its, opts.iterations)?;
+    let plot = LossPlot {
+        series: vec![
+            curve(&result.log, "total", "total", [0, 0, 0], 1.0),
+            curve(&result.log, "silhouette", "1 - IoU", [220, 40, 40], 1.0),
+            curve(&result.log, "laplacian", "laplacian", [40, 120, 220], 1.0),
+        ],
+        width: 800,
+        height: 500,
+        log_y: true,
+    };
+    write_loss_report(report_dir, &result.log, &plot, its, opts.iterations)?;
     gif.finish()?;
     io::write_obj(out, &result.mesh.positions, &result.mesh.faces)?;
-    // Resumed: which iterations ran now (the rest after the checkpoint's).
-    let resumed = super::interrupt::resumed_note(result.first_iteration, its);
+    let what = format!("; mean IoU {mean:.4} over {views} views");
+    let wrote = [out, report_dir];
     println!(
-        "{resumed}{its} iterations in {:.1} s ({:.1} ms per iteration); mean IoU {mean:.4} over \
-         {views} views; wrote {} and {}",
-        result.seconds,
-        1e3 * result.seconds / f64::from(its.max(1)),
-        out.display(),
-        report_dir.display()
+        "{}",
+        summary(result.first_iteration, its, result.seconds, &what, &wrote)
     );
     Ok(())
 }

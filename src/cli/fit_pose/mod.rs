@@ -28,7 +28,8 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 use serde_json::{Value, json};
 use softvk::fit::pose::{
-    Pose, PoseFit, PoseTarget, fit_pose, fit_pose_multistart, rotation_distance, screened_starts,
+    Pose, PoseFit, PoseTarget, Schedule, fit_pose, fit_pose_multistart, rotation_distance,
+    screened_starts,
 };
 use softvk::fit::report;
 use softvk::fit::session::Progress;
@@ -40,7 +41,7 @@ use softvk::{Error, Result};
 use crate::cli::output::{
     AtomicFile, ImageFormat, SideFile, encode_sheet_png, load_target, side_files,
 };
-use crate::cli::session::Watch;
+use crate::cli::session::{Watch, interrupted};
 
 mod args;
 pub use args::*;
@@ -214,17 +215,9 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
         "iterations": result.iterations,
     });
     let fields = json.as_object_mut().expect("an object");
-    if let Some(signal) = super::interrupt::requested() {
-        // Stopped early by Ctrl-C / SIGTERM (`cli::interrupt`): the pose after the last step.
-        fields.insert(
-            "interrupted".into(),
-            json!(format!(
-                "{}: stopped after iteration {} of {}",
-                super::interrupt::name(signal),
-                result.iterations,
-                opts.iterations
-            )),
-        );
+    // Stopped early by Ctrl-C / SIGTERM (`cli::interrupt`): the pose after the last step.
+    if let Some(note) = interrupted(result.iterations, opts.iterations) {
+        fields.insert("interrupted".into(), json!(note));
     }
     if let Some(m) = &multi {
         fields.insert("best_start".into(), json!(m.best_start));
@@ -248,12 +241,7 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
     }
     fields.insert("sigma".into(), json!(opts.settings.sigma));
     fields.insert("gamma".into(), json!(opts.settings.gamma));
-    fields.insert(
-        "schedule".into(),
-        opts.schedule.as_ref().map_or(Value::Null, |s| {
-            json!({"sigma_start": s.sigma_start, "gamma_start": s.gamma_start, "stages": s.stages})
-        }),
-    );
+    fields.insert("schedule".into(), schedule_json(opts.schedule.as_ref()));
     fields.insert("seconds".into(), json!(result.seconds));
     let json = format!(
         "{}\n",
@@ -331,6 +319,14 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
         compare_path.display()
     );
     Ok(())
+}
+
+/// A σ/γ schedule in a fit's JSON (`null` without one).
+pub fn schedule_json(schedule: Option<&Schedule>) -> Value {
+    schedule.map_or(
+        Value::Null,
+        |s| json!({"sigma_start": s.sigma_start, "gamma_start": s.gamma_start, "stages": s.stages}),
+    )
 }
 
 #[cfg(test)]

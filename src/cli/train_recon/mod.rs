@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use softvk::fit::checkpoint::FitKind;
 use softvk::fit::driver::{Fitter, to_next_log};
-use softvk::fit::report::{self, Series};
+use softvk::fit::report::Series;
 use softvk::fit::session::{CheckpointPlan, Progress, Resume, Session, Trainee};
 use softvk::gpu::{Context, ContextOptions};
 use softvk::recon::dataset::{Dataset, Split};
@@ -22,7 +22,7 @@ use softvk::{Error, Result};
 
 use crate::cli::interrupt;
 use crate::cli::output::AtomicFile;
-use crate::cli::session::Watch;
+use crate::cli::session::{LossPlot, Watch, curve, write_loss_report};
 
 mod args;
 pub use args::*;
@@ -158,7 +158,7 @@ impl<M: Fn(Vec<f32>, u32) -> ReconModel> TrainingRun<'_, M> {
             }
             let at_boundary = p.last % args.val_every == 0 || p.last == iterations;
             if at_boundary || !go_on {
-                write_train_report(&dir, p.log, p.validations)?;
+                write_train_report(&dir, p.log, p.validations, (p.last, iterations))?;
             }
             Ok(go_on)
         };
@@ -222,52 +222,37 @@ impl Trained for FieldReconTraining<'_> {
     }
 }
 
-fn write_train_report(dir: &Path, rows: &[TrainRow], vals: &[(u32, f64)]) -> Result<()> {
-    let log: Vec<[f64; 6]> = rows
-        .iter()
-        .map(|r| {
-            let it = f64::from(r.iteration);
-            [it, r.silhouette, r.color, r.laplacian, r.flatten, r.total]
-        })
-        .collect();
-    let vals: Vec<[f64; 2]> = vals.iter().map(|&(it, v)| [f64::from(it), v]).collect();
-    let mut csv = String::from("iteration,silhouette,color,laplacian,flatten,total\n");
-    for r in &log {
-        csv.push_str(&format!(
-            "{},{},{},{},{},{}\n",
-            r[0], r[1], r[2], r[3], r[4], r[5]
-        ));
-    }
-    AtomicFile::create(&dir.join("loss.csv"))?.commit(csv.as_bytes())?;
+/// The report of `rows` after iteration `done` of `asked`: `loss.csv`, `loss.png` and
+/// `interrupted.txt` ([`write_loss_report`]), and `val.csv`, the validations.
+fn write_train_report(
+    dir: &Path,
+    rows: &[TrainRow],
+    vals: &[(u32, f64)],
+    (done, asked): (u32, u32),
+) -> Result<()> {
     let mut csv = String::from("iteration,val_iou\n");
-    for r in &vals {
-        csv.push_str(&format!("{},{}\n", r[0], r[1]));
+    for &(it, v) in vals {
+        csv.push_str(&format!("{it},{v}\n"));
     }
     AtomicFile::create(&dir.join("val.csv"))?.commit(csv.as_bytes())?;
-    let series = [
-        Series {
-            name: "L_sil".into(),
-            points: log.iter().map(|r| (r[0], r[1])).collect(),
-            color: [200, 40, 40],
-        },
-        Series {
-            name: "L_col".into(),
-            points: log.iter().map(|r| (r[0], r[2])).collect(),
-            color: [200, 140, 20],
-        },
-        Series {
-            name: "total".into(),
-            points: log.iter().map(|r| (r[0], r[5])).collect(),
-            color: [40, 40, 200],
-        },
-        Series {
-            name: "1 - val IoU".into(),
-            points: vals.iter().map(|r| (r[0], 1.0 - r[1])).collect(),
-            color: [30, 150, 60],
-        },
-    ];
-    report::write_png(
-        &dir.join("loss.png"),
-        &report::loss_plot(&series, 640, 400, false),
-    )
+    let validation = Series {
+        name: "1 - val IoU".into(),
+        points: vals
+            .iter()
+            .map(|&(it, v)| (f64::from(it), 1.0 - v))
+            .collect(),
+        color: [30, 150, 60],
+    };
+    let plot = LossPlot {
+        series: vec![
+            curve(rows, "silhouette", "L_sil", [200, 40, 40], 1.0),
+            curve(rows, "color", "L_col", [200, 140, 20], 1.0),
+            curve(rows, "total", "total", [40, 40, 200], 1.0),
+            validation,
+        ],
+        width: 640,
+        height: 400,
+        log_y: false,
+    };
+    write_loss_report(dir, rows, &plot, done, asked)
 }

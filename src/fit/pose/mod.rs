@@ -62,6 +62,7 @@ use super::posed::Stages;
 use super::session::{LogRow, Session, StopRule, Trainee};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
+use crate::fit::log::Columns;
 use crate::gpu::Context;
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
@@ -409,7 +410,7 @@ impl PoseFitOptions {
 }
 
 /// One logged iteration.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PoseLog {
     /// Iteration, from 1.
     pub iteration: u32,
@@ -498,31 +499,19 @@ impl LogRow for PoseLog {
     fn loss(&self) -> f64 {
         self.loss
     }
-    fn write(&self, w: &mut Writer) {
-        w.u32(self.iteration);
-        for x in [self.loss, self.sigma, self.gamma]
-            .into_iter()
-            .chain(self.pose.to_array())
-            .chain([self.seconds])
-        {
-            w.f64(x);
-        }
-    }
-    fn read(r: &mut Reader<'_>) -> Result<Self> {
-        let iteration = r.u32()?;
-        let (loss, sigma, gamma) = (r.f64()?, r.f64()?, r.f64()?);
-        let mut pose = [0.0; 6];
-        for x in &mut pose {
-            *x = r.f64()?;
-        }
-        Ok(PoseLog {
-            iteration,
-            loss,
-            sigma,
-            gamma,
-            pose: Pose::from_array(pose),
-            seconds: r.f64()?,
-        })
+    fn columns(&mut self, c: &mut dyn Columns) {
+        c.u32("iteration", &mut self.iteration);
+        c.f64("loss", &mut self.loss);
+        c.f64("sigma", &mut self.sigma);
+        c.f64("gamma", &mut self.gamma);
+        let (r, t) = (&mut self.pose.rotation, &mut self.pose.translation);
+        c.f64("rotation_x", &mut r.x);
+        c.f64("rotation_y", &mut r.y);
+        c.f64("rotation_z", &mut r.z);
+        c.f64("translation_x", &mut t.x);
+        c.f64("translation_y", &mut t.y);
+        c.f64("translation_z", &mut t.z);
+        c.f64("seconds", &mut self.seconds);
     }
 }
 
