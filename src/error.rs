@@ -2,15 +2,29 @@
 //! or input) for its `Display` to be the single line a user sees.
 //!
 //! Layering: a low module that can fail on its own keeps its error type beside it
-//! ([`MeshError`](crate::mesh::MeshError) in `mesh`,
-//! [`RenderError`](crate::raster::settings::RenderError) in `raster::settings`) and imports
-//! nothing from here; [`Error`] sits above them and only wraps them, so no import leads back
-//! down into this module.
+//! ([`MeshError`](crate::mesh::MeshError) in `mesh`) and imports nothing from here; [`Error`]
+//! sits above it and only wraps it. [`RenderError`], the renderer's, is defined here (and
+//! re-exported by `raster::settings`): the renderer imports [`Error`], so its own error beside
+//! it would make a circle.
 
 use ash::vk;
 
 // The modules above take it from here together with `Error` and `Result`.
 pub(crate) use crate::text::one_line;
+
+/// Why a render could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    /// The mesh breaks an invariant.
+    #[error("invalid mesh: {0}")]
+    Mesh(#[from] crate::mesh::MeshError),
+    /// A setting is out of its domain.
+    #[error("invalid raster settings: {0}")]
+    Settings(String),
+    /// Other inputs do not fit together (e.g. a gradient image of the wrong size).
+    #[error("invalid input: {0}")]
+    Input(String),
+}
 
 /// Everything that can go wrong in softvk.
 #[derive(Debug, thiserror::Error)]
@@ -155,7 +169,7 @@ pub enum Error {
 
     /// Rendering settings or inputs are out of their domain.
     #[error(transparent)]
-    Render(#[from] crate::raster::settings::RenderError),
+    Render(#[from] RenderError),
 
     /// A self-check failed: two computations that must agree bit for bit did not (the
     /// benchmark checks every tiled render against brute force before timing it).

@@ -275,49 +275,6 @@ pub fn render_preview_with(
     Ok(image)
 }
 
-/// Surfaces rendered side by side (`size`² each, lit white, SoftRas's sharp σ) under their
-/// names; an empty surface leaves its panel black.
-#[cfg(feature = "plots")]
-pub fn surfaces_side_by_side(
-    ctx: &Context,
-    surfaces: &[(&str, &super::mcubes::Isosurface)],
-    camera: &Camera,
-    size: u32,
-) -> Result<image::RgbaImage> {
-    use crate::lighting::Lighting;
-    use crate::raster::gpu::{Method, Renderer};
-    use crate::raster::settings::RasterSettings;
-    let renderer = Renderer::new(ctx)?;
-    let settings = RasterSettings {
-        width: size,
-        height: size,
-        ..RasterSettings::default()
-    };
-    let images = surfaces
-        .iter()
-        .map(|(_, iso)| {
-            if iso.is_empty() {
-                return Ok(vec![[0.0; 4]; (size * size) as usize]);
-            }
-            let frames = renderer.render_views(
-                ctx,
-                &iso.to_mesh()?,
-                std::slice::from_ref(camera),
-                &Lighting::default(),
-                &settings,
-                Method::default(),
-            )?;
-            Ok(frames.images)
-        })
-        .collect::<Result<Vec<_>>>()?;
-    let named: Vec<(&str, &[[f32; 4]])> = surfaces
-        .iter()
-        .zip(&images)
-        .map(|((name, _), img)| (*name, img.as_slice()))
-        .collect();
-    Ok(crate::fit::report::side_by_side(&named, size, size))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

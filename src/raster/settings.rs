@@ -2,7 +2,7 @@
 //! once ([`RasterSettings::validate`]) and read alike by the GPU path and the f64 twins, which
 //! both sit above this module.
 
-use crate::mesh::MeshError;
+pub use crate::error::RenderError;
 
 /// ε_d of the SPEC by default: the coverage below which a face is ignored (`dist_eps` in
 /// SoftRas; [`RasterSettings::dist_eps`] sets it).
@@ -110,20 +110,6 @@ impl Default for RasterSettings {
             color_mode: ColorMode::Surface,
         }
     }
-}
-
-/// Why a render could not run.
-#[derive(Debug, thiserror::Error)]
-pub enum RenderError {
-    /// The mesh breaks an invariant.
-    #[error("invalid mesh: {0}")]
-    Mesh(#[from] MeshError),
-    /// A setting is out of its domain.
-    #[error("invalid raster settings: {0}")]
-    Settings(String),
-    /// Other inputs do not fit together (e.g. a gradient image of the wrong size).
-    #[error("invalid input: {0}")]
-    Input(String),
 }
 
 /// Largest image side accepted (×2 with anti-aliasing stays far below any overflow).

@@ -11,15 +11,18 @@
 //! nothing.
 
 use softvk::camera::{Camera, Projection};
-use softvk::field::mcubes::MarchingCubes;
-use softvk::field::preview::{PreviewOptions, render_preview, surfaces_side_by_side};
+use softvk::field::mcubes::{Isosurface, MarchingCubes};
+use softvk::field::preview::{PreviewOptions, render_preview};
 use softvk::field::voxel::visual_hull_surface;
 use softvk::fit::field_fit::{
     FieldFit, FieldFitOptions, auto_cube, check_cameras_outside, fit_field, scaled_to_cube,
 };
 use softvk::fit::report;
 use softvk::gpu::{Context, ContextOptions};
+use softvk::lighting::Lighting;
 use softvk::probe::Targets;
+use softvk::raster::gpu::{Method, Renderer};
+use softvk::raster::settings::RasterSettings;
 use softvk::{Error, Result};
 
 use crate::cli::args::{default_report, load_silhouette_views};
@@ -145,4 +148,43 @@ pub fn run(args: &FitFieldArgs) -> Result<()> {
     let (first, done) = (result.first_iteration, result.iterations);
     println!("{}", summary(first, done, t.iterations_s, &what, &wrote));
     Ok(())
+}
+
+/// Surfaces rendered side by side (`size`² each, lit white, SoftRas's sharp σ) under their
+/// names; an empty surface leaves its panel black.
+fn surfaces_side_by_side(
+    ctx: &Context,
+    surfaces: &[(&str, &Isosurface)],
+    camera: &Camera,
+    size: u32,
+) -> Result<image::RgbaImage> {
+    let renderer = Renderer::new(ctx)?;
+    let settings = RasterSettings {
+        width: size,
+        height: size,
+        ..RasterSettings::default()
+    };
+    let images = surfaces
+        .iter()
+        .map(|(_, iso)| {
+            if iso.is_empty() {
+                return Ok(vec![[0.0; 4]; (size * size) as usize]);
+            }
+            let frames = renderer.render_views(
+                ctx,
+                &iso.to_mesh()?,
+                std::slice::from_ref(camera),
+                &Lighting::default(),
+                &settings,
+                Method::default(),
+            )?;
+            Ok(frames.images)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let named: Vec<(&str, &[[f32; 4]])> = surfaces
+        .iter()
+        .zip(&images)
+        .map(|((name, _), img)| (*name, img.as_slice()))
+        .collect();
+    Ok(report::side_by_side(&named, size, size))
 }
