@@ -117,6 +117,9 @@ impl Default for ViewArgs {
     }
 }
 
+/// An image size `(width, height)` and its RGBA pixels (row 0 at the top).
+pub type SizedImage = ((u32, u32), Vec<[f32; 4]>);
+
 impl ViewArgs {
     /// Whether the image size was given (`--size` or `--width`/`--height`).
     pub fn sized(&self) -> bool {
@@ -127,7 +130,7 @@ impl ViewArgs {
     /// target's, which the size flags, where given, must agree with.
     ///
     /// [`load_target`]: crate::cli::output::load_target
-    pub fn target(&self, path: &Path) -> Result<((u32, u32), Vec<[f32; 4]>)> {
+    pub fn target(&self, path: &Path) -> Result<SizedImage> {
         let (tw, th, pixels) = crate::cli::output::load_target(path)?;
         let size = if self.sized() { self.size() } else { (tw, th) };
         if size != (tw, th) {

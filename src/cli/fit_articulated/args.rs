@@ -10,6 +10,9 @@ use softvk::{Error, Result};
 
 use crate::cli::args::{CheckpointArgs, RasterArgs, ViewArgs, non_negative, overlay, positive};
 use crate::cli::output::{SideFile, side_files};
+
+/// RGBA pixels, row 0 at the top.
+type Image = Vec<[f32; 4]>;
 use crate::cli::session::Outputs;
 
 /// The flags of `softvk fit-articulated`.
@@ -116,7 +119,7 @@ impl FitArticulatedArgs {
 
     /// The image size and the `--target` image: the target's size (the size flags must agree),
     /// else the flags', else the defaults'.
-    pub fn size_and_target(&self) -> Result<((u32, u32), Option<Vec<[f32; 4]>>)> {
+    pub fn size_and_target(&self) -> Result<((u32, u32), Option<Image>)> {
         let d = self.defaults().settings;
         Ok(match &self.target {
             Some(path) => self.view.target(path).map(|(size, t)| (size, Some(t)))?,

@@ -22,7 +22,7 @@ pub fn angles_json(
         let e: Vec<f64> = result.angles.iter().zip(t).map(|(a, b)| a - b).collect();
         (degrees(t), degrees(&e))
     });
-    let (fitted, start) = (degrees(&result.angles), degrees(&init));
+    let (fitted, start) = (degrees(&result.angles), degrees(init));
     let joints: Vec<Value> = (0..rig.joint_count())
         .map(|j| {
             let name = &rig.joints[j].name;
