@@ -25,147 +25,48 @@
 //!   and textures into it ([`GpuScene::update_meshes`]) instead of making every buffer again;
 //!   the buffers of its backward are kept with it ([`GradBuffers::fits`]), since on a CPU device
 //!   new device memory costs a page fault per page at its first write.
+//!
+//! [`Context`]: softvk::gpu::Context
+//! [`Renderer`]: softvk::raster::gpu::Renderer
 
 use std::mem::ManuallyDrop;
-use std::sync::atomic::{AtomicU32, Ordering};
-use std::sync::{Mutex, MutexGuard};
+use std::sync::Mutex;
 
 use glam::DVec3;
 use numpy::{
     IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArrayDyn,
     PyUntypedArrayMethods,
 };
-use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
+use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
-use softvk::Error;
 use softvk::atomic_file::AtomicFile;
 use softvk::camera::{Camera, Projection};
 use softvk::exr_io::{encode_rgba, read_rgba};
-use softvk::gpu::{Context, ContextOptions};
 use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
 use softvk::raster::backward::GradBuffers;
-use softvk::raster::fragments::gpu::FragmentRasterizer;
-use softvk::raster::gpu::{GpuScene, Method, Renderer};
-use softvk::raster::hard::gpu::HardRasterizer;
-use softvk::raster::hard::gpu::texture::TextureSampler;
+use softvk::raster::gpu::{GpuScene, Method};
 use softvk::raster::settings::{Alpha, ColorMode, Dist, RasterSettings, Rgb};
 use softvk::raster::{reference, reference_grad};
 
 /// Lights from Python: `(ambient intensity, ambient colour, [(intensity, colour, direction)])`.
 type PyLighting = (f64, [f64; 3], Vec<(f64, [f64; 3], [f64; 3])>);
 
+mod engine;
+mod error;
 mod fragments;
 mod nvdiffrast;
 mod nvtexture;
 
-/// The process's engine, made on first use.
-struct Engine {
-    ctx: Context,
-    renderer: Renderer,
-    /// PyTorch3D's rasterizer, made on its first use.
-    fragments: Mutex<Option<FragmentRasterizer>>,
-    /// nvdiffrast's primitives, made on their first use.
-    hard: Mutex<Option<HardRasterizer>>,
-    /// nvdiffrast's texture sampling, made on its first use.
-    texture: Mutex<Option<TextureSampler>>,
-}
+use engine::{Engine, engine_fragments, forked, forked_error, with_engine};
+use error::{to_py, value_error};
 
-/// The engine's fragment rasterizer, made on first use.
-fn engine_fragments(engine: &Engine) -> softvk::Result<MutexGuard<'_, Option<FragmentRasterizer>>> {
-    let mut cell = engine.fragments.lock().unwrap_or_else(|e| e.into_inner());
-    if cell.is_none() {
-        *cell = Some(FragmentRasterizer::new(&engine.ctx)?);
-    }
-    Ok(cell)
-}
-
-static ENGINE: Mutex<Option<Engine>> = Mutex::new(None);
 /// Scenes of dropped renders, newest last, for the next render of the same [`SceneKey`].
 static SPARES: Mutex<Vec<Spare>> = Mutex::new(Vec::new());
 /// How many spare scenes are kept (a loop alternates between at most two of a kind: the one
 /// being differentiated and the next iteration's).
 const MAX_SPARES: usize = 4;
-/// The process that made [`ENGINE`] (0: none yet). Read before the lock: a child forked while
-/// another thread held the lock would wait on it forever.
-static OWNER: AtomicU32 = AtomicU32::new(0);
-
-fn forked_error(owner: u32) -> PyErr {
-    PyRuntimeError::new_err(format!(
-        "softvk: this process ({}) was forked from process {owner}, which had already opened the \
-         Vulkan device; a device cannot be used across fork(). Make the first softvk call in \
-         the child instead (for a DataLoader, render in the main process or use \
-         multiprocessing_context='spawn'; torchrun's ranks are separate processes already)",
-        std::process::id()
-    ))
-}
-
-/// Whether this process is a fork of the one that made the engine.
-pub(crate) fn forked() -> Option<u32> {
-    let owner = OWNER.load(Ordering::Acquire);
-    (owner != 0 && owner != std::process::id()).then_some(owner)
-}
-
-/// The engine, made on first use: the lock held for the whole call.
-fn engine() -> PyResult<MutexGuard<'static, Option<Engine>>> {
-    if let Some(owner) = forked() {
-        return Err(forked_error(owner));
-    }
-    let mut guard = ENGINE.lock().map_err(|_| {
-        PyRuntimeError::new_err("softvk: a previous call panicked inside the engine")
-    })?;
-    if guard.is_none() {
-        let ctx = Context::new(&ContextOptions::from_env()).map_err(to_py)?;
-        let renderer = Renderer::new(&ctx).map_err(to_py)?;
-        *guard = Some(Engine {
-            ctx,
-            renderer,
-            fragments: Mutex::new(None),
-            hard: Mutex::new(None),
-            texture: Mutex::new(None),
-        });
-        OWNER.store(std::process::id(), Ordering::Release);
-    }
-    Ok(guard)
-}
-
-/// Runs `f` on the engine with the GIL released, then checks the validation layer's log.
-fn with_engine<T: Send>(
-    py: Python<'_>,
-    f: impl FnOnce(&Engine) -> softvk::Result<T> + Send,
-) -> PyResult<T> {
-    py.detach(|| {
-        let guard = engine()?;
-        let engine = guard.as_ref().expect("engine() made it");
-        let out = f(engine).map_err(to_py)?;
-        engine.ctx.check_validation().map_err(to_py)?;
-        Ok(out)
-    })
-}
-
-/// softvk's errors as Python exceptions: bad input is a `ValueError`, an allocation the device
-/// cannot hold a `MemoryError`, the rest (no driver, no device, a device limit) `RuntimeError`;
-/// the message is the engine's one line.
-fn to_py(e: Error) -> PyErr {
-    let message = format!("softvk: {e}");
-    match e {
-        Error::Input(_) | Error::Mesh(_) | Error::Render(_) | Error::Parse { .. } => {
-            PyValueError::new_err(message)
-        }
-        // An input too large for the device (an image, a batch): refused before any work, as
-        // the input's fault, the same ValueError as any other bad input.
-        Error::Limit(_) | Error::DeviceLimit { .. } | Error::BufferTooLarge { .. } => {
-            PyValueError::new_err(message)
-        }
-        Error::Allocation { .. } => PyMemoryError::new_err(message),
-        _ => PyRuntimeError::new_err(message),
-    }
-}
-
-fn value_error(message: String) -> PyErr {
-    PyValueError::new_err(format!("softvk: {message}"))
-}
 
 /// The settings of one render: SoftRas's rasterizer arguments, the image size and how faces
 /// meet pixels.
@@ -1086,18 +987,6 @@ fn write_png(path: std::path::PathBuf, image: PyReadonlyArrayDyn<'_, u8>) -> PyR
         .map_err(to_py)
 }
 
-/// The name of the Vulkan device softvk renders on (opening it if need be).
-#[pyfunction]
-fn device_name(py: Python<'_>) -> PyResult<String> {
-    with_engine(py, |engine| Ok(engine.ctx.info().name.clone()))
-}
-
-/// Whether this process is a fork of the one that opened the device (then every call fails).
-#[pyfunction]
-fn is_forked_child() -> bool {
-    forked().is_some()
-}
-
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Settings>()?;
@@ -1106,13 +995,13 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(reference_rasterize, m)?)?;
     m.add_function(wrap_pyfunction!(reference_rasterize_grad, m)?)?;
     m.add_function(wrap_pyfunction!(render_mesh, m)?)?;
-    m.add_function(wrap_pyfunction!(device_name, m)?)?;
+    m.add_function(wrap_pyfunction!(engine::device_name, m)?)?;
     m.add_function(wrap_pyfunction!(release_cached_scenes, m)?)?;
     m.add_function(wrap_pyfunction!(read_exr, m)?)?;
     m.add_function(wrap_pyfunction!(write_exr, m)?)?;
     m.add_function(wrap_pyfunction!(read_rgb, m)?)?;
     m.add_function(wrap_pyfunction!(write_png, m)?)?;
-    m.add_function(wrap_pyfunction!(is_forked_child, m)?)?;
+    m.add_function(wrap_pyfunction!(engine::is_forked_child, m)?)?;
     fragments::register(m)?;
     nvdiffrast::register(m)?;
     nvtexture::register(m)?;
