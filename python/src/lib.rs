@@ -33,16 +33,11 @@ use std::mem::ManuallyDrop;
 use std::sync::Mutex;
 
 use glam::DVec3;
-use numpy::{
-    IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArrayDyn,
-    PyUntypedArrayMethods,
-};
+use numpy::{IntoPyArray, PyArrayMethods, PyReadonlyArray1, PyReadonlyArrayDyn};
 use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
-use softvk::atomic_file::AtomicFile;
 use softvk::camera::{Camera, Projection};
-use softvk::exr_io::{encode_rgba, read_rgba};
 use softvk::lighting::{Directional, Lighting};
 use softvk::mesh::Mesh;
 use softvk::raster::backward::GradBuffers;
@@ -53,12 +48,15 @@ use softvk::raster::{reference, reference_grad};
 /// Lights from Python: `(ambient intensity, ambient colour, [(intensity, colour, direction)])`.
 type PyLighting = (f64, [f64; 3], Vec<(f64, [f64; 3], [f64; 3])>);
 
+mod convert;
 mod engine;
 mod error;
 mod fragments;
+mod io;
 mod nvdiffrast;
 mod nvtexture;
 
+use convert::{array_of, checked, images_array, texture_res, triples};
 use engine::{Engine, engine_fragments, forked, forked_error, with_engine};
 use error::{to_py, value_error};
 
@@ -266,49 +264,6 @@ impl Settings {
     }
 }
 
-/// A contiguous array's data and shape, checked against `want` (`None`: any extent).
-fn checked<'a, T: numpy::Element>(
-    name: &str,
-    array: &'a PyReadonlyArrayDyn<'_, T>,
-    want: &[Option<usize>],
-) -> PyResult<(&'a [T], Vec<usize>)> {
-    let shape = array.shape().to_vec();
-    let fits = shape.len() == want.len()
-        && shape
-            .iter()
-            .zip(want)
-            .all(|(s, w)| w.is_none_or(|w| *s == w));
-    if !fits {
-        let want: Vec<String> = want
-            .iter()
-            .map(|w| w.map_or("*".into(), |w| w.to_string()))
-            .collect();
-        return Err(value_error(format!(
-            "{name} has shape {shape:?}; expected [{}]",
-            want.join(", ")
-        )));
-    }
-    let data = array
-        .as_slice()
-        .map_err(|_| value_error(format!("{name} is not C-contiguous")))?;
-    Ok((data, shape))
-}
-
-fn triples<T: Copy>(data: &[T]) -> Vec<[T; 3]> {
-    data.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
-}
-
-/// The texture resolution R of `texels` = R² texels a face.
-fn texture_res(texels: usize) -> PyResult<u32> {
-    let r = (texels as f64).sqrt().round() as usize;
-    if r == 0 || r * r != texels {
-        return Err(value_error(format!(
-            "surface textures need R² texels a face, got {texels}"
-        )));
-    }
-    u32::try_from(r).map_err(|_| value_error(format!("texture resolution {r} is too large")))
-}
-
 /// SoftRas's `face_vertices` `[B, F, 3, 3]` and `textures` (`[B, F, R², 3]` surface, `[B, F, 3,
 /// 3]` vertex), checked: one mesh a batch element, three vertices a face (face `j` = vertices
 /// `3j, 3j + 1, 3j + 2`).
@@ -419,22 +374,6 @@ impl FaceInputs<'_, f64> {
             })
             .collect()
     }
-}
-
-/// RGBA images `[views, H, W, 4]` as a numpy array.
-fn images_array<'py, T: numpy::Element>(
-    py: Python<'py>,
-    flat: Vec<T>,
-    (views, height, width): (usize, usize, usize),
-) -> PyResult<Bound<'py, PyAny>> {
-    Ok(flat
-        .into_pyarray(py)
-        .reshape([views, height, width, 4])?
-        .into_any())
-}
-
-fn array_of<'py>(py: Python<'py>, flat: Vec<f32>, shape: &[usize]) -> PyResult<Bound<'py, PyAny>> {
-    Ok(PyArray1::from_vec(py, flat).reshape(shape)?.into_any())
 }
 
 /// What the backward needs: the rendered scene, kept on the device, and how its arrays map
@@ -909,84 +848,6 @@ fn render_mesh<'py>(
     render(py, settings, &meshes, &views, &lighting, kind)
 }
 
-/// `read_exr(path)`: the first RGBA layer of an EXR (what `softvk render --out X.exr` writes)
-/// as float32 `[H, W, 4]`, row 0 at the top; missing channels read as 0.
-#[pyfunction]
-fn read_exr<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bound<'py, PyAny>> {
-    let (width, height, pixels) = py.detach(|| read_rgba(&path)).map_err(to_py)?;
-    let flat = pixels.into_flattened();
-    Ok(flat
-        .into_pyarray(py)
-        .reshape([height as usize, width as usize, 4])?
-        .into_any())
-}
-
-/// `write_exr(path, image)`: float32 `[H, W, 4]` RGBA (row 0 at the top) as a lossless EXR, the
-/// format `softvk grad --weights` reads; the file appears whole or not at all.
-#[pyfunction]
-fn write_exr(path: std::path::PathBuf, image: PyReadonlyArrayDyn<'_, f32>) -> PyResult<()> {
-    let (data, shape) = checked("image", &image, &[None, None, Some(4)])?;
-    let too_large = || value_error(format!("image of shape {shape:?} is too large"));
-    let width = u32::try_from(shape[1]).map_err(|_| too_large())?;
-    let height = u32::try_from(shape[0]).map_err(|_| too_large())?;
-    let bytes = encode_rgba(bytemuck::cast_slice(data), width, height)
-        .map_err(|e| value_error(format!("{}: {e}", path.display())))?;
-    AtomicFile::create(&path)
-        .and_then(|file| file.commit(&bytes))
-        .map_err(to_py)
-}
-
-/// `read_rgb(path)`: an image (PNG, 8 or 16 bits, any colour type) as float32 `[H, W, 3]` in
-/// [0, 1], row 0 at the top: grey replicated to RGB, alpha dropped, as SoftRas reads textures.
-#[pyfunction]
-fn read_rgb<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bound<'py, PyAny>> {
-    let image = py
-        .detach(|| image::open(&path).map(|i| i.to_rgb32f()))
-        .map_err(|e| value_error(format!("{}: cannot read the image: {e}", path.display())))?;
-    let (width, height) = image.dimensions();
-    Ok(image
-        .into_raw()
-        .into_pyarray(py)
-        .reshape([height as usize, width as usize, 3])?
-        .into_any())
-}
-
-/// `write_png(path, image)`: uint8 `[H, W]`, `[H, W, 1]`, `[H, W, 3]` or `[H, W, 4]` as an 8-bit
-/// PNG; the file appears whole or not at all.
-#[pyfunction]
-fn write_png(path: std::path::PathBuf, image: PyReadonlyArrayDyn<'_, u8>) -> PyResult<()> {
-    use image::ImageEncoder;
-    let shape = image.shape().to_vec();
-    let channels = match shape.as_slice() {
-        [_, _] => 1,
-        [_, _, c] => *c,
-        _ => 0,
-    };
-    let color = match channels {
-        1 => image::ExtendedColorType::L8,
-        3 => image::ExtendedColorType::Rgb8,
-        4 => image::ExtendedColorType::Rgba8,
-        _ => {
-            return Err(value_error(format!(
-                "a PNG needs [H, W] or [H, W, 1 | 3 | 4] bytes, got shape {shape:?}"
-            )));
-        }
-    };
-    let data = image
-        .as_slice()
-        .map_err(|_| value_error("the image is not C-contiguous".into()))?;
-    let too_large = || value_error(format!("image of shape {shape:?} is too large"));
-    let width = u32::try_from(shape[1]).map_err(|_| too_large())?;
-    let height = u32::try_from(shape[0]).map_err(|_| too_large())?;
-    let mut bytes = Vec::new();
-    image::codecs::png::PngEncoder::new(&mut bytes)
-        .write_image(data, width, height, color)
-        .map_err(|e| value_error(format!("{}: cannot encode PNG: {e}", path.display())))?;
-    AtomicFile::create(&path)
-        .and_then(|file| file.commit(&bytes))
-        .map_err(to_py)
-}
-
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Settings>()?;
@@ -997,10 +858,10 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(engine::device_name, m)?)?;
     m.add_function(wrap_pyfunction!(release_cached_scenes, m)?)?;
-    m.add_function(wrap_pyfunction!(read_exr, m)?)?;
-    m.add_function(wrap_pyfunction!(write_exr, m)?)?;
-    m.add_function(wrap_pyfunction!(read_rgb, m)?)?;
-    m.add_function(wrap_pyfunction!(write_png, m)?)?;
+    m.add_function(wrap_pyfunction!(io::read_exr, m)?)?;
+    m.add_function(wrap_pyfunction!(io::write_exr, m)?)?;
+    m.add_function(wrap_pyfunction!(io::read_rgb, m)?)?;
+    m.add_function(wrap_pyfunction!(io::write_png, m)?)?;
     m.add_function(wrap_pyfunction!(engine::is_forked_child, m)?)?;
     fragments::register(m)?;
     nvdiffrast::register(m)?;
