@@ -18,7 +18,9 @@ use softvk::raster::hard::gpu::{AntialiasArgs, HardRasterizer};
 use softvk::raster::hard::reference::AttrLayout;
 use softvk::raster::hard::{Shape, Topology};
 
-use super::{Engine, checked, to_py, value_error, with_engine};
+use crate::convert::checked;
+use crate::engine::{Engine, with_engine};
+use crate::error::{to_py, value_error};
 
 /// The engine's hard rasterizer, made on first use.
 fn engine_hard(engine: &Engine) -> softvk::Result<MutexGuard<'_, Option<HardRasterizer>>> {

@@ -17,7 +17,9 @@ use softvk::raster::hard::gpu::texture::{
 };
 use softvk::raster::hard::texture::Filter;
 
-use super::{Engine, checked, value_error, with_engine};
+use crate::convert::checked;
+use crate::engine::{Engine, with_engine};
+use crate::error::{to_py, value_error};
 
 /// The engine's texture sampler, made on first use.
 fn engine_sampler(engine: &Engine) -> softvk::Result<MutexGuard<'_, Option<TextureSampler>>> {
@@ -127,7 +129,7 @@ fn with_mips(dims: [usize; 4], max_mip_level: Option<u32>) -> PyResult<TexLayout
         u32_of("tex channels", c)?,
         max_mip_level,
     )
-    .map_err(super::to_py)
+    .map_err(to_py)
 }
 
 /// The Python shape of level `level` of a stack over a texture of `shape`.
@@ -203,8 +205,8 @@ impl TextureCall {
         max_mip_level: Option<u32>,
     ) -> PyResult<Self> {
         let filter = Filter::parse(filter, uv_da.is_some() || bias.is_some(), max_mip_level)
-            .map_err(super::to_py)?;
-        let mode = TexMode::parse(filter, boundary).map_err(super::to_py)?;
+            .map_err(to_py)?;
+        let mode = TexMode::parse(filter, boundary).map_err(to_py)?;
         let cube = matches!(mode, TexMode::Cube(_));
         let (tex_data, shape, dims) = texture_dims("tex", tex, cube)?;
         let n_uv = mode.uv_floats() as usize;
@@ -233,7 +235,7 @@ impl TextureCall {
                 u32_of("tex channels", c)?,
                 1,
             )
-            .map_err(super::to_py)
+            .map_err(to_py)
         };
         let (layout, source, stack) = match (mips, mip, mip_levels) {
             (false, ..) => (base()?, Source::Custom, tex_data.to_vec()),
@@ -260,7 +262,7 @@ impl TextureCall {
                     layout.channels,
                     1 + u32_of("mip levels", levels.len())?,
                 )
-                .map_err(super::to_py)?;
+                .map_err(to_py)?;
                 let mut stack = tex_data.to_vec();
                 for (k, level) in levels.iter().enumerate() {
                     let want: Vec<_> = level_shape(&shape, &layout, 1 + k as u32)
