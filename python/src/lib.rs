@@ -30,8 +30,8 @@
 //! its lock and the fork rule), [`error`] (softvk's errors as Python exceptions), [`scene`]
 //! (the cache of spare scenes), [`soft`] (SoftRas's rasterizer: `Settings`, `Raster`,
 //! `rasterize`, `render_mesh` and the f64 twin), [`fragments`] (PyTorch3D's), [`nvdiffrast`]
-//! and [`nvtexture`] (nvdiffrast's primitives and texture sampling), [`convert`] (numpy
-//! arrays in and out) and [`io`] (image files).
+//! (nvdiffrast's primitives and texture sampling), [`convert`] (numpy arrays in and out) and
+//! [`io`] (image files).
 //!
 //! [`Context`]: softvk::gpu::Context
 //! [`Renderer`]: softvk::raster::gpu::Renderer
@@ -52,7 +52,6 @@ mod error;
 mod fragments;
 mod io;
 mod nvdiffrast;
-mod nvtexture;
 mod scene;
 mod soft;
 
@@ -73,7 +72,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(engine::is_forked_child, m)?)?;
     fragments::register(m)?;
     nvdiffrast::register(m)?;
-    nvtexture::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -7,9 +7,10 @@
 //! the GIL is released (another thread may write to a numpy array meanwhile), as
 //! [`super::fragments`] does.
 //!
-//! The functions lie in [`rasterize`], [`interpolate`] and [`antialias`]; this file holds what
-//! they share: the engine's hard rasterizer, made on first use, and the checks of triangles,
-//! extents and image arrays.
+//! The functions lie in [`rasterize`], [`interpolate`], [`antialias`], and for nvdiffrast's
+//! `texture` and `texture_construct_mip` in [`texture`] and [`mip`]; this file holds what they
+//! share: the engine's hard rasterizer and texture sampler, made on first use, and the checks
+//! of triangles, extents and image arrays.
 
 use std::sync::MutexGuard;
 
@@ -17,6 +18,7 @@ use numpy::{IntoPyArray, PyArrayMethods, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 use softvk::gpu::Context;
 use softvk::raster::hard::gpu::HardRasterizer;
+use softvk::raster::hard::gpu::texture::TextureSampler;
 
 use crate::convert::checked;
 use crate::engine::{Engine, with_engine};
@@ -24,7 +26,9 @@ use crate::error::value_error;
 
 mod antialias;
 mod interpolate;
+mod mip;
 mod rasterize;
+mod texture;
 
 /// The engine's hard rasterizer, made on first use.
 fn engine_hard(engine: &Engine) -> softvk::Result<MutexGuard<'_, Option<HardRasterizer>>> {
@@ -44,6 +48,26 @@ fn with_hard<T: Send>(
         let mut cell = engine_hard(engine)?;
         let hard = cell.as_mut().expect("made by engine_hard");
         f(&engine.ctx, hard)
+    })
+}
+
+/// The engine's texture sampler, made on first use.
+fn engine_sampler(engine: &Engine) -> softvk::Result<MutexGuard<'_, Option<TextureSampler>>> {
+    let mut cell = engine.texture.lock().unwrap_or_else(|e| e.into_inner());
+    if cell.is_none() {
+        *cell = Some(TextureSampler::new(&engine.ctx)?);
+    }
+    Ok(cell)
+}
+
+/// Runs `f` on the texture sampler with the GIL released.
+fn with_sampler<T: Send>(
+    py: Python<'_>,
+    f: impl FnOnce(&Context, &mut TextureSampler) -> softvk::Result<T> + Send,
+) -> PyResult<T> {
+    with_engine(py, |engine| {
+        let mut cell = engine_sampler(engine)?;
+        f(&engine.ctx, cell.as_mut().expect("made by engine_sampler"))
     })
 }
 
@@ -107,5 +131,9 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(antialias::nv_topology_hash, m)?)?;
     m.add_function(wrap_pyfunction!(antialias::nv_antialias, m)?)?;
     m.add_function(wrap_pyfunction!(antialias::nv_antialias_grad, m)?)?;
+    m.add_class::<mip::NvTextureMip>()?;
+    m.add_function(wrap_pyfunction!(mip::nv_texture_construct_mip, m)?)?;
+    m.add_function(wrap_pyfunction!(texture::nv_texture, m)?)?;
+    m.add_function(wrap_pyfunction!(texture::nv_texture_grad, m)?)?;
     Ok(())
 }
