@@ -12,7 +12,9 @@ use softvk::gpu::{Buffer, MemoryKind};
 use softvk::raster::fragments::gpu::{FragmentPlan, SlotParts};
 use softvk::raster::fragments::{self, FragmentSettings};
 
-use super::{checked, engine_fragments, forked, to_py, value_error, with_engine};
+use crate::convert::checked;
+use crate::engine::{engine_fragments, forked, with_engine};
+use crate::error::{to_py, value_error};
 
 /// Host-visible output buffers of earlier forwards whose arrays Python has dropped, kept for the
 /// next forward: on a CPU device a fresh buffer costs a page fault per page at its first write,

@@ -6,162 +6,21 @@
 //! A call's mip stack is one of three (nvdiffrast's): built here from `tex` (a mipmap mode with
 //! no `mip`), `tex` over the levels a [`NvTextureMip`] holds (its gradients carried into `tex`),
 //! or `tex` over a list of the caller's levels (each level's gradient its own).
-
-use std::sync::MutexGuard;
+//!
+//! `texture_construct_mip` itself, and the texture shapes and stack layouts both use, lie in
+//! [`super::mip`].
+//!
+//! [`TextureSampler`]: softvk::raster::hard::gpu::texture::TextureSampler
 
 use numpy::{IntoPyArray, PyArrayMethods, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
-use softvk::gpu::Context;
-use softvk::raster::hard::gpu::texture::{
-    Levels, Lookup, Lookups, TexLayout, TexMode, TextureSampler,
-};
+use softvk::raster::hard::gpu::texture::{Levels, Lookup, Lookups, TexLayout, TexMode};
 use softvk::raster::hard::texture::Filter;
 
-use super::{Engine, checked, value_error, with_engine};
-
-/// The engine's texture sampler, made on first use.
-fn engine_sampler(engine: &Engine) -> softvk::Result<MutexGuard<'_, Option<TextureSampler>>> {
-    let mut cell = engine.texture.lock().unwrap_or_else(|e| e.into_inner());
-    if cell.is_none() {
-        *cell = Some(TextureSampler::new(&engine.ctx)?);
-    }
-    Ok(cell)
-}
-
-/// Runs `f` on the texture sampler with the GIL released.
-fn with_sampler<T: Send>(
-    py: Python<'_>,
-    f: impl FnOnce(&Context, &mut TextureSampler) -> softvk::Result<T> + Send,
-) -> PyResult<T> {
-    with_engine(py, |engine| {
-        let mut cell = engine_sampler(engine)?;
-        f(&engine.ctx, cell.as_mut().expect("made by engine_sampler"))
-    })
-}
-
-/// `texture_construct_mip(tex, max_mip_level)`'s result: the mip levels below a texture of one
-/// shape, built once for a texture that stays the same between calls.
-#[pyclass(frozen, module = "softvk._native")]
-pub struct NvTextureMip {
-    /// The shape of the texture it was built from: `[B, H, W, C]`, or a cube map's
-    /// `[B, 6, S, S, C]`.
-    shape: Vec<usize>,
-    /// Whether it is a cube map's.
-    cube: bool,
-    /// The stack's layout (the base included).
-    layout: TexLayout,
-    /// Levels 1 and below, as the stack lays them out.
-    below: Vec<f32>,
-}
-
-#[pymethods]
-impl NvTextureMip {
-    /// The shape of the texture it was built from.
-    #[getter]
-    fn texture_shape(&self) -> Vec<usize> {
-        self.shape.clone()
-    }
-
-    /// Whether it was built for a cube map.
-    #[getter]
-    fn cube_mode(&self) -> bool {
-        self.cube
-    }
-
-    /// Mip levels below the texture.
-    #[getter]
-    fn max_mip_level(&self) -> u32 {
-        self.layout.levels - 1
-    }
-
-    fn __repr__(&self) -> String {
-        format!(
-            "<softvk mip stack of a {:?} texture, {} levels below it>",
-            self.shape,
-            self.layout.levels - 1
-        )
-    }
-}
-
-/// A float32 texture's data, its shape and the stack's `[items, height, width, channels]`: a
-/// 2D texture `[B, H, W, C]`, or a cube map `[B, 6, S, S, C]` (items: its `6 B` faces).
-fn texture_dims<'a>(
-    name: &str,
-    tex: &'a PyReadonlyArrayDyn<'_, f32>,
-    cube: bool,
-) -> PyResult<(&'a [f32], Vec<usize>, [usize; 4])> {
-    let want: &[Option<usize>] = if cube {
-        &[None, Some(6), None, None, None]
-    } else {
-        &[None; 4]
-    };
-    let (data, shape) = checked(name, tex, want)?;
-    if shape.contains(&0) {
-        return Err(value_error(format!(
-            "{name} has shape {shape:?}; every extent must be > 0"
-        )));
-    }
-    let dims = if cube {
-        if shape[2] != shape[3] {
-            return Err(value_error(format!(
-                "{name} has shape {shape:?}; a cube map's faces must be square"
-            )));
-        }
-        [6 * shape[0], shape[2], shape[3], shape[4]]
-    } else {
-        [shape[0], shape[1], shape[2], shape[3]]
-    };
-    Ok((data, shape, dims))
-}
-
-fn u32_of(what: &str, v: usize) -> PyResult<u32> {
-    u32::try_from(v).map_err(|_| value_error(format!("{what} {v} is too large")))
-}
-
-fn with_mips(dims: [usize; 4], max_mip_level: Option<u32>) -> PyResult<TexLayout> {
-    let [b, h, w, c] = dims;
-    TexLayout::with_mips(
-        u32_of("tex minibatch", b)?,
-        u32_of("tex height", h)?,
-        u32_of("tex width", w)?,
-        u32_of("tex channels", c)?,
-        max_mip_level,
-    )
-    .map_err(super::to_py)
-}
-
-/// The Python shape of level `level` of a stack over a texture of `shape`.
-fn level_shape(shape: &[usize], layout: &TexLayout, level: u32) -> Vec<usize> {
-    let [w, h] = layout.level_size(level).map(|v| v as usize);
-    let mut s = shape.to_vec();
-    let n = s.len();
-    s[n - 3] = h;
-    s[n - 2] = w;
-    s
-}
-
-/// `nv_texture_construct_mip(tex, max_mip_level=None, cube_mode=False)`: nvdiffrast's
-/// `texture_construct_mip`.
-#[pyfunction]
-#[pyo3(signature = (tex, max_mip_level = None, cube_mode = false))]
-pub fn nv_texture_construct_mip(
-    py: Python<'_>,
-    tex: PyReadonlyArrayDyn<'_, f32>,
-    max_mip_level: Option<u32>,
-    cube_mode: bool,
-) -> PyResult<NvTextureMip> {
-    let (data, shape, dims) = texture_dims("tex", &tex, cube_mode)?;
-    let layout = with_mips(dims, max_mip_level)?;
-    let data = data.to_vec();
-    let mut stack = with_sampler(py, |ctx, s| s.construct_mip(ctx, &layout, &data))?;
-    let below = stack.split_off(data.len());
-    Ok(NvTextureMip {
-        shape,
-        cube: cube_mode,
-        layout,
-        below,
-    })
-}
+use super::mip::{NvTextureMip, level_shape, texture_dims, u32_of, with_mips};
+use super::with_sampler;
+use crate::convert::checked;
+use crate::error::{to_py, value_error};
 
 /// Where a call's stack comes from.
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -203,8 +62,8 @@ impl TextureCall {
         max_mip_level: Option<u32>,
     ) -> PyResult<Self> {
         let filter = Filter::parse(filter, uv_da.is_some() || bias.is_some(), max_mip_level)
-            .map_err(super::to_py)?;
-        let mode = TexMode::parse(filter, boundary).map_err(super::to_py)?;
+            .map_err(to_py)?;
+        let mode = TexMode::parse(filter, boundary).map_err(to_py)?;
         let cube = matches!(mode, TexMode::Cube(_));
         let (tex_data, shape, dims) = texture_dims("tex", tex, cube)?;
         let n_uv = mode.uv_floats() as usize;
@@ -233,7 +92,7 @@ impl TextureCall {
                 u32_of("tex channels", c)?,
                 1,
             )
-            .map_err(super::to_py)
+            .map_err(to_py)
         };
         let (layout, source, stack) = match (mips, mip, mip_levels) {
             (false, ..) => (base()?, Source::Custom, tex_data.to_vec()),
@@ -260,7 +119,7 @@ impl TextureCall {
                     layout.channels,
                     1 + u32_of("mip levels", levels.len())?,
                 )
-                .map_err(super::to_py)?;
+                .map_err(to_py)?;
                 let mut stack = tex_data.to_vec();
                 for (k, level) in levels.iter().enumerate() {
                     let want: Vec<_> = level_shape(&shape, &layout, 1 + k as u32)
@@ -451,13 +310,4 @@ pub fn nv_texture_grad<'py>(
             .map(|a| a.into_any()),
         levels,
     ))
-}
-
-/// Registers the functions on the native module.
-pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<NvTextureMip>()?;
-    m.add_function(wrap_pyfunction!(nv_texture_construct_mip, m)?)?;
-    m.add_function(wrap_pyfunction!(nv_texture, m)?)?;
-    m.add_function(wrap_pyfunction!(nv_texture_grad, m)?)?;
-    Ok(())
 }
