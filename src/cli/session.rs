@@ -15,7 +15,7 @@ use softvk::{Error, Result};
 
 use super::args::CheckpointArgs;
 use super::interrupt;
-use super::output::AtomicFile;
+use super::output::{AtomicFile, SideFile, side_files};
 
 impl CheckpointArgs {
     /// The session these flags ask for: the checkpoint in `--resume DIR` (file `file`) read and
@@ -211,7 +211,7 @@ pub fn summary(first: u32, done: u32, seconds: f64, what: &str, wrote: &[&Path])
 }
 
 /// The files a command writes, hidden until all are ready (`--out` and its side files,
-/// [`side_files`](super::output::side_files)), each created before the fit (a path that cannot be written fails before
+/// [`side_files`]), each created before the fit (a path that cannot be written fails before
 /// any work) and all committed after it, or none.
 pub struct Outputs {
     /// `--out`, then the side files, in order.
@@ -228,6 +228,13 @@ impl Outputs {
             .map(|p| AtomicFile::create(p))
             .collect::<Result<_>>()?;
         Ok(Outputs { paths, files })
+    }
+
+    /// `out` and its side files `side` ([`side_files`]: `<stem><suffix>` beside `out` by
+    /// default; `stem` when `out` has none), created.
+    pub fn beside(out: &Path, stem: &str, side: &[SideFile<'_>]) -> Result<Outputs> {
+        let side = side_files(out, stem, side)?;
+        Outputs::create(std::iter::once(out.to_path_buf()).chain(side))
     }
 
     /// Writes `contents` (one for each path, in order).

@@ -1,10 +1,13 @@
 //! The flags of `softvk fit-pose`, and the fit's options they make.
 
-use crate::cli::args::{CheckpointArgs, RasterArgs, ViewArgs, positive, triple};
+use std::path::PathBuf;
+
 use clap::Args;
 use softvk::Result;
 use softvk::fit::pose::{PoseFitOptions, Refine, Schedule};
-use std::path::PathBuf;
+use softvk::raster::gpu::Method;
+
+use crate::cli::args::{CheckpointArgs, RasterArgs, ViewArgs, overlay, positive, triple};
 
 /// The defaults of the pose fit (chosen by `examples/pose_study.rs`; RESULTS.md).
 pub(super) fn defaults() -> PoseFitOptions {
@@ -136,39 +139,34 @@ impl FitPoseArgs {
             .unwrap_or(if checkpoints { 1 } else { DEFAULT_STARTS })
     }
 
-    /// The fit's options these flags ask for, for an image of `size` on `tile`-pixel tiles.
-    pub(super) fn options(&self, size: (u32, u32), tile: u32) -> Result<PoseFitOptions> {
-        let d = defaults();
-        let settings = self.raster.settings(size)?;
-        let schedule = (!self.no_schedule).then(|| {
-            let s = Schedule::default();
-            Schedule {
-                sigma_start: self.sigma_start.unwrap_or(s.sigma_start),
-                gamma_start: self.gamma_start.unwrap_or(s.gamma_start),
-                stages: self.stages.unwrap_or(s.stages),
-            }
+    /// The fit's options these flags ask for, for an image of `size`: the library's defaults
+    /// ([`defaults`]), each flag given in place of its default.
+    pub(super) fn options(&self, size: (u32, u32)) -> Result<PoseFitOptions> {
+        let mut o = defaults();
+        overlay(&mut o.iterations, self.iterations);
+        overlay(&mut o.lr_rotation, self.lr);
+        overlay(&mut o.lr_translation, self.lr_translation);
+        overlay(&mut o.lr_final, self.lr_final);
+        overlay(&mut o.tile, self.tile);
+        Method::check_tile(o.tile)?;
+        // The schedule's defaults are the schedule's own, not the fit's (which may have none).
+        o.schedule = (!self.no_schedule).then(|| {
+            let mut s = Schedule::default();
+            overlay(&mut s.sigma_start, self.sigma_start);
+            overlay(&mut s.gamma_start, self.gamma_start);
+            overlay(&mut s.stages, self.stages);
+            s
         });
-        let refine = match (self.refine, d.refine) {
-            (Some(0), _) => None,
-            (Some(n), Some(r)) => Some(Refine { iterations: n, ..r }),
-            (Some(n), None) => Some(Refine {
-                iterations: n,
-                ..Refine::default()
+        o.refine = match self.refine {
+            Some(0) => None,
+            Some(iterations) => Some(Refine {
+                iterations,
+                ..o.refine.unwrap_or_default()
             }),
-            (None, r) => r,
+            None => o.refine,
         };
-        let opts = PoseFitOptions {
-            iterations: self.iterations.unwrap_or(d.iterations),
-            refine,
-            lr_rotation: self.lr.unwrap_or(d.lr_rotation),
-            lr_translation: self.lr_translation.unwrap_or(d.lr_translation),
-            lr_final: self.lr_final.unwrap_or(d.lr_final),
-            schedule,
-            settings,
-            tile,
-            ..d
-        };
-        opts.validate()?;
-        Ok(opts)
+        o.settings = self.raster.settings(size)?;
+        o.validate()?;
+        Ok(o)
     }
 }

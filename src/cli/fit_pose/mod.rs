@@ -23,7 +23,7 @@
 //! (`--compare`, default `<out stem>-compare.png`). Every file is written atomically after the
 //! fit; any error is one line and leaves no file.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use glam::DVec3;
 use serde_json::{Value, json};
@@ -38,10 +38,8 @@ use softvk::mesh::Mesh;
 use softvk::raster::gpu::{Method, Renderer};
 use softvk::{Error, Result};
 
-use crate::cli::output::{
-    AtomicFile, ImageFormat, SideFile, encode_sheet_png, load_target, side_files,
-};
-use crate::cli::session::{Watch, interrupted};
+use crate::cli::output::{SideFile, encode_compare, encode_png};
+use crate::cli::session::{Outputs, Watch, interrupted, summary};
 
 mod args;
 pub use args::*;
@@ -54,23 +52,11 @@ pub const CHECKPOINT_FILE: &str = "pose-fit.ckpt";
 
 /// Runs `softvk fit-pose`.
 pub fn run(args: &FitPoseArgs) -> Result<()> {
-    let d = defaults();
-    let tile = args.tile.unwrap_or(d.tile);
-    Method::check_tile(tile)?;
-    let (tw, th, target) = load_target(&args.target)?;
-    let explicit = args.view.size.is_some() || args.view.width.is_some();
-    let size = if explicit { args.view.size() } else { (tw, th) };
-    if size != (tw, th) {
-        return Err(Error::Input(format!(
-            "the target {} is {tw}x{th} but the image is {}x{}",
-            args.target.display(),
-            size.0,
-            size.1
-        )));
-    }
+    let (size, target) = args.view.target(&args.target)?;
     let camera = args.view.camera()?;
     let lighting = args.raster.lighting();
-    let opts = args.options(size, tile)?;
+    let opts = args.options(size)?;
+    let tile = opts.tile;
     let init = Pose {
         rotation: DVec3::from(args.init_rotation.unwrap_or([0.0; 3])) * (1f64.to_radians()),
         translation: DVec3::from(args.init_translation.unwrap_or([0.0; 3])),
@@ -82,29 +68,6 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
             args.mesh.display()
         )));
     }
-    let [render_path, error_path, compare_path]: [PathBuf; 3] = side_files(
-        &args.out,
-        "pose",
-        &[
-            SideFile {
-                flag: "--render",
-                path: args.render.as_deref(),
-                suffix: "-render.png",
-            },
-            SideFile {
-                flag: "--error",
-                path: args.error.as_deref(),
-                suffix: "-error.png",
-            },
-            SideFile {
-                flag: "--compare",
-                path: args.compare.as_deref(),
-                suffix: "-compare.png",
-            },
-        ],
-    )?
-    .try_into()
-    .expect("three side files");
     let starts = args.starts();
     if args.candidates.is_some() && starts == 1 {
         return Err(Error::Input(
@@ -120,10 +83,16 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
     // The checkpoint is checked before anything is written.
     let fingerprint = PoseFit::fingerprint(&mesh, &camera, &lighting, &target, &init, &opts);
     let session = args.checkpoints.session(CHECKPOINT_FILE, fingerprint)?;
-    let out = AtomicFile::create(&args.out)?;
-    let render_file = AtomicFile::create(&render_path)?;
-    let error_file = AtomicFile::create(&error_path)?;
-    let compare_file = AtomicFile::create(&compare_path)?;
+    let side = |flag, path, suffix| SideFile { flag, path, suffix };
+    let outputs = Outputs::beside(
+        &args.out,
+        "pose",
+        &[
+            side("--render", args.render.as_deref(), "-render.png"),
+            side("--error", args.error.as_deref(), "-error.png"),
+            side("--compare", args.compare.as_deref(), "-compare.png"),
+        ],
+    )?;
     let watch = Watch::new(args.quiet, u64::from(opts.iterations));
     let bar = watch.bar();
     let mut multi = None;
@@ -169,10 +138,8 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
     } else {
         let hooks = |p: &Progress<'_, '_, PoseFit<'_>>| {
             let l = p.row();
-            Ok(watch.update(
-                l.iteration,
-                format!("loss {:.5}  σ {:.0e}", l.loss, l.sigma),
-            ))
+            let message = format!("loss {:.5}  σ {:.0e}", l.loss, l.sigma);
+            Ok(watch.update(l.iteration, message))
         };
         fit_pose(
             &ctx,
@@ -248,14 +215,10 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
         serde_json::to_string_pretty(&json).expect("JSON of numbers")
     );
 
-    let (w, h) = size;
-    let png = |pixels: &[[f32; 4]], path: &Path| {
-        ImageFormat::Png
-            .encode(pixels, w, h)
-            .map_err(|e| Error::Input(format!("{}: {e}", path.display())))
-    };
-    let render_png = png(&result.image, &render_path)?;
-    let error_png = png(&report::error_map(&result.image, &target), &error_path)?;
+    let [out, render_path, error_path, compare_path] = [0, 1, 2, 3].map(|i| &outputs.paths[i]);
+    let render_png = encode_png(&result.image, size, render_path)?;
+    let error_map = report::error_map(&result.image, &target);
+    let error_png = encode_png(&error_map, size, error_path)?;
     // The start (the winning one of several), posed about the same centre and rendered as the
     // result was.
     let start_pose = multi.as_ref().map_or(init, |m| m.starts[m.best_start].init);
@@ -285,27 +248,14 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
         )?
         .images;
     ctx.check_validation()?;
-    let sheet = report::side_by_side(
-        &[
-            ("target", &target),
-            ("start", &start),
-            ("result", &result.image),
-        ],
-        w,
-        h,
-    );
-    let compare_png = encode_sheet_png(&sheet, &compare_path)?;
-    out.commit(json.as_bytes())?;
-    render_file.commit(&render_png)?;
-    error_file.commit(&error_png)?;
-    compare_file.commit(&compare_png)?;
-    println!(
-        "{} iterations in {:.1} s ({:.1} ms per iteration); loss {:.3e} → {:.3e}; rotation \
-         {:.2}° about {:?}, translation {:?}; wrote {}, {}, {} and {}",
-        result.iterations,
-        result.seconds,
-        1e3 * result.seconds / f64::from(result.iterations.max(1)),
-        initial_loss,
+    let sheet = [
+        ("target", &target),
+        ("start", &start),
+        ("result", &result.image),
+    ];
+    let compare_png = encode_compare(&sheet, size, compare_path)?;
+    let what = format!(
+        "; loss {initial_loss:.3e} → {:.3e}; rotation {:.2}° about {:?}, translation {:?}",
         result.loss,
         angle.to_degrees(),
         pose.rotation
@@ -313,11 +263,17 @@ pub fn run(args: &FitPoseArgs) -> Result<()> {
             .to_array()
             .map(|c| (c * 1e4).round() / 1e4),
         pose.translation.to_array().map(|c| (c * 1e4).round() / 1e4),
-        args.out.display(),
-        render_path.display(),
-        error_path.display(),
-        compare_path.display()
     );
+    let wrote = [out, render_path, error_path, compare_path].map(PathBuf::as_path);
+    let line = summary(
+        result.first_iteration,
+        result.iterations,
+        result.seconds,
+        &what,
+        &wrote,
+    );
+    outputs.commit(&[json.as_bytes(), &render_png, &error_png, &compare_png])?;
+    println!("{line}");
     Ok(())
 }
 

@@ -441,6 +441,8 @@ pub struct PoseFitResult {
     pub log: Vec<PoseLog>,
     /// Iterations run.
     pub iterations: u32,
+    /// The first iteration this run ran (after a resume, the checkpoint's + 1).
+    pub first_iteration: u32,
     /// Wall time of the iterations (without the final evaluation).
     pub seconds: f64,
 }
@@ -488,6 +490,7 @@ pub fn fit_pose<'c>(
         centre: fitter.centre(),
         log: end.log,
         iterations: end.last,
+        first_iteration: end.first,
         seconds: end.seconds,
     })
 }
