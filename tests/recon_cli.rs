@@ -64,6 +64,9 @@ fn train_twice_resume_evaluate_and_reconstruct() {
     let dir = TempDir::new("recon-cli");
     let data = dataset(&dir);
     let (a, b, c) = (dir.path("a.npz"), dir.path("b.npz"), dir.path("c.npz"));
+    // c's checkpoints, in its report folder by default.
+    let c_train = dir.path("c-train");
+    let c_train = c_train.to_str().unwrap();
     let said = train(&data, &a, 4, &[]);
     assert!(said.contains("trained 4 iterations"), "{said}");
     train(&data, &b, 4, &[]);
@@ -71,7 +74,7 @@ fn train_twice_resume_evaluate_and_reconstruct() {
     assert!(bytes(&a) == bytes(&b), "a second run wrote other bytes");
     // Stopped after 2 (a finished run of 2), then resumed to 4: the same model.
     train(&data, &c, 2, &[]);
-    let said = train(&data, &c, 4, &["--resume"]);
+    let said = train(&data, &c, 4, &["--resume", c_train]);
     assert!(
         said.contains("resumed after iteration 2: ran iterations 3..4;"),
         "a resumed run runs only the rest: {said}"
@@ -111,6 +114,7 @@ fn train_twice_resume_evaluate_and_reconstruct() {
             "--hidden",
             "8",
             "--resume",
+            c_train,
         ])
         .output()
         .unwrap();
@@ -125,7 +129,7 @@ fn train_twice_resume_evaluate_and_reconstruct() {
         .args(["train-recon", "--dataset", data.to_str().unwrap()])
         .args(["--out", c.to_str().unwrap(), "--iters", "6", "--batch", "2"])
         .args(["--channels", "2,3,4", "--latent", "8", "--hidden", "8"])
-        .args(["--lr", "1e-3", "--recipe", "one-view", "--resume"])
+        .args(["--lr", "1e-3", "--recipe", "one-view", "--resume", c_train])
         .output()
         .unwrap();
     assert!(!refused.status.success());
@@ -152,12 +156,12 @@ fn train_twice_resume_evaluate_and_reconstruct() {
     }
     // The learning rate's step may be added on resume where it changes no iteration already
     // run (c's checkpoint is at 4: a step at 5 is fine), not where it would have (at 3).
-    train(&data, &c, 6, &["--resume", "--lr-step", "5"]);
+    train(&data, &c, 6, &["--resume", c_train, "--lr-step", "5"]);
     let refused = softvk()
         .args(["train-recon", "--dataset", data.to_str().unwrap()])
         .args(["--out", c.to_str().unwrap(), "--iters", "8", "--batch", "2"])
         .args(["--channels", "2,3,4", "--latent", "8", "--hidden", "8"])
-        .args(["--lr", "1e-3", "--lr-step", "3", "--resume"])
+        .args(["--lr", "1e-3", "--lr-step", "3", "--resume", c_train])
         .output()
         .unwrap();
     assert!(!refused.status.success());
@@ -457,7 +461,9 @@ fn a_conditioned_field_trains_resumes_and_sits_beside_the_mesh_in_the_table() {
     assert!(said.contains("trained 4 iterations"), "{said}");
     // Stopped after 2, resumed to 4: the same model, bit for bit.
     train(&data, &g, 2, &FIELD);
-    let said = train(&data, &g, 4, &[&FIELD[..], &["--resume"]].concat());
+    let g_train = dir.path("g-train");
+    let resume = ["--resume", g_train.to_str().unwrap()];
+    let said = train(&data, &g, 4, &[&FIELD[..], &resume].concat());
     assert!(
         said.contains("resumed after iteration 2: ran iterations 3..4;"),
         "a resumed field run runs only the rest: {said}"
@@ -481,7 +487,8 @@ fn a_conditioned_field_trains_resumes_and_sits_beside_the_mesh_in_the_table() {
         .args(["train-recon", "--dataset", data.to_str().unwrap()])
         .args(["--out", g.to_str().unwrap(), "--iters", "6", "--batch", "2"])
         .args(["--channels", "2,3,4", "--latent", "8", "--hidden", "8"])
-        .args(["--lr", "1e-3", "--resume"])
+        .args(["--lr", "1e-3"])
+        .args(resume)
         .output()
         .unwrap();
     assert!(!refused.status.success());

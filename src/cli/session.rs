@@ -22,6 +22,17 @@ impl CheckpointArgs {
     /// checked against `fingerprint` (before anything is written: a refused one leaves nothing
     /// behind), then the `--checkpoint DIR` folder created and checkpoints planned into it.
     pub fn session<'h, F: Trainee>(&self, file: &str, fingerprint: u64) -> Result<Session<'h, F>> {
+        self.session_in(file, fingerprint, None)
+    }
+
+    /// [`CheckpointArgs::session`], checkpointing into `default`'s folder every `default`'s
+    /// iterations when `--checkpoint` is not given (a trainer always checkpoints).
+    pub fn session_in<'h, F: Trainee>(
+        &self,
+        file: &str,
+        fingerprint: u64,
+        default: Option<(&Path, u32)>,
+    ) -> Result<Session<'h, F>> {
         let resume = match &self.resume {
             Some(dir) => Some(Resume::read(&dir.join(file), F::KIND, fingerprint)?),
             None => None,
@@ -29,14 +40,18 @@ impl CheckpointArgs {
         if self.checkpoint_every == 0 {
             return Err(Error::Input("--checkpoint-every must be at least 1".into()));
         }
-        let plan = match &self.checkpoint {
-            Some(dir) => {
+        let planned = match (&self.checkpoint, default) {
+            (Some(dir), _) => Some((dir.as_path(), self.checkpoint_every)),
+            (None, d) => d,
+        };
+        let plan = match planned {
+            Some((dir, every)) => {
                 std::fs::create_dir_all(dir)
                     .map_err(|e| Error::Input(format!("cannot create {}: {e}", dir.display())))?;
                 Some(CheckpointPlan {
                     path: dir.join(file),
                     fingerprint,
-                    every: self.checkpoint_every,
+                    every,
                 })
             }
             None => None,

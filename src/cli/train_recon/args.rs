@@ -10,7 +10,7 @@ use softvk::recon::dataset::{self};
 use softvk::recon::field::{self, FieldNet, FieldTrainOptions};
 use softvk::recon::train::{LrStep, NetShape, Recipe, TrainOptions};
 
-use crate::cli::args::{non_negative, positive};
+use crate::cli::args::{CheckpointArgs, non_negative, positive};
 
 /// `--channels`: three comma-separated positive widths.
 pub(super) fn channels(s: &str) -> std::result::Result<[u32; 3], String> {
@@ -113,9 +113,10 @@ pub struct TrainReconArgs {
     #[arg(long, value_name = "V", default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..))]
     pub val_views: u32,
 
-    /// Go on from the checkpoint in `<MODEL stem>-train/` (same dataset and options).
-    #[arg(long)]
-    pub resume: bool,
+    /// `--checkpoint DIR` [default: `<MODEL stem>-train/`, every `--val-every`], and
+    /// `--resume DIR` (the same dataset and options).
+    #[command(flatten)]
+    pub checkpoints: CheckpointArgs,
 
     /// Train a conditioned implicit field instead of the mesh decoder: the encoder predicts
     /// each hidden layer's bias of a shared occupancy MLP, trained by sphere probing against

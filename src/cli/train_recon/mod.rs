@@ -7,17 +7,18 @@
 
 use std::path::{Path, PathBuf};
 
-use softvk::fit::checkpoint::FitKind;
+use softvk::field::MlpLayout;
 use softvk::fit::driver::{Fitter, to_next_log};
 use softvk::fit::report::Series;
-use softvk::fit::session::{CheckpointPlan, Progress, Resume, Session, Trainee};
+use softvk::fit::session::{Progress, Session, Trainee};
 use softvk::gpu::{Context, ContextOptions};
 use softvk::recon::dataset::{Dataset, Split};
 use softvk::recon::field::{FieldReconTrainer, FieldReconTraining};
 use softvk::recon::model::ReconModel;
+use softvk::recon::model::SETTINGS;
 use softvk::recon::reconstruct::{spread_views, validation_iou};
 use softvk::recon::session::{self, TrainRow};
-use softvk::recon::train::{ReconTrainer, ReconTraining, TrainImages, TrainedParams};
+use softvk::recon::train::{NetShape, ReconTrainer, ReconTraining, TrainImages, TrainedParams};
 use softvk::{Error, Result};
 
 use crate::cli::interrupt;
@@ -60,19 +61,12 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
             .map_err(|_| Error::Input(format!("--images {images}: over 2^32 iterations")))?,
     };
     let dir = report_dir(&args.out);
-    let ckpt_path = dir.join(CHECKPOINT_FILE);
     let fingerprint = session::fingerprint(&net, field_layout);
-    let resume = if args.resume {
-        let kind = if args.field {
-            FitKind::ReconField
-        } else {
-            FitKind::ReconMesh
-        };
-        let r = Resume::read(&ckpt_path, kind, fingerprint)?;
-        session::check_resume(&ckpt_path, &r, &net, field_layout, &settings)?;
-        Some(r)
-    } else {
-        None
+    let shape = Shape {
+        net: &net,
+        field: field_layout,
+        settings: &settings,
+        fingerprint,
     };
     let ctx = Context::new(&ContextOptions::from_env())?;
     let images = TrainImages::from_dataset(data);
@@ -80,9 +74,7 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
         args,
         ctx: &ctx,
         val,
-        dir,
-        ckpt_path,
-        fingerprint,
+        dir: dir.clone(),
         model_of: |params: Vec<f32>, iteration: u32| ReconModel {
             net,
             field: field_layout,
@@ -93,15 +85,45 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
         per_iteration,
     };
     if args.field {
+        let session = shape.session(args, &dir)?;
         let trainer = FieldReconTrainer::new(&ctx, &images, &field_opts, None)?;
-        run.go(trainer, resume)
+        run.go(trainer, session)
     } else {
-        run.go(ReconTrainer::new(&ctx, &images, &mesh_opts, None)?, resume)
+        let session = shape.session(args, &dir)?;
+        run.go(ReconTrainer::new(&ctx, &images, &mesh_opts, None)?, session)
     }
 }
 
-/// The checkpoint's file in the report folder.
+/// The checkpoint's file in the report folder (or `--checkpoint DIR`).
 const CHECKPOINT_FILE: &str = "checkpoint.ckpt";
+
+/// What a trainer's checkpoint must match: the network's shape and the run's settings.
+struct Shape<'a> {
+    net: &'a NetShape,
+    field: Option<MlpLayout>,
+    settings: &'a [f64; SETTINGS],
+    fingerprint: u64,
+}
+
+impl Shape<'_> {
+    /// The checkpoint flags' session: `--resume DIR`'s checkpoint read and held to this shape
+    /// and these settings, and checkpoints into `--checkpoint DIR` or, by default, the report
+    /// folder `dir` at each validation.
+    fn session<'h, T: Trainee<Row = TrainRow>>(
+        &self,
+        args: &TrainReconArgs,
+        dir: &Path,
+    ) -> Result<Session<'h, T>> {
+        let c = &args.checkpoints;
+        let default = Some((dir, args.val_every));
+        let s = c.session_in(CHECKPOINT_FILE, self.fingerprint, default)?;
+        if let (Some(r), Some(from)) = (&s.resume, &c.resume) {
+            let path = from.join(CHECKPOINT_FILE);
+            session::check_resume(&path, r, self.net, self.field, self.settings)?;
+        }
+        Ok(s)
+    }
+}
 
 /// A training run's inputs beside its trainer.
 struct TrainingRun<'a, M> {
@@ -109,8 +131,6 @@ struct TrainingRun<'a, M> {
     ctx: &'a Context,
     val: Option<Dataset>,
     dir: PathBuf,
-    ckpt_path: PathBuf,
-    fingerprint: u64,
     /// The model of parameters after an iteration.
     model_of: M,
     /// The last iteration (`--iters`, or `--images` over `per_iteration`).
@@ -122,7 +142,7 @@ struct TrainingRun<'a, M> {
 impl<M: Fn(Vec<f32>, u32) -> ReconModel> TrainingRun<'_, M> {
     /// Trains to the last iteration in a session (validating and checkpointing every
     /// `--val-every`, stopping at an interrupt with a checkpoint) and writes the model.
-    fn go<'c, T>(self, mut trainer: Fitter<'c, T>, resume: Option<Resume<TrainRow>>) -> Result<()>
+    fn go<'c, T>(self, mut trainer: Fitter<'c, T>, session: Session<'_, T>) -> Result<()>
     where
         T: Trainee<Row = TrainRow> + Trained,
     {
@@ -131,13 +151,15 @@ impl<M: Fn(Vec<f32>, u32) -> ReconModel> TrainingRun<'_, M> {
             ctx,
             val,
             dir,
-            ckpt_path,
-            fingerprint,
             model_of,
             iterations,
             per_iteration,
         } = self;
-        let start = resume.as_ref().map_or(0, |r| r.iteration);
+        let start = session.resume.as_ref().map_or(0, |r| r.iteration);
+        let plan = session
+            .checkpoint
+            .clone()
+            .expect("a trainer always checkpoints");
         std::fs::create_dir_all(&dir)
             .map_err(|e| Error::Input(format!("cannot create {}: {e}", dir.display())))?;
         let val_views = spread_views(args.val_views);
@@ -162,30 +184,25 @@ impl<M: Fn(Vec<f32>, u32) -> ReconModel> TrainingRun<'_, M> {
             }
             Ok(go_on)
         };
-        let mut session = Session::new()
-            .resume(resume)
-            .checkpoint(Some(CheckpointPlan {
-                path: ckpt_path.clone(),
-                fingerprint,
-                every: args.val_every,
-            }))
-            .hooks(hooks);
+        let mut session = session.hooks(hooks);
         if let Some(val) = &val {
             session = session.validate(args.val_every, |p: &Progress<'_, '_, T>| {
                 validation_iou(ctx, &model_now(p)?, val, &val_views)
             });
         }
-        // Submissions of `--log-every` iterations, ending at each validation.
+        // Submissions of `--log-every` iterations, ending at each validation and checkpoint.
         let end = session.run(&mut trainer, (iterations, 1), |_, it| {
-            Ok((it + args.log_every - 1).min(to_next_log(it, args.val_every)))
+            let boundary = to_next_log(it, args.val_every).min(to_next_log(it, plan.every));
+            Ok((it + args.log_every - 1).min(boundary))
         })?;
         watch.finish();
         let done = end.last;
         if done < iterations {
+            let folder = plan.path.parent().unwrap_or(Path::new("."));
             eprintln!(
-                "softvk: stopped after iteration {done} of {}; `--resume` goes on from {}",
-                iterations,
-                ckpt_path.display()
+                "softvk: stopped after iteration {done} of {iterations}; `--resume {}` goes on \
+                 from it",
+                folder.display()
             );
             return Ok(());
         }
