@@ -4,13 +4,12 @@ use std::path::PathBuf;
 
 use clap::Args;
 use softvk::field::MlpLayout;
-use softvk::fit::AdamOptions;
 use softvk::probe::ProbeSettings;
 use softvk::recon::dataset::{self};
 use softvk::recon::field::{self, FieldNet, FieldTrainOptions};
 use softvk::recon::train::{LrStep, NetShape, Recipe, TrainOptions};
 
-use crate::cli::args::{CheckpointArgs, non_negative, positive};
+use crate::cli::args::{CheckpointArgs, non_negative, overlay, positive};
 
 /// `--channels`: three comma-separated positive widths.
 pub(super) fn channels(s: &str) -> std::result::Result<[u32; 3], String> {
@@ -185,27 +184,27 @@ impl TrainReconArgs {
         })
     }
 
-    /// The mesh network's training options.
+    /// The mesh network's training options: SoftRas's ([`TrainOptions::default`]), each flag
+    /// given in place of its default.
     pub(super) fn mesh_options(&self) -> TrainOptions {
-        TrainOptions {
+        let mut o = TrainOptions {
             net: self.net(),
             recipe: self.recipe.into(),
-            batch: self.batch.unwrap_or(TrainOptions::default().batch),
-            adam: AdamOptions {
-                lr: self.lr.unwrap_or(1e-4),
-                ..AdamOptions::default()
-            },
             lr_step: self.lr_step(),
             sigma: self.sigma,
             color: self.color as f32,
             seed: self.seed,
             ..TrainOptions::default()
-        }
+        };
+        overlay(&mut o.batch, self.batch);
+        overlay(&mut o.adam.lr, self.lr);
+        o
     }
 
-    /// The conditioned field's training options.
+    /// The conditioned field's training options: [`FieldTrainOptions::default`]'s, each flag
+    /// given in place of its default.
     pub(super) fn field_options(&self) -> FieldTrainOptions {
-        FieldTrainOptions {
+        let mut o = FieldTrainOptions {
             net: FieldNet {
                 net: self.net(),
                 mlp: MlpLayout {
@@ -213,11 +212,6 @@ impl TrainReconArgs {
                     width: self.field_width,
                     frequencies: self.field_freqs,
                 },
-            },
-            batch: self.batch.unwrap_or(FieldTrainOptions::default().batch),
-            adam: AdamOptions {
-                lr: self.lr.unwrap_or(1e-3),
-                ..AdamOptions::default()
             },
             lr_step: self.lr_step(),
             probe: ProbeSettings {
@@ -227,6 +221,10 @@ impl TrainReconArgs {
                 ..field::default_probe()
             },
             seed: self.seed,
-        }
+            ..FieldTrainOptions::default()
+        };
+        overlay(&mut o.batch, self.batch);
+        overlay(&mut o.adam.lr, self.lr);
+        o
     }
 }
