@@ -47,7 +47,8 @@
 //! arithmetic. They can part only at the kinks (a texel centre, a face edge, an integer `λ`),
 //! where each takes the side its forward takes.
 
-use super::{Filter, Level, LevelInput, MipStack, level_gradient, level_of_detail, pick_levels};
+use super::forward::pick_levels;
+use super::{Filter, Level, LevelInput, MipStack, level_gradient, level_of_detail};
 use crate::error::{Error, Result};
 
 /// OpenGL's cube-map table, faces +x, −x, +y, −y, +z, −z: each face's major axis, and the axis
