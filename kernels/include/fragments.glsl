@@ -6,7 +6,7 @@
 #ifndef SOFTVK_FRAGMENTS_GLSL
 #define SOFTVK_FRAGMENTS_GLSL
 
-// Twin of `FragmentPush` (src/raster/fragments/gpu.rs); every fragment kernel takes it.
+// Twin of `FragmentPush` (src/raster/fragments/gpu/mod.rs); every fragment kernel takes it.
 layout(push_constant) uniform Push {
     uint width;           // image size in pixels
     uint height;

@@ -1,7 +1,7 @@
 // nvdiffrast's primitives (`softvk::raster::hard`), what their kernels share: the push
 // constants, the pixel grid (row 0 at the bottom, centres at NDC ((2x + 1)/W − 1, (2y + 1)/H − 1)),
 // reading clip-space corners, and the per-pixel arithmetic of `reference::shade`, in f32 on
-// softvk's maths, every intermediate `precise`. Twin: `src/raster/hard/reference.rs` (f64).
+// softvk's maths, every intermediate `precise`. Twin: `src/raster/hard/reference/` (f64).
 #ifndef SOFTVK_HARD_GLSL
 #define SOFTVK_HARD_GLSL
 

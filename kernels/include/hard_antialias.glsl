@@ -1,5 +1,5 @@
 // nvdiffrast's `antialias` (`softvk::raster::hard::gpu`), what its kernels share: the work list's
-// records and the pixel frame. Twin: `src/raster/hard/antialias.rs` (f64), whose module docs give
+// records and the pixel frame. Twin: `src/raster/hard/antialias/` (f64), whose module docs give
 // every rule; the kernels follow it operation for operation in f32 on softvk's maths.
 //
 // The work list (`hard_antialias_pairs.comp`) holds per pixel i = (b·H + y)·W + x one uvec4:

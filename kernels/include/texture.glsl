@@ -1,7 +1,7 @@
 // nvdiffrast's `texture` (`softvk::raster::hard::texture`), what its kernels share: the push
 // constants, the mip stack's addressing, the level of detail and the bilinear taps, in f32 on
 // softvk's maths, every intermediate `precise`; then a cube map's face projection and seamless
-// taps. Twins: `src/raster/hard/texture/mod.rs` and `cube.rs` (f64), whose module docs give the
+// taps. Twins: `src/raster/hard/texture/` and `cube/` (f64), whose module docs give the
 // behaviour; each function here names the twin function it follows.
 //
 // The stack is one float array: level 0 (the texture, `tex_items` items of H × W texels of C
@@ -11,7 +11,7 @@
 #ifndef SOFTVK_TEXTURE_GLSL
 #define SOFTVK_TEXTURE_GLSL
 
-// Twin of `TexPush` (src/raster/hard/gpu/texture.rs); every texture kernel takes it.
+// Twin of `TexPush` (src/raster/hard/gpu/texture/mod.rs); every texture kernel takes it.
 layout(push_constant) uniform Push {
     uint width;        // W, H: the base level
     uint height;
@@ -49,7 +49,7 @@ const uint DA_DIM = CUBE ? 6u : 4u;
 // modes, four on each of two levels for linear-mipmap-linear.
 const uint TAPS = FILTER == FILTER_NEAREST ? 1u : (FILTER == FILTER_MIPMAP_LINEAR ? 8u : 4u);
 
-// Sorted entries a partial sum of the backward covers (`PARTIAL_BLOCK` in gpu/texture.rs).
+// Sorted entries a partial sum of the backward covers (`PARTIAL_BLOCK` in gpu/texture/mod.rs).
 const uint PARTIAL_BLOCK = 256u;
 
 const float LOG2_E = 1.44269504;  // 1 / ln 2

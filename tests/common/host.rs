@@ -68,7 +68,7 @@ impl HostDevice {
                 ash::ext::validation_features::NAME.as_ptr(),
             ];
             // The layer's shader validation cache off, as softvk's own contexts have it
-            // (src/gpu/context.rs: a file every device rewrites without locking).
+            // (src/gpu/context/create.rs: a file every device rewrites without locking).
             let disabled = [vk::ValidationFeatureDisableEXT::SHADER_VALIDATION_CACHE];
             let mut features =
                 vk::ValidationFeaturesEXT::default().disabled_validation_features(&disabled);

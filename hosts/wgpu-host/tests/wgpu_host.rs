@@ -35,7 +35,7 @@ fn run_here(name: &str) -> bool {
             "VK_LAYER_ENABLES",
             layer_enables_with_submit_time_sync_validation(),
         )
-        // As softvk's own contexts do (src/gpu/context.rs): the layer's on-disk shader
+        // As softvk's own contexts do (src/gpu/context/create.rs): the layer's on-disk shader
         // validation cache is rewritten without locking by every device, and parallel tests
         // can crash the layer on a half-written one.
         .env(
