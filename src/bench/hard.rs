@@ -55,7 +55,7 @@ pub struct HardRecord {
     /// which it tests (rasterize only).
     pub binned_pairs: Option<u64>,
     /// The visited pairs, the per-pair figure's fixed denominator: per block of a subgroup's
-    /// lanes, its pixels × the triangles whose snapped box meets it ([`visited_pairs`];
+    /// lanes, its pixels × the triangles whose snapped box meets it (`hard::visited_pairs`;
     /// rasterize only).
     pub visited_pairs: Option<u64>,
     /// The depth pass's GPU time per visited pair, ns (rasterize only).

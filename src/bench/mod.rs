@@ -310,7 +310,7 @@ impl serde_json::ser::Formatter for Spaced {
 }
 
 /// The fitting benchmarks (`softvk bench --scene fit-120` and the rest of [`FIT_SCENES`]): each
-/// named scene's records, in the order asked ([`fits`]'s for the fits, [`recon`]'s for the
+/// named scene's records, in the order asked (`fits.rs`'s for the fits, `recon.rs`'s for the
 /// trainers). Each times one iteration per submission with its passes after an untimed one,
 /// and the mesh fit also its loop at 1 and [`FIT_BATCH`] iterations per submission.
 pub fn run_fit(
