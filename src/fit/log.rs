@@ -7,7 +7,7 @@
 //!   both lists;
 //! - `loss.csv` ([`csv`]): a header of the names, then a line a row, every value in its
 //!   shortest round-trip form, except wall time (a column named `seconds`), to the millisecond;
-//! - the curves of `loss.png` ([`column`]).
+//! - the curves of `loss.png` ([`column()`]).
 //!
 //! A list column ([`Columns::f64s`]: the articulated fit's angles, one per joint) is one
 //! column of the checkpoint (its length, then its values) and `name_0, name_1, …` in the CSV.
