@@ -1,27 +1,21 @@
 //! softvk: differentiable rendering as Vulkan compute kernels.
 //!
-//! The modules, bottom up (none imports from one below it in this list):
+//! This crate is the top of softvk's workspace: the command line and `softvk bench`, and the
+//! layers that fit and learn through the rasterizers. It re-exports the crates below it, so one
+//! dependency gives everything under the paths the project itself uses:
 //!
-//! - [`error`] (the one error enum) and [`atomic_file`] (files written whole or not at all).
-//! - [`gpu`]: the Vulkan compute core — a [`gpu::Context`] (owned headless, or adopted from a host
-//!   engine with [`gpu::Context::from_raw`]), buffers, kernels compiled at build time, and a
-//!   [`gpu::Recorder`] that records dispatches into a command buffer the caller owns.
-//! - [`fmath`]: softvk's own `exp`, `log`, division, `sqrt`, `sin`, `cos`, ... built from
-//!   correctly rounded operations, which every kernel uses (`kernels/include/fmath.glsl`), so a
-//!   kernel's bits are the same on every conformant device; the CPU twin is bit-exact.
-//! - [`primitives`]: exclusive scan, stable radix sort, sums and tiled binning (which items each
-//!   screen tile must visit, exactly), with their CPU twins.
-//! - Inputs: [`mesh`] (OBJ and MTL, per-face textures, generated shapes), [`assets`] (the meshes
-//!   built in or found through `SOFTVK_ASSETS`), [`io`] (silhouettes, cameras CSV), [`exr_io`].
-//! - The soft rasterizer: [`camera`] (look-at, projection, pixel centres) → [`lighting`] →
-//!   [`raster`]: the settings; the f64 CPU twins of the forward ([`raster::reference`], the
-//!   oracle of the GPU kernels) and of the backward ([`raster::reference_grad`], checked by
-//!   finite differences); the GPU face setup, the tiled and brute-force fine passes and the
-//!   backward, driven by [`raster::gpu::Renderer`], with what a forward leaves for its backward
-//!   as types ([`raster::binned`]: an exact run, guarded bins), the f32 bit twins of the fine
-//!   pass and the backward ([`raster::bits`]); and PyTorch3D's rasterizer
-//!   ([`raster::fragments`]: the K nearest faces of every pixel, forward and backward, with its
-//!   f64 twin).
+//! - softvk-gpu: [`error`] (the one error enum), [`atomic_file`], [`gpu`] (the Vulkan compute
+//!   core: contexts owned or adopted with [`gpu::Context::from_raw`], buffers, kernels,
+//!   recording into a caller's command buffer), [`fmath`] (correctly rounded maths, the same
+//!   bits on every device) and [`primitives`] (scan, sort, sums, tiled binning);
+//! - softvk-raster: [`mesh`], [`camera`], [`lighting`] and [`raster`] (the soft rasterizer,
+//!   PyTorch3D's fragments, the hard rasterizer, with their twins).
+//!
+//! An engine that only renders depends on softvk-raster alone. The modules of this crate, bottom
+//! up (none imports from one below it in this list):
+//!
+//! - Inputs: [`assets`] (the meshes found through `SOFTVK_ASSETS` or the checkout), [`io`]
+//!   (silhouettes, cameras CSV), [`exr_io`].
 //! - [`fit`]: the fitting building blocks as kernels — silhouette losses, Laplacian and flatten
 //!   regularizers, deformation, Adam, blur — the loop driver that every fit runs on
 //!   ([`fit::driver`]) and the session around it ([`fit::session`]: log, hooks, checkpoints,
@@ -47,26 +41,26 @@
 
 #![warn(missing_docs)]
 
+pub use softvk_gpu::{Error, LimitKind, Result, atomic_file, error, fmath, gpu, primitives};
+pub use softvk_raster::{camera, lighting, mesh, raster};
+
 pub mod assets;
-pub mod atomic_file;
 #[cfg(feature = "bench")]
 pub mod bench;
-pub mod camera;
-pub mod error;
 pub mod exr_io;
 pub mod field;
 pub mod fit;
-pub mod fmath;
-pub mod gpu;
 pub mod io;
-pub mod lighting;
-pub mod mesh;
 pub mod nn;
-pub mod primitives;
 pub mod probe;
-pub mod raster;
 pub mod recon;
 mod rng;
-mod text;
 
-pub use error::{Error, LimitKind, Result};
+/// This crate's kernels (`kernels/softvk/`: fits, fields and probing, networks,
+/// reconstruction), as `softvk-build` compiled them. The crates below list theirs in
+/// [`gpu::specs`] and [`raster::specs`].
+#[allow(missing_docs)]
+pub mod specs {
+    use softvk_gpu::gpu::{BindingKind, BindingSpec, BufferRange, KernelSpec};
+    include!(concat!(env!("OUT_DIR"), "/kernels.rs"));
+}

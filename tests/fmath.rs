@@ -1,4 +1,4 @@
-//! softvk's own maths (`kernels/include/fmath.glsl`) against its CPU twin (`softvk::fmath`), bit
+//! softvk's own maths (`kernels/gpu/include/fmath.glsl`) against its CPU twin (`softvk::fmath`), bit
 //! for bit, and the twin against f64.
 //!
 //! The device check covers, for every function, 2^24 inputs: every sign and exponent (all 512

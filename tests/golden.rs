@@ -6,7 +6,7 @@
 //! CI runs this under llvmpipe with 4-, 8- and 16-lane subgroups and with GPU workgroup shapes:
 //! the same bytes in all four, since no sum's order depends on the lanes or the workgroups. It
 //! checks every other driver too: no kernel leaves a float result to the driver (softvk's own
-//! `exp`, `log`, division, square root, `sin` and `cos`, `kernels/include/fmath.glsl`; no fused
+//! `exp`, `log`, division, square root, `sin` and `cos`, `kernels/gpu/include/fmath.glsl`; no fused
 //! operations; fixed-order dot and matrix products), so any conformant device must write these
 //! bytes. A device that differs has found a case this reasoning missed (`.ci/gpu-check` lists
 //! the files and measures each one's difference from llvmpipe's output, OUT/golden-diff.txt).

@@ -4,7 +4,18 @@ mod common;
 
 use ash::vk;
 use softvk::Error;
-use softvk::gpu::{MemoryKind, Timer, specs};
+use softvk::gpu::{KernelSpec, MemoryKind, Timer, specs};
+use softvk::raster::specs as raster_specs;
+use softvk::specs as top_specs;
+
+/// Every kernel of every crate: softvk-gpu's, softvk-raster's and softvk's own.
+fn all_kernels() -> impl Iterator<Item = &'static KernelSpec> {
+    specs::ALL
+        .iter()
+        .chain(raster_specs::ALL)
+        .chain(top_specs::ALL)
+        .copied()
+}
 use softvk::primitives::{Scan, ScanScratch};
 
 #[test]
@@ -142,11 +153,22 @@ fn absurd_buffers_are_one_clear_error_naming_the_buffer_and_the_size() {
     gpu.check_validation().unwrap();
 }
 
+/// The context's pipeline cache knows a kernel by its name, so no two crates may name two
+/// kernels alike.
+#[test]
+fn kernel_names_are_unique_across_the_crates() {
+    let mut names: Vec<&str> = all_kernels().map(|k| k.name).collect();
+    let count = names.len();
+    names.sort_unstable();
+    names.dedup();
+    assert_eq!(names.len(), count, "two kernels share a name");
+}
+
 #[test]
 fn every_generated_kernel_builds_a_pipeline() {
     let Some(gpu) = common::gpu() else { return };
-    assert!(specs::ALL.len() >= 4);
-    for spec in specs::ALL {
+    assert!(specs::ALL.len() >= 4 && raster_specs::ALL.len() >= 4 && top_specs::ALL.len() >= 4);
+    for spec in all_kernels() {
         assert!(
             !spec.spirv.is_empty() && spec.spirv[0] == 0x0723_0203,
             "{}",
@@ -169,7 +191,7 @@ fn the_contexts_kernels_are_built_once_per_specialization_and_shared() {
     assert_eq!(other.name(), "scan_reduce");
     // Another specialization of one kernel is another pipeline (constants: activation, slope,
     // K, S, P).
-    let conv = &specs::NN_CONV_FORWARD4;
+    let conv = &top_specs::NN_CONV_FORWARD4;
     let slope = 0.2f32.to_bits();
     let k3 = gpu.kernel(conv, &[0, slope, 3, 1, 1]).unwrap();
     let k3_again = gpu.kernel(conv, &[0, slope, 3, 1, 1]).unwrap();
@@ -221,7 +243,7 @@ fn texel_bindings_are_reflected_and_checked() {
     let kinds = |spec: &softvk::gpu::KernelSpec| -> Vec<(&str, BindingKind)> {
         spec.bindings.iter().map(|b| (b.name, b.kind)).collect()
     };
-    let grad = kinds(&specs::GRAD_TILED);
+    let grad = kinds(&raster_specs::GRAD_TILED);
     for name in ["Setups", "Colors", "Image", "Aux"] {
         assert!(
             grad.contains(&(name, BindingKind::Texels)),
@@ -235,7 +257,7 @@ fn texel_bindings_are_reflected_and_checked() {
             "{name}: {grad:?}"
         );
     }
-    let tiled = kinds(&specs::RASTER_TILED);
+    let tiled = kinds(&raster_specs::RASTER_TILED);
     assert!(
         tiled.contains(&("Setups", BindingKind::Texels)),
         "{tiled:?}"
@@ -245,21 +267,21 @@ fn texel_bindings_are_reflected_and_checked() {
         "{tiled:?}"
     );
     assert!(
-        specs::RASTER_BRUTE
+        raster_specs::RASTER_BRUTE
             .bindings
             .iter()
             .all(|b| b.kind == BindingKind::Storage)
     );
 
     let Some(gpu) = common::gpu() else { return };
-    let kernel = gpu.kernel(&specs::RASTER_TILED, &[]).unwrap();
+    let kernel = gpu.kernel(&raster_specs::RASTER_TILED, &[]).unwrap();
     let buffer = gpu
         .create_buffer("texels", 4096, MemoryKind::Device)
         .unwrap();
-    const PUSH_WORDS: usize = specs::RASTER_TILED.push_constant_size as usize / 4;
+    const PUSH_WORDS: usize = raster_specs::RASTER_TILED.push_constant_size as usize / 4;
     let push = [0u32; PUSH_WORDS];
     let dispatch = |setups: softvk::gpu::BufferRange<'_>| {
-        let b = specs::RasterTiledBindings {
+        let b = raster_specs::RasterTiledBindings {
             setups,
             colors: buffer.range(0, 256),
             faces: buffer.whole(),
@@ -392,7 +414,7 @@ fn gated_dispatches_run_with_their_grids_and_not_with_zero_grids() {
 /// kernel's pipeline is an error.
 #[test]
 fn bindings_are_declared_by_the_kernels_and_bound_by_name() {
-    for spec in specs::ALL {
+    for spec in all_kernels() {
         let mut names: Vec<&str> = spec.bindings.iter().map(|b| b.name).collect();
         assert!(
             names.iter().all(|n| !n.is_empty()),
@@ -415,7 +437,7 @@ fn bindings_are_declared_by_the_kernels_and_bound_by_name() {
             spec.name
         );
     }
-    let access: Vec<(&str, bool)> = specs::GRAD_TILED
+    let access: Vec<(&str, bool)> = raster_specs::GRAD_TILED
         .bindings
         .iter()
         .map(|b| (b.name, b.writable))
@@ -423,7 +445,7 @@ fn bindings_are_declared_by_the_kernels_and_bound_by_name() {
     assert!(access.contains(&("Partials", true)) && access.contains(&("Setups", false)));
 
     let Some(gpu) = common::gpu() else { return };
-    let buffers: Vec<_> = specs::GRAD_TILED
+    let buffers: Vec<_> = raster_specs::GRAD_TILED
         .bindings
         .iter()
         .map(|b| gpu.upload_buffer(b.name, &[0u32; 4]).unwrap())
@@ -435,7 +457,7 @@ fn bindings_are_declared_by_the_kernels_and_bound_by_name() {
             .expect("a buffer per block")
             .whole()
     };
-    let bindings = specs::GradTiledBindings {
+    let bindings = raster_specs::GradTiledBindings {
         // Written out of binding order on purpose: names, not positions, decide.
         ranges: by_name("Ranges"),
         partials: by_name("Partials"),
@@ -449,14 +471,18 @@ fn bindings_are_declared_by_the_kernels_and_bound_by_name() {
         pair_items: by_name("PairItems"),
     };
     let order: Vec<&str> = bindings.ranges().iter().map(|r| r.buffer.name()).collect();
-    let want: Vec<&str> = specs::GRAD_TILED.bindings.iter().map(|b| b.name).collect();
+    let want: Vec<&str> = raster_specs::GRAD_TILED
+        .bindings
+        .iter()
+        .map(|b| b.name)
+        .collect();
     assert_eq!(order, want);
 
     // A kernel given another kernel's buffers is caught before anything is recorded (the
     // library's dispatches all go through `for_kernel`).
     let sum = gpu.kernel(&specs::FIT_SUM, &[]).unwrap();
     let x = by_name("Partials");
-    let mse = specs::MseViewsBindings {
+    let mse = top_specs::MseViewsBindings {
         images: x,
         targets: x,
         partials: x,

@@ -528,7 +528,7 @@ mod tests {
         }
         // The subdivided sphere is as watertight as the asset.
         let dense = Scene::load("dense-1024", &assets).unwrap().mesh;
-        assert!(crate::mesh::tests::is_closed_and_consistent(&dense));
+        assert!(dense.is_closed_and_consistent());
         assert!(Scene::load("nope", &assets).is_err());
     }
 }

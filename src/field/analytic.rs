@@ -8,7 +8,8 @@ use bytemuck::{Pod, Zeroable};
 use super::shape::Shape;
 use super::{FIELD_CHUNK, SumChunks};
 use crate::error::Result;
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder};
+use crate::specs;
 
 /// Points per backward batch.
 pub(crate) const SHAPE_BATCH: u32 = 1 << 16;

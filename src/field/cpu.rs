@@ -1,5 +1,5 @@
 //! The f64 twin of the field kernels: [`eval`] (φ), [`logit`] (f) and [`backward`]
-//! (dL/dparams from dL/dφ), loop for loop as `kernels/include/field_{grid,mlp,shape}.glsl`
+//! (dL/dparams from dL/dφ), loop for loop as `kernels/softvk/include/field_{grid,mlp,shape}.glsl`
 //! compute them, in f64. Gradients are checked against central finite differences of
 //! [`eval`] in the tests.
 

@@ -20,8 +20,9 @@ use bytemuck::{Pod, Zeroable};
 
 use super::{Cube, check_binding_bytes};
 use crate::error::Result;
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder};
 use crate::primitives::{RadixSort, SortScratch};
+use crate::specs;
 
 /// Sorted points per chunk of `field_grid_chunks` (`GRID_CHUNK` in the kernels).
 pub(crate) const GRID_CHUNK: u32 = 256;

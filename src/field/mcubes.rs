@@ -34,9 +34,10 @@ use bytemuck::{Pod, Zeroable};
 
 use super::{Cube, EVAL_BATCH, Field, check_binding_bytes, groups};
 use crate::error::{Error, Result};
-use crate::gpu::{Buffer, Context, Kernel, MemoryKind, specs};
+use crate::gpu::{Buffer, Context, Kernel, MemoryKind};
 use crate::mesh::Mesh;
 use crate::primitives::{Scan, ScanScratch};
+use crate::specs;
 
 /// The case table: for each of the 256 cases (bit k set when corner `k = x + 2y + 4z` of the
 /// cell is inside) its triangles as triples of local edges. Local edge `e` runs along axis

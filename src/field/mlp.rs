@@ -31,8 +31,9 @@ use bytemuck::{Pod, Zeroable};
 
 use super::{Cube, FIELD_CHUNK, SumChunks, check_binding_bytes};
 use crate::error::{Error, LimitKind, Result};
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder};
 use crate::rng::SplitMix64;
+use crate::specs;
 
 /// β of the hidden layers' softplus.
 pub const SOFTPLUS_BETA: f64 = 100.0;

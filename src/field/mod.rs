@@ -63,7 +63,8 @@ pub use mlp::MlpLayout;
 pub use shape::Shape;
 
 use crate::error::{Error, Result};
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder};
+use crate::specs;
 
 /// Points per eval dispatch (16 MiB of points per binding).
 pub const EVAL_BATCH: u32 = 1 << 20;

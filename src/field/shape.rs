@@ -10,7 +10,7 @@
 //! | box    | `cx cy cz hx hy hz` (half extents) | `d = |p − c| − h`: `|max(d, 0)| + min(max_i d_i, 0)` |
 //! | torus  | `cx cy cz R r` (axis y)            | `|(|(p − c).xz| − R, (p − c).y)| − r`              |
 //!
-//! Twin of `kernels/include/field_shape.glsl`, in f64; [`Shape::sd_and_grad`] also gives ∂sd/∂θ.
+//! Twin of `kernels/softvk/include/field_shape.glsl`, in f64; [`Shape::sd_and_grad`] also gives ∂sd/∂θ.
 
 /// An analytic shape and its initial parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -15,8 +15,9 @@ use std::sync::Arc;
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, Recorder};
 use crate::gpu::{check_binding, check_floats, groups};
+use crate::specs;
 
 /// Adam's hyper-parameters; the default is PyTorch's.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -42,9 +42,10 @@ use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::gate::IterationGate;
 use crate::gpu::groups;
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder};
 use crate::lighting::Lighting;
 use crate::raster::settings::RasterSettings;
+use crate::specs;
 
 /// Everything settable about an articulated fit.
 #[derive(Clone, Debug, PartialEq)]
@@ -225,7 +226,7 @@ impl ArticulatedFitOptions {
     }
 }
 
-/// Push constants of `kernels/skin/*.comp` (`skin.glsl`'s `Push`).
+/// Push constants of `kernels/softvk/skin/*.comp` (`skin.glsl`'s `Push`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 struct SkinPush {

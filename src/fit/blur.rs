@@ -14,8 +14,9 @@ use bytemuck::{Pod, Zeroable};
 
 use super::ImageMse;
 use crate::error::{Error, Result};
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder};
 use crate::gpu::{GradOut, check_floats, groups};
+use crate::specs;
 
 /// The widest blur, in pixels (its taps reach 3 std).
 pub const MAX_BLUR_STD: f64 = 32.0;

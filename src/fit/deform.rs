@@ -24,9 +24,10 @@ use std::sync::Arc;
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder};
 use crate::gpu::{check_binding, check_floats, groups};
 use crate::primitives::sum::{Sum, SumPush};
+use crate::specs;
 
 /// Push constants of `deform_forward.comp` and `deform_backward.comp`.
 #[repr(C)]

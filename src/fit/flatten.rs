@@ -283,8 +283,8 @@ mod tests {
 
     use super::*;
     use crate::fit::test_support::{assert_grad_matches_fd, jittered_icosphere};
-    use crate::gpu::specs;
     use crate::mesh::Mesh;
+    use crate::specs;
 
     /// SoftRas's edge set: the sorted (0,1) and (1,2) corner pairs of every face.
     fn softras_edge_pairs(faces: &[[u32; 3]]) -> BTreeSet<(u32, u32)> {

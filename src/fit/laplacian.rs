@@ -137,7 +137,7 @@ pub mod cpu {
 mod tests {
     use super::*;
     use crate::fit::test_support::{assert_grad_matches_fd, jittered_icosphere};
-    use crate::gpu::specs;
+    use crate::specs;
 
     #[test]
     fn push_constant_structs_match_the_kernels_layout() {

@@ -6,9 +6,10 @@ use std::sync::Arc;
 use super::flatten::{EdgesPush, FlattenEdges};
 use super::laplacian::{Adjacency, ApplyPush, WeightedPush};
 use crate::error::{Error, Result};
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder};
 use crate::gpu::{GradOut, check_binding, check_floats, groups};
 use crate::primitives::sum::{Sum, SumPush};
+use crate::specs;
 
 /// The regularizers' last values, as read back.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -1,6 +1,6 @@
 //! Skinned articulated meshes (non-rigid pose): hinge joints in a tree, forward
 //! kinematics to one rigid transform per bone, and linear blend skinning (LBS), in f64 on the
-//! host. These are the twins of the GPU kernels `kernels/skin/*.comp` that
+//! host. These are the twins of the GPU kernels `kernels/softvk/skin/*.comp` that
 //! [`articulated`](super::articulated) fits with.
 //!
 //! # The model

@@ -15,9 +15,10 @@ use std::sync::Arc;
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder};
 use crate::gpu::{GradOut, check_binding, check_floats, groups};
 use crate::primitives::sum::{Sum, SumPush};
+use crate::specs;
 
 /// SoftRas's union epsilon.
 pub const IOU_EPS: f64 = 1e-6;
@@ -416,10 +417,14 @@ mod tests {
         );
         assert_eq!(
             std::mem::size_of::<SumPush>() as u32,
-            specs::FIT_SUM.push_constant_size
+            crate::gpu::specs::FIT_SUM.push_constant_size
         );
         // The shared-memory tree assumes 256 invocations.
-        for spec in [&specs::IOU_VIEWS, &specs::MSE_VIEWS, &specs::FIT_SUM] {
+        for spec in [
+            &specs::IOU_VIEWS,
+            &specs::MSE_VIEWS,
+            &crate::gpu::specs::FIT_SUM,
+        ] {
             assert_eq!(spec.workgroup_size, [256, 1, 1], "{}", spec.name);
         }
         assert_eq!(specs::IOU_VIEWS.bindings.len(), 3);

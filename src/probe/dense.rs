@@ -25,8 +25,9 @@ use super::sampler::Ray;
 use super::targets::{GpuTargets, Targets};
 use crate::error::{Error, LimitKind, Result};
 use crate::field::Cube;
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder};
 use crate::gpu::{check_binding, groups};
+use crate::specs;
 
 /// Push constants of `probe_dense_points.comp`.
 #[repr(C)]

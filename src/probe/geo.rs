@@ -24,9 +24,10 @@ use bytemuck::{Pod, Zeroable};
 
 use super::ProbeSettings;
 use crate::error::Result;
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder};
 use crate::gpu::{GradOut, check_binding, check_floats, groups};
 use crate::primitives::sum::{Sum, SumPush};
+use crate::specs;
 
 /// Points evaluated per surface candidate: 7 centres × (the centre + 6 stencil points).
 pub const POINTS_PER_CANDIDATE: u32 = 49;

@@ -1,4 +1,4 @@
-//! The sampler's counter-based random numbers, twins of `kernels/include/probe.glsl`: every
+//! The sampler's counter-based random numbers, twins of `kernels/softvk/include/probe.glsl`: every
 //! random word is a hash of (seed, iteration, stream, sample index, draw), so any sample of any
 //! iteration can be recomputed on its own, on the GPU or here, with the same bits.
 

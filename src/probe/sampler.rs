@@ -32,11 +32,12 @@ use super::rng::{STREAM_RAYS, stream_key};
 use super::targets::{GpuTargets, Targets};
 use super::{ProbeSettings, hull};
 use crate::error::{Error, Result};
-use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, Context, Kernel, MemoryKind, Recorder};
 use crate::gpu::{check_binding, groups};
 use crate::primitives::{Scan, ScanScratch};
+use crate::specs;
 
-/// One probing ray. Twin of `Ray` in `kernels/include/probe.glsl`; 16 bytes.
+/// One probing ray. Twin of `Ray` in `kernels/softvk/include/probe.glsl`; 16 bytes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct Ray {

@@ -13,7 +13,7 @@ use crate::error::{Error, Result};
 use crate::gpu::{Buffer, Context};
 use crate::io::Silhouettes;
 
-/// One view as the probing kernels read it. Twin of `ProbeView` in `kernels/include/probe.glsl`;
+/// One view as the probing kernels read it. Twin of `ProbeView` in `kernels/softvk/include/probe.glsl`;
 /// std430, 160 bytes, every member a `vec4`.
 ///
 /// Screen position of a world point p: `(a0·(p, 1) / a2·(p, 1), a1·(p, 1) / a2·(p, 1))`, which is

@@ -15,7 +15,8 @@ use std::sync::Arc;
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
-use crate::gpu::{BufferRange, Context, Kernel, Recorder, check_binding, specs};
+use crate::gpu::{BufferRange, Context, Kernel, Recorder, check_binding};
+use crate::specs;
 
 /// Push constants of `recon_batch.comp`.
 #[repr(C)]

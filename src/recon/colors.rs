@@ -14,7 +14,7 @@
 //! Every colour is a convex combination of the image's own (pooled) colours, so the colours
 //! cannot drift out of what the input shows, and what is learned is *where* to look and which
 //! sample each vertex takes; the network need not encode colour values in its weights.
-//! Kernels (`kernels/recon/`): `recon_pool.comp` (the pooled cells), `recon_palette.comp`,
+//! Kernels (`kernels/softvk/recon/`): `recon_pool.comp` (the pooled cells), `recon_palette.comp`,
 //! `recon_colors.comp` (written to every copy of the object in the renderer's vertex-colour
 //! layout), and the backward `recon_colors_backward.comp` (dL/dw) and
 //! `recon_palette_backward.comp` (dL/dC through the selections, then dL/ds). The input image
@@ -26,7 +26,8 @@ use std::sync::Arc;
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, LimitKind, Result};
-use crate::gpu::{BufferRange, Context, Kernel, Recorder, specs};
+use crate::gpu::{BufferRange, Context, Kernel, Recorder};
+use crate::specs;
 
 /// Colours in each object's palette (P).
 pub const PALETTE: u32 = 8;
@@ -41,7 +42,7 @@ pub fn outputs_per_object(vertices: u32, image: u32) -> u64 {
     u64::from(PALETTE) * (grid * grid + u64::from(vertices))
 }
 
-/// Push constants of the five kernels (`kernels/include/recon_colors.glsl`).
+/// Push constants of the five kernels (`kernels/softvk/include/recon_colors.glsl`).
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct ColorPush {

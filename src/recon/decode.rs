@@ -4,7 +4,7 @@
 //!
 //! With the template t (SoftRas's `sphere_642.obj` scaled by `obj_scale` = 0.5, so every
 //! coordinate is in (−1, 1) and nonzero), per object the network outputs
-//! `r = [r_d (3 V), r_c (3)]` and (`kernels/recon/recon_decode.comp`):
+//! `r = [r_d (3 V), r_c (3)]` and (`kernels/softvk/recon/recon_decode.comp`):
 //!
 //! ```text
 //! base = log(|t| / (1 − |t|));   c = tanh(0.1 · r_c)
@@ -37,7 +37,8 @@ use bytemuck::{Pod, Zeroable};
 use super::colors::{ColorGenerator, HeadLayout};
 use crate::error::{Error, LimitKind, Result};
 use crate::fit::deform::cpu::template_terms;
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder};
+use crate::specs;
 
 /// Push constants of the three decode kernels.
 #[repr(C)]

@@ -18,9 +18,10 @@ use crate::fit::driver::Fitter;
 use crate::gpu::GradOut;
 use crate::gpu::gate::IterationGate;
 use crate::gpu::groups;
-use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder, specs};
+use crate::gpu::{Buffer, BufferRange, Context, Kernel, MemoryKind, Recorder};
 use crate::lighting::Lighting;
 use crate::mesh::Mesh;
+use crate::specs;
 
 /// Push constants of `pose_apply.comp` and `pose_grad.comp`.
 #[repr(C)]

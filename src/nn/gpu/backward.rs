@@ -3,8 +3,9 @@
 
 use super::{ActPush, ConvBlocks, LinearBlocks, Sequential, SumPush, texel_input};
 use crate::error::Result;
-use crate::gpu::{BufferRange, Recorder, groups, specs};
+use crate::gpu::{BufferRange, Recorder, groups};
 use crate::nn::Layer;
+use crate::specs;
 
 /// The caller's ranges of one backward.
 #[derive(Clone, Copy)]

@@ -3,8 +3,9 @@
 
 use super::{Sequential, packed_texels};
 use crate::error::{Error, LimitKind, Result};
-use crate::gpu::{Context, KernelVariants, MemoryKind, check_binding, check_texels, specs};
+use crate::gpu::{Context, KernelVariants, MemoryKind, check_binding, check_texels};
 use crate::nn::{Activation, Layer, param_offsets, validate_chain};
+use crate::specs;
 
 impl Sequential {
     /// The network of `layers` for batches of at most `capacity` samples: its pipelines (one

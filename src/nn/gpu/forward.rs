@@ -3,8 +3,9 @@
 
 use super::{ConvBlocks, LinearBlocks, Sequential, texel_input};
 use crate::error::Result;
-use crate::gpu::{BufferRange, Recorder, groups, specs};
+use crate::gpu::{BufferRange, Recorder, groups};
 use crate::nn::Layer;
+use crate::specs;
 
 impl Sequential {
     /// Records the forward of `batch` samples of `input` (`batch × input_len` floats) with

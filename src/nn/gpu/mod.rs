@@ -1,4 +1,4 @@
-//! The layers' kernels (`kernels/nn/`) and [`Sequential`], which records a network's forward and
+//! The layers' kernels (`kernels/softvk/nn/`) and [`Sequential`], which records a network's forward and
 //! backward.
 
 mod backward;
@@ -12,7 +12,8 @@ use bytemuck::{Pod, Zeroable};
 use super::{Conv2d, Layer};
 use crate::error::{Error, Result};
 use crate::gpu::groups;
-use crate::gpu::{Buffer, BufferRange, Kernel, Recorder, TEXEL_BYTES, specs};
+use crate::gpu::{Buffer, BufferRange, Kernel, Recorder, TEXEL_BYTES};
+use crate::specs;
 
 /// Push constants of the conv kernels (`NN_CONV_PUSH` in `nn.glsl`).
 #[repr(C)]

@@ -8,9 +8,10 @@ use bytemuck::{Pod, Zeroable};
 
 use super::{Prober, lanes};
 use crate::error::Result;
-use crate::gpu::{BufferRange, Context, GradOut, Recorder, check_floats, groups, specs};
+use crate::gpu::{BufferRange, Context, GradOut, Recorder, check_floats, groups};
 use crate::probe::Aggregate;
 use crate::probe::targets::GpuTargets;
+use crate::specs;
 
 /// Push constants of `probe_aux_keys.comp`.
 #[repr(C)]

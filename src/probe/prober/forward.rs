@@ -9,11 +9,10 @@ use bytemuck::{Pod, Zeroable};
 
 use super::{Prober, lanes};
 use crate::error::Result;
-use crate::gpu::{
-    BufferRange, Context, Kernel, KernelVariants, Recorder, groups, pass_size, specs,
-};
+use crate::gpu::{BufferRange, Context, Kernel, KernelVariants, Recorder, groups, pass_size};
 use crate::primitives::sum::SumPush;
 use crate::probe::targets::GpuTargets;
+use crate::specs;
 
 /// Push constants of `probe_forward.comp` and `probe_forward_brute.comp`.
 #[repr(C)]

@@ -11,10 +11,10 @@ use crate::error::{Error, LimitKind, Result};
 use crate::gpu::gate::IterationGate;
 use crate::gpu::{
     BufferRange, Context, MemoryKind, Recorder, check_binding, check_texels, groups, pass_size,
-    specs,
 };
 use crate::primitives::binning;
 use crate::probe::targets::GpuTargets;
+use crate::specs;
 
 /// Push constants of `probe_items.comp`.
 #[repr(C)]
@@ -116,7 +116,7 @@ impl Prober {
         let counts = self.offsets.range(0, 4 * tiles);
         rec.dispatch(
             &self.mask_counts_kernel,
-            &specs::BinMaskCountsBindings {
+            &crate::gpu::specs::BinMaskCountsBindings {
                 masks: self.masks.whole(),
                 counts,
             }
@@ -333,7 +333,7 @@ mod tests {
         assert_eq!(std::mem::size_of::<ItemsPush>(), size(&specs::PROBE_ITEMS));
         assert_eq!(
             std::mem::size_of::<WordsPush>(),
-            size(&specs::BIN_MASK_COUNTS)
+            size(&crate::gpu::specs::BIN_MASK_COUNTS)
         );
         assert_eq!(
             std::mem::size_of::<ListPush>(),

@@ -63,12 +63,13 @@ use super::targets::GpuTargets;
 use crate::error::{Error, LimitKind, Result};
 use crate::gpu::{
     Buffer, BufferRange, Context, GradOut, Kernel, KernelVariants, MemoryKind, check_binding,
-    check_floats, check_texels, specs,
+    check_floats, check_texels,
 };
 use crate::primitives::binning::{BinJob, Binner, ItemLayout, TileGrid};
 use crate::primitives::scan::{Scan, ScanScratch};
 use crate::primitives::sum::Sum;
 use crate::primitives::{RadixSort, SortScratch};
+use crate::specs;
 
 #[cfg(doc)]
 use crate::gpu::gate::IterationGate;
@@ -81,7 +82,7 @@ pub const FLAG_INSIDE: u32 = 2;
 pub const NO_HIT: u32 = u32::MAX;
 
 /// One anchor in one view, as the binning reads it. Twin of `ProbeItem` in
-/// `kernels/include/probe.glsl`; 32 bytes.
+/// `kernels/softvk/include/probe.glsl`; 32 bytes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct ProbeItem {
@@ -98,7 +99,7 @@ pub struct ProbeItem {
     pub depth: f32,
 }
 
-/// What the forward leaves per ray. Twin of `RayOut` in `kernels/include/probe.glsl`; 16 bytes.
+/// What the forward leaves per ray. Twin of `RayOut` in `kernels/softvk/include/probe.glsl`; 16 bytes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct RayOut {
@@ -317,7 +318,7 @@ impl Prober {
             keys_kernel: ctx.kernel(&specs::PROBE_RAY_KEYS, &[])?,
             backward_kernel: KernelVariants::new(&specs::PROBE_BACKWARD),
             reduce_kernel: ctx.kernel(&specs::PROBE_REDUCE, &[])?,
-            mask_counts_kernel: ctx.kernel(&specs::BIN_MASK_COUNTS, &[])?,
+            mask_counts_kernel: ctx.kernel(&crate::gpu::specs::BIN_MASK_COUNTS, &[])?,
             mask_list_kernel: KernelVariants::new(&specs::PROBE_MASK_LIST),
             aux_keys_kernel: ctx.kernel(&specs::PROBE_AUX_KEYS, &[])?,
             max_grad_kernel: ctx.kernel(&specs::PROBE_MAX_GRAD, &[])?,

@@ -1,0 +1,121 @@
+#version 460
+#extension GL_GOOGLE_include_directive : require
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_ballot : require
+#extension GL_KHR_shader_subgroup_shuffle : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
+// Tiled soft rasterization (in passes over consecutive parts of a crowded tile's run where the
+// driver's loop cap asks: `CARRY` in raster_fine.glsl): one workgroup per 8×8 block of pixels (a block is the unit a tile
+// size must be a multiple of; 64 invocations, one per pixel, or fewer, each shading a pixel of
+// several of the block's segments in turn: `tiled_forward_workgroup` in src/raster/fine.rs says
+// when and why), visiting only the faces binned to the block's tile (`kernels/gpu/binning/`), in
+// index order. Binning keeps every face that can touch a pixel of the tile (a superset is
+// harmless: the step ignores a face beyond its cut-off exactly as brute force does), so the
+// pixels are bit for bit those of `raster_brute.comp`, which calls the same `shade_face` for
+// every face. Twin: `reference::shade_pixel`.
+//
+// Each subgroup works alone, with no shared memory and no barrier: per batch of as many binned
+// faces as it has lanes, each lane loads one face; a ballot keeps the faces whose box touches
+// the box of the subgroup's pixel centres (a face whose box holds none of them changes none of
+// them, the same argument that lets binning drop it from the tile), and the loop over the
+// ballot's bits, lowest first (index order), broadcasts each kept face with shuffles and folds it
+// into every lane's pixel. The loop ends when the mask is empty, which on llvmpipe is the only
+// construct that skips work (an `if` only narrows the lane mask).
+// The per-lane inputs as texel buffers: branch-free gathers on llvmpipe (raster_fine.glsl).
+#define TEXEL_INPUTS
+#define CARRY_BINDING 8
+#include "common.glsl"
+#include "raster_fine.glsl"
+#include "subgroup_face.glsl"
+
+// The workgroup size is the host's (constant 5): 64, or as few whole subgroups as the loop cap
+// allows on a CPU device.
+layout(local_size_x = 64, local_size_x_id = 5) in;
+
+// Bin entries sorted by tile: each holds its item-major slot.
+layout(std430, set = 0, binding = 5) readonly buffer Pairs { uint pairs[]; };
+// The face of every item-major slot.
+layout(std430, set = 0, binding = 6) readonly buffer PairItems { uint pair_items[]; };
+// [start, end) of every tile's run of sorted entries, view-major within this dispatch.
+layout(std430, set = 0, binding = 7) readonly buffer Ranges { uvec2 ranges[]; };
+
+void main() {
+    // The pixel rows of the grid's window of tile rows (all of them unless a view was binned
+    // window by window); tiles are multiples of 8 pixels, so blocks never straddle two tiles.
+    uint row0 = pc.first_row * pc.tile_size;
+    uint rows = min(pc.height - row0, pc.tiles_y * pc.tile_size);
+    uint blocks_x = (pc.width + 7u) / 8u;
+    uint blocks_y = (rows + 7u) / 8u;
+    uint blocks_per_view = blocks_x * blocks_y;
+    uint block = linear_group_id();
+    uint view = block / blocks_per_view;
+    if (view >= pc.view_count) {
+        return; // surplus workgroup of a folded grid: uniform across the workgroup
+    }
+    uint in_view = block - view * blocks_per_view;
+    uint by = in_view / blocks_x;
+    uint bx = in_view - by * blocks_x;
+    uint blocks_per_tile = pc.tile_size / 8u;
+    uint tile = view * pc.tiles_x * pc.tiles_y + (by / blocks_per_tile) * pc.tiles_x
+              + bx / blocks_per_tile;
+    uvec2 range = ranges[tile];
+    // This pass's part of the tile's run (all of it without CARRY). A tile whose run ended in
+    // an earlier pass is done: uniform across the workgroup.
+    uint run = range.y - range.x;
+    if (CARRY != 0u && pc.pass_begin > 0u && pc.pass_begin >= run) {
+        return;
+    }
+    uint begin = CARRY != 0u ? pc.pass_begin : 0u;
+    uint end = CARRY != 0u ? min(pc.pass_end, run) : run;
+    uint setup_base = (pc.first_view + view) * pc.face_count;
+    uint lanes = subgroup_lanes();
+    uint lane = gl_SubgroupInvocationID;
+
+    // Pixel b of the block, for b = this invocation's index, then one workgroup further, and so
+    // on: `segment_pixel(b, 8, lanes)`. Where the driver gives subgroups consecutive invocations
+    // (any does for a workgroup that is a whole number of subgroups), each subgroup covers one
+    // `segment_shape` block per round. Any other assignment is still one pixel per invocation
+    // and round, only less well pruned.
+    for (uint b = gl_LocalInvocationIndex; b < 64u; b += gl_WorkGroupSize.x) {
+        uvec2 at = segment_pixel(b, 8u, lanes);
+        uint col = bx * 8u + at.x;
+        uint row = row0 + by * 8u + at.y;
+        bool valid = col < pc.width && row < pc.height;
+        vec2 p = pixel_center(col, row, pc.width, pc.height);
+        // The box of this subgroup's pixel centres inside the image: a lane past the image's
+        // edge writes nothing, so its centre need not be in the box (a face that misses the
+        // box changes no pixel that is written, the same bits).
+        float inf = uintBitsToFloat(0x7f800000u);
+        vec2 lo = lane_min(valid ? p : vec2(inf));
+        vec2 hi = lane_max(valid ? p : vec2(-inf));
+
+        uint pixel = (pc.first_view + view) * pc.width * pc.height + row * pc.width + col;
+        PixelState s = begin > 0u && valid ? carry_load(pixel) : pixel_init();
+        for (uint start = range.x + begin; start < range.x + end; start += lanes) {
+            uint k = start + lane;
+            Face f = face_none();
+            uint face = 0u;
+            if (k < range.x + end && lane < lanes) {
+                face = pair_items[pairs[k]];
+                f = load_face(setup_base + face);
+            }
+            bool touches = (f.flags & FACE_FINITE) != 0u
+                        && !(hi.x < f.bbox.x || hi.y < f.bbox.y || lo.x > f.bbox.z
+                             || lo.y > f.bbox.w);
+            uvec4 kept = subgroupBallot(touches);
+            for (uint word = 0u; word < ballot_words(); ++word) {
+                uint mask = kept[word];
+                while (mask != 0u) {
+                    uint i = 32u * word + uint(findLSB(mask));
+                    mask &= mask - 1u;
+                    shade_face(s, face_shuffle(f, i), subgroupShuffle(face, i), p);
+                }
+            }
+        }
+        if (valid && end < run) {
+            carry_store(s, pixel);
+        } else if (valid) {
+            pixel_finish(s, pixel);
+        }
+    }
+}
