@@ -3,19 +3,12 @@
 mod common;
 
 use ash::vk;
+use common::all_kernels;
 use softvk::Error;
-use softvk::gpu::{KernelSpec, MemoryKind, Timer, specs};
+use softvk::gpu::{MemoryKind, Timer, specs};
 use softvk::raster::specs as raster_specs;
 use softvk::specs as top_specs;
 
-/// Every kernel of every crate: softvk-gpu's, softvk-raster's and softvk's own.
-fn all_kernels() -> impl Iterator<Item = &'static KernelSpec> {
-    specs::ALL
-        .iter()
-        .chain(raster_specs::ALL)
-        .chain(top_specs::ALL)
-        .copied()
-}
 use softvk::primitives::{Scan, ScanScratch};
 
 #[test]

@@ -2,16 +2,9 @@
 //! (no device needed): no float operation a driver may fuse, and no float result whose precision
 //! or order Vulkan leaves to the driver.
 
-use softvk::gpu::{KernelSpec, specs};
+mod common;
 
-/// Every kernel of every crate: softvk-gpu's, softvk-raster's and softvk's own.
-fn all_kernels() -> impl Iterator<Item = &'static KernelSpec> {
-    specs::ALL
-        .iter()
-        .chain(softvk::raster::specs::ALL)
-        .chain(softvk::specs::ALL)
-        .copied()
-}
+use common::all_kernels;
 
 /// Every float operation of every kernel is decorated `NoContraction` (softvk-build): no driver
 /// may fuse `a * b + c` into one rounding, so each is the IEEE operation everywhere.

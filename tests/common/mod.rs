@@ -7,7 +7,7 @@ pub mod recon;
 
 use std::ops::Deref;
 
-use softvk::gpu::{Context, ContextOptions};
+use softvk::gpu::{Context, ContextOptions, KernelSpec};
 
 /// A context for one test. Validation is on unless `SOFTVK_VALIDATION=0`; dropping it fails the
 /// test if the validation layer said anything the test did not consume.
@@ -217,4 +217,13 @@ pub fn disc_camera_rows() -> Vec<softvk::io::CameraRow> {
             azimuth: 120.0 * f64::from(i),
         })
         .collect()
+}
+
+/// Every kernel of every crate: softvk-gpu's, softvk-raster's and softvk's own.
+pub fn all_kernels() -> impl Iterator<Item = &'static KernelSpec> {
+    softvk::gpu::specs::ALL
+        .iter()
+        .chain(softvk::raster::specs::ALL)
+        .chain(softvk::specs::ALL)
+        .copied()
 }

@@ -2,9 +2,10 @@
 //!
 //! The modules, bottom up (none imports from one below it in this list):
 //!
-//! - [`text`] (user text in one-line messages), [`error`] (the one error enum of every softvk
-//!   crate, with the errors of the layers above it: a crate below cannot wrap a type of a crate
-//!   above) and [`atomic_file`] (files written whole or not at all).
+//! - `text` (user text in one-line messages, public as [`error::one_line`]), [`error`] (the one
+//!   error enum of every softvk crate, with the errors of the layers above it: a crate below
+//!   cannot wrap a type of a crate above) and [`atomic_file`] (files written whole or not at
+//!   all).
 //! - [`gpu`]: a [`gpu::Context`] (owned headless, or adopted from a host engine with
 //!   [`gpu::Context::from_raw`]), buffers, kernels compiled at build time and the pipeline cache,
 //!   and a [`gpu::Recorder`] that records dispatches into a command buffer the caller owns, with
@@ -31,6 +32,6 @@ pub mod error;
 pub mod fmath;
 pub mod gpu;
 pub mod primitives;
-pub mod text;
+mod text;
 
 pub use error::{Error, LimitKind, Result};

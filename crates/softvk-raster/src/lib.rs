@@ -20,7 +20,7 @@
 #![warn(missing_docs)]
 
 // softvk-gpu's modules, by the paths the code of this crate names them with (`crate::gpu::…`).
-use softvk_gpu::{error, fmath, gpu, primitives, text};
+use softvk_gpu::{error, fmath, gpu, primitives};
 
 pub mod camera;
 pub mod lighting;

@@ -6,7 +6,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use super::MeshError;
-use crate::text::one_line;
+use crate::error::one_line;
 
 /// What the MTL loader saw, kept beside tobj (which merges materials and drops their origin).
 #[derive(Default)]

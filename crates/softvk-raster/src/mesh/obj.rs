@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 use super::mtl::MtlLog;
 use super::texture::{TextureImage, resolve_texture, texture_file_name, wrap_uv};
 use super::{Location, Mesh, MeshError, check_finite, check_texture_res, shown};
-use crate::text::one_line;
+use crate::error::one_line;
 
 /// [`Mesh::load_obj`], with each warning (a missing MTL or texture file) given to `warn` as one
 /// line instead of printed.

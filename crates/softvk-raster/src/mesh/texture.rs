@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use super::{MAX_TEXTURE_PIXELS, MeshError};
-use crate::text::one_line;
+use crate::error::one_line;
 
 /// Barycentric coordinates (w0, w1, w2) of the centre of texel `(w_x, w_y)` of an R×R face
 /// texture, as SoftRas's `load_textures` kernel places them.
