@@ -44,7 +44,7 @@ use softvk::field::voxel::{self, Occupancy};
 use softvk::field::{Cube, Field, FieldKind};
 use softvk::fit::AdamOptions;
 use softvk::fit::field_fit::{
-    FieldFitLog, FieldFitOptions, FieldFitter, auto_cube, fit_field, scaled_to_cube,
+    FieldFit, FieldFitLog, FieldFitOptions, auto_cube, fit_field, scaled_to_cube,
 };
 use softvk::fit::session::Session;
 use softvk::gpu::{Context, ContextOptions};
@@ -366,7 +366,7 @@ fn staged_fit(
         o.probe.tau = tau.parse().expect("stages: a number for τ");
         o.probe = scaled_to_cube(&o.probe, &p.cube);
         let n: u32 = n.parse().expect("stages: a number of iterations");
-        let mut f = FieldFitter::new(ctx, targets, &o).unwrap();
+        let mut f = FieldFit::fitter(ctx, targets, &o).unwrap();
         if let Some(before) = &field {
             f.field()
                 .set_params(ctx, &before.read_params(ctx).unwrap())
@@ -379,7 +379,7 @@ fn staged_fit(
             first = f.run(first, last, None).unwrap().unwrap_or(last + 1);
         }
         done += n;
-        field = Some(f.into_field());
+        field = Some(f.into_fit().into_field());
     }
     (field.expect("stages: at least one"), done)
 }

@@ -1,7 +1,7 @@
 //! softvk: differentiable rendering as Vulkan compute kernels.
 //!
-//! This crate is the top of softvk's workspace: the command line and `softvk bench`, and the
-//! layers that fit and learn through the rasterizers. It re-exports the crates below it, so one
+//! This crate is the top of softvk's workspace: the command line and `softvk bench`, and
+//! single-view reconstruction (networks, datasets, trainers) on the fits below it. It re-exports the crates below it, so one
 //! dependency gives everything under the paths the project itself uses:
 //!
 //! - softvk-gpu: [`error`] (the one error enum), [`atomic_file`], [`gpu`] (the Vulkan compute
@@ -9,24 +9,18 @@
 //!   recording into a caller's command buffer), [`fmath`] (correctly rounded maths, the same
 //!   bits on every device) and [`primitives`] (scan, sort, sums, tiled binning);
 //! - softvk-raster: [`mesh`], [`camera`], [`lighting`] and [`raster`] (the soft rasterizer,
-//!   PyTorch3D's fragments, the hard rasterizer, with their twins).
+//!   PyTorch3D's fragments, the hard rasterizer, with their twins);
+//! - softvk-fit: [`io`] (silhouettes, cameras CSV, OBJ out), [`rng`] and [`fit`] (the losses,
+//!   regularizers, deformation and Adam as kernels, the driver and session every fit runs on,
+//!   the mesh, rigid-pose and articulated fits, their checkpoints and reports);
+//! - softvk-field: [`field`] (implicit fields, marching cubes, voxel tools, preview) and
+//!   [`probe`] (sphere probing), and the field fit, which [`fit`] holds here as
+//!   [`fit::field_fit`] beside the other fits.
 //!
 //! An engine that only renders depends on softvk-raster alone. The modules of this crate, bottom
 //! up (none imports from one below it in this list):
 //!
-//! - Inputs: [`assets`] (the meshes found through `SOFTVK_ASSETS` or the checkout), [`io`]
-//!   (silhouettes, cameras CSV), [`exr_io`].
-//! - [`fit`]: the fitting building blocks as kernels — silhouette losses, Laplacian and flatten
-//!   regularizers, deformation, Adam, blur — the loop driver that every fit runs on
-//!   ([`fit::driver`]) and the session around it ([`fit::session`]: log, hooks, checkpoints,
-//!   resume, stopping rule), the fits (mesh, field, rigid pose, articulated pose), their
-//!   checkpoint format and reports.
-//! - [`probe`]: implicit-field sphere probing — sampling (rays, anchors, surface candidates),
-//!   probing anchors binned to screen tiles, the silhouette loss and the geometric regularizer,
-//!   with their gradients with respect to φ.
-//! - [`field`]: implicit fields φ = sigmoid(f) in a bounding cube (dense grid, MLP with positional
-//!   encoding, analytic shapes) with a deterministic GPU backward, marching cubes, occupancy /
-//!   visual hull / IoU tools and a ray-marched preview.
+//! - [`assets`] (the meshes found through `SOFTVK_ASSETS` or the checkout), [`exr_io`].
 //! - [`nn`]: neural-network layers (Conv2d, Linear, fused activations) as kernels with a
 //!   deterministic backward and f64 twins, chained by [`nn::Sequential`].
 //! - [`recon`]: single-view reconstruction learned from silhouettes (SoftRas's unsupervised 3D
@@ -41,24 +35,29 @@
 
 #![warn(missing_docs)]
 
+pub use softvk_field::{field, probe};
+pub use softvk_fit::{io, rng};
 pub use softvk_gpu::{Error, LimitKind, Result, atomic_file, error, fmath, gpu, primitives};
 pub use softvk_raster::{camera, lighting, mesh, raster};
+
+/// Fitting: softvk-fit's [`fit`](softvk_fit::fit) (losses, regularizers, Adam, the driver and
+/// session, the mesh and pose fits), with softvk-field's field fit beside them as
+/// [`field_fit`](softvk_field::field_fit).
+pub mod fit {
+    pub use softvk_field::field_fit;
+    pub use softvk_fit::fit::*;
+}
 
 pub mod assets;
 #[cfg(feature = "bench")]
 pub mod bench;
 pub mod exr_io;
-pub mod field;
-pub mod fit;
-pub mod io;
 pub mod nn;
-pub mod probe;
 pub mod recon;
-mod rng;
 
-/// This crate's kernels (`kernels/softvk/`: fits, fields and probing, networks,
-/// reconstruction), as `softvk-build` compiled them. The crates below list theirs in
-/// [`gpu::specs`] and [`raster::specs`].
+/// This crate's kernels (`kernels/softvk/`: networks and reconstruction), as `softvk-build`
+/// compiled them. The crates below list theirs in [`gpu::specs`], [`raster::specs`],
+/// [`softvk_fit::specs`] and [`softvk_field::specs`].
 #[allow(missing_docs)]
 pub mod specs {
     use softvk_gpu::gpu::{BindingKind, BindingSpec, BufferRange, KernelSpec};

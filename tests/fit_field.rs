@@ -14,26 +14,14 @@ use softvk::field::{Cube, FieldKind, cpu as field_cpu, voxel};
 use softvk::fit::AdamOptions;
 use softvk::fit::adam::cpu as adam_cpu;
 use softvk::fit::field_fit::{
-    FieldFitOptions, FieldFitter, auto_cube, check_cameras_outside, fit_field,
+    FieldFit, FieldFitOptions, FieldFitter, auto_cube, check_cameras_outside, fit_field,
 };
 use softvk::fit::session::Session;
 use softvk::probe::prober::cpu as probe_cpu;
 use softvk::probe::sampler::{Ray, cpu as sampler_cpu};
 use softvk::probe::targets::sphere_silhouettes;
 use softvk::probe::{Aggregate, ProbeSettings, Targets, geo};
-
-/// A tiny deterministic generator.
-struct Lcg(u64);
-
-impl Lcg {
-    fn unit(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
+use softvk_testing::Lcg;
 
 /// 2 views of 24² of a sphere of radius 0.5.
 fn tiny_targets() -> Targets {
@@ -104,7 +92,7 @@ fn one_gpu_iteration_equals_the_iteration_of_the_cpu_twins() {
         let s = &opts.probe;
         let kind = opts.field;
         let cube = opts.cube();
-        let mut fitter = FieldFitter::new(&ctx, &targets, &opts).unwrap();
+        let mut fitter = FieldFit::fitter(&ctx, &targets, &opts).unwrap();
         // Random logits: a field with structure and without ties between anchors.
         let mut rng = Lcg(11);
         let p0: Vec<f32> = (0..kind.param_count())
@@ -315,13 +303,13 @@ fn a_field_fit_that_outgrows_its_entry_capacity_equals_one_that_never_did() {
         let p = f.field().read_params(&ctx).unwrap();
         p.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
     };
-    let mut ample = FieldFitter::new(&ctx, &targets, &opts).unwrap();
+    let mut ample = FieldFit::fitter(&ctx, &targets, &opts).unwrap();
     assert_eq!(ample.run(1, 3, None).unwrap(), None);
     assert_eq!(ample.regrowths(), 0);
     let entries = ample.last_entries();
     assert!(entries > 1);
 
-    let mut tight = FieldFitter::new(&ctx, &targets, &opts).unwrap();
+    let mut tight = FieldFit::fitter(&ctx, &targets, &opts).unwrap();
     tight.reserve(&ctx, 1).unwrap();
     assert_eq!(tight.capacity(), 1);
     // Iteration 1 does not fit: it and the later ones change nothing, and the capacity grows.
@@ -373,7 +361,7 @@ fn a_short_fit_of_a_sphere_raises_its_3d_iou() {
         (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() < 0.5
     });
     let before = {
-        let f = FieldFitter::new(&ctx, &targets, &opts).unwrap();
+        let f = FieldFit::fitter(&ctx, &targets, &opts).unwrap();
         voxel::iou(
             &voxel::field_occupancy(&ctx, f.field(), &cube, 24).unwrap(),
             &sphere,
@@ -416,7 +404,7 @@ fn cameras_inside_the_cube_and_bad_options_are_input_errors() {
     let mut opts = tiny_options(Aggregate::Max, 0.1);
     opts.probe.cube_half = 3.0;
     assert!(matches!(
-        FieldFitter::new(&ctx, &targets, &opts),
+        FieldFit::fitter(&ctx, &targets, &opts),
         Err(Error::Input(_))
     ));
     let opts = FieldFitOptions {

@@ -12,8 +12,8 @@ use softvk::fit::AdamOptions;
 use softvk::recon::Reconstructor;
 use softvk::recon::dataset::{occupancy_to_nmr, voxel_cube};
 use softvk::recon::field::{
-    FieldNet, FieldReconTrainer, FieldReconstructor, FieldTrainOptions, MAX_BATCH, default_probe,
-    field_cube,
+    FieldNet, FieldReconTrainer, FieldReconTraining, FieldReconstructor, FieldTrainOptions,
+    MAX_BATCH, default_probe, field_cube,
 };
 use softvk::recon::model::ReconModel;
 use softvk::recon::train::{LrStep, NetShape, TrainImages, VIEWS};
@@ -74,7 +74,7 @@ fn an_iterations_gradient_through_the_codes_matches_central_differences() {
         lr_step: Some(LrStep { at: 1, factor: 0.0 }),
         ..options()
     };
-    let mut trainer = FieldReconTrainer::new(&gpu, &data, &opts, None).unwrap();
+    let mut trainer = FieldReconTraining::fitter(&gpu, &data, &opts, None).unwrap();
     let params = trainer.trained().read_params(&gpu).unwrap();
     let l0 = loss_at(&mut trainer, &params);
     assert!(
@@ -142,7 +142,7 @@ fn train_run(
     iterations: u32,
     k: u32,
 ) -> (Vec<u32>, Vec<f32>) {
-    let mut trainer = FieldReconTrainer::new(gpu, data, &options(), None).unwrap();
+    let mut trainer = FieldReconTraining::fitter(gpu, data, &options(), None).unwrap();
     let mut losses = Vec::new();
     let mut it = 1;
     while it <= iterations {
@@ -189,7 +189,7 @@ fn reconstruction_is_the_twins_field_and_the_model_round_trips() {
     let Some(gpu) = common::gpu() else { return };
     let data = data(&gpu);
     let opts = options();
-    let mut trainer = FieldReconTrainer::new(&gpu, &data, &opts, None).unwrap();
+    let mut trainer = FieldReconTraining::fitter(&gpu, &data, &opts, None).unwrap();
     assert_eq!(trainer.run(1, 30, None).unwrap(), None);
     let model = ReconModel {
         net: opts.net.net,
@@ -285,7 +285,7 @@ fn the_largest_batch_runs_and_one_more_is_an_input_error() {
         batch: MAX_BATCH,
         ..options()
     };
-    let mut trainer = FieldReconTrainer::new(&gpu, &data, &opts, None).unwrap();
+    let mut trainer = FieldReconTraining::fitter(&gpu, &data, &opts, None).unwrap();
     assert_eq!(trainer.run(1, 1, None).unwrap(), None);
     for bad in [
         FieldTrainOptions {
@@ -312,7 +312,7 @@ fn the_largest_batch_runs_and_one_more_is_an_input_error() {
         },
     ] {
         assert!(matches!(
-            FieldReconTrainer::new(&gpu, &data, &bad, None),
+            FieldReconTraining::fitter(&gpu, &data, &bad, None),
             Err(softvk::Error::Input(_))
         ));
     }

@@ -13,8 +13,8 @@ use softvk::raster::reference;
 use softvk::raster::reference_grad;
 use softvk::recon::batch::{self, BatchShape};
 use softvk::recon::train::{
-    self, LrStep, NetShape, Recipe, ReconTrainer, TrainImages, TrainOptions, VIEWS, schedule_entry,
-    view_azimuth,
+    self, LrStep, NetShape, Recipe, ReconTraining, TrainImages, TrainOptions, VIEWS,
+    schedule_entry, view_azimuth,
 };
 use softvk::recon::view_camera;
 use softvk::recon::view_rotation;
@@ -69,7 +69,7 @@ fn one_training_iteration_equals_the_chain_of_twins_one_view_recipe() {
 fn one_iteration_against_twins(opts: TrainOptions) {
     let Some(gpu) = common::gpu() else { return };
     let data = data(&gpu);
-    let mut trainer = ReconTrainer::new(&gpu, &data, &opts, None).unwrap();
+    let mut trainer = ReconTraining::fitter(&gpu, &data, &opts, None).unwrap();
     let params: Vec<f64> = trainer
         .trained()
         .read_params(&gpu)
@@ -260,7 +260,7 @@ fn train_run(
     iterations: u32,
     k: u32,
 ) -> (Vec<u32>, Vec<f32>) {
-    let mut trainer = ReconTrainer::new(gpu, data, opts, None).unwrap();
+    let mut trainer = ReconTraining::fitter(gpu, data, opts, None).unwrap();
     let mut losses = Vec::new();
     let mut it = 1;
     while it <= iterations {
@@ -308,7 +308,7 @@ fn the_learning_rate_step_applies_from_its_iteration_on() {
     let Some(gpu) = common::gpu() else { return };
     let data = data(&gpu);
     let params = |opts: &TrainOptions, iterations: u32| {
-        let mut trainer = ReconTrainer::new(&gpu, &data, opts, None).unwrap();
+        let mut trainer = ReconTraining::fitter(&gpu, &data, opts, None).unwrap();
         assert_eq!(trainer.run(1, iterations, None).unwrap(), None);
         trainer.trained().read_params(&gpu).unwrap()
     };
@@ -320,7 +320,7 @@ fn the_learning_rate_step_applies_from_its_iteration_on() {
         ..options()
     };
     assert!(matches!(
-        ReconTrainer::new(
+        ReconTraining::fitter(
             &gpu,
             &data,
             &TrainOptions {
@@ -341,7 +341,7 @@ fn the_learning_rate_step_applies_from_its_iteration_on() {
     assert!(params(&frozen, 4) == two, "iterations after the step moved");
     assert!(params(&one_view, 4) != two, "without the step they move");
     assert!(matches!(
-        ReconTrainer::new(
+        ReconTraining::fitter(
             &gpu,
             &data,
             &TrainOptions {
@@ -399,7 +399,7 @@ fn a_dataset_larger_than_a_storage_buffer_trains() {
             classes: classes.clone(),
             size: SIZE,
         };
-        let mut trainer = ReconTrainer::new(&gpu, &data, &options(), None).unwrap();
+        let mut trainer = ReconTraining::fitter(&gpu, &data, &options(), None).unwrap();
         assert_eq!(trainer.run(1, 3, None).unwrap(), None);
         let total = trainer.read_log(3).unwrap().total;
         assert!(total.is_finite());

@@ -33,7 +33,7 @@ pub(super) fn run_field_fit(
     assets: &Path,
     progress: &mut impl FnMut(&str),
 ) -> Result<BenchRecord> {
-    use crate::fit::field_fit::{FieldFitOptions, FieldFitter, auto_cube, scaled_to_cube};
+    use crate::fit::field_fit::{FieldFit, FieldFitOptions, auto_cube, scaled_to_cube};
     use crate::probe::Targets;
     let name = "fit-field";
     let size = 64;
@@ -62,7 +62,7 @@ pub(super) fn run_field_fit(
         probe: scaled_to_cube(&defaults.probe, &cube),
         ..defaults
     };
-    let mut fitter = FieldFitter::new(ctx, &targets, &fit_opts)?;
+    let mut fitter = FieldFit::fitter(ctx, &targets, &fit_opts)?;
     let s = fit_opts.probe;
     progress(&format!(
         "{name}: spot silhouettes, {} views of {size}x{size}, field {:?}, {} rays per view, {} \

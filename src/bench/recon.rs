@@ -8,8 +8,8 @@ use crate::error::Result;
 use crate::gpu::Context;
 use crate::raster::gpu::{Method, Renderer};
 use crate::recon::dataset::{DatasetOptions, Split, render_shapes, split_shapes};
-use crate::recon::field::{FieldReconTrainer, FieldTrainOptions};
-use crate::recon::train::{ReconTrainer, TrainImages, TrainOptions, template};
+use crate::recon::field::{FieldReconTraining, FieldTrainOptions};
+use crate::recon::train::{ReconTraining, TrainImages, TrainOptions, template};
 
 /// Objects per class of the benchmark's data: the iteration's cost does not depend on how many
 /// objects there are to draw from, only on the batch.
@@ -32,7 +32,7 @@ pub(super) fn run_recon_train(
     let name = "train-recon";
     let train_opts = TrainOptions::default();
     let data = bench_data(ctx, train_opts.net.image)?;
-    let mut trainer = ReconTrainer::new(ctx, &data, &train_opts, None)?;
+    let mut trainer = ReconTraining::fitter(ctx, &data, &train_opts, None)?;
     let inputs = train_opts.inputs();
     progress(&format!(
         "{name}: {:?} recipe, batch {} ({inputs} input images, {} renders of {} faces at \
@@ -107,7 +107,7 @@ pub(super) fn run_field_recon_train(
     let name = "train-recon-field";
     let train_opts = FieldTrainOptions::default();
     let data = bench_data(ctx, train_opts.net.net.image)?;
-    let mut trainer = FieldReconTrainer::new(ctx, &data, &train_opts, None)?;
+    let mut trainer = FieldReconTraining::fitter(ctx, &data, &train_opts, None)?;
     let probe = train_opts.probe;
     progress(&format!(
         "{name}: batch {} objects, {} rays per view and {} anchors each, network {:?}; entry \

@@ -461,7 +461,7 @@ pub mod cpu {
 mod tests {
     use super::cpu::{Shape, backward, forward};
     use super::*;
-    use crate::fit::test_support::{Lcg, assert_grad_matches_fd};
+    use softvk_testing::{Lcg, assert_grad_matches_fd};
 
     fn shape(vertices: usize, image: usize, offset: u32) -> Shape {
         let cells = (image / POOL as usize).pow(2);

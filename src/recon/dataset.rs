@@ -225,12 +225,12 @@ pub fn object_seed(seed: u64, category: Category, split: Split, index: usize) ->
         Split::Test => 3,
     };
     let mut s = SplitMix64(seed);
-    let a = s.next();
+    let a = s.next_u64();
     let mut s = SplitMix64(a ^ class.wrapping_mul(0xd6e8_feb8_6659_fd93));
-    let b = s.next();
+    let b = s.next_u64();
     let mut s = SplitMix64(b ^ split_tag.wrapping_mul(0xa076_1d64_78bd_642f));
-    let c = s.next();
-    SplitMix64(c ^ (index as u64).wrapping_mul(0xe703_7ed1_a0b4_28db)).next()
+    let c = s.next_u64();
+    SplitMix64(c ^ (index as u64).wrapping_mul(0xe703_7ed1_a0b4_28db)).next_u64()
 }
 
 /// The objects of a category and split, as [`write_dataset`] draws them.

@@ -450,7 +450,7 @@ mod tests {
 
     #[test]
     fn decode_twin_gradient_matches_central_differences() {
-        use crate::fit::test_support::{Lcg, assert_grad_matches_fd, jittered_icosphere};
+        use softvk_testing::{Lcg, assert_grad_matches_fd, jittered_icosphere};
         let (x, _) = jittered_icosphere(0, 0.05, 3);
         let template: Vec<[f32; 3]> = x
             .chunks(3)

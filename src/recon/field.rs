@@ -238,17 +238,18 @@ pub type FieldReconTrainer<'c> = Fitter<'c, FieldReconTraining<'c>>;
 
 const HINT: &str = "use fewer anchors, larger tiles or a smaller τ";
 
-impl<'c> Fitter<'c, FieldReconTraining<'c>> {
+impl<'c> FieldReconTraining<'c> {
     /// Uploads the training images, prepares every object's probing (its visual hull's
     /// boundary and contour densities, on the host), builds the network with `params`
     /// (packed, [`FieldNet::param_count`]) or the seeded init, and sizes the probers' entries
-    /// from iteration 1's counts.
-    pub fn new(
+    /// from iteration 1's counts; on the driver (built by its own type, as
+    /// [`ReconTraining::fitter`](crate::recon::train::ReconTraining::fitter) says why).
+    pub fn fitter(
         ctx: &'c Context,
         data: &'c TrainImages,
         opts: &FieldTrainOptions,
         params: Option<&[f32]>,
-    ) -> Result<Self> {
+    ) -> Result<FieldReconTrainer<'c>> {
         data.validate()?;
         opts.validate()?;
         if data.size != opts.net.net.image {

@@ -219,11 +219,14 @@ pub fn disc_camera_rows() -> Vec<softvk::io::CameraRow> {
         .collect()
 }
 
-/// Every kernel of every crate: softvk-gpu's, softvk-raster's and softvk's own.
+/// Every kernel of every crate: softvk-gpu's, softvk-raster's, softvk-fit's, softvk-field's and
+/// softvk's own.
 pub fn all_kernels() -> impl Iterator<Item = &'static KernelSpec> {
     softvk::gpu::specs::ALL
         .iter()
         .chain(softvk::raster::specs::ALL)
+        .chain(softvk_fit::specs::ALL)
+        .chain(softvk_field::specs::ALL)
         .chain(softvk::specs::ALL)
         .copied()
 }

@@ -1,4 +1,4 @@
-// The fixed-order workgroup reduction of the fit kernels (`kernels/softvk/fit/`). Each invocation of a
+// The fixed-order workgroup reduction of the fit kernels (`kernels/fit/fit/`). Each invocation of a
 // 256-wide workgroup hands in its own partial (a sequential sum over a fixed stride); the tree
 // then adds element t + s into t for s = 128, 64, ..., 1. The order depends only on the
 // workgroup size, never on timing: repeated runs are bit-identical. No float atomics.

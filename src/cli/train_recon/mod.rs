@@ -13,12 +13,12 @@ use softvk::fit::report::Series;
 use softvk::fit::session::{Progress, Session, Trainee};
 use softvk::gpu::{Context, ContextOptions};
 use softvk::recon::dataset::{Dataset, Split};
-use softvk::recon::field::{FieldReconTrainer, FieldReconTraining};
+use softvk::recon::field::FieldReconTraining;
 use softvk::recon::model::ReconModel;
 use softvk::recon::model::SETTINGS;
 use softvk::recon::reconstruct::{spread_views, validation_iou};
 use softvk::recon::session::{self, TrainRow};
-use softvk::recon::train::{NetShape, ReconTrainer, ReconTraining, TrainImages, TrainedParams};
+use softvk::recon::train::{NetShape, ReconTraining, TrainImages, TrainedParams};
 use softvk::{Error, Result};
 
 use crate::cli::interrupt;
@@ -86,11 +86,14 @@ pub fn train(args: &TrainReconArgs) -> Result<()> {
     };
     if args.field {
         let session = shape.session(args, &dir)?;
-        let trainer = FieldReconTrainer::new(&ctx, &images, &field_opts, None)?;
+        let trainer = FieldReconTraining::fitter(&ctx, &images, &field_opts, None)?;
         run.go(trainer, session)
     } else {
         let session = shape.session(args, &dir)?;
-        run.go(ReconTrainer::new(&ctx, &images, &mesh_opts, None)?, session)
+        run.go(
+            ReconTraining::fitter(&ctx, &images, &mesh_opts, None)?,
+            session,
+        )
     }
 }
 

@@ -57,7 +57,7 @@ pub fn paired_bootstrap(
     let observed = diffs.iter().map(|d| mean(d)).sum::<f64>() / diffs.len() as f64;
     let mut rng = crate::rng::SplitMix64(seed);
     let mut stats: Vec<f64> = (0..resamples)
-        .map(|_| statistic(&diffs, &mut |n| (rng.next() % n as u64) as usize))
+        .map(|_| statistic(&diffs, &mut |n| (rng.next_u64() % n as u64) as usize))
         .collect();
     stats.sort_by(f64::total_cmp);
     Ok(Interval {

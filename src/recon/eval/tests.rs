@@ -197,7 +197,7 @@ fn pairing_cancels_what_both_columns_share() {
     let mut rng = crate::rng::SplitMix64(BOOTSTRAP_SEED);
     let mut draw = |v: &[f64]| {
         (0..v.len())
-            .map(|_| v[(rng.next() % v.len() as u64) as usize])
+            .map(|_| v[(rng.next_u64() % v.len() as u64) as usize])
             .sum::<f64>()
             / v.len() as f64
     };

@@ -13,7 +13,7 @@ use crate::rng::SplitMix64;
 /// SplitMix64's output for one counter value: the schedule is a stateless function of the
 /// seed and the position, so a resumed run needs no generator state.
 fn mix(z: u64) -> u64 {
-    SplitMix64(z).next()
+    SplitMix64(z).next_u64()
 }
 
 /// Uniform in `0..n` from a 64-bit word (Lemire's multiply-shift; the bias is below 2^-32).

@@ -75,16 +75,17 @@ pub struct ReconTraining<'c> {
 /// The reconstruction network's training, ready to run iterations ([`Fitter::run`]).
 pub type ReconTrainer<'c> = Fitter<'c, ReconTraining<'c>>;
 
-impl<'c> Fitter<'c, ReconTraining<'c>> {
+impl<'c> ReconTraining<'c> {
     /// Borrows the training images (each submission stages the views its batches name), builds
     /// the network with `params` (or an initialization from the seed), zeroes Adam's moments,
-    /// and sizes the binning on the template.
-    pub fn new(
+    /// and sizes the binning on the template; on the driver. (A fit of another crate than the
+    /// driver's is built by its own type: an inherent `impl` on [`Fitter`] is softvk-fit's.)
+    pub fn fitter(
         ctx: &'c Context,
         data: &'c TrainImages,
         opts: &TrainOptions,
         params: Option<&[f32]>,
-    ) -> Result<Self> {
+    ) -> Result<ReconTrainer<'c>> {
         data.validate()?;
         if data.size != opts.net.image {
             return Err(Error::Input(format!(
