@@ -1,10 +1,81 @@
 //! What softvk's crates share in their tests, and only there (a dev-dependency, never
-//! published): a tiny deterministic generator, jittered meshes, the central-difference gradient
-//! check of the f64 twins, temporary folders, and where the test meshes are.
+//! published): the validated GPU context of every GPU test, a tiny deterministic generator,
+//! jittered meshes, the central-difference gradient check of the f64 twins, temporary folders,
+//! and where the test meshes are.
 
+use std::ops::Deref;
 use std::path::{Path, PathBuf};
 
+use softvk_gpu::gpu::{Context, ContextOptions};
+
 use softvk_raster::mesh::Mesh;
+
+/// A context for one test. Validation is on unless `SOFTVK_VALIDATION=0`; dropping it fails the
+/// test if the validation layer said anything the test did not consume.
+pub struct Gpu(Option<Context>);
+
+impl Deref for Gpu {
+    type Target = Context;
+    fn deref(&self) -> &Context {
+        self.0.as_ref().expect("context lives until drop")
+    }
+}
+
+impl Drop for Gpu {
+    fn drop(&mut self) {
+        let ctx = self.0.take().expect("dropped once");
+        let messages = ctx.take_validation_messages();
+        drop(ctx); // destruction itself is validated too
+        if !std::thread::panicking() {
+            assert!(
+                messages.is_empty(),
+                "validation layer reported {} message(s):\n{}",
+                messages.len(),
+                messages.join("\n")
+            );
+        }
+    }
+}
+
+/// True when the environment says explicitly that there is no Vulkan device.
+pub fn no_gpu() -> bool {
+    std::env::var("SOFTVK_NO_GPU").is_ok_and(|v| v == "1")
+}
+
+/// The validated context, or `None` (after saying so) when `SOFTVK_NO_GPU=1`. Panics when no
+/// device can be created otherwise: a missing device fails GPU tests, it never skips them.
+pub fn gpu() -> Option<Gpu> {
+    gpu_with(|_| {})
+}
+
+/// As [`gpu`], with descriptor sets (`true`) or push descriptors where the device has them
+/// (`false`) whatever `SOFTVK_DESCRIPTORS` says.
+pub fn gpu_descriptors(sets: bool) -> Option<Gpu> {
+    gpu_with(|o| o.descriptor_sets = sets)
+}
+
+/// As [`gpu`], with the options from the environment changed by `tweak`.
+pub fn gpu_with(tweak: impl FnOnce(&mut ContextOptions)) -> Option<Gpu> {
+    if no_gpu() {
+        eprintln!("SOFTVK_NO_GPU=1: skipping a GPU test");
+        return None;
+    }
+    let mut options = ContextOptions::from_env();
+    options.validation = validation_wanted();
+    tweak(&mut options);
+    let ctx = Context::new(&options).unwrap_or_else(|e| {
+        panic!(
+            "cannot create a Vulkan context ({e}); set SOFTVK_NO_GPU=1 to skip GPU tests explicitly"
+        )
+    });
+    assert_eq!(ctx.validation_enabled(), options.validation);
+    Some(Gpu(Some(ctx)))
+}
+
+/// Tests validate unless `SOFTVK_VALIDATION=0` says otherwise.
+pub fn validation_wanted() -> bool {
+    std::env::var("SOFTVK_VALIDATION").map_or(true, |v| v.trim() != "0")
+}
 
 /// A tiny deterministic generator (tests must not depend on a crate's stream).
 pub struct Lcg(pub u64);

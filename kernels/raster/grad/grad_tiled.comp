@@ -54,6 +54,16 @@ uint tile_size() {
     return TILE_SIZE != 0u ? TILE_SIZE : pc.tile_size;
 }
 
+// Constant 7, set only by softvk-raster's own tests (`test-knobs`: `GradKernels::counting_loops`):
+// in place of each entry's partial the kernel writes what it counted, (the iterations its
+// invocation had run by then of the loops whose trip counts depend on the input, the segments
+// where the entry's face was kept, 0, 0) at the partial's first vec4, which the host's
+// `loops::tiled_backward_iterations` must bound and `Binned::pair_counts` predict. At 0 the
+// counts are dead code and the compiler drops them.
+layout(constant_id = 7) const uint COUNT_LOOPS = 0u;
+uint counted_iterations;
+uint counted_kept;
+
 // This chunk's partials: `grad_stride` floats per entry, as vec4 records (`PARTIAL_COLORS` in
 // raster_grad.glsl). The texel slots arrive zeroed (the host fills them) and are summed into
 // here; with `TEXEL_MASKS` they arrive unwritten, and the mask says which were written.
@@ -73,6 +83,7 @@ uint first_slot_from(uint lo, uint hi, uint s) {
         lo = hi;
     }
     while (lo < hi) {
+        ++counted_iterations;
         uint mid = lo + (hi - lo) / 2u;
         if (pairs[mid] < s) {
             lo = mid + 1u;
@@ -223,6 +234,7 @@ void visit_group(uint group0, uint segments, Face f, uint face, uint o, uvec4 re
     uint count = min(32u, segments - group0);
     uint mine = 0u;
     for (uint s = 0u; s < count; ++s) {
+        ++counted_iterations;
         uvec2 at = morton_pixel((group0 + s) * lanes, tile_size());
         bool in_reach = reach.x <= reach.z && at.x <= reach.z && at.x + shape.x > reach.x
                      && at.y <= reach.w && at.y + shape.y > reach.y;
@@ -230,6 +242,7 @@ void visit_group(uint group0, uint segments, Face f, uint face, uint o, uvec4 re
     }
     uint todo = lane_or(mine);
     while (todo != 0u) {
+        ++counted_iterations;
         uint base = (group0 + uint(findLSB(todo))) * lanes;
         todo &= todo - 1u;
         uint i = base + lane;
@@ -253,10 +266,13 @@ void visit_group(uint group0, uint segments, Face f, uint face, uint o, uvec4 re
                          || lo.y > f.bbox.w);
         uvec4 kept = subgroupBallot(touches);
         for (uint word = 0u; word < ballot_words(); ++word) {
+            ++counted_iterations;
             uint mask = kept[word];
             while (mask != 0u) {
+                ++counted_iterations;
                 uint q = 32u * word + uint(findLSB(mask));
                 mask &= mask - 1u;
+                counted_kept += lane == q ? 1u : 0u;
                 uint fq = subgroupShuffle(face, q);
                 FaceGrad g;
                 bool hit = live && pixel_face_grad(face_shuffle(f, q), fq, u, g);
@@ -339,6 +355,7 @@ void visit_group(uint group0, uint segments, Face f, uint face, uint o, uvec4 re
 }
 
 void main() {
+    counted_iterations = 0u;
     uint tiles_per_view = pc.tiles_x * pc.tiles_y;
     uint group = linear_group_id();
     uint tile = group / pc.parts;
@@ -379,6 +396,8 @@ void main() {
     // The workgroup's faces go to its subgroups `lanes` at a time, round robin.
     for (uint start = first + gl_SubgroupID * lanes; start < last;
          start += gl_NumSubgroups * lanes) {
+        ++counted_iterations;
+        counted_kept = 0u;
         uint k = start + lane;
         bool has = k < last && lane < lanes;
         uint slot = 0u;
@@ -411,11 +430,16 @@ void main() {
                         written);
         } else {
             for (uint group0 = 0u; group0 < segments; group0 += 32u) {
+                ++counted_iterations;
                 visit_group(group0, segments, f, face, o, reach, centres, tx, ty, gview, acc,
                             cacc, written);
             }
         }
-        if (has) {
+        if (COUNT_LOOPS != 0u) {
+            if (has) {
+                partials[o] = vec4(float(counted_iterations), float(counted_kept), 0.0, 0.0);
+            }
+        } else if (has) {
             for (uint c = 0u; c < 3u; ++c) {
                 float w = TEXEL_MASKS && c == TEXEL_MASK_SLOT ? uintBitsToFloat(written) : 0.0;
                 partials[o + c] = vec4(acc[c], w);

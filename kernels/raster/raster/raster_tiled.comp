@@ -32,6 +32,13 @@
 // allows on a CPU device.
 layout(local_size_x = 64, local_size_x_id = 5) in;
 
+// Constant 7, set only by softvk-raster's own tests (`test-knobs`: `Renderer::counting_loops`):
+// in place of each pixel's colour the kernel writes what it counted, (the loop iterations its
+// invocation had run when it wrote the pixel, the faces it shaded for the pixel, 0, 0), which
+// the host's `loops::tiled_forward_iterations` and `Binned::pair_counts` must predict. At 0 the
+// counts are dead code and the compiler drops them.
+layout(constant_id = 7) const uint COUNT_LOOPS = 0u;
+
 // Bin entries sorted by tile: each holds its item-major slot.
 layout(std430, set = 0, binding = 5) readonly buffer Pairs { uint pairs[]; };
 // The face of every item-major slot.
@@ -76,7 +83,10 @@ void main() {
     // (any does for a workgroup that is a whole number of subgroups), each subgroup covers one
     // `segment_shape` block per round. Any other assignment is still one pixel per invocation
     // and round, only less well pruned.
+    uint iterations = 0u;
     for (uint b = gl_LocalInvocationIndex; b < 64u; b += gl_WorkGroupSize.x) {
+        ++iterations;
+        uint shaded = 0u;
         uvec2 at = segment_pixel(b, 8u, lanes);
         uint col = bx * 8u + at.x;
         uint row = row0 + by * 8u + at.y;
@@ -92,6 +102,7 @@ void main() {
         uint pixel = (pc.first_view + view) * pc.width * pc.height + row * pc.width + col;
         PixelState s = begin > 0u && valid ? carry_load(pixel) : pixel_init();
         for (uint start = range.x + begin; start < range.x + end; start += lanes) {
+            ++iterations;
             uint k = start + lane;
             Face f = face_none();
             uint face = 0u;
@@ -104,15 +115,22 @@ void main() {
                              || lo.y > f.bbox.w);
             uvec4 kept = subgroupBallot(touches);
             for (uint word = 0u; word < ballot_words(); ++word) {
+                ++iterations;
                 uint mask = kept[word];
                 while (mask != 0u) {
+                    ++iterations;
+                    ++shaded;
                     uint i = 32u * word + uint(findLSB(mask));
                     mask &= mask - 1u;
                     shade_face(s, face_shuffle(f, i), subgroupShuffle(face, i), p);
                 }
             }
         }
-        if (valid && end < run) {
+        if (COUNT_LOOPS != 0u) {
+            if (valid) {
+                image[pixel] = vec4(float(iterations), float(shaded), 0.0, 0.0);
+            }
+        } else if (valid && end < run) {
             carry_store(s, pixel);
         } else if (valid) {
             pixel_finish(s, pixel);

@@ -202,8 +202,11 @@ impl<'s> Binned<'s> {
                     }
                 }
                 // Backward: per batch of `lanes` faces, per segment of `lanes` pixels of the tile
-                // (`morton_pixel`'s order, those in the image), the batch's faces whose box
-                // touches the segment.
+                // (`morton_pixel`'s order, those in the image) that the kernel visits, the
+                // batch's faces whose box touches the segment. It visits a segment where some
+                // face of the batch holds one of its pixel centres in its box (`reach`: a face
+                // whose box only passes between the centres adds nothing there, so a segment
+                // that only such faces touch is skipped).
                 let tile_pixels: Vec<(u32, u32)> = (0..tile * tile)
                     .map(|i| {
                         let (x, y) = morton_pixel(i, tile);
@@ -217,7 +220,9 @@ impl<'s> Binned<'s> {
                             .copied()
                             .filter(|&(c, r)| c < w && r < h)
                             .collect();
-                        counts.backward += u64::from(lanes) * touching(batch, &inside);
+                        if batch.iter().any(|f| centers.holds_one(f, &inside)) {
+                            counts.backward += u64::from(lanes) * touching(batch, &inside);
+                        }
                     }
                 }
             }
@@ -390,6 +395,16 @@ impl PixelCenters {
         let rows = (self.y.partition_point(|&y| y >= b[1]))
             .saturating_sub(self.y.partition_point(|&y| y > b[3]));
         (cols * rows) as u64
+    }
+
+    /// Whether `face` is finite and holds the centre of one of `pixels` (col, row) in its box.
+    fn holds_one(&self, face: &GpuFaceSetup, pixels: &[(u32, u32)]) -> bool {
+        let b = face.bbox;
+        face.flags & FACE_FINITE != 0
+            && pixels.iter().any(|&(c, r)| {
+                let (x, y) = (self.x[c as usize], self.y[r as usize]);
+                x >= b[0] && x <= b[2] && y >= b[1] && y <= b[3]
+            })
     }
 
     /// The box of the centres of `pixels` (col, row), if any.

@@ -339,6 +339,8 @@ pub use crate::raster::specs::RasterTiledBindings as TiledBindings;
 /// The tiled fine pass's pipelines, one per combination of modes, each built on first use.
 pub struct TiledRaster {
     kernel: KernelVariants,
+    /// The kernel writes its loop and face counts in place of colours (constant 7).
+    count_loops: bool,
 }
 
 impl TiledRaster {
@@ -346,7 +348,18 @@ impl TiledRaster {
     pub fn new(_ctx: &Context) -> Result<Self> {
         Ok(Self {
             kernel: KernelVariants::new(&specs::RASTER_TILED),
+            count_loops: false,
         })
+    }
+
+    /// The pass writes, in place of each pixel's colour, `(the loop iterations its invocation
+    /// had run by then, the faces it shaded for the pixel, 0, 0)`: what the host's loop bound
+    /// (the driver's loop cap) and pair counts must predict. A test knob (the `test-knobs`
+    /// feature).
+    #[cfg(feature = "test-knobs")]
+    pub fn counting_loops(mut self) -> Self {
+        self.count_loops = true;
+        self
     }
 
     /// Records the tiled fine pass over views `first_view .. first_view + view_count`, binned on
@@ -416,6 +429,7 @@ impl TiledRaster {
             .constants(ctx, tiled_forward_workgroup(ctx, per_pass))
             .to_vec();
         constants.push(u32::from(passes > 1));
+        constants.push(u32::from(self.count_loops));
         let kernel = self.kernel.get(ctx, &constants)?;
         push.first_view = first_view;
         push.tile_size = grid.tile_size;

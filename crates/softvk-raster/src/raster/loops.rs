@@ -77,3 +77,205 @@ pub(crate) fn reduce_iterations(units: u64) -> u64 {
 pub(crate) fn texel_reduce_iterations(views: u64, units: u64, texels: u64) -> u64 {
     views * (2 + texels) + (texels + 1) * units + 2
 }
+
+#[cfg(test)]
+mod tests {
+    use super::{tiled_backward_iterations, tiled_forward_iterations};
+    use crate::camera::Camera;
+    use crate::gpu::Context;
+    use crate::lighting::Lighting;
+    use crate::mesh::Mesh;
+    use crate::raster::backward::{GradBuffers, GradKernels};
+    use crate::raster::gpu::Renderer;
+    use crate::raster::method::Method;
+    use crate::raster::settings::RasterSettings;
+
+    /// `faces` triangles far larger than the view, one behind the other: every face touches
+    /// every pixel, so every tile's run is every face and each kernel loop runs its most.
+    fn stacked(faces: u32) -> Mesh {
+        let mut positions = Vec::new();
+        for i in 0..faces {
+            let z = -0.5 + f32::from(u16::try_from(i).unwrap()) / faces as f32;
+            positions.extend([[-8.0, -8.0, z], [8.0, -8.0, z], [0.0, 8.0, z]]);
+        }
+        let tris = (0..faces).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+        Mesh::new(positions, tris, 1).unwrap()
+    }
+
+    /// What the kernel counted for one 8×8 tile, and the tile's run of binned faces.
+    struct Tile {
+        run: u64,
+        /// The most loop iterations an invocation of the tile's had run when it wrote a pixel:
+        /// its total, at its last pixel.
+        iterations: u64,
+        /// Faces shaded, summed over the tile's pixels.
+        shaded: u64,
+    }
+
+    /// Renders `mesh` tiled (tile 8, two views of `size`², no image edge inside a block) with
+    /// the forward counting its loops: what it counted per tile, the workgroup the host chose,
+    /// and the host's count of visited (pixel, face) pairs.
+    fn counted(ctx: &Context, mesh: &Mesh, size: u32) -> (Vec<Tile>, u32, u64) {
+        assert_eq!(size % 8, 0);
+        let settings = RasterSettings {
+            width: size,
+            height: size,
+            ..RasterSettings::default()
+        };
+        // Front and back (faces are double-sided): the stacked faces fill both views.
+        let cameras = [Camera::default(), Camera::from_angles(2.732, 0.0, 180.0)];
+        let renderer = Renderer::new(ctx).unwrap().counting_loops();
+        let mut scene = renderer
+            .prepare(ctx, mesh, &cameras, &Lighting::unlit(), &settings)
+            .unwrap();
+        let run = renderer
+            .run(ctx, &mut scene, Method::Tiled { tile: 8 })
+            .unwrap();
+        let binned = run.binned();
+        let pairs = binned.pair_counts(ctx).unwrap().forward;
+        // One group of both views, the whole image: tile t of view v is range v · per_view + t.
+        let [group] = binned.groups() else {
+            panic!("one view group expected")
+        };
+        assert_eq!((group.first, group.views), (0, 2));
+        let per_row = size / 8;
+        let per_view = (per_row * per_row) as usize;
+        let ranges: Vec<[u32; 2]> = ctx
+            .read_buffer(binned.bins[0].ranges(), 0, 2 * per_view)
+            .unwrap();
+        let mut tiles: Vec<Tile> = ranges
+            .iter()
+            .map(|r| Tile {
+                run: u64::from(r[1] - r[0]),
+                iterations: 0,
+                shaded: 0,
+            })
+            .collect();
+        let pixels = (size * size) as usize;
+        let image: Vec<[f32; 4]> = ctx.read_buffer(&binned.scene.image, 0, 2 * pixels).unwrap();
+        for (i, p) in image.iter().enumerate() {
+            let (view, row, col) = (i / pixels, (i % pixels) as u32 / size, i as u32 % size);
+            let t = &mut tiles[view * per_view + ((row / 8) * per_row + col / 8) as usize];
+            t.iterations = t.iterations.max(p[0] as u64);
+            t.shaded += p[1] as u64;
+        }
+        let workgroup = crate::raster::fine::tiled_forward_workgroup(ctx, group.max_tile_entries);
+        (tiles, workgroup, pairs)
+    }
+
+    /// The tiled forward's loop bound (what the host holds to llvmpipe's cap of 65 535
+    /// iterations an invocation) and its visited-pair count are the kernel's own counts: a
+    /// change to `raster_tiled.comp`'s loops or to `tiled_forward_iterations` /
+    /// `Binned::pair_counts` without the other fails here.
+    #[test]
+    fn the_forward_loop_bound_and_pair_counts_are_what_the_kernel_counts() {
+        let Some(ctx) = softvk_testing::gpu() else {
+            return;
+        };
+        let subgroup = ctx.info().subgroup_size;
+        // Every face touches every pixel: the bound is reached in every tile, but for its
+        // margin of 2.
+        for faces in [1, 7, 40] {
+            let (tiles, workgroup, pairs) = counted(&ctx, &stacked(faces), 16);
+            for t in &tiles {
+                assert_eq!(t.run, u64::from(faces));
+                assert_eq!(
+                    t.iterations + 2,
+                    tiled_forward_iterations(t.run, subgroup, workgroup),
+                    "{faces} faces, workgroup {workgroup}"
+                );
+                assert_eq!(t.shaded, 64 * t.run);
+            }
+            assert_eq!(tiles.iter().map(|t| t.shaded).sum::<u64>(), pairs);
+        }
+        // A real mesh, whose faces touch some subgroups' pixels and not others: the bound
+        // holds, and the host counts the pairs the kernel shaded.
+        let (tiles, workgroup, pairs) = counted(&ctx, &Mesh::icosphere(2), 32);
+        assert!(tiles.iter().any(|t| t.run > 1 && t.shaded < 64 * t.run));
+        for t in &tiles {
+            assert!(t.iterations + 2 <= tiled_forward_iterations(t.run, subgroup, workgroup));
+        }
+        assert_eq!(tiles.iter().map(|t| t.shaded).sum::<u64>(), pairs);
+    }
+
+    /// The tiled backward's loop bound holds the iterations its kernel counts (those of the
+    /// loops whose trip counts depend on the input: the slot searches, the batches, the
+    /// groups and segments visited, the ballot words and kept faces; the loops of constant
+    /// trip counts, the compiler's to unroll, are not counted), and the host counts the
+    /// (segment, face) pairs the kernel evaluates. The bound also counts the constant loops
+    /// of every kept face (the screen sums, the texel search) as if they were not unrolled:
+    /// on 40 stacked faces at 8 lanes it is 4 319 where the kernel counts 445.
+    #[test]
+    fn the_backward_loop_bound_and_pair_counts_hold_what_the_kernel_counts() {
+        let Some(ctx) = softvk_testing::gpu() else {
+            return;
+        };
+        let subgroup = ctx.info().subgroup_size;
+        let lanes = u64::from(subgroup.clamp(1, 64));
+        let counting = GradKernels::new(&ctx).unwrap().counting_loops();
+        for (mesh, size, dense) in [
+            (stacked(1), 16, true),
+            (stacked(40), 16, true),
+            (Mesh::icosphere(2), 32, false),
+        ] {
+            let settings = RasterSettings {
+                width: size,
+                height: size,
+                ..RasterSettings::default()
+            };
+            let cameras = [Camera::default(), Camera::from_angles(2.732, 0.0, 180.0)];
+            let renderer = Renderer::new(&ctx).unwrap();
+            let mut scene = renderer
+                .prepare(&ctx, &mesh, &cameras, &Lighting::unlit(), &settings)
+                .unwrap();
+            let run = renderer
+                .run(&ctx, &mut scene, Method::Tiled { tile: 8 })
+                .unwrap();
+            let binned = run.binned();
+            let pairs = binned.pair_counts(&ctx).unwrap().backward;
+            let gb = GradBuffers::new(&ctx, &binned).unwrap();
+            let pixels = (size * size) as usize * cameras.len();
+            gb.set_d_image(&ctx, binned.scene, &vec![[1.0; 4]; pixels])
+                .unwrap();
+            ctx.submit_and_wait(|rec| counting.record(rec, &binned, &gb, &gb.io()))
+                .unwrap();
+            let [group] = binned.groups() else {
+                panic!("one view group expected")
+            };
+            let tiles = 2 * (size / 8) * (size / 8);
+            let bins = &binned.bins[0];
+            let ranges: Vec<[u32; 2]> = ctx.read_buffer(bins.ranges(), 0, tiles as usize).unwrap();
+            let slots: Vec<u32> = ctx
+                .read_buffer(bins.entries(), 0, group.entries as usize)
+                .unwrap();
+            let vec4s = (gb.stride / 4) as usize;
+            let partials: Vec<[f32; 4]> = ctx
+                .read_buffer(&gb.partials, 0, group.entries as usize * vec4s)
+                .unwrap();
+            let work = (
+                subgroup,
+                crate::raster::fine::tiled_backward_workgroup(&ctx),
+                gb.color_work(binned.scene),
+            );
+            let mut kept = 0;
+            for r in &ranges {
+                let run = u64::from(r[1] - r[0]);
+                let counts: Vec<[f32; 4]> = slots[r[0] as usize..r[1] as usize]
+                    .iter()
+                    .map(|&s| partials[s as usize * vec4s])
+                    .collect();
+                let most = counts.iter().map(|c| c[0] as u64).max().unwrap_or(0);
+                assert!(
+                    most <= tiled_backward_iterations(run, 8, run, work),
+                    "run {run}"
+                );
+                kept += counts.iter().map(|c| c[1] as u64).sum::<u64>();
+                if dense {
+                    // Every face is kept in each of the tile's segments.
+                    assert!(counts.iter().all(|c| c[1] as u64 == 64u64.div_ceil(lanes)));
+                }
+            }
+            assert_eq!(lanes * kept, pairs);
+        }
+    }
+}

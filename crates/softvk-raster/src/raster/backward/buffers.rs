@@ -19,7 +19,7 @@ use crate::raster::settings::ColorMode;
 /// The buffers of one scene's backward, reusable across backward passes of that scene.
 pub struct GradBuffers {
     d_image: Buffer,
-    pub(super) partials: Buffer,
+    pub(crate) partials: Buffer,
     pub(super) face_grads: Buffer,
     pub(super) corner_world: Buffer,
     pub(super) corner_cam: Buffer,
@@ -30,7 +30,7 @@ pub struct GradBuffers {
     position_grads: Buffer,
     color_grads: Buffer,
     pub(super) method: Method,
-    pub(super) stride: u32,
+    pub(crate) stride: u32,
     pub(super) width: u32,
     pub(super) split: GradSplit,
     /// Units one chunk of partials holds, and the most it may hold (the budget).
@@ -313,7 +313,7 @@ impl GradBuffers {
     }
 
     /// What the tiled kernel does per face besides the screen sums.
-    pub(super) fn color_work(&self, scene: &GpuScene) -> ColorWork {
+    pub(crate) fn color_work(&self, scene: &GpuScene) -> ColorWork {
         match scene.settings.color_mode {
             _ if self.alpha_only(scene) => ColorWork::None,
             ColorMode::Vertex => ColorWork::Vertex,

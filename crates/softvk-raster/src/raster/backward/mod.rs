@@ -63,6 +63,8 @@ use crate::raster::specs;
 /// The backward's pipelines, made once per context.
 pub struct GradKernels {
     tiled: KernelVariants,
+    /// The tiled kernel writes its loop and pair counts in place of partials (constant 7).
+    count_loops: bool,
     brute: KernelVariants,
     reduce: Arc<Kernel>,
     reduce_texels: Arc<Kernel>,
@@ -75,12 +77,24 @@ impl GradKernels {
     pub fn new(ctx: &Context) -> Result<Self> {
         Ok(Self {
             tiled: KernelVariants::new(&specs::GRAD_TILED),
+            count_loops: false,
             brute: KernelVariants::new(&specs::GRAD_BRUTE),
             reduce: ctx.kernel(&specs::GRAD_REDUCE, &[])?,
             reduce_texels: ctx.kernel(&specs::GRAD_REDUCE_TEXELS, &[])?,
             world: ctx.kernel(&specs::GRAD_WORLD, &[])?,
             gather: ctx.kernel(&specs::GRAD_GATHER, &[])?,
         })
+    }
+
+    /// Backward kernels whose tiled pass writes, in place of each (face, tile) entry's partial,
+    /// `(the iterations its invocation had run by then of the loops whose trip counts depend
+    /// on the input, the segments where the entry's face was kept, 0, 0)` at the partial's first
+    /// vec4: what the host's loop bound (the driver's loop cap) and pair counts must bound and
+    /// predict. The gradients they give are meaningless. A test knob (the `test-knobs` feature).
+    #[cfg(feature = "test-knobs")]
+    pub fn counting_loops(mut self) -> Self {
+        self.count_loops = true;
+        self
     }
 
     /// Records the backward of the forward that left `binned`: dL/d(output RGBA) is read from

@@ -148,6 +148,7 @@ impl GradKernels {
             .constants(rec.context(), tiled_backward_workgroup(rec.context()));
         let mut constants = modes.to_vec();
         constants.push(tile);
+        constants.push(u32::from(self.count_loops));
         let kernel = self.tiled.get(rec.context(), &constants)?;
         for (group, bins) in binned.groups().iter().zip(binned.bins) {
             let grid = grid.window(group.tile_rows.0, group.tile_rows.1)?;
