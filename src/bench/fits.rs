@@ -249,10 +249,15 @@ pub(super) fn run_mesh_fit(
     ));
     let mut it = 1u32;
     let timing = time_fit_iteration(ctx, opts, &mut fitter, &mut it, 32, true, progress, name)?;
-    let counts = fitter.binned()?.pair_counts(ctx)?;
+    let binned = fitter.binned()?;
+    let counts = binned.pair_counts(ctx)?;
     progress(&format!(
         "{name} fit-iteration per pair:{}",
         per_pair_summary(&timing.passes, &counts)
+    ));
+    progress(&format!(
+        "{name} alpha: {}",
+        settled_summary(&binned.scene().read_frames(ctx)?.aux)
     ));
     let shape = Shape {
         name,
@@ -276,4 +281,28 @@ pub(super) fn run_mesh_fit(
         records.push(shape.record(ctx, pass, timing, FIT_BATCH, fitter.last_entries()));
     }
     Ok(records)
+}
+
+/// How many rendered pixels ended with their alpha settled (SoftRas's product: two or more
+/// factors `1 − D_j` exactly 0, or the product of the others 0 — every `∂A/∂D_j` is then exactly
+/// zero), and how many with one factor exactly 0 (only that face's is not): what a backward that
+/// skips such pixels, or such faces, could save.
+fn settled_summary(aux: &[crate::raster::fine::PixelAux]) -> String {
+    let settled = aux
+        .iter()
+        .filter(|a| a.alpha_zeros >= 2 || a.alpha_acc == 0.0)
+        .count();
+    let one = aux
+        .iter()
+        .filter(|a| a.alpha_zeros == 1 && a.alpha_acc != 0.0)
+        .count();
+    let covered = aux
+        .iter()
+        .filter(|a| a.alpha_zeros > 0 || a.alpha_acc < 1.0)
+        .count();
+    format!(
+        "{} pixels, {covered} with some coverage; settled (every dA/dD_j exactly 0) {settled}, \
+         one factor exactly 0 {one}",
+        aux.len()
+    )
 }
