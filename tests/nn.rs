@@ -8,22 +8,11 @@ use softvk::fit::adam::{self, Adam, AdamOptions};
 use softvk::gpu::{Buffer, Context};
 use softvk::nn::{self, Activation, Conv2d, Layer, Linear, Sequential, cpu};
 use softvk::{Error, LimitKind};
+use softvk_testing::Lcg;
 
-/// A tiny deterministic generator for test data.
-struct Lcg(u64);
-
-impl Lcg {
-    fn unit(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    fn vec(&mut self, n: usize, scale: f64) -> Vec<f64> {
-        (0..n).map(|_| scale * (2.0 * self.unit() - 1.0)).collect()
-    }
+/// `n` values uniform in [-scale, scale) from `rng`.
+fn uniform(rng: &mut Lcg, n: usize, scale: f64) -> Vec<f64> {
+    (0..n).map(|_| scale * (2.0 * rng.unit() - 1.0)).collect()
 }
 
 const ACTIVATIONS: [Activation; 5] = [
@@ -136,9 +125,9 @@ const GPU_FLOOR: f64 = 2.4e-7;
 /// parameter and every input.
 fn check_layer_gradient(layer: &Layer, batch: usize, seed: u64) {
     let mut rng = Lcg(seed);
-    let params = rng.vec(layer.param_count() as usize, 0.5);
-    let input = rng.vec(batch * layer.input_len() as usize, 1.0);
-    let r = rng.vec(batch * layer.output_len() as usize, 1.0);
+    let params = uniform(&mut rng, layer.param_count() as usize, 0.5);
+    let input = uniform(&mut rng, batch * layer.input_len() as usize, 1.0);
+    let r = uniform(&mut rng, batch * layer.output_len() as usize, 1.0);
     let output = cpu::layer_forward(layer, &params, &input, batch);
     let g = cpu::layer_backward(layer, &params, &input, &output, &r, batch);
     let loss = |p: &[f64], x: &[f64]| dot(&r, &cpu::layer_forward(layer, p, x, batch));
@@ -256,8 +245,8 @@ impl Run {
     ) -> (Run, Vec<f64>, Vec<f64>, Vec<f64>) {
         let mut rng = Lcg(seed);
         let params: Vec<f64> = net.init(seed).iter().map(|&p| f64::from(p)).collect();
-        let input = f32s(&rng.vec(batch * net.input_len() as usize, 1.0));
-        let d_output = f32s(&rng.vec(batch * net.output_len() as usize, 1.0));
+        let input = f32s(&uniform(&mut rng, batch * net.input_len() as usize, 1.0));
+        let d_output = f32s(&uniform(&mut rng, batch * net.output_len() as usize, 1.0));
         // Garbage where the gradients go: the backward must overwrite it.
         let garbage = vec![7.0; net.param_count() as usize];
         let run = Run {

@@ -26,20 +26,3 @@ pub mod camera;
 pub mod lighting;
 pub mod mesh;
 pub mod raster;
-
-/// Where this crate's unit tests find the meshes they load: `SOFTVK_ASSETS`, else the
-/// repository's `assets/` (the top crate's `softvk::assets`, which the tests cannot reach from
-/// below it).
-#[cfg(test)]
-mod assets {
-    use std::path::PathBuf;
-
-    pub fn dir() -> PathBuf {
-        std::env::var_os("SOFTVK_ASSETS")
-            .filter(|v| !v.is_empty())
-            .map_or_else(
-                || PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../assets")),
-                PathBuf::from,
-            )
-    }
-}

@@ -54,7 +54,7 @@ uint tile_size() {
     return TILE_SIZE != 0u ? TILE_SIZE : pc.tile_size;
 }
 
-// Constant 7, set only by softvk-raster's own tests (`test-knobs`: `GradKernels::counting_loops`):
+// Constant 7, set only by softvk-raster's own unit tests (`GradKernels::counting_loops`):
 // in place of each entry's partial the kernel writes what it counted, (the iterations its
 // invocation had run by then of the loops whose trip counts depend on the input, the segments
 // where the entry's face was kept, 0, 0) at the partial's first vec4, which the host's

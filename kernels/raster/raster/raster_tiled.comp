@@ -32,7 +32,7 @@
 // allows on a CPU device.
 layout(local_size_x = 64, local_size_x_id = 5) in;
 
-// Constant 7, set only by softvk-raster's own tests (`test-knobs`: `Renderer::counting_loops`):
+// Constant 7, set only by softvk-raster's own unit tests (`Renderer::counting_loops`):
 // in place of each pixel's colour the kernel writes what it counted, (the loop iterations its
 // invocation had run when it wrote the pixel, the faces it shaded for the pixel, 0, 0), which
 // the host's `loops::tiled_forward_iterations` and `Binned::pair_counts` must predict. At 0 the

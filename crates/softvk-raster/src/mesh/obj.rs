@@ -424,7 +424,7 @@ mod tests {
     use super::*;
 
     fn spot() -> std::path::PathBuf {
-        crate::assets::dir().join("spot_triangulated.obj")
+        softvk_testing::assets_dir().join("spot_triangulated.obj")
     }
 
     /// A fresh temporary folder, removed when dropped.
@@ -495,7 +495,7 @@ mod tests {
             ("sphere_642.obj", 642, 1280),
             ("sphere_1352.obj", 1352, 2700),
         ] {
-            let path = crate::assets::dir().join(name);
+            let path = softvk_testing::assets_dir().join(name);
             let mesh = Mesh::load_obj(&path, 1).unwrap();
             assert_eq!((mesh.vertex_count(), mesh.face_count()), (v, f), "{name}");
             assert!(mesh.textures.iter().all(|t| *t == [1.0; 3]));

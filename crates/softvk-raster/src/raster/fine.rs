@@ -354,10 +354,10 @@ impl TiledRaster {
 
     /// The pass writes, in place of each pixel's colour, `(the loop iterations its invocation
     /// had run by then, the faces it shaded for the pixel, 0, 0)`: what the host's loop bound
-    /// (the driver's loop cap) and pair counts must predict. A test knob (the `test-knobs`
-    /// feature).
-    #[cfg(feature = "test-knobs")]
-    pub fn counting_loops(mut self) -> Self {
+    /// (the driver's loop cap) and pair counts must predict. For this crate's own tests
+    /// (`raster::loops`) only.
+    #[cfg(test)]
+    pub(crate) fn counting_loops(mut self) -> Self {
         self.count_loops = true;
         self
     }

@@ -86,8 +86,10 @@ mod tests {
     use crate::lighting::Lighting;
     use crate::mesh::Mesh;
     use crate::raster::backward::{GradBuffers, GradKernels};
+    use crate::raster::binned::Binned;
     use crate::raster::gpu::Renderer;
     use crate::raster::method::Method;
+    use crate::raster::scene::GpuScene;
     use crate::raster::settings::RasterSettings;
 
     /// `faces` triangles far larger than the view, one behind the other: every face touches
@@ -95,11 +97,40 @@ mod tests {
     fn stacked(faces: u32) -> Mesh {
         let mut positions = Vec::new();
         for i in 0..faces {
-            let z = -0.5 + f32::from(u16::try_from(i).unwrap()) / faces as f32;
+            let z = -0.5 + i as f32 / faces as f32;
             positions.extend([[-8.0, -8.0, z], [8.0, -8.0, z], [0.0, 8.0, z]]);
         }
         let tris = (0..faces).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
         Mesh::new(positions, tris, 1).unwrap()
+    }
+
+    /// Views of every test scene: front and back (faces are double-sided), so the stacked
+    /// faces fill both.
+    const VIEWS: usize = 2;
+
+    /// `mesh` on the GPU in two views of `size`² (no image edge inside an 8×8 block).
+    fn scene(ctx: &Context, renderer: &Renderer, mesh: &Mesh, size: u32) -> GpuScene {
+        assert_eq!(size % 8, 0);
+        let settings = RasterSettings {
+            width: size,
+            height: size,
+            ..RasterSettings::default()
+        };
+        let cameras: [Camera; VIEWS] = [Camera::default(), Camera::from_angles(2.732, 0.0, 180.0)];
+        renderer
+            .prepare(ctx, mesh, &cameras, &Lighting::unlit(), &settings)
+            .unwrap()
+    }
+
+    /// The [start, end) of every tile's run of sorted entries, after a tiled run (tile 8) that
+    /// binned both views in one group: tile t of view v is range v · tiles per view + t.
+    fn tile_ranges(ctx: &Context, binned: &Binned<'_>, size: u32) -> Vec<[u32; 2]> {
+        let [group] = binned.groups() else {
+            panic!("one view group expected")
+        };
+        assert_eq!((group.first, group.views as usize), (0, VIEWS));
+        let tiles = VIEWS * ((size / 8) * (size / 8)) as usize;
+        ctx.read_buffer(binned.bins[0].ranges(), 0, tiles).unwrap()
     }
 
     /// What the kernel counted for one 8×8 tile, and the tile's run of binned faces.
@@ -112,38 +143,20 @@ mod tests {
         shaded: u64,
     }
 
-    /// Renders `mesh` tiled (tile 8, two views of `size`², no image edge inside a block) with
-    /// the forward counting its loops: what it counted per tile, the workgroup the host chose,
-    /// and the host's count of visited (pixel, face) pairs.
+    /// Renders `mesh` tiled ([`scene`]) with the forward counting its loops: what it counted
+    /// per tile, the workgroup the host chose, and the host's count of visited (pixel, face)
+    /// pairs.
     fn counted(ctx: &Context, mesh: &Mesh, size: u32) -> (Vec<Tile>, u32, u64) {
-        assert_eq!(size % 8, 0);
-        let settings = RasterSettings {
-            width: size,
-            height: size,
-            ..RasterSettings::default()
-        };
-        // Front and back (faces are double-sided): the stacked faces fill both views.
-        let cameras = [Camera::default(), Camera::from_angles(2.732, 0.0, 180.0)];
         let renderer = Renderer::new(ctx).unwrap().counting_loops();
-        let mut scene = renderer
-            .prepare(ctx, mesh, &cameras, &Lighting::unlit(), &settings)
-            .unwrap();
+        let mut scene = scene(ctx, &renderer, mesh, size);
         let run = renderer
             .run(ctx, &mut scene, Method::Tiled { tile: 8 })
             .unwrap();
         let binned = run.binned();
         let pairs = binned.pair_counts(ctx).unwrap().forward;
-        // One group of both views, the whole image: tile t of view v is range v · per_view + t.
-        let [group] = binned.groups() else {
-            panic!("one view group expected")
-        };
-        assert_eq!((group.first, group.views), (0, 2));
         let per_row = size / 8;
         let per_view = (per_row * per_row) as usize;
-        let ranges: Vec<[u32; 2]> = ctx
-            .read_buffer(binned.bins[0].ranges(), 0, 2 * per_view)
-            .unwrap();
-        let mut tiles: Vec<Tile> = ranges
+        let mut tiles: Vec<Tile> = tile_ranges(ctx, &binned, size)
             .iter()
             .map(|r| Tile {
                 run: u64::from(r[1] - r[0]),
@@ -152,14 +165,17 @@ mod tests {
             })
             .collect();
         let pixels = (size * size) as usize;
-        let image: Vec<[f32; 4]> = ctx.read_buffer(&binned.scene.image, 0, 2 * pixels).unwrap();
+        let image: Vec<[f32; 4]> = ctx
+            .read_buffer(&binned.scene.image, 0, VIEWS * pixels)
+            .unwrap();
         for (i, p) in image.iter().enumerate() {
             let (view, row, col) = (i / pixels, (i % pixels) as u32 / size, i as u32 % size);
             let t = &mut tiles[view * per_view + ((row / 8) * per_row + col / 8) as usize];
             t.iterations = t.iterations.max(p[0] as u64);
             t.shaded += p[1] as u64;
         }
-        let workgroup = crate::raster::fine::tiled_forward_workgroup(ctx, group.max_tile_entries);
+        let max_run = binned.groups()[0].max_tile_entries;
+        let workgroup = crate::raster::fine::tiled_forward_workgroup(ctx, max_run);
         (tiles, workgroup, pairs)
     }
 
@@ -218,40 +234,27 @@ mod tests {
             (stacked(40), 16, true),
             (Mesh::icosphere(2), 32, false),
         ] {
-            let settings = RasterSettings {
-                width: size,
-                height: size,
-                ..RasterSettings::default()
-            };
-            let cameras = [Camera::default(), Camera::from_angles(2.732, 0.0, 180.0)];
             let renderer = Renderer::new(&ctx).unwrap();
-            let mut scene = renderer
-                .prepare(&ctx, &mesh, &cameras, &Lighting::unlit(), &settings)
-                .unwrap();
+            let mut scene = scene(&ctx, &renderer, &mesh, size);
             let run = renderer
                 .run(&ctx, &mut scene, Method::Tiled { tile: 8 })
                 .unwrap();
             let binned = run.binned();
             let pairs = binned.pair_counts(&ctx).unwrap().backward;
             let gb = GradBuffers::new(&ctx, &binned).unwrap();
-            let pixels = (size * size) as usize * cameras.len();
+            let pixels = (size * size) as usize * VIEWS;
             gb.set_d_image(&ctx, binned.scene, &vec![[1.0; 4]; pixels])
                 .unwrap();
             ctx.submit_and_wait(|rec| counting.record(rec, &binned, &gb, &gb.io()))
                 .unwrap();
-            let [group] = binned.groups() else {
-                panic!("one view group expected")
-            };
-            let tiles = 2 * (size / 8) * (size / 8);
-            let bins = &binned.bins[0];
-            let ranges: Vec<[u32; 2]> = ctx.read_buffer(bins.ranges(), 0, tiles as usize).unwrap();
+            let ranges = tile_ranges(&ctx, &binned, size);
+            let entries = binned.entries() as usize;
             let slots: Vec<u32> = ctx
-                .read_buffer(bins.entries(), 0, group.entries as usize)
+                .read_buffer(binned.bins[0].entries(), 0, entries)
                 .unwrap();
             let vec4s = (gb.stride / 4) as usize;
-            let partials: Vec<[f32; 4]> = ctx
-                .read_buffer(&gb.partials, 0, group.entries as usize * vec4s)
-                .unwrap();
+            let partials: Vec<[f32; 4]> =
+                ctx.read_buffer(&gb.partials, 0, entries * vec4s).unwrap();
             let work = (
                 subgroup,
                 crate::raster::fine::tiled_backward_workgroup(&ctx),

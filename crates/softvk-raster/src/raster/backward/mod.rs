@@ -90,9 +90,10 @@ impl GradKernels {
     /// `(the iterations its invocation had run by then of the loops whose trip counts depend
     /// on the input, the segments where the entry's face was kept, 0, 0)` at the partial's first
     /// vec4: what the host's loop bound (the driver's loop cap) and pair counts must bound and
-    /// predict. The gradients they give are meaningless. A test knob (the `test-knobs` feature).
-    #[cfg(feature = "test-knobs")]
-    pub fn counting_loops(mut self) -> Self {
+    /// predict. The gradients they give are meaningless. For this crate's own tests
+    /// (`raster::loops`) only.
+    #[cfg(test)]
+    pub(crate) fn counting_loops(mut self) -> Self {
         self.count_loops = true;
         self
     }

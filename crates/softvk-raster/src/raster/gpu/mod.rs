@@ -160,9 +160,9 @@ impl Renderer {
     /// A renderer whose tiled forward writes, in place of each pixel's colour, `(the loop
     /// iterations the kernel's invocation had run by then, the faces it shaded for the pixel,
     /// 0, 0)` ([`TiledRaster::counting_loops`]), so that tests hold the host's loop bounds and
-    /// pair counts to what the kernel did. A test knob (the `test-knobs` feature).
-    #[cfg(feature = "test-knobs")]
-    pub fn counting_loops(mut self) -> Self {
+    /// pair counts to what the kernel did. For this crate's own tests (`raster::loops`) only.
+    #[cfg(test)]
+    pub(crate) fn counting_loops(mut self) -> Self {
         self.tiled = self.tiled.counting_loops();
         self
     }

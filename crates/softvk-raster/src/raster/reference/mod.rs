@@ -571,7 +571,11 @@ mod tests {
 
     #[test]
     fn spot_renders_to_a_plausible_image() {
-        let mesh = Mesh::load_obj(&crate::assets::dir().join("spot_triangulated.obj"), 1).unwrap();
+        let mesh = Mesh::load_obj(
+            &softvk_testing::assets_dir().join("spot_triangulated.obj"),
+            1,
+        )
+        .unwrap();
         let s = settings(32, 32);
         let img = render(
             &mesh,
