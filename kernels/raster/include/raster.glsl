@@ -213,6 +213,15 @@ float nearest_edge(Face f, vec2 p, out vec2 a, out vec2 e, out uint ea, out uint
     return best;
 }
 
+// The sigmoid's argument: `x` where the face covers the pixel, 0 where it is ignored. An
+// ignored pair's D is discarded (every caller selects it away), but it is computed (selects, not
+// branches); from its own argument, far from the face, e^-|x| and the backward's products of it
+// fall below 2^-126, and on x86 every vector operation with a subnormal operand or result takes
+// a microcode assist of some hundred cycles (llvmpipe's compute threads keep subnormals).
+float covered_arg(bool covered, float x) {
+    return covered ? x : 0.0;
+}
+
 // `reference::coverage` given the squared edge distance `d2` (Euclidean mode only) and 1 / σ:
 // false when the face is ignored at this pixel (outside and beyond the cut-off `t`); otherwise
 // `d` is the coverage D.
@@ -224,13 +233,15 @@ bool coverage_from(float d2, vec3 w, uint dist, float inv_sigma, float t, out fl
     if (dist == DIST_BARYCENTRIC) {
         float m = min(min(w.x, w.y), w.z);
         float s = m * abs(m);
-        d = sigmoid(s * inv_sigma);
-        return -s < t;
+        bool covered = -s < t;
+        d = sigmoid(covered_arg(covered, s * inv_sigma));
+        return covered;
     }
     // Selects rather than branches: on llvmpipe every branch costs masked stores.
     bool inside = strictly_inside(w);
-    d = sigmoid((inside ? d2 : -d2) * inv_sigma);
-    return inside || d2 < t;
+    bool covered = inside || d2 < t;
+    d = sigmoid(covered_arg(covered, (inside ? d2 : -d2) * inv_sigma));
+    return covered;
 }
 
 // `reference::coverage`, given 1 / σ.

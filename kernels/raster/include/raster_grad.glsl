@@ -151,7 +151,8 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
     float d2 = MODE_DIST == DIST_EUCLIDEAN ? nearest_edge(f, p, ea_pos, edge, ea, eb, t) : 0.0;
     float d;
     float inv_sigma = pc.inv_sigma;
-    bool hit = coverage_from(d2, w, MODE_DIST, inv_sigma, pc.cutoff, d) && live;
+    bool covered = coverage_from(d2, w, MODE_DIST, inv_sigma, pc.cutoff, d);
+    bool hit = covered && live;
     float inv_clip_sum = clip_inverse_sum(w);
     vec3 wc = clamp(w, 0.0, 1.0) * inv_clip_sum; // clip_barycentric(w)
     float z = 0.0;
@@ -223,7 +224,7 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
             // The coverage's own argument (`coverage_from`: the same operations, so the
             // compiler shares the sigmoid's exponential and reciprocal; ±0 alike there).
             float least = min(min(w.x, w.y), w.z);
-            float x = least * abs(least) * inv_sigma;
+            float x = covered_arg(covered, least * abs(least) * inv_sigma);
             float add = d_cov * sigmoid_grad(x) * 2.0 * abs(m) * inv_sigma;
             for (uint c = 0u; c < 3u; ++c) {
                 d_w[c] = cov && c == k ? d_w[c] + add : d_w[c];
@@ -235,7 +236,8 @@ bool pixel_face_grad(Face f, uint j, Upstream u, out FaceGrad g) {
             // compiler shares the exponential and the reciprocal with the sigmoid's).
             bool inside = strictly_inside(w);
             float sgn = inside ? 1.0 : -1.0;
-            float d_d2 = d_cov * sigmoid_grad((inside ? d2 : -d2) * inv_sigma) * sgn * inv_sigma;
+            float x = covered_arg(covered, (inside ? d2 : -d2) * inv_sigma);
+            float d_d2 = d_cov * sigmoid_grad(x) * sgn * inv_sigma;
             vec2 r = vec2(ea_pos.x + t * edge.x - p.x, ea_pos.y + t * edge.y - p.y);
             vec2 to_a = d_d2 * 2.0 * (1.0 - t) * r;
             vec2 to_b = d_d2 * 2.0 * t * r;

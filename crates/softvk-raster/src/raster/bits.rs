@@ -146,20 +146,29 @@ fn euclidean_dist2(f: &Face, p: V2) -> f32 {
         .min(dist2_point_segment(p, xy(2), xy(0), f.inv_len2[2]))
 }
 
-/// `coverage`: the coverage D, or `None` where the face is ignored at this pixel.
+/// `covered_arg`: the sigmoid's argument `x` where the face covers the pixel, 0 where it is
+/// ignored (an ignored pair's D is never used; the kernels compute it anyway, and from its own
+/// argument it can be subnormal, which costs a microcode assist per vector operation on x86).
+pub(super) fn covered_arg(covered: bool, x: f32) -> f32 {
+    if covered { x } else { 0.0 }
+}
+
+/// `coverage`: whether the face covers the pixel (false where it is ignored), and the coverage D.
 fn coverage(f: &Face, w: V3, p: V2, dist: Dist, inv_sigma: f32, t: f32) -> (bool, f32) {
     match dist {
         Dist::Hard => (inside_closed(w), 1.0),
         Dist::Barycentric => {
             let m = w[0].min(w[1]).min(w[2]);
             let s = m * m.abs();
-            (-s < t, fmath::sigmoid(s * inv_sigma))
+            let covered = -s < t;
+            (covered, fmath::sigmoid(covered_arg(covered, s * inv_sigma)))
         }
         Dist::Euclidean => {
             let d2 = euclidean_dist2(f, p);
             let inside = strictly_inside(w);
-            let d = fmath::sigmoid((if inside { d2 } else { -d2 }) * inv_sigma);
-            (inside || d2 < t, d)
+            let covered = inside || d2 < t;
+            let x = (if inside { d2 } else { -d2 }) * inv_sigma;
+            (covered, fmath::sigmoid(covered_arg(covered, x)))
         }
     }
 }

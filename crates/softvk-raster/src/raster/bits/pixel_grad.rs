@@ -4,7 +4,8 @@
 
 use super::{
     CLIP_SUM_FLOOR, Face, FineTwin, MIN_DET, PairGrad, Upstream, V2, barycentric, clamp01,
-    depth_in_range, dot3, inside_closed, pixel_center, strictly_inside, surface_texel_index,
+    covered_arg, depth_in_range, dot3, inside_closed, pixel_center, strictly_inside,
+    surface_texel_index,
 };
 use crate::fmath;
 use crate::raster::fine::PixelAux;
@@ -98,12 +99,17 @@ impl FineTwin<'_> {
             Dist::Barycentric => {
                 let m = w[0].min(w[1]).min(w[2]);
                 let sm = m * m.abs();
-                (-sm < pc.cutoff, fmath::sigmoid(sm * inv_sigma))
+                let covered = -sm < pc.cutoff;
+                (
+                    covered,
+                    fmath::sigmoid(covered_arg(covered, sm * inv_sigma)),
+                )
             }
             Dist::Euclidean => {
                 let inside = strictly_inside(w);
-                let d = fmath::sigmoid((if inside { d2 } else { -d2 }) * inv_sigma);
-                (inside || d2 < pc.cutoff, d)
+                let covered = inside || d2 < pc.cutoff;
+                let x = (if inside { d2 } else { -d2 }) * inv_sigma;
+                (covered, fmath::sigmoid(covered_arg(covered, x)))
             }
         };
         let hit = covered && live;
