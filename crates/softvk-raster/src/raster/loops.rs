@@ -143,12 +143,13 @@ mod tests {
         shaded: u64,
     }
 
-    /// Renders `mesh` tiled ([`scene`]) with the forward counting its loops: what it counted
-    /// per tile, the workgroup the host chose, and the host's count of visited (pixel, face)
-    /// pairs.
-    fn counted(ctx: &Context, mesh: &Mesh, size: u32) -> (Vec<Tile>, u32, u64) {
+    /// Renders `mesh` tiled ([`scene`]; alpha only if `silhouette`) with the forward counting
+    /// its loops: what it counted per tile, the workgroup the host chose, and the host's count
+    /// of visited (pixel, face) pairs.
+    fn counted(ctx: &Context, mesh: &Mesh, size: u32, silhouette: bool) -> (Vec<Tile>, u32, u64) {
         let renderer = Renderer::new(ctx).unwrap().counting_loops();
         let mut scene = scene(ctx, &renderer, mesh, size);
+        scene.set_silhouette_only(silhouette);
         let run = renderer
             .run(ctx, &mut scene, Method::Tiled { tile: 8 })
             .unwrap();
@@ -192,7 +193,7 @@ mod tests {
         // Every face touches every pixel: the bound is reached in every tile, but for its
         // margin of 2.
         for faces in [1, 7, 40] {
-            let (tiles, workgroup, pairs) = counted(&ctx, &stacked(faces), 16);
+            let (tiles, workgroup, pairs) = counted(&ctx, &stacked(faces), 16, false);
             for t in &tiles {
                 assert_eq!(t.run, u64::from(faces));
                 assert_eq!(
@@ -206,12 +207,43 @@ mod tests {
         }
         // A real mesh, whose faces touch some subgroups' pixels and not others: the bound
         // holds, and the host counts the pairs the kernel shaded.
-        let (tiles, workgroup, pairs) = counted(&ctx, &Mesh::icosphere(2), 32);
+        let (tiles, workgroup, pairs) = counted(&ctx, &Mesh::icosphere(2), 32, false);
         assert!(tiles.iter().any(|t| t.run > 1 && t.shaded < 64 * t.run));
         for t in &tiles {
             assert!(t.iterations + 2 <= tiled_forward_iterations(t.run, subgroup, workgroup));
         }
         assert_eq!(tiles.iter().map(|t| t.shaded).sum::<u64>(), pairs);
+    }
+
+    /// A silhouette render on a CPU device folds each batch into every segment of its block
+    /// (`raster_tiled.comp`'s alpha-only path): fewer iterations than the general path's
+    /// bound, which the host still holds it to, and the same visited pairs.
+    #[test]
+    fn the_silhouette_forward_stays_within_the_loop_bound_and_visits_the_same_pairs() {
+        let Some(ctx) = softvk_testing::gpu() else {
+            return;
+        };
+        let subgroup = ctx.info().subgroup_size;
+        for (mesh, size) in [(stacked(40), 16), (Mesh::icosphere(2), 32)] {
+            let (tiles, workgroup, pairs) = counted(&ctx, &mesh, size, true);
+            let (general, _, general_pairs) = counted(&ctx, &mesh, size, false);
+            for (t, g) in tiles.iter().zip(&general) {
+                assert_eq!((t.run, t.shaded), (g.run, g.shaded));
+                assert!(t.iterations + 2 <= tiled_forward_iterations(t.run, subgroup, workgroup));
+                // One subgroup a workgroup (a CPU device): the swapped loops ran, one batch
+                // iteration for every segment's of the general path.
+                if workgroup == subgroup && t.run > 0 {
+                    assert!(
+                        t.iterations < g.iterations,
+                        "{} vs {}",
+                        t.iterations,
+                        g.iterations
+                    );
+                }
+            }
+            assert_eq!(pairs, general_pairs);
+            assert_eq!(tiles.iter().map(|t| t.shaded).sum::<u64>(), pairs);
+        }
     }
 
     /// The tiled backward's loop bound holds the iterations its kernel counts (those of the
