@@ -367,10 +367,7 @@ void visit_group(uint group0, uint segments, Face f, uint face, uint o, uvec4 re
         live = live && !upstream_is_zero(u);
         vec2 lo = lane_min(live ? u.p : vec2(inf));
         vec2 hi = lane_max(live ? u.p : vec2(-inf));
-        bool touches = (f.flags & FACE_FINITE) != 0u
-                    && !(hi.x < f.bbox.x || hi.y < f.bbox.y || lo.x > f.bbox.z
-                         || lo.y > f.bbox.w);
-        uvec4 kept = subgroupBallot(touches);
+        uvec4 kept = subgroupBallot(face_meets_box(f, lo, hi));
         fold_kept(kept, f, face, o, u, live, acc, cacc, written);
     }
 }
@@ -400,10 +397,7 @@ void visit_group(uint group0, uint segments, Face f, uint face, uint o, uvec4 re
 // segment `seg` of a kept bit.
 #define SEGMENT_KEEP(k)                                                                   \
     if (uint(k) < tile_segments) {                                                         \
-        bool touches = (f.flags & FACE_FINITE) != 0u                                       \
-                    && !(hi##k.x < f.bbox.x || hi##k.y < f.bbox.y || lo##k.x > f.bbox.z    \
-                         || lo##k.y > f.bbox.w);                                           \
-        uvec4 ballot = subgroupBallot(touches);                                            \
+        uvec4 ballot = subgroupBallot(face_meets_box(f, lo##k, hi##k));                    \
         if (lanes == 64u) {                                                                \
             kept = ballot.xy;                                                              \
         } else {                                                                           \

@@ -26,6 +26,13 @@ Face face_shuffle(Face f, uint i) {
     return g;
 }
 
+// Whether face `f` may touch a pixel centred in the box [lo, hi] (a subgroup's pixel centres):
+// the tiled kernels' per-batch test, whose ballot keeps the faces a segment folds.
+bool face_meets_box(Face f, vec2 lo, vec2 hi) {
+    return (f.flags & FACE_FINITE) != 0u
+        && !(hi.x < f.bbox.x || hi.y < f.bbox.y || lo.x > f.bbox.z || lo.y > f.bbox.w);
+}
+
 // The subgroup size, when the host knows it (constant_id 4, after the fine modes): the device's
 // `subgroupSize`, which a SPIR-V 1.5 pipeline without size control sees as gl_SubgroupSize. As a
 // constant it lets the driver unroll the loops over lanes and ballot words (llvmpipe learns its

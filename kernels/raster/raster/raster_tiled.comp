@@ -25,7 +25,7 @@
 // A silhouette render (`ALPHA_ONLY`) on a workgroup of one subgroup (a CPU device) swaps the two
 // loops: each batch of faces is loaded once and folded into every segment of the block in turn,
 // each lane holding its pixel of every segment, instead of the whole run being loaded again for
-// each segment (fit-120's tiled forward on llvmpipe: 107 -> 72 ms, BENCHMARKS.md). Every pixel
+// each segment (fit-120's tiled forward on llvmpipe: 108 -> 71 ms, BENCHMARKS.md). Every pixel
 // still folds its tile's faces in index order, each kept by the same ballot over its own
 // segment's box: the same bits. (A colour render's state is too large to hold per segment.)
 // The per-lane inputs as texel buffers: branch-free gathers on llvmpipe (raster_fine.glsl).
@@ -55,12 +55,10 @@ layout(std430, set = 0, binding = 7) readonly buffer Ranges { uvec2 ranges[]; };
 
 // The faces of one batch (lane i's `f`, face index `face`) that the ballot keeps for the segment
 // whose pixel centres' box is [lo, hi], folded into this lane's pixel `p` of it (state `s`), in
-// index order: the inner loops of `main`'s general path, for one segment.
+// index order: for one segment, in either of `main`'s paths.
 void fold_batch(inout PixelState s, vec2 p, vec2 lo, vec2 hi, Face f, uint face,
                 inout uint iterations, inout uint shaded) {
-    bool touches = (f.flags & FACE_FINITE) != 0u
-                && !(hi.x < f.bbox.x || hi.y < f.bbox.y || lo.x > f.bbox.z || lo.y > f.bbox.w);
-    uvec4 kept = subgroupBallot(touches);
+    uvec4 kept = subgroupBallot(face_meets_box(f, lo, hi));
     for (uint word = 0u; word < ballot_words(); ++word) {
         ++iterations;
         uint mask = kept[word];
@@ -199,21 +197,7 @@ void main() {
                 face = pair_items[pairs[k]];
                 f = load_face(setup_base + face);
             }
-            bool touches = (f.flags & FACE_FINITE) != 0u
-                        && !(hi.x < f.bbox.x || hi.y < f.bbox.y || lo.x > f.bbox.z
-                             || lo.y > f.bbox.w);
-            uvec4 kept = subgroupBallot(touches);
-            for (uint word = 0u; word < ballot_words(); ++word) {
-                ++iterations;
-                uint mask = kept[word];
-                while (mask != 0u) {
-                    ++iterations;
-                    ++shaded;
-                    uint i = 32u * word + uint(findLSB(mask));
-                    mask &= mask - 1u;
-                    shade_face(s, face_shuffle(f, i), subgroupShuffle(face, i), p);
-                }
-            }
+            fold_batch(s, p, lo, hi, f, face, iterations, shaded);
         }
         if (COUNT_LOOPS != 0u) {
             if (valid) {
